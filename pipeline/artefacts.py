@@ -1,0 +1,298 @@
+"""Atomic artefact files and stage directories.
+
+* Every file is written to a temporary file in the same directory, flushed, ``fsync``-ed and
+  moved into place with ``os.replace`` (atomic on POSIX): a reader never sees half a file.
+* A stage writes everything into ``<run>/.<stage>.partial-XXXX/`` and the directory is renamed
+  to ``<run>/<stage>/`` only when complete (:func:`commit_stage_dir`); an old ``<stage>/`` is
+  moved aside first and deleted afterwards. A stage that fails leaves no ``<stage>/``.
+* ``inputs.sha256`` (written last) holds the hash of everything the stage's result depends on
+  (:func:`inputs_hash`); the runner reuses a stage whose stored hash equals the new one.
+
+Layout of a stage directory::
+
+    summary.json   headline figures      results.npz   arrays      results.json  details
+    *.png          figures               report.md     markdown    robot/        URDF + robot.yaml
+    manifest.json  stage, hash, figures, timing          inputs.sha256
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import hashlib
+import io
+import json
+import math
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+SUMMARY = "summary.json"
+RESULTS_NPZ = "results.npz"
+RESULTS_JSON = "results.json"
+REPORT_MD = "report.md"
+MANIFEST = "manifest.json"
+INPUTS_HASH = "inputs.sha256"
+ROBOT_DIR = "robot"
+
+
+# --------------------------------------------------------------------------------------------
+# Atomic files
+# --------------------------------------------------------------------------------------------
+def _current_umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+_UMASK = _current_umask()
+
+
+def _fsync_dir(path: Path) -> None:
+    with contextlib.suppress(OSError):
+        fd = os.open(path, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+@contextlib.contextmanager
+def atomic_open(path: str | Path, mode: str = "wb") -> Iterator[Any]:
+    """Open a temporary file next to ``path``; on success fsync and ``os.replace`` it into place."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        kwargs = {"encoding": "utf-8", "newline": "\n"} if "b" not in mode else {}
+        os.chmod(tmp, 0o666 & ~_UMASK)          # mkstemp makes 0600; use the usual permissions
+        with os.fdopen(fd, mode, **kwargs) as fh:
+            yield fh
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+    _fsync_dir(path.parent)
+
+
+def write_bytes(path: str | Path, data: bytes) -> Path:
+    with atomic_open(path, "wb") as fh:
+        fh.write(data)
+    return Path(path)
+
+
+def write_text(path: str | Path, text: str) -> Path:
+    with atomic_open(path, "w") as fh:
+        fh.write(text)
+    return Path(path)
+
+
+def to_jsonable(value: Any) -> Any:
+    """numpy arrays/scalars, tuples, Paths, dataclasses -> JSON types. NaN/inf -> None."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if value is None or isinstance(value, (bool, int, str)):
+        return value
+    if isinstance(value, np.generic):
+        return to_jsonable(value.item())
+    if isinstance(value, np.ndarray):
+        return to_jsonable(value.tolist())
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: to_jsonable(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, Mapping):
+        return {str(k): to_jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, set, frozenset)):
+        return [to_jsonable(v) for v in value]
+    if isinstance(value, Path):
+        return str(value)
+    raise TypeError(f"not JSON-able: {type(value).__name__}")
+
+
+def write_json(path: str | Path, obj: Any) -> Path:
+    """Atomic JSON (indented, keys in insertion order); numpy values converted."""
+    text = json.dumps(to_jsonable(obj), indent=2, allow_nan=False) + "\n"
+    return write_text(path, text)
+
+
+def read_json(path: str | Path) -> Any:
+    return json.loads(Path(path).read_text(encoding="utf-8"))
+
+
+def write_npz(path: str | Path, arrays: Mapping[str, Any]) -> Path:
+    """Atomic compressed ``.npz``; object arrays are refused (they would need pickle)."""
+    clean: dict[str, np.ndarray] = {}
+    for key, value in arrays.items():
+        arr = np.asarray(value)
+        if arr.dtype == object:
+            raise TypeError(f"array {key!r} has dtype object; only numeric/bool/str arrays can be saved")
+        clean[str(key)] = arr
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **clean)
+    return write_bytes(path, buf.getvalue())
+
+
+def read_npz(path: str | Path) -> dict[str, np.ndarray]:
+    with np.load(Path(path), allow_pickle=False) as data:
+        return {k: data[k] for k in data.files}
+
+
+def save_figure(path: str | Path, fig: Any, dpi: int = 120, close: bool = True) -> Path:
+    """Atomic PNG of a matplotlib figure (closed afterwards unless ``close=False``)."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
+    if close:
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
+    return write_bytes(path, buf.getvalue())
+
+
+# --------------------------------------------------------------------------------------------
+# Stage directories
+# --------------------------------------------------------------------------------------------
+def new_stage_dir(run_dir: str | Path, stage: str) -> Path:
+    """Create the staging directory ``<run_dir>/.<stage>.partial-XXXX/``."""
+    run_dir = Path(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    path = Path(tempfile.mkdtemp(dir=run_dir, prefix=f".{stage}.partial-"))
+    os.chmod(path, 0o777 & ~_UMASK)
+    return path
+
+
+def commit_stage_dir(staging: str | Path, final: str | Path) -> Path:
+    """Rename the complete ``staging`` directory to ``final``, replacing an old one."""
+    staging, final = Path(staging), Path(final)
+    old: Path | None = None
+    if final.exists():
+        old = Path(tempfile.mkdtemp(dir=final.parent, prefix=f".{final.name}.old-"))
+        os.rmdir(old)
+        os.replace(final, old)
+    os.replace(staging, final)
+    _fsync_dir(final.parent)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+    return final
+
+
+def discard_stage_dir(staging: str | Path) -> None:
+    shutil.rmtree(staging, ignore_errors=True)
+
+
+def clean_leftovers(run_dir: str | Path) -> None:
+    """Remove ``.<stage>.partial-*`` / ``.<stage>.old-*`` directories left by a killed run."""
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        return
+    for p in run_dir.iterdir():
+        if p.is_dir() and p.name.startswith(".") and (".partial-" in p.name or ".old-" in p.name):
+            shutil.rmtree(p, ignore_errors=True)
+
+
+def read_inputs_hash(stage_dir: str | Path) -> str | None:
+    """The stored inputs hash of a finished stage directory, or None."""
+    p = Path(stage_dir) / INPUTS_HASH
+    try:
+        return p.read_text(encoding="utf-8").strip() or None
+    except OSError:
+        return None
+
+
+# --------------------------------------------------------------------------------------------
+# Loading a finished stage
+# --------------------------------------------------------------------------------------------
+@dataclasses.dataclass
+class StageOutput:
+    """What later stages get from a finished stage (``pipeline.runner.StageOutput``)."""
+
+    summary: dict
+    arrays: dict[str, np.ndarray]
+    data: dict
+    robot: Any            # RobotModel | None (from ``<stage>/robot/``)
+    path: Path
+
+
+def load_stage_output(stage_dir: str | Path, robot: Any = None) -> StageOutput:
+    """Load ``summary.json``, ``results.npz``, ``results.json`` and ``robot/`` of a stage.
+
+    ``robot``: an already loaded RobotModel to use instead of reading ``robot/`` again.
+    """
+    from pipeline.errors import PipelineError
+
+    d = Path(stage_dir)
+    if not (d / INPUTS_HASH).exists():
+        raise PipelineError(d, None, "not a finished stage directory (no inputs.sha256)")
+    summary = read_json(d / SUMMARY) if (d / SUMMARY).exists() else {}
+    arrays = read_npz(d / RESULTS_NPZ) if (d / RESULTS_NPZ).exists() else {}
+    data = read_json(d / RESULTS_JSON) if (d / RESULTS_JSON).exists() else {}
+    if robot is None and (d / ROBOT_DIR).is_dir():
+        from pipeline.robot.model import RobotModel
+
+        robot = RobotModel.load(d / ROBOT_DIR)
+    return StageOutput(summary=summary, arrays=arrays, data=data, robot=robot, path=d)
+
+
+# --------------------------------------------------------------------------------------------
+# Hashing
+# --------------------------------------------------------------------------------------------
+def stable_json(obj: Any) -> str:
+    """Canonical JSON (sorted keys, no spaces) used for hashing."""
+    return json.dumps(to_jsonable(obj), sort_keys=True, separators=(",", ":"), allow_nan=False)
+
+
+def hash_files(paths: list[Path], root: Path | None = None) -> str:
+    """sha256 over (relative name, content) of the given files, in sorted order."""
+    h = hashlib.sha256()
+    for p in sorted(paths):
+        name = str(p.relative_to(root)) if root is not None else p.name
+        h.update(name.encode())
+        h.update(b"\0")
+        h.update(p.read_bytes())
+        h.update(b"\0")
+    return h.hexdigest()
+
+
+def hash_tree(folder: str | Path, suffixes: tuple[str, ...] | None = None) -> str:
+    """sha256 of every file under ``folder`` (skipping caches and hidden files)."""
+    folder = Path(folder)
+    files = [
+        p for p in folder.rglob("*")
+        if p.is_file()
+        and "__pycache__" not in p.parts
+        and not any(part.startswith(".") for part in p.relative_to(folder).parts)
+        and (suffixes is None or p.suffix in suffixes)
+    ]
+    return hash_files(files, folder)
+
+
+def inputs_hash(
+    stage: str,
+    stage_config: Any,
+    run: Mapping[str, Any],
+    robot_files_sha256: str,
+    upstream: Mapping[str, str],
+    package_version: str,
+    code_sha256: str = "",
+) -> str:
+    """sha256 of everything a stage's result depends on.
+
+    ``run``: run-level settings that matter (seed, robot, truth section); ``upstream``: stage
+    name -> its inputs hash; ``code_sha256``: hash of the stage's source files (optional).
+    """
+    payload = {
+        "stage": stage,
+        "config": stage_config,
+        "run": run,
+        "robot_files": robot_files_sha256,
+        "upstream": dict(sorted(upstream.items())),
+        "version": package_version,
+        "code": code_sha256,
+    }
+    return hashlib.sha256(stable_json(payload).encode()).hexdigest()

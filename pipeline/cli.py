@@ -1,0 +1,91 @@
+"""Command line: ``python -m pipeline run | view | study``.
+
+* ``run [--config FILE] [--set key=value ...] [--stages a,b] [--out DIR] [--force]``
+* ``view [RUN_DIR] [--robot NAME] [--configurations NAME] [--trajectory NAME] [--open]``
+* ``study [NAME [ARGS...]]`` (no name: list the registered studies)
+
+A :class:`pipeline.errors.PipelineError` ends the program with one line on stderr and exit
+code 2 (no traceback).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from pipeline.errors import PipelineError
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m pipeline", description=__doc__.split("\n\n")[0])
+    sub = p.add_subparsers(dest="command", required=True, metavar="{run,view,study}")
+
+    r = sub.add_parser("run", help="run the pipeline stages", description=(
+        "Run the stages into DIR/<name>/ (default data/runs/<name>/). A stage whose inputs are "
+        "unchanged since its last run is reused."))
+    r.add_argument("--config", metavar="FILE", help="YAML run configuration (e.g. configs/quick.yaml)")
+    r.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a setting, dotted keys, YAML values (repeatable): "
+                        "--set seed=3 --set calibration.n_configurations=40")
+    r.add_argument("--stages", metavar="A,B", help="stages to run (their upstream stages are added)")
+    r.add_argument("--out", metavar="DIR", help="directory holding the runs (default data/runs)")
+    r.add_argument("--force", action="store_true", help="re-run the stages even when reusable")
+
+    v = sub.add_parser("view", help="show the robot, saved configurations and trajectories in meshcat")
+    v.add_argument("run_dir", nargs="?", metavar="RUN_DIR",
+                   help="a run directory (default: the most recent under data/runs)")
+    v.add_argument("--robot", help="robot name or folder (default: the run's calibrated/nominal robot)")
+    v.add_argument("--configurations", metavar="NAME", help="show this configuration set only")
+    v.add_argument("--trajectory", metavar="NAME", help="replay this trajectory only")
+    v.add_argument("--open", action="store_true", help="open the page in a web browser")
+    v.add_argument("--once", action="store_true", help="show everything once and exit (no waiting)")
+
+    s = sub.add_parser("study", help="run a registered study (no name: list them)")
+    s.add_argument("name", nargs="?")
+    s.add_argument("args", nargs=argparse.REMAINDER, help="arguments passed to the study")
+    return p
+
+
+def _cmd_run(ns: argparse.Namespace) -> int:
+    from pipeline.config import load_config
+    from pipeline.runner import run_pipeline
+
+    cfg = load_config(ns.config, ns.overrides, ns.stages)
+    result = run_pipeline(cfg, out_root=ns.out, force=ns.force)
+    print(result.report)
+    return 0
+
+
+def _cmd_view(ns: argparse.Namespace) -> int:
+    from pipeline.viewer import view_run
+
+    view_run(ns.run_dir, robot=ns.robot, configurations=ns.configurations, trajectory=ns.trajectory,
+             open_browser=ns.open, wait=not ns.once)
+    return 0
+
+
+def _cmd_study(ns: argparse.Namespace) -> int:
+    from pipeline import studies
+
+    if not ns.name:
+        names = studies.list_studies()
+        print("\n".join(names) if names else "no studies registered (see pipeline/studies.py)")
+        return 0
+    return studies.run_study(ns.name, ns.args)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    ns = _parser().parse_args(argv)
+    try:
+        return {"run": _cmd_run, "view": _cmd_view, "study": _cmd_study}[ns.command](ns)
+    except PipelineError as exc:
+        print("error: " + " ".join(exc.one_line().split()), file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

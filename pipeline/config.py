@@ -1,0 +1,496 @@
+"""Run configuration: built-in defaults, a YAML file, ``--set key=value`` overrides, validation.
+
+A run configuration has a few top-level keys (``name``, ``seed``, ``robot``, ``profile``,
+``stages``) and one section per stage (plus ``truth`` for the hidden robot). Each section is
+validated against a dataclass:
+
+* stage ``<stage>``: ``Config`` in the stage module (``STAGES[stage]``, e.g.
+  ``pipeline.calibration.stage.Config``), imported lazily;
+* ``truth``: ``pipeline.robot.truth.TruthConfig``.
+
+Merging order (later wins): dataclass defaults < YAML file < ``--set`` overrides.
+Every problem raises :class:`pipeline.errors.ConfigError` naming the file (or ``--set``) and the
+dotted field, e.g. ``configs/my.yaml: calibration.n_configurations: expected int, got 'abc'``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import types
+import typing
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from pipeline.errors import ConfigError, PipelineError
+
+#: Stage registry, in run order: stage name -> module path (or a module-like object exposing
+#: ``NAME``, ``DEPENDS``, ``Config`` and ``run``; tests put fake stages here).
+STAGES: dict[str, Any] = {
+    "model": "pipeline.robot.stage",
+    "calibration": "pipeline.calibration.stage",
+    "identification": "pipeline.identification.stage",
+    "control": "pipeline.control.stage",
+    "trajectory": "pipeline.trajectory.stage",
+}
+
+#: Sections that are not stages: section name -> "module:ClassName" of their dataclass.
+EXTRA_SECTIONS: dict[str, str] = {
+    "truth": "pipeline.robot.truth:TruthConfig",
+}
+
+TOP_LEVEL_KEYS = ("name", "seed", "robot", "profile", "stages")
+PROFILES = ("full", "quick")
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+CONFIGS_DIR = REPO_ROOT / "configs"
+
+
+class StageUnavailableError(PipelineError):
+    """A stage module (or a section's config class) does not exist yet."""
+
+
+# --------------------------------------------------------------------------------------------
+# Stage modules
+# --------------------------------------------------------------------------------------------
+def stage_names() -> list[str]:
+    """Registered stage names in run order."""
+    return list(STAGES)
+
+
+def load_stage_module(name: str) -> Any:
+    """Import the module of stage ``name`` (see :data:`STAGES`).
+
+    Raises :class:`StageUnavailableError` when the module does not exist (not written yet) and
+    :class:`ConfigError` for an unknown stage name. Other import errors propagate (they are bugs).
+    """
+    if name not in STAGES:
+        raise ConfigError(None, "stages", f"unknown stage {name!r} (known: {', '.join(STAGES)})")
+    target = STAGES[name]
+    if not isinstance(target, str):
+        return target
+    try:
+        return importlib.import_module(target)
+    except ModuleNotFoundError as exc:
+        missing = exc.name or ""
+        if missing and (target == missing or target.startswith(missing + ".")):
+            raise StageUnavailableError(
+                target.replace(".", "/") + ".py", name,
+                f"stage {name!r} is not available: module {target} does not exist (not written yet?)",
+            ) from None
+        raise
+
+
+def _section_class(section: str) -> type | None:
+    """The dataclass of a section, or None when its module does not exist yet."""
+    if section in STAGES:
+        try:
+            module = load_stage_module(section)
+        except StageUnavailableError:
+            return None
+        cls = getattr(module, "Config", None)
+        if cls is None or not dataclasses.is_dataclass(cls):
+            raise StageUnavailableError(
+                str(getattr(module, "__file__", section)), "Config",
+                f"stage {section!r} has no Config dataclass",
+            )
+        return cls
+    spec = EXTRA_SECTIONS[section]
+    module_name, _, cls_name = spec.partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ModuleNotFoundError as exc:
+        if exc.name and (module_name == exc.name or module_name.startswith(exc.name + ".")):
+            return None
+        raise
+    cls = getattr(module, cls_name, None)
+    if cls is None:
+        return None
+    return cls
+
+
+def section_names() -> list[str]:
+    """All section names: the extra sections (``truth``) then the stages."""
+    return [*EXTRA_SECTIONS, *STAGES]
+
+
+# --------------------------------------------------------------------------------------------
+# RunConfig
+# --------------------------------------------------------------------------------------------
+@dataclass
+class RunConfig:
+    """A validated run configuration.
+
+    ``sections`` maps each section name (``truth``, ``model``, ``calibration``, ...) to its
+    validated dataclass instance, or to a plain dict when the section's module does not exist
+    yet (then the dict is empty: a non-empty section for a missing module is an error).
+    Sections are also reachable as attributes: ``cfg.calibration.n_configurations``.
+    """
+
+    name: str = "default"
+    seed: int = 0
+    robot: str = "rx130l"
+    profile: str = "full"
+    stages: list[str] = field(default_factory=stage_names)
+    sections: dict[str, Any] = field(default_factory=dict)
+    source: str = "<defaults>"          # where it came from, for messages
+    base_dir: Path = field(default_factory=Path.cwd)   # relative robot paths resolve here first
+    origins: dict[str, str] = field(default_factory=dict)  # top-level key -> file or "--set" that set it
+
+    def __getattr__(self, item: str) -> Any:
+        # only called when normal lookup fails: expose sections as attributes
+        sections = self.__dict__.get("sections")
+        if sections is not None and item in sections:
+            return sections[item]
+        raise AttributeError(item)
+
+    def section(self, name: str) -> Any:
+        """The config of section ``name`` (dataclass instance)."""
+        if name not in self.sections:
+            raise ConfigError(self.source, name, "no such section")
+        return self.sections[name]
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain (YAML/JSON-able) dict that :func:`load_config` reads back to an equal config."""
+        out: dict[str, Any] = {
+            "name": self.name,
+            "seed": self.seed,
+            "robot": self.robot,
+            "profile": self.profile,
+            "stages": list(self.stages),
+        }
+        for key, value in self.sections.items():
+            out[key] = to_plain(value)
+        return out
+
+    def to_yaml(self) -> str:
+        return yaml.safe_dump(self.to_dict(), sort_keys=False)
+
+
+def to_plain(value: Any) -> Any:
+    """Dataclasses, tuples, Paths and numpy values -> plain Python (dict/list/str/float/...)."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: to_plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, Mapping):
+        return {str(k): to_plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [to_plain(v) for v in value]
+    if isinstance(value, Path):
+        return str(value)
+    if hasattr(value, "tolist"):      # numpy arrays and scalars
+        return to_plain(value.tolist())
+    return value
+
+
+# --------------------------------------------------------------------------------------------
+# Parsing and validation
+# --------------------------------------------------------------------------------------------
+def parse_set(item: str) -> tuple[list[str], Any]:
+    """``"a.b=3"`` -> (["a", "b"], 3); the value is parsed as a YAML scalar/flow value."""
+    if "=" not in item:
+        raise ConfigError("--set", item, "expected key=value")
+    key, _, text = item.partition("=")
+    key = key.strip()
+    if not key or any(not part for part in key.split(".")):
+        raise ConfigError("--set", item, "empty key")
+    try:
+        value = yaml.safe_load(text) if text.strip() else ""
+    except yaml.YAMLError as exc:
+        raise ConfigError("--set", key, f"cannot parse value {text!r}: {_one_line(exc)}") from None
+    return key.split("."), value
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split())
+
+
+def read_yaml(path: Path) -> dict[str, Any]:
+    """Read a YAML config file whose top level must be a mapping."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(path, None, "config file not found") from None
+    except OSError as exc:
+        raise ConfigError(path, None, f"cannot read: {exc.strerror or exc}") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"line {mark.line + 1}" if mark is not None else None
+        problem = getattr(exc, "problem", None) or _one_line(exc)
+        raise ConfigError(path, where, f"invalid YAML: {problem}") from None
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise ConfigError(path, None, f"top level must be a mapping, got {type(data).__name__}")
+    return data
+
+
+def _type_name(tp: Any) -> str:
+    if isinstance(tp, type):
+        return tp.__name__
+    return str(tp).replace("typing.", "")
+
+
+def _describe(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def coerce(value: Any, tp: Any, where: str, source: str) -> Any:
+    """Check ``value`` (from YAML) against type annotation ``tp`` and convert it.
+
+    Supported: bool, int, float (ints accepted), str, Path, None, X | None, Union, Literal,
+    list[X], tuple[X, ...], tuple[X, Y], dict[K, V], nested dataclasses, Any, and
+    ``np.ndarray`` (accepts nested lists). Unknown annotations accept the value as is.
+    """
+    def fail(expected: str) -> ConfigError:
+        return ConfigError(source, where, f"expected {expected}, got {_describe(value)}")
+
+    if tp is Any or tp is object:
+        return value
+    origin = typing.get_origin(tp)
+    args = typing.get_args(tp)
+    if origin is typing.Union or origin is types.UnionType:
+        if value is None and type(None) in args:
+            return None
+        errors = []
+        for arg in args:
+            if arg is type(None):
+                continue
+            try:
+                return coerce(value, arg, where, source)
+            except ConfigError as exc:
+                errors.append(exc)
+        raise fail(_type_name(tp))
+    if origin is typing.Literal:
+        if value in args:
+            return value
+        raise fail("one of " + ", ".join(repr(a) for a in args))
+    if tp is type(None) or tp is None:
+        if value is None:
+            return None
+        raise fail("null")
+    if dataclasses.is_dataclass(tp) and isinstance(tp, type):
+        if dataclasses.is_dataclass(value) and isinstance(value, tp):
+            return value
+        if not isinstance(value, Mapping):
+            raise fail(f"a mapping ({tp.__name__})")
+        return build_dataclass(tp, value, where, source)
+    if tp is bool:
+        if isinstance(value, bool):
+            return value
+        raise fail("true/false")
+    if tp is int:
+        if isinstance(value, int) and not isinstance(value, bool):
+            return value
+        raise fail("int")
+    if tp is float:
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return float(value)
+        raise fail("number")
+    if tp is str:
+        if isinstance(value, str):
+            return value
+        raise fail("string")
+    if tp is Path:
+        if isinstance(value, (str, Path)):
+            return Path(value)
+        raise fail("path string")
+    if origin in (list, Sequence, typing.Sequence) or tp is list:
+        if not isinstance(value, (list, tuple)):
+            raise fail("a list")
+        item_tp = args[0] if args else Any
+        return [coerce(v, item_tp, f"{where}[{i}]", source) for i, v in enumerate(value)]
+    if origin is tuple or tp is tuple:
+        if not isinstance(value, (list, tuple)):
+            raise fail("a list")
+        if not args or (len(args) == 2 and args[1] is Ellipsis):
+            item_tp = args[0] if args else Any
+            return tuple(coerce(v, item_tp, f"{where}[{i}]", source) for i, v in enumerate(value))
+        if len(value) != len(args):
+            raise fail(f"a list of {len(args)} items")
+        pairs = enumerate(zip(value, args, strict=True))
+        return tuple(coerce(v, a, f"{where}[{i}]", source) for i, (v, a) in pairs)
+    if origin in (dict, Mapping, typing.Mapping) or tp is dict:
+        if not isinstance(value, Mapping):
+            raise fail("a mapping")
+        k_tp, v_tp = args if args else (Any, Any)
+        return {coerce(k, k_tp, where, source): coerce(v, v_tp, f"{where}.{k}", source)
+                for k, v in value.items()}
+    if getattr(tp, "__name__", "") == "ndarray":
+        import numpy as np
+
+        try:
+            arr = np.asarray(value, dtype=float)
+        except (TypeError, ValueError):
+            raise fail("a numeric array") from None
+        return arr
+    return value
+
+
+def _hints(cls: type) -> dict[str, Any]:
+    try:
+        return typing.get_type_hints(cls)
+    except Exception:  # unresolved forward references: fall back to no checking
+        return {f.name: Any for f in dataclasses.fields(cls)}
+
+
+def build_dataclass(cls: type, values: Mapping[str, Any], where: str, source: str) -> Any:
+    """Instantiate dataclass ``cls`` from defaults overridden by ``values`` (validated)."""
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    hints = _hints(cls)
+    kwargs: dict[str, Any] = {}
+    for key, value in values.items():
+        dotted = f"{where}.{key}" if where else str(key)
+        if key not in fields:
+            known = ", ".join(fields) or "none"
+            raise ConfigError(source, dotted, f"unknown key (known keys: {known})")
+        kwargs[key] = coerce(value, hints.get(key, Any), dotted, source)
+    try:
+        instance = cls(**kwargs)
+    except PipelineError:
+        raise
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(source, where, _one_line(exc)) from None
+    return instance
+
+
+def _merge(base: dict[str, Any], update: Mapping[str, Any]) -> dict[str, Any]:
+    """Deep merge of plain dicts (update wins)."""
+    out = dict(base)
+    for key, value in update.items():
+        if isinstance(value, Mapping) and isinstance(out.get(key), Mapping):
+            out[key] = _merge(dict(out[key]), value)
+        else:
+            out[key] = value
+    return out
+
+
+def _parse_stages(value: Any, source: str) -> list[str]:
+    if isinstance(value, str):
+        items = [s.strip() for s in value.split(",") if s.strip()]
+    elif isinstance(value, (list, tuple)) and all(isinstance(s, str) for s in value):
+        items = list(value)
+    else:
+        raise ConfigError(source, "stages", f"expected a list of stage names, got {_describe(value)}")
+    for s in items:
+        if s not in STAGES:
+            raise ConfigError(source, "stages", f"unknown stage {s!r} (known: {', '.join(STAGES)})")
+    if not items:
+        raise ConfigError(source, "stages", "no stage selected")
+    # keep registry order, drop duplicates
+    return [s for s in STAGES if s in items]
+
+
+def load_config(
+    path: str | Path | None = None,
+    overrides: Sequence[str] = (),
+    stages: str | Sequence[str] | None = None,
+    values: Mapping[str, Any] | None = None,
+) -> RunConfig:
+    """Build and validate a :class:`RunConfig`.
+
+    ``path``: YAML file (None: built-in defaults only). ``overrides``: ``"dotted.key=value"``
+    strings (``--set``), values parsed as YAML. ``stages``: ``"a,b"`` or a list, replaces the
+    ``stages`` key (``--stages``). ``values``: ``{"dotted.key": value}`` applied after the
+    overrides (Python API, e.g. notebooks). Raises :class:`ConfigError` naming the file and the field.
+    """
+    layers: list[tuple[str, dict[str, Any]]] = []
+    base_dir = Path.cwd()
+    source = "<defaults>"
+    if path is not None:
+        path = Path(path)
+        layers.append((str(path), read_yaml(path)))
+        base_dir = path.resolve().parent
+        source = str(path)
+    set_layer: dict[str, Any] = {}
+    pairs = [parse_set(item) for item in overrides]
+    pairs += [(str(k).split("."), v) for k, v in (values or {}).items()]
+    for keys, value in pairs:
+        node = set_layer
+        for k in keys[:-1]:
+            child = node.get(k)
+            if not isinstance(child, dict):
+                child = {}
+                node[k] = child
+            node = child
+        node[keys[-1]] = value
+    if set_layer:
+        layers.append(("--set", set_layer))
+    if stages is not None:
+        layers.append(("--stages", {"stages": stages}))
+
+    known = set(TOP_LEVEL_KEYS) | set(section_names())
+    top: dict[str, tuple[str, Any]] = {}            # key -> (source, value)
+    raw_sections: dict[str, list[tuple[str, Any]]] = {s: [] for s in section_names()}
+    for src, layer in layers:
+        for key, value in layer.items():
+            if key not in known:
+                raise ConfigError(src, str(key), f"unknown key (known keys: {', '.join(sorted(known))})")
+            if key in TOP_LEVEL_KEYS:
+                top[key] = (src, value)
+            else:
+                if value is None:
+                    value = {}
+                if not isinstance(value, Mapping):
+                    raise ConfigError(src, key, f"expected a mapping of settings, got {_describe(value)}")
+                raw_sections[key].append((src, value))
+
+    cfg = RunConfig(source=source, base_dir=base_dir)
+    for key, (src, value) in top.items():
+        cfg.origins[key] = src
+        if key == "name":
+            if not isinstance(value, (str, int)) or isinstance(value, bool) or not str(value).strip():
+                raise ConfigError(src, "name", f"expected a non-empty string, got {_describe(value)}")
+            value = str(value)
+            if "/" in value or "\\" in value or value.startswith("."):
+                raise ConfigError(src, "name", f"must be a plain directory name, got {value!r}")
+            cfg.name = value
+        elif key == "seed":
+            if not isinstance(value, int) or isinstance(value, bool) or value < 0:
+                raise ConfigError(src, "seed", f"expected a non-negative int, got {_describe(value)}")
+            cfg.seed = value
+        elif key == "robot":
+            if not isinstance(value, (str, Path)) or not str(value).strip():
+                raise ConfigError(src, "robot", f"expected a robot name or folder, got {_describe(value)}")
+            cfg.robot = str(value)
+        elif key == "profile":
+            if value not in PROFILES:
+                raise ConfigError(src, "profile",
+                                  f"expected one of {', '.join(PROFILES)}, got {_describe(value)}")
+            cfg.profile = value
+        elif key == "stages":
+            cfg.stages = _parse_stages(value, src)
+
+    for section, items in raw_sections.items():
+        cls = _section_class(section)
+        if cls is None:
+            for src, value in items:
+                if value:
+                    module = STAGES.get(section) or EXTRA_SECTIONS[section].partition(":")[0]
+                    raise ConfigError(
+                        src, section,
+                        f"cannot check these settings: {module} does not exist yet",
+                    )
+            cfg.sections[section] = {}
+            continue
+        # validate each layer on its own (so errors name the right file), then merge
+        merged: dict[str, Any] = {}
+        for src, value in items:
+            build_dataclass(cls, _merge(merged, value), section, src)
+            merged = _merge(merged, value)
+        cfg.sections[section] = build_dataclass(cls, merged, section, items[-1][0] if items else source)
+    return cfg
+
+
+def quick_config(**overrides: Any) -> RunConfig:
+    """The quick profile (``configs/quick.yaml``) with optional dotted overrides.
+
+    ``quick_config(**{"calibration.n_configurations": 20})``.
+    """
+    return load_config(CONFIGS_DIR / "quick.yaml", values=overrides)

@@ -1,0 +1,112 @@
+"""Servo design of the per-joint cascade with python-control (paper 004 §2.3, DESIGN.md "Control").
+
+Per joint ``i`` the drive sees the reflected inertia ``J_i = M_ii(q_ref)`` (``M`` from CRBA,
+including the rotor inertia ``model.armature``). For a velocity-loop bandwidth ``w_v`` and a
+position-loop bandwidth ``w_p`` (rad/s)::
+
+    Kv = J w_v,   Ki = Kv w_v / n_i   (PI zero a factor n_i below crossover),   Kp = w_p
+
+Loop models for Bode plots and margins, at the velocity sample time ``T_v``:
+    plant      q/tau = ZOH{1 / (J s^2)}
+    velocity   v_hat = alpha / (1 - (1 - alpha) z^-1) * (1 - z^-1) / T_v * q
+    PI         C_v(z) = Kv + Ki T_v z / (z - 1)
+    L_v = C_v P D F (loop broken at the torque);  velocity loop closed: T_v(z) = v_hat / v_cmd
+    position   L_p = Kp T_v / (z - 1) * T_v(z) * z^-(r d_m + r/2), r = T_p / T_v
+               (the measurement delay of d_m position samples and half a position-loop hold).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import control as ct
+import numpy as np
+import pinocchio as pin
+
+
+@dataclass
+class ServoGains:
+    kp: np.ndarray            # 1/s       position loop
+    kv: np.ndarray            # N m s/rad velocity loop proportional
+    ki: np.ndarray            # N m/rad   velocity loop integral
+    inertia_kgm2: np.ndarray  # reflected inertia the design used
+
+    def as_dict(self) -> dict[str, np.ndarray]:
+        return {"kp": self.kp, "kv": self.kv, "ki": self.ki}
+
+
+def reflected_inertia(robot, q_ref: np.ndarray) -> np.ndarray:
+    """Diagonal of the joint-space inertia (CRBA incl. rotor inertia) at ``q_ref``."""
+    data = robot.model.createData()
+    M = pin.crba(robot.model, data, np.asarray(q_ref, float))
+    return np.diag(M).copy()
+
+
+def design_gains(inertia_kgm2: np.ndarray, position_bandwidth_rad_s: np.ndarray,
+                 velocity_bandwidth_rad_s: np.ndarray, pi_zero_ratio: float = 4.0) -> ServoGains:
+    J = np.asarray(inertia_kgm2, float)
+    wv = np.broadcast_to(np.asarray(velocity_bandwidth_rad_s, float), J.shape)
+    wp = np.broadcast_to(np.asarray(position_bandwidth_rad_s, float), J.shape)
+    kv = J * wv
+    return ServoGains(kp=wp.copy(), kv=kv, ki=kv * wv / pi_zero_ratio, inertia_kgm2=J.copy())
+
+
+def loop_models(J: float, kp: float, kv: float, ki: float, sample_time_s: float, velocity_samples: int,
+                measurement_delay_samples: int, velocity_filter_alpha: float) -> dict[str, ct.TransferFunction]:
+    """Discrete loop transfer functions of one joint at the velocity sample time (see module doc)."""
+    Tv = sample_time_s / velocity_samples
+    plant = ct.sample_system(ct.tf([1.0], [J, 0.0, 0.0]), Tv, method="zoh")
+    z = ct.tf([1.0, 0.0], [1.0], Tv)
+    a = velocity_filter_alpha
+    diff = (z - 1) / (Tv * z)
+    filt = a * z / (z - (1 - a))
+    pi = kv + ki * Tv * z / (z - 1)
+    L_v = ct.minreal(pi * plant * diff * filt, verbose=False)
+    # closed velocity loop from v_cmd to v_hat:  pi*P*D*F / (1 + pi*P*D*F)
+    T_vel = ct.minreal(ct.feedback(L_v, 1), verbose=False)
+    r = velocity_samples
+    n_delay = r * measurement_delay_samples + r // 2
+    delay = ct.tf([1.0], [1.0] + [0.0] * n_delay, Tv) if n_delay > 0 else ct.tf([1.0], [1.0], Tv)
+    integ = ct.tf([Tv], [1.0, -1.0], Tv)
+    L_p = ct.minreal(kp * integ * T_vel * delay, verbose=False)
+    T_pos = ct.minreal(ct.feedback(L_p, 1), verbose=False)
+    return {"velocity_open": L_v, "velocity_closed": T_vel, "position_open": L_p, "position_closed": T_pos}
+
+
+def margins(sys: ct.TransferFunction) -> dict[str, float]:
+    """Gain margin (dB), phase margin (deg), crossover frequencies (Hz), closed-loop stability."""
+    gm, pm, _sm, wpc, wgc, _ws = ct.stability_margins(sys)
+    closed = ct.feedback(sys, 1)
+    stable = bool(np.all(np.abs(closed.poles()) < 1.0))
+    return {"gain_margin_db": float(20 * np.log10(gm)) if np.isfinite(gm) and gm > 0 else float("inf"),
+            "phase_margin_deg": float(pm), "phase_crossover_hz": float(wpc / 2 / np.pi),
+            "gain_crossover_hz": float(wgc / 2 / np.pi), "closed_loop_stable": stable}
+
+
+def bandwidth_hz(closed: ct.TransferFunction) -> float:
+    """-3 dB bandwidth of a closed loop (Hz)."""
+    w = np.logspace(-1, np.log10(np.pi / closed.dt) - 0.01, 2000)
+    mag = np.abs(closed(np.exp(1j * w * closed.dt)))
+    below = np.nonzero(mag < mag[0] / np.sqrt(2))[0]
+    return float(w[below[0]] / 2 / np.pi) if len(below) else float("nan")
+
+
+def servo_report(gains: ServoGains, sample_time_s: float, velocity_samples: int, measurement_delay_samples: int,
+                 velocity_filter_alpha: float) -> list[dict]:
+    """Margins and bandwidths of every joint's velocity and position loops."""
+    rows = []
+    for i in range(len(gains.kp)):
+        lm = loop_models(gains.inertia_kgm2[i], gains.kp[i], gains.kv[i], gains.ki[i], sample_time_s,
+                         velocity_samples, measurement_delay_samples, velocity_filter_alpha)
+        mv, mp = margins(lm["velocity_open"]), margins(lm["position_open"])
+        rows.append({"joint": i + 1, "inertia_kgm2": float(gains.inertia_kgm2[i]),
+                     "kp_1_s": float(gains.kp[i]), "kv_Nms_rad": float(gains.kv[i]), "ki_Nm_rad": float(gains.ki[i]),
+                     "velocity": mv, "position": mp,
+                     "velocity_bandwidth_hz": bandwidth_hz(lm["velocity_closed"]),
+                     "position_bandwidth_hz": bandwidth_hz(lm["position_closed"])})
+    return rows
+
+
+def filter_alpha(cutoff_hz: float, velocity_sample_time_s: float) -> float:
+    """First-order low-pass coefficient: alpha = 1 - exp(-2 pi f_c T_v)."""
+    return float(1.0 - np.exp(-2 * np.pi * cutoff_hz * velocity_sample_time_s))

@@ -1,0 +1,216 @@
+"""The sampled cascade (drive) + plant step as one CasADi function, compiled and cached.
+
+One call of ``step`` covers one position-loop sample ``T_p`` (paper 004 §2.3: 400 µs)::
+
+    position loop (every T_p):  v_cmd = v_ff + Kp (q_d_fb - q_meas[k - d_m])
+    velocity loop (every T_v = T_p / n_vel, paper: 200 µs), per joint:
+        q_enc   = round((q + noise) / res) * res                  encoder: noise + quantisation
+        v_hat  <- v_hat + alpha ((q_enc - q_enc_prev) / T_v - v_hat)   differenced, low-passed
+        e_v     = v_cmd - v_hat ;  I <- clip(I + Ki T_v e_v, +-tau_max)
+        tau_cmd = tau_ff + Kv e_v + I                             ideal current loop
+    plant: n_sub semi-implicit Euler substeps of  qdd = ABA(q, v, sat(tau_cmd) - friction(v))
+
+``q_d_fb`` is the setpoint aligned with the delayed measurement (the drive keeps the setpoint
+history), so the measurement delay only acts on the feedback, not as a lag.
+The step is rolled out with ``mapaccum`` over a chunk of samples, C code is generated and
+compiled with gcc once per structure; the ``.so`` is cached under ``~/.cache/pipeline/control``
+keyed by a hash of the structure, the loop settings, CasADi's version and this source.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import subprocess
+import tempfile
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+import pinocchio as pin
+
+from pipeline.control import dynamics
+from pipeline.control.dynamics import ChainStructure
+from pipeline.errors import SolverError
+
+
+@dataclass(frozen=True)
+class LoopStructure:
+    """Everything the generated code depends on (numbers that vary are inputs)."""
+
+    chain: ChainStructure
+    velocity_samples_per_position_sample: int = 2
+    substeps_per_velocity_sample: int = 4
+    measurement_delay_samples: int = 1
+    chunk_samples: int = 250
+
+    @property
+    def nq(self) -> int:
+        return self.chain.nq
+
+    @property
+    def n_state(self) -> int:
+        return self.nq * (5 + self.measurement_delay_samples)
+
+    @property
+    def n_input(self) -> int:
+        return self.nq * (3 + self.velocity_samples_per_position_sample)
+
+    @property
+    def n_output(self) -> int:
+        return self.nq * 5
+
+    @property
+    def n_loop_params(self) -> int:
+        return self.chain.n_params + 3 * self.nq + 3
+
+    def key(self) -> str:
+        src = Path(__file__).read_bytes() + Path(dynamics.__file__).read_bytes()
+        text = repr(self) + ca.__version__ + hashlib.sha256(src).hexdigest()
+        return hashlib.sha256(text.encode()).hexdigest()[:20]
+
+
+def loop_parameters(p_dyn: np.ndarray, kp: np.ndarray, kv: np.ndarray, ki: np.ndarray, alpha: float,
+                    encoder_resolution_rad: float, sample_time_s: float) -> np.ndarray:
+    """Parameter vector of the step: plant numbers, gains, filter, encoder resolution, T_p."""
+    return np.concatenate([p_dyn, kp, kv, ki, [alpha, encoder_resolution_rad, sample_time_s]])
+
+
+def build_step(ls: LoopStructure) -> ca.Function:
+    """``step(x, u, P) -> (x_next, y)``; layouts in the module docstring and :func:`unpack_output`."""
+    n, nv_, ns = ls.nq, ls.velocity_samples_per_position_sample, ls.substeps_per_velocity_sample
+    dm = ls.measurement_delay_samples
+    fd = dynamics.forward_dynamics_function(ls.chain)
+    x = ca.MX.sym("x", ls.n_state)
+    u = ca.MX.sym("u", ls.n_input)
+    P = ca.MX.sym("P", ls.n_loop_params)
+    npd = ls.chain.n_params
+    p_dyn = P[:npd]
+    kp, kv, ki = P[npd:npd + n], P[npd + n:npd + 2 * n], P[npd + 2 * n:npd + 3 * n]
+    alpha, res, Tp = P[npd + 3 * n], P[npd + 3 * n + 1], P[npd + 3 * n + 2]
+    Tv = Tp / nv_
+    h = Tv / ns
+    psym = ca.SX.sym("p", npd)
+    effort = ca.Function("effort", [psym], [dynamics.effort_sx(psym, ls.chain)])(p_dyn)
+
+    q, v, integ, q_prev, v_hat = (x[i * n:(i + 1) * n] for i in range(5))
+    buf = [x[(5 + i) * n:(6 + i) * n] for i in range(dm)]  # buf[0] oldest
+    q_d_fb, v_ff, tau_ff = u[:n], u[n:2 * n], u[2 * n:3 * n]
+    noise = [u[(3 + j) * n:(4 + j) * n] for j in range(nv_)]
+
+    def encoder(qq, nn):
+        return ca.floor((qq + nn) / res + 0.5) * res
+
+    q_enc0 = encoder(q, noise[0])
+    q_fb = buf[0] if dm > 0 else q_enc0
+    v_cmd = v_ff + kp * (q_d_fb - q_fb)
+    tau_sum = ca.MX.zeros(n)
+    ratio = ca.MX.zeros(n)
+    for j in range(nv_):
+        q_enc = q_enc0 if j == 0 else encoder(q, noise[j])
+        v_hat = v_hat + alpha * ((q_enc - q_prev) / Tv - v_hat)
+        q_prev = q_enc
+        e_v = v_cmd - v_hat
+        integ = ca.fmin(ca.fmax(integ + ki * Tv * e_v, -effort), effort)
+        tau_cmd = tau_ff + kv * e_v + integ
+        tau_sum = tau_sum + tau_cmd
+        ratio = ca.fmax(ratio, ca.fabs(tau_cmd) / effort)
+        for _ in range(ns):
+            a = fd(q, v, tau_cmd, p_dyn)
+            v = v + h * a
+            q = q + h * v
+    new_buf = [*buf[1:], q_enc0] if dm > 0 else []
+    x_next = ca.vertcat(q, v, integ, q_prev, v_hat, *new_buf)
+    y = ca.vertcat(q_enc0, v_hat, tau_sum / nv_, ratio, x[:n])
+    return ca.Function("step", [x, u, P], [x_next, y], ["x", "u", "P"], ["x_next", "y"])
+
+
+def unpack_output(Y: np.ndarray, n: int) -> dict[str, np.ndarray]:
+    """Rows of the stacked outputs (samples x 5n) -> named arrays (samples x n)."""
+    names = ("q_meas", "v_est", "tau_cmd", "torque_ratio", "q_true")
+    return {k: Y[:, i * n:(i + 1) * n] for i, k in enumerate(names)}
+
+
+_CACHE: dict[str, ca.Function] = {}
+_LOCK = threading.Lock()
+
+
+def cache_dir() -> Path:
+    root = Path(os.environ.get("PIPELINE_CACHE", Path.home() / ".cache" / "pipeline"))
+    return root / "control"
+
+
+def compiled_rollout(ls: LoopStructure) -> ca.Function:
+    """``roll(x0, U (n_input x chunk), P) -> (X, Y)`` compiled with gcc, cached in memory and on disk."""
+    key = ls.key()
+    with _LOCK:
+        if key in _CACHE:
+            return _CACHE[key]
+        d = cache_dir()
+        d.mkdir(parents=True, exist_ok=True)
+        so = d / f"rollout_{key}.so"
+        if not so.exists():
+            roll = build_step(ls).mapaccum("roll", ls.chunk_samples, [0], [0])
+            with tempfile.TemporaryDirectory(dir=d) as tmp:
+                cg = ca.CodeGenerator(f"roll_{key}.c", {"with_header": False})
+                cg.add(roll)
+                cg.generate(tmp + os.sep)
+                c_file = Path(tmp) / f"roll_{key}.c"
+                tmp_so = Path(tmp) / so.name
+                proc = subprocess.run(["gcc", "-shared", "-fPIC", "-O2", str(c_file), "-o", str(tmp_so)],
+                                      capture_output=True, text=True)
+                if proc.returncode != 0:
+                    raise SolverError(str(c_file), "gcc", proc.stderr.strip()[-400:])
+                os.replace(tmp_so, so)  # atomic
+        f = ca.external("roll", str(so))
+        _CACHE[key] = f
+        return f
+
+
+def python_rollout(ls: LoopStructure, model: pin.Model, p_dyn: np.ndarray, x0: np.ndarray, U: np.ndarray,
+                   P: np.ndarray, friction) -> tuple[np.ndarray, np.ndarray]:
+    """The same loop as a plain Python loop with ``pin.aba`` (baseline for the speed-up and tests).
+
+    ``friction(v)`` is the plant's friction torque; ``U`` is (samples x n_input).
+    """
+    n, nv_, ns, dm = ls.nq, ls.velocity_samples_per_position_sample, ls.substeps_per_velocity_sample, \
+        ls.measurement_delay_samples
+    npd = ls.chain.n_params
+    kp, kv, ki = P[npd:npd + n], P[npd + n:npd + 2 * n], P[npd + 2 * n:npd + 3 * n]
+    alpha, res, Tp = P[npd + 3 * n:npd + 3 * n + 3]
+    effort = np.array([p_dyn[i * dynamics.PARAMS_PER_JOINT + 25] for i in range(n)])
+    Tv = Tp / nv_
+    h = Tv / ns
+    data = model.createData()
+    x = np.array(x0, float)
+    q, v, integ, q_prev, v_hat = (x[i * n:(i + 1) * n].copy() for i in range(5))
+    buf = [x[(5 + i) * n:(6 + i) * n].copy() for i in range(dm)]
+    Y = np.empty((len(U), ls.n_output))
+    for k, u in enumerate(U):
+        q_start = q.copy()
+        noise = [u[(3 + j) * n:(4 + j) * n] for j in range(nv_)]
+        q_enc0 = np.floor((q + noise[0]) / res + 0.5) * res
+        q_fb = buf[0] if dm > 0 else q_enc0
+        v_cmd = u[n:2 * n] + kp * (u[:n] - q_fb)
+        tau_sum = np.zeros(n)
+        ratio = np.zeros(n)
+        for j in range(nv_):
+            q_enc = q_enc0 if j == 0 else np.floor((q + noise[j]) / res + 0.5) * res
+            v_hat = v_hat + alpha * ((q_enc - q_prev) / Tv - v_hat)
+            q_prev = q_enc
+            e_v = v_cmd - v_hat
+            integ = np.clip(integ + ki * Tv * e_v, -effort, effort)
+            tau_cmd = u[2 * n:3 * n] + kv * e_v + integ
+            tau_sum += tau_cmd
+            ratio = np.maximum(ratio, np.abs(tau_cmd) / effort)
+            tau_sat = np.clip(tau_cmd, -effort, effort)
+            for _ in range(ns):
+                a = pin.aba(model, data, q, v, tau_sat - friction(v))
+                v = v + h * a
+                q = q + h * v
+        if dm > 0:
+            buf = [*buf[1:], q_enc0]
+        Y[k] = np.concatenate([q_enc0, v_hat, tau_sum / nv_, ratio, q_start])
+    return np.concatenate([q, v, integ, q_prev, v_hat, *buf]), Y

@@ -1,0 +1,136 @@
+"""The physical robot behind the drives: what ``RealRobot.plant`` returns.
+
+A :class:`Plant` wraps the hidden robot model (only the truth side constructs it) and offers
+the hardware's interfaces: ``integrate`` (one open-loop step of the rigid-body dynamics at
+>= 10 kHz internal rate) and ``run_servo`` (the drives' cascaded loops closed around the robot,
+sampled at the position-loop rate, returning what the encoders, the current loop and an ideal
+laser tracker registered in the base frame would record). Stage code passes gains and set
+points in and gets sensor records out; it never sees the model inside.
+
+Dynamics (paper 004 §2.3, DESIGN.md "Control"): ``qdd = ABA(q, v, sat(tau) - friction(v))`` with
+rotor inertia in ``model.armature``, integrated by semi-implicit Euler substeps.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from pipeline.control import dynamics, loop
+from pipeline.errors import ConfigError
+
+
+@dataclass
+class ServoRecord:
+    """Per position sample: encoder positions, velocity estimate, torque command (mean over the
+    velocity samples), max |tau_cmd| / tau_max within the sample, TCP position from the tracker."""
+
+    q_meas: np.ndarray
+    v_est: np.ndarray
+    tau_cmd: np.ndarray
+    torque_ratio: np.ndarray
+    tcp_position_m: np.ndarray | None
+    wall_time_s: float
+    extra: dict = field(default_factory=dict)
+
+
+class Plant:
+    """Hidden-robot dynamics + encoders. ``model`` is a RobotModel (the truth, when built by RealRobot)."""
+
+    def __init__(self, model, encoder_noise_rad: float = 2e-6, encoder_resolution_rad: float = 2 * np.pi / 2**26,
+                 integration_rate_hz: float = 10000.0) -> None:
+        if encoder_resolution_rad <= 0 or encoder_noise_rad < 0:
+            raise ConfigError(None, "plant.encoder", "resolution must be > 0 and noise >= 0")
+        if integration_rate_hz < 10000.0:
+            raise ConfigError(None, "plant.integration_rate_hz", f"{integration_rate_hz} < 10 kHz")
+        self._model = model
+        self._chain = dynamics.chain_structure(model.model)
+        self._p = dynamics.parameter_vector(model)
+        self._data = model.model.createData()
+        self.encoder_noise_rad = float(encoder_noise_rad)
+        self.encoder_resolution_rad = float(encoder_resolution_rad)
+        self.integration_rate_hz = float(integration_rate_hz)
+        self.nq = model.model.nq
+
+    # --- open-loop interface of the contract -------------------------------------------------
+    def _friction(self, v: np.ndarray) -> np.ndarray:
+        a = self._model.actuation
+        return a.viscous_Nms_rad * v + a.coulomb_Nm * np.tanh(v / a.coulomb_smoothing_rad_s)
+
+    def integrate(self, q: np.ndarray, v: np.ndarray, tau_cmd: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """Hold ``tau_cmd`` (saturated) for ``dt`` seconds; semi-implicit Euler at >= the integration rate."""
+        n_sub = max(1, int(np.ceil(dt * self.integration_rate_hz - 1e-9)))
+        h = dt / n_sub
+        eff = self._model.limits.effort_Nm
+        tau = np.clip(tau_cmd, -eff, eff)
+        q, v = np.array(q, float), np.array(v, float)
+        for _ in range(n_sub):
+            a = pin.aba(self._model.model, self._data, q, v, tau - self._friction(v))
+            v = v + h * a
+            q = q + h * v
+        return q, v
+
+    def read_encoders(self, q_true: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        noisy = q_true + self.encoder_noise_rad * rng.standard_normal(np.shape(q_true))
+        return np.floor(noisy / self.encoder_resolution_rad + 0.5) * self.encoder_resolution_rad
+
+    def substeps_for(self, velocity_sample_time_s: float) -> int:
+        """Substeps per velocity sample: >= the integration rate and stable for the smooth Coulomb
+        slope ``coulomb / (width * J_rotor)`` of explicit friction (h * slope <= 0.5)."""
+        a = self._model.actuation
+        slope = np.max(a.coulomb_Nm / a.coulomb_smoothing_rad_s / np.maximum(self._model.model.armature, 1e-3)
+                       + a.viscous_Nms_rad / np.maximum(self._model.model.armature, 1e-3))
+        n_rate = int(np.ceil(velocity_sample_time_s * self.integration_rate_hz - 1e-9))
+        n_stab = int(np.ceil(velocity_sample_time_s * slope / 0.5))
+        return max(n_rate, n_stab, 1)
+
+    # --- closed loop ------------------------------------------------------------------------
+    def run_servo(self, gains: dict[str, np.ndarray], sample_time_s: float, velocity_samples: int,
+                  measurement_delay_samples: int, velocity_filter_alpha: float,
+                  q_d_fb: np.ndarray, v_ff: np.ndarray, tau_ff: np.ndarray, q0: np.ndarray,
+                  rng: np.random.Generator, engine: str = "compiled", chunk_samples: int = 250,
+                  measure_tcp: bool = True, tcp_frame: str = "tcp") -> ServoRecord:
+        """Close the drives' loops around the robot for ``len(q_d_fb)`` position samples.
+
+        ``q_d_fb`` (N, nq): set point aligned with the delayed measurement; ``v_ff``, ``tau_ff``: the
+        velocity and torque feedforward as they reach the drive. Starts at rest at ``q0``.
+        ``engine``: "compiled" (CasADi/gcc, cached) or "python" (plain loop with pin.aba).
+        """
+        n, N = self.nq, len(q_d_fb)
+        ls = loop.LoopStructure(self._chain, velocity_samples, self.substeps_for(sample_time_s / velocity_samples),
+                                measurement_delay_samples, chunk_samples)
+        P = loop.loop_parameters(self._p, gains["kp"], gains["kv"], gains["ki"], velocity_filter_alpha,
+                                 self.encoder_resolution_rad, sample_time_s)
+        noise = self.encoder_noise_rad * rng.standard_normal((N, velocity_samples * n))
+        U = np.hstack([q_d_fb, v_ff, tau_ff, noise])
+        q_enc0 = np.floor(q0 / self.encoder_resolution_rad + 0.5) * self.encoder_resolution_rad
+        x0 = np.concatenate([q0, np.zeros(n), np.zeros(n), q_enc0, np.zeros(n),
+                             np.tile(q_enc0, measurement_delay_samples)])
+        t0 = time.perf_counter()
+        if engine == "python":
+            _, Y = loop.python_rollout(ls, self._model.model, self._p, x0, U, P, self._friction)
+        elif engine == "compiled":
+            roll = loop.compiled_rollout(ls)
+            t0 = time.perf_counter()  # compile/cache load is not part of the loop time
+            c = ls.chunk_samples
+            n_chunks = -(-N // c)
+            Upad = np.vstack([U, np.repeat(U[-1:], n_chunks * c - N, axis=0)])
+            Upad[N:, 3 * n:] = 0.0
+            Ys = []
+            x = x0
+            for i in range(n_chunks):
+                X, Yc = roll(x, Upad[i * c:(i + 1) * c].T, P)
+                X = np.asarray(X)
+                x = X[:, -1]
+                Ys.append(np.asarray(Yc).T)
+            Y = np.vstack(Ys)[:N]
+        else:
+            raise ConfigError(None, "control.engine", f"unknown engine {engine!r} (compiled|python)")
+        wall = time.perf_counter() - t0
+        out = loop.unpack_output(Y, n)
+        tcp = self._model.positions(out["q_true"], frame=tcp_frame) if measure_tcp else None
+        return ServoRecord(out["q_meas"], out["v_est"], out["tau_cmd"], out["torque_ratio"], tcp, wall,
+                           {"substeps_per_velocity_sample": ls.substeps_per_velocity_sample})

@@ -1,0 +1,155 @@
+"""Execute a joint trajectory with the cascaded drives on the real robot's plant.
+
+Paper 004 §2.3 (DESIGN.md "Control"): set points ``q_d`` and ``v_d`` go to the P position loop
+with velocity feedforward; the feedforward torque ``tau_ff`` of the chosen variant is added to
+the current set value::
+
+    none           tau_ff = 0
+    gravity        tau_ff = g(q_d)
+    full           tau_ff = M(q_d) a_d + h(q_d, v_d)            (rotor inertia included)
+    full_friction  tau_ff = M(q_d) a_d + h(q_d, v_d) + viscous v_d + coulomb tanh(v_d / width)
+
+Set points reach the drives ``setpoint_delay_samples`` late; with ``advance_feedforward`` they are
+sent that many samples early so they arrive on time. The drive aligns its set point with the
+measurement, which is ``measurement_delay_samples`` old.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from pipeline.control.config import FEEDFORWARD_VARIANTS, ControlConfig
+from pipeline.control.design import ServoGains, design_gains, filter_alpha, reflected_inertia
+from pipeline.errors import ConfigError, InfeasibleError
+
+
+@dataclass
+class ClosedLoopResult:
+    t_s: np.ndarray             # (N,) sample times of the trajectory (control grid)
+    q: np.ndarray               # (N, nq) encoder positions
+    v: np.ndarray               # (N, nq) drive velocity estimate
+    q_d: np.ndarray             # (N, nq) desired positions
+    tau_cmd: np.ndarray         # (N, nq) torque command (mean over the velocity samples)
+    tau_ff: np.ndarray          # (N, nq) feedforward torque
+    lag_error_rad: np.ndarray   # (N, nq) q_d - q
+    max_torque_ratio: np.ndarray  # (nq,) max |tau_cmd| / tau_max
+    realtime_factor: float      # simulated time / wall time of the loop
+    tcp_position_m: np.ndarray | None = None   # (N, 3) measured TCP (ideal tracker, base frame)
+    wall_time_s: float = 0.0
+    gains: ServoGains | None = None
+    torque_ratio: np.ndarray | None = None     # (N, nq) per-sample max |tau_cmd| / tau_max
+
+
+def feedforward_torque(model, q_d: np.ndarray, v_d: np.ndarray, a_d: np.ndarray, variant: str) -> np.ndarray:
+    """Feedforward torques (N, nq) of a variant from ``model`` (RobotModel)."""
+    if variant not in FEEDFORWARD_VARIANTS:
+        raise ConfigError(None, "feedforward", f"unknown variant {variant!r}; one of {FEEDFORWARD_VARIANTS}")
+    N, n = q_d.shape
+    if variant == "none":
+        return np.zeros((N, n))
+    data = model.model.createData()
+    zero = np.zeros(n)
+    out = np.empty((N, n))
+    for k in range(N):
+        if variant == "gravity":
+            out[k] = pin.rnea(model.model, data, q_d[k], zero, zero)
+        else:
+            out[k] = pin.rnea(model.model, data, q_d[k], v_d[k], a_d[k])
+    if variant == "full_friction":
+        out += np.array([model.friction_torque(v) for v in v_d])
+    return out
+
+
+def resample(t_s: np.ndarray, q: np.ndarray, v: np.ndarray, a: np.ndarray, dt: float):
+    """Onto the uniform control grid: cubic Hermite for q (with v), linear for v and a."""
+    t_s = np.asarray(t_s, float)
+    if len(t_s) < 2 or np.any(np.diff(t_s) <= 0):
+        raise ConfigError(None, "t_s", "trajectory times must be strictly increasing (>= 2 samples)")
+    n_grid = int(np.floor((t_s[-1] - t_s[0]) / dt + 1e-9)) + 1
+    grid = t_s[0] + dt * np.arange(n_grid)
+    if len(t_s) == n_grid and np.allclose(t_s, grid, atol=1e-9 * max(1.0, abs(t_s[-1]))):
+        return grid, q, v, a
+    from scipy.interpolate import CubicHermiteSpline
+
+    qs = CubicHermiteSpline(t_s, q, v, axis=0)(grid)
+    vs = np.stack([np.interp(grid, t_s, v[:, j]) for j in range(q.shape[1])], axis=1)
+    acc = np.stack([np.interp(grid, t_s, a[:, j]) for j in range(q.shape[1])], axis=1)
+    return grid, qs, vs, acc
+
+
+def drive_inputs(q_d, v_d, tau_ff, setpoint_delay: int, measurement_delay: int, advance: bool):
+    """What reaches the drive at each sample: (q_d aligned with the delayed measurement, v_ff, tau_ff)."""
+    N = len(q_d)
+    k = np.arange(N)
+    shift = 0 if advance else setpoint_delay
+    idx = np.clip(k - shift, 0, N - 1)
+    idx_fb = np.clip(k - shift - measurement_delay, 0, N - 1)
+    return q_d[idx_fb], v_d[idx], tau_ff[idx]
+
+
+def servo_gains(model, q_ref: np.ndarray, config: ControlConfig) -> ServoGains:
+    J = reflected_inertia(model, q_ref)
+    return design_gains(J, 2 * np.pi * config.position_bandwidth_hz, 2 * np.pi * config.velocity_bandwidth_hz,
+                        config.pi_zero_ratio)
+
+
+def simulate_joint_trajectory(real, model, t_s, q_d, v_d, a_d, config: ControlConfig | None = None,
+                              feedforward: str = "full_friction", rng: np.random.Generator | None = None,
+                              gains: ServoGains | None = None, tcp_frame: str = "tcp") -> ClosedLoopResult:
+    """Run the trajectory (t_s (N,), q_d/v_d/a_d (N, nq)) on ``real.plant`` and return the record.
+
+    ``model`` (RobotModel) gives the feedforward and the servo design (reflected inertia at the
+    mean of ``q_d``). The trajectory is resampled to the control grid if needed. The robot holds
+    ``q_d[0]`` for ``config.settle_time_s`` before the start (not part of the result).
+    Raises InfeasibleError naming time and joint if the torque command saturates
+    (``config.on_saturation == "error"``).
+    """
+    config = config or ControlConfig()
+    rng = rng if rng is not None else np.random.default_rng(0)
+    q_d, v_d, a_d = (np.atleast_2d(np.asarray(x, float)) for x in (q_d, v_d, a_d))
+    if not (q_d.shape == v_d.shape == a_d.shape) or q_d.shape[1] != model.model.nq or len(q_d) != len(t_s):
+        raise ConfigError(None, "q_d/v_d/a_d", f"shapes {q_d.shape}, {v_d.shape}, {a_d.shape} do not match "
+                          f"t_s ({len(t_s)},) and nq = {model.model.nq}")
+    dt = config.sample_time_s
+    t, q_d, v_d, a_d = resample(np.asarray(t_s, float), q_d, v_d, a_d, dt)
+    n_settle = int(round(config.settle_time_s / dt))
+    pad = lambda x, first: np.vstack([np.repeat(first[None], n_settle, 0), x])  # noqa: E731
+    zero = np.zeros_like(q_d[0])
+    Q, V, A = pad(q_d, q_d[0]), pad(v_d, zero), pad(a_d, zero)
+    tau_ff = feedforward_torque(model, Q, V, A, feedforward)
+    if gains is None:
+        gains = servo_gains(model, np.mean(q_d, axis=0), config)
+    d_s, d_m = config.setpoint_delay_samples, config.measurement_delay_samples
+    q_fb, v_ff, tau_drive = drive_inputs(Q, V, tau_ff, d_s, d_m, config.advance_feedforward)
+    alpha = filter_alpha(config.velocity_filter_hz, dt / config.velocity_samples_per_position_sample)
+    plant = real.plant
+    rec = plant.run_servo(gains.as_dict(), dt, config.velocity_samples_per_position_sample, d_m, alpha,
+                          q_fb, v_ff, tau_drive, Q[0], rng, engine=config.engine,
+                          chunk_samples=config.chunk_samples, tcp_frame=tcp_frame)
+    s = slice(n_settle, None)
+    q_meas = rec.q_meas[s]
+    ratio = rec.torque_ratio[s]
+    result = ClosedLoopResult(
+        t_s=t, q=q_meas, v=rec.v_est[s], q_d=q_d, tau_cmd=rec.tau_cmd[s], tau_ff=tau_ff[s],
+        lag_error_rad=q_d - q_meas, max_torque_ratio=ratio.max(axis=0),
+        realtime_factor=float(len(Q) * dt / max(rec.wall_time_s, 1e-12)),
+        tcp_position_m=None if rec.tcp_position_m is None else rec.tcp_position_m[s],
+        wall_time_s=rec.wall_time_s, gains=gains, torque_ratio=ratio)
+    check_saturation(result, config)
+    return result
+
+
+def check_saturation(result: ClosedLoopResult, config: ControlConfig) -> None:
+    """Raise InfeasibleError naming the first time and joint where |tau_cmd| > ratio * tau_max."""
+    if config.on_saturation != "error" or result.torque_ratio is None:
+        return
+    over = result.torque_ratio > config.saturation_ratio
+    if over.any():
+        k, j = np.argwhere(over)[0]
+        raise InfeasibleError(None, "control", f"torque saturation at t = {result.t_s[k]:.4f} s on joint {j + 1}: "
+                              f"|tau_cmd| = {result.torque_ratio[k, j]:.2f} x tau_max (max over the run "
+                              f"{result.max_torque_ratio[j]:.2f}); slow the trajectory down or set "
+                              "control.on_saturation = clip")

@@ -1,0 +1,42 @@
+"""Errors that name the file, the field and the problem.
+
+The CLI prints a :class:`PipelineError` as one line and exits with code 2.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+class PipelineError(Exception):
+    """A user-facing error: ``<file>: <field>: <problem>``."""
+
+    def __init__(self, file: str | Path | None, field: str | None, problem: str) -> None:
+        self.file = str(file) if file is not None else None
+        self.field = field
+        self.problem = problem
+        super().__init__(self.one_line())
+
+    def one_line(self) -> str:
+        parts = [p for p in (self.file, self.field) if p]
+        return ": ".join([*parts, self.problem])
+
+
+class ConfigError(PipelineError):
+    """The run configuration is invalid."""
+
+
+class RobotFileError(PipelineError):
+    """A URDF or robot.yaml is missing or invalid."""
+
+
+class DataFileError(PipelineError):
+    """A measurement file is missing or invalid."""
+
+
+class SolverError(PipelineError):
+    """A numerical solver failed; never returned as a result."""
+
+
+class InfeasibleError(PipelineError):
+    """A path point, pose or limit cannot be met."""

@@ -1,0 +1,318 @@
+"""Least-squares and physically consistent estimation of the dynamic parameters.
+
+Paper ``004_abbe750b8bbcc3aa.txt`` §4.1 (overdetermined system (28), ``tau = W p_b``).
+
+* **OLS** on the base regressor ``W`` (rows sample-major, ``k*nv + j``).
+* **WLS, Gautier's weighting** (Gautier & Poignet 2001): from the OLS residual ``rho_j`` of joint
+  ``j`` (``r_j`` rows, ``c_j`` base parameters acting on that joint)
+  ``sigma_j^2 = ||rho_j||^2 / (r_j - c_j)``; rows of joint ``j`` are divided by ``sigma_j`` and
+  the estimate is re-solved. Covariance ``(W^T S^-1 W)^-1`` gives each base parameter's sigma.
+* **Physically consistent** estimate of the *standard* parameters: each link's parameters come
+  from its log-Cholesky parameters ``theta`` (Rucker & Wensing 2022): the pseudo-inertia
+  ``J = U U^T`` with ``U = e^alpha [[e^d1, s12, s13, t1], [0, e^d2, s23, t2], [0, 0, e^d3, t3],
+  [0, 0, 0, 1]]`` is positive definite for every ``theta`` (so the mass is positive and the
+  inertia satisfies the triangle inequalities). Rotor inertia, viscous and Coulomb friction have
+  a positive lower bound. IPOPT (through CasADi, exact Hessian) minimises
+
+      ||S^-1/2 (Y p(theta) - tau)||^2 + lambda * sum(((p - p_nominal) / p_scale)^2)
+
+  The small ``lambda`` term picks, among the models that fit equally well, the one closest to the
+  nominal model: it fixes the standard parameters the data cannot identify.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from pipeline.errors import DataFileError, SolverError
+
+#: lower bound of rotor inertia (kg m^2) and friction (N m s/rad, N m) in the physical fit
+POSITIVE_LOWER_BOUND = 1e-6
+
+
+@dataclass
+class LeastSquaresEstimate:
+    """Result of OLS or WLS on the base regressor."""
+
+    beta: np.ndarray  # base parameters
+    covariance: np.ndarray  # (n_base, n_base)
+    joint_sigma_Nm: np.ndarray  # residual sigma per joint (Gautier)
+    residual_Nm: np.ndarray  # (N, nv) unweighted residual tau - W beta
+    method: str
+
+    @property
+    def sigma(self) -> np.ndarray:
+        return np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
+
+    @property
+    def rms_Nm(self) -> float:
+        return float(np.sqrt(np.mean(self.residual_Nm**2)))
+
+
+def _check_system(W: np.ndarray, y: np.ndarray, nv: int) -> None:
+    if W.ndim != 2 or y.ndim != 1 or W.shape[0] != y.shape[0]:
+        raise DataFileError(None, "regressor/torque", f"mismatched shapes {W.shape}, {y.shape}")
+    if W.shape[0] % nv:
+        raise DataFileError(None, "regressor", f"{W.shape[0]} rows are not a multiple of {nv}")
+    if not (np.all(np.isfinite(W)) and np.all(np.isfinite(y))):
+        raise DataFileError(None, "regressor/torque", "contains NaN or inf")
+    n_samples = W.shape[0] // nv
+    if n_samples * nv <= W.shape[1]:
+        raise DataFileError(
+            None,
+            "samples",
+            f"{n_samples} samples x {nv} joints = {W.shape[0]} equations <= "
+            f"{W.shape[1]} base parameters",
+        )
+
+
+def _joint_sigmas(W: np.ndarray, res: np.ndarray, nv: int) -> np.ndarray:
+    n = W.shape[0] // nv
+    sig = np.empty(nv)
+    for j in range(nv):
+        rows = W[j::nv]
+        c_j = int(np.sum(np.linalg.norm(rows, axis=0) > 0))
+        dof = max(n - c_j, 1)
+        sig[j] = np.sqrt(np.sum(res[:, j] ** 2) / dof)
+    return np.maximum(sig, 1e-12)
+
+
+def ols(W: np.ndarray, y: np.ndarray, nv: int) -> LeastSquaresEstimate:
+    """Ordinary least squares; covariance from one residual variance of all rows."""
+    _check_system(W, y, nv)
+    beta, *_ = np.linalg.lstsq(W, y, rcond=None)
+    res = (y - W @ beta).reshape(-1, nv)
+    dof = max(W.shape[0] - W.shape[1], 1)
+    s2 = float(np.sum(res**2) / dof)
+    cov = s2 * np.linalg.pinv(W.T @ W)
+    return LeastSquaresEstimate(beta, cov, _joint_sigmas(W, res, nv), res, "ols")
+
+
+def wls(W: np.ndarray, y: np.ndarray, nv: int, iterations: int = 1) -> LeastSquaresEstimate:
+    """Gautier's weighted least squares (per-joint residual sigma from the previous fit)."""
+    est = ols(W, y, nv)
+    for _ in range(iterations):
+        w = np.tile(1.0 / est.joint_sigma_Nm, W.shape[0] // nv)
+        Ww = W * w[:, None]
+        beta, *_ = np.linalg.lstsq(Ww, y * w, rcond=None)
+        res = (y - W @ beta).reshape(-1, nv)
+        cov = np.linalg.pinv(Ww.T @ Ww)
+        est = LeastSquaresEstimate(beta, cov, _joint_sigmas(W, res, nv), res, "wls")
+    # the covariance assumes the weights are the true sigmas: rescale by the weighted residual
+    n_dof = max(W.shape[0] - W.shape[1], 1)
+    chi2 = float(np.sum((est.residual_Nm / est.joint_sigma_Nm) ** 2) / n_dof)
+    est.covariance = est.covariance * chi2
+    return est
+
+
+# ----------------------------------------------------------------------------- log-Cholesky
+
+
+def log_cholesky_to_dynamic(theta):
+    """10 log-Cholesky parameters -> 10 dynamic parameters (pin order), numpy or CasADi."""
+    is_ca = isinstance(theta, (ca.SX, ca.MX, ca.DM))
+    exp = ca.exp if is_ca else np.exp
+    al, d1, d2, d3, s12, s23, s13, t1, t2, t3 = (theta[i] for i in range(10))
+    ea = exp(al)
+    e1, e2, e3 = exp(d1), exp(d2), exp(d3)
+    # U upper triangular (row-major entries), J = U U^T, times e^(2 alpha)
+    u = [[e1, s12, s13, t1], [0, e2, s23, t2], [0, 0, e3, t3], [0, 0, 0, 1]]
+
+    def jij(i, j):
+        return sum(u[i][k] * u[j][k] for k in range(4)) * ea * ea
+
+    S = [[jij(i, j) for j in range(3)] for i in range(3)]
+    h = [jij(i, 3) for i in range(3)]
+    m = jij(3, 3)
+    tr = S[0][0] + S[1][1] + S[2][2]
+    vals = [
+        m,
+        h[0],
+        h[1],
+        h[2],
+        tr - S[0][0],
+        -S[0][1],
+        tr - S[1][1],
+        -S[0][2],
+        -S[1][2],
+        tr - S[2][2],
+    ]
+    return ca.vertcat(*vals) if is_ca else np.array(vals, dtype=float)
+
+
+def pseudo_inertia(p10: np.ndarray) -> np.ndarray:
+    """4x4 pseudo-inertia ``[[Sigma, h], [h^T, m]]`` of 10 dynamic parameters (pin order)."""
+    m, hx, hy, hz, ixx, ixy, iyy, ixz, iyz, izz = np.asarray(p10, float)
+    inertia = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
+    sigma = 0.5 * np.trace(inertia) * np.eye(3) - inertia
+    J = np.zeros((4, 4))
+    J[:3, :3] = sigma
+    J[:3, 3] = J[3, :3] = (hx, hy, hz)
+    J[3, 3] = m
+    return J
+
+
+def is_physically_consistent(p10: np.ndarray, tol: float = 0.0) -> bool:
+    """Pseudo-inertia positive definite (mass > 0, inertia PD and triangle inequalities)."""
+    return bool(np.linalg.eigvalsh(pseudo_inertia(p10)).min() > tol)
+
+
+def dynamic_to_log_cholesky(p10: np.ndarray, min_eig_ratio: float = 1e-6) -> np.ndarray:
+    """Inverse map; a non-PD pseudo-inertia is first projected (eigenvalues clipped)."""
+    J = pseudo_inertia(p10)
+    w, V = np.linalg.eigh(J)
+    floor = min_eig_ratio * max(abs(w).max(), 1e-9)
+    J = V @ np.diag(np.maximum(w, floor)) @ V.T
+    P = np.eye(4)[::-1]
+    L = np.linalg.cholesky(P @ J @ P)
+    U = P @ L @ P  # upper triangular with U U^T = J
+    ea = U[3, 3]
+    U = U / ea
+    return np.array(
+        [
+            np.log(ea),
+            np.log(U[0, 0]),
+            np.log(U[1, 1]),
+            np.log(U[2, 2]),
+            U[0, 1],
+            U[1, 2],
+            U[0, 2],
+            U[0, 3],
+            U[1, 3],
+            U[2, 3],
+        ]
+    )
+
+
+def parameter_scale(p_nominal: np.ndarray, n_links: int, nv: int) -> np.ndarray:
+    """Typical magnitude of each standard parameter for the regularisation term."""
+    s = np.empty_like(p_nominal)
+    for i in range(n_links):
+        blk = p_nominal[10 * i : 10 * i + 10]
+        m = max(abs(blk[0]), 0.1)
+        s[10 * i] = m
+        s[10 * i + 1 : 10 * i + 4] = m * 0.1
+        s[10 * i + 4 : 10 * i + 10] = max(m * 0.01, np.abs(blk[4:]).max(), 1e-3)
+    ia = p_nominal[10 * n_links : 10 * n_links + nv]
+    s[10 * n_links : 10 * n_links + nv] = np.maximum(np.abs(ia), 1e-2)
+    # friction and offsets are always identifiable: no pull towards the nominal values
+    s[10 * n_links + nv :] = np.inf
+    return s
+
+
+@dataclass
+class PhysicalEstimate:
+    """Physically consistent standard parameters and the fit statistics."""
+
+    p: np.ndarray
+    residual_Nm: np.ndarray
+    consistent: bool
+    min_pseudo_inertia_eig: list[float]
+    iterations: int
+    status: str
+    details: dict = field(default_factory=dict)
+
+    @property
+    def rms_Nm(self) -> float:
+        return float(np.sqrt(np.mean(self.residual_Nm**2)))
+
+
+def physical_fit(
+    Y: np.ndarray,
+    y: np.ndarray,
+    nv: int,
+    p_nominal: np.ndarray,
+    joint_sigma_Nm: np.ndarray | None = None,
+    regularization: float = 1e-4,
+    max_iter: int = 500,
+    fit_offsets: bool = True,
+    min_mass_kg: float = 1e-2,
+    min_spread_m: float = 1e-3,
+) -> PhysicalEstimate:
+    """Physically consistent least squares on the standard regressor ``Y`` (see module doc).
+
+    ``Y``: (N*nv, 10*n_links + 4*nv) standard regressor, ``y`` torques, ``joint_sigma_Nm`` the
+    per-joint weights (Gautier); ``regularization`` is ``lambda`` relative to the number of rows.
+    """
+    n_std = Y.shape[1]
+    n_links = (n_std - 4 * nv) // 10
+    if n_links * 10 + 4 * nv != n_std:
+        raise DataFileError(None, "regressor", f"{n_std} columns do not match {nv} joints")
+    _check_system(Y, y, nv)
+    sig = np.ones(nv) if joint_sigma_Nm is None else np.asarray(joint_sigma_Nm, float)
+    w = np.tile(1.0 / sig, Y.shape[0] // nv)
+    # compress: ||A p - b||^2 = ||R p - r||^2 + const
+    A = np.hstack([Y * w[:, None], (y * w)[:, None]])
+    R = np.linalg.qr(A, mode="r")
+    R_p, r_b = R[:n_std, :n_std], R[:n_std, n_std]
+    n_rows = Y.shape[0]
+
+    theta = ca.SX.sym("theta", 10 * n_links)
+    act = ca.SX.sym("act", 4 * nv)
+    p = ca.vertcat(*[log_cholesky_to_dynamic(theta[10 * i : 10 * i + 10]) for i in range(n_links)], act)
+    scale = parameter_scale(p_nominal, n_links, nv)
+    res = ca.mtimes(ca.DM(R_p), p) - ca.DM(r_b)
+    reg = (p - ca.DM(p_nominal)) / ca.DM(scale)
+    # normalise by the number of rows so that lambda is independent of the data length
+    f = (ca.dot(res, res) + regularization * n_rows * ca.dot(reg, reg)) / n_rows
+    x = ca.vertcat(theta, act)
+    lbx = -np.inf * np.ones(x.shape[0])
+    ubx = np.inf * np.ones(x.shape[0])
+    off = 10 * n_links
+    lbx[off : off + 3 * nv] = POSITIVE_LOWER_BOUND
+    # keep every pseudo-inertia strictly inside the PD cone: mass >= min_mass_kg and each
+    # normalised principal spread e^d_k >= min_spread_m (else the optimum sits on the boundary
+    # that the log-Cholesky map only reaches at infinity and IPOPT never converges)
+    for i in range(n_links):
+        lbx[10 * i] = 0.5 * np.log(min_mass_kg)
+        lbx[10 * i + 1 : 10 * i + 4] = np.log(min_spread_m)
+    if not fit_offsets:
+        lbx[off + 3 * nv :] = ubx[off + 3 * nv :] = 0.0
+    x0 = np.concatenate(
+        [
+            *[dynamic_to_log_cholesky(p_nominal[10 * i : 10 * i + 10]) for i in range(n_links)],
+            np.maximum(p_nominal[off : off + 3 * nv], 2 * POSITIVE_LOWER_BOUND),
+            p_nominal[off + 3 * nv :] if fit_offsets else np.zeros(nv),
+        ]
+    )
+    solver = ca.nlpsol(
+        "physical_fit",
+        "ipopt",
+        {"x": x, "f": f},
+        {
+            "ipopt.print_level": 0,
+            "print_time": False,
+            "ipopt.max_iter": max_iter,
+            "ipopt.tol": 1e-10,
+            "ipopt.sb": "yes",
+        },
+    )
+    x0 = np.clip(x0, lbx + 1e-3, ubx)
+    sol = solver(x0=x0, lbx=lbx, ubx=ubx)
+    stats = solver.stats()
+    if not stats["success"] and stats["return_status"] not in (
+        "Maximum_Iterations_Exceeded",
+        "Solved_To_Acceptable_Level",
+    ):
+        raise SolverError(None, "physical_fit", f"IPOPT: {stats['return_status']}")
+    p_fun = ca.Function("p", [x], [p])
+    p_hat = np.asarray(p_fun(sol["x"])).ravel()
+    resid = (y - Y @ p_hat).reshape(-1, nv)
+    eigs = [
+        float(np.linalg.eigvalsh(pseudo_inertia(p_hat[10 * i : 10 * i + 10])).min())
+        for i in range(n_links)
+    ]
+    consistent = bool(
+        all(e > 0 for e in eigs) and np.all(p_hat[off : off + 3 * nv] > 0)
+    )
+    return PhysicalEstimate(
+        p=p_hat,
+        residual_Nm=resid,
+        consistent=consistent,
+        min_pseudo_inertia_eig=eigs,
+        iterations=int(stats["iter_count"]),
+        status=str(stats["return_status"]),
+    )

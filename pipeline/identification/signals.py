@@ -1,0 +1,84 @@
+"""Signal processing for identification data (paper ``004_abbe750b8bbcc3aa.txt`` §4.1).
+
+Positions are low-pass filtered with a zero-phase Butterworth filter (``scipy.signal.butter`` +
+``filtfilt``), differentiated by central differences (``np.gradient``) to velocity and
+acceleration, then the regressor rows and torques are decimated (the same zero-phase low-pass
+before keeping every ``factor``-th sample, the "parallel decimation" of Gautier). Periodic
+excitation data can be averaged over its periods, which divides the noise variance by the
+number of periods.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.signal
+
+from pipeline.errors import DataFileError
+
+
+def lowpass(x: np.ndarray, cutoff_hz: float, sample_rate_hz: float, order: int = 4) -> np.ndarray:
+    """Zero-phase Butterworth low-pass along axis 0."""
+    x = np.asarray(x, float)
+    nyq = 0.5 * sample_rate_hz
+    if not 0 < cutoff_hz < nyq:
+        raise DataFileError(
+            None, "cutoff_hz", f"{cutoff_hz} Hz must be in (0, {nyq}) (Nyquist of the data)"
+        )
+    b, a = scipy.signal.butter(order, cutoff_hz / nyq)
+    padlen = 3 * max(len(a), len(b))
+    if x.shape[0] <= padlen:
+        raise DataFileError(None, "samples", f"{x.shape[0]} samples are too few to filter")
+    return scipy.signal.filtfilt(b, a, x, axis=0)
+
+
+def differentiate(x: np.ndarray, sample_time_s: float) -> np.ndarray:
+    """Central-difference derivative along axis 0 (second order, one-sided at the ends)."""
+    return np.gradient(np.asarray(x, float), sample_time_s, axis=0)
+
+
+@dataclass
+class FilteredStates:
+    """Filtered positions and their derivatives at the original sample rate."""
+
+    q: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+
+
+def states_from_positions(
+    q_meas: np.ndarray, sample_time_s: float, cutoff_hz: float, order: int = 4
+) -> FilteredStates:
+    """q filtered, v = dq/dt, a = dv/dt (each derivative of the filtered signal)."""
+    fs = 1.0 / sample_time_s
+    q = lowpass(q_meas, cutoff_hz, fs, order)
+    v = differentiate(q, sample_time_s)
+    a = differentiate(v, sample_time_s)
+    return FilteredStates(q, v, a)
+
+
+def decimate(x: np.ndarray, factor: int, sample_rate_hz: float, order: int = 4) -> np.ndarray:
+    """Zero-phase low-pass at 0.8 x the new Nyquist frequency, then keep every ``factor``-th row."""
+    if factor <= 1:
+        return np.asarray(x, float)
+    cutoff = 0.8 * 0.5 * sample_rate_hz / factor
+    return lowpass(x, cutoff, sample_rate_hz, order)[::factor]
+
+
+def average_periods(x: np.ndarray, samples_per_period: int) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and standard deviation over whole periods (axis 0 split into periods).
+
+    Returns ``(mean (P, ...), std (P, ...))`` with ``P = samples_per_period``; a trailing
+    incomplete period is dropped. Needs at least two periods for the standard deviation.
+    """
+    x = np.asarray(x, float)
+    n_periods = x.shape[0] // samples_per_period
+    if n_periods < 1:
+        raise DataFileError(
+            None, "samples", f"{x.shape[0]} samples < one period ({samples_per_period})"
+        )
+    xs = x[: n_periods * samples_per_period].reshape(n_periods, samples_per_period, *x.shape[1:])
+    mean = xs.mean(axis=0)
+    std = xs.std(axis=0, ddof=1) if n_periods > 1 else np.full_like(mean, np.nan)
+    return mean, std

@@ -1,0 +1,554 @@
+"""The robot model shared by every stage: Pinocchio model + limits + actuators + tool.
+
+``RobotModel.load`` reads a robot folder (``robots/<name>/robot.yaml`` + its URDF) or any
+URDF + yaml pair and validates both, naming the file and the field of the first problem.
+Kinematics and dynamics are Pinocchio's; this class adds the facts a URDF lacks (rotor
+inertia as ``model.armature``, friction, TCP and reflector frames, tracker placement,
+collision capsules) and an inverse kinematics that reports failure instead of returning
+a wrong pose.
+"""
+
+from __future__ import annotations
+
+import copy as _copy
+import os
+import tempfile
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import yaml
+
+from pipeline.errors import RobotFileError
+from pipeline.robot.collision import CapsuleDistances, segment_distances
+from pipeline.robot.spec import Capsule, RobotSpec, load_robot_spec, robot_spec_to_yaml
+
+ROBOTS_DIR = Path(__file__).resolve().parents[2] / "robots"
+WORLD = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+
+
+@dataclass
+class JointLimits:
+    lower_rad: np.ndarray
+    upper_rad: np.ndarray
+    velocity_rad_s: np.ndarray
+    effort_Nm: np.ndarray
+    acceleration_rad_s2: np.ndarray
+
+
+@dataclass
+class IKResult:
+    """Outcome of :meth:`RobotModel.ik`; ``q`` is only meaningful when ``success``."""
+
+    q: np.ndarray
+    success: bool
+    position_error_m: float
+    rotation_error_rad: float
+    iterations: int
+    message: str
+
+
+def resolve_robot_files(robot: str | Path, yaml_path: str | Path | None = None) -> tuple[Path, Path]:
+    """(robot.yaml, folder) for a robot name under ``robots/``, a folder, or a URDF + yaml pair."""
+    candidate = Path(robot)
+    if yaml_path is not None:
+        return Path(yaml_path), Path(yaml_path).parent
+    if candidate.suffix == ".urdf":
+        guess = candidate.parent / "robot.yaml"
+        if not guess.is_file():
+            raise RobotFileError(candidate, "robot.yaml", "a URDF needs a robot.yaml beside it or given explicitly")
+        return guess, candidate.parent
+    for folder in (candidate, ROBOTS_DIR / str(robot)):
+        if folder.is_dir() and (folder / "robot.yaml").is_file():
+            return folder / "robot.yaml", folder
+    known = sorted(p.name for p in ROBOTS_DIR.iterdir() if (p / "robot.yaml").is_file()) if ROBOTS_DIR.is_dir() else []
+    raise RobotFileError(None, "robot", f"'{robot}' is neither a folder with a robot.yaml nor a robot under "
+                         f"{ROBOTS_DIR} (known: {', '.join(known)})")
+
+
+def _check_urdf_xml(urdf: Path) -> ET.Element:
+    if not urdf.is_file():
+        raise RobotFileError(urdf, "urdf", "file not found")
+    try:
+        root = ET.parse(urdf).getroot()
+    except ET.ParseError as exc:
+        raise RobotFileError(urdf, "xml", f"not valid XML ({exc})") from None
+    if root.tag != "robot":
+        raise RobotFileError(urdf, "xml", f"root element is <{root.tag}>, expected <robot>")
+    return root
+
+
+def _validate_inertials(urdf: Path, model: pin.Model) -> None:
+    for j in range(1, model.njoints):
+        inertia = model.inertias[j]
+        name = model.names[j]
+        if not inertia.mass > 0:
+            raise RobotFileError(urdf, f"joint {name}: link inertial.mass", f"must be positive, got {inertia.mass}")
+        eig = np.linalg.eigvalsh(inertia.inertia)
+        if eig.min() <= 0:
+            raise RobotFileError(urdf, f"joint {name}: link inertial.inertia",
+                                 f"not positive definite (eigenvalues {np.round(eig, 6).tolist()})")
+        a, b, c = np.sort(eig)
+        if a + b < c * (1 - 1e-9):
+            raise RobotFileError(urdf, f"joint {name}: link inertial.inertia",
+                                 "violates the triangle inequality of principal moments")
+
+
+def _validate_joint_limits(urdf: Path, model: pin.Model, limits: JointLimits) -> None:
+    for i in range(model.nq):
+        name = model.names[i + 1]
+        if limits.lower_rad[i] > limits.upper_rad[i]:
+            raise RobotFileError(urdf, f"joint {name}: limit", f"lower {limits.lower_rad[i]} is above "
+                                 f"upper {limits.upper_rad[i]}")
+        if not limits.velocity_rad_s[i] > 0:
+            raise RobotFileError(urdf, f"joint {name}: limit.velocity", "must be positive")
+        if not limits.effort_Nm[i] > 0:
+            raise RobotFileError(urdf, f"joint {name}: limit.effort", "must be positive")
+
+
+class RobotModel:
+    """A validated robot: Pinocchio model with armature, limits, actuators, tool and capsules."""
+
+    frame_flange = "flange"
+    frame_tcp = "tcp"
+    frame_reflector = "reflector"
+
+    def __init__(self, spec: RobotSpec, model: pin.Model, urdf_text: str) -> None:
+        self.spec = spec
+        self.model = model
+        self.urdf_text = urdf_text
+        self._data = model.createData()
+        self._frame_ids: dict[str, int] = {}
+        self._check_frames()
+        capsule_joints = [self.model.frames[self.frame_id(c.frame)].parentJoint for c in spec.capsules]
+        self._capsule_joint = np.array(capsule_joints, dtype=int)
+        self._self_pairs = [(i, k) for i in range(len(spec.capsules)) for k in range(i + 1, len(spec.capsules))
+                            if abs(capsule_joints[i] - capsule_joints[k]) > 1]
+        self._floor_capsules = [i for i, j in enumerate(capsule_joints) if j >= spec.collision.floor_check_from_joint]
+
+    # ------------------------------------------------------------------ loading
+    @classmethod
+    def load(cls, robot: str | Path, yaml_path: str | Path | None = None) -> RobotModel:
+        """Load ``robots/<robot>/``, a folder with ``robot.yaml``, or a URDF (+ yaml)."""
+        yaml_file, _ = resolve_robot_files(robot, yaml_path)
+        spec = load_robot_spec(yaml_file)
+        urdf = Path(robot) if str(robot).endswith(".urdf") else spec.urdf
+        _check_urdf_xml(urdf)
+        try:
+            model = pin.buildModelFromUrdf(str(urdf))
+        except (RuntimeError, ValueError) as exc:
+            raise RobotFileError(urdf, "urdf", f"Pinocchio could not build the model ({exc})") from None
+        if model.nq != model.nv or model.nq == 0:
+            raise RobotFileError(urdf, "joints", f"expected revolute/prismatic joints only (nq={model.nq}, "
+                                 f"nv={model.nv})")
+        spec = load_robot_spec(yaml_file, nq=model.nq)
+        _validate_inertials(urdf, model)
+        spec.urdf = urdf
+        return cls._assemble(spec, model, urdf.read_text())
+
+    @classmethod
+    def _assemble(cls, spec: RobotSpec, model: pin.Model, urdf_text: str) -> RobotModel:
+        if not model.existFrame(spec.flange_frame):
+            raise RobotFileError(spec.path, "flange_frame", f"frame '{spec.flange_frame}' not in the URDF "
+                                 f"(frames: {', '.join(f.name for f in model.frames)})")
+        model.armature = spec.actuation.rotor_inertia_kgm2.copy()
+        for key, values in spec.limit_overrides.items():
+            attr = {"lower_rad": "lowerPositionLimit", "upper_rad": "upperPositionLimit",
+                    "velocity_rad_s": "velocityLimit", "effort_Nm": "effortLimit"}[key]
+            setattr(model, attr, values.copy())
+        flange_id = model.getFrameId(spec.flange_frame)
+        flange = model.frames[flange_id]
+        joint, placement = flange.parentJoint, flange.placement
+        frame_type = pin.FrameType.OP_FRAME
+        if spec.flange_frame != cls.frame_flange and not model.existFrame(cls.frame_flange):
+            model.addFrame(pin.Frame(cls.frame_flange, joint, flange_id, placement, frame_type))
+        for name, local in (
+            (cls.frame_tcp, spec.tool.transform_tcp_to_flange),
+            (cls.frame_reflector, pin.SE3(np.eye(3), spec.tool.reflector_offset_m)),
+        ):
+            if model.existFrame(name):
+                raise RobotFileError(spec.urdf, name, f"the URDF already has a frame '{name}'; the yaml defines it")
+            model.addFrame(pin.Frame(name, joint, flange_id, placement * local, frame_type))
+        robot = cls(spec, model, urdf_text)
+        _validate_joint_limits(spec.urdf, model, robot.limits)
+        return robot
+
+    def _check_frames(self) -> None:
+        for k, capsule in enumerate(self.spec.capsules):
+            if not self.model.existFrame(capsule.frame):
+                raise RobotFileError(self.spec.path, f"capsules[{k}].frame",
+                                     f"unknown frame '{capsule.frame}'")
+
+    # --------------------------------------------------------------- properties
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+    @property
+    def nq(self) -> int:
+        return self.model.nq
+
+    @property
+    def limits(self) -> JointLimits:
+        m = self.model
+        return JointLimits(m.lowerPositionLimit.copy(), m.upperPositionLimit.copy(), m.velocityLimit.copy(),
+                           m.effortLimit.copy(), self.spec.acceleration_rad_s2.copy())
+
+    @property
+    def actuation(self):  # noqa: ANN201 - ActuationSpec
+        return self.spec.actuation
+
+    @property
+    def tracker(self):  # noqa: ANN201 - TrackerSpec
+        return self.spec.tracker
+
+    @property
+    def capsules(self) -> list[Capsule]:
+        return self.spec.capsules
+
+    @property
+    def transform_tcp_to_flange(self) -> pin.SE3:
+        return self.spec.tool.transform_tcp_to_flange
+
+    @property
+    def reflector_offset_m(self) -> np.ndarray:
+        return self.spec.tool.reflector_offset_m
+
+    @property
+    def reflector_axis(self) -> np.ndarray:
+        return self.spec.tool.reflector_axis
+
+    @property
+    def payload_kg(self) -> float:
+        return self.spec.payload_kg
+
+    @property
+    def urdf_path(self) -> Path:
+        return self.spec.urdf
+
+    def new_data(self) -> pin.Data:
+        return self.model.createData()
+
+    def frame_id(self, frame: str) -> int:
+        if frame not in self._frame_ids:
+            if not self.model.existFrame(frame):
+                raise KeyError(f"unknown frame '{frame}'")
+            self._frame_ids[frame] = self.model.getFrameId(frame)
+        return self._frame_ids[frame]
+
+    # --------------------------------------------------------------- kinematics
+    def fk(self, q: np.ndarray, frame: str = "tcp") -> pin.SE3:
+        """Pose of ``frame`` in the base frame."""
+        fid = self.frame_id(frame)
+        pin.forwardKinematics(self.model, self._data, np.asarray(q, float))
+        return pin.updateFramePlacement(self.model, self._data, fid).copy()
+
+    def positions(self, Q: np.ndarray, frame: str = "tcp") -> np.ndarray:
+        """Positions ``(N, 3)`` of ``frame`` for configurations ``Q (N, nq)``."""
+        Q = np.atleast_2d(np.asarray(Q, float))
+        fid = self.frame_id(frame)
+        out = np.empty((len(Q), 3))
+        model, data = self.model, self._data
+        for k, q in enumerate(Q):
+            pin.forwardKinematics(model, data, q)
+            out[k] = pin.updateFramePlacement(model, data, fid).translation
+        return out
+
+    def poses(self, Q: np.ndarray, frame: str = "tcp") -> tuple[np.ndarray, np.ndarray]:
+        """Positions ``(N, 3)`` and rotations ``(N, 3, 3)`` of ``frame``."""
+        Q = np.atleast_2d(np.asarray(Q, float))
+        fid = self.frame_id(frame)
+        pos, rot = np.empty((len(Q), 3)), np.empty((len(Q), 3, 3))
+        for k, q in enumerate(Q):
+            pin.forwardKinematics(self.model, self._data, q)
+            placement = pin.updateFramePlacement(self.model, self._data, fid)
+            pos[k], rot[k] = placement.translation, placement.rotation
+        return pos, rot
+
+    def jacobian(self, q: np.ndarray, frame: str = "tcp") -> np.ndarray:
+        """Frame Jacobian ``(6, nq)`` in LOCAL_WORLD_ALIGNED (linear rows first)."""
+        return pin.computeFrameJacobian(self.model, self._data, np.asarray(q, float), self.frame_id(frame), WORLD)
+
+    def within_limits(self, q: np.ndarray, margin_rad: float = 0.0) -> bool:
+        q = np.asarray(q, float)
+        return bool(np.all(q >= self.model.lowerPositionLimit + margin_rad)
+                    and np.all(q <= self.model.upperPositionLimit - margin_rad))
+
+    def ik(self, target: pin.SE3, q0: np.ndarray, frame: str = "tcp", *, position_only: bool = False,
+           tolerance_m: float = 1e-9, tolerance_rad: float = 1e-9, max_iterations: int = 200,
+           restarts: int = 8, rng: np.random.Generator | None = None) -> IKResult:
+        """Inverse kinematics by damped least squares on the SE(3) log error, inside the joint limits.
+
+        Each iteration solves ``(J^T J + λ I) dq = J^T e`` with ``e = log6(T_current^-1 T_target)``
+        (local frame) and clamps ``q`` to the limits. If the start ``q0`` does not converge, up
+        to ``restarts`` random starts inside the limits are tried. Failure is reported
+        (``success=False``) with the best residual; a pose outside the tolerance is never
+        returned as a solution.
+        """
+        lower, upper = self.model.lowerPositionLimit, self.model.upperPositionLimit
+        fid = self.frame_id(frame)
+        rng = rng if rng is not None else np.random.default_rng(0)
+        best: IKResult | None = None
+        starts = [np.clip(np.asarray(q0, float), lower, upper)]
+        starts += [rng.uniform(lower, upper) for _ in range(restarts)]
+        for start in starts:
+            result = self._ik_from(target, start, fid, position_only, tolerance_m, tolerance_rad, max_iterations)
+            if result.success:
+                return result
+            if best is None or result.position_error_m + result.rotation_error_rad < (
+                best.position_error_m + best.rotation_error_rad
+            ):
+                best = result
+        assert best is not None
+        best.message = (f"IK did not reach the target within {tolerance_m:g} m / {tolerance_rad:g} rad inside the "
+                        f"joint limits (best residual {best.position_error_m:.3g} m, {best.rotation_error_rad:.3g} rad)")
+        return best
+
+    def _ik_from(self, target: pin.SE3, q: np.ndarray, fid: int, position_only: bool, tol_m: float,
+                 tol_rad: float, max_iterations: int) -> IKResult:
+        """Levenberg–Marquardt from ``q``: a step is kept only if it lowers the error, else the
+        damping grows; steps are capped at 0.5 rad and projected onto the joint limits."""
+        model, data = self.model, self._data
+        lower, upper = model.lowerPositionLimit, model.upperPositionLimit
+
+        def residual(q_: np.ndarray) -> tuple[np.ndarray, pin.SE3, float, float]:
+            pin.forwardKinematics(model, data, q_)
+            current = pin.updateFramePlacement(model, data, fid).copy()
+            if position_only:
+                error = current.rotation.T @ (target.translation - current.translation)
+                return error, current, float(np.linalg.norm(error)), 0.0
+            error = pin.log6(current.actInv(target)).vector
+            return (error, current, float(np.linalg.norm(target.translation - current.translation)),
+                    float(np.linalg.norm(error[3:])))
+
+        damping = 1e-4
+        error, current, pos_err, rot_err = residual(q)
+        for iteration in range(max_iterations):
+            if pos_err <= tol_m and rot_err <= tol_rad:
+                return IKResult(q.copy(), True, pos_err, rot_err, iteration, "converged")
+            jac = pin.computeFrameJacobian(model, data, q, fid, pin.ReferenceFrame.LOCAL)
+            jac = jac[:3] if position_only else pin.Jlog6(current.actInv(target)) @ jac
+            gradient, hessian = jac.T @ error, jac.T @ jac
+            for _ in range(12):
+                step = np.linalg.solve(hessian + damping * np.eye(model.nv), gradient)
+                largest = np.max(np.abs(step))
+                if largest > 0.5:
+                    step *= 0.5 / largest
+                q_new = np.clip(q + step, lower, upper)
+                error_new, current_new, pos_new, rot_new = residual(q_new)
+                if error_new @ error_new < error @ error:
+                    q, error, current, pos_err, rot_err = q_new, error_new, current_new, pos_new, rot_new
+                    damping = max(damping / 10.0, 1e-12)
+                    break
+                damping *= 10.0
+            else:
+                break  # no descent possible from here: a local minimum at the limits
+        converged = pos_err <= tol_m and rot_err <= tol_rad
+        return IKResult(q.copy(), converged, pos_err, rot_err, max_iterations,
+                        "converged" if converged else "not converged")
+
+    # ----------------------------------------------------------------- dynamics
+    def friction_torque(self, v: np.ndarray) -> np.ndarray:
+        """Joint friction ``f_v v + f_c tanh(v / width)`` (smooth Coulomb, DESIGN.md)."""
+        act = self.spec.actuation
+        v = np.asarray(v, float)
+        return act.viscous_Nms_rad * v + act.coulomb_Nm * np.tanh(v / act.coulomb_smoothing_rad_s)
+
+    def inverse_dynamics(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """``tau = M(q) a + h(q, v) + friction(v)``; M includes the rotor inertia (armature)."""
+        tau = pin.rnea(self.model, self._data, np.asarray(q, float), np.asarray(v, float), np.asarray(a, float))
+        return tau + self.friction_torque(v)
+
+    def forward_dynamics(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """Joint accelerations under ``tau`` minus friction (ABA, armature included)."""
+        return pin.aba(self.model, self._data, np.asarray(q, float), np.asarray(v, float),
+                       np.asarray(tau, float) - self.friction_torque(v)).copy()
+
+    def mass_matrix(self, q: np.ndarray) -> np.ndarray:
+        mass = pin.crba(self.model, self._data, np.asarray(q, float))
+        return np.triu(mass) + np.triu(mass, 1).T
+
+    def gravity_torque(self, q: np.ndarray) -> np.ndarray:
+        return pin.computeGeneralizedGravity(self.model, self._data, np.asarray(q, float)).copy()
+
+    # ---------------------------------------------------------------- collision
+    def capsule_segments(self, Q: np.ndarray) -> np.ndarray:
+        """World end points of every capsule, shape ``(N, n_capsules, 2, 3)``."""
+        Q = np.atleast_2d(np.asarray(Q, float))
+        caps = self.spec.capsules
+        local = np.stack([np.stack([c.p0, c.p1]) for c in caps]) if caps else np.zeros((0, 2, 3))
+        fids = [self.frame_id(c.frame) for c in caps]
+        out = np.empty((len(Q), len(caps), 2, 3))
+        for k, q in enumerate(Q):
+            pin.forwardKinematics(self.model, self._data, q)
+            for i, fid in enumerate(fids):
+                placement = pin.updateFramePlacement(self.model, self._data, fid)
+                out[k, i] = local[i] @ placement.rotation.T + placement.translation
+        return out
+
+    def capsule_clearances(self, segments: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Self-pair and floor clearances ``(N, n_pairs)``, ``(N, n_floor)`` from capsule segments."""
+        caps = self.spec.capsules
+        radii = np.array([c.radius_m for c in caps])
+        if self._self_pairs:
+            i, k = np.array(self._self_pairs).T
+            pair = segment_distances(segments[:, i, 0], segments[:, i, 1], segments[:, k, 0], segments[:, k, 1])
+            pair = pair - radii[i] - radii[k]
+        else:
+            pair = np.zeros((len(segments), 0))
+        floor_idx = np.array(self._floor_capsules, dtype=int)
+        floor = segments[:, floor_idx][..., 2].min(axis=-1) - radii[floor_idx] - self.spec.collision.floor_z_m
+        return pair, floor
+
+    def capsule_distances(self, q: np.ndarray) -> CapsuleDistances:
+        """Signed clearances between non-adjacent link capsules and of link capsules to the floor."""
+        pair, floor = self.capsule_clearances(self.capsule_segments(q))
+        names = [c.name for c in self.spec.capsules]
+        return CapsuleDistances([(names[i], names[k]) for i, k in self._self_pairs], pair[0],
+                                [names[i] for i in self._floor_capsules], floor[0])
+
+    @property
+    def self_collision_pairs(self) -> list[tuple[int, int]]:
+        """Index pairs of capsules checked against each other (non-adjacent links)."""
+        return list(self._self_pairs)
+
+    @property
+    def floor_capsules(self) -> list[int]:
+        return list(self._floor_capsules)
+
+    def in_collision(self, q: np.ndarray, margin_m: float = 0.0) -> bool:
+        distances = self.capsule_distances(q)
+        return bool(min(distances.self_min_m, distances.floor_min_m) < margin_m)
+
+    # ------------------------------------------------------------------ summary
+    def summary(self) -> dict:
+        """DOF, reach (axis 1 to flange), moving mass and limits in readable units."""
+        rng = np.random.default_rng(0)
+        lim = self.limits
+        samples = rng.uniform(lim.lower_rad, lim.upper_rad, size=(4000, self.nq))
+        joint1 = self.model.jointPlacements[1]
+        axis = joint1.rotation[:, 2]
+        flange = self.positions(samples, self.frame_flange) - joint1.translation
+        radial = flange - np.outer(flange @ axis, axis)
+        reach = float(np.max(np.linalg.norm(radial, axis=1)))
+        # refine the sampled maximum with the stretched configuration search of scipy
+        from scipy.optimize import minimize
+
+        best = samples[int(np.argmax(np.linalg.norm(radial, axis=1)))]
+
+        def negative_reach(q: np.ndarray) -> float:
+            p = self.fk(q, self.frame_flange).translation - joint1.translation
+            return -float(np.linalg.norm(p - (p @ axis) * axis))
+
+        refined = minimize(negative_reach, best, bounds=list(zip(lim.lower_rad, lim.upper_rad, strict=True)))
+        reach = max(reach, -float(refined.fun))
+        return {
+            "name": self.name,
+            "dof": self.nq,
+            "reach_m": reach,
+            "moving_mass_kg": float(sum(self.model.inertias[j].mass for j in range(1, self.model.njoints))),
+            "payload_kg": self.payload_kg,
+            "joint_names": [str(n) for n in self.model.names[1:]],
+            "lower_deg": np.rad2deg(lim.lower_rad).round(3).tolist(),
+            "upper_deg": np.rad2deg(lim.upper_rad).round(3).tolist(),
+            "velocity_deg_s": np.rad2deg(lim.velocity_rad_s).round(3).tolist(),
+            "effort_Nm": lim.effort_Nm.round(3).tolist(),
+            "acceleration_deg_s2": np.rad2deg(lim.acceleration_rad_s2).round(3).tolist(),
+            "gear_ratio": self.actuation.gear_ratio.tolist(),
+        }
+
+    # ------------------------------------------------------------ copy and save
+    def copy(self) -> RobotModel:
+        return RobotModel(_copy.deepcopy(self.spec), self.model.copy(), self.urdf_text)
+
+    def with_model(self, model: pin.Model, spec: RobotSpec | None = None) -> RobotModel:
+        """A RobotModel sharing this one's facts but with another Pinocchio model (same frames)."""
+        return RobotModel(_copy.deepcopy(spec if spec is not None else self.spec), model, self.urdf_text)
+
+    def save(self, folder: str | Path) -> Path:
+        """Write ``<folder>/<name>.urdf`` and ``robot.yaml`` that :meth:`load` reads back.
+
+        Joint placements, link inertials (as Pinocchio holds them, including identified or
+        calibrated values), limits, armature and friction are written; visuals are kept from
+        the source URDF. Files are written atomically.
+        """
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        urdf_name = f"{self.name}.urdf"
+        spec = _copy.deepcopy(self.spec)
+        spec.actuation.rotor_inertia_kgm2 = np.asarray(self.model.armature, float).copy()
+        spec.limit_overrides = {}
+        _atomic_write(folder / urdf_name, export_urdf(self.model, self.urdf_text))
+        _atomic_write(folder / "robot.yaml", yaml.safe_dump(robot_spec_to_yaml(spec, urdf_name), sort_keys=False))
+        return folder
+
+
+def _atomic_write(path: Path, text: str) -> None:
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
+    with os.fdopen(fd, "w") as handle:
+        handle.write(text)
+        handle.flush()
+        os.fsync(handle.fileno())
+    os.replace(tmp, path)
+
+
+def _fmt(values: np.ndarray) -> str:
+    return " ".join(f"{float(v):.17g}" for v in values)
+
+
+def export_urdf(model: pin.Model, template_urdf: str) -> str:
+    """URDF text of ``model``: the template with joint origins, limits and link inertials replaced.
+
+    Fixed child links are merged into their moving parent by Pinocchio, so their inertials are
+    removed here (the merged inertia is written on the moving link). The template's joint
+    tree must be the model's (same joint names).
+    """
+    root = ET.fromstring(template_urdf)
+    joints = {j.get("name"): j for j in root.findall("joint")}
+    links = {link.get("name"): link for link in root.findall("link")}
+    moving_children = set()
+    for j in range(1, model.njoints):
+        name = model.names[j]
+        element = joints.get(name)
+        if element is None:
+            raise RobotFileError(None, f"joint {name}", "not in the template URDF")
+        placement = model.jointPlacements[j]
+        parent_link = element.find("parent").get("link")
+        parent_joint = [jn for jn in joints.values() if jn.find("child").get("link") == parent_link]
+        if parent_joint and parent_joint[0].get("type") == "fixed":
+            raise RobotFileError(None, f"joint {name}", "export of a fixed joint between moving joints is not "
+                                 "supported")
+        origin = element.find("origin")
+        if origin is None:
+            origin = ET.SubElement(element, "origin")
+        origin.set("xyz", _fmt(placement.translation))
+        origin.set("rpy", _fmt(pin.rpy.matrixToRpy(placement.rotation)))
+        limit = element.find("limit")
+        if limit is not None:
+            limit.set("lower", f"{model.lowerPositionLimit[j - 1]:.17g}")
+            limit.set("upper", f"{model.upperPositionLimit[j - 1]:.17g}")
+            limit.set("velocity", f"{model.velocityLimit[j - 1]:.17g}")
+            limit.set("effort", f"{model.effortLimit[j - 1]:.17g}")
+        child = element.find("child").get("link")
+        moving_children.add(child)
+        link = links[child]
+        for old in link.findall("inertial"):
+            link.remove(old)
+        inertia = model.inertias[j]
+        inertial = ET.Element("inertial")
+        ET.SubElement(inertial, "origin", xyz=_fmt(inertia.lever), rpy="0 0 0")
+        ET.SubElement(inertial, "mass", value=f"{inertia.mass:.17g}")
+        i = inertia.inertia
+        ET.SubElement(inertial, "inertia", ixx=f"{i[0, 0]:.17g}", ixy=f"{i[0, 1]:.17g}", ixz=f"{i[0, 2]:.17g}",
+                      iyy=f"{i[1, 1]:.17g}", iyz=f"{i[1, 2]:.17g}", izz=f"{i[2, 2]:.17g}")
+        link.insert(0, inertial)
+    base_links = {model.frames[f].name for f in range(len(model.frames))
+                  if model.frames[f].parentJoint == 0}
+    for name, link in links.items():
+        if name not in moving_children and name not in base_links:
+            for old in link.findall("inertial"):
+                link.remove(old)
+    ET.indent(root)
+    return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"

@@ -1,0 +1,128 @@
+"""Simulated sensors of the real robot: laser tracker, joint encoders, motor-torque measurement.
+
+Noise facts (DESIGN.md, "Sensors"):
+- laser tracker: reflector position, isotropic sigma = 8 µm + 3 µm per metre of range, only
+  if the incidence angle between the reflector axis and the beam is <= 30 deg and no link
+  capsule blocks the beam (paper 000 §2, tracker and incidence constraint);
+- encoders: sigma about 2 µrad joint side;
+- motor torque from current: sigma about 1 % of the torque limit.
+
+The visibility test is a function of a robot model and a tracker placement, so planners use
+it with the nominal model and the estimated tracker pose, and the real tracker with the truth.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from pipeline.robot.collision import segment_distances
+from pipeline.robot.model import RobotModel
+
+#: the beam is checked for blockage up to this distance before the reflector (its holder)
+BEAM_END_CLEARANCE_M = 0.02
+
+
+@dataclass
+class TrackerReading:
+    """Tracker measurements of the reflector in the TRACKER frame; NaN where not visible."""
+
+    position_m: np.ndarray  # (N, 3)
+    visible: np.ndarray  # (N,) bool
+    sigma_m: np.ndarray  # (N,) isotropic 1-sigma noise of each reading
+
+
+@dataclass
+class Visibility:
+    """Why a configuration can or cannot be measured."""
+
+    visible: np.ndarray  # (N,) bool
+    incidence_rad: np.ndarray  # (N,)
+    beam_clearance_m: np.ndarray  # (N,) smallest capsule clearance to the beam (negative: blocked)
+    range_m: np.ndarray  # (N,)
+
+
+def tracker_visibility(robot: RobotModel, transform_tracker_to_base: pin.SE3, Q: np.ndarray,
+                       max_incidence_rad: float | None = None) -> Visibility:
+    """Incidence angle, beam blockage and range of the reflector seen from the tracker.
+
+    Incidence: angle between the reflector's opening axis (``robot.reflector_axis`` in the
+    flange frame, rotated to the base) and the direction reflector -> tracker. Blockage: the
+    beam segment (tracker -> a point ``BEAM_END_CLEARANCE_M`` before the reflector) against
+    every link capsule.
+    """
+    Q = np.atleast_2d(np.asarray(Q, float))
+    max_incidence = robot.tracker.max_incidence_rad if max_incidence_rad is None else max_incidence_rad
+    positions, rotations = robot.poses(Q, robot.frame_reflector)
+    tracker_position = transform_tracker_to_base.translation
+    beam = tracker_position - positions
+    range_m = np.linalg.norm(beam, axis=1)
+    direction = beam / range_m[:, None]
+    axis_world = rotations @ robot.reflector_axis
+    incidence = np.arccos(np.clip(np.einsum("ij,ij->i", axis_world, direction), -1.0, 1.0))
+    segments = robot.capsule_segments(Q)
+    radii = np.array([c.radius_m for c in robot.capsules])
+    beam_end = positions + BEAM_END_CLEARANCE_M * direction
+    start = np.broadcast_to(tracker_position, beam_end.shape)
+    clearance = segment_distances(start[:, None, :], beam_end[:, None, :], segments[:, :, 0], segments[:, :, 1])
+    clearance = (clearance - radii).min(axis=1) if radii.size else np.full(len(Q), np.inf)
+    visible = (incidence <= max_incidence) & (clearance > 0.0)
+    return Visibility(visible, incidence, clearance, range_m)
+
+
+class LaserTracker:
+    """A laser tracker at a fixed (unknown to the stages) pose, measuring the reflector."""
+
+    def __init__(self, robot: RobotModel, transform_tracker_to_base: pin.SE3) -> None:
+        self._robot = robot
+        self._transform_tracker_to_base = transform_tracker_to_base
+        self.noise_const_m = robot.tracker.noise_const_m
+        self.noise_per_m = robot.tracker.noise_per_m
+        self.max_incidence_rad = robot.tracker.max_incidence_rad
+
+    def visible(self, Q: np.ndarray) -> np.ndarray:
+        """Whether each configuration can be measured (incidence and beam blockage)."""
+        return tracker_visibility(self._robot, self._transform_tracker_to_base, Q).visible
+
+    def measure(self, Q: np.ndarray, rng: np.random.Generator) -> TrackerReading:
+        """Reflector positions in the tracker frame with range-dependent isotropic noise.
+
+        Invisible configurations give NaN rows. Noise is drawn for every row (visible or not)
+        so the noise of a configuration does not depend on which others are visible.
+        """
+        Q = np.atleast_2d(np.asarray(Q, float))
+        vis = tracker_visibility(self._robot, self._transform_tracker_to_base, Q)
+        positions_base = self._robot.positions(Q, self._robot.frame_reflector)
+        base_to_tracker = self._transform_tracker_to_base.inverse()
+        positions = positions_base @ base_to_tracker.rotation.T + base_to_tracker.translation
+        sigma = self.noise_const_m + self.noise_per_m * vis.range_m
+        positions = positions + sigma[:, None] * rng.standard_normal(positions.shape)
+        positions[~vis.visible] = np.nan
+        return TrackerReading(positions, vis.visible, sigma)
+
+
+class Encoders:
+    """Joint-side encoders: Gaussian noise of ``noise_rad`` (and optional quantisation)."""
+
+    def __init__(self, noise_rad: float, resolution_rad: float = 0.0) -> None:
+        self.noise_rad = float(noise_rad)
+        self.resolution_rad = float(resolution_rad)
+
+    def read(self, q_true: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        q = np.asarray(q_true, float) + self.noise_rad * rng.standard_normal(np.shape(q_true))
+        if self.resolution_rad > 0:
+            q = np.round(q / self.resolution_rad) * self.resolution_rad
+        return q
+
+
+class TorqueSensor:
+    """Joint torques from motor currents: ``tau + N(0, sigma_i)``, sigma_i a fraction of the limit."""
+
+    def __init__(self, sigma_Nm: np.ndarray) -> None:
+        self.sigma_Nm = np.asarray(sigma_Nm, float)
+
+    def read(self, tau_true: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        tau = np.asarray(tau_true, float)
+        return tau + self.sigma_Nm * rng.standard_normal(tau.shape)

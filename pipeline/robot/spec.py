@@ -1,0 +1,320 @@
+"""``robot.yaml``: the robot facts a URDF does not carry, parsed strictly.
+
+Every problem raises :class:`~pipeline.errors.RobotFileError` naming the file and the field
+(``robot.yaml: actuation.viscous_Nms_rad: expected 6 numbers, got 5``). Unknown keys are
+errors, so a typo never silently falls back to a default.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+import yaml
+
+from pipeline.errors import RobotFileError
+
+
+@dataclass
+class Capsule:
+    """A capsule (segment ``p0``–``p1`` swept by a sphere) fixed in ``frame``."""
+
+    name: str
+    frame: str
+    p0: np.ndarray
+    p1: np.ndarray
+    radius_m: float
+
+
+@dataclass
+class ToolSpec:
+    transform_tcp_to_flange: pin.SE3
+    reflector_offset_m: np.ndarray
+    reflector_axis: np.ndarray
+
+
+@dataclass
+class ActuationSpec:
+    """Drive train facts, joint side. ``gear_matrix`` K: ``q_motor = K q``, ``tau_joint = K^T tau_motor``."""
+
+    gear_ratio: np.ndarray
+    gear_matrix: np.ndarray
+    rotor_inertia_kgm2: np.ndarray
+    viscous_Nms_rad: np.ndarray
+    coulomb_Nm: np.ndarray
+    coulomb_smoothing_rad_s: float
+
+
+@dataclass
+class TrackerSpec:
+    """Nominal laser-tracker placement and noise model (DESIGN.md, "Sensors")."""
+
+    transform_tracker_to_base: pin.SE3
+    noise_const_m: float
+    noise_per_m: float
+    max_incidence_rad: float
+
+    def sigma_m(self, range_m: np.ndarray) -> np.ndarray:
+        """Isotropic 1-sigma position noise at the given range."""
+        return self.noise_const_m + self.noise_per_m * np.asarray(range_m)
+
+
+@dataclass
+class CollisionSpec:
+    floor_z_m: float
+    floor_check_from_joint: int
+
+
+@dataclass
+class RobotSpec:
+    """Everything in ``robot.yaml``, validated."""
+
+    path: Path
+    name: str
+    urdf: Path
+    flange_frame: str
+    payload_kg: float
+    tool: ToolSpec
+    actuation: ActuationSpec
+    acceleration_rad_s2: np.ndarray
+    limit_overrides: dict[str, np.ndarray]
+    tracker: TrackerSpec
+    collision: CollisionSpec
+    capsules: list[Capsule] = field(default_factory=list)
+
+
+_TOP_KEYS = {
+    "name", "urdf", "flange_frame", "payload_kg", "tool", "actuation", "limits", "tracker",
+    "collision", "capsules",
+}
+_REQUIRED_TOP = {"urdf", "flange_frame", "tool", "actuation", "limits", "tracker"}
+
+
+class _Reader:
+    """Typed access to a YAML mapping that reports ``file: field: problem``."""
+
+    def __init__(self, path: Path, data: dict, prefix: str = "") -> None:
+        self.path, self.data, self.prefix = path, data, prefix
+
+    def error(self, key: str, problem: str) -> RobotFileError:
+        return RobotFileError(self.path.name if self.path else None, f"{self.prefix}{key}", problem)
+
+    def check_keys(self, allowed: set[str], required: set[str] = frozenset()) -> None:
+        for key in self.data:
+            if key not in allowed:
+                raise self.error(str(key), f"unknown key (allowed: {', '.join(sorted(allowed))})")
+        for key in sorted(required):
+            if key not in self.data:
+                raise self.error(key, "missing")
+
+    def sub(self, key: str) -> _Reader:
+        value = self.data.get(key)
+        if not isinstance(value, dict):
+            raise self.error(key, "expected a mapping")
+        return _Reader(self.path, value, f"{self.prefix}{key}.")
+
+    def number(self, key: str, *, positive: bool = False, nonnegative: bool = False,
+               default: float | None = None) -> float:
+        if key not in self.data:
+            if default is None:
+                raise self.error(key, "missing")
+            return float(default)
+        value = self.data[key]
+        if isinstance(value, bool) or not isinstance(value, int | float) or not np.isfinite(value):
+            raise self.error(key, f"expected a finite number, got {value!r}")
+        if positive and value <= 0:
+            raise self.error(key, f"must be positive, got {value}")
+        if nonnegative and value < 0:
+            raise self.error(key, f"must not be negative, got {value}")
+        return float(value)
+
+    def vector(self, key: str, length: int | None, *, nonnegative: bool = False,
+               positive: bool = False, default: Any = None) -> np.ndarray:
+        if key not in self.data:
+            if default is None:
+                raise self.error(key, "missing")
+            return np.asarray(default, dtype=float)
+        value = self.data[key]
+        if not isinstance(value, list) or not all(
+            isinstance(v, int | float) and not isinstance(v, bool) for v in value
+        ):
+            raise self.error(key, f"expected a list of numbers, got {value!r}")
+        array = np.asarray(value, dtype=float)
+        if length is not None and array.shape != (length,):
+            raise self.error(key, f"expected {length} numbers, got {len(value)}")
+        if not np.all(np.isfinite(array)):
+            raise self.error(key, "contains a non-finite number")
+        if nonnegative and np.any(array < 0):
+            raise self.error(key, f"must not be negative, got {value}")
+        if positive and np.any(array <= 0):
+            raise self.error(key, f"must be positive, got {value}")
+        return array
+
+    def text(self, key: str, default: str | None = None) -> str:
+        value = self.data.get(key, default)
+        if not isinstance(value, str) or not value:
+            raise self.error(key, f"expected a non-empty string, got {value!r}")
+        return value
+
+    def transform(self, key: str) -> pin.SE3:
+        reader = self.sub(key)
+        reader.check_keys({"xyz", "rpy"}, {"xyz", "rpy"})
+        xyz = reader.vector("xyz", 3)
+        rpy = reader.vector("rpy", 3)
+        return pin.SE3(pin.rpy.rpyToMatrix(rpy), xyz)
+
+
+def load_robot_spec(path: Path, nq: int | None = None) -> RobotSpec:
+    """Parse and validate ``robot.yaml``; ``nq`` checks per-joint list lengths when known."""
+    path = Path(path)
+    if not path.is_file():
+        raise RobotFileError(path, "robot.yaml", "file not found")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise RobotFileError(path.name, "yaml", f"not valid YAML ({exc})".replace("\n", " ")) from None
+    if not isinstance(data, dict):
+        raise RobotFileError(path.name, "top level", "expected a mapping")
+    top = _Reader(path, data)
+    top.check_keys(_TOP_KEYS, _REQUIRED_TOP)
+
+    tool = top.sub("tool")
+    tool.check_keys({"transform_tcp_to_flange", "reflector_offset_m", "reflector_axis"},
+                    {"transform_tcp_to_flange", "reflector_offset_m"})
+    axis = tool.vector("reflector_axis", 3, default=[0.0, 0.0, 1.0])
+    if np.linalg.norm(axis) < 1e-9:
+        raise tool.error("reflector_axis", "must not be the zero vector")
+
+    act = top.sub("actuation")
+    act.check_keys(
+        {"gear_ratio", "gear_coupling", "rotor_inertia_kgm2", "viscous_Nms_rad", "coulomb_Nm",
+         "coulomb_smoothing_rad_s"},
+        {"gear_ratio", "rotor_inertia_kgm2", "viscous_Nms_rad", "coulomb_Nm"},
+    )
+    gear_ratio = act.vector("gear_ratio", nq)
+    if np.any(gear_ratio == 0):
+        raise act.error("gear_ratio", "a gear ratio must not be zero")
+    n = len(gear_ratio)
+    gear_matrix = np.diag(gear_ratio)
+    coupling = act.data.get("gear_coupling", []) or []
+    if not isinstance(coupling, list):
+        raise act.error("gear_coupling", "expected a list of [row, col, value]")
+    for k, entry in enumerate(coupling):
+        if (not isinstance(entry, list) or len(entry) != 3 or not all(isinstance(e, int | float) for e in entry)
+                or not (0 <= entry[0] < n and 0 <= entry[1] < n) or entry[0] == entry[1]):
+            raise act.error(f"gear_coupling[{k}]", f"expected [row, col, value] with 0-based off-diagonal "
+                            f"indices < {n}, got {entry!r}")
+        gear_matrix[int(entry[0]), int(entry[1])] = float(entry[2])
+    if abs(np.linalg.det(gear_matrix)) < 1e-12:
+        raise act.error("gear_coupling", "the gear matrix is singular")
+    actuation = ActuationSpec(
+        gear_ratio=gear_ratio,
+        gear_matrix=gear_matrix,
+        rotor_inertia_kgm2=act.vector("rotor_inertia_kgm2", n, nonnegative=True),
+        viscous_Nms_rad=act.vector("viscous_Nms_rad", n, nonnegative=True),
+        coulomb_Nm=act.vector("coulomb_Nm", n, nonnegative=True),
+        coulomb_smoothing_rad_s=act.number("coulomb_smoothing_rad_s", positive=True, default=0.01),
+    )
+
+    lim = top.sub("limits")
+    overridable = ("lower_rad", "upper_rad", "velocity_rad_s", "effort_Nm")
+    lim.check_keys({"acceleration_rad_s2", *overridable}, {"acceleration_rad_s2"})
+    overrides = {key: lim.vector(key, n) for key in overridable if key in lim.data}
+    for key in ("velocity_rad_s", "effort_Nm"):
+        if key in overrides and np.any(overrides[key] <= 0):
+            raise lim.error(key, "must be positive")
+
+    trk = top.sub("tracker")
+    trk.check_keys({"transform_tracker_to_base", "noise_const_m", "noise_per_m", "max_incidence_deg"},
+                   {"transform_tracker_to_base"})
+    tracker = TrackerSpec(
+        transform_tracker_to_base=trk.transform("transform_tracker_to_base"),
+        noise_const_m=trk.number("noise_const_m", nonnegative=True, default=8e-6),
+        noise_per_m=trk.number("noise_per_m", nonnegative=True, default=3e-6),
+        max_incidence_rad=np.deg2rad(trk.number("max_incidence_deg", positive=True, default=30.0)),
+    )
+
+    collision = CollisionSpec(0.0, 2)
+    if "collision" in data:
+        col = top.sub("collision")
+        col.check_keys({"floor_z_m", "floor_check_from_joint"})
+        collision = CollisionSpec(col.number("floor_z_m", default=0.0),
+                                  int(col.number("floor_check_from_joint", nonnegative=True, default=2)))
+
+    capsules = []
+    raw_capsules = data.get("capsules", []) or []
+    if not isinstance(raw_capsules, list):
+        raise top.error("capsules", "expected a list")
+    for k, raw in enumerate(raw_capsules):
+        if not isinstance(raw, dict):
+            raise top.error(f"capsules[{k}]", "expected a mapping")
+        cap = _Reader(path, raw, f"capsules[{k}].")
+        cap.check_keys({"name", "frame", "p0", "p1", "radius_m"}, {"name", "frame", "p0", "p1", "radius_m"})
+        capsules.append(Capsule(cap.text("name"), cap.text("frame"), cap.vector("p0", 3), cap.vector("p1", 3),
+                                cap.number("radius_m", positive=True)))
+
+    return RobotSpec(
+        path=path,
+        name=top.text("name", default=path.parent.name),
+        urdf=path.parent / top.text("urdf"),
+        flange_frame=top.text("flange_frame"),
+        payload_kg=top.number("payload_kg", nonnegative=True, default=0.0),
+        tool=ToolSpec(tool.transform("transform_tcp_to_flange"), tool.vector("reflector_offset_m", 3),
+                      axis / np.linalg.norm(axis)),
+        actuation=actuation,
+        acceleration_rad_s2=lim.vector("acceleration_rad_s2", n, positive=True),
+        limit_overrides=overrides,
+        tracker=tracker,
+        collision=collision,
+        capsules=capsules,
+    )
+
+
+def _se3_yaml(transform: pin.SE3) -> dict:
+    return {"xyz": [float(v) for v in transform.translation],
+            "rpy": [float(v) for v in pin.rpy.matrixToRpy(transform.rotation)]}
+
+
+def robot_spec_to_yaml(spec: RobotSpec, urdf_name: str) -> dict:
+    """Inverse of :func:`load_robot_spec` (used to save calibrated/identified models)."""
+    act = spec.actuation
+    coupling = [[int(i), int(j), float(act.gear_matrix[i, j])]
+                for i, j in zip(*np.nonzero(act.gear_matrix - np.diag(np.diag(act.gear_matrix))), strict=True)]
+    out = {
+        "name": spec.name,
+        "urdf": urdf_name,
+        "flange_frame": spec.flange_frame,
+        "payload_kg": float(spec.payload_kg),
+        "tool": {
+            "transform_tcp_to_flange": _se3_yaml(spec.tool.transform_tcp_to_flange),
+            "reflector_offset_m": [float(v) for v in spec.tool.reflector_offset_m],
+            "reflector_axis": [float(v) for v in spec.tool.reflector_axis],
+        },
+        "actuation": {
+            "gear_ratio": [float(v) for v in act.gear_ratio],
+            "gear_coupling": coupling,
+            "rotor_inertia_kgm2": [float(v) for v in act.rotor_inertia_kgm2],
+            "viscous_Nms_rad": [float(v) for v in act.viscous_Nms_rad],
+            "coulomb_Nm": [float(v) for v in act.coulomb_Nm],
+            "coulomb_smoothing_rad_s": float(act.coulomb_smoothing_rad_s),
+        },
+        "limits": {"acceleration_rad_s2": [float(v) for v in spec.acceleration_rad_s2]}
+        | {k: [float(x) for x in v] for k, v in spec.limit_overrides.items()},
+        "tracker": {
+            "transform_tracker_to_base": _se3_yaml(spec.tracker.transform_tracker_to_base),
+            "noise_const_m": float(spec.tracker.noise_const_m),
+            "noise_per_m": float(spec.tracker.noise_per_m),
+            "max_incidence_deg": float(np.rad2deg(spec.tracker.max_incidence_rad)),
+        },
+        "collision": {"floor_z_m": float(spec.collision.floor_z_m),
+                      "floor_check_from_joint": int(spec.collision.floor_check_from_joint)},
+        "capsules": [
+            {"name": c.name, "frame": c.frame, "p0": [float(v) for v in c.p0], "p1": [float(v) for v in c.p1],
+             "radius_m": float(c.radius_m)}
+            for c in spec.capsules
+        ],
+    }
+    return out

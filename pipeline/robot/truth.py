@@ -1,0 +1,188 @@
+"""The hidden "real" robot: a seeded perturbed copy of the nominal model, seen only through sensors.
+
+Perturbations (DESIGN.md, "Truth perturbations", 1-sigma): joint placements 0.5 mm in
+translation and 0.3 mrad in rotation (6 per joint, applied as ``M_i exp6(delta_i)``), joint
+zero offsets 1 mrad, tool/reflector 0.5 mm and 0.3 mrad, tracker placement a few cm and
+degrees away from its nominal pose; inertial parameters 10–20 % (mass log-normal, centre of
+mass shifted, second moments scaled and rotated so every link stays physically consistent),
+rotor inertia and friction 20 %.
+
+Stage code may use only :attr:`RealRobot.tracker`, :attr:`RealRobot.encoders`,
+:attr:`RealRobot.torque_sensor`, :meth:`RealRobot.execute_joint_trajectory` and
+:attr:`RealRobot.plant`. The attributes documented "tests only" open the truth.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+from scipy.linalg import expm
+
+from pipeline.errors import ConfigError
+from pipeline.robot.model import RobotModel
+from pipeline.robot.sensors import Encoders, LaserTracker, TorqueSensor
+from pipeline.robot.symbolic import KinematicLayout, apply_kinematic_errors
+
+#: fixed salt so the truth stream is independent of every stage's stream
+_TRUTH_SALT = 0x74727574
+
+
+@dataclass
+class TruthConfig:
+    """Magnitudes (1-sigma) of the hidden robot's deviations and of the sensor noise."""
+
+    placement_translation_sigma_m: float = 0.5e-3
+    placement_rotation_sigma_rad: float = 0.3e-3
+    joint_offset_sigma_rad: float = 1.0e-3
+    tool_translation_sigma_m: float = 0.5e-3
+    tool_rotation_sigma_rad: float = 0.3e-3
+    tracker_translation_sigma_m: float = 0.05
+    tracker_rotation_sigma_rad: float = 0.03
+    mass_relative_sigma: float = 0.15
+    com_shift_sigma_m: float = 0.02
+    second_moment_relative_sigma: float = 0.15
+    rotor_inertia_relative_sigma: float = 0.2
+    friction_relative_sigma: float = 0.2
+    encoder_noise_rad: float = 2.0e-6
+    torque_noise_fraction_of_limit: float = 0.01
+
+    def validate(self, source: str = "truth") -> None:
+        for name, value in vars(self).items():
+            if not isinstance(value, int | float) or not np.isfinite(value) or value < 0:
+                raise ConfigError(source, f"truth.{name}", f"must be a non-negative number, got {value!r}")
+
+
+@dataclass
+class JointMeasurement:
+    """Sampled joint positions and torques of the real robot (joint side)."""
+
+    t_s: np.ndarray
+    q_rad: np.ndarray
+    tau_Nm: np.ndarray
+    tau_sigma_Nm: np.ndarray
+    q_sigma_rad: float
+
+
+def _perturb_inertia(inertia: pin.Inertia, rng: np.random.Generator, cfg: TruthConfig) -> pin.Inertia:
+    """A physically consistent random neighbour of ``inertia``.
+
+    The second-moment matrix about the COM, ``Sigma = tr(I)/2 * 1 - I``, is positive definite
+    for any physical body; it is perturbed as ``L Sigma L^T`` with ``L = expm(S)`` (S a small
+    random matrix), which keeps it positive definite, so the new ``I = tr(Sigma) 1 - Sigma``
+    is physically consistent (triangle inequalities hold).
+    """
+    mass = inertia.mass * float(np.exp(cfg.mass_relative_sigma * rng.standard_normal()))
+    com = inertia.lever + cfg.com_shift_sigma_m * rng.standard_normal(3)
+    sigma = 0.5 * np.trace(inertia.inertia) * np.eye(3) - inertia.inertia
+    scale = expm(cfg.second_moment_relative_sigma / 2 * rng.standard_normal((3, 3)))
+    sigma = scale @ sigma @ scale.T * (mass / inertia.mass)
+    rotational = np.trace(sigma) * np.eye(3) - sigma
+    return pin.Inertia(mass, com, 0.5 * (rotational + rotational.T))
+
+
+class RealRobot:
+    """A perturbed copy of the nominal robot with its sensors (see the module docstring)."""
+
+    def __init__(self, truth: RobotModel, kinematic_errors: np.ndarray, transform_tracker_to_base: pin.SE3,
+                 config: TruthConfig) -> None:
+        self._truth = truth
+        self._kinematic_errors = kinematic_errors
+        self._transform_tracker_to_base = transform_tracker_to_base
+        self.config = config
+        self.tracker = LaserTracker(truth, transform_tracker_to_base)
+        self.encoders = Encoders(config.encoder_noise_rad)
+        self.torque_sensor = TorqueSensor(config.torque_noise_fraction_of_limit * truth.limits.effort_Nm)
+        self._plant = None
+
+    @classmethod
+    def create(cls, nominal: RobotModel, seed: int, config: TruthConfig | None = None) -> RealRobot:
+        """The hidden robot of run seed ``seed``: same seed and config, same robot, bit for bit."""
+        config = config if config is not None else TruthConfig()
+        config.validate()
+        rng = np.random.default_rng([int(seed), _TRUTH_SALT])
+        nq = nominal.nq
+        layout = KinematicLayout(nq)
+        errors = np.zeros(layout.size)
+        for i in range(1, nq + 1):
+            errors[layout.placement(i)] = np.concatenate([
+                config.placement_translation_sigma_m * rng.standard_normal(3),
+                config.placement_rotation_sigma_rad * rng.standard_normal(3),
+            ])
+        errors[layout.joint_offsets] = config.joint_offset_sigma_rad * rng.standard_normal(nq)
+        errors[layout.tool] = np.concatenate([config.tool_translation_sigma_m * rng.standard_normal(3),
+                                              config.tool_rotation_sigma_rad * rng.standard_normal(3)])
+        model = apply_kinematic_errors(nominal.model, errors, nominal.frame_flange,
+                                       (nominal.frame_tcp, nominal.frame_reflector))
+        for j in range(1, model.njoints):
+            model.inertias[j] = _perturb_inertia(nominal.model.inertias[j], rng, config)
+        spec = copy.deepcopy(nominal.spec)
+        act = spec.actuation
+        act.rotor_inertia_kgm2 = act.rotor_inertia_kgm2 * np.exp(
+            config.rotor_inertia_relative_sigma * rng.standard_normal(nq))
+        act.viscous_Nms_rad = act.viscous_Nms_rad * np.exp(config.friction_relative_sigma * rng.standard_normal(nq))
+        act.coulomb_Nm = act.coulomb_Nm * np.exp(config.friction_relative_sigma * rng.standard_normal(nq))
+        model.armature = act.rotor_inertia_kgm2.copy()
+        truth = nominal.with_model(model, spec)
+        tracker_error = np.concatenate([config.tracker_translation_sigma_m * rng.standard_normal(3),
+                                        config.tracker_rotation_sigma_rad * rng.standard_normal(3)])
+        tracker_pose = nominal.tracker.transform_tracker_to_base * pin.exp6(tracker_error)
+        return cls(truth, errors, tracker_pose, config)
+
+    # ------------------------------------------------------------ stage-facing
+    def execute_joint_trajectory(self, t_s: np.ndarray, q: np.ndarray, v: np.ndarray, a: np.ndarray,
+                                 rng: np.random.Generator) -> JointMeasurement:
+        """Ideal tracking of ``(q, v, a)``: encoder readings and joint torques (motor currents
+        through the gear matrix) with sensor noise. Torque saturation is not modelled here;
+        use :attr:`plant` for a closed-loop experiment."""
+        q, v, a = (np.atleast_2d(np.asarray(x, float)) for x in (q, v, a))
+        if not (len(t_s) == len(q) == len(v) == len(a)):
+            raise ConfigError(None, "trajectory", f"t, q, v, a have different lengths "
+                              f"({len(t_s)}, {len(q)}, {len(v)}, {len(a)})")
+        tau = np.array([self._truth.inverse_dynamics(qk, vk, ak) for qk, vk, ak in zip(q, v, a, strict=True)])
+        return JointMeasurement(np.asarray(t_s, float).copy(), self.encoders.read(q, rng),
+                                self.torque_sensor.read(tau, rng), self.torque_sensor.sigma_Nm.copy(),
+                                self.encoders.noise_rad)
+
+    @property
+    def plant(self):  # noqa: ANN201 - pipeline.control.plant.Plant
+        """The physical arm behind the drives (closed-loop simulation, stage 3)."""
+        if self._plant is None:
+            from pipeline.control.plant import Plant
+
+            self._plant = Plant(self._truth, encoder_noise_rad=self.config.encoder_noise_rad)
+        return self._plant
+
+    # -------------------------------------------------------------- tests only
+    @property
+    def truth(self) -> RobotModel:
+        """Tests only: the hidden robot model."""
+        return self._truth
+
+    @property
+    def kinematic_errors(self) -> np.ndarray:
+        """Tests only: the kinematic error vector (SymbolicRobot layout) of the truth."""
+        return self._kinematic_errors.copy()
+
+    @property
+    def transform_tracker_to_base(self) -> pin.SE3:
+        """Tests only: the true tracker placement."""
+        return self._transform_tracker_to_base.copy()
+
+    @property
+    def reflector_offset_m(self) -> np.ndarray:
+        """Tests only: the true reflector position in the flange frame."""
+        model = self._truth.model
+        flange = model.frames[model.getFrameId(self._truth.frame_flange)].placement
+        reflector = model.frames[model.getFrameId(self._truth.frame_reflector)].placement
+        return (flange.inverse() * reflector).translation.copy()
+
+    @property
+    def dynamic_parameters(self) -> np.ndarray:
+        """Tests only: the true ``p_dyn`` (SymbolicRobot layout, offsets zero)."""
+        from pipeline.robot.symbolic import pinocchio_dynamic_parameters
+
+        act = self._truth.actuation
+        return pinocchio_dynamic_parameters(self._truth.model, act.viscous_Nms_rad, act.coulomb_Nm)

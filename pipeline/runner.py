@@ -1,0 +1,431 @@
+"""The stage runner: run stages in order, reuse finished ones, write ``report.md``.
+
+Each stage is a module (registry :data:`pipeline.config.STAGES`) exposing::
+
+    NAME = "calibration"
+    DEPENDS = ("model",)           # upstream stages whose results it reads
+    Config = CalibrationConfig     # dataclass with defaults
+    def run(ctx: StageContext) -> StageResult
+
+:func:`run_pipeline` validates everything (stage modules, dependencies, the robot files, the
+hidden robot) *before* creating any directory, then for every needed stage either reuses
+``<run>/<stage>/`` (stored ``inputs.sha256`` equal to the new hash) or calls ``run(ctx)`` with
+a staging directory that is renamed to ``<stage>/`` only when complete.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import pipeline
+from pipeline import artefacts
+from pipeline import config as config_mod
+from pipeline.artefacts import StageOutput, load_stage_output
+from pipeline.config import REPO_ROOT, RunConfig
+from pipeline.errors import ConfigError, PipelineError
+from pipeline.progress import Progress
+
+__all__ = [
+    "StageContext", "StageResult", "StageOutput", "RunResult", "run_pipeline", "load_run",
+    "load_stage_output", "default_runs_dir", "resolve_robot_dir", "stage_rng", "stable_stage_hash",
+]
+
+
+# --------------------------------------------------------------------------------------------
+# The contract (docs/ARCHITECTURE.md, "Stages and the runner")
+# --------------------------------------------------------------------------------------------
+@dataclass
+class StageContext:
+    run: RunConfig                        # name, seed, robot, profile (+ all sections)
+    config: Any                           # this stage's Config instance
+    robot: Any                            # RobotModel: best model so far (a private copy)
+    real: Any                             # RealRobot: sensors of the hidden robot (None if unavailable)
+    upstream: dict[str, StageOutput]      # loaded results of the earlier stages it depends on
+    out_dir: Path                         # staging directory (write extra files here)
+    rng: np.random.Generator              # seeded from (run seed, stage name)
+    progress: Progress                    # ctx.progress.track(iterable, "description")
+
+
+@dataclass
+class StageResult:
+    summary: dict                                           # -> summary.json (headline figures)
+    arrays: dict[str, np.ndarray] = field(default_factory=dict)   # -> results.npz
+    data: dict = field(default_factory=dict)                # -> results.json
+    figures: dict[str, Any] = field(default_factory=dict)   # matplotlib Figures -> <name>.png
+    robot: Any = None                                       # RobotModel handed on -> robot/
+    report_md: str = ""                                     # extra markdown for report.md
+
+
+@dataclass
+class RunResult:
+    run_dir: Path
+    report: Path
+    outputs: dict[str, StageOutput]       # every stage of this run, in order
+    ran: list[str]                        # stages whose run() was called
+    reused: list[str]                     # stages loaded from disk
+
+
+# --------------------------------------------------------------------------------------------
+# Helpers
+# --------------------------------------------------------------------------------------------
+def default_runs_dir() -> Path:
+    """``<repo>/data/runs`` in a source checkout, else ``./data/runs``."""
+    if (REPO_ROOT / "pyproject.toml").exists():
+        return REPO_ROOT / "data" / "runs"
+    return Path.cwd() / "data" / "runs"
+
+
+def stable_stage_hash(name: str) -> int:
+    """32-bit integer from sha256(name): stable across processes (unlike ``hash()``)."""
+    return int.from_bytes(hashlib.sha256(name.encode()).digest()[:4], "little")
+
+
+def stage_rng(seed: int, stage: str) -> np.random.Generator:
+    """``np.random.default_rng([seed, stable_stage_hash(stage)])``."""
+    return np.random.default_rng([seed, stable_stage_hash(stage)])
+
+
+def resolve_robot_dir(cfg: RunConfig) -> Path:
+    """The robot folder named by ``cfg.robot``: a path (absolute, relative to the config
+    file, or to the working directory) or a folder name under ``robots/``."""
+    value = cfg.robot
+    p = Path(value).expanduser()
+    candidates = [p] if p.is_absolute() else [cfg.base_dir / p, Path.cwd() / p, REPO_ROOT / "robots" / p]
+    for c in candidates:
+        if c.is_dir():
+            return c.resolve()
+    source = cfg.origins.get("robot", cfg.source)
+    robots = REPO_ROOT / "robots"
+    known = sorted(d.name for d in robots.iterdir() if d.is_dir()) if robots.is_dir() else []
+    hint = f" (built-in robots: {', '.join(known)})" if known else ""
+    raise ConfigError(source, "robot", f"no robot folder {value!r}{hint}")
+
+
+def _load_robot(robot_dir: Path) -> Any:
+    from pipeline.robot.model import RobotModel
+
+    return RobotModel.load(robot_dir)
+
+
+def _make_real(nominal: Any, cfg: RunConfig) -> Any:
+    try:
+        from pipeline.robot.truth import RealRobot
+    except ModuleNotFoundError as exc:
+        if exc.name and "pipeline.robot.truth".startswith(exc.name):
+            print("warning: pipeline.robot.truth does not exist yet; ctx.real is None", file=sys.stderr)
+            return None
+        raise
+    truth_cfg = cfg.sections.get("truth")
+    if isinstance(truth_cfg, dict) or truth_cfg is None:
+        from pipeline.robot.truth import TruthConfig
+
+        truth_cfg = TruthConfig()
+    return RealRobot.create(nominal, cfg.seed, truth_cfg)
+
+
+def _code_hash(module: Any) -> str:
+    """Hash of the .py files of the stage's package ("" for objects without a file)."""
+    path = getattr(module, "__file__", None)
+    if not path:
+        return ""
+    folder = Path(path).parent
+    return artefacts.hash_tree(folder, suffixes=(".py",))
+
+
+def _copy_robot(robot: Any) -> Any:
+    copy = getattr(robot, "copy", None)
+    return copy() if callable(copy) else robot
+
+
+@dataclass
+class _Plan:
+    name: str
+    module: Any
+    config: Any
+    depends: tuple[str, ...]
+    closure: list[str]            # all upstream stages (transitive), in run order
+    inputs_sha256: str = ""
+
+
+def _check_stage_module(name: str, module: Any) -> None:
+    where = str(getattr(module, "__file__", None) or f"stage {name}")
+    for attr in ("NAME", "DEPENDS", "Config", "run"):
+        if not hasattr(module, attr):
+            raise PipelineError(where, attr, f"stage {name!r} does not define {attr}")
+    if module.NAME != name:
+        raise PipelineError(where, "NAME", f"is {module.NAME!r}, registered as {name!r}")
+
+
+def plan_stages(cfg: RunConfig) -> list[_Plan]:
+    """Needed stages (selected + their transitive dependencies) in registry order."""
+    order = config_mod.stage_names()
+    modules: dict[str, Any] = {}
+
+    def module_of(name: str) -> Any:
+        if name not in modules:
+            modules[name] = config_mod.load_stage_module(name)
+            _check_stage_module(name, modules[name])
+        return modules[name]
+
+    needed: set[str] = set()
+    stack = list(cfg.stages)
+    while stack:
+        name = stack.pop()
+        if name in needed:
+            continue
+        if name not in order:
+            raise ConfigError(cfg.origins.get("stages", cfg.source), "stages", f"unknown stage {name!r}")
+        needed.add(name)
+        module = module_of(name)
+        where = str(getattr(module, "__file__", None) or name)
+        for dep in tuple(module.DEPENDS):
+            if dep not in order:
+                raise PipelineError(where, "DEPENDS", f"unknown stage {dep!r}")
+            if order.index(dep) >= order.index(name):
+                raise PipelineError(where, "DEPENDS",
+                                    f"{dep!r} does not run before {name!r}")
+            stack.append(dep)
+
+    plans: dict[str, _Plan] = {}
+    for name in order:
+        if name not in needed:
+            continue
+        module = module_of(name)
+        section = cfg.sections.get(name)
+        if section is None or isinstance(section, dict):
+            section = config_mod.build_dataclass(module.Config, section or {}, name, cfg.source)
+            cfg.sections[name] = section
+        closure: set[str] = set()
+        for dep in module.DEPENDS:
+            closure.add(dep)
+            closure.update(plans[dep].closure)
+        plans[name] = _Plan(name, module, section, tuple(module.DEPENDS), [s for s in order if s in closure])
+    return list(plans.values())
+
+
+def _check_result(name: str, result: Any) -> StageResult:
+    where = f"stage {name}"
+    if not isinstance(result, StageResult):
+        raise TypeError(f"{where}: run() returned {type(result).__name__}, expected StageResult")
+    if not isinstance(result.summary, dict):
+        raise TypeError(f"{where}: StageResult.summary must be a dict")
+    for key in result.figures:
+        if not str(key).replace("_", "").replace("-", "").isalnum():
+            raise ValueError(f"{where}: figure name {key!r} must be a plain file stem")
+    return result
+
+
+def write_stage_result(stage_dir: Path, name: str, result: StageResult, inputs_sha256: str,
+                       duration_s: float) -> None:
+    """Write a StageResult into a (staging) directory; ``inputs.sha256`` last."""
+    artefacts.write_json(stage_dir / artefacts.SUMMARY, result.summary)
+    artefacts.write_npz(stage_dir / artefacts.RESULTS_NPZ, result.arrays)
+    artefacts.write_json(stage_dir / artefacts.RESULTS_JSON, result.data)
+    figures = []
+    for key, fig in result.figures.items():
+        artefacts.save_figure(stage_dir / f"{key}.png", fig)
+        figures.append(f"{key}.png")
+    if result.report_md:
+        artefacts.write_text(stage_dir / artefacts.REPORT_MD, result.report_md.rstrip() + "\n")
+    if result.robot is not None:
+        result.robot.save(stage_dir / artefacts.ROBOT_DIR)
+    artefacts.write_json(stage_dir / artefacts.MANIFEST, {
+        "stage": name,
+        "inputs_sha256": inputs_sha256,
+        "figures": figures,
+        "has_robot": result.robot is not None,
+        "finished_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+        "duration_s": round(duration_s, 3),
+        "package_version": pipeline.__version__,
+    })
+    artefacts.write_text(stage_dir / artefacts.INPUTS_HASH, inputs_sha256 + "\n")
+
+
+# --------------------------------------------------------------------------------------------
+# report.md
+# --------------------------------------------------------------------------------------------
+def _fmt(value: Any) -> str:
+    if isinstance(value, bool) or value is None:
+        return str(value)
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    if isinstance(value, (list, tuple)):
+        if len(value) > 12:
+            return "[" + ", ".join(_fmt(v) for v in value[:12]) + f", … ({len(value)} items)]"
+        return "[" + ", ".join(_fmt(v) for v in value) + "]"
+    return str(value).replace("|", "\\|").replace("\n", " ")
+
+
+def _flatten(d: dict, prefix: str = "") -> list[tuple[str, Any]]:
+    rows: list[tuple[str, Any]] = []
+    for key, value in d.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            rows.extend(_flatten(value, name + "."))
+        else:
+            rows.append((name, value))
+    return rows
+
+
+def summary_table(summary: dict) -> str:
+    """Markdown table ``| key | value |`` of a (nested) summary dict."""
+    rows = _flatten(summary)
+    if not rows:
+        return "_no summary figures_\n"
+    lines = ["| quantity | value |", "|---|---|"]
+    lines += [f"| {k} | {_fmt(v)} |" for k, v in rows]
+    return "\n".join(lines) + "\n"
+
+
+def write_report(run_dir: Path, cfg: RunConfig | None = None, current: Sequence[str] = ()) -> Path:
+    """Gather every finished stage directory of ``run_dir`` into ``report.md``.
+
+    Figures are linked relatively (``<stage>/<name>.png``). Stage directories that were not part
+    of this run (``current``) are marked as coming from an earlier run.
+    """
+    run_dir = Path(run_dir)
+    lines = [f"# Run `{run_dir.name}`", ""]
+    if cfg is not None:
+        lines += [f"robot `{cfg.robot}` · seed {cfg.seed} · profile `{cfg.profile}` · "
+                  f"pipeline {pipeline.__version__} · config in `config.yaml`", ""]
+    names = [s for s in config_mod.stage_names() if (run_dir / s / artefacts.INPUTS_HASH).exists()]
+    extra = sorted(p.name for p in run_dir.iterdir()
+                   if p.is_dir() and not p.name.startswith(".") and p.name not in names
+                   and (p / artefacts.INPUTS_HASH).exists())
+    for name in [*names, *extra]:
+        d = run_dir / name
+        manifest = artefacts.read_json(d / artefacts.MANIFEST) if (d / artefacts.MANIFEST).exists() else {}
+        lines += [f"## {name}", ""]
+        if current and name not in current:
+            lines += ["_from an earlier run: not part of this run, its inputs may differ_", ""]
+        if manifest.get("finished_utc"):
+            lines += [f"finished {manifest['finished_utc']} in {manifest.get('duration_s', 0):.1f} s", ""]
+        summary = artefacts.read_json(d / artefacts.SUMMARY) if (d / artefacts.SUMMARY).exists() else {}
+        lines += [summary_table(summary)]
+        if (d / artefacts.REPORT_MD).exists():
+            lines += [(d / artefacts.REPORT_MD).read_text(encoding="utf-8").rstrip(), ""]
+        figures = manifest.get("figures") or sorted(p.name for p in d.glob("*.png"))
+        for fig in figures:
+            lines += [f"![{name}: {Path(fig).stem}]({name}/{fig})", ""]
+    return artefacts.write_text(run_dir / "report.md", "\n".join(lines).rstrip() + "\n")
+
+
+# --------------------------------------------------------------------------------------------
+# Running
+# --------------------------------------------------------------------------------------------
+def run_pipeline(
+    cfg: RunConfig,
+    out_root: str | Path | None = None,
+    force: bool | Sequence[str] = False,
+    progress: Progress | None = None,
+    log: Any = None,
+) -> RunResult:
+    """Run the stages of ``cfg`` into ``<out_root>/<cfg.name>/`` (default ``data/runs``).
+
+    ``force``: True re-runs every needed stage, a list re-runs those stages (reuse otherwise).
+    ``log``: callable(str) for one-line progress messages (default: stderr).
+    Raises :class:`PipelineError` (nothing written when it comes from validation).
+    """
+    say = log if log is not None else (lambda msg: print(msg, file=sys.stderr))
+    # ---- validate everything before touching the disk --------------------------------------
+    plans = plan_stages(cfg)
+    robot_dir = resolve_robot_dir(cfg)
+    nominal = _load_robot(robot_dir)
+    real = _make_real(nominal, cfg)
+    robot_sha = artefacts.hash_tree(robot_dir)
+    run_key = {
+        "seed": cfg.seed,
+        "robot": robot_dir.name,
+        "truth": config_mod.to_plain(cfg.sections.get("truth", {})),
+    }
+    by_name: dict[str, _Plan] = {}
+    for plan in plans:
+        plan.inputs_sha256 = artefacts.inputs_hash(
+            plan.name, config_mod.to_plain(plan.config), run_key, robot_sha,
+            {d: by_name[d].inputs_sha256 for d in plan.closure}, pipeline.__version__,
+            _code_hash(plan.module),
+        )
+        by_name[plan.name] = plan
+    forced = set(by_name) if force is True else set(force or ())
+
+    # ---- run --------------------------------------------------------------------------------
+    run_dir = Path(out_root) if out_root is not None else default_runs_dir()
+    run_dir = run_dir / cfg.name
+    run_dir.mkdir(parents=True, exist_ok=True)
+    artefacts.clean_leftovers(run_dir)
+    artefacts.write_text(run_dir / "config.yaml", cfg.to_yaml())
+    outputs: dict[str, StageOutput] = {}
+    ran: list[str] = []
+    reused: list[str] = []
+    handed_robot: dict[str, Any] = {}       # stage -> robot it handed on
+    prog = progress if progress is not None else Progress()
+    try:
+        with prog:
+            for plan in plans:
+                stage_dir = run_dir / plan.name
+                if plan.name not in forced and artefacts.read_inputs_hash(stage_dir) == plan.inputs_sha256:
+                    outputs[plan.name] = load_stage_output(stage_dir)
+                    reused.append(plan.name)
+                    say(f"{plan.name}: reused ({stage_dir})")
+                else:
+                    outputs[plan.name] = _run_one(plan, cfg, nominal, real, outputs, handed_robot,
+                                                  run_dir, prog, say)
+                    ran.append(plan.name)
+                if outputs[plan.name].robot is not None:
+                    handed_robot[plan.name] = outputs[plan.name].robot
+    finally:
+        report = write_report(run_dir, cfg, [p.name for p in plans])
+    say(f"report: {report}")
+    return RunResult(run_dir, report, outputs, ran, reused)
+
+
+def _run_one(plan: _Plan, cfg: RunConfig, nominal: Any, real: Any, outputs: dict[str, StageOutput],
+             handed_robot: dict[str, Any], run_dir: Path, prog: Progress, say: Any) -> StageOutput:
+    robot = nominal
+    for up in plan.closure:                   # latest robot handed on upstream
+        if up in handed_robot:
+            robot = handed_robot[up]
+    staging = artefacts.new_stage_dir(run_dir, plan.name)
+    ctx = StageContext(
+        run=cfg,
+        config=plan.config,
+        robot=_copy_robot(robot),
+        real=real,
+        upstream={u: outputs[u] for u in plan.closure},
+        out_dir=staging,
+        rng=stage_rng(cfg.seed, plan.name),
+        progress=prog,
+    )
+    say(f"{plan.name}: running")
+    t0 = time.perf_counter()
+    try:
+        result = _check_result(plan.name, plan.module.run(ctx))
+        duration = time.perf_counter() - t0
+        write_stage_result(staging, plan.name, result, plan.inputs_sha256, duration)
+        final = artefacts.commit_stage_dir(staging, run_dir / plan.name)
+    except BaseException:
+        artefacts.discard_stage_dir(staging)
+        raise
+    say(f"{plan.name}: done in {duration:.1f} s")
+    out = load_stage_output(final, robot=result.robot)
+    return out
+
+
+def load_run(run_dir: str | Path) -> dict[str, StageOutput]:
+    """Every finished stage of a run directory, in run order (unknown stage dirs last)."""
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise PipelineError(run_dir, None, "run directory not found")
+    names = [s for s in config_mod.stage_names() if (run_dir / s / artefacts.INPUTS_HASH).exists()]
+    names += sorted(p.name for p in run_dir.iterdir() if p.is_dir() and not p.name.startswith(".")
+                    and p.name not in names and (p / artefacts.INPUTS_HASH).exists())
+    return {n: load_stage_output(run_dir / n) for n in names}

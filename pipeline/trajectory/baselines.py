@@ -1,0 +1,166 @@
+"""Baselines run in the same stage: toppra for CP, ruckig for PtP.
+
+* toppra (reachability analysis, Pham & Pham 2018) on the same joint path with the
+  constraints it can express: joint speed limits and ``JointTorqueConstraint`` with the
+  rigid-body inverse dynamics and Coulomb friction as its dry-friction coefficients
+  ``fs_coef * sign(q')``. Viscous friction cannot be expressed (DESIGN.md "Measured facts").
+* ruckig (jerk-limited time-optimal kinematics): the most aggressive kinematic limits whose
+  torques (full model, checked every ``check_dt_s`` <= 0.5 ms) stay within the torque limits,
+  found by bisection on a scale factor of reference accelerations for several jerk/acceleration
+  ratios.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pipeline.errors import InfeasibleError, SolverError
+from pipeline.trajectory.cp import CPProfile
+from pipeline.trajectory.design import JointPath
+from pipeline.trajectory.dynamics import PlanningModel
+from pipeline.trajectory.trajectories import JointTrajectory, check_trajectory
+
+
+def _toppra_path(path: JointPath):
+    import toppra
+
+    class _Path(toppra.interpolator.AbstractGeometricPath):
+        def __call__(self, s, order=0):
+            out = path(np.asarray(s, float), order)
+            if order >= 1:
+                out = np.where(np.abs(out) < 1e-9, 0.0, out)
+            return out
+
+        @property
+        def dof(self):
+            return path.nq
+
+        @property
+        def path_interval(self):
+            return np.array([0.0, 1.0])
+
+    return _Path()
+
+
+def toppra_cp(pm: PlanningModel, path: JointPath, n_grid: int = 400, coulomb: bool = True,
+              name: str = "cp_toppra") -> CPProfile:
+    """toppra time-optimal profile on the same grid (collocation), velocity + torque limits."""
+    import pinocchio as pin
+    import toppra
+    import toppra.algorithm as algo
+    import toppra.constraint as constraint
+
+    toppra.setup_logging("WARNING")
+    t0 = time.perf_counter()
+    data = pm.model.createData()
+
+    def inv_dyn(q, v, a):
+        return pin.rnea(pm.model, data, np.asarray(q, float), np.asarray(v, float), np.asarray(a, float))
+
+    vlim = np.stack([-pm.velocity_rad_s, pm.velocity_rad_s], axis=1)
+    tlim = np.stack([-pm.effort_Nm, pm.effort_Nm], axis=1)
+    fs = pm.coulomb_Nm if coulomb else np.zeros(pm.nq)
+    cons = [constraint.JointVelocityConstraint(vlim),
+            constraint.JointTorqueConstraint(inv_dyn, tlim, fs,
+                                             discretization_scheme=constraint.DiscretizationType.Collocation)]
+    grid = np.linspace(0.0, 1.0, n_grid + 1)
+    inst = algo.TOPPRA(cons, _toppra_path(path), gridpoints=grid, solver_wrapper="seidel")
+    _, sd_vec, _ = inst.compute_parameterization(0.0, 0.0)
+    if sd_vec is None:
+        raise SolverError(None, name, "toppra found no feasible parametrisation")
+    sd = np.sqrt(np.maximum(np.asarray(sd_vec, float) ** 2, 0.0))
+    ds = np.diff(grid)
+    dur = float(np.sum(2 * ds / np.maximum(sd[:-1] + sd[1:], 1e-300)))
+    sdd = np.diff(sd**2) / (2 * ds)
+    return CPProfile(name, grid, sd, sdd, dur, time.perf_counter() - t0,
+                     info={"n_grid": n_grid, "coulomb": coulomb, "method": "toppra seidel collocation"})
+
+
+@dataclass
+class RuckigResult:
+    trajectory: JointTrajectory
+    duration_s: float
+    accel_scale: float
+    jerk_ratio_1_s: float
+    max_torque_ratio: float
+    search_time_s: float
+    evaluations: int
+    info: dict = field(default_factory=dict)
+
+
+def _ruckig_sample(q0: np.ndarray, q1: np.ndarray, vmax: np.ndarray, amax: np.ndarray,
+                   jmax: np.ndarray, dt_s: float) -> JointTrajectory | None:
+    from ruckig import InputParameter, Result, Ruckig, Trajectory
+
+    n = len(q0)
+    inp = InputParameter(n)
+    inp.current_position, inp.target_position = list(q0), list(q1)
+    inp.current_velocity = inp.current_acceleration = [0.0] * n
+    inp.target_velocity = inp.target_acceleration = [0.0] * n
+    inp.max_velocity, inp.max_acceleration, inp.max_jerk = list(vmax), list(amax), list(jmax)
+    traj = Trajectory(n)
+    res = Ruckig(n).calculate(inp, traj)
+    if res not in (Result.Working, Result.Finished):
+        return None
+    T = traj.duration
+    t = np.append(np.arange(0.0, T, dt_s), T)
+    Q = np.empty((t.size, n))
+    V = np.empty_like(Q)
+    A = np.empty_like(Q)
+    for k, tk in enumerate(t):
+        p, v, a = traj.at_time(tk)
+        Q[k], V[k], A[k] = p, v, a
+    return JointTrajectory("ptp_ruckig", t, Q, V, A)
+
+
+def ruckig_torque_feasible(pm: PlanningModel, q0: np.ndarray, q1: np.ndarray, check_dt_s: float = 5e-4,
+                           jerk_ratios_1_s: tuple[float, ...] = (10.0, 20.0, 40.0, 80.0),
+                           bisection_steps: int = 18, tol: float = 0.0) -> RuckigResult:
+    """Fastest ruckig move whose full-model torques stay within limits (max ratio <= 1 + tol).
+
+    Reference accelerations ``a_ref_i = tau_max_i / M_ii(q0)`` are scaled by ``alpha`` (bisection)
+    and jerks set to ``ratio * alpha * a_ref``; velocities are the joint speed limits.
+    """
+    t0 = time.perf_counter()
+    a_ref = pm.effort_Nm / np.maximum(pm.mass_diagonal(q0), 1e-9)
+    best: RuckigResult | None = None
+    evals = 0
+    for ratio in jerk_ratios_1_s:
+        def feasible(alpha: float):
+            nonlocal evals
+            evals += 1
+            tr = _ruckig_sample(q0, q1, pm.velocity_rad_s, alpha * a_ref, ratio * alpha * a_ref, check_dt_s)
+            if tr is None:
+                return None, np.inf
+            chk = check_trajectory(pm, tr)
+            return tr, chk.max_torque_ratio
+        lo, hi = 0.0, 1.0
+        tr_hi, r_hi = feasible(hi)
+        while r_hi <= 1.0 + tol and hi < 1e3:
+            lo, hi = hi, 2 * hi
+            tr_hi, r_hi = feasible(hi)
+        good = None
+        for _ in range(bisection_steps):
+            mid = 0.5 * (lo + hi) if lo > 0 else hi / 4
+            tr, r = feasible(mid)
+            if r <= 1.0 + tol:
+                lo, good = mid, (tr, r)
+            else:
+                hi = mid
+            if lo > 0 and (hi - lo) / hi < 1e-4:
+                break
+        if good is None:
+            continue
+        tr, r = good
+        if best is None or tr.duration_s < best.duration_s:
+            best = RuckigResult(tr, tr.duration_s, lo, ratio, r, 0.0, 0)
+    if best is None:
+        raise InfeasibleError(None, "ptp ruckig baseline", "no torque-feasible kinematic limits found "
+                              "(the static torques may exceed the limits)")
+    best.search_time_s = time.perf_counter() - t0
+    best.evaluations = evals
+    best.trajectory.info.update({"accel_scale": best.accel_scale, "jerk_ratio_1_s": best.jerk_ratio_1_s})
+    return best

@@ -1,0 +1,249 @@
+"""Time-optimal continuous-path (CP) parametrisation (paper 004 section 5.1; Verscheure 2009).
+
+Given a joint path ``q(s)``, ``s in [0, 1]``, find ``s(t)`` minimising the duration under
+joint velocity and torque limits. With ``b = sdot^2`` and ``a = sddot`` (piecewise constant on
+the grid intervals, so ``b`` is piecewise linear: ``b_{k+1} = b_k + 2 a_k ds``):
+
+    tau(s) = m(s) a + c(s) b + g(s) + F_c sign(q'(s))           (convex step)
+    T = sum_k 2 ds / (sqrt(b_k) + sqrt(b_{k+1}))
+
+The convex step writes the objective with second-order-cone slacks (DESIGN.md "Measured
+facts": ``1/sqrt(b)`` is singular at rest):  ``e_k^2 <= b_k``,  ``d_k (e_k + e_{k+1}) >= 1``,
+minimise ``sum 2 ds d_k``. Torques and velocities are constrained at the start, midpoint and
+end of every interval (where ``b`` is exactly known because ``a`` is constant there).
+
+The refinement is the non-convex problem in ``x = sdot`` (warm-started from the convex
+solution) with the full friction model
+
+    tau = m a + c x^2 + g + F_v q' x + F_c tanh(q' x / w),   a_k = (x_{k+1}^2 - x_k^2) / (2 ds)
+
+and the smooth variant (:func:`solve_cp_smooth`) is a time-domain problem: ``s(t)`` a chain of
+integrators driven by piecewise-constant snap, so joint velocity, acceleration and jerk
+are continuous (paper 004 section 5: "continuous velocities, accelerations, and jerks"), with
+joint jerk bounds.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from pipeline.errors import InfeasibleError, SolverError
+from pipeline.trajectory.design import JointPath
+from pipeline.trajectory.dynamics import PlanningModel, path_coefficients
+from pipeline.trajectory.trajectories import JointTrajectory
+
+_IPOPT = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
+          "ipopt.tol": 1e-9, "ipopt.acceptable_tol": 1e-6, "ipopt.max_iter": 3000}
+
+
+@dataclass
+class CPProfile:
+    """Path velocity profile on a grid: ``sdot`` at grid points, ``sddot`` per interval."""
+
+    name: str
+    s: np.ndarray
+    sdot: np.ndarray
+    sddot: np.ndarray
+    duration_s: float
+    solve_time_s: float
+    info: dict = field(default_factory=dict)
+
+    def grid_times(self) -> np.ndarray:
+        ds = np.diff(self.s)
+        dt = 2.0 * ds / np.maximum(self.sdot[:-1] + self.sdot[1:], 1e-300)
+        return np.concatenate([[0.0], np.cumsum(dt)])
+
+    def sample(self, path: JointPath, dt_s: float) -> JointTrajectory:
+        """Exact samples of q, v, a every ``dt_s`` (piecewise constant sddot per interval)."""
+        tk = self.grid_times()
+        t = np.arange(0.0, tk[-1], dt_s)
+        t = np.append(t, tk[-1]) if tk[-1] - t[-1] > 1e-12 else t
+        k = np.clip(np.searchsorted(tk, t, side="right") - 1, 0, len(self.sddot) - 1)
+        tau = t - tk[k]
+        s = np.clip(self.s[k] + self.sdot[k] * tau + 0.5 * self.sddot[k] * tau**2, 0.0, self.s[-1])
+        sd = np.maximum(self.sdot[k] + self.sddot[k] * tau, 0.0)
+        sdd = self.sddot[k]
+        q, dq, ddq = path.derivatives(s)
+        v = dq * sd[:, None]
+        a = ddq * (sd**2)[:, None] + dq * sdd[:, None]
+        return JointTrajectory(self.name, t, q, v, a, info={"profile": self.name})
+
+
+def _check_solver(solver: ca.Function, what: str) -> dict:
+    stats = solver.stats()
+    if not stats.get("success", False):
+        status = stats.get("return_status", "unknown")
+        if status in ("Infeasible_Problem_Detected", "Local_Infeasibility"):
+            raise InfeasibleError(None, what, f"IPOPT reports the limits cannot be met ({status})")
+        raise SolverError(None, what, f"IPOPT failed: {status}")
+    return stats
+
+
+def _eval_points(path: JointPath, s: np.ndarray, midpoints: bool) -> tuple[np.ndarray, list]:
+    """Evaluation points: interval starts, midpoints and ends (or grid points only)."""
+    if midpoints:
+        sm = 0.5 * (s[:-1] + s[1:])
+        return np.concatenate([s[:-1], sm, s[1:]]), ["start", "mid", "end"]
+    return s[:-1].copy(), ["start"]
+
+
+def _velocity_bound_b(pm: PlanningModel, dq: np.ndarray) -> np.ndarray:
+    """Upper bound on b = sdot^2 from joint speed limits at points with path tangent dq."""
+    with np.errstate(divide="ignore"):
+        r = pm.velocity_rad_s / np.abs(dq)
+    return np.min(r, axis=1) ** 2
+
+
+def solve_cp_convex(pm: PlanningModel, path: JointPath, n_grid: int = 400, midpoints: bool = True,
+                    coulomb: bool = True, name: str = "cp_convex",
+                    torque_scale: float = 1.0) -> CPProfile:
+    """Convex minimum-time problem (rigid body + sharp Coulomb), SOC objective, IPOPT.
+
+    ``torque_scale`` shrinks the torque limits (used to leave margin for unmodelled terms).
+    """
+    t0 = time.perf_counter()
+    N = int(n_grid)
+    s = np.linspace(0.0, 1.0, N + 1)
+    ds = s[1] - s[0]
+    pts, kinds = _eval_points(path, s, midpoints)
+    q, dq, ddq = path.derivatives(pts)
+    pc = path_coefficients(pm, pts, q, dq, ddq)
+    fc = pm.coulomb_Nm * np.sign(dq) if coulomb else np.zeros_like(dq)
+    tau_max = pm.effort_Nm * torque_scale
+
+    b = ca.SX.sym("b", N + 1)
+    a = ca.SX.sym("a", N)
+    e = ca.SX.sym("e", N + 1)
+    d = ca.SX.sym("d", N)
+    # b at each evaluation point, a of the interval it belongs to
+    b_pts = [b[:-1], 0.5 * (b[:-1] + b[1:]), b[1:]][: len(kinds)]
+    if not midpoints:
+        b_pts = [b[:-1]]
+    b_p = ca.vertcat(*b_pts)
+    a_p = ca.vertcat(*([a] * len(kinds)))
+    n_p = pts.size
+    A_p = ca.repmat(a_p, 1, pm.nq)
+    B_p = ca.repmat(b_p, 1, pm.nq)
+    tau = pc.m * A_p + pc.c * B_p + (pc.g + fc)
+    tau_scaled = tau / np.tile(tau_max, (n_p, 1))
+    g_dyn = b[1:] - b[:-1] - 2.0 * ds * a
+    g_soc1 = b - e**2
+    g_soc2 = d * (e[:-1] + e[1:])
+    vb = _velocity_bound_b(pm, dq)
+    g_list = [g_dyn, ca.vec(tau_scaled), g_soc1, g_soc2]
+    lbg = [np.zeros(N), -np.ones(n_p * pm.nq), np.zeros(N + 1), np.ones(N)]
+    ubg = [np.zeros(N), np.ones(n_p * pm.nq), np.full(N + 1, np.inf), np.full(N, np.inf)]
+    # velocity limits: grid points as simple bounds, midpoints as linear constraints
+    ub_b = np.full(N + 1, np.inf)
+    ub_b[:-1] = np.minimum(ub_b[:-1], vb[:N])
+    if midpoints:
+        ub_b[1:] = np.minimum(ub_b[1:], vb[2 * N:])
+        g_list.append(b_pts[1])
+        lbg.append(np.zeros(N))
+        ubg.append(vb[N:2 * N])
+    else:
+        qN, dqN, _ = path.derivatives(s[-1:])
+        ub_b[-1] = min(ub_b[-1], _velocity_bound_b(pm, dqN)[0])
+    ub_b[0] = ub_b[-1] = 0.0  # rest to rest
+    x = ca.vertcat(b, a, e, d)
+    nlp = {"x": x, "f": 2.0 * ds * ca.sum1(d), "g": ca.vertcat(*g_list)}
+    solver = ca.nlpsol(name, "ipopt", nlp, _IPOPT)
+    # initial guess: a fraction of the speed limit
+    b0 = np.minimum(ub_b, 0.1 * np.min(ub_b[1:-1]))
+    b0[0] = b0[-1] = 0.0
+    e0 = np.sqrt(b0)
+    d0 = 1.0 / np.maximum(e0[:-1] + e0[1:], 1e-3)
+    a0 = np.diff(b0) / (2 * ds)
+    lbx = np.concatenate([np.zeros(N + 1), np.full(N, -np.inf), np.zeros(N + 1), np.zeros(N)])
+    ubx = np.concatenate([ub_b, np.full(N, np.inf), np.full(N + 1, np.inf), np.full(N, np.inf)])
+    sol = solver(x0=np.concatenate([b0, a0, e0, d0]), lbx=lbx, ubx=ubx,
+                 lbg=np.concatenate(lbg), ubg=np.concatenate(ubg))
+    stats = _check_solver(solver, f"{name} (convex CP, N={N})")
+    xs = np.asarray(sol["x"]).ravel()
+    bs = np.maximum(xs[: N + 1], 0.0)
+    sd = np.sqrt(bs)
+    sdd = np.diff(bs) / (2 * ds)
+    dur = float(np.sum(2 * ds / np.maximum(sd[:-1] + sd[1:], 1e-300)))
+    return CPProfile(name, s, sd, sdd, dur, time.perf_counter() - t0,
+                     info={"iterations": int(stats["iter_count"]), "objective_s": float(sol["f"]),
+                           "midpoints": midpoints, "coulomb": coulomb, "n_grid": N})
+
+
+def _fric_sx(pm: PlanningModel, dq: np.ndarray, x: ca.SX) -> ca.SX:
+    """Full friction along the path for path speeds ``x`` (column) at tangents dq (n, nq)."""
+    X = ca.repmat(x, 1, pm.nq)
+    qd = dq * X
+    n = dq.shape[0]
+    return (np.tile(pm.viscous_Nms_rad, (n, 1)) * qd
+            + np.tile(pm.coulomb_Nm, (n, 1)) * ca.tanh(qd / pm.coulomb_smoothing_rad_s))
+
+
+def solve_cp_refined(pm: PlanningModel, path: JointPath, warm: CPProfile, midpoints: bool = True,
+                     name: str = "cp", torque_margin: float = 0.0) -> CPProfile:
+    """Non-convex refinement in ``x = sdot`` with viscous + smooth Coulomb friction.
+
+    Warm-started from ``warm`` (same grid). ``torque_margin`` (e.g. 0.002) tightens the torque
+    limit to keep the fine-grid violation below tolerance between the checked points.
+    """
+    t0 = time.perf_counter()
+    s = warm.s
+    N = len(s) - 1
+    ds = s[1] - s[0]
+    pts, kinds = _eval_points(path, s, midpoints)
+    q, dq, ddq = path.derivatives(pts)
+    pc = path_coefficients(pm, pts, q, dq, ddq)
+    tau_max = pm.effort_Nm * (1.0 - torque_margin)
+    x = ca.SX.sym("x", N + 1)
+    b = x**2
+    a = (b[1:] - b[:-1]) / (2 * ds)
+    bm = 0.5 * (b[:-1] + b[1:])
+    xs = [x[:-1], ca.sqrt(bm + 1e-14), x[1:]][: len(kinds)]
+    bs = [b[:-1], bm, b[1:]][: len(kinds)]
+    x_p = ca.vertcat(*xs)
+    b_p = ca.vertcat(*bs)
+    a_p = ca.vertcat(*([a] * len(kinds)))
+    n_p = pts.size
+    tau = pc.m * ca.repmat(a_p, 1, pm.nq) + pc.c * ca.repmat(b_p, 1, pm.nq) + pc.g + _fric_sx(pm, dq, x_p)
+    tau_scaled = tau / np.tile(tau_max, (n_p, 1))
+    vb = np.sqrt(_velocity_bound_b(pm, dq))
+    g_list = [ca.vec(tau_scaled)]
+    lbg = [-np.ones(n_p * pm.nq)]
+    ubg = [np.ones(n_p * pm.nq)]
+    ubx = np.full(N + 1, np.inf)
+    ubx[:-1] = np.minimum(ubx[:-1], vb[:N])
+    if midpoints:
+        ubx[1:] = np.minimum(ubx[1:], vb[2 * N:])
+        g_list.append(xs[1])
+        lbg.append(np.zeros(N))
+        ubg.append(vb[N:2 * N])
+    ubx[0] = ubx[-1] = 0.0
+    f = ca.sum1(2 * ds / (x[:-1] + x[1:] + 1e-12))
+    solver = ca.nlpsol(name, "ipopt", {"x": x, "f": f, "g": ca.vertcat(*g_list)}, _IPOPT)
+    x0 = np.minimum(warm.sdot, ubx)
+    sol = solver(x0=x0, lbx=np.zeros(N + 1), ubx=ubx, lbg=np.concatenate(lbg), ubg=np.concatenate(ubg))
+    stats = _check_solver(solver, f"{name} (CP refinement with friction, N={N})")
+    sd = np.maximum(np.asarray(sol["x"]).ravel(), 0.0)
+    sdd = np.diff(sd**2) / (2 * ds)
+    dur = float(np.sum(2 * ds / np.maximum(sd[:-1] + sd[1:], 1e-300)))
+    return CPProfile(name, s, sd, sdd, dur, time.perf_counter() - t0,
+                     info={"iterations": int(stats["iter_count"]), "midpoints": midpoints,
+                           "friction": "viscous+tanh coulomb", "n_grid": N,
+                           "torque_margin": torque_margin})
+
+
+def cp_constraint_activity(pm: PlanningModel, path: JointPath, traj: JointTrajectory,
+                           tau: np.ndarray) -> dict:
+    """Normalised torques and speeds, and the share of time with some constraint active.
+
+    ``active`` at a sample = max over joints of max(|tau|/tau_max, |v|/v_max) >= 0.98
+    (paper 004 Fig. 8: at least one constraint is always active on a time-optimal path).
+    """
+    tr = np.abs(tau) / pm.effort_Nm
+    vr = np.abs(traj.v) / pm.velocity_rad_s
+    level = np.maximum(tr.max(axis=1), vr.max(axis=1))
+    return {"torque_ratio": tr, "velocity_ratio": vr, "activity": level,
+            "active_fraction": float(np.mean(level >= 0.98)), "min_activity": float(level.min())}

@@ -1,0 +1,126 @@
+"""Numeric dynamics for trajectory planning: limits, friction, path coefficients, torque checks.
+
+Everything here is plain Pinocchio on numpy arrays (DESIGN.md "Measured facts": numeric
+Pinocchio calls are cheap, batch them).  The rigid-body part comes from ``pin.rnea`` (which
+includes the joint-side rotor inertia ``model.armature``), the friction part is
+
+    tau_f = F_v * qdot + F_c * tanh(qdot / w)                       (DESIGN.md, "Symbolic bridge")
+
+Path coefficients (Verscheure et al. 2009, used in paper 004 section 5.1): along a joint path
+``q(s)`` with ``sdot``, ``sddot``
+
+    tau(s) = m(s) sddot + c(s) sdot^2 + g(s) + F_v q'(s) sdot + F_c tanh(q'(s) sdot / w)
+    m = M(q) q',   c = M(q) q'' + C(q, q') q',   g = g(q)
+
+computed with the rnea tricks  g = rnea(q, 0, 0),  m = rnea(q, 0, q') - g,
+c = rnea(q, q', q'') - g.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+#: joint path derivatives smaller than this are treated as "joint does not move" (Coulomb sign).
+QPRIME_ZERO = 1e-9
+
+
+@dataclass
+class PlanningModel:
+    """What the planners need from a robot: Pinocchio model, limits and friction (joint side)."""
+
+    model: pin.Model
+    lower_rad: np.ndarray
+    upper_rad: np.ndarray
+    velocity_rad_s: np.ndarray
+    effort_Nm: np.ndarray
+    viscous_Nms_rad: np.ndarray
+    coulomb_Nm: np.ndarray
+    coulomb_smoothing_rad_s: float
+    acceleration_rad_s2: np.ndarray
+    robot: Any = None  # the RobotModel it was made from (IK, FK, symbolic bridge), if any
+
+    @property
+    def nq(self) -> int:
+        return int(self.model.nq)
+
+    @classmethod
+    def from_robot(cls, robot: Any) -> PlanningModel:
+        """Build from a :class:`pipeline.robot.model.RobotModel` (docs/ARCHITECTURE.md)."""
+        lim, act = robot.limits, robot.actuation
+        return cls(
+            model=robot.model,
+            lower_rad=np.asarray(lim.lower_rad, float),
+            upper_rad=np.asarray(lim.upper_rad, float),
+            velocity_rad_s=np.asarray(lim.velocity_rad_s, float),
+            effort_Nm=np.asarray(lim.effort_Nm, float),
+            viscous_Nms_rad=np.asarray(act.viscous_Nms_rad, float),
+            coulomb_Nm=np.asarray(act.coulomb_Nm, float),
+            coulomb_smoothing_rad_s=float(act.coulomb_smoothing_rad_s),
+            acceleration_rad_s2=np.asarray(lim.acceleration_rad_s2, float),
+            robot=robot,
+        )
+
+    def friction(self, v: np.ndarray) -> np.ndarray:
+        """Viscous plus smooth Coulomb friction, ``v`` of shape (..., nq)."""
+        v = np.asarray(v, float)
+        return self.viscous_Nms_rad * v + self.coulomb_Nm * np.tanh(v / self.coulomb_smoothing_rad_s)
+
+    def rigid_torques(self, Q: np.ndarray, V: np.ndarray, A: np.ndarray) -> np.ndarray:
+        """Rigid-body (incl. rotor inertia) torques for rows of Q, V, A: (N, nq)."""
+        data = self.model.createData()
+        Q, V, A = (np.atleast_2d(np.asarray(x, float)) for x in (Q, V, A))
+        out = np.empty_like(Q)
+        for k in range(Q.shape[0]):
+            out[k] = pin.rnea(self.model, data, Q[k], V[k], A[k])
+        return out
+
+    def torques(self, Q: np.ndarray, V: np.ndarray, A: np.ndarray) -> np.ndarray:
+        """Full model: rigid body + viscous + smooth Coulomb friction, (N, nq)."""
+        return self.rigid_torques(Q, V, A) + self.friction(np.atleast_2d(V))
+
+    def mass_diagonal(self, q: np.ndarray) -> np.ndarray:
+        data = self.model.createData()
+        return np.diag(pin.crba(self.model, data, np.asarray(q, float))).copy()
+
+
+@dataclass
+class PathCoefficients:
+    """``tau = m sddot + c sdot^2 + g`` (+ friction in q' sdot) sampled at path parameters ``s``."""
+
+    s: np.ndarray
+    q: np.ndarray
+    dq: np.ndarray
+    ddq: np.ndarray
+    m: np.ndarray
+    c: np.ndarray
+    g: np.ndarray
+
+
+def path_coefficients(pm: PlanningModel, s: np.ndarray, q: np.ndarray, dq: np.ndarray,
+                      ddq: np.ndarray) -> PathCoefficients:
+    """m(s), c(s), g(s) of the path by three rnea calls per sample (see module docstring)."""
+    data = pm.model.createData()
+    n = len(s)
+    m = np.empty((n, pm.nq))
+    c = np.empty((n, pm.nq))
+    g = np.empty((n, pm.nq))
+    zero = np.zeros(pm.nq)
+    for k in range(n):
+        g[k] = pin.rnea(pm.model, data, q[k], zero, zero)
+        m[k] = pin.rnea(pm.model, data, q[k], zero, dq[k]) - g[k]
+        c[k] = pin.rnea(pm.model, data, q[k], dq[k], ddq[k]) - g[k]
+    return PathCoefficients(np.asarray(s, float), q, dq, ddq, m, c, g)
+
+
+def torque_ratio(pm: PlanningModel, tau: np.ndarray) -> np.ndarray:
+    """|tau| / tau_max, (N, nq)."""
+    return np.abs(tau) / pm.effort_Nm
+
+
+def max_violation(ratio: np.ndarray) -> float:
+    """Relative violation max(0, max ratio - 1)."""
+    return float(max(0.0, np.max(ratio) - 1.0))

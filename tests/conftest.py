@@ -1,0 +1,94 @@
+"""Shared fixtures.
+
+* ``quick_config``: the quick profile (``configs/quick.yaml``) as a fresh :class:`RunConfig`.
+* ``rx130l``: the built-in robot, loaded once per session (do not mutate it; use ``.copy()``).
+* ``fake_stages``: replaces the stage registry with small fake stages (runner tests).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+
+@pytest.fixture
+def quick_config():
+    from pipeline.config import CONFIGS_DIR, load_config
+
+    return load_config(CONFIGS_DIR / "quick.yaml")
+
+
+@pytest.fixture(scope="session")
+def rx130l():
+    from pipeline.robot.model import RobotModel
+
+    return RobotModel.load("rx130l")
+
+
+# ---------------------------------------------------------------------------- fake stages
+@dataclass
+class FakeConfig:
+    n: int = 3
+    gain: float = 1.0
+    label: str = "x"
+    fail: bool = False              # raise halfway through run()
+
+
+class FakeStages:
+    """Registry of fake stages ``a -> b -> c`` recording their calls."""
+
+    def __init__(self) -> None:
+        self.calls: list[str] = []
+        self.contexts: dict[str, Any] = {}
+        self.hand_robot: set[str] = set()
+
+    def make(self, name: str, depends: tuple[str, ...] = ()) -> SimpleNamespace:
+        def run(ctx: Any) -> Any:
+            from matplotlib.figure import Figure
+
+            from pipeline.runner import StageResult
+
+            self.calls.append(name)
+            self.contexts[name] = ctx
+            (ctx.out_dir / "extra.txt").write_text(f"{name} started\n")
+            if ctx.config.fail:
+                raise RuntimeError(f"stage {name} failed halfway")
+            fig = Figure(figsize=(2, 2))
+            fig.add_subplot(111).plot([0, 1], [0, ctx.config.gain])
+            robot = None
+            if name in self.hand_robot:
+                robot = ctx.robot.copy()
+                robot.model.armature = robot.model.armature * 2.0
+            return StageResult(
+                summary={"n": ctx.config.n, "draw": float(ctx.rng.random()), "nested": {"gain": ctx.config.gain}},
+                arrays={"x": np.arange(ctx.config.n, dtype=float), "configurations_test": np.zeros((2, 6))},
+                data={"label": ctx.config.label, "upstream": sorted(ctx.upstream)},
+                figures={"plot": fig},
+                robot=robot,
+                report_md=f"stage **{name}** says hello",
+            )
+
+        return SimpleNamespace(NAME=name, DEPENDS=depends, Config=FakeConfig, run=run, __file__=None)
+
+
+@pytest.fixture
+def fake_stages(monkeypatch):
+    from pipeline import config
+
+    fakes = FakeStages()
+    registry = {"a": fakes.make("a"), "b": fakes.make("b", ("a",)), "c": fakes.make("c", ("b",))}
+    monkeypatch.setattr(config, "STAGES", registry)
+    return fakes

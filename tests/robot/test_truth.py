@@ -1,0 +1,116 @@
+"""The hidden real robot and its sensors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from pipeline.errors import ConfigError
+from pipeline.robot.model import RobotModel
+from pipeline.robot.sensors import tracker_visibility
+from pipeline.robot.symbolic import KinematicLayout, dynamic_parameter_problems
+from pipeline.robot.truth import RealRobot, TruthConfig
+
+
+@pytest.fixture(scope="module")
+def real(rx130l: RobotModel) -> RealRobot:
+    return RealRobot.create(rx130l, seed=11)
+
+
+def _visible_configurations(real: RealRobot, robot: RobotModel, n: int, seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    found = []
+    while sum(len(f) for f in found) < n:
+        Q = rng.uniform(robot.limits.lower_rad, robot.limits.upper_rad, (4000, robot.nq))
+        found.append(Q[real.tracker.visible(Q)])
+    return np.concatenate(found)[:n]
+
+
+def test_same_seed_same_truth_and_noise_bit_for_bit(rx130l: RobotModel) -> None:
+    a, b = RealRobot.create(rx130l, 5), RealRobot.create(rx130l, 5)
+    assert np.array_equal(a.kinematic_errors, b.kinematic_errors)
+    assert np.array_equal(a.dynamic_parameters, b.dynamic_parameters)
+    assert np.array_equal(a.transform_tracker_to_base.homogeneous, b.transform_tracker_to_base.homogeneous)
+    Q = _visible_configurations(a, rx130l, 5)
+    ra, rb = a.tracker.measure(Q, np.random.default_rng(9)), b.tracker.measure(Q, np.random.default_rng(9))
+    assert np.array_equal(ra.position_m, rb.position_m)
+    c = RealRobot.create(rx130l, 6)
+    assert not np.array_equal(a.kinematic_errors, c.kinematic_errors)
+
+
+def test_truth_deviates_by_the_stated_magnitudes(rx130l: RobotModel, real: RealRobot) -> None:
+    layout = KinematicLayout(rx130l.nq)
+    errors = real.kinematic_errors
+    translations = np.concatenate([errors[layout.placement(i)][:3] for i in range(1, 7)])
+    assert 0.1e-3 < np.std(translations) < 1.5e-3
+    assert 0.2e-3 < np.std(errors[layout.joint_offsets]) < 3e-3
+    rng = np.random.default_rng(1)
+    Q = rng.uniform(rx130l.limits.lower_rad, rx130l.limits.upper_rad, (200, 6))
+    tcp_error = np.linalg.norm(real.truth.positions(Q) - rx130l.positions(Q), axis=1)
+    assert 0.5e-3 < np.mean(tcp_error) < 10e-3  # millimetres before calibration
+    assert dynamic_parameter_problems(real.dynamic_parameters, 6) == []
+    masses = np.array([real.truth.model.inertias[j].mass for j in range(1, 7)])
+    nominal = np.array([rx130l.model.inertias[j].mass for j in range(1, 7)])
+    assert np.all(np.abs(masses / nominal - 1) < 0.8) and not np.allclose(masses, nominal)
+
+
+def test_tracker_noise_matches_its_model(rx130l: RobotModel, real: RealRobot) -> None:
+    Q = _visible_configurations(real, rx130l, 40)
+    exact = real.truth.positions(Q, "reflector")
+    to_tracker = real.transform_tracker_to_base.inverse()
+    exact_tracker = exact @ to_tracker.rotation.T + to_tracker.translation
+    rng = np.random.default_rng(2)
+    residuals = []
+    for _ in range(50):
+        reading = real.tracker.measure(Q, rng)
+        assert reading.visible.all()
+        residuals.append((reading.position_m - exact_tracker) / reading.sigma_m[:, None])
+    normalised = np.concatenate(residuals).ravel()
+    assert abs(np.mean(normalised)) < 0.05
+    assert np.std(normalised) == pytest.approx(1.0, abs=0.05)
+    ranges = np.linalg.norm(exact_tracker, axis=1)
+    assert np.allclose(reading.sigma_m, 8e-6 + 3e-6 * ranges, rtol=1e-12)
+
+
+def test_invisible_configurations_give_nan(rx130l: RobotModel, real: RealRobot) -> None:
+    rng = np.random.default_rng(3)
+    Q = rng.uniform(rx130l.limits.lower_rad, rx130l.limits.upper_rad, (300, 6))
+    reading = real.tracker.measure(Q, rng)
+    assert (~reading.visible).any()
+    assert np.isnan(reading.position_m[~reading.visible]).all()
+    assert np.isfinite(reading.position_m[reading.visible]).all()
+
+
+def test_visibility_respects_incidence_and_beam_blockage(rx130l: RobotModel) -> None:
+    q = np.zeros(6)
+    reflector = rx130l.fk(q, "reflector")
+    axis = reflector.rotation @ rx130l.reflector_axis
+    # a tracker straight along the reflector axis sees it; one 40 deg off-axis does not
+    along = pin.SE3(np.eye(3), reflector.translation + 2.0 * axis)
+    assert tracker_visibility(rx130l, along, q).visible[0]
+    side = np.cross(axis, [0.0, 1.0, 0.0])
+    off_axis = pin.SE3(np.eye(3), reflector.translation + 2.0 * (np.cos(0.7) * axis + np.sin(0.7) * side))
+    vis = tracker_visibility(rx130l, off_axis, q)
+    assert not vis.visible[0] and vis.incidence_rad[0] == pytest.approx(0.7, abs=1e-9)
+    # a tracker behind the column: the beam passes through the link capsules
+    behind = pin.SE3(np.eye(3), np.array([-2.0, 0.0, 0.3]))
+    assert tracker_visibility(rx130l, behind, q, max_incidence_rad=np.pi).beam_clearance_m[0] < 0
+
+
+def test_joint_measurements_carry_the_stated_noise(rx130l: RobotModel, real: RealRobot) -> None:
+    rng = np.random.default_rng(4)
+    n = 2000
+    t = np.linspace(0, 1, n)
+    q = np.tile(np.array([0.1, -0.2, 0.3, 0.0, 0.5, 0.0]), (n, 1))
+    zeros = np.zeros_like(q)
+    measured = real.execute_joint_trajectory(t, q, zeros, zeros, rng)
+    exact = real.truth.inverse_dynamics(q[0], zeros[0], zeros[0])
+    assert np.allclose(np.std(measured.tau_Nm - exact, axis=0) / measured.tau_sigma_Nm, 1.0, atol=0.1)
+    assert np.allclose(measured.tau_sigma_Nm, 0.01 * rx130l.limits.effort_Nm)
+    assert np.std(measured.q_rad - q) == pytest.approx(2e-6, rel=0.1)
+
+
+def test_truth_config_rejects_negative_sigma(rx130l: RobotModel) -> None:
+    with pytest.raises(ConfigError, match="truth.mass_relative_sigma"):
+        RealRobot.create(rx130l, 0, TruthConfig(mass_relative_sigma=-1.0))

@@ -1,0 +1,150 @@
+"""Atomic files, stage directories, reuse by input hash, report.md (fake stages: fast)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from pipeline import artefacts
+from pipeline.config import load_config
+from pipeline.runner import load_run, run_pipeline, stage_rng
+
+
+# ------------------------------------------------------------------------------ atomic files
+def test_atomic_write_keeps_old_file_on_failure(tmp_path):
+    p = tmp_path / "x.json"
+    artefacts.write_json(p, {"a": 1})
+    with pytest.raises(RuntimeError), artefacts.atomic_open(p, "w") as fh:
+        fh.write('{"a": 2, "half')
+        raise RuntimeError("crash while writing")
+    assert json.loads(p.read_text()) == {"a": 1}
+    assert [f.name for f in tmp_path.iterdir()] == ["x.json"]       # no temp file left
+
+
+def test_json_converts_numpy_and_nonfinite(tmp_path):
+    p = artefacts.write_json(tmp_path / "s.json", {"v": np.arange(3), "f": np.float64(1.5), "nan": float("nan"),
+                                                   "t": (1, 2), "b": np.bool_(True)})
+    assert artefacts.read_json(p) == {"v": [0, 1, 2], "f": 1.5, "nan": None, "t": [1, 2], "b": True}
+
+
+def test_npz_round_trip_and_object_refused(tmp_path):
+    p = artefacts.write_npz(tmp_path / "r.npz", {"a": np.eye(3), "b": [1, 2]})
+    back = artefacts.read_npz(p)
+    np.testing.assert_array_equal(back["a"], np.eye(3))
+    np.testing.assert_array_equal(back["b"], [1, 2])
+    with pytest.raises(TypeError, match="dtype object"):
+        artefacts.write_npz(tmp_path / "o.npz", {"o": np.array([{}, 1], dtype=object)})
+
+
+def test_commit_replaces_old_stage_dir(tmp_path):
+    old = tmp_path / "s"
+    old.mkdir()
+    (old / "old.txt").write_text("old")
+    staging = artefacts.new_stage_dir(tmp_path, "s")
+    assert staging.name.startswith(".s.partial-")
+    (staging / "new.txt").write_text("new")
+    artefacts.commit_stage_dir(staging, old)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s"]
+    assert [p.name for p in old.iterdir()] == ["new.txt"]
+
+
+def test_inputs_hash_depends_on_every_input():
+    base = dict(stage="a", stage_config={"n": 1}, run={"seed": 0}, robot_files_sha256="r",
+                upstream={"x": "h"}, package_version="1")
+    h0 = artefacts.inputs_hash(**base)
+    assert h0 == artefacts.inputs_hash(**base)
+    for key, value in [("stage", "b"), ("stage_config", {"n": 2}), ("run", {"seed": 1}),
+                       ("robot_files_sha256", "r2"), ("upstream", {"x": "h2"}), ("package_version", "2")]:
+        assert artefacts.inputs_hash(**{**base, key: value}) != h0, key
+
+
+# ------------------------------------------------------------------------------------ runner
+def test_run_writes_stage_dirs_and_report(fake_stages, tmp_path):
+    result = run_pipeline(load_config(None, ["name=r"]), out_root=tmp_path, log=lambda m: None)
+    run_dir = tmp_path / "r"
+    assert result.run_dir == run_dir and result.ran == ["a", "b", "c"] and result.reused == []
+    for s in "abc":
+        d = run_dir / s
+        names = {p.name for p in d.iterdir()}
+        assert {"summary.json", "results.npz", "results.json", "plot.png", "inputs.sha256", "manifest.json",
+                "report.md", "extra.txt"} <= names
+        assert artefacts.read_npz(d / "results.npz")["x"].shape == (3,)
+    assert not [p for p in run_dir.iterdir() if p.name.startswith(".")]      # no staging leftovers
+    report = (run_dir / "report.md").read_text()
+    for s in "abc":
+        assert f"## {s}" in report and f"]({s}/plot.png)" in report
+    assert "stage **b** says hello" in report and "| nested.gain | 1 |" in report
+    assert fake_stages.contexts["c"].upstream.keys() == {"a", "b"}
+    loaded = load_run(run_dir)
+    assert list(loaded) == ["a", "b", "c"]
+    assert loaded["b"].data["upstream"] == ["a"]
+
+
+def test_failing_stage_leaves_no_directory(fake_stages, tmp_path):
+    run_pipeline(load_config(None, ["name=r"]), out_root=tmp_path, log=lambda m: None)
+    old_b = (tmp_path / "r" / "b" / "inputs.sha256").read_text()
+    with pytest.raises(RuntimeError, match="failed halfway"):
+        run_pipeline(load_config(None, ["name=r", "b.fail=true", "b.n=5"]), out_root=tmp_path, log=lambda m: None)
+    run_dir = tmp_path / "r"
+    assert not [p for p in run_dir.iterdir() if p.name.startswith(".")]      # staging removed
+    assert (run_dir / "b" / "inputs.sha256").read_text() == old_b          # old result untouched
+    # a fresh run directory: the failing stage leaves no <stage>/ at all
+    with pytest.raises(RuntimeError):
+        run_pipeline(load_config(None, ["name=fresh", "b.fail=true"]), out_root=tmp_path, log=lambda m: None)
+    fresh = tmp_path / "fresh"
+    assert (fresh / "a").is_dir()
+    assert not (fresh / "b").exists() and not (fresh / "c").exists()
+    assert not [p for p in fresh.iterdir() if p.name.startswith(".")]
+    assert "## a" in (fresh / "report.md").read_text()                     # report of what finished
+
+
+def test_reuse_when_inputs_unchanged(fake_stages, tmp_path):
+    quiet = {"out_root": tmp_path, "log": lambda m: None}
+    run_pipeline(load_config(None, ["name=r"]), **quiet)
+    assert fake_stages.calls == ["a", "b", "c"]
+    fake_stages.calls.clear()
+    second = run_pipeline(load_config(None, ["name=r"]), **quiet)
+    assert fake_stages.calls == [] and second.reused == ["a", "b", "c"]
+    assert second.outputs["b"].summary["n"] == 3
+    np.testing.assert_array_equal(second.outputs["c"].arrays["x"], np.arange(3.0))
+    # a changed stage config re-runs that stage and everything downstream, not upstream
+    third = run_pipeline(load_config(None, ["name=r", "b.n=4"]), **quiet)
+    assert fake_stages.calls == ["b", "c"] and third.reused == ["a"]
+    fake_stages.calls.clear()
+    # a changed seed re-runs everything; --force re-runs although unchanged
+    run_pipeline(load_config(None, ["name=r", "b.n=4", "seed=9"]), **quiet)
+    assert fake_stages.calls == ["a", "b", "c"]
+    fake_stages.calls.clear()
+    run_pipeline(load_config(None, ["name=r", "b.n=4", "seed=9"]), force=["c"], **quiet)
+    assert fake_stages.calls == ["c"]
+
+
+def test_stage_selection_adds_dependencies(fake_stages, tmp_path):
+    res = run_pipeline(load_config(None, ["name=r"], stages="b"), out_root=tmp_path, log=lambda m: None)
+    assert res.ran == ["a", "b"] and not (tmp_path / "r" / "c").exists()
+
+
+def test_rng_seeded_by_run_seed_and_stage(fake_stages, tmp_path):
+    res = run_pipeline(load_config(None, ["name=r", "seed=3"]), out_root=tmp_path, log=lambda m: None)
+    draws = {s: res.outputs[s].summary["draw"] for s in "abc"}
+    assert len(set(draws.values())) == 3                                    # per-stage streams
+    assert draws["b"] == stage_rng(3, "b").random()
+    assert stage_rng(3, "b").random() != stage_rng(4, "b").random()
+
+
+def test_robot_handed_on_to_later_stages(fake_stages, tmp_path, rx130l):
+    fake_stages.hand_robot.add("a")
+    res = run_pipeline(load_config(None, ["name=r"]), out_root=tmp_path, log=lambda m: None)
+    assert (tmp_path / "r" / "a" / "robot").is_dir()
+    ctx_b, ctx_a = fake_stages.contexts["b"], fake_stages.contexts["a"]
+    np.testing.assert_allclose(ctx_a.robot.model.armature, rx130l.model.armature)      # nominal
+    np.testing.assert_allclose(ctx_b.robot.model.armature, 2 * rx130l.model.armature)  # a's robot
+    np.testing.assert_allclose(fake_stages.contexts["c"].robot.model.armature, 2 * rx130l.model.armature)
+    # reloaded from disk on reuse
+    fake_stages.calls.clear()
+    again = run_pipeline(load_config(None, ["name=r", "c.n=2"]), out_root=tmp_path, log=lambda m: None)
+    assert fake_stages.calls == ["c"]
+    np.testing.assert_allclose(again.outputs["a"].robot.model.armature, 2 * rx130l.model.armature)
+    np.testing.assert_allclose(fake_stages.contexts["c"].robot.model.armature, 2 * rx130l.model.armature)

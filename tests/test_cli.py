@@ -1,0 +1,139 @@
+"""The command line as a user meets it: one-line errors, exit code 2, nothing written."""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from pipeline import cli, studies
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def run_cli(*args: str, cwd: Path = REPO) -> subprocess.CompletedProcess:
+    env = {**os.environ, "MPLBACKEND": "Agg", "PYTHONWARNINGS": "ignore"}
+    return subprocess.run([sys.executable, "-m", "pipeline", *args], cwd=cwd, env=env,
+                          capture_output=True, text=True, timeout=300)
+
+
+def assert_one_line_error(proc: subprocess.CompletedProcess, out: Path, *fragments: str) -> str:
+    assert proc.returncode == 2, proc.stderr
+    assert "Traceback" not in proc.stderr
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip() and not ln.startswith("warning:")]
+    assert len(lines) == 1, proc.stderr
+    for fragment in fragments:
+        assert fragment in lines[0], (fragment, lines[0])
+    assert not out.exists() or not any(out.rglob("*")), list(out.rglob("*"))
+    return lines[0]
+
+
+@pytest.fixture
+def robot_copy(tmp_path):
+    src = REPO / "robots" / "rx130l"
+    dst = tmp_path / "myrobot"
+    shutil.copytree(src, dst)
+    return dst
+
+
+def test_unknown_robot(tmp_path):
+    out = tmp_path / "runs"
+    proc = run_cli("run", "--stages", "model", "--set", "robot=does_not_exist", "--out", str(out))
+    assert_one_line_error(proc, out, "--set", "robot", "does_not_exist")
+
+
+def test_urdf_not_xml(tmp_path, robot_copy):
+    (robot_copy / "rx130l.urdf").write_text("this is { not xml\n")
+    out = tmp_path / "runs"
+    proc = run_cli("run", "--stages", "model", "--set", f"robot={robot_copy}", "--out", str(out))
+    assert_one_line_error(proc, out, str(robot_copy / "rx130l.urdf"), "XML")
+
+
+def test_negative_mass_in_robot_yaml(tmp_path, robot_copy):
+    yaml_file = robot_copy / "robot.yaml"
+    text = yaml_file.read_text()
+    assert "payload_kg: 10.0" in text
+    yaml_file.write_text(text.replace("payload_kg: 10.0", "payload_kg: -10.0"))
+    out = tmp_path / "runs"
+    proc = run_cli("run", "--stages", "model", "--set", f"robot={robot_copy}", "--out", str(out))
+    assert_one_line_error(proc, out, yaml_file.name, "payload_kg")
+
+
+def test_negative_link_mass_in_urdf(tmp_path, robot_copy):
+    urdf = robot_copy / "rx130l.urdf"
+    urdf.write_text(urdf.read_text().replace('<mass value="35"/>', '<mass value="-35"/>', 1))
+    out = tmp_path / "runs"
+    proc = run_cli("run", "--stages", "model", "--set", f"robot={robot_copy}", "--out", str(out))
+    assert_one_line_error(proc, out, str(urdf), "mass")
+
+
+@pytest.mark.parametrize(
+    ("text", "fragments"),
+    [
+        ("name: t\nstages: [model]\nbogus_key: 3\n", ["bogus_key", "unknown key"]),
+        ("name: t\nstages: [model, no_such_stage]\n", ["stages", "no_such_stage"]),
+        ("name: t\nstages: [model]\nmodel: {no_such_setting: 1}\n", ["model.no_such_setting", "unknown key"]),
+        ("name: t\nstages: [model]\nmodel: {picture_size_in: big}\n", ["model.picture_size_in", "expected number"]),
+    ],
+)
+def test_bad_config_file(tmp_path, text, fragments):
+    cfg = tmp_path / "bad.yaml"
+    cfg.write_text(text)
+    out = tmp_path / "runs"
+    proc = run_cli("run", "--config", str(cfg), "--out", str(out))
+    line = assert_one_line_error(proc, out, *fragments)
+    assert line.startswith(f"error: {cfg}: ")
+
+
+def test_bad_set_and_stage_in_process(tmp_path, capsys):
+    out = tmp_path / "runs"
+    assert cli.main(["run", "--stages", "model,nope", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert re.fullmatch(r"error: --stages: stages: unknown stage 'nope' .*\n", err)
+    assert cli.main(["run", "--stages", "model", "--set", "model.views_deg=3", "--out", str(out)]) == 2
+    assert "error: --set: model.views_deg: expected a list" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_missing_stage_module_reported(monkeypatch, tmp_path, capsys):
+    from pipeline import config
+
+    monkeypatch.setattr(config, "STAGES", {**config.STAGES, "ghost": "pipeline.ghost_not_written.stage"})
+    out = tmp_path / "runs"
+    assert cli.main(["run", "--stages", "ghost", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "stage 'ghost' is not available" in err and "pipeline.ghost_not_written.stage" in err
+    assert not out.exists()
+
+
+def test_model_stage_end_to_end(tmp_path):
+    out = tmp_path / "runs"
+    proc = run_cli("run", "--stages", "model", "--set", "name=e2e", "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    run_dir = out / "e2e"
+    report = (run_dir / "report.md").read_text()
+    assert "](model/robot.png)" in report and "| dof | 6 |" in report
+    png = (run_dir / "model" / "robot.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
+    proc2 = run_cli("run", "--stages", "model", "--set", "name=e2e", "--out", str(out))
+    assert proc2.returncode == 0 and "model: reused" in proc2.stderr
+
+
+def test_study_registry(monkeypatch, capsys):
+    calls = []
+    monkeypatch.setitem(studies.STUDIES, "demo", f"{__name__}:_demo_study")
+    globals()["_CALLS"] = calls
+    assert cli.main(["study", "demo", "--n", "3"]) == 0
+    assert calls == [["--n", "3"]]
+    assert cli.main(["study"]) == 0 and "demo" in capsys.readouterr().out
+    assert cli.main(["study", "nope"]) == 2
+    assert "error: study: nope: unknown study" in capsys.readouterr().err
+
+
+def _demo_study(argv: list[str]) -> None:
+    globals()["_CALLS"].append(argv)

@@ -1,0 +1,146 @@
+"""Run configuration: defaults, YAML, --set, validation messages naming file and field."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from types import SimpleNamespace
+
+import pytest
+
+from pipeline import config
+from pipeline.config import RunConfig, load_config, parse_set
+from pipeline.errors import ConfigError
+
+
+def write(tmp_path, text: str, name: str = "run.yaml"):
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def test_defaults_follow_registry(fake_stages):
+    cfg = load_config()
+    assert cfg.stages == ["a", "b", "c"]
+    assert cfg.a.n == 3 and cfg.section("b").gain == 1.0
+    assert isinstance(cfg, RunConfig) and cfg.seed == 0
+
+
+def test_yaml_then_set_overrides(fake_stages, tmp_path):
+    p = write(tmp_path, "name: r1\nseed: 4\na: {n: 7, label: hello}\nb: {gain: 2}\n")
+    cfg = load_config(p, ["a.n=9", "b.label=world", "seed=5"])
+    assert (cfg.name, cfg.seed) == ("r1", 5)
+    assert cfg.a.n == 9 and cfg.a.label == "hello"       # untouched key kept from the file
+    assert cfg.b.gain == 2.0 and isinstance(cfg.b.gain, float)   # int accepted for float
+    assert cfg.b.label == "world"
+    assert cfg.c.n == 3                                   # defaults elsewhere
+
+
+def test_set_values_are_yaml(fake_stages):
+    assert parse_set("a.n=40") == (["a", "n"], 40)
+    assert parse_set("x=[1, 2.5]") == (["x"], [1, 2.5])
+    assert parse_set("x=true") == (["x"], True)
+    assert parse_set("x=abc") == (["x"], "abc")
+    assert parse_set("x=") == (["x"], "")
+    with pytest.raises(ConfigError, match="--set"):
+        parse_set("novalue")
+
+
+def test_stages_key_and_argument(fake_stages, tmp_path):
+    assert load_config(stages="c,a").stages == ["a", "c"]        # registry order
+    assert load_config(write(tmp_path, "stages: [b]\n")).stages == ["b"]
+
+
+@pytest.mark.parametrize(
+    ("text", "field_name", "problem"),
+    [
+        ("bogus: 1\n", "bogus", "unknown key"),
+        ("a: {bogus: 1}\n", "a.bogus", "unknown key"),
+        ("stages: [a, nope]\n", "stages", "unknown stage 'nope'"),
+        ("a: {n: abc}\n", "a.n", "expected int"),
+        ("a: {n: 1.5}\n", "a.n", "expected int"),
+        ("a: {n: true}\n", "a.n", "expected int"),
+        ("a: {fail: 1}\n", "a.fail", "expected true/false"),
+        ("a: [1, 2]\n", "a", "expected a mapping"),
+        ("seed: -1\n", "seed", "non-negative"),
+        ("profile: slow\n", "profile", "expected one of"),
+        ("name: ../x\n", "name", "plain directory name"),
+        ("- just\n- a list\n", None, "top level must be a mapping"),
+        ("a: {n: [1\n", "line", "invalid YAML"),
+    ],
+)
+def test_file_errors_name_file_and_field(fake_stages, tmp_path, text, field_name, problem):
+    p = write(tmp_path, text)
+    with pytest.raises(ConfigError) as info:
+        load_config(p)
+    msg = str(info.value)
+    assert msg.startswith(str(p) + ": ")
+    if field_name:
+        assert f": {field_name}" in msg
+    assert problem in msg
+    assert "\n" not in msg
+
+
+def test_set_errors_name_set_and_field(fake_stages, tmp_path):
+    p = write(tmp_path, "a: {n: 2}\n")
+    with pytest.raises(ConfigError, match=r"^--set: a\.n: expected int"):
+        load_config(p, ["a.n=two"])
+    with pytest.raises(ConfigError, match=r"^--set: zz: unknown key"):
+        load_config(p, ["zz=1"])
+    with pytest.raises(ConfigError, match=r"^--stages: stages: unknown stage"):
+        load_config(p, stages="a,zz")
+
+
+def test_missing_config_file(tmp_path):
+    with pytest.raises(ConfigError, match="config file not found"):
+        load_config(tmp_path / "nope.yaml")
+
+
+@dataclass
+class Inner:
+    width_m: float = 0.1
+    names: tuple[str, ...] = ("x",)
+
+
+@dataclass
+class Rich:
+    inner: Inner = field(default_factory=Inner)
+    pair: tuple[float, float] = (0.0, 1.0)
+    maybe: int | None = None
+    weights: dict[str, float] = field(default_factory=dict)
+    mode: str = "a"
+
+
+def test_nested_dataclasses_and_containers(monkeypatch):
+    stage = SimpleNamespace(NAME="r", DEPENDS=(), Config=Rich, run=None)
+    monkeypatch.setattr(config, "STAGES", {"r": stage})
+    cfg = load_config(None, ["r.inner.width_m=2", "r.pair=[3, 4]", "r.maybe=5", "r.weights={a: 1}"])
+    assert cfg.r.inner == Inner(width_m=2.0, names=("x",))
+    assert cfg.r.pair == (3.0, 4.0) and cfg.r.maybe == 5 and cfg.r.weights == {"a": 1.0}
+    with pytest.raises(ConfigError, match=r"r\.inner\.bogus: unknown key"):
+        load_config(None, ["r.inner.bogus=1"])
+    with pytest.raises(ConfigError, match=r"r\.pair: expected a list of 2 items"):
+        load_config(None, ["r.pair=[1, 2, 3]"])
+    with pytest.raises(ConfigError, match=r"r\.inner\.names\[1\]: expected string"):
+        load_config(None, ["r.inner.names=[a, 3]"])
+
+
+def test_round_trip_through_yaml(fake_stages, tmp_path):
+    cfg = load_config(None, ["a.n=11", "name=rt", "b.label=z"])
+    p = write(tmp_path, cfg.to_yaml())
+    again = load_config(p)
+    assert again.to_dict() == cfg.to_dict()
+
+
+def test_missing_stage_module_is_reported(monkeypatch, tmp_path):
+    monkeypatch.setattr(config, "STAGES", {"ghost": "pipeline.ghost_stage_that_does_not_exist.stage"})
+    load_config()                              # empty section: fine, nothing to check
+    with pytest.raises(ConfigError, match=r"ghost: cannot check these settings: .*does not exist"):
+        load_config(write(tmp_path, "ghost: {n: 1}\n"))
+    with pytest.raises(config.StageUnavailableError, match="stage 'ghost' is not available"):
+        config.load_stage_module("ghost")
+
+
+def test_quick_profile_loads(quick_config):
+    assert quick_config.profile == "quick"
+    assert quick_config.stages == [s for s in config.STAGES if s in quick_config.stages]
+    assert set(quick_config.sections) >= {"truth", *config.STAGES}
