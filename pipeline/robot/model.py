@@ -303,7 +303,8 @@ class RobotModel:
                 best = result
         assert best is not None
         best.message = (f"IK did not reach the target within {tolerance_m:g} m / {tolerance_rad:g} rad inside the "
-                        f"joint limits (best residual {best.position_error_m:.3g} m, {best.rotation_error_rad:.3g} rad)")
+                        f"joint limits (best residual {best.position_error_m:.3g} m, "
+                        f"{best.rotation_error_rad:.3g} rad)")
         return best
 
     def _ik_from(self, target: pin.SE3, q: np.ndarray, fid: int, position_only: bool, tol_m: float,
