@@ -136,7 +136,7 @@ def test_rng_seeded_by_run_seed_and_stage(fake_stages, tmp_path):
 
 def test_robot_handed_on_to_later_stages(fake_stages, tmp_path, rx130l):
     fake_stages.hand_robot.add("a")
-    res = run_pipeline(load_config(None, ["name=r"]), out_root=tmp_path, log=lambda m: None)
+    run_pipeline(load_config(None, ["name=r"]), out_root=tmp_path, log=lambda m: None)
     assert (tmp_path / "r" / "a" / "robot").is_dir()
     ctx_b, ctx_a = fake_stages.contexts["b"], fake_stages.contexts["a"]
     np.testing.assert_allclose(ctx_a.robot.model.armature, rx130l.model.armature)      # nominal

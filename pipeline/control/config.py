@@ -50,6 +50,7 @@ class ControlConfig:
     velocity_bandwidth_hz: float = 30.0
     pi_zero_ratio: float = 4.0
     velocity_filter_hz: float = 400.0
+    compensate_velocity_estimate_delay: bool = True   # delay v_ff like the velocity estimate
     settle_time_s: float = 0.3                  # hold the start pose before the path (integrators settle)
     engine: str = "compiled"                    # compiled | python
     chunk_samples: int = 250

@@ -123,8 +123,19 @@ def simulate_joint_trajectory(real, model, t_s, q_d, v_d, a_d, config: ControlCo
     if gains is None:
         gains = servo_gains(model, np.mean(q_d, axis=0), config)
     d_s, d_m = config.setpoint_delay_samples, config.measurement_delay_samples
-    q_fb, v_ff, tau_drive = drive_inputs(Q, V, tau_ff, d_s, d_m, config.advance_feedforward)
-    alpha = filter_alpha(config.velocity_filter_hz, dt / config.velocity_samples_per_position_sample)
+    Tv = dt / config.velocity_samples_per_position_sample
+    alpha = filter_alpha(config.velocity_filter_hz, Tv)
+    # the torque is held over a sample: use the mean of its end points (ZOH centred on the interval)
+    tau_hold = tau_ff.copy()
+    tau_hold[:-1] = 0.5 * (tau_ff[:-1] + tau_ff[1:])
+    V_ff = V
+    if config.compensate_velocity_estimate_delay:
+        # v_hat is the backward difference (delay T_v/2) low-passed (delay (1-alpha)/alpha T_v):
+        # compare it with the velocity set point delayed alike (the drive knows its own filter)
+        delay_s = Tv / 2 + (1 - alpha) / alpha * Tv
+        tt = dt * np.arange(len(V))
+        V_ff = np.stack([np.interp(tt - delay_s, tt, V[:, j]) for j in range(V.shape[1])], axis=1)
+    q_fb, v_ff, tau_drive = drive_inputs(Q, V_ff, tau_hold, d_s, d_m, config.advance_feedforward)
     plant = real.plant
     rec = plant.run_servo(gains.as_dict(), dt, config.velocity_samples_per_position_sample, d_m, alpha,
                           q_fb, v_ff, tau_drive, Q[0], rng, engine=config.engine,

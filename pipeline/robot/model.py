@@ -208,17 +208,24 @@ class RobotModel:
     def capsules(self) -> list[Capsule]:
         return self.spec.capsules
 
+    def _relative_to_flange(self, frame: str) -> pin.SE3:
+        frames = self.model.frames
+        return frames[self.frame_id(self.frame_flange)].placement.actInv(frames[self.frame_id(frame)].placement)
+
     @property
     def transform_tcp_to_flange(self) -> pin.SE3:
-        return self.spec.tool.transform_tcp_to_flange
+        """TCP pose in the flange frame, read from the model's frames (calibrated tool errors included)."""
+        return self._relative_to_flange(self.frame_tcp)
 
     @property
     def reflector_offset_m(self) -> np.ndarray:
-        return self.spec.tool.reflector_offset_m
+        """Reflector centre in the flange frame (from the model's frames)."""
+        return self._relative_to_flange(self.frame_reflector).translation.copy()
 
     @property
     def reflector_axis(self) -> np.ndarray:
-        return self.spec.tool.reflector_axis
+        """Reflector opening axis in the flange frame: the yaml axis turned with the reflector frame."""
+        return self._relative_to_flange(self.frame_reflector).rotation @ self.spec.tool.reflector_axis
 
     @property
     def payload_kg(self) -> float:
@@ -480,6 +487,10 @@ class RobotModel:
         urdf_name = f"{self.name}.urdf"
         spec = _copy.deepcopy(self.spec)
         spec.actuation.rotor_inertia_kgm2 = np.asarray(self.model.armature, float).copy()
+        # tool frames as the model holds them (load() rebuilds them from these three facts)
+        spec.tool.transform_tcp_to_flange = self.transform_tcp_to_flange
+        spec.tool.reflector_offset_m = self.reflector_offset_m
+        spec.tool.reflector_axis = self.reflector_axis
         spec.limit_overrides = {}
         _atomic_write(folder / urdf_name, export_urdf(self.model, self.urdf_text))
         _atomic_write(folder / "robot.yaml", yaml.safe_dump(robot_spec_to_yaml(spec, urdf_name), sort_keys=False))

@@ -106,12 +106,17 @@ def test_save_and_load_round_trip(tmp_path: Path, rx130l: RobotModel) -> None:
     changed.model.jointPlacements[3] = changed.model.jointPlacements[3] * pin.exp6(np.full(6, 1e-3))
     changed.model.inertias[2] = pin.Inertia(40.0, np.array([0.3, 0.01, 0.0]), np.diag([0.2, 1.0, 1.1]))
     changed.model.armature = changed.model.armature * 1.1
+    for name in ("tcp", "reflector"):  # a calibrated tool: frames moved on the flange
+        fid = changed.model.getFrameId(name)
+        changed.model.frames[fid].placement = changed.model.frames[fid].placement * pin.exp6(np.full(6, 2e-3))
     changed.save(tmp_path / "saved")
     loaded = RobotModel.load(tmp_path / "saved")
     rng = np.random.default_rng(6)
     for _ in range(10):
         q, v, a = rng.normal(size=(3, 6))
         assert np.allclose(loaded.fk(q).homogeneous, changed.fk(q).homogeneous, atol=1e-12)
+        assert np.allclose(loaded.fk(q, "reflector").translation, changed.fk(q, "reflector").translation, atol=1e-12)
+        assert np.allclose(loaded.reflector_axis, changed.reflector_axis, atol=1e-12)
         assert np.allclose(loaded.inverse_dynamics(q, v, a), changed.inverse_dynamics(q, v, a), atol=1e-9)
 
 

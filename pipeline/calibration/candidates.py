@@ -1,0 +1,407 @@
+"""Candidate measurement configurations: grid / random generation, batched filtering, Jacobians.
+
+Filtering (DESIGN.md "Sensors"; paper 000 §2.2 and §3; paper 004 §3.4): inside the joint limits,
+no self-collision between capsules of non-adjacent links and no capsule below the floor
+(``RobotModel.self_collision_pairs`` / ``floor_capsules`` with a clearance margin), and a
+*predicted* tracker line of sight with the nominal tracker pose: incidence angle between the
+reflector axis and the beam ``<= max_incidence - margin`` and the beam segment reflector ->
+tracker clear of every link capsule. The sensor decides at measurement time; the margins make the
+prediction conservative against the unknown tracker pose and kinematic errors.
+
+The full 13^6 grid (paper 004: 13 values per axis, ~4.8 million) is filtered coarse-first: the
+5-axis prefix grid (13^5) is checked for everything that does not depend on axis 6, then only the
+surviving prefixes are expanded along axis 6 in chunks. All kinematics is batched numpy on the
+Pinocchio model's joint placements (tested against ``pin.forwardKinematics``).
+
+The whitened candidate Jacobians use the exact first-order model of
+:mod:`pipeline.calibration.error_model` at ``x = 0`` in closed form (screw theory: a twist
+``(v, w)`` right-multiplied on a frame F moves a point p by ``R_F v + (R_F w) x (p - o_F)``), tested
+against the CasADi Jacobian.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from pipeline.robot.collision import segment_distances
+
+
+@dataclass
+class Chain:
+    """Numpy description of a serial chain taken from a Pinocchio model."""
+
+    R_place: np.ndarray      # (nq,3,3) joint placements in the parent joint frame
+    p_place: np.ndarray      # (nq,3)
+    axis: np.ndarray         # (nq,3) revolute axes in the joint frame
+    capsule_joint: np.ndarray  # (nc,) 0 = base
+    capsule_p: np.ndarray    # (nc,2,3) end points in the joint frame of the capsule's parent joint
+    capsule_r: np.ndarray    # (nc,)
+    flange_R: np.ndarray     # flange placement in joint nq
+    flange_p: np.ndarray
+    reflector_p: np.ndarray  # reflector in joint nq frame
+    reflector_axis_joint: np.ndarray  # reflector axis in joint nq frame
+    self_pairs: np.ndarray   # (n_pairs,2)
+    floor_caps: np.ndarray
+    floor_z: float
+    lower: np.ndarray
+    upper: np.ndarray
+    tracker_R: np.ndarray    # nominal tracker pose in base (p_base = R p_t + t)
+    tracker_t: np.ndarray
+    max_incidence_rad: float
+    noise_const_m: float
+    noise_per_m: float
+
+    @property
+    def nq(self) -> int:
+        return self.R_place.shape[0]
+
+
+def chain_from_robot(robot, transform_tracker_to_base: pin.SE3 | None = None) -> Chain:
+    """Extract the serial chain, capsules, reflector and tracker facts of a RobotModel."""
+    model = robot.model
+    nq = model.nq
+    for i in range(1, model.njoints):
+        if model.parents[i] != i - 1 or model.joints[i].nq != 1:
+            raise ValueError("candidate filtering needs a serial chain of one-dof joints")
+    R_place = np.stack([model.jointPlacements[i].rotation for i in range(1, nq + 1)])
+    p_place = np.stack([model.jointPlacements[i].translation for i in range(1, nq + 1)])
+    axes = []
+    for i in range(1, nq + 1):
+        jd = model.joints[i].createData()
+        model.joints[i].calc(jd, np.zeros(1))
+        s = np.asarray(jd.S).reshape(6)
+        if np.linalg.norm(s[:3]) > 1e-12:
+            raise ValueError("candidate filtering supports revolute joints only")
+        axes.append(s[3:])
+    caps = robot.capsules
+    cj, cp = [], []
+    for c in caps:
+        fr = model.frames[robot.frame_id(c.frame)]
+        cj.append(int(fr.parentJoint))
+        cp.append(np.stack([fr.placement.act(np.asarray(c.p0, float)), fr.placement.act(np.asarray(c.p1, float))]))
+    fl = model.frames[robot.frame_id(robot.frame_flange)]
+    rf = model.frames[robot.frame_id(robot.frame_reflector)]
+    if fl.parentJoint != nq or rf.parentJoint != nq:
+        raise ValueError("flange and reflector must hang on the last joint")
+    tr = transform_tracker_to_base if transform_tracker_to_base is not None else \
+        robot.tracker.transform_tracker_to_base
+    return Chain(
+        R_place=R_place, p_place=p_place, axis=np.stack(axes),
+        capsule_joint=np.array(cj, int), capsule_p=np.array(cp).reshape(-1, 2, 3),
+        capsule_r=np.array([c.radius_m for c in caps], float),
+        flange_R=fl.placement.rotation.copy(), flange_p=fl.placement.translation.copy(),
+        reflector_p=rf.placement.translation.copy(),
+        reflector_axis_joint=rf.placement.rotation @ np.asarray(robot.reflector_axis, float),
+        self_pairs=np.array(robot.self_collision_pairs, int).reshape(-1, 2),
+        floor_caps=np.array(robot.floor_capsules, int),
+        floor_z=float(robot.spec.collision.floor_z_m),
+        lower=robot.limits.lower_rad.copy(), upper=robot.limits.upper_rad.copy(),
+        tracker_R=tr.rotation.copy(), tracker_t=tr.translation.copy(),
+        max_incidence_rad=float(robot.tracker.max_incidence_rad),
+        noise_const_m=float(robot.tracker.noise_const_m), noise_per_m=float(robot.tracker.noise_per_m),
+    )
+
+
+def _axis_rotation(axis: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Rotation matrices (N,3,3) about a fixed unit axis (Rodrigues)."""
+    c, s = np.cos(q), np.sin(q)
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    KK = K @ K
+    return np.eye(3)[None] + s[:, None, None] * K[None] + (1 - c)[:, None, None] * KK[None]
+
+
+def _step(chain: Chain, i: int, R: np.ndarray, o: np.ndarray, q: np.ndarray):
+    """Joint i (0-based): pre-motion frame (after the placement) and post-motion frame."""
+    Rpre = R @ chain.R_place[i]
+    opre = o + R @ chain.p_place[i]
+    Rpost = Rpre @ _axis_rotation(chain.axis[i], q)
+    return Rpre, opre, Rpost, opre
+
+
+@dataclass
+class Kinematics:
+    """Batched world kinematics of N configurations."""
+
+    Rpre: np.ndarray   # (N,nq,3,3)
+    opre: np.ndarray   # (N,nq,3)
+    Rpost: np.ndarray  # (N,nq,3,3)
+    p_reflector: np.ndarray  # (N,3)
+    R_flange: np.ndarray     # (N,3,3)
+    o_flange: np.ndarray     # (N,3)
+    reflector_axis: np.ndarray  # (N,3) world
+
+
+def kinematics(chain: Chain, Q: np.ndarray) -> Kinematics:
+    """World frames of every joint, flange and reflector for ``Q`` (N, nq)."""
+    Q = np.atleast_2d(np.asarray(Q, float))
+    N = Q.shape[0]
+    R = np.broadcast_to(np.eye(3), (N, 3, 3))
+    o = np.zeros((N, 3))
+    Rpre, opre, Rpost = [], [], []
+    for i in range(chain.nq):
+        a, b, R, o = _step(chain, i, R, o, Q[:, i])
+        Rpre.append(a)
+        opre.append(b)
+        Rpost.append(R)
+    R_fl = R @ chain.flange_R
+    o_fl = o + R @ chain.flange_p
+    p_rf = o + R @ chain.reflector_p
+    ax = R @ chain.reflector_axis_joint
+    return Kinematics(np.stack(Rpre, 1), np.stack(opre, 1), np.stack(Rpost, 1), p_rf, R_fl, o_fl, ax)
+
+
+def capsule_segments(chain: Chain, kin: Kinematics) -> np.ndarray:
+    """World capsule end points (N, nc, 2, 3)."""
+    N = kin.Rpost.shape[0]
+    out = np.empty((N, len(chain.capsule_r), 2, 3))
+    for c, j in enumerate(chain.capsule_joint):
+        if j == 0:
+            out[:, c] = chain.capsule_p[c][None]
+        else:
+            out[:, c] = np.einsum("nij,kj->nki", kin.Rpost[:, j - 1], chain.capsule_p[c]) + kin.opre[:, j - 1, None]
+    return out
+
+
+@dataclass
+class FilterMargins:
+    """Conservative margins of the predicted feasibility."""
+
+    collision_m: float = 0.01
+    incidence_rad: float = np.deg2rad(3.0)
+    beam_m: float = 0.02
+
+
+def _collision_ok(chain: Chain, seg: np.ndarray, margins: FilterMargins, pairs: np.ndarray,
+                  floor: np.ndarray) -> np.ndarray:
+    ok = np.ones(seg.shape[0], bool)
+    for a, b in pairs:
+        d = segment_distances(seg[:, a, 0], seg[:, a, 1], seg[:, b, 0], seg[:, b, 1])
+        ok &= d - chain.capsule_r[a] - chain.capsule_r[b] >= margins.collision_m
+    for c in floor:
+        ok &= seg[:, c, :, 2].min(axis=1) - chain.capsule_r[c] - chain.floor_z >= margins.collision_m
+    return ok
+
+
+def _visibility_ok(chain: Chain, kin: Kinematics, seg: np.ndarray, margins: FilterMargins) -> np.ndarray:
+    beam = chain.tracker_t[None] - kin.p_reflector
+    dist = np.linalg.norm(beam, axis=1)
+    cosang = np.einsum("ni,ni->n", kin.reflector_axis, beam) / np.maximum(dist, 1e-12)
+    ok = cosang >= np.cos(max(chain.max_incidence_rad - margins.incidence_rad, 0.0))
+    idx = np.flatnonzero(ok)
+    if idx.size:
+        p0 = kin.p_reflector[idx]
+        p1 = np.broadcast_to(chain.tracker_t, p0.shape)
+        for c in range(seg.shape[1]):
+            d = segment_distances(p0, p1, seg[idx, c, 0], seg[idx, c, 1])
+            bad = d - chain.capsule_r[c] < margins.beam_m
+            ok[idx[bad]] = False
+    return ok
+
+
+def filter_configurations(chain: Chain, Q: np.ndarray, margins: FilterMargins | None = None,
+                          visibility: bool = True, chunk: int = 200_000) -> tuple[np.ndarray, dict]:
+    """Feasibility mask of ``Q`` and counts of the reasons for rejection."""
+    margins = margins or FilterMargins()
+    Q = np.atleast_2d(np.asarray(Q, float))
+    mask = np.zeros(len(Q), bool)
+    counts = {"total": len(Q), "limits": 0, "collision": 0, "visibility": 0}
+    for s in range(0, len(Q), chunk):
+        Qc = Q[s : s + chunk]
+        ok = np.all((Qc >= chain.lower) & (Qc <= chain.upper), axis=1)
+        counts["limits"] += int((~ok).sum())
+        kin = kinematics(chain, Qc)
+        seg = capsule_segments(chain, kin)
+        col = _collision_ok(chain, seg, margins, chain.self_pairs, chain.floor_caps)
+        counts["collision"] += int((ok & ~col).sum())
+        ok &= col
+        if visibility:
+            vis = _visibility_ok(chain, kin, seg, margins)
+            counts["visibility"] += int((ok & ~vis).sum())
+            ok &= vis
+        mask[s : s + len(Qc)] = ok
+    counts["feasible"] = int(mask.sum())
+    return mask, counts
+
+
+def grid_values(chain: Chain, n_per_axis: int | list[int]) -> list[np.ndarray]:
+    """Midpoints of ``n`` equal intervals of each joint range (paper 004 §3.4: 13 per axis)."""
+    ns = [n_per_axis] * chain.nq if np.isscalar(n_per_axis) else list(n_per_axis)
+    return [chain.lower[i] + (np.arange(n) + 0.5) * (chain.upper[i] - chain.lower[i]) / n
+            for i, n in enumerate(ns)]
+
+
+def filter_grid(chain: Chain, n_per_axis: int | list[int] = 13, margins: FilterMargins | None = None,
+                chunk: int = 20_000) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Coarse-first filtering of the full joint-space grid.
+
+    Returns the feasible configurations (M, nq) in lexicographic grid order, their flat grid
+    indices, and counts. The prefix grid over axes 1..nq-1 (last axis at its first value is
+    irrelevant for capsules not on the last link) is checked for collisions between capsules that
+    do not hang on the last joint; survivors are expanded along the last axis in chunks and checked
+    for the remaining pairs, floor and visibility.
+    """
+    t0 = time.perf_counter()
+    margins = margins or FilterMargins()
+    vals = grid_values(chain, n_per_axis)
+    nq = chain.nq
+    sizes = [len(v) for v in vals]
+    total = int(np.prod(sizes))
+    last = nq
+    pre_pairs = np.array([p for p in chain.self_pairs if chain.capsule_joint[p].max() < last], int).reshape(-1, 2)
+    post_pairs = np.array([p for p in chain.self_pairs if chain.capsule_joint[p].max() >= last], int).reshape(-1, 2)
+    pre_floor = np.array([c for c in chain.floor_caps if chain.capsule_joint[c] < last], int)
+    post_floor = np.array([c for c in chain.floor_caps if chain.capsule_joint[c] >= last], int)
+    # prefix grid (axes 1..nq-1) built level by level, keeping only collision-free prefixes
+    prefix = np.zeros((1, 0))
+    for i in range(nq - 1):
+        prefix = np.concatenate([np.repeat(prefix, sizes[i], axis=0),
+                                 np.tile(vals[i], len(prefix))[:, None]], axis=1)
+        Qp = np.concatenate([prefix, np.zeros((len(prefix), nq - prefix.shape[1]))], axis=1)
+        caps_now = [c for c in range(len(chain.capsule_r)) if chain.capsule_joint[c] <= i + 1]
+        pairs = np.array([p for p in pre_pairs if chain.capsule_joint[p].max() == i + 1], int).reshape(-1, 2)
+        floor = np.array([c for c in pre_floor if chain.capsule_joint[c] == i + 1], int)
+        if len(pairs) or len(floor):
+            keep = np.ones(len(Qp), bool)
+            for s in range(0, len(Qp), 100_000):
+                kin = kinematics(chain, Qp[s : s + 100_000])
+                seg = capsule_segments(chain, kin)
+                keep[s : s + 100_000] = _collision_ok(chain, seg, margins, pairs, floor)
+            prefix = prefix[keep]
+        del caps_now
+    n_prefix_ok = len(prefix)
+    # expand along the last axis
+    feas_Q, counts = [], {"total": total, "prefix_collision_free": n_prefix_ok,
+                          "collision": 0, "visibility": 0}
+    n_last = sizes[-1]
+    for s in range(0, len(prefix), chunk):
+        P = prefix[s : s + chunk]
+        Q = np.concatenate([np.repeat(P, n_last, axis=0), np.tile(vals[-1], len(P))[:, None]], axis=1)
+        kin = kinematics(chain, Q)
+        seg = capsule_segments(chain, kin)
+        ok = _collision_ok(chain, seg, margins, post_pairs, post_floor)
+        counts["collision"] += int((~ok).sum())
+        idx = np.flatnonzero(ok)
+        if idx.size:
+            sub = Kinematics(kin.Rpre[idx], kin.opre[idx], kin.Rpost[idx], kin.p_reflector[idx],
+                             kin.R_flange[idx], kin.o_flange[idx], kin.reflector_axis[idx])
+            vis = _visibility_ok(chain, sub, seg[idx], margins)
+            counts["visibility"] += int((~vis).sum())
+            feas_Q.append(Q[idx[vis]])
+    Qf = np.concatenate(feas_Q) if feas_Q else np.zeros((0, nq))
+    # flat grid indices (lexicographic, axis 1 slowest)
+    steps = [(chain.upper[i] - chain.lower[i]) / sizes[i] for i in range(nq)]
+    ks = np.rint((Qf - chain.lower) / np.array(steps) - 0.5).astype(np.int64)
+    flat = np.ravel_multi_index(ks.T, sizes) if len(Qf) else np.zeros(0, np.int64)
+    counts["collision"] += total - n_prefix_ok * n_last
+    counts["feasible"] = len(Qf)
+    counts["time_s"] = time.perf_counter() - t0
+    return Qf, flat, counts
+
+
+def random_candidates(chain: Chain, n: int, rng: np.random.Generator, margins: FilterMargins | None = None,
+                      max_draws: int = 50) -> tuple[np.ndarray, dict]:
+    """``n`` feasible uniformly random configurations (drawn in batches until enough)."""
+    out, counts = [], {"total": 0, "limits": 0, "collision": 0, "visibility": 0, "feasible": 0}
+    have = 0
+    for _ in range(max_draws):
+        Q = rng.uniform(chain.lower, chain.upper, size=(max(4 * (n - have), 1000), chain.nq))
+        mask, c = filter_configurations(chain, Q, margins)
+        for k in counts:
+            counts[k] += c.get(k, 0)
+        out.append(Q[mask])
+        have += int(mask.sum())
+        if have >= n:
+            break
+    Qf = np.concatenate(out)[:n]
+    return Qf, counts
+
+
+# ------------------------------------------------------------------------------------------------
+# Jacobians
+# ------------------------------------------------------------------------------------------------
+
+def _skew_batch(v: np.ndarray) -> np.ndarray:
+    z = np.zeros(v.shape[0])
+    return np.stack([np.stack([z, -v[:, 2], v[:, 1]], 1), np.stack([v[:, 2], z, -v[:, 0]], 1),
+                     np.stack([-v[:, 1], v[:, 0], z], 1)], 1)
+
+
+def nominal_jacobian(chain: Chain, Q: np.ndarray, transform_tracker_to_base: pin.SE3,
+                     chunk: int = 100_000) -> tuple[np.ndarray, np.ndarray]:
+    """Tracker-frame reflector positions (N,3) and Jacobian (N,3,n_x) at ``x = 0``.
+
+    Column layout = :class:`~pipeline.calibration.error_model.MeasurementModel` ``names``:
+    ``j{i}.dx..rz`` (6 nq), ``j{i}.dq`` (nq), ``base.*`` (6), ``tool.*`` (6), ``tracker.*`` (6),
+    ``reflector.*`` (3).
+    """
+    Q = np.atleast_2d(np.asarray(Q, float))
+    nq = chain.nq
+    n_x = 7 * nq + 12 + 9
+    R0 = np.asarray(transform_tracker_to_base.rotation)
+    t0 = np.asarray(transform_tracker_to_base.translation)
+    Y = np.empty((len(Q), 3))
+    J = np.empty((len(Q), 3, n_x))
+    for s in range(0, len(Q), chunk):
+        kin = kinematics(chain, Q[s : s + chunk])
+        n = kin.p_reflector.shape[0]
+        p = kin.p_reflector
+        Jb = np.empty((n, 3, n_x))  # base-frame rows
+        for i in range(nq):
+            Rf, of = kin.Rpre[:, i], kin.opre[:, i]
+            Jb[:, :, 6 * i : 6 * i + 3] = Rf
+            Jb[:, :, 6 * i + 3 : 6 * i + 6] = -_skew_batch(p - of) @ Rf
+            a = Rf @ chain.axis[i]
+            Jb[:, :, 6 * nq + i] = np.cross(a, p - of)
+        b = 7 * nq
+        Jb[:, :, b : b + 3] = np.eye(3)
+        Jb[:, :, b + 3 : b + 6] = -_skew_batch(p)
+        Jb[:, :, b + 6 : b + 9] = kin.R_flange
+        Jb[:, :, b + 9 : b + 12] = -_skew_batch(p - kin.o_flange) @ kin.R_flange
+        Jb[:, :, b + 18 : b + 21] = kin.R_flange  # reflector offset in the flange-aligned frame
+        y = (p - t0) @ R0                          # R0^T (p - t0)
+        Jc = np.einsum("ji,njk->nik", R0, Jb)      # R0^T Jb
+        Jc[:, :, b + 12 : b + 15] = -np.eye(3)
+        Jc[:, :, b + 15 : b + 18] = _skew_batch(y)  # -w x y = y x w
+        Y[s : s + n] = y
+        J[s : s + n] = Jc
+    return Y, J
+
+
+def noise_sigma(chain: Chain, Y: np.ndarray) -> np.ndarray:
+    """Isotropic tracker sigma (m) at the range of each tracker-frame point (DESIGN.md)."""
+    return chain.noise_const_m + chain.noise_per_m * np.linalg.norm(Y, axis=1)
+
+
+@dataclass
+class CandidateSet:
+    """Feasible candidates with their whitened Jacobians wrt the identifiable parameters."""
+
+    Q: np.ndarray            # (N,nq)
+    Y: np.ndarray            # (N,3) predicted tracker-frame reflector positions (nominal)
+    sigma_m: np.ndarray      # (N,)
+    G: np.ndarray            # (N,3,p) whitened Jacobian blocks (J / sigma)
+    columns: np.ndarray      # identifiable columns in the full parameter vector
+    counts: dict = field(default_factory=dict)
+    grid_index: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return len(self.Q)
+
+
+def build_candidate_set(chain: Chain, Q: np.ndarray, columns: np.ndarray, T0: pin.SE3, counts: dict | None = None,
+                        grid_index: np.ndarray | None = None, dtype=np.float64) -> CandidateSet:
+    """Whitened Jacobian blocks of the identifiable columns for feasible configurations ``Q``."""
+    columns = np.asarray(columns)
+    N = len(Q)
+    G = np.empty((N, 3, columns.size), dtype)
+    Y = np.empty((N, 3))
+    for s in range(0, N, 50_000):
+        y, J = nominal_jacobian(chain, Q[s : s + 50_000], T0)
+        Y[s : s + len(y)] = y
+        sig = noise_sigma(chain, y)
+        G[s : s + len(y)] = J[:, :, columns] / sig[:, None, None]
+    return CandidateSet(np.asarray(Q, float), Y, noise_sigma(chain, Y), G, columns, counts or {}, grid_index)

@@ -1,0 +1,600 @@
+"""Optimal periodic excitation (paper ``004_abbe750b8bbcc3aa.txt`` §4.2, after Swevers et al. [14]).
+
+Each joint follows a finite Fourier series with base pulsation ``w_f = 2 pi f_f`` and ``L``
+harmonics (§4.2.1):
+
+    q_i(t) = q_i0 + sum_l a_il / (w_f l) sin(w_f l t) - b_il / (w_f l) cos(w_f l t)
+    v_i(t) = sum_l a_il cos(w_f l t) + b_il sin(w_f l t)
+    a_i(t) = sum_l -a_il w_f l sin(w_f l t) + b_il w_f l cos(w_f l t)
+
+Rest to rest (and periodic): ``v_i(0) = sum_l a_il = 0`` and ``a_i(0) = w_f sum_l l b_il = 0``,
+two linear equalities per joint.
+
+The coefficients minimise the condition number of the base regressor stacked over ``N`` samples
+of one period, ``W = [Y_b(q(t_k), v(t_k), a(t_k))]_k`` (``cond(W)^2 = lambda_max / lambda_min`` of
+``G = W^T W``), or, as an option, ``-log det G`` (D-optimality). IPOPT (through CasADi) solves
+
+    min_x  f(x) = log lambda_max(G) - log lambda_min(G)        (= 2 log cond W)
+    s.t.   q, v, a within margin x limits at every sample       (linear in x)
+           |tau_nominal(q, v, a)| <= margin x tau_max            (symbolic RNEA, exact Jacobian)
+           z_tcp(q) >= floor + clearance                        (symbolic FK)
+           rest-to-rest equalities.
+
+``f`` and its exact gradient are computed in a CasADi ``Callback``: the regressor and its
+vector-Jacobian product come from the symbolic regressor mapped over the samples (``.map(N)``),
+and ``d lambda = u^T dG u`` for a simple eigenvalue (so the gradient is exact wherever the extreme
+eigenvalues are simple; IPOPT uses a limited-memory Hessian). Self-collision and the floor
+clearance of every capsule are checked with ``RobotModel.capsule_clearances`` on a fine grid after
+the solve; a start whose optimum collides is rejected. Several random feasible starts are solved
+and the best feasible optimum is kept. The baseline is the median condition number of random
+feasible Fourier trajectories with the same harmonics and limits.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from pipeline.errors import InfeasibleError
+from pipeline.identification.regressor import BaseParameters, RegressorModel
+
+
+# ------------------------------------------------------------------------------ trajectories
+@dataclass
+class FourierTrajectory:
+    """Periodic Fourier trajectory; ``coefficients`` (nq, 2L+1) = ``[q0, a_1..a_L, b_1..b_L]``."""
+
+    coefficients: np.ndarray
+    base_frequency_hz: float
+
+    @property
+    def harmonics(self) -> int:
+        return (self.coefficients.shape[1] - 1) // 2
+
+    @property
+    def period_s(self) -> float:
+        return 1.0 / self.base_frequency_hz
+
+    @property
+    def nq(self) -> int:
+        return self.coefficients.shape[0]
+
+    def basis(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return fourier_basis(np.asarray(t_s, float), self.base_frequency_hz, self.harmonics)
+
+    def evaluate(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(q, v, a), each (N, nq)."""
+        bq, bv, ba = self.basis(t_s)
+        c = self.coefficients
+        return bq @ c.T, bv @ c.T, ba @ c.T
+
+    def sample_times(self, n: int, periods: int = 1) -> np.ndarray:
+        return np.arange(n * periods) * (self.period_s / n)
+
+    def to_dict(self) -> dict:
+        return {
+            "base_frequency_hz": self.base_frequency_hz,
+            "harmonics": self.harmonics,
+            "coefficients": self.coefficients.tolist(),
+        }
+
+
+def fourier_basis(
+    t_s: np.ndarray, base_frequency_hz: float, harmonics: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Basis rows for ``[q0, a_1..a_L, b_1..b_L]``: q = Bq c, v = Bv c, a = Ba c."""
+    w = 2 * np.pi * base_frequency_hz
+    n = len(t_s)
+    ell = np.arange(1, harmonics + 1)
+    wl = w * ell
+    arg = np.outer(t_s, wl)
+    s, c = np.sin(arg), np.cos(arg)
+    bq = np.hstack([np.ones((n, 1)), s / wl, -c / wl])
+    bv = np.hstack([np.zeros((n, 1)), c, s])
+    ba = np.hstack([np.zeros((n, 1)), -s * wl, c * wl])
+    return bq, bv, ba
+
+
+def rest_constraint_matrix(harmonics: int) -> np.ndarray:
+    """(2, 2L+1) matrix C with ``C c_i = 0`` <=> joint i starts/ends at rest."""
+    ell = np.arange(1, harmonics + 1, dtype=float)
+    C = np.zeros((2, 2 * harmonics + 1))
+    C[0, 1 : harmonics + 1] = 1.0
+    C[1, harmonics + 1 :] = ell / ell.sum()
+    return C
+
+
+# ------------------------------------------------------------------------------ limits
+@dataclass
+class ExcitationLimits:
+    """Limits the excitation must respect (already multiplied by the margins)."""
+
+    lower_rad: np.ndarray
+    upper_rad: np.ndarray
+    velocity_rad_s: np.ndarray
+    acceleration_rad_s2: np.ndarray
+    effort_Nm: np.ndarray
+    floor_clearance_m: float
+    self_clearance_m: float
+
+    @classmethod
+    def from_robot(
+        cls,
+        robot: Any,
+        position_margin: float,
+        velocity_margin: float,
+        acceleration_margin: float,
+        torque_margin: float,
+        floor_clearance_m: float,
+        self_clearance_m: float,
+    ) -> ExcitationLimits:
+        lim = robot.limits
+        mid = 0.5 * (lim.lower_rad + lim.upper_rad)
+        half = 0.5 * (lim.upper_rad - lim.lower_rad) * position_margin
+        return cls(
+            mid - half,
+            mid + half,
+            lim.velocity_rad_s * velocity_margin,
+            lim.acceleration_rad_s2 * acceleration_margin,
+            lim.effort_Nm * torque_margin,
+            floor_clearance_m,
+            self_clearance_m,
+        )
+
+
+@dataclass
+class FeasibilityReport:
+    """Worst ratios to the limits on a fine grid (<= 1 feasible) and the capsule clearances."""
+
+    position_ratio: float
+    velocity_ratio: float
+    acceleration_ratio: float
+    torque_ratio: float
+    self_clearance_m: float
+    floor_clearance_m: float
+    tcp_floor_m: float
+    feasible: bool
+
+    def to_dict(self) -> dict:
+        return {k: (bool(v) if k == "feasible" else float(v)) for k, v in vars(self).items()}
+
+
+def check_trajectory(
+    robot: Any,
+    traj: FourierTrajectory,
+    limits: ExcitationLimits,
+    n_samples: int = 400,
+    floor_z_m: float | None = None,
+) -> FeasibilityReport:
+    """Evaluate every constraint on ``n_samples`` points of one period (nominal dynamics)."""
+    t = traj.sample_times(n_samples)
+    q, v, a = traj.evaluate(t)
+    mid = 0.5 * (limits.lower_rad + limits.upper_rad)
+    half = 0.5 * (limits.upper_rad - limits.lower_rad)
+    pos = float(np.max(np.abs(q - mid) / half))
+    vel = float(np.max(np.abs(v) / limits.velocity_rad_s))
+    acc = float(np.max(np.abs(a) / limits.acceleration_rad_s2))
+    tau = np.array([robot.inverse_dynamics(qk, vk, ak) for qk, vk, ak in zip(q, v, a, strict=True)])
+    trq = float(np.max(np.abs(tau) / limits.effort_Nm))
+    seg = robot.capsule_segments(q)
+    pair, floor = robot.capsule_clearances(seg)
+    self_min = float(pair.min()) if pair.size else np.inf
+    floor_min = float(floor.min()) if floor.size else np.inf
+    fz = robot.spec.collision.floor_z_m if floor_z_m is None else floor_z_m
+    tcp = float(robot.positions(q, robot.frame_tcp)[:, 2].min() - fz)
+    ok = (
+        max(pos, vel, acc, trq) <= 1.0 + 1e-9
+        and self_min >= limits.self_clearance_m
+        and floor_min >= limits.floor_clearance_m
+        and tcp >= limits.floor_clearance_m
+    )
+    return FeasibilityReport(pos, vel, acc, trq, self_min, floor_min, tcp, bool(ok))
+
+
+def random_trajectory(
+    robot: Any,
+    limits: ExcitationLimits,
+    harmonics: int,
+    base_frequency_hz: float,
+    rng: np.random.Generator,
+    n_check: int = 200,
+) -> FourierTrajectory:
+    """Random Fourier coefficients scaled into the kinematic and torque limits.
+
+    Coefficients ~ N(0, 1/l), projected onto the rest-to-rest constraints, each joint scaled by a
+    random fraction (0.3..1) of the largest factor its position/velocity/acceleration limits allow
+    and centred at a random point of its range; then scaled down until the nominal torques fit.
+    Collisions are not checked here (see :func:`random_feasible_trajectories`).
+    """
+    nq = robot.nq
+    L = harmonics
+    C = rest_constraint_matrix(L)
+    P = np.eye(2 * L + 1) - np.linalg.pinv(C) @ C
+    ell = np.arange(1, L + 1)
+    traj_t = np.arange(n_check) / (n_check * base_frequency_hz)
+    bq, bv, ba = fourier_basis(traj_t, base_frequency_hz, L)
+    coef = np.zeros((nq, 2 * L + 1))
+    for i in range(nq):
+        c = np.concatenate([[0.0], rng.normal(size=L) / ell, rng.normal(size=L) / ell])
+        c = P @ c
+        c[0] = 0.0
+        qo, vo, ao = bq @ c, bv @ c, ba @ c
+        span = qo.max() - qo.min()
+        s = min(
+            (limits.upper_rad[i] - limits.lower_rad[i]) / max(span, 1e-12),
+            limits.velocity_rad_s[i] / max(np.abs(vo).max(), 1e-12),
+            limits.acceleration_rad_s2[i] / max(np.abs(ao).max(), 1e-12),
+        ) * rng.uniform(0.3, 1.0)
+        c = c * s
+        lo = limits.lower_rad[i] - (bq @ c).min()
+        hi = limits.upper_rad[i] - (bq @ c).max()
+        c[0] = rng.uniform(lo, hi) if hi > lo else 0.5 * (lo + hi)
+        coef[i] = c
+    traj = FourierTrajectory(coef, base_frequency_hz)
+    # torque: shrink the oscillation about the mean position until the nominal torque fits
+    for _ in range(30):
+        q, v, a = traj.evaluate(traj_t)
+        tau = np.array([robot.inverse_dynamics(*s) for s in zip(q, v, a, strict=True)])
+        ratio = np.max(np.abs(tau) / limits.effort_Nm)
+        if ratio <= 1.0:
+            break
+        coef = traj.coefficients.copy()
+        coef[:, 1:] *= 0.85
+        traj = FourierTrajectory(coef, base_frequency_hz)
+    return traj
+
+
+def random_feasible_trajectories(
+    robot: Any,
+    limits: ExcitationLimits,
+    harmonics: int,
+    base_frequency_hz: float,
+    count: int,
+    rng: np.random.Generator,
+    max_tries: int | None = None,
+    n_check: int = 200,
+) -> list[FourierTrajectory]:
+    """``count`` random trajectories that pass :func:`check_trajectory` (collisions included)."""
+    out: list[FourierTrajectory] = []
+    tries = 0
+    max_tries = max_tries if max_tries is not None else 50 * count
+    while len(out) < count and tries < max_tries:
+        tries += 1
+        traj = random_trajectory(robot, limits, harmonics, base_frequency_hz, rng, n_check)
+        if check_trajectory(robot, traj, limits, n_check).feasible:
+            out.append(traj)
+    if len(out) < count:
+        raise InfeasibleError(
+            None,
+            "identification.excitation",
+            f"only {len(out)} of {count} random Fourier trajectories are feasible after "
+            f"{tries} tries (limits, torques or capsule collisions)",
+        )
+    return out
+
+
+# ------------------------------------------------------------------------------ criterion
+def regressor_casadi(sym: Any, reg: RegressorModel, base: BaseParameters) -> ca.Function:
+    """``Y_b(q, v, a)`` as a CasADi function: inertial columns from ``sym.regressor`` (the
+    symbolic bridge), actuator columns from the gear matrix (same formulas as
+    :meth:`RegressorModel.actuator_columns`), then the base columns."""
+    nq = reg.nv
+    q, v, a = ca.SX.sym("q", nq), ca.SX.sym("v", nq), ca.SX.sym("a", nq)
+    y_sym = sym.regressor(q, v, a)
+    n_link_cols = reg.n_parameters - 4 * nq
+    y_links = y_sym[:, :n_link_cols]
+    K = reg.gear_matrix
+    kd = np.abs(np.diag(K))
+    vm = ca.mtimes(ca.DM(K), v)
+    am = ca.mtimes(ca.DM(K), a)
+    w = reg.coulomb_width_rad_s
+    cols = []
+    for group in range(4):
+        for j in range(nq):
+            kj = ca.DM(K[j].reshape(-1, 1))
+            if group == 0:
+                cols.append(kj * am[j] / kd[j] ** 2)
+            elif group == 1:
+                cols.append(kj * vm[j] / kd[j] ** 2)
+            elif group == 2:
+                s = ca.tanh(vm[j] / (kd[j] * w)) if w > 0 else ca.sign(vm[j])
+                cols.append(kj * s / kd[j])
+            else:
+                e = np.zeros((nq, 1))
+                e[j] = 1.0
+                cols.append(ca.DM(e))
+    y = ca.horzcat(y_links, *cols)
+    yb = y[:, [int(i) for i in base.independent]]
+    return ca.Function("regressor_base", [q, v, a], [yb], ["q", "v", "a"], ["Yb"])
+
+
+class ExcitationCriterion:
+    """Value and exact gradient of the excitation criterion over the Fourier coefficients."""
+
+    def __init__(
+        self,
+        y_base: ca.Function,
+        basis: tuple[np.ndarray, np.ndarray, np.ndarray],
+        nq: int,
+        criterion: str = "cond",
+    ) -> None:
+        if criterion not in ("cond", "logdet"):
+            raise ValueError(f"criterion must be 'cond' or 'logdet', got {criterion!r}")
+        self.criterion = criterion
+        self.bq, self.bv, self.ba = basis
+        self.n = self.bq.shape[0]
+        self.nq = nq
+        self.nb = y_base.size2_out(0)
+        q, v, a = (ca.SX.sym(s, nq) for s in "qva")
+        gbar = ca.SX.sym("gbar", nq, self.nb)
+        yb = y_base(q, v, a)
+        inner = ca.sum1(ca.sum2(yb * gbar))
+        vjp = ca.Function("vjp", [q, v, a, gbar], [ca.gradient(inner, ca.vertcat(q, v, a))])
+        self._y = y_base.map(self.n)
+        self._vjp = vjp.map(self.n)
+        self.n_evals = 0
+
+    def states(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        c = np.asarray(x, float).reshape(self.nq, -1)
+        return self.bq @ c.T, self.bv @ c.T, self.ba @ c.T  # (N, nq)
+
+    def matrix(self, x: np.ndarray) -> np.ndarray:
+        q, v, a = self.states(x)
+        yb = np.asarray(self._y(q.T, v.T, a.T))  # (nq, N*nb), blocks per sample
+        return yb.reshape(self.nq, self.n, self.nb).transpose(1, 0, 2).reshape(-1, self.nb)
+
+    def value_and_gradient(self, x: np.ndarray, gradient: bool = True) -> tuple[float, np.ndarray | None]:
+        self.n_evals += 1
+        q, v, a = self.states(x)
+        yb = np.asarray(self._y(q.T, v.T, a.T))
+        W = yb.reshape(self.nq, self.n, self.nb).transpose(1, 0, 2).reshape(-1, self.nb)
+        G = W.T @ W
+        lam, U = np.linalg.eigh(G)
+        lam = np.maximum(lam, 1e-300)
+        if self.criterion == "cond":
+            f = float(np.log(lam[-1]) - np.log(lam[0]))
+            dG = np.outer(U[:, -1], U[:, -1]) / lam[-1] - np.outer(U[:, 0], U[:, 0]) / lam[0]
+        else:
+            f = float(-np.sum(np.log(lam)) / self.nb)
+            dG = -(U / lam) @ U.T / self.nb
+        if not gradient:
+            return f, None
+        dW = 2.0 * W @ dG  # df/dW, (N*nq, nb)
+        gbar = dW.reshape(self.n, self.nq, self.nb).transpose(1, 0, 2).reshape(self.nq, -1)
+        g = np.asarray(self._vjp(q.T, v.T, a.T, gbar))  # (3 nq, N)
+        gq, gv, ga = g[:self.nq].T, g[self.nq : 2 * self.nq].T, g[2 * self.nq :].T  # (N, nq)
+        grad = gq.T @ self.bq + gv.T @ self.bv + ga.T @ self.ba  # (nq, 2L+1)
+        return f, grad.ravel()
+
+
+def condition_number(W: np.ndarray) -> float:
+    s = np.linalg.svd(W, compute_uv=False)
+    return float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
+
+
+class _Objective(ca.Callback):
+    """CasADi callback wrapping :class:`ExcitationCriterion` (value + exact gradient)."""
+
+    def __init__(self, name: str, crit: ExcitationCriterion, nx: int) -> None:
+        ca.Callback.__init__(self)
+        self.crit = crit
+        self.nx = nx
+        self._jac: _Gradient | None = None
+        self.construct(name, {})
+
+    def get_n_in(self) -> int:
+        return 1
+
+    def get_n_out(self) -> int:
+        return 1
+
+    def get_sparsity_in(self, i: int) -> ca.Sparsity:
+        return ca.Sparsity.dense(self.nx, 1)
+
+    def get_sparsity_out(self, i: int) -> ca.Sparsity:
+        return ca.Sparsity.dense(1, 1)
+
+    def eval(self, arg: list) -> list:
+        f, _ = self.crit.value_and_gradient(np.asarray(arg[0]).ravel(), gradient=False)
+        return [f]
+
+    def has_jacobian(self) -> bool:
+        return True
+
+    def get_jacobian(self, name: str, inames: list, onames: list, opts: dict) -> ca.Function:
+        self._jac = _Gradient(name, self.crit, self.nx)
+        return self._jac
+
+
+class _Gradient(ca.Callback):
+    def __init__(self, name: str, crit: ExcitationCriterion, nx: int) -> None:
+        ca.Callback.__init__(self)
+        self.crit = crit
+        self.nx = nx
+        self.construct(name, {})
+
+    def get_n_in(self) -> int:
+        return 2
+
+    def get_n_out(self) -> int:
+        return 1
+
+    def get_sparsity_in(self, i: int) -> ca.Sparsity:
+        return ca.Sparsity.dense(self.nx, 1) if i == 0 else ca.Sparsity.dense(1, 1)
+
+    def get_sparsity_out(self, i: int) -> ca.Sparsity:
+        return ca.Sparsity.dense(1, self.nx)
+
+    def eval(self, arg: list) -> list:
+        _, g = self.crit.value_and_gradient(np.asarray(arg[0]).ravel())
+        return [ca.DM(g.reshape(1, -1))]
+
+
+# ------------------------------------------------------------------------------ optimisation
+@dataclass
+class ExcitationResult:
+    """The optimised trajectory and the evidence around it."""
+
+    trajectory: FourierTrajectory
+    cond_optimized: float
+    cond_random: list[float]
+    cond_starts: list[float]
+    cond_history: list[list[float]]  # per start: cond at every IPOPT iteration
+    start_results: list[dict]
+    feasibility: FeasibilityReport
+    criterion: str
+    n_samples: int
+    details: dict = field(default_factory=dict)
+
+    @property
+    def cond_random_median(self) -> float:
+        return float(np.median(self.cond_random))
+
+
+def _nlp_constraints(
+    sym: Any,
+    robot: Any,
+    x: ca.MX,
+    basis: tuple[np.ndarray, np.ndarray, np.ndarray],
+    limits: ExcitationLimits,
+    nq: int,
+    harmonics: int,
+) -> tuple[ca.MX, np.ndarray, np.ndarray]:
+    bq, bv, ba = basis
+    n = bq.shape[0]
+    X = ca.reshape(x, 2 * harmonics + 1, nq).T  # (nq, 2L+1), row-major layout of x
+    Q = ca.mtimes(X, ca.DM(bq.T))  # (nq, N)
+    V = ca.mtimes(X, ca.DM(bv.T))
+    A = ca.mtimes(X, ca.DM(ba.T))
+    C = rest_constraint_matrix(harmonics)
+    rest = ca.mtimes(X, ca.DM(C.T))  # (nq, 2)
+    p_nom = sym.nominal_dynamic_parameters()
+    rnea = sym.rnea.map(n)
+    tau = rnea(Q, V, A, ca.repmat(ca.DM(p_nom), 1, n))
+    tau_ratio = tau / ca.repmat(ca.DM(limits.effort_Nm), 1, n)
+    fk = sym.fk(robot.frame_tcp).map(n)
+    pos, _ = fk(Q, ca.repmat(ca.DM(sym.nominal_kinematic_parameters()), 1, n))
+    tcp_z = pos[2, :]
+    mid = 0.5 * (limits.lower_rad + limits.upper_rad)
+    half = 0.5 * (limits.upper_rad - limits.lower_rad)
+    qn = (Q - ca.repmat(ca.DM(mid), 1, n)) / ca.repmat(ca.DM(half), 1, n)
+    vn = V / ca.repmat(ca.DM(limits.velocity_rad_s), 1, n)
+    an = A / ca.repmat(ca.DM(limits.acceleration_rad_s2), 1, n)
+    floor_z = robot.spec.collision.floor_z_m + limits.floor_clearance_m
+    g = ca.vertcat(ca.vec(rest), ca.vec(qn), ca.vec(vn), ca.vec(an), ca.vec(tau_ratio), ca.vec(tcp_z))
+    n_rest = 2 * nq
+    n_box = 4 * nq * n
+    lbg = np.concatenate([np.zeros(n_rest), -np.ones(n_box), np.full(n, floor_z)])
+    ubg = np.concatenate([np.zeros(n_rest), np.ones(n_box), np.full(n, np.inf)])
+    return g, lbg, ubg
+
+
+def optimize_excitation(
+    robot: Any,
+    sym: Any,
+    reg: RegressorModel,
+    base: BaseParameters,
+    limits: ExcitationLimits,
+    rng: np.random.Generator,
+    harmonics: int = 5,
+    base_frequency_hz: float = 0.1,
+    n_samples: int = 100,
+    n_starts: int = 4,
+    n_random: int = 20,
+    max_iter: int = 150,
+    criterion: str = "cond",
+    n_check: int = 400,
+    progress: Any = None,
+) -> ExcitationResult:
+    """Random-start IPOPT optimisation of the excitation (see the module docstring).
+
+    ``n_random`` random feasible trajectories give the baseline median; the ``n_starts`` best of
+    them (by the criterion) are the starts of the NLP.
+    """
+    nq = robot.nq
+    L = harmonics
+    t = np.arange(n_samples) / (n_samples * base_frequency_hz)
+    basis = fourier_basis(t, base_frequency_hz, L)
+    y_base = regressor_casadi(sym, reg, base)
+    crit = ExcitationCriterion(y_base, basis, nq, criterion)
+    nx = nq * (2 * L + 1)
+
+    randoms = random_feasible_trajectories(
+        robot, limits, L, base_frequency_hz, max(n_random, n_starts), rng, n_check=n_check // 2
+    )
+    # the baseline is scored on the same criterion grid as the optimum
+    cond_random = [condition_number(crit.matrix(tr.coefficients.ravel())) for tr in randoms]
+    order = np.argsort(cond_random)
+    starts = [randoms[i] for i in order[:n_starts]]
+
+    x = ca.MX.sym("x", nx)
+    g, lbg, ubg = _nlp_constraints(sym, robot, x, basis, limits, nq, L)
+    obj = _Objective("excitation_objective", crit, nx)
+    solver = ca.nlpsol(
+        "excitation",
+        "ipopt",
+        {"x": x, "f": obj(x), "g": g},
+        {
+            "ipopt.print_level": 0,
+            "print_time": False,
+            "ipopt.sb": "yes",
+            "ipopt.max_iter": max_iter,
+            "ipopt.hessian_approximation": "limited-memory",
+            "ipopt.tol": 1e-6,
+            "ipopt.acceptable_tol": 1e-4,
+            "ipopt.acceptable_iter": 5,
+        },
+    )
+    best: tuple[float, FourierTrajectory, FeasibilityReport] | None = None
+    histories, start_results, cond_starts = [], [], []
+    iterable = range(len(starts))
+    if progress is not None:
+        iterable = progress.track(iterable, "excitation starts")
+    for k in iterable:
+        x0 = starts[k].coefficients.ravel()
+        cond0 = condition_number(crit.matrix(x0))
+        cond_starts.append(cond0)
+        sol = solver(x0=x0, lbg=lbg, ubg=ubg)
+        st = solver.stats()
+        xk = np.asarray(sol["x"]).ravel()
+        traj = FourierTrajectory(xk.reshape(nq, 2 * L + 1), base_frequency_hz)
+        feas = check_trajectory(robot, traj, limits, n_check)
+        condk = condition_number(crit.matrix(xk))
+        objs = list(st.get("iterations", {}).get("obj", []))
+        if criterion == "cond":
+            hist = [float(np.exp(0.5 * o)) for o in objs]
+        else:
+            hist = []
+        histories.append(hist)
+        start_results.append(
+            {
+                "cond_start": cond0,
+                "cond_end": condk,
+                "status": str(st["return_status"]),
+                "iterations": int(st["iter_count"]),
+                "feasible": feas.feasible,
+                "feasibility": feas.to_dict(),
+            }
+        )
+        if feas.feasible and (best is None or condk < best[0]):
+            best = (condk, traj, feas)
+    if best is None:
+        # no optimum passed the fine-grid/collision check: keep the best random start
+        i0 = int(order[0])
+        tr = randoms[i0]
+        best = (cond_random[i0], tr, check_trajectory(robot, tr, limits, n_check))
+    return ExcitationResult(
+        trajectory=best[1],
+        cond_optimized=float(best[0]),
+        cond_random=[float(c) for c in cond_random[: max(n_random, 1)]],
+        cond_starts=cond_starts,
+        cond_history=histories,
+        start_results=start_results,
+        feasibility=best[2],
+        criterion=criterion,
+        n_samples=n_samples,
+        details={"criterion_evaluations": crit.n_evals},
+    )

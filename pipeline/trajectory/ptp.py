@@ -1,0 +1,291 @@
+"""Time/energy-optimal point-to-point (PtP) motion (paper 004 section 5.4, eq. 40).
+
+    min  k1 T + k2 int_0^T tau^T W tau dt
+    s.t. tau = RNEA(q, v, a; p_dyn) (rigid body + rotor + viscous + smooth Coulomb),
+         |tau_i| <= tau_max_i,  |v_i| <= v_max_i,  q_min <= q <= q_max,
+         q(0) = q0, q(T) = q1, v(0) = v(T) = 0   (rest to rest)
+
+Inverse-dynamics transcription (DESIGN.md "Measured facts"): N intervals of length h = T/N,
+states q, v at the nodes, piecewise-constant accelerations a_k, exact integration
+``q_{k+1} = q_k + h v_k + h^2/2 a_k``, ``v_{k+1} = v_k + h a_k``; torques from the symbolic
+RNEA (one CasADi function applied with ``.map(3N)``) at the start, midpoint and end of every
+interval, as path constraints scaled by their limits; energy by Simpson's rule on those points.
+
+``W`` selects the energy measure: ``"torque"`` (W = I, the paper's tau^T tau), ``"normalised"``
+(W = diag(1 / tau_max^2)), ``"electrical"`` (copper losses, W = diag(R_i / (k_t,i G_i)^2) with
+motor resistance R, torque constant k_t and gear ratio G).
+
+The NLP is built once per robot structure with start, goal, limits, weights, k1, k2 and the
+dynamic parameters as NLP parameters/bounds; with ``jit=True`` its C code (all derivative
+functions, size independent of N thanks to ``map``) is compiled once by gcc and cached on disk
+keyed by the SHA-256 of the generated code, so a user pays the compile at most once.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import subprocess
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from pipeline.errors import InfeasibleError, PipelineError, SolverError
+from pipeline.trajectory.dynamics import PlanningModel
+from pipeline.trajectory.trajectories import JointTrajectory
+
+JIT_FLAGS = ("-O1", "-shared", "-fPIC")
+FORMULATION_VERSION = "ptp-v1"
+
+
+def cache_dir_default() -> Path:
+    env = os.environ.get("PIPELINE_CACHE_DIR")
+    return (Path(env) if env else Path.home() / ".cache" / "pipeline") / "trajectory"
+
+
+def energy_weights(pm: PlanningModel, kind: str, motor_resistance_ohm: Any = None,
+                   torque_constant_Nm_A: Any = None, gear_ratio: Any = None) -> np.ndarray:
+    """Weights W of ``int tau^T W tau dt`` for the energy measures described in the module doc."""
+    if kind == "torque":
+        return np.ones(pm.nq)
+    if kind == "normalised":
+        return 1.0 / pm.effort_Nm**2
+    if kind == "electrical":
+        if motor_resistance_ohm is None or torque_constant_Nm_A is None:
+            raise PipelineError(None, "trajectory.energy", "electrical needs motor_resistance_ohm and "
+                                "torque_constant_Nm_A")
+        g = np.ones(pm.nq) if gear_ratio is None else np.asarray(gear_ratio, float)
+        return np.asarray(motor_resistance_ohm, float) / (np.asarray(torque_constant_Nm_A, float) * g) ** 2
+    raise PipelineError(None, "trajectory.energy", f"unknown energy measure {kind!r} "
+                        "(torque, normalised, electrical)")
+
+
+@dataclass
+class PtpResult:
+    """Optimal PtP motion on the transcription grid plus solver facts."""
+
+    t_nodes_s: np.ndarray
+    q_nodes: np.ndarray
+    v_nodes: np.ndarray
+    a_intervals: np.ndarray
+    duration_s: float
+    energy: float
+    objective: float
+    solve_time_s: float
+    iterations: int
+    k1: float
+    k2: float
+    info: dict = field(default_factory=dict)
+
+    def sample(self, dt_s: float, name: str = "ptp") -> JointTrajectory:
+        """Exact samples (piecewise-constant acceleration) every ``dt_s``."""
+        T = self.duration_s
+        N = len(self.a_intervals)
+        h = T / N
+        t = np.append(np.arange(0.0, T, dt_s), T)
+        k = np.clip((t / h).astype(int), 0, N - 1)
+        tau = (t - k * h)[:, None]
+        a = self.a_intervals[k]
+        v = self.v_nodes[k] + a * tau
+        q = self.q_nodes[k] + self.v_nodes[k] * tau + 0.5 * a * tau**2
+        return JointTrajectory(name, t, q, v, a, info={"k1": self.k1, "k2": self.k2})
+
+
+def _compile_nlp(solver_sx: ca.Function, cache: Path, name: str) -> Path:
+    """C code of the NLP's functions (objective, constraints and their derivatives) -> .so."""
+    cache.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=cache) as tmp:
+        cwd = os.getcwd()
+        try:
+            os.chdir(tmp)
+            solver_sx.generate_dependencies(f"{name}.c")
+        finally:
+            os.chdir(cwd)
+        src = Path(tmp) / f"{name}.c"
+        code = src.read_text()
+        key = hashlib.sha256((code + " ".join(JIT_FLAGS) + ca.__version__).encode()).hexdigest()[:20]
+        lib = cache / f"{name}_{key}.so"
+        if not lib.exists():
+            tmp_lib = Path(tmp) / f"{name}.so"
+            cmd = ["gcc", *JIT_FLAGS, str(src), "-o", str(tmp_lib), "-lm"]
+            res = subprocess.run(cmd, capture_output=True, text=True, check=False)
+            if res.returncode != 0:
+                raise PipelineError(str(src), name, f"gcc failed: {res.stderr.strip()[:500]}")
+            os.replace(tmp_lib, lib)
+    return lib
+
+
+class PtpProblem:
+    """The PtP NLP for one robot structure and grid size, reusable for any move.
+
+    ``problem.solve(q0, q1, k1=1, k2=0.01)`` or with ``duration_s=T`` for a fixed duration
+    (then only the energy is minimised). Limits default to the planning model's and may be
+    overridden per call; ``p_dyn`` defaults to the symbolic robot's nominal parameters.
+    """
+
+    def __init__(self, pm: PlanningModel, sym: Any, n_intervals: int = 50, jit: bool = True,
+                 cache_dir: Path | None = None, ipopt_options: dict | None = None) -> None:
+        t0 = time.perf_counter()
+        self.pm, self.sym, self.N, self.nq = pm, sym, int(n_intervals), pm.nq
+        self.p_dyn_nominal = np.asarray(sym.nominal_dynamic_parameters(), float)
+        nq, N = self.nq, self.N
+        self.v_scale = pm.velocity_rad_s.copy()
+        self.a_scale = pm.effort_Nm / np.maximum(pm.mass_diagonal(np.zeros(nq)), 1e-9)
+        n_dyn = self.p_dyn_nominal.size
+        # decision variables (scaled): T, Q (nq x N+1), Vn = V / v_scale, An = A / a_scale
+        T = ca.MX.sym("T")
+        Q = ca.MX.sym("Q", nq, N + 1)
+        Vn = ca.MX.sym("V", nq, N + 1)
+        An = ca.MX.sym("A", nq, N)
+        p_dyn = ca.MX.sym("p_dyn", n_dyn)
+        inv_tau_max = ca.MX.sym("inv_tau_max", nq)
+        w = ca.MX.sym("w", nq)
+        k1 = ca.MX.sym("k1")
+        k2 = ca.MX.sym("k2")
+        V = Vn * ca.repmat(ca.DM(self.v_scale), 1, N + 1)
+        A = An * ca.repmat(ca.DM(self.a_scale), 1, N)
+        h = T / N
+        q0, v0 = Q[:, :-1], V[:, :-1]
+        q_mid = q0 + 0.5 * h * v0 + 0.125 * h**2 * A
+        v_mid = v0 + 0.5 * h * A
+        g_q = Q[:, 1:] - q0 - h * v0 - 0.5 * h**2 * A
+        g_v = (V[:, 1:] - v0 - h * A) / ca.repmat(ca.DM(self.v_scale), 1, N)
+        rnea = sym.rnea.map(3 * N)
+        tau = rnea(ca.horzcat(q0, q_mid, Q[:, 1:]), ca.horzcat(v0, v_mid, V[:, 1:]),
+                   ca.horzcat(A, A, A), p_dyn)
+        tau_n = tau * ca.repmat(inv_tau_max, 1, 3 * N)
+        wt = ca.sum1(tau**2 * ca.repmat(w, 1, 3 * N))
+        e_s, e_m, e_e = wt[:N], wt[N:2 * N], wt[2 * N:]
+        energy = h / 6.0 * ca.sum2(e_s + 4 * e_m + e_e)
+        x = ca.vertcat(T, ca.vec(Q), ca.vec(Vn), ca.vec(An))
+        p = ca.vertcat(p_dyn, inv_tau_max, w, k1, k2)
+        g = ca.vertcat(ca.vec(g_q), ca.vec(g_v), ca.vec(tau_n))
+        self.n_x, self.n_g, self.n_p = x.numel(), g.numel(), p.numel()
+        self._energy_fn = ca.Function("energy", [x, p], [energy, tau])
+        nlp = {"x": x, "p": p, "f": k1 * T + k2 * energy, "g": g}
+        opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "ipopt.tol": 1e-8,
+                "ipopt.acceptable_tol": 1e-5, "ipopt.max_iter": 1000}
+        opts.update(ipopt_options or {})
+        name = f"ptp_{pm.model.name or 'robot'}_{N}".replace("-", "_").replace(" ", "_")
+        self.jit = bool(jit)
+        solver = ca.nlpsol(name, "ipopt", nlp, opts)
+        self.build_time_s = time.perf_counter() - t0
+        self.compile_time_s = 0.0
+        if self.jit:
+            t1 = time.perf_counter()
+            lib = _compile_nlp(solver, Path(cache_dir) if cache_dir else cache_dir_default(), name)
+            solver = ca.nlpsol(name, "ipopt", str(lib), opts)
+            self.library = lib
+            self.compile_time_s = time.perf_counter() - t1
+        self.solver = solver
+
+    # ----------------------------------------------------------------------------------------
+    def _unpack(self, x: np.ndarray) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+        nq, N = self.nq, self.N
+        T = float(x[0])
+        i = 1
+        Q = x[i:i + nq * (N + 1)].reshape(N + 1, nq)
+        i += nq * (N + 1)
+        V = x[i:i + nq * (N + 1)].reshape(N + 1, nq) * self.v_scale
+        i += nq * (N + 1)
+        A = x[i:i + nq * N].reshape(N, nq) * self.a_scale
+        return T, Q, V, A
+
+    def _pack(self, T: float, Q: np.ndarray, V: np.ndarray, A: np.ndarray) -> np.ndarray:
+        return np.concatenate([[T], Q.ravel(), (V / self.v_scale).ravel(), (A / self.a_scale).ravel()])
+
+    def quintic_guess(self, q0: np.ndarray, q1: np.ndarray, duration_s: float | None = None) -> np.ndarray:
+        """Rest-to-rest quintic ``q0 + dq (10 u^3 - 15 u^4 + 6 u^5)`` as initial guess."""
+        dq = np.abs(q1 - q0)
+        if duration_s is None:
+            duration_s = 1.2 * max(np.max(1.875 * dq / self.pm.velocity_rad_s),
+                                   np.max(np.sqrt(5.774 * dq / self.a_scale)), 0.05)
+        T, N = duration_s, self.N
+        u = np.linspace(0.0, 1.0, N + 1)[:, None]
+        Q = q0 + (q1 - q0) * (10 * u**3 - 15 * u**4 + 6 * u**5)
+        V = (q1 - q0) * (30 * u**2 - 60 * u**3 + 30 * u**4) / T
+        A = np.diff(V, axis=0) / (T / N)
+        return self._pack(T, Q, V, A)
+
+    def solve(self, q0: np.ndarray, q1: np.ndarray, k1: float = 1.0, k2: float = 0.01,
+              weights: np.ndarray | None = None, duration_s: float | None = None,
+              p_dyn: np.ndarray | None = None, lower_rad: np.ndarray | None = None,
+              upper_rad: np.ndarray | None = None, velocity_rad_s: np.ndarray | None = None,
+              effort_Nm: np.ndarray | None = None, x0: np.ndarray | None = None,
+              max_duration_s: float = 60.0) -> PtpResult:
+        """Solve one move; raises InfeasibleError / SolverError instead of returning a failure."""
+        pm, nq, N = self.pm, self.nq, self.N
+        q0, q1 = np.asarray(q0, float), np.asarray(q1, float)
+        lo = pm.lower_rad if lower_rad is None else np.asarray(lower_rad, float)
+        hi = pm.upper_rad if upper_rad is None else np.asarray(upper_rad, float)
+        vmax = pm.velocity_rad_s if velocity_rad_s is None else np.asarray(velocity_rad_s, float)
+        tmax = pm.effort_Nm if effort_Nm is None else np.asarray(effort_Nm, float)
+        for nm, qq in (("start", q0), ("goal", q1)):
+            bad = np.flatnonzero((qq < lo) | (qq > hi))
+            if bad.size:
+                j = int(bad[0])
+                raise InfeasibleError(None, f"ptp {nm} joint {j + 1}",
+                                      f"{np.degrees(qq[j]):.2f} deg outside the limits "
+                                      f"[{np.degrees(lo[j]):.1f}, {np.degrees(hi[j]):.1f}] deg")
+        pd = self.p_dyn_nominal if p_dyn is None else np.asarray(p_dyn, float)
+        # static feasibility: holding torque at start and goal
+        fn_static = self.sym.rnea
+        for nm, qq in (("start", q0), ("goal", q1)):
+            tau_s = np.asarray(fn_static(qq, np.zeros(nq), np.zeros(nq), pd)).ravel()
+            bad = np.flatnonzero(np.abs(tau_s) > tmax)
+            if bad.size:
+                j = int(bad[0])
+                raise InfeasibleError(None, f"ptp {nm} joint {j + 1} torque limit",
+                                      f"holding torque {tau_s[j]:.1f} N·m exceeds {tmax[j]:.1f} N·m")
+        w = np.ones(nq) if weights is None else np.asarray(weights, float)
+        p = np.concatenate([pd, 1.0 / tmax, w, [k1, k2]])
+        # bounds
+        lbT, ubT = (duration_s, duration_s) if duration_s is not None else (1e-3, max_duration_s)
+        lbQ = np.tile(lo, (N + 1, 1))
+        ubQ = np.tile(hi, (N + 1, 1))
+        lbQ[0] = ubQ[0] = q0
+        lbQ[-1] = ubQ[-1] = q1
+        vb = vmax / self.v_scale
+        lbV = np.tile(-vb, (N + 1, 1))
+        ubV = np.tile(vb, (N + 1, 1))
+        lbV[0] = ubV[0] = lbV[-1] = ubV[-1] = 0.0
+        lbx = np.concatenate([[lbT], lbQ.ravel(), lbV.ravel(), np.full(nq * N, -np.inf)])
+        ubx = np.concatenate([[ubT], ubQ.ravel(), ubV.ravel(), np.full(nq * N, np.inf)])
+        n_dyn_eq = 2 * nq * N
+        lbg = np.concatenate([np.zeros(n_dyn_eq), -np.ones(3 * N * nq)])
+        ubg = np.concatenate([np.zeros(n_dyn_eq), np.ones(3 * N * nq)])
+        if x0 is None:
+            x0 = self.quintic_guess(q0, q1, duration_s)
+        t0 = time.perf_counter()
+        sol = self.solver(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+        solve_time = time.perf_counter() - t0
+        stats = self.solver.stats()
+        what = f"ptp move {np.round(np.degrees(q0), 1).tolist()} -> {np.round(np.degrees(q1), 1).tolist()} deg"
+        if not stats.get("success", False):
+            status = stats.get("return_status", "unknown")
+            if status in ("Infeasible_Problem_Detected", "Local_Infeasibility"):
+                cons = "torque limits" if duration_s is None else f"duration {duration_s:.4f} s with torque limits"
+                raise InfeasibleError(None, what, f"the {cons} cannot be met (IPOPT: {status})")
+            raise SolverError(None, what, f"IPOPT failed: {status}")
+        xs = np.asarray(sol["x"]).ravel()
+        T, Q, V, A = self._unpack(xs)
+        energy, _ = self._energy_fn(xs, p)
+        return PtpResult(np.linspace(0.0, T, N + 1), Q, V, A, T, float(energy), float(sol["f"]),
+                         solve_time, int(stats["iter_count"]), k1, k2,
+                         info={"x": xs, "jit": self.jit, "fixed_duration": duration_s is not None})
+
+    def pareto(self, q0: np.ndarray, q1: np.ndarray, k2_values: list[float], weights: np.ndarray,
+               **kw: Any) -> list[PtpResult]:
+        """Sweep ``k2`` (k1 = 1), each solve warm-started from the previous one."""
+        out: list[PtpResult] = []
+        x0 = None
+        for k2 in k2_values:
+            r = self.solve(q0, q1, k1=1.0, k2=float(k2), weights=weights, x0=x0, **kw)
+            out.append(r)
+            x0 = r.info["x"]
+        return out
