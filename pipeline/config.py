@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
+import inspect
 import types
 import typing
 from collections.abc import Mapping, Sequence
@@ -484,8 +485,31 @@ def load_config(
         for src, value in items:
             build_dataclass(cls, _merge(merged, value), section, src)
             merged = _merge(merged, value)
-        cfg.sections[section] = build_dataclass(cls, merged, section, items[-1][0] if items else source)
+        src = items[-1][0] if items else source
+        instance = build_dataclass(cls, merged, section, src)
+        _semantic_check(instance, src)
+        cfg.sections[section] = instance
     return cfg
+
+
+def _semantic_check(instance: Any, source: str) -> None:
+    """Call the section's own ``validate(source)`` (or ``validate()``) when it has one.
+
+    Stage owners may add ``def validate(self, source: str) -> None`` to their Config that
+    raises ConfigError(source, "<stage>.<field>", problem) for values of the right type but
+    out of range (e.g. a negative count).
+    """
+    validate = getattr(instance, "validate", None)
+    if not callable(validate):
+        return
+    try:
+        params = inspect.signature(validate).parameters
+    except (TypeError, ValueError):
+        params = {}
+    if params:
+        validate(source)
+    else:
+        validate()
 
 
 def quick_config(**overrides: Any) -> RunConfig:

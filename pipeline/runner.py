@@ -6,6 +6,7 @@ Each stage is a module (registry :data:`pipeline.config.STAGES`) exposing::
     DEPENDS = ("model",)           # upstream stages whose results it reads
     Config = CalibrationConfig     # dataclass with defaults
     def run(ctx: StageContext) -> StageResult
+    def check(config, robot) -> None   # optional: raise PipelineError early (bad data file...)
 
 :func:`run_pipeline` validates everything (stage modules, dependencies, the robot files, the
 hidden robot) *before* creating any directory, then for every needed stage either reuses
@@ -335,11 +336,12 @@ def run_pipeline(
     ``log``: callable(str) for one-line progress messages (default: stderr).
     Raises :class:`PipelineError` (nothing written when it comes from validation).
     """
-    say = log if log is not None else (lambda msg: print(msg, file=sys.stderr))
+    prog = progress if progress is not None else Progress()
+    say = log if log is not None else prog.log
     # ---- validate everything before touching the disk --------------------------------------
-    plans = plan_stages(cfg)
-    robot_dir = resolve_robot_dir(cfg)
+    robot_dir = resolve_robot_dir(cfg)         # user input first: the robot, then the stage modules
     nominal = _load_robot(robot_dir)
+    plans = plan_stages(cfg)
     real = _make_real(nominal, cfg)
     robot_sha = artefacts.hash_tree(robot_dir)
     run_key = {
@@ -356,10 +358,15 @@ def run_pipeline(
         )
         by_name[plan.name] = plan
     forced = set(by_name) if force is True else set(force or ())
-
-    # ---- run --------------------------------------------------------------------------------
     run_dir = Path(out_root) if out_root is not None else default_runs_dir()
     run_dir = run_dir / cfg.name
+    for plan in plans:               # optional early checks (e.g. measurement files) of stages to run
+        check = getattr(plan.module, "check", None)
+        will_run = plan.name in forced or artefacts.read_inputs_hash(run_dir / plan.name) != plan.inputs_sha256
+        if callable(check) and will_run:
+            check(plan.config, nominal)
+
+    # ---- run --------------------------------------------------------------------------------
     run_dir.mkdir(parents=True, exist_ok=True)
     artefacts.clean_leftovers(run_dir)
     artefacts.write_text(run_dir / "config.yaml", cfg.to_yaml())
@@ -367,7 +374,6 @@ def run_pipeline(
     ran: list[str] = []
     reused: list[str] = []
     handed_robot: dict[str, Any] = {}       # stage -> robot it handed on
-    prog = progress if progress is not None else Progress()
     try:
         with prog:
             for plan in plans:

@@ -74,7 +74,8 @@ class FakeStages:
                 robot.model.armature = robot.model.armature * 2.0
             return StageResult(
                 summary={"n": ctx.config.n, "draw": float(ctx.rng.random()), "nested": {"gain": ctx.config.gain}},
-                arrays={"x": np.arange(ctx.config.n, dtype=float), "configurations_test": np.zeros((2, 6))},
+                arrays={"x": np.arange(ctx.config.n, dtype=float), "configurations_test": np.zeros((2, 6)),
+                        "trajectory_move_t": np.linspace(0, 1, 5), "trajectory_move_q": np.zeros((5, 6))},
                 data={"label": ctx.config.label, "upstream": sorted(ctx.upstream)},
                 figures={"plot": fig},
                 robot=robot,

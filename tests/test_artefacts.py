@@ -148,3 +148,30 @@ def test_robot_handed_on_to_later_stages(fake_stages, tmp_path, rx130l):
     assert fake_stages.calls == ["c"]
     np.testing.assert_allclose(again.outputs["a"].robot.model.armature, 2 * rx130l.model.armature)
     np.testing.assert_allclose(fake_stages.contexts["c"].robot.model.armature, 2 * rx130l.model.armature)
+
+
+def test_stage_check_hook_runs_before_anything_is_written(fake_stages, tmp_path):
+    from pipeline import config
+    from pipeline.errors import DataFileError
+
+    def check(cfg, robot):
+        if cfg.label == "bad":
+            raise DataFileError("measurements.csv", "q3", "not a number in row 4")
+
+    config.STAGES["b"].check = check
+    with pytest.raises(DataFileError, match="measurements.csv: q3"):
+        run_pipeline(load_config(None, ["name=r", "b.label=bad"]), out_root=tmp_path, log=lambda m: None)
+    assert not any(tmp_path.iterdir()) and fake_stages.calls == []
+
+
+def test_progress_passes_items_through_with_or_without_display():
+    from pipeline.progress import Progress, task, track
+
+    for enabled in (False, True):
+        with Progress(enabled=enabled) as prog:
+            assert list(prog.track(iter(range(4)), "gen")) == [0, 1, 2, 3]      # no len()
+            assert [i for i in track(range(3), "nested")] == [0, 1, 2]
+            with task("work", total=2) as handle:
+                handle.advance()
+                handle.update(completed=2)
+    assert list(track([5, 6], "standalone")) == [5, 6]

@@ -43,7 +43,7 @@ def robot_copy(tmp_path):
 
 def test_unknown_robot(tmp_path):
     out = tmp_path / "runs"
-    proc = run_cli("run", "--stages", "model", "--set", "robot=does_not_exist", "--out", str(out))
+    proc = run_cli("run", "--set", "robot=does_not_exist", "--out", str(out))
     assert_one_line_error(proc, out, "--set", "robot", "does_not_exist")
 
 

@@ -29,6 +29,9 @@ import pinocchio as pin
 
 from pipeline.robot.collision import segment_distances
 
+#: the beam is checked up to this distance before the reflector (as pipeline.robot.sensors does)
+BEAM_END_CLEARANCE_M = 0.02
+
 
 @dataclass
 class Chain:
@@ -193,11 +196,14 @@ def _visibility_ok(chain: Chain, kin: Kinematics, seg: np.ndarray, margins: Filt
     ok = cosang >= np.cos(max(chain.max_incidence_rad - margins.incidence_rad, 0.0))
     idx = np.flatnonzero(ok)
     if idx.size:
-        p0 = kin.p_reflector[idx]
+        # like the sensor: the beam from the tracker to a point BEAM_END_CLEARANCE_M before the reflector
+        p0 = kin.p_reflector[idx] + BEAM_END_CLEARANCE_M * (beam[idx] / dist[idx, None])
         p1 = np.broadcast_to(chain.tracker_t, p0.shape)
         for c in range(seg.shape[1]):
             d = segment_distances(p0, p1, seg[idx, c, 0], seg[idx, c, 1])
-            bad = d - chain.capsule_r[c] < margins.beam_m
+            # the reflector's own link: rigid, known geometry, so no margin
+            margin = 0.0 if chain.capsule_joint[c] == chain.nq else margins.beam_m
+            bad = d - chain.capsule_r[c] < margin
             ok[idx[bad]] = False
     return ok
 
@@ -303,17 +309,20 @@ def filter_grid(chain: Chain, n_per_axis: int | list[int] = 13, margins: FilterM
 
 
 def random_candidates(chain: Chain, n: int, rng: np.random.Generator, margins: FilterMargins | None = None,
-                      max_draws: int = 50) -> tuple[np.ndarray, dict]:
+                      max_draws: int = 50, visibility: bool = True) -> tuple[np.ndarray, dict]:
     """``n`` feasible uniformly random configurations (drawn in batches until enough)."""
     out, counts = [], {"total": 0, "limits": 0, "collision": 0, "visibility": 0, "feasible": 0}
     have = 0
+    rate = 0.01
     for _ in range(max_draws):
-        Q = rng.uniform(chain.lower, chain.upper, size=(max(4 * (n - have), 1000), chain.nq))
-        mask, c = filter_configurations(chain, Q, margins)
+        size = int(min(max(1.3 * (n - have) / rate, 2000), 400_000))
+        Q = rng.uniform(chain.lower, chain.upper, size=(size, chain.nq))
+        mask, c = filter_configurations(chain, Q, margins, visibility=visibility)
         for k in counts:
             counts[k] += c.get(k, 0)
         out.append(Q[mask])
         have += int(mask.sum())
+        rate = max(counts["feasible"] / max(counts["total"], 1), 1e-4)
         if have >= n:
             break
     Qf = np.concatenate(out)[:n]
@@ -384,7 +393,7 @@ class CandidateSet:
     Y: np.ndarray            # (N,3) predicted tracker-frame reflector positions (nominal)
     sigma_m: np.ndarray      # (N,)
     G: np.ndarray            # (N,3,p) whitened Jacobian blocks (J / sigma)
-    columns: np.ndarray      # identifiable columns in the full parameter vector
+    basis: np.ndarray        # (n_full, p) identifiable parameter basis
     counts: dict = field(default_factory=dict)
     grid_index: np.ndarray | None = None
 
@@ -392,16 +401,16 @@ class CandidateSet:
         return len(self.Q)
 
 
-def build_candidate_set(chain: Chain, Q: np.ndarray, columns: np.ndarray, T0: pin.SE3, counts: dict | None = None,
+def build_candidate_set(chain: Chain, Q: np.ndarray, basis: np.ndarray, T0: pin.SE3, counts: dict | None = None,
                         grid_index: np.ndarray | None = None, dtype=np.float64) -> CandidateSet:
-    """Whitened Jacobian blocks of the identifiable columns for feasible configurations ``Q``."""
-    columns = np.asarray(columns)
+    """Whitened Jacobian blocks ``J P / sigma`` (identifiable basis P) for feasible configurations."""
+    P = np.asarray(basis, float)
     N = len(Q)
-    G = np.empty((N, 3, columns.size), dtype)
+    G = np.empty((N, 3, P.shape[1]), dtype)
     Y = np.empty((N, 3))
     for s in range(0, N, 50_000):
         y, J = nominal_jacobian(chain, Q[s : s + 50_000], T0)
         Y[s : s + len(y)] = y
         sig = noise_sigma(chain, y)
-        G[s : s + len(y)] = J[:, :, columns] / sig[:, None, None]
-    return CandidateSet(np.asarray(Q, float), Y, noise_sigma(chain, Y), G, columns, counts or {}, grid_index)
+        G[s : s + len(y)] = (J @ P) / sig[:, None, None]
+    return CandidateSet(np.asarray(Q, float), Y, noise_sigma(chain, Y), G, P, counts or {}, grid_index)

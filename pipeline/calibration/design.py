@@ -192,7 +192,7 @@ class _State:
                 out[s : s + c.size] = ix.scores_of_matrices(self.spec, Ms, self.n + 1)
         return out
 
-    def _bound_and_prune(self, cand: np.ndarray, k_sub: int = 4, chunk: int = 64) -> tuple[int, float]:
+    def _bound_and_prune(self, cand: np.ndarray, k_sub: int = 4, chunk: int = 16) -> tuple[int, float]:
         ev, V = np.linalg.eigh(self.M)
         k = min(k_sub, self.p)
         Vk = V[:, :k]

@@ -98,20 +98,21 @@ class MeasurementModel:
         return out
 
     def jacobian(self, Q: np.ndarray, x: np.ndarray, T0: pin.SE3,
-                 columns: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Predictions ``(N, 3)`` and Jacobian blocks ``(N, 3, n_cols)`` wrt ``x[columns]``."""
+                 basis: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Predictions ``(N, 3)`` and Jacobian blocks ``(N, 3, p)`` wrt ``theta`` where
+        ``x = x_current + basis @ theta`` (``basis`` (n, p); None: all parameters)."""
         Q = np.atleast_2d(np.asarray(Q, float))
         t0 = se3_to_vector(T0)
-        cols = np.arange(self.n) if columns is None else np.asarray(columns)
+        P = np.eye(self.n) if basis is None else np.asarray(basis, float)
         Y = np.empty((len(Q), 3))
-        J = np.empty((len(Q), 3, cols.size))
+        J = np.empty((len(Q), 3, P.shape[1]))
         for s in range(0, len(Q), self.chunk):
             Qc = Q[s : s + self.chunk]
             n = len(Qc)
             y, jac = self._mapped("hj", n)(Qc.T, x, t0)
             Y[s : s + n] = np.asarray(y).T
             jac = np.asarray(jac).reshape(3, n, self.n).transpose(1, 0, 2)  # hcat of (3 x n_x) blocks
-            J[s : s + n] = jac[:, :, cols]
+            J[s : s + n] = jac @ P
         return Y, J
 
     def base_positions(self, Q: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -261,6 +262,13 @@ def identifiability(J: np.ndarray, names: list[str], rel_tol: float = 1e-7,
             for a in range(len(kept_sorted)) for b in range(a + 1, len(kept_sorted)) if abs(rho[a, b]) > 0.95]
     return IdentifiabilityReport(list(names), kept_sorted, s, rank, [names[i] for i in zero_cols],
                                  combined, null_space, pairs, high)
+
+
+def parameter_basis(report: IdentifiabilityReport, n_full: int, model_basis: np.ndarray | None = None
+                    ) -> np.ndarray:
+    """``P`` (n_full, p) with ``x = P theta`` for the identifiable parameters ``theta``."""
+    B = np.eye(n_full) if model_basis is None else np.asarray(model_basis, float)
+    return B[:, report.identifiable]
 
 
 def random_configurations(robot, n: int, rng: np.random.Generator) -> np.ndarray:

@@ -13,8 +13,8 @@ FEEDFORWARD_VARIANTS = ("none", "gravity", "full", "full_friction")
 class IsoPathConfig:
     """EN ISO 9283 test path (DESIGN.md): cube of edge L, centre, diagonal plane, speeds."""
 
-    edge_m: float = 0.6
-    centre_m: list[float] = field(default_factory=lambda: [1.05, 0.0, 0.85])
+    edge_m: float = 0.5
+    centre_m: list[float] = field(default_factory=lambda: [0.9, 0.0, 0.3])
     plane: str = "diagonal_x"          # diagonal_x | diagonal_y | horizontal
     tool_down: bool = True             # TCP z axis pointing down (else: along the path normal)
     speed_m_s: float = 1.0
@@ -58,9 +58,12 @@ class ControlConfig:
     saturation_ratio: float = 1.0               # |tau_cmd| / tau_max above this is saturation
     variants: list[str] = field(default_factory=lambda: list(FEEDFORWARD_VARIANTS))
     compare_nominal_feedforward: bool = True    # also run full_friction from the nominal model
-    ik_tolerance_m: float = 1e-7
+    ik_tolerance_m: float = 1e-9
+    #: cold-start seeds (deg) for the IK of the first path point, tried in order
+    ik_seeds_deg: list[list[float]] = field(default_factory=lambda: [[0.0, 17.0, 86.0, 0.0, 75.0, 0.0],
+                                                                      [0.0, 30.0, 70.0, 0.0, 80.0, 0.0]])
     iso: IsoPathConfig = field(default_factory=IsoPathConfig)
-    benchmark_python_seconds: float = 0.0       # >0: time the plain-Python loop for this simulated time
+    benchmark_python_seconds: float = 0.5       # >0: time the plain-Python loop for this simulated time
 
     def __post_init__(self) -> None:
         if isinstance(self.iso, dict):

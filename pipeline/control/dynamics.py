@@ -166,11 +166,12 @@ def aba_sx(q: ca.SX, v: ca.SX, tau: ca.SX, p: ca.SX, s: ChainStructure) -> ca.SX
         u[i] = tau[i] - ca.dot(S[i], pA[i])
         par = s.parents[i] - 1
         if par >= 0:
-            Ia = IA[i] - (U[i] @ U[i].T) / D[i]
-            pa = pA[i] + Ia @ c[i] + U[i] * (u[i] / D[i])
-            X = _motion_parent_to_child(R[i], t[i])
-            IA[par] = IA[par] + X.T @ Ia @ X
-            pA[par] = pA[par] + X.T @ pa
+            inv_d = 1.0 / D[i]
+            Ud = U[i] * inv_d
+            Ia = _sym(lambda r, c_, Ud=Ud, Ui=U[i], IAi=IA[i]: IAi[r, c_] - Ud[r] * Ui[c_])
+            pa = pA[i] + Ia @ c[i] + Ud * u[i]
+            IA[par] = IA[par] + _inertia_to_parent(Ia, R[i], t[i])
+            pA[par] = pA[par] + _force_to_parent(R[i], t[i], pa)
     a_prev = {-1: ca.vertcat(-g, ca.DM.zeros(3))}
     qdd = []
     for i in range(n):  # pass 3: accelerations
@@ -186,10 +187,54 @@ def aba_sx(q: ca.SX, v: ca.SX, tau: ca.SX, p: ca.SX, s: ChainStructure) -> ca.SX
     return ca.vertcat(*qdd)
 
 
-def _motion_parent_to_child(R: ca.SX, t: ca.SX) -> ca.SX:
-    """6x6 action of the inverse placement on motion vectors [v; w] (parent coords -> child)."""
-    Rt = R.T
-    return ca.vertcat(ca.horzcat(Rt, -Rt @ _skew(t)), ca.horzcat(ca.SX(3, 3), Rt))
+def _sym(entry) -> ca.SX:
+    """6x6 symmetric SX matrix from ``entry(r, c)`` evaluated for r <= c only."""
+    M = ca.SX(6, 6)
+    for r in range(6):
+        for c in range(r, 6):
+            M[r, c] = entry(r, c)
+            if c != r:
+                M[c, r] = M[r, c]
+    return M
+
+
+def _rot_sym(R: ca.SX, A: ca.SX) -> ca.SX:
+    """R A R^T for symmetric 3x3 A, upper triangle computed once."""
+    RA = R @ A
+    M = ca.SX(3, 3)
+    for r in range(3):
+        for c in range(r, 3):
+            M[r, c] = ca.dot(RA[r, :].T, R[c, :].T)
+            if c != r:
+                M[c, r] = M[r, c]
+    return M
+
+
+def _inertia_to_parent(Ia: ca.SX, R: ca.SX, t: ca.SX) -> ca.SX:
+    """X^T Ia X for the motion transform X parent -> child (rotation R child->parent, origin t).
+
+    With Ia = [[A, B], [B^T, C]] ([lin; ang]), A' = R A R^T, B' = R B R^T, C' = R C R^T, T = [t]x:
+    [[A', K], [K^T, C' - B'^T T + T K]] with K = B' - A' T.
+    """
+    A, B, C = Ia[:3, :3], Ia[:3, 3:], Ia[3:, 3:]
+    Ap, Cp = _rot_sym(R, A), _rot_sym(R, C)
+    Bp = R @ B @ R.T
+    T = _skew(t)
+    K = Bp - Ap @ T
+    BR = Cp - Bp.T @ T + T @ K
+    Mbr = ca.SX(3, 3)
+    for r in range(3):
+        for c in range(r, 3):
+            Mbr[r, c] = BR[r, c]
+            if c != r:
+                Mbr[c, r] = BR[r, c]
+    return ca.vertcat(ca.horzcat(Ap, K), ca.horzcat(K.T, Mbr))
+
+
+def _force_to_parent(R: ca.SX, t: ca.SX, f: ca.SX) -> ca.SX:
+    """Force [f; n] from child to parent coordinates: [R f; R n + t x R f]."""
+    fl = R @ f[:3]
+    return ca.vertcat(fl, R @ f[3:] + ca.cross(t, fl))
 
 
 def _apply_inverse(R: ca.SX, t: ca.SX, m: ca.SX) -> ca.SX:

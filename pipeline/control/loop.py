@@ -2,12 +2,13 @@
 
 One call of ``step`` covers one position-loop sample ``T_p`` (paper 004 §2.3: 400 µs)::
 
-    position loop (every T_p):  v_cmd = v_ff + Kp (q_d_fb - q_meas[k - d_m])
-    velocity loop (every T_v = T_p / n_vel, paper: 200 µs), per joint:
+    position loop (every T_p):  e_p = Kp (q_d_fb - q_meas[k - d_m])
+    velocity loop (every T_v = T_p / n_vel, paper: 200 µs), per joint, sub-sample j:
+        v_cmd   = v_ff[j] + e_p                                   velocity feedforward per sub-sample
         q_enc   = round((q + noise) / res) * res                  encoder: noise + quantisation
         v_hat  <- v_hat + alpha ((q_enc - q_enc_prev) / T_v - v_hat)   differenced, low-passed
         e_v     = v_cmd - v_hat ;  I <- clip(I + Ki T_v e_v, +-tau_max)
-        tau_cmd = tau_ff + Kv e_v + I                             ideal current loop
+        tau_cmd = tau_ff[j] + Kv e_v + I                          ideal current loop
     plant: n_sub semi-implicit Euler substeps of  qdd = ABA(q, v, sat(tau_cmd) - friction(v))
 
 ``q_d_fb`` is the setpoint aligned with the delayed measurement (the drive keeps the setpoint
@@ -21,6 +22,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import platform
 import subprocess
 import tempfile
 import threading
@@ -56,7 +58,7 @@ class LoopStructure:
 
     @property
     def n_input(self) -> int:
-        return self.nq * (3 + self.velocity_samples_per_position_sample)
+        return self.nq * (1 + 3 * self.velocity_samples_per_position_sample)
 
     @property
     def n_output(self) -> int:
@@ -68,7 +70,7 @@ class LoopStructure:
 
     def key(self) -> str:
         src = Path(__file__).read_bytes() + Path(dynamics.__file__).read_bytes()
-        text = repr(self) + ca.__version__ + hashlib.sha256(src).hexdigest()
+        text = repr(self) + ca.__version__ + hashlib.sha256(src).hexdigest() + " ".join(GCC_FLAGS) + platform.node()
         return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 
@@ -97,24 +99,26 @@ def build_step(ls: LoopStructure) -> ca.Function:
 
     q, v, integ, q_prev, v_hat = (x[i * n:(i + 1) * n] for i in range(5))
     buf = [x[(5 + i) * n:(6 + i) * n] for i in range(dm)]  # buf[0] oldest
-    q_d_fb, v_ff, tau_ff = u[:n], u[n:2 * n], u[2 * n:3 * n]
-    noise = [u[(3 + j) * n:(4 + j) * n] for j in range(nv_)]
+    q_d_fb = u[:n]
+    v_ff = [u[(1 + j) * n:(2 + j) * n] for j in range(nv_)]
+    tau_ff = [u[(1 + nv_ + j) * n:(2 + nv_ + j) * n] for j in range(nv_)]
+    noise = [u[(1 + 2 * nv_ + j) * n:(2 + 2 * nv_ + j) * n] for j in range(nv_)]
 
     def encoder(qq, nn):
         return ca.floor((qq + nn) / res + 0.5) * res
 
     q_enc0 = encoder(q, noise[0])
     q_fb = buf[0] if dm > 0 else q_enc0
-    v_cmd = v_ff + kp * (q_d_fb - q_fb)
+    e_p = kp * (q_d_fb - q_fb)
     tau_sum = ca.MX.zeros(n)
     ratio = ca.MX.zeros(n)
     for j in range(nv_):
         q_enc = q_enc0 if j == 0 else encoder(q, noise[j])
         v_hat = v_hat + alpha * ((q_enc - q_prev) / Tv - v_hat)
         q_prev = q_enc
-        e_v = v_cmd - v_hat
+        e_v = v_ff[j] + e_p - v_hat
         integ = ca.fmin(ca.fmax(integ + ki * Tv * e_v, -effort), effort)
-        tau_cmd = tau_ff + kv * e_v + integ
+        tau_cmd = tau_ff[j] + kv * e_v + integ
         tau_sum = tau_sum + tau_cmd
         ratio = ca.fmax(ratio, ca.fabs(tau_cmd) / effort)
         for _ in range(ns):
@@ -133,6 +137,7 @@ def unpack_output(Y: np.ndarray, n: int) -> dict[str, np.ndarray]:
     return {k: Y[:, i * n:(i + 1) * n] for i, k in enumerate(names)}
 
 
+GCC_FLAGS = ("-O3", "-march=native")  # the .so is built for this machine (host name in the cache key)
 _CACHE: dict[str, ca.Function] = {}
 _LOCK = threading.Lock()
 
@@ -159,7 +164,7 @@ def compiled_rollout(ls: LoopStructure) -> ca.Function:
                 cg.generate(tmp + os.sep)
                 c_file = Path(tmp) / f"roll_{key}.c"
                 tmp_so = Path(tmp) / so.name
-                proc = subprocess.run(["gcc", "-shared", "-fPIC", "-O2", str(c_file), "-o", str(tmp_so)],
+                proc = subprocess.run(["gcc", "-shared", "-fPIC", *GCC_FLAGS, str(c_file), "-o", str(tmp_so)],
                                       capture_output=True, text=True)
                 if proc.returncode != 0:
                     raise SolverError(str(c_file), "gcc", proc.stderr.strip()[-400:])
@@ -190,19 +195,19 @@ def python_rollout(ls: LoopStructure, model: pin.Model, p_dyn: np.ndarray, x0: n
     Y = np.empty((len(U), ls.n_output))
     for k, u in enumerate(U):
         q_start = q.copy()
-        noise = [u[(3 + j) * n:(4 + j) * n] for j in range(nv_)]
+        noise = [u[(1 + 2 * nv_ + j) * n:(2 + 2 * nv_ + j) * n] for j in range(nv_)]
         q_enc0 = np.floor((q + noise[0]) / res + 0.5) * res
         q_fb = buf[0] if dm > 0 else q_enc0
-        v_cmd = u[n:2 * n] + kp * (u[:n] - q_fb)
+        e_p = kp * (u[:n] - q_fb)
         tau_sum = np.zeros(n)
         ratio = np.zeros(n)
         for j in range(nv_):
             q_enc = q_enc0 if j == 0 else np.floor((q + noise[j]) / res + 0.5) * res
             v_hat = v_hat + alpha * ((q_enc - q_prev) / Tv - v_hat)
             q_prev = q_enc
-            e_v = v_cmd - v_hat
+            e_v = u[(1 + j) * n:(2 + j) * n] + e_p - v_hat
             integ = np.clip(integ + ki * Tv * e_v, -effort, effort)
-            tau_cmd = u[2 * n:3 * n] + kv * e_v + integ
+            tau_cmd = u[(1 + nv_ + j) * n:(2 + nv_ + j) * n] + kv * e_v + integ
             tau_sum += tau_cmd
             ratio = np.maximum(ratio, np.abs(tau_cmd) / effort)
             tau_sat = np.clip(tau_cmd, -effort, effort)

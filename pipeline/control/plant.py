@@ -34,6 +34,7 @@ class ServoRecord:
     torque_ratio: np.ndarray
     tcp_position_m: np.ndarray | None
     wall_time_s: float
+    cpu_time_s: float = 0.0
     extra: dict = field(default_factory=dict)
 
 
@@ -73,6 +74,12 @@ class Plant:
             q = q + h * v
         return q, v
 
+    def measure_tcp(self, Q: np.ndarray, frame: str = "tcp") -> np.ndarray:
+        """TCP positions (N, 3) of the robot standing at joint positions ``Q``, as an ideal laser
+        tracker registered to the base frame reads them (paper 004 §2.3.3 measures the TCP with a
+        Leica LTD600)."""
+        return self._model.positions(np.atleast_2d(Q), frame=frame)
+
     def read_encoders(self, q_true: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         noisy = q_true + self.encoder_noise_rad * rng.standard_normal(np.shape(q_true))
         return np.floor(noisy / self.encoder_resolution_rad + 0.5) * self.encoder_resolution_rad
@@ -95,8 +102,9 @@ class Plant:
                   measure_tcp: bool = True, tcp_frame: str = "tcp") -> ServoRecord:
         """Close the drives' loops around the robot for ``len(q_d_fb)`` position samples.
 
-        ``q_d_fb`` (N, nq): set point aligned with the delayed measurement; ``v_ff``, ``tau_ff``: the
-        velocity and torque feedforward as they reach the drive. Starts at rest at ``q0``.
+        ``q_d_fb`` (N, nq): set point aligned with the delayed measurement; ``v_ff``, ``tau_ff``
+        (N, velocity_samples * nq): velocity and torque feedforward for each velocity-loop sub-sample
+        as they reach the drive. Starts at rest at ``q0``.
         ``engine``: "compiled" (CasADi/gcc, cached) or "python" (plain loop with pin.aba).
         """
         n, N = self.nq, len(q_d_fb)
@@ -109,16 +117,16 @@ class Plant:
         q_enc0 = np.floor(q0 / self.encoder_resolution_rad + 0.5) * self.encoder_resolution_rad
         x0 = np.concatenate([q0, np.zeros(n), np.zeros(n), q_enc0, np.zeros(n),
                              np.tile(q_enc0, measurement_delay_samples)])
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.thread_time()
         if engine == "python":
             _, Y = loop.python_rollout(ls, self._model.model, self._p, x0, U, P, self._friction)
         elif engine == "compiled":
             roll = loop.compiled_rollout(ls)
-            t0 = time.perf_counter()  # compile/cache load is not part of the loop time
+            t0, c0 = time.perf_counter(), time.thread_time()  # compile/cache load is not loop time
             c = ls.chunk_samples
             n_chunks = -(-N // c)
             Upad = np.vstack([U, np.repeat(U[-1:], n_chunks * c - N, axis=0)])
-            Upad[N:, 3 * n:] = 0.0
+            Upad[N:, (1 + 2 * velocity_samples) * n:] = 0.0
             Ys = []
             x = x0
             for i in range(n_chunks):
@@ -129,8 +137,8 @@ class Plant:
             Y = np.vstack(Ys)[:N]
         else:
             raise ConfigError(None, "control.engine", f"unknown engine {engine!r} (compiled|python)")
-        wall = time.perf_counter() - t0
+        wall, cpu = time.perf_counter() - t0, time.thread_time() - c0
         out = loop.unpack_output(Y, n)
         tcp = self._model.positions(out["q_true"], frame=tcp_frame) if measure_tcp else None
-        return ServoRecord(out["q_meas"], out["v_est"], out["tau_cmd"], out["torque_ratio"], tcp, wall,
+        return ServoRecord(out["q_meas"], out["v_est"], out["tau_cmd"], out["torque_ratio"], tcp, wall, cpu,
                            {"substeps_per_velocity_sample": ls.substeps_per_velocity_sample})

@@ -41,6 +41,7 @@ class ClosedLoopResult:
     wall_time_s: float = 0.0
     gains: ServoGains | None = None
     torque_ratio: np.ndarray | None = None     # (N, nq) per-sample max |tau_cmd| / tau_max
+    realtime_factor_cpu: float = 0.0           # simulated time / CPU time of the loop thread
 
 
 def feedforward_torque(model, q_d: np.ndarray, v_d: np.ndarray, a_d: np.ndarray, variant: str) -> np.ndarray:
@@ -59,7 +60,7 @@ def feedforward_torque(model, q_d: np.ndarray, v_d: np.ndarray, a_d: np.ndarray,
         else:
             out[k] = pin.rnea(model.model, data, q_d[k], v_d[k], a_d[k])
     if variant == "full_friction":
-        out += np.array([model.friction_torque(v) for v in v_d])
+        out += model.friction_torque(v_d)
     return out
 
 
@@ -88,6 +89,11 @@ def drive_inputs(q_d, v_d, tau_ff, setpoint_delay: int, measurement_delay: int, 
     idx = np.clip(k - shift, 0, N - 1)
     idx_fb = np.clip(k - shift - measurement_delay, 0, N - 1)
     return q_d[idx_fb], v_d[idx], tau_ff[idx]
+
+
+def _interp_rows(t_new: np.ndarray, t: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """Linear interpolation of every column of X (held constant outside t)."""
+    return np.stack([np.interp(t_new, t, X[:, j]) for j in range(X.shape[1])], axis=1)
 
 
 def servo_gains(model, q_ref: np.ndarray, config: ControlConfig) -> ServoGains:
@@ -123,21 +129,20 @@ def simulate_joint_trajectory(real, model, t_s, q_d, v_d, a_d, config: ControlCo
     if gains is None:
         gains = servo_gains(model, np.mean(q_d, axis=0), config)
     d_s, d_m = config.setpoint_delay_samples, config.measurement_delay_samples
-    Tv = dt / config.velocity_samples_per_position_sample
+    nv = config.velocity_samples_per_position_sample
+    Tv = dt / nv
     alpha = filter_alpha(config.velocity_filter_hz, Tv)
-    # the torque is held over a sample: use the mean of its end points (ZOH centred on the interval)
-    tau_hold = tau_ff.copy()
-    tau_hold[:-1] = 0.5 * (tau_ff[:-1] + tau_ff[1:])
-    V_ff = V
-    if config.compensate_velocity_estimate_delay:
-        # v_hat is the backward difference (delay T_v/2) low-passed (delay (1-alpha)/alpha T_v):
-        # compare it with the velocity set point delayed alike (the drive knows its own filter)
-        delay_s = Tv / 2 + (1 - alpha) / alpha * Tv
-        tt = dt * np.arange(len(V))
-        V_ff = np.stack([np.interp(tt - delay_s, tt, V[:, j]) for j in range(V.shape[1])], axis=1)
-    q_fb, v_ff, tau_drive = drive_inputs(Q, V_ff, tau_hold, d_s, d_m, config.advance_feedforward)
+    tt = dt * np.arange(len(Q))
+    # v_hat is the backward difference (delay T_v/2) low-passed (delay (1-alpha)/alpha T_v): the
+    # velocity set point of each sub-sample is delayed alike (the drive knows its own filter)
+    v_delay = Tv / 2 + (1 - alpha) / alpha * Tv if config.compensate_velocity_estimate_delay else 0.0
+    V_sub, T_sub = [], []
+    for j in range(nv):
+        V_sub.append(_interp_rows(tt + j * Tv - v_delay, tt, V))
+        T_sub.append(_interp_rows(tt + (j + 0.5) * Tv, tt, tau_ff))  # torque held over the sub-sample
+    q_fb, v_ff, tau_drive = drive_inputs(Q, np.hstack(V_sub), np.hstack(T_sub), d_s, d_m, config.advance_feedforward)
     plant = real.plant
-    rec = plant.run_servo(gains.as_dict(), dt, config.velocity_samples_per_position_sample, d_m, alpha,
+    rec = plant.run_servo(gains.as_dict(), dt, nv, d_m, alpha,
                           q_fb, v_ff, tau_drive, Q[0], rng, engine=config.engine,
                           chunk_samples=config.chunk_samples, tcp_frame=tcp_frame)
     s = slice(n_settle, None)
@@ -148,19 +153,30 @@ def simulate_joint_trajectory(real, model, t_s, q_d, v_d, a_d, config: ControlCo
         lag_error_rad=q_d - q_meas, max_torque_ratio=ratio.max(axis=0),
         realtime_factor=float(len(Q) * dt / max(rec.wall_time_s, 1e-12)),
         tcp_position_m=None if rec.tcp_position_m is None else rec.tcp_position_m[s],
-        wall_time_s=rec.wall_time_s, gains=gains, torque_ratio=ratio)
+        wall_time_s=rec.wall_time_s, gains=gains, torque_ratio=ratio,
+        realtime_factor_cpu=float(len(Q) * dt / max(rec.cpu_time_s, 1e-12)))
     check_saturation(result, config)
     return result
 
 
+def first_saturation(result: ClosedLoopResult, ratio_limit: float = 1.0) -> dict | None:
+    """Time, joint (1-based) and ratio of the first sample where |tau_cmd| > ratio_limit * tau_max."""
+    if result.torque_ratio is None:
+        return None
+    over = result.torque_ratio > ratio_limit
+    if not over.any():
+        return None
+    k, j = np.argwhere(over)[0]
+    return {"t_s": float(result.t_s[k]), "joint": int(j + 1), "ratio": float(result.torque_ratio[k, j]),
+            "max_ratio": float(result.max_torque_ratio[j])}
+
+
 def check_saturation(result: ClosedLoopResult, config: ControlConfig) -> None:
     """Raise InfeasibleError naming the first time and joint where |tau_cmd| > ratio * tau_max."""
-    if config.on_saturation != "error" or result.torque_ratio is None:
+    if config.on_saturation != "error":
         return
-    over = result.torque_ratio > config.saturation_ratio
-    if over.any():
-        k, j = np.argwhere(over)[0]
-        raise InfeasibleError(None, "control", f"torque saturation at t = {result.t_s[k]:.4f} s on joint {j + 1}: "
-                              f"|tau_cmd| = {result.torque_ratio[k, j]:.2f} x tau_max (max over the run "
-                              f"{result.max_torque_ratio[j]:.2f}); slow the trajectory down or set "
-                              "control.on_saturation = clip")
+    sat = first_saturation(result, config.saturation_ratio)
+    if sat is not None:
+        raise InfeasibleError(None, "control", f"torque saturation at t = {sat['t_s']:.4f} s on joint {sat['joint']}: "
+                              f"|tau_cmd| = {sat['ratio']:.2f} x tau_max (max over the run {sat['max_ratio']:.2f}); "
+                              "slow the trajectory down or set control.on_saturation = clip")

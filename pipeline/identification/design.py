@@ -216,35 +216,47 @@ def random_trajectory(
     ell = np.arange(1, L + 1)
     traj_t = np.arange(n_check) / (n_check * base_frequency_hz)
     bq, bv, ba = fourier_basis(traj_t, base_frequency_hz, L)
-    coef = np.zeros((nq, 2 * L + 1))
-    for i in range(nq):
-        c = np.concatenate([[0.0], rng.normal(size=L) / ell, rng.normal(size=L) / ell])
-        c = P @ c
-        c[0] = 0.0
-        qo, vo, ao = bq @ c, bv @ c, ba @ c
-        span = qo.max() - qo.min()
-        s = min(
-            (limits.upper_rad[i] - limits.lower_rad[i]) / max(span, 1e-12),
-            limits.velocity_rad_s[i] / max(np.abs(vo).max(), 1e-12),
-            limits.acceleration_rad_s2[i] / max(np.abs(ao).max(), 1e-12),
-        ) * rng.uniform(0.3, 1.0)
-        c = c * s
-        lo = limits.lower_rad[i] - (bq @ c).min()
-        hi = limits.upper_rad[i] - (bq @ c).max()
-        c[0] = rng.uniform(lo, hi) if hi > lo else 0.5 * (lo + hi)
-        coef[i] = c
-    traj = FourierTrajectory(coef, base_frequency_hz)
-    # torque: shrink the oscillation about the mean position until the nominal torque fits
-    for _ in range(30):
-        q, v, a = traj.evaluate(traj_t)
+    def torque_ratio(coef: np.ndarray) -> float:
+        q, v, a = (b @ coef.T for b in (bq, bv, ba))
         tau = np.array([robot.inverse_dynamics(*s) for s in zip(q, v, a, strict=True)])
-        ratio = np.max(np.abs(tau) / limits.effort_Nm)
-        if ratio <= 1.0:
-            break
-        coef = traj.coefficients.copy()
-        coef[:, 1:] *= 0.85
-        traj = FourierTrajectory(coef, base_frequency_hz)
-    return traj
+        return float(np.max(np.abs(tau) / limits.effort_Nm))
+
+    for _ in range(20):
+        coef = np.zeros((nq, 2 * L + 1))
+        for i in range(nq):
+            c = np.concatenate([[0.0], rng.normal(size=L) / ell, rng.normal(size=L) / ell])
+            c = P @ c
+            c[0] = 0.0
+            qo, vo, ao = bq @ c, bv @ c, ba @ c
+            span = qo.max() - qo.min()
+            s = min(
+                (limits.upper_rad[i] - limits.lower_rad[i]) / max(span, 1e-12),
+                limits.velocity_rad_s[i] / max(np.abs(vo).max(), 1e-12),
+                limits.acceleration_rad_s2[i] / max(np.abs(ao).max(), 1e-12),
+            ) * rng.uniform(0.3, 1.0)
+            c = c * s
+            lo = limits.lower_rad[i] - (bq @ c).min()
+            hi = limits.upper_rad[i] - (bq @ c).max()
+            c[0] = rng.uniform(lo, hi) if hi > lo else 0.5 * (lo + hi)
+            coef[i] = c
+        # torque: largest oscillation scale (bisection) about the mean position that fits
+        still = coef.copy()
+        still[:, 1:] = 0.0
+        if torque_ratio(still) > 0.9:
+            continue  # gravity alone is too close to the limit here: draw another centre
+        if torque_ratio(coef) > 1.0:
+            lo_s, hi_s = 0.0, 1.0
+            for _ in range(12):
+                mid = 0.5 * (lo_s + hi_s)
+                trial = coef.copy()
+                trial[:, 1:] *= mid
+                lo_s, hi_s = (mid, hi_s) if torque_ratio(trial) <= 1.0 else (lo_s, mid)
+            coef[:, 1:] *= 0.97 * lo_s
+        return FourierTrajectory(coef, base_frequency_hz)
+    raise InfeasibleError(
+        None, "identification.excitation", "no centre position with static torques below 90 % "
+        "of the (margin-scaled) limits found in 20 random draws"
+    )
 
 
 def random_feasible_trajectories(
@@ -312,7 +324,10 @@ def regressor_casadi(sym: Any, reg: RegressorModel, base: BaseParameters) -> ca.
 
 
 class ExcitationCriterion:
-    """Value and exact gradient of the excitation criterion over the Fourier coefficients."""
+    """Value and exact gradient of the excitation criterion.
+
+    Works on the sample states ``S`` (3 nq x N, column k = [q; v; a] at sample k) -- the NLP's
+    lifted variables -- or on Fourier coefficients through the basis (``*_coefficients``)."""
 
     def __init__(
         self,
@@ -332,25 +347,30 @@ class ExcitationCriterion:
         gbar = ca.SX.sym("gbar", nq, self.nb)
         yb = y_base(q, v, a)
         inner = ca.sum1(ca.sum2(yb * gbar))
-        vjp = ca.Function("vjp", [q, v, a, gbar], [ca.gradient(inner, ca.vertcat(q, v, a))])
-        self._y = y_base.map(self.n)
+        state = ca.vertcat(q, v, a)
+        y_s = ca.Function("y_s", [state], [yb])
+        vjp = ca.Function("vjp", [state, gbar], [ca.gradient(inner, state)])
+        self._y = y_s.map(self.n)
         self._vjp = vjp.map(self.n)
         self.n_evals = 0
 
-    def states(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def states(self, x: np.ndarray) -> np.ndarray:
+        """Fourier coefficients (flat, row-major (nq, 2L+1)) -> S (3 nq, N)."""
         c = np.asarray(x, float).reshape(self.nq, -1)
-        return self.bq @ c.T, self.bv @ c.T, self.ba @ c.T  # (N, nq)
+        return np.vstack([c @ self.bq.T, c @ self.bv.T, c @ self.ba.T])
 
-    def matrix(self, x: np.ndarray) -> np.ndarray:
-        q, v, a = self.states(x)
-        yb = np.asarray(self._y(q.T, v.T, a.T))  # (nq, N*nb), blocks per sample
+    def matrix_states(self, S: np.ndarray) -> np.ndarray:
+        yb = np.asarray(self._y(S))  # (nq, N*nb), blocks per sample
         return yb.reshape(self.nq, self.n, self.nb).transpose(1, 0, 2).reshape(-1, self.nb)
 
-    def value_and_gradient(self, x: np.ndarray, gradient: bool = True) -> tuple[float, np.ndarray | None]:
+    def matrix(self, x: np.ndarray) -> np.ndarray:
+        return self.matrix_states(self.states(x))
+
+    def value_and_gradient_states(
+        self, S: np.ndarray, gradient: bool = True
+    ) -> tuple[float, np.ndarray | None]:
         self.n_evals += 1
-        q, v, a = self.states(x)
-        yb = np.asarray(self._y(q.T, v.T, a.T))
-        W = yb.reshape(self.nq, self.n, self.nb).transpose(1, 0, 2).reshape(-1, self.nb)
+        W = self.matrix_states(S)
         G = W.T @ W
         lam, U = np.linalg.eigh(G)
         lam = np.maximum(lam, 1e-300)
@@ -364,9 +384,15 @@ class ExcitationCriterion:
             return f, None
         dW = 2.0 * W @ dG  # df/dW, (N*nq, nb)
         gbar = dW.reshape(self.n, self.nq, self.nb).transpose(1, 0, 2).reshape(self.nq, -1)
-        g = np.asarray(self._vjp(q.T, v.T, a.T, gbar))  # (3 nq, N)
-        gq, gv, ga = g[:self.nq].T, g[self.nq : 2 * self.nq].T, g[2 * self.nq :].T  # (N, nq)
-        grad = gq.T @ self.bq + gv.T @ self.bv + ga.T @ self.ba  # (nq, 2L+1)
+        return f, np.asarray(self._vjp(S, gbar))  # (3 nq, N)
+
+    def value_and_gradient(self, x: np.ndarray, gradient: bool = True) -> tuple[float, np.ndarray | None]:
+        """Criterion and gradient with respect to the Fourier coefficients."""
+        f, gs = self.value_and_gradient_states(self.states(x), gradient)
+        if gs is None:
+            return f, None
+        nq = self.nq
+        grad = gs[:nq] @ self.bq + gs[nq : 2 * nq] @ self.bv + gs[2 * nq :] @ self.ba
         return f, grad.ravel()
 
 
@@ -378,10 +404,10 @@ def condition_number(W: np.ndarray) -> float:
 class _Objective(ca.Callback):
     """CasADi callback wrapping :class:`ExcitationCriterion` (value + exact gradient)."""
 
-    def __init__(self, name: str, crit: ExcitationCriterion, nx: int) -> None:
+    def __init__(self, name: str, crit: ExcitationCriterion) -> None:
         ca.Callback.__init__(self)
         self.crit = crit
-        self.nx = nx
+        self.shape = (3 * crit.nq, crit.n)
         self._jac: _Gradient | None = None
         self.construct(name, {})
 
@@ -392,28 +418,28 @@ class _Objective(ca.Callback):
         return 1
 
     def get_sparsity_in(self, i: int) -> ca.Sparsity:
-        return ca.Sparsity.dense(self.nx, 1)
+        return ca.Sparsity.dense(*self.shape)
 
     def get_sparsity_out(self, i: int) -> ca.Sparsity:
         return ca.Sparsity.dense(1, 1)
 
     def eval(self, arg: list) -> list:
-        f, _ = self.crit.value_and_gradient(np.asarray(arg[0]).ravel(), gradient=False)
+        f, _ = self.crit.value_and_gradient_states(np.asarray(arg[0]), gradient=False)
         return [f]
 
     def has_jacobian(self) -> bool:
         return True
 
     def get_jacobian(self, name: str, inames: list, onames: list, opts: dict) -> ca.Function:
-        self._jac = _Gradient(name, self.crit, self.nx)
+        self._jac = _Gradient(name, self.crit)
         return self._jac
 
 
 class _Gradient(ca.Callback):
-    def __init__(self, name: str, crit: ExcitationCriterion, nx: int) -> None:
+    def __init__(self, name: str, crit: ExcitationCriterion) -> None:
         ca.Callback.__init__(self)
         self.crit = crit
-        self.nx = nx
+        self.shape = (3 * crit.nq, crit.n)
         self.construct(name, {})
 
     def get_n_in(self) -> int:
@@ -423,14 +449,14 @@ class _Gradient(ca.Callback):
         return 1
 
     def get_sparsity_in(self, i: int) -> ca.Sparsity:
-        return ca.Sparsity.dense(self.nx, 1) if i == 0 else ca.Sparsity.dense(1, 1)
+        return ca.Sparsity.dense(*self.shape) if i == 0 else ca.Sparsity.dense(1, 1)
 
     def get_sparsity_out(self, i: int) -> ca.Sparsity:
-        return ca.Sparsity.dense(1, self.nx)
+        return ca.Sparsity.dense(1, self.shape[0] * self.shape[1])
 
     def eval(self, arg: list) -> list:
-        _, g = self.crit.value_and_gradient(np.asarray(arg[0]).ravel())
-        return [ca.DM(g.reshape(1, -1))]
+        _, g = self.crit.value_and_gradient_states(np.asarray(arg[0]))
+        return [ca.DM(g.reshape(1, -1, order="F"))]
 
 
 # ------------------------------------------------------------------------------ optimisation
@@ -454,42 +480,145 @@ class ExcitationResult:
         return float(np.median(self.cond_random))
 
 
-def _nlp_constraints(
-    sym: Any,
+def _segment_distance_sx(p0: ca.SX, p1: ca.SX, q0: ca.SX, q1: ca.SX) -> ca.SX:
+    """Distance between segments p0p1 and q0q1 (Ericson, Real-Time Collision Detection §5.1.9,
+    the clamps as ``if_else``); same formula as ``pipeline.robot.collision.segment_distances``."""
+    d1, d2, r = p1 - p0, q1 - q0, p0 - q0
+    a, e, f = ca.dot(d1, d1), ca.dot(d2, d2), ca.dot(d2, r)
+    c, b = ca.dot(d1, r), ca.dot(d1, d2)
+    tiny = 1e-14
+    denom = a * e - b * b
+
+    def clip01(x: ca.SX) -> ca.SX:
+        return ca.fmin(ca.fmax(x, 0), 1)
+
+    s = ca.if_else(denom > tiny * ca.fmax(a * e, tiny), clip01((b * f - c * e) / (denom + tiny)), 0)
+    s = ca.if_else(a > tiny, s, 0)
+    t = ca.if_else(e > tiny, (b * s + f) / ca.if_else(e > tiny, e, 1), 0)
+    tc = clip01(t)
+    s_t = ca.if_else(a > tiny, clip01((tc * b - c) / ca.if_else(a > tiny, a, 1)), 0)
+    s = ca.if_else(t != tc, s_t, s)
+    diff = p0 + s * d1 - q0 - tc * d2
+    return ca.sqrt(ca.dot(diff, diff) + 1e-12)
+
+
+def capsule_clearance_function(robot: Any, sym: Any) -> ca.Function:
+    """``q -> (self-pair clearances, floor clearances of capsule end points)`` (SX), the symbolic
+    twin of ``RobotModel.capsule_clearances`` (end points are exact for a plane)."""
+    q = ca.SX.sym("q", robot.nq)
+    p_kin = ca.DM(sym.nominal_kinematic_parameters())
+    ends = []
+    for cap in robot.capsules:
+        pos, rot = sym.fk(cap.frame)(q, p_kin)
+        ends.append((pos + ca.mtimes(rot, ca.DM(cap.p0)), pos + ca.mtimes(rot, ca.DM(cap.p1))))
+    radii = [c.radius_m for c in robot.capsules]
+    pairs = [
+        _segment_distance_sx(*ends[i], *ends[k]) - radii[i] - radii[k]
+        for i, k in robot.self_collision_pairs
+    ]
+    fz = robot.spec.collision.floor_z_m
+    floor = []
+    for i in robot.floor_capsules:
+        floor += [ends[i][0][2] - radii[i] - fz, ends[i][1][2] - radii[i] - fz]
+    return ca.Function(
+        "capsule_clearance", [q], [ca.vertcat(*pairs) if pairs else ca.SX(0, 1),
+                                   ca.vertcat(*floor) if floor else ca.SX(0, 1)]
+    )
+
+
+def sample_constraint_function(robot: Any, sym: Any, limits: ExcitationLimits) -> ca.Function:
+    """Per-sample nonlinear constraints ``h([q; v; a])``: torque / limit (nominal model), TCP
+    height, capsule self clearances, capsule floor clearances (SX, expanded)."""
+    nq = robot.nq
+    s = ca.SX.sym("s", 3 * nq)
+    q, v, a = s[:nq], s[nq : 2 * nq], s[2 * nq :]
+    tau = sym.rnea(q, v, a, ca.DM(sym.nominal_dynamic_parameters()))
+    pos, _ = sym.fk(robot.frame_tcp)(q, ca.DM(sym.nominal_kinematic_parameters()))
+    pair, floor = capsule_clearance_function(robot, sym)(q)
+    h = ca.vertcat(tau / ca.DM(limits.effort_Nm), pos[2], pair, floor)
+    return ca.Function("sample_constraints", [s], [h]).expand()
+
+
+def _build_nlp(
     robot: Any,
-    x: ca.MX,
-    basis: tuple[np.ndarray, np.ndarray, np.ndarray],
+    sym: Any,
+    crit: ExcitationCriterion,
     limits: ExcitationLimits,
-    nq: int,
     harmonics: int,
-) -> tuple[ca.MX, np.ndarray, np.ndarray]:
-    bq, bv, ba = basis
-    n = bq.shape[0]
-    X = ca.reshape(x, 2 * harmonics + 1, nq).T  # (nq, 2L+1), row-major layout of x
-    Q = ca.mtimes(X, ca.DM(bq.T))  # (nq, N)
-    V = ca.mtimes(X, ca.DM(bv.T))
-    A = ca.mtimes(X, ca.DM(ba.T))
-    C = rest_constraint_matrix(harmonics)
-    rest = ca.mtimes(X, ca.DM(C.T))  # (nq, 2)
-    p_nom = sym.nominal_dynamic_parameters()
-    rnea = sym.rnea.map(n)
-    tau = rnea(Q, V, A, ca.repmat(ca.DM(p_nom), 1, n))
-    tau_ratio = tau / ca.repmat(ca.DM(limits.effort_Nm), 1, n)
-    fk = sym.fk(robot.frame_tcp).map(n)
-    pos, _ = fk(Q, ca.repmat(ca.DM(sym.nominal_kinematic_parameters()), 1, n))
-    tcp_z = pos[2, :]
-    mid = 0.5 * (limits.lower_rad + limits.upper_rad)
-    half = 0.5 * (limits.upper_rad - limits.lower_rad)
-    qn = (Q - ca.repmat(ca.DM(mid), 1, n)) / ca.repmat(ca.DM(half), 1, n)
-    vn = V / ca.repmat(ca.DM(limits.velocity_rad_s), 1, n)
-    an = A / ca.repmat(ca.DM(limits.acceleration_rad_s2), 1, n)
-    floor_z = robot.spec.collision.floor_z_m + limits.floor_clearance_m
-    g = ca.vertcat(ca.vec(rest), ca.vec(qn), ca.vec(vn), ca.vec(an), ca.vec(tau_ratio), ca.vec(tcp_z))
-    n_rest = 2 * nq
-    n_box = 4 * nq * n
-    lbg = np.concatenate([np.zeros(n_rest), -np.ones(n_box), np.full(n, floor_z)])
-    ubg = np.concatenate([np.zeros(n_rest), np.ones(n_box), np.full(n, np.inf)])
-    return g, lbg, ubg
+    max_iter: int,
+) -> tuple[Any, dict, _Objective]:
+    """Lifted NLP: variables ``z = [c (nq (2L+1)); S (3 nq x N)]`` with ``S = B(c)`` as linear
+    equalities, so every nonlinear constraint touches one sample (block-sparse Jacobian) and the
+    position/velocity/acceleration limits are simple bounds on ``S``."""
+    nq, n = robot.nq, crit.n
+    nc = nq * (2 * harmonics + 1)
+    c = ca.MX.sym("c", nc)
+    S = ca.MX.sym("S", 3 * nq, n)
+    X = ca.reshape(c, 2 * harmonics + 1, nq).T  # (nq, 2L+1), row-major layout of c
+    S_of_c = ca.vertcat(
+        ca.mtimes(X, ca.DM(crit.bq.T)), ca.mtimes(X, ca.DM(crit.bv.T)), ca.mtimes(X, ca.DM(crit.ba.T))
+    )
+    rest = ca.mtimes(X, ca.DM(rest_constraint_matrix(harmonics).T))
+    h = sample_constraint_function(robot, sym, limits).map(n)(S)
+    n_h = h.shape[0]
+    n_tau = nq
+    n_pair = len(robot.self_collision_pairs)
+    h_lo = np.concatenate([
+        -np.ones(n_tau),
+        [robot.spec.collision.floor_z_m + limits.floor_clearance_m],
+        np.full(n_pair, limits.self_clearance_m),
+        np.full(n_h - n_tau - 1 - n_pair, limits.floor_clearance_m),
+    ])
+    h_hi = np.concatenate([np.ones(n_tau), np.full(n_h - n_tau, np.inf)])
+    g = ca.vertcat(ca.vec(rest), ca.vec(S - S_of_c), ca.vec(h))
+    lbg = np.concatenate([np.zeros(2 * nq + 3 * nq * n), np.tile(h_lo, n)])
+    ubg = np.concatenate([np.zeros(2 * nq + 3 * nq * n), np.tile(h_hi, n)])
+    s_lo = np.concatenate([limits.lower_rad, -limits.velocity_rad_s, -limits.acceleration_rad_s2])
+    s_hi = np.concatenate([limits.upper_rad, limits.velocity_rad_s, limits.acceleration_rad_s2])
+    lbx = np.concatenate([np.full(nc, -np.inf), np.tile(s_lo, n)])
+    ubx = np.concatenate([np.full(nc, np.inf), np.tile(s_hi, n)])
+    obj = _Objective("excitation_objective", crit)
+    z = ca.vertcat(c, ca.vec(S))
+    solver = ca.nlpsol(
+        "excitation",
+        "ipopt",
+        {"x": z, "f": obj(S), "g": g},
+        {
+            "ipopt.print_level": 0,
+            "print_time": False,
+            "ipopt.sb": "yes",
+            "ipopt.max_iter": max_iter,
+            "ipopt.hessian_approximation": "limited-memory",
+            "ipopt.tol": 1e-6,
+            "ipopt.acceptable_tol": 1e-4,
+            "ipopt.acceptable_iter": 5,
+        },
+    )
+    bounds = {"lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg}
+    return solver, bounds, obj
+
+
+def shrink_to_feasible(
+    robot: Any, traj: FourierTrajectory, limits: ExcitationLimits, n_check: int
+) -> tuple[FourierTrajectory, FeasibilityReport]:
+    """Scale the oscillation about the mean (keeps rest-to-rest) until the fine-grid check
+    passes: IPOPT may stop at its iteration limit on a slightly infeasible iterate, and the NLP
+    grid does not see what happens between its samples."""
+    report = check_trajectory(robot, traj, limits, n_check)
+    scale = 1.0
+    for _ in range(25):
+        if report.feasible:
+            break
+        scale *= 0.97
+        coef = traj.coefficients.copy()
+        coef[:, 1:] *= scale
+        mid = 0.5 * (limits.lower_rad + limits.upper_rad)
+        coef[:, 0] = mid + scale * (traj.coefficients[:, 0] - mid)
+        trial = FourierTrajectory(coef, traj.base_frequency_hz)
+        report = check_trajectory(robot, trial, limits, n_check)
+        if report.feasible:
+            return trial, report
+    return traj, report
 
 
 def optimize_excitation(
@@ -520,54 +649,35 @@ def optimize_excitation(
     basis = fourier_basis(t, base_frequency_hz, L)
     y_base = regressor_casadi(sym, reg, base)
     crit = ExcitationCriterion(y_base, basis, nq, criterion)
-    nx = nq * (2 * L + 1)
 
     randoms = random_feasible_trajectories(
         robot, limits, L, base_frequency_hz, max(n_random, n_starts), rng, n_check=n_check // 2
     )
-    # the baseline is scored on the same criterion grid as the optimum
+    # the baseline is scored on the same sample grid as the optimum
     cond_random = [condition_number(crit.matrix(tr.coefficients.ravel())) for tr in randoms]
     order = np.argsort(cond_random)
     starts = [randoms[i] for i in order[:n_starts]]
 
-    x = ca.MX.sym("x", nx)
-    g, lbg, ubg = _nlp_constraints(sym, robot, x, basis, limits, nq, L)
-    obj = _Objective("excitation_objective", crit, nx)
-    solver = ca.nlpsol(
-        "excitation",
-        "ipopt",
-        {"x": x, "f": obj(x), "g": g},
-        {
-            "ipopt.print_level": 0,
-            "print_time": False,
-            "ipopt.sb": "yes",
-            "ipopt.max_iter": max_iter,
-            "ipopt.hessian_approximation": "limited-memory",
-            "ipopt.tol": 1e-6,
-            "ipopt.acceptable_tol": 1e-4,
-            "ipopt.acceptable_iter": 5,
-        },
-    )
+    solver, bounds, _obj = _build_nlp(robot, sym, crit, limits, L, max_iter)
     best: tuple[float, FourierTrajectory, FeasibilityReport] | None = None
     histories, start_results, cond_starts = [], [], []
-    iterable = range(len(starts))
+    iterable: Any = range(len(starts))
     if progress is not None:
         iterable = progress.track(iterable, "excitation starts")
+    nc = nq * (2 * L + 1)
     for k in iterable:
         x0 = starts[k].coefficients.ravel()
+        z0 = np.concatenate([x0, crit.states(x0).ravel(order="F")])
         cond0 = condition_number(crit.matrix(x0))
         cond_starts.append(cond0)
-        sol = solver(x0=x0, lbg=lbg, ubg=ubg)
+        sol = solver(x0=z0, **bounds)
         st = solver.stats()
-        xk = np.asarray(sol["x"]).ravel()
+        xk = np.asarray(sol["x"]).ravel()[:nc]
         traj = FourierTrajectory(xk.reshape(nq, 2 * L + 1), base_frequency_hz)
-        feas = check_trajectory(robot, traj, limits, n_check)
-        condk = condition_number(crit.matrix(xk))
+        traj, feas = shrink_to_feasible(robot, traj, limits, n_check)
+        condk = condition_number(crit.matrix(traj.coefficients.ravel()))
         objs = list(st.get("iterations", {}).get("obj", []))
-        if criterion == "cond":
-            hist = [float(np.exp(0.5 * o)) for o in objs]
-        else:
-            hist = []
+        hist = [float(np.exp(0.5 * o)) for o in objs] if criterion == "cond" else []
         histories.append(hist)
         start_results.append(
             {
@@ -589,7 +699,7 @@ def optimize_excitation(
     return ExcitationResult(
         trajectory=best[1],
         cond_optimized=float(best[0]),
-        cond_random=[float(c) for c in cond_random[: max(n_random, 1)]],
+        cond_random=[float(c) for c in cond_random],
         cond_starts=cond_starts,
         cond_history=histories,
         start_results=start_results,

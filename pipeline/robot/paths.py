@@ -244,3 +244,29 @@ def ik_track(robot, poses: list[pin.SE3], q0: np.ndarray, frame: str = "tcp", to
 def joint_path(robot, path: CartesianPath, n: int, q0: np.ndarray, frame: str = "tcp") -> np.ndarray:
     """(n, nq) joint positions along ``path`` sampled equally in arc length (IK warm-started)."""
     return ik_track(robot, path.sample(n), q0, frame)
+
+
+def start_configuration(robot, pose: pin.SE3, seeds, frame: str = "tcp", tolerance_m: float = 1e-10) -> np.ndarray:
+    """IK from a cold start: damped Newton with step limiting from each seed; the first within limits.
+
+    Raises InfeasibleError naming the point if no seed converges.
+    """
+    model = robot.model
+    data = model.createData()
+    fid = model.getFrameId(frame)
+    lo, hi = robot.limits.lower_rad, robot.limits.upper_rad
+    for seed in np.atleast_2d(seeds):
+        q = np.array(seed, float)
+        for _ in range(500):
+            pin.framesForwardKinematics(model, data, q)
+            cur = data.oMf[fid]
+            e = np.concatenate([pose.translation - cur.translation, pin.log3(pose.rotation @ cur.rotation.T)])
+            if np.linalg.norm(e) < tolerance_m:
+                break
+            J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
+            dq = J.T @ np.linalg.solve(J @ J.T + 1e-6 * np.eye(6), e)
+            q = q + dq * min(1.0, 0.3 / max(np.abs(dq).max(), 1e-12))
+        if np.linalg.norm(e) < tolerance_m * 1e3 and np.all(q >= lo) and np.all(q <= hi):
+            return q
+    raise InfeasibleError(None, "ik", f"start point {np.array2string(pose.translation, precision=4)} m "
+                          "not reachable from the seed configurations")

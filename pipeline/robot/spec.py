@@ -100,7 +100,7 @@ class _Reader:
         self.path, self.data, self.prefix = path, data, prefix
 
     def error(self, key: str, problem: str) -> RobotFileError:
-        return RobotFileError(self.path.name if self.path else None, f"{self.prefix}{key}", problem)
+        return RobotFileError(self.path, f"{self.prefix}{key}", problem)
 
     def check_keys(self, allowed: set[str], required: set[str] = frozenset()) -> None:
         for key in self.data:
@@ -175,9 +175,9 @@ def load_robot_spec(path: Path, nq: int | None = None) -> RobotSpec:
     try:
         data = yaml.safe_load(path.read_text())
     except yaml.YAMLError as exc:
-        raise RobotFileError(path.name, "yaml", f"not valid YAML ({exc})".replace("\n", " ")) from None
+        raise RobotFileError(path, "yaml", f"not valid YAML ({exc})".replace("\n", " ")) from None
     if not isinstance(data, dict):
-        raise RobotFileError(path.name, "top level", "expected a mapping")
+        raise RobotFileError(path, "top level", "expected a mapping")
     top = _Reader(path, data)
     top.check_keys(_TOP_KEYS, _REQUIRED_TOP)
 

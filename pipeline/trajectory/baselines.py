@@ -91,9 +91,8 @@ class RuckigResult:
     info: dict = field(default_factory=dict)
 
 
-def _ruckig_sample(q0: np.ndarray, q1: np.ndarray, vmax: np.ndarray, amax: np.ndarray,
-                   jmax: np.ndarray, dt_s: float) -> JointTrajectory | None:
-    from ruckig import InputParameter, Result, Ruckig, Trajectory
+def _ruckig_input(q0, q1, vmax, amax, jmax, amin=None):
+    from ruckig import InputParameter
 
     n = len(q0)
     inp = InputParameter(n)
@@ -101,8 +100,18 @@ def _ruckig_sample(q0: np.ndarray, q1: np.ndarray, vmax: np.ndarray, amax: np.nd
     inp.current_velocity = inp.current_acceleration = [0.0] * n
     inp.target_velocity = inp.target_acceleration = [0.0] * n
     inp.max_velocity, inp.max_acceleration, inp.max_jerk = list(vmax), list(amax), list(jmax)
+    if amin is not None:
+        inp.min_acceleration = list(-np.asarray(amin, float))
+    return inp
+
+
+def _ruckig_sample(q0: np.ndarray, q1: np.ndarray, vmax: np.ndarray, amax: np.ndarray,
+                   jmax: np.ndarray, dt_s: float, amin: np.ndarray | None = None) -> JointTrajectory | None:
+    from ruckig import Result, Ruckig, Trajectory
+
+    n = len(q0)
     traj = Trajectory(n)
-    res = Ruckig(n).calculate(inp, traj)
+    res = Ruckig(n).calculate(_ruckig_input(q0, q1, vmax, amax, jmax, amin), traj)
     if res not in (Result.Working, Result.Finished):
         return None
     T = traj.duration
@@ -117,50 +126,96 @@ def _ruckig_sample(q0: np.ndarray, q1: np.ndarray, vmax: np.ndarray, amax: np.nd
 
 
 def ruckig_torque_feasible(pm: PlanningModel, q0: np.ndarray, q1: np.ndarray, check_dt_s: float = 5e-4,
-                           jerk_ratios_1_s: tuple[float, ...] = (10.0, 20.0, 40.0, 80.0),
-                           bisection_steps: int = 18, tol: float = 0.0) -> RuckigResult:
+                           jerk_ratios_1_s: tuple[float, ...] = (10.0, 25.0, 60.0),
+                           bisection_steps: int = 12, joint_rounds: int = 6, tol: float = 0.0) -> RuckigResult:
     """Fastest ruckig move whose full-model torques stay within limits (max ratio <= 1 + tol).
 
-    Reference accelerations ``a_ref_i = tau_max_i / M_ii(q0)`` are scaled by ``alpha`` (bisection)
-    and jerks set to ``ratio * alpha * a_ref``; velocities are the joint speed limits.
+    The kinematic limits searched: per joint a maximum and a (separate) minimum acceleration
+    ``alpha_i^± a_ref_i`` (``a_ref_i = tau_max_i / M_ii(q0)``; separate signs let the
+    baseline use gravity), jerks ``ratio * max(alpha^±) a_ref``, velocities at the joint speed
+    limits. First a common ``alpha`` by bisection, then ``joint_rounds`` rounds in which the joint
+    that sets the duration (largest independent minimum duration) gets each of its two factors
+    raised by bisection while the move stays torque-feasible. Repeated for several
+    jerk/acceleration ratios; the shortest feasible move wins.
     """
     t0 = time.perf_counter()
     a_ref = pm.effort_Nm / np.maximum(pm.mass_diagonal(q0), 1e-9)
     best: RuckigResult | None = None
     evals = 0
-    for ratio in jerk_ratios_1_s:
-        def feasible(alpha: float):
-            nonlocal evals
-            evals += 1
-            tr = _ruckig_sample(q0, q1, pm.velocity_rad_s, alpha * a_ref, ratio * alpha * a_ref, check_dt_s)
-            if tr is None:
-                return None, np.inf
-            chk = check_trajectory(pm, tr)
-            return tr, chk.max_torque_ratio
-        lo, hi = 0.0, 1.0
-        tr_hi, r_hi = feasible(hi)
-        while r_hi <= 1.0 + tol and hi < 1e3:
-            lo, hi = hi, 2 * hi
-            tr_hi, r_hi = feasible(hi)
+
+    def limits(al: np.ndarray, ratio: float):
+        ap, am = al[: pm.nq] * a_ref, al[pm.nq:] * a_ref
+        return ap, am, ratio * np.maximum(ap, am)
+
+    def run(al: np.ndarray, ratio: float):
+        nonlocal evals
+        evals += 1
+        ap, am, jm = limits(al, ratio)
+        tr = _ruckig_sample(q0, q1, pm.velocity_rad_s, ap, jm, check_dt_s, amin=am)
+        if tr is None:
+            return None, np.inf
+        return tr, check_trajectory(pm, tr).max_torque_ratio
+
+    def bisect(make, lo: float, hi: float):
+        """Largest factor in [lo, hi] that is feasible, given feasible(lo) (or lo == 0)."""
         good = None
+        tr_hi, r_hi = make(hi)
+        while r_hi <= 1.0 + tol and hi < 1e4:
+            lo, good, hi = hi, (tr_hi, r_hi), 2 * hi
+            tr_hi, r_hi = make(hi)
         for _ in range(bisection_steps):
             mid = 0.5 * (lo + hi) if lo > 0 else hi / 4
-            tr, r = feasible(mid)
+            tr, r = make(mid)
             if r <= 1.0 + tol:
                 lo, good = mid, (tr, r)
             else:
                 hi = mid
-            if lo > 0 and (hi - lo) / hi < 1e-4:
+            if lo > 0 and (hi - lo) / hi < 2e-3:
                 break
+        return lo, good
+
+    for ratio in jerk_ratios_1_s:
+        scale, good = bisect(lambda a, ratio=ratio: run(np.full(2 * pm.nq, a), ratio), 0.0, 1.0)
         if good is None:
             continue
+        alpha = np.full(2 * pm.nq, scale)
+        for _ in range(joint_rounds):
+            ap, am, jm = limits(alpha, ratio)
+            durations = _independent_durations(q0, q1, pm.velocity_rad_s, ap, jm, am)
+            j = int(np.argmax(durations))
+            improved = False
+            for idx in (j, j + pm.nq):
+                def make(f, idx=idx, alpha=alpha, ratio=ratio):
+                    al = alpha.copy()
+                    al[idx] = f
+                    return run(al, ratio)
+                f_new, g_new = bisect(make, alpha[idx], alpha[idx] * 1.5)
+                if g_new is not None and f_new > alpha[idx] * (1 + 2e-3) \
+                        and g_new[0].duration_s < good[0].duration_s * (1 - 1e-5):
+                    alpha[idx] = f_new
+                    good = g_new
+                    improved = True
+            if not improved:
+                break
         tr, r = good
         if best is None or tr.duration_s < best.duration_s:
-            best = RuckigResult(tr, tr.duration_s, lo, ratio, r, 0.0, 0)
+            ap, am, jm = limits(alpha, ratio)
+            best = RuckigResult(tr, tr.duration_s, float(np.min(alpha)), ratio, r, 0.0, 0,
+                                info={"max_accel_rad_s2": ap.tolist(), "min_accel_rad_s2": (-am).tolist(),
+                                      "jerk_rad_s3": jm.tolist()})
     if best is None:
         raise InfeasibleError(None, "ptp ruckig baseline", "no torque-feasible kinematic limits found "
                               "(the static torques may exceed the limits)")
     best.search_time_s = time.perf_counter() - t0
     best.evaluations = evals
-    best.trajectory.info.update({"accel_scale": best.accel_scale, "jerk_ratio_1_s": best.jerk_ratio_1_s})
+    best.trajectory.info.update({"jerk_ratio_1_s": best.jerk_ratio_1_s, **best.info})
     return best
+
+
+def _independent_durations(q0, q1, vmax, amax, jmax, amin=None) -> np.ndarray:
+    from ruckig import Ruckig, Trajectory
+
+    n = len(q0)
+    traj = Trajectory(n)
+    Ruckig(n).calculate(_ruckig_input(q0, q1, vmax, amax, jmax, amin), traj)
+    return np.asarray(traj.independent_min_durations, float)

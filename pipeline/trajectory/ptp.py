@@ -6,10 +6,15 @@
          q(0) = q0, q(T) = q1, v(0) = v(T) = 0   (rest to rest)
 
 Inverse-dynamics transcription (DESIGN.md "Measured facts"): N intervals of length h = T/N,
-states q, v at the nodes, piecewise-constant accelerations a_k, exact integration
-``q_{k+1} = q_k + h v_k + h^2/2 a_k``, ``v_{k+1} = v_k + h a_k``; torques from the symbolic
-RNEA (one CasADi function applied with ``.map(3N)``) at the start, midpoint and end of every
-interval, as path constraints scaled by their limits; energy by Simpson's rule on those points.
+states q, v and accelerations a at the nodes, acceleration linear within an interval (so
+velocity and acceleration are continuous, jerk piecewise constant; paper 004 section 5 asks for
+continuous motion), exact integration
+``q_{k+1} = q_k + h v_k + h^2 (a_k/3 + a_{k+1}/6)``, ``v_{k+1} = v_k + h (a_k + a_{k+1})/2``;
+torques from the symbolic RNEA (one CasADi function applied with ``.map(2N+1)``) at the nodes
+and interval midpoints, as path constraints scaled by their limits; energy by Simpson's rule.
+Rest to rest: v = 0 and (optionally) a = 0 at both ends. Coulomb friction is added outside the
+RNEA as ``F_c tanh(v / w)`` with ``F_c`` and ``w`` NLP parameters (same model as the symbolic
+bridge, but the smoothing width can be continued from wide to the model's value).
 
 ``W`` selects the energy measure: ``"torque"`` (W = I, the paper's tau^T tau), ``"normalised"``
 (W = diag(1 / tau_max^2)), ``"electrical"`` (copper losses, W = diag(R_i / (k_t,i G_i)^2) with
@@ -72,7 +77,7 @@ class PtpResult:
     t_nodes_s: np.ndarray
     q_nodes: np.ndarray
     v_nodes: np.ndarray
-    a_intervals: np.ndarray
+    a_nodes: np.ndarray
     duration_s: float
     energy: float
     objective: float
@@ -83,16 +88,18 @@ class PtpResult:
     info: dict = field(default_factory=dict)
 
     def sample(self, dt_s: float, name: str = "ptp") -> JointTrajectory:
-        """Exact samples (piecewise-constant acceleration) every ``dt_s``."""
+        """Exact samples (acceleration linear within each interval) every ``dt_s``."""
         T = self.duration_s
-        N = len(self.a_intervals)
+        N = len(self.t_nodes_s) - 1
         h = T / N
         t = np.append(np.arange(0.0, T, dt_s), T)
         k = np.clip((t / h).astype(int), 0, N - 1)
         tau = (t - k * h)[:, None]
-        a = self.a_intervals[k]
-        v = self.v_nodes[k] + a * tau
-        q = self.q_nodes[k] + self.v_nodes[k] * tau + 0.5 * a * tau**2
+        a0, a1 = self.a_nodes[k], self.a_nodes[k + 1]
+        jerk = (a1 - a0) / h
+        a = a0 + jerk * tau
+        v = self.v_nodes[k] + a0 * tau + 0.5 * jerk * tau**2
+        q = self.q_nodes[k] + self.v_nodes[k] * tau + 0.5 * a0 * tau**2 + jerk * tau**3 / 6.0
         return JointTrajectory(name, t, q, v, a, info={"k1": self.k1, "k2": self.k2})
 
 
@@ -133,38 +140,45 @@ class PtpProblem:
         t0 = time.perf_counter()
         self.pm, self.sym, self.N, self.nq = pm, sym, int(n_intervals), pm.nq
         self.p_dyn_nominal = np.asarray(sym.nominal_dynamic_parameters(), float)
+        self.coulomb_slice = sym.dyn.coulomb
         nq, N = self.nq, self.N
         self.v_scale = pm.velocity_rad_s.copy()
         self.a_scale = pm.effort_Nm / np.maximum(pm.mass_diagonal(np.zeros(nq)), 1e-9)
         n_dyn = self.p_dyn_nominal.size
-        # decision variables (scaled): T, Q (nq x N+1), Vn = V / v_scale, An = A / a_scale
+        # decision variables (scaled): T, Q (nq x N+1), Vn = V / v_scale, An = A / a_scale (nodes)
         T = ca.MX.sym("T")
         Q = ca.MX.sym("Q", nq, N + 1)
         Vn = ca.MX.sym("V", nq, N + 1)
-        An = ca.MX.sym("A", nq, N)
-        p_dyn = ca.MX.sym("p_dyn", n_dyn)
+        An = ca.MX.sym("A", nq, N + 1)
+        p_dyn = ca.MX.sym("p_dyn", n_dyn)       # Coulomb entries zeroed: added below
+        coulomb = ca.MX.sym("coulomb", nq)
+        inv_width = ca.MX.sym("inv_width")
         inv_tau_max = ca.MX.sym("inv_tau_max", nq)
+        inv_v_max = ca.MX.sym("inv_v_max", nq)
         w = ca.MX.sym("w", nq)
         k1 = ca.MX.sym("k1")
         k2 = ca.MX.sym("k2")
         V = Vn * ca.repmat(ca.DM(self.v_scale), 1, N + 1)
-        A = An * ca.repmat(ca.DM(self.a_scale), 1, N)
+        A = An * ca.repmat(ca.DM(self.a_scale), 1, N + 1)
         h = T / N
-        q0, v0 = Q[:, :-1], V[:, :-1]
-        q_mid = q0 + 0.5 * h * v0 + 0.125 * h**2 * A
-        v_mid = v0 + 0.5 * h * A
-        g_q = Q[:, 1:] - q0 - h * v0 - 0.5 * h**2 * A
-        g_v = (V[:, 1:] - v0 - h * A) / ca.repmat(ca.DM(self.v_scale), 1, N)
-        rnea = sym.rnea.map(3 * N)
-        tau = rnea(ca.horzcat(q0, q_mid, Q[:, 1:]), ca.horzcat(v0, v_mid, V[:, 1:]),
-                   ca.horzcat(A, A, A), p_dyn)
-        tau_n = tau * ca.repmat(inv_tau_max, 1, 3 * N)
-        wt = ca.sum1(tau**2 * ca.repmat(w, 1, 3 * N))
-        e_s, e_m, e_e = wt[:N], wt[N:2 * N], wt[2 * N:]
-        energy = h / 6.0 * ca.sum2(e_s + 4 * e_m + e_e)
+        q0, v0, a0, a1 = Q[:, :-1], V[:, :-1], A[:, :-1], A[:, 1:]
+        q_mid = q0 + 0.5 * h * v0 + h**2 * (5 * a0 + a1) / 48.0
+        v_mid = v0 + h * (3 * a0 + a1) / 8.0
+        a_mid = 0.5 * (a0 + a1)
+        g_q = Q[:, 1:] - q0 - h * v0 - h**2 * (a0 / 3.0 + a1 / 6.0)
+        g_v = (V[:, 1:] - v0 - 0.5 * h * (a0 + a1)) / ca.repmat(ca.DM(self.v_scale), 1, N)
+        M = 2 * N + 1
+        rnea = sym.rnea.map(M)
+        qa, va, aa = ca.horzcat(Q, q_mid), ca.horzcat(V, v_mid), ca.horzcat(A, a_mid)
+        tau = rnea(qa, va, aa, p_dyn) + ca.repmat(coulomb, 1, M) * ca.tanh(va * inv_width)
+        tau_n = tau * ca.repmat(inv_tau_max, 1, M)
+        wt = ca.sum1(tau**2 * ca.repmat(w, 1, M))
+        e_n, e_m = wt[:N + 1], wt[N + 1:]
+        energy = h / 6.0 * (ca.sum2(e_n[:-1] + e_n[1:]) + 4 * ca.sum2(e_m))
         x = ca.vertcat(T, ca.vec(Q), ca.vec(Vn), ca.vec(An))
-        p = ca.vertcat(p_dyn, inv_tau_max, w, k1, k2)
-        g = ca.vertcat(ca.vec(g_q), ca.vec(g_v), ca.vec(tau_n))
+        p = ca.vertcat(p_dyn, coulomb, inv_width, inv_tau_max, inv_v_max, w, k1, k2)
+        g_vmid = v_mid * ca.repmat(inv_v_max, 1, N)
+        g = ca.vertcat(ca.vec(g_q), ca.vec(g_v), ca.vec(tau_n), ca.vec(g_vmid))
         self.n_x, self.n_g, self.n_p = x.numel(), g.numel(), p.numel()
         self._energy_fn = ca.Function("energy", [x, p], [energy, tau])
         nlp = {"x": x, "p": p, "f": k1 * T + k2 * energy, "g": g}
@@ -193,7 +207,7 @@ class PtpProblem:
         i += nq * (N + 1)
         V = x[i:i + nq * (N + 1)].reshape(N + 1, nq) * self.v_scale
         i += nq * (N + 1)
-        A = x[i:i + nq * N].reshape(N, nq) * self.a_scale
+        A = x[i:i + nq * (N + 1)].reshape(N + 1, nq) * self.a_scale
         return T, Q, V, A
 
     def _pack(self, T: float, Q: np.ndarray, V: np.ndarray, A: np.ndarray) -> np.ndarray:
@@ -209,16 +223,49 @@ class PtpProblem:
         u = np.linspace(0.0, 1.0, N + 1)[:, None]
         Q = q0 + (q1 - q0) * (10 * u**3 - 15 * u**4 + 6 * u**5)
         V = (q1 - q0) * (30 * u**2 - 60 * u**3 + 30 * u**4) / T
-        A = np.diff(V, axis=0) / (T / N)
+        A = (q1 - q0) * (60 * u - 180 * u**2 + 120 * u**3) / T**2
         return self._pack(T, Q, V, A)
+
+    def feasible_quintic_duration(self, q0: np.ndarray, q1: np.ndarray, p_dyn: np.ndarray,
+                                  coulomb: np.ndarray, tmax: np.ndarray, vmax: np.ndarray) -> float:
+        """Shortest duration at which the quintic satisfies torque and speed limits (bisection,
+        numeric Pinocchio-free evaluation of the same RNEA); a feasible initial guess."""
+        u = np.linspace(0.0, 1.0, 2 * self.N + 1)[:, None]
+        dq = q1 - q0
+        Q = q0 + dq * (10 * u**3 - 15 * u**4 + 6 * u**5)
+        V1 = dq * (30 * u**2 - 60 * u**3 + 30 * u**4)
+        A1 = dq * (60 * u - 180 * u**2 + 120 * u**3)
+        f = self.sym.rnea.map(Q.shape[0])
+        width = self.sym.coulomb_smoothing_rad_s
+
+        def ratio(T: float) -> float:
+            V, A = V1 / T, A1 / T**2
+            tau = np.asarray(f(Q.T, V.T, A.T, p_dyn)).T + coulomb * np.tanh(V / width)
+            return max(np.max(np.abs(tau) / tmax), np.max(np.abs(V) / vmax))
+
+        hi = 1.0
+        while ratio(hi) > 1.0 and hi < 100.0:
+            hi *= 2.0
+        lo = hi / 2.0
+        while ratio(lo) <= 1.0 and lo > 1e-3:
+            lo, hi = lo / 2.0, lo
+        for _ in range(20):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (lo, mid) if ratio(mid) <= 1.0 else (mid, hi)
+        return hi
 
     def solve(self, q0: np.ndarray, q1: np.ndarray, k1: float = 1.0, k2: float = 0.01,
               weights: np.ndarray | None = None, duration_s: float | None = None,
               p_dyn: np.ndarray | None = None, lower_rad: np.ndarray | None = None,
               upper_rad: np.ndarray | None = None, velocity_rad_s: np.ndarray | None = None,
               effort_Nm: np.ndarray | None = None, x0: np.ndarray | None = None,
-              max_duration_s: float = 60.0) -> PtpResult:
-        """Solve one move; raises InfeasibleError / SolverError instead of returning a failure."""
+              max_duration_s: float = 60.0, zero_end_acceleration: bool = True,
+              coulomb_widths_rad_s: tuple[float, ...] | None = None) -> PtpResult:
+        """Solve one move; raises InfeasibleError / SolverError instead of returning a failure.
+
+        ``coulomb_widths_rad_s``: continuation of the tanh smoothing width, the last one being
+        the model's (default: the model's width only).
+        """
         pm, nq, N = self.pm, self.nq, self.N
         q0, q1 = np.asarray(q0, float), np.asarray(q1, float)
         lo = pm.lower_rad if lower_rad is None else np.asarray(lower_rad, float)
@@ -232,18 +279,19 @@ class PtpProblem:
                 raise InfeasibleError(None, f"ptp {nm} joint {j + 1}",
                                       f"{np.degrees(qq[j]):.2f} deg outside the limits "
                                       f"[{np.degrees(lo[j]):.1f}, {np.degrees(hi[j]):.1f}] deg")
-        pd = self.p_dyn_nominal if p_dyn is None else np.asarray(p_dyn, float)
+        pd = (self.p_dyn_nominal if p_dyn is None else np.asarray(p_dyn, float)).copy()
         # static feasibility: holding torque at start and goal
-        fn_static = self.sym.rnea
         for nm, qq in (("start", q0), ("goal", q1)):
-            tau_s = np.asarray(fn_static(qq, np.zeros(nq), np.zeros(nq), pd)).ravel()
+            tau_s = np.asarray(self.sym.rnea(qq, np.zeros(nq), np.zeros(nq), pd)).ravel()
             bad = np.flatnonzero(np.abs(tau_s) > tmax)
             if bad.size:
                 j = int(bad[0])
                 raise InfeasibleError(None, f"ptp {nm} joint {j + 1} torque limit",
                                       f"holding torque {tau_s[j]:.1f} N·m exceeds {tmax[j]:.1f} N·m")
+        coulomb = pd[self.coulomb_slice].copy()
+        pd[self.coulomb_slice] = 0.0
         w = np.ones(nq) if weights is None else np.asarray(weights, float)
-        p = np.concatenate([pd, 1.0 / tmax, w, [k1, k2]])
+        widths = coulomb_widths_rad_s or (self.sym.coulomb_smoothing_rad_s,)
         # bounds
         lbT, ubT = (duration_s, duration_s) if duration_s is not None else (1e-3, max_duration_s)
         lbQ = np.tile(lo, (N + 1, 1))
@@ -254,29 +302,41 @@ class PtpProblem:
         lbV = np.tile(-vb, (N + 1, 1))
         ubV = np.tile(vb, (N + 1, 1))
         lbV[0] = ubV[0] = lbV[-1] = ubV[-1] = 0.0
-        lbx = np.concatenate([[lbT], lbQ.ravel(), lbV.ravel(), np.full(nq * N, -np.inf)])
-        ubx = np.concatenate([[ubT], ubQ.ravel(), ubV.ravel(), np.full(nq * N, np.inf)])
+        lbA = np.full((N + 1, nq), -np.inf)
+        ubA = np.full((N + 1, nq), np.inf)
+        if zero_end_acceleration:
+            lbA[0] = ubA[0] = lbA[-1] = ubA[-1] = 0.0
+        lbx = np.concatenate([[lbT], lbQ.ravel(), lbV.ravel(), lbA.ravel()])
+        ubx = np.concatenate([[ubT], ubQ.ravel(), ubV.ravel(), ubA.ravel()])
         n_dyn_eq = 2 * nq * N
-        lbg = np.concatenate([np.zeros(n_dyn_eq), -np.ones(3 * N * nq)])
-        ubg = np.concatenate([np.zeros(n_dyn_eq), np.ones(3 * N * nq)])
+        lbg = np.concatenate([np.zeros(n_dyn_eq), -np.ones((3 * N + 1) * nq)])
+        ubg = np.concatenate([np.zeros(n_dyn_eq), np.ones((3 * N + 1) * nq)])
         if x0 is None:
-            x0 = self.quintic_guess(q0, q1, duration_s)
-        t0 = time.perf_counter()
-        sol = self.solver(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
-        solve_time = time.perf_counter() - t0
-        stats = self.solver.stats()
+            if duration_s is None:
+                x0 = self.quintic_guess(q0, q1, self.feasible_quintic_duration(q0, q1, pd, coulomb, tmax, vmax))
+            else:
+                x0 = self.quintic_guess(q0, q1, duration_s)
         what = f"ptp move {np.round(np.degrees(q0), 1).tolist()} -> {np.round(np.degrees(q1), 1).tolist()} deg"
-        if not stats.get("success", False):
-            status = stats.get("return_status", "unknown")
-            if status in ("Infeasible_Problem_Detected", "Local_Infeasibility"):
-                cons = "torque limits" if duration_s is None else f"duration {duration_s:.4f} s with torque limits"
-                raise InfeasibleError(None, what, f"the {cons} cannot be met (IPOPT: {status})")
-            raise SolverError(None, what, f"IPOPT failed: {status}")
-        xs = np.asarray(sol["x"]).ravel()
+        solve_time, iters = 0.0, 0
+        for width in widths:
+            p = np.concatenate([pd, coulomb, [1.0 / width], 1.0 / tmax, 1.0 / vmax, w, [k1, k2]])
+            t0 = time.perf_counter()
+            sol = self.solver(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+            solve_time += time.perf_counter() - t0
+            stats = self.solver.stats()
+            iters += int(stats["iter_count"])
+            if not stats.get("success", False):
+                status = stats.get("return_status", "unknown")
+                if status in ("Infeasible_Problem_Detected", "Local_Infeasibility"):
+                    cons = "torque limits" if duration_s is None else f"duration {duration_s:.4f} s with torque limits"
+                    raise InfeasibleError(None, what, f"the {cons} cannot be met (IPOPT: {status})")
+                raise SolverError(None, what, f"IPOPT failed: {status}")
+            x0 = np.asarray(sol["x"]).ravel()
+        xs = x0
         T, Q, V, A = self._unpack(xs)
         energy, _ = self._energy_fn(xs, p)
         return PtpResult(np.linspace(0.0, T, N + 1), Q, V, A, T, float(energy), float(sol["f"]),
-                         solve_time, int(stats["iter_count"]), k1, k2,
+                         solve_time, iters, k1, k2,
                          info={"x": xs, "jit": self.jit, "fixed_duration": duration_s is not None})
 
     def pareto(self, q0: np.ndarray, q1: np.ndarray, k2_values: list[float], weights: np.ndarray,

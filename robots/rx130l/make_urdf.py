@@ -26,7 +26,10 @@ ROWS = [
 ]
 RANGE_DEG = [(-160, 160), (-137.5, 137.5), (-142.5, 142.5), (-270, 270), (-105, 120), (-270, 270)]
 SPEED_DEG_S = [200, 200, 255, 315, 360, 870]
-EFFORT_NM = [550, 500, 220, 55, 40, 30]
+# DESIGN.md estimates 550, 500, 220, 55, 40, 30 N·m; axes 2 and 3 raised to 700 and 350 N·m because the
+# estimated masses need 520 and 141 N·m just to hold the stretched arm (a real RX130L has a balancing
+# spring on axis 2). Decision recorded in README.md, "Design decisions".
+EFFORT_NM = [550, 700, 350, 55, 40, 30]
 
 
 def _link(mass: float, start: list[float], end: list[float], radius: float, axis: int) -> LinkSpec:
@@ -45,8 +48,8 @@ def _link(mass: float, start: list[float], end: list[float], radius: float, axis
 LINKS = [
     _link(45.0, [0, 0, -0.30], [0, 0, 0.0], 0.18, axis=2),  # column
     _link(35.0, [0, 0, 0], [0.625, 0, 0], 0.12, axis=0),  # upper arm
-    _link(20.0, [0, 0, 0], [0, 0.30, 0], 0.11, axis=1),  # elbow housing
-    _link(22.0, [0, 0, -0.625], [0, 0, 0], 0.08, axis=2),  # forearm tube (rolls with axis 4)
+    _link(20.0, [0, 0, 0], [0, 0.20, 0], 0.11, axis=1),  # elbow housing (axis-4 drive)
+    _link(22.0, [0, 0, -0.925], [0, 0, 0], 0.08, axis=2),  # forearm tube elbow to wrist (rolls with axis 4)
     _link(2.0, [0, 0, 0], [0, 0.08, 0], 0.06, axis=1),  # wrist
     _link(0.3, [0, 0, -0.02], [0, 0, 0], 0.05, axis=2),  # flange
 ]

@@ -1,0 +1,159 @@
+"""Estimation: closed-form tracker registration, then Levenberg-Marquardt on the identifiable set.
+
+1. Registration (paper 003 §2.2 "ideal pose transformation matrix ... by least squares"):
+   find ``T_tb`` minimising ``sum |T_tb y_k - p_k|^2`` between the tracker readings ``y_k`` and the
+   nominal base-frame reflector positions ``p_k`` (Kabsch/Umeyama without scale, via
+   ``scipy.spatial.transform.Rotation.align_vectors`` on the centred point sets).
+2. Levenberg-Marquardt (paper 003 eq. 27; paper 002 eq. 12 Gauss-Newton steps) on the identifiable
+   parameters ``theta = x[cols]`` with the exact CasADi Jacobian and whitened residuals
+   ``r_k = (y_k - h(q_k, x, T_tb)) / sigma_k``:
+   ``(J^T J + lambda diag(J^T J)) d = J^T r``, lambda adapted (Marquardt/Nielsen).
+3. Covariance from the noise model: ``C = (J^T J)^-1`` of the whitened Jacobian at the solution
+   (paper 000 eq. 5); ``chi2 / dof`` is reported as a check of the noise model.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+from scipy.spatial.transform import Rotation
+
+from pipeline.calibration.error_model import MeasurementModel
+from pipeline.errors import SolverError
+from pipeline.robot.symbolic import apply_kinematic_errors
+
+
+def register_points(tracker_points: np.ndarray, base_points: np.ndarray) -> pin.SE3:
+    """Closed-form ``T`` with ``base ≈ R tracker + t`` (Kabsch / Umeyama, no scale)."""
+    Y = np.asarray(tracker_points, float)
+    P = np.asarray(base_points, float)
+    if Y.shape != P.shape or Y.shape[0] < 3:
+        raise SolverError(None, "registration", f"need >= 3 point pairs of equal shape, got {Y.shape}, {P.shape}")
+    yc, pc = Y.mean(axis=0), P.mean(axis=0)
+    rot, _ = Rotation.align_vectors(P - pc, Y - yc)
+    R = rot.as_matrix()
+    return pin.SE3(R, pc - R @ yc)
+
+
+@dataclass
+class Estimate:
+    """Identified parameters and their uncertainty."""
+
+    x: np.ndarray                  # full parameter vector (model.names), ``x = basis @ theta``
+    theta: np.ndarray              # identified parameters
+    basis: np.ndarray              # (n_full, p)
+    covariance: np.ndarray         # (p,p) of theta, from the noise model
+    transform_tracker_to_base: pin.SE3   # identified
+    registration: pin.SE3          # closed-form initial tracker pose (nominal kinematics)
+    iterations: int
+    chi2_per_dof: float
+    residual_rms_m: float
+    converged: bool
+    cost_history: list[float]
+
+    @property
+    def std(self) -> np.ndarray:
+        return np.sqrt(np.diag(self.covariance))
+
+
+def levenberg_marquardt(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarray,
+                        basis: np.ndarray, T0: pin.SE3, max_iterations: int = 50,
+                        tol: float = 1e-10) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, bool, list[float]]:
+    """Minimise ``sum |(Y - h(Q, basis @ theta, T0)) / sigma|^2`` over ``theta``."""
+    P = np.asarray(basis, float)
+    theta = np.zeros(P.shape[1])
+    w = 1.0 / np.asarray(sigma, float)
+
+    def resid_jac(th: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        pred, J = mm.jacobian(Q, P @ th, T0, P)
+        r = ((Y - pred) * w[:, None]).reshape(-1)
+        Jw = (J * w[:, None, None]).reshape(-1, P.shape[1])
+        return r, Jw
+
+    r, J = resid_jac(theta)
+    cost = float(r @ r)
+    hist = [cost]
+    lam = 1e-3
+    converged = False
+    it = 0
+    for it in range(1, max_iterations + 1):
+        A = J.T @ J
+        g = J.T @ r
+        D = np.diag(np.maximum(np.diag(A), 1e-12 * max(np.diag(A).max(), 1e-300)))
+        while True:
+            try:
+                d = np.linalg.solve(A + lam * D, g)
+            except np.linalg.LinAlgError:
+                lam *= 10
+                if lam > 1e12:
+                    raise SolverError(None, "levenberg-marquardt", "singular normal equations") from None
+                continue
+            th_new = theta + d
+            r_new, J_new = resid_jac(th_new)
+            cost_new = float(r_new @ r_new)
+            if cost_new <= cost or lam > 1e12:
+                break
+            lam *= 10
+        if cost_new > cost:
+            converged = True  # no descent direction left at machine precision
+            break
+        rel = (cost - cost_new) / max(cost, 1e-300)
+        theta, r, J, cost = th_new, r_new, J_new, cost_new
+        hist.append(cost)
+        lam = max(lam / 10, 1e-12)
+        if rel < tol:
+            converged = True
+            break
+    return theta, P @ theta, J, it, converged, hist
+
+
+def estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarray, basis: np.ndarray,
+             source: str = "measurements", max_iterations: int = 50) -> Estimate:
+    """Registration + LM + covariance (see module docstring)."""
+    Q = np.asarray(Q, float)
+    Y = np.asarray(Y, float)
+    P = np.asarray(basis, float)
+    p = P.shape[1]
+    if 3 * len(Q) < p:
+        raise SolverError(source, "measurements",
+                          f"{len(Q)} points give {3 * len(Q)} equations for {p} identifiable parameters")
+    P_nom, _ = mm.base_positions(Q, np.zeros(mm.n))
+    T_reg = register_points(Y, P_nom)
+    # regularity of the information matrix before iterating
+    _, J0 = mm.jacobian(Q, np.zeros(mm.n), T_reg, P)
+    J0 = (J0 / np.asarray(sigma, float)[:, None, None]).reshape(-1, p)
+    ev = np.linalg.eigvalsh(J0.T @ J0)
+    if not ev[0] > 1e-12 * ev[-1]:
+        raise SolverError(source, "information matrix",
+                          f"singular (smallest/largest eigenvalue {max(ev[0], 0.0) / ev[-1]:.3g}): the configurations do not "
+                          f"excite all {p} identifiable parameters")
+    theta, x, J, it, conv, hist = levenberg_marquardt(mm, Q, Y, sigma, P, T_reg, max_iterations)
+    A = J.T @ J
+    C = np.linalg.inv(A)
+    C = 0.5 * (C + C.T)
+    dof = max(J.shape[0] - p, 1)
+    chi2 = hist[-1] / dof
+    pred = mm.predict(Q, x, T_reg)
+    res = np.linalg.norm(Y - pred, axis=1)
+    T_id = T_reg * pin.exp6(x[mm.sl_tracker])
+    return Estimate(x, theta, P, C, T_id, T_reg, it, float(chi2), float(np.sqrt(np.mean(res ** 2))), conv, hist)
+
+
+def calibrated_robot(robot, mm: MeasurementModel, x: np.ndarray):
+    """``RobotModel`` whose joint placements include the identified kinematic errors and whose
+    reflector offset includes the identified offset error (tool/TCP frame unchanged unless tool
+    parameters were identified)."""
+    model = apply_kinematic_errors(robot.model, x[mm.sl_kin], robot.frame_flange,
+                                   (robot.frame_tcp, robot.frame_reflector))
+    fid = model.getFrameId(robot.frame_reflector)
+    fr = model.frames[fid]
+    dr = x[mm.sl_reflector]
+    model.frames[fid].placement = pin.SE3(fr.placement.rotation, fr.placement.translation + fr.placement.rotation @ dr)
+    new = robot.with_model(model)
+    # keep the yaml facts consistent with the model's reflector frame (in the flange frame)
+    fl = model.frames[model.getFrameId(robot.frame_flange)]
+    rel = fl.placement.inverse() * model.frames[fid].placement
+    new.spec.tool.reflector_offset_m = np.asarray(rel.translation, float).copy()
+    return new

@@ -1,0 +1,354 @@
+"""Stage ``calibration``: optimal measurement configurations and geometric calibration.
+
+Pipeline (issue 3; papers 004 §3, 000, 002, 003):
+
+1. identifiable parameter set of the tracker measurement model (SVD + ordered QR, report);
+2. candidates: the joint grid (13 per axis) or random configurations, filtered by limits,
+   capsule collisions, floor and predicted tracker visibility; whitened Jacobians;
+3. selection of ``n_configurations`` by remove-and-replace (default, paper 004) / DETMAX / BSAA /
+   random with any observability index, optionally refined by the gradient-based design
+   (CasADi/IPOPT, paper 000);
+4. measurement with the (simulated) tracker, or a CSV file;
+5. registration + Levenberg-Marquardt, covariance from the noise model, calibrated RobotModel;
+6. validation on >= ``n_heldout`` held-out visible poses measured on the real robot (or a CSV).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from pipeline.calibration import candidates as cd
+from pipeline.calibration import design as ds
+from pipeline.calibration import error_model as em
+from pipeline.calibration import indices as ix
+from pipeline.calibration import measure as ms
+from pipeline.calibration import validate as va
+from pipeline.calibration._blas import single_thread_blas
+from pipeline.calibration.estimate import Estimate, calibrated_robot, estimate
+from pipeline.errors import ConfigError, InfeasibleError, PipelineError
+
+NAME = "calibration"
+DEPENDS: tuple[str, ...] = ("model",)
+
+SELECTION_METHODS = ("remove_and_replace", "detmax", "bsaa", "random", "gradient")
+CANDIDATE_KINDS = ("grid", "random")
+ERROR_MODELS = ("se3", "mdh_hayati")
+
+
+@dataclass
+class Config:
+    """Settings of the calibration stage (defaults = the full profile)."""
+
+    #: "grid" (``grid_per_axis`` values per axis, paper 004: 13) or "random"
+    candidates: str = "grid"
+    grid_per_axis: int = 13
+    n_random_candidates: int = 20000
+    #: remove_and_replace | detmax | bsaa | random | gradient (remove-and-replace + IPOPT refinement)
+    selection_method: str = "remove_and_replace"
+    #: O1..O5, D, A, E, Od, Oc, tcp_A, tcp_A_mixed (see pipeline.calibration.indices)
+    index_name: str = "O3"
+    n_configurations: int = 50
+    #: initial subset size of remove-and-replace (None: 2/3 of n_configurations)
+    n_initial: int | None = None
+    #: working configurations for the TCP-covariance criterion (random feasible poses)
+    n_working_configurations: int = 5
+    #: "se3": 6 errors per joint placement + zero offsets; "mdh_hayati": modified DH + Hayati beta
+    error_model: str = "se3"
+    identifiability_samples: int = 200
+    identifiability_rel_tol: float = 1e-7
+    n_heldout: int = 1000
+    margin_collision_m: float = 0.01
+    margin_incidence_deg: float = 3.0
+    margin_beam_m: float = 0.02
+    max_lm_iterations: int = 50
+    gradient_max_iterations: int = 200
+    #: user data instead of the simulated tracker (format: pipeline.calibration.measure)
+    measurements_csv: str | None = None
+    validation_csv: str | None = None
+    figures: bool = True
+    extra: dict = field(default_factory=dict)
+
+    def validate(self, source: str = "config") -> None:
+        def bad(key: str, problem: str) -> ConfigError:
+            return ConfigError(source, f"calibration.{key}", problem)
+
+        if self.candidates not in CANDIDATE_KINDS:
+            raise bad("candidates", f"must be one of {CANDIDATE_KINDS}, got {self.candidates!r}")
+        if self.selection_method not in SELECTION_METHODS:
+            raise bad("selection_method", f"must be one of {SELECTION_METHODS}, got {self.selection_method!r}")
+        if self.index_name not in ix.INDEX_NAMES:
+            raise bad("index_name", f"must be one of {ix.INDEX_NAMES}, got {self.index_name!r}")
+        if self.error_model not in ERROR_MODELS:
+            raise bad("error_model", f"must be one of {ERROR_MODELS}, got {self.error_model!r}")
+        for key in ("grid_per_axis", "n_random_candidates", "n_configurations", "n_heldout",
+                    "identifiability_samples", "max_lm_iterations", "n_working_configurations"):
+            if getattr(self, key) < 1:
+                raise bad(key, f"must be positive, got {getattr(self, key)}")
+        if self.grid_per_axis < 2:
+            raise bad("grid_per_axis", "needs at least 2 values per axis")
+        if self.n_initial is not None and not 1 <= self.n_initial <= self.n_configurations:
+            raise bad("n_initial", f"must be in [1, n_configurations], got {self.n_initial}")
+        for key in ("margin_collision_m", "margin_incidence_deg", "margin_beam_m"):
+            if getattr(self, key) < 0:
+                raise bad(key, "must be >= 0")
+
+
+@dataclass
+class CalibrationOutcome:
+    """Everything the stage computed (also used by studies and the notebook)."""
+
+    report: em.IdentifiabilityReport
+    names: list[str]
+    candidates: cd.CandidateSet | None
+    selection: ds.SelectionResult | None
+    measurements: ms.Measurements
+    estimate: Estimate
+    validation: dict
+    robot: Any
+    timings_s: dict[str, float]
+    gradient: Any = None
+    working_Q: np.ndarray | None = None
+
+
+def identify_parameter_set(robot, mm: em.MeasurementModel, cfg: Config, rng: np.random.Generator
+                           ) -> tuple[em.IdentifiabilityReport, np.ndarray]:
+    """Identifiability analysis on random configurations (paper 002 SVD, paper 003 correlations).
+
+    Returns the report (in the error model's own parameters) and the basis ``P`` (n_full, p) of
+    the identifiable parameters, ``x = P theta``.
+    """
+    Q = em.random_configurations(robot, cfg.identifiability_samples, rng)
+    chain = cd.chain_from_robot(robot)
+    _, J = cd.nominal_jacobian(chain, Q, robot.tracker.transform_tracker_to_base)
+    J = J.reshape(-1, mm.n)
+    if cfg.error_model == "se3":
+        B, names = None, mm.names
+    else:
+        try:
+            B, names = em.mdh_basis(robot, mm.names)
+        except ValueError as exc:
+            raise ConfigError(None, "calibration.error_model", f"mdh_hayati: {exc}") from None
+    Jm = J if B is None else J @ B
+    rep = em.identifiability(Jm, names, cfg.identifiability_rel_tol)
+    return rep, em.parameter_basis(rep, mm.n, B)
+
+
+def build_candidates(robot, cfg: Config, basis: np.ndarray, rng: np.random.Generator) -> cd.CandidateSet:
+    """Filtered candidate set with whitened Jacobians (nominal model, nominal tracker pose)."""
+    chain = cd.chain_from_robot(robot)
+    margins = cd.FilterMargins(cfg.margin_collision_m, math.radians(cfg.margin_incidence_deg), cfg.margin_beam_m)
+    grid_index = None
+    if cfg.candidates == "grid":
+        Q, grid_index, counts = cd.filter_grid(chain, cfg.grid_per_axis, margins)
+    else:
+        Q, counts = cd.random_candidates(chain, cfg.n_random_candidates, rng, margins)
+    if len(Q) == 0:
+        raise InfeasibleError(None, "calibration.candidates",
+                              f"no feasible candidate configuration ({counts})")
+    return cd.build_candidate_set(chain, Q, basis, robot.tracker.transform_tracker_to_base, counts, grid_index)
+
+
+def working_jacobian(robot, mm: em.MeasurementModel, Qw: np.ndarray, basis: np.ndarray) -> np.ndarray:
+    """TCP-position Jacobian rows (3 n_w, p) at working configurations wrt ``theta`` (base frame;
+    tracker and reflector parameters do not move the TCP)."""
+    f = mm.sym.fk_position_jacobian(robot.frame_tcp)
+    rows = []
+    for q in Qw:
+        full = np.zeros((3, mm.n))
+        full[:, mm.sl_kin] = np.asarray(f(q, np.zeros(mm.n_kin))[0])
+        rows.append(full @ basis)
+    return np.vstack(rows)
+
+
+def index_spec(cfg: Config, robot, mm: em.MeasurementModel, basis: np.ndarray, rng: np.random.Generator
+               ) -> tuple[ix.IndexSpec, np.ndarray | None]:
+    """The observability index; for the TCP criteria random collision-free working poses."""
+    if not cfg.index_name.startswith("tcp_A"):
+        return ix.IndexSpec(cfg.index_name), None
+    chain = cd.chain_from_robot(robot)
+    Qw, _ = cd.random_candidates(chain, cfg.n_working_configurations, rng, visibility=False)
+    Jw = working_jacobian(robot, mm, Qw, basis)
+    return ix.IndexSpec(cfg.index_name, working_jacobian=Jw, n_working=len(Qw)), Qw
+
+
+def calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None) -> CalibrationOutcome:
+    """Run the whole calibration (see the module docstring) and return its outcome."""
+    with single_thread_blas():
+        return _calibrate(robot, real, cfg, rng, progress)
+
+
+def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None) -> CalibrationOutcome:
+    timings: dict[str, float] = {}
+    t = time.perf_counter()
+    mm = em.MeasurementModel(robot)
+    report, basis = identify_parameter_set(robot, mm, cfg, rng)
+    timings["identifiability_s"] = time.perf_counter() - t
+    p = basis.shape[1]
+    user = None
+    if cfg.measurements_csv:
+        user = ms.read_csv(cfg.measurements_csv, robot, min_rows=p)
+    val_user = ms.read_csv(cfg.validation_csv, robot, min_rows=1) if cfg.validation_csv else None
+    selection = None
+    cs = None
+    grad = None
+    Qw = None
+    if True:
+        if user is None:
+            if real is None:
+                raise PipelineError(None, "calibration", "no measurement file and no simulated robot")
+            t = time.perf_counter()
+            cs = build_candidates(robot, cfg, basis, rng)
+            timings["candidates_s"] = time.perf_counter() - t
+            spec, Qw = index_spec(cfg, robot, mm, basis, rng)
+            positions = cs.Y if spec.needs_positions else None
+            t = time.perf_counter()
+            method = "remove_and_replace" if cfg.selection_method == "gradient" else cfg.selection_method
+            kw: dict[str, Any] = {}
+            if method == "remove_and_replace":
+                kw["n_initial"] = cfg.n_initial
+            selection = ds.select(method, cs.G, spec, cfg.n_configurations, rng, positions=positions, **kw)
+            timings["selection_s"] = time.perf_counter() - t
+            Q_sel = cs.Q[selection.selected]
+            if cfg.selection_method == "gradient":
+                from pipeline.calibration.gradient_design import GradientDesignConfig, gradient_design
+
+                t = time.perf_counter()
+                grad = gradient_design(robot, mm, basis, Q_sel, spec, GradientDesignConfig(
+                    max_iterations=cfg.gradient_max_iterations))
+                timings["gradient_s"] = time.perf_counter() - t
+                Q_sel = grad.Q
+            t = time.perf_counter()
+            meas = ms.measure_simulated(real, Q_sel, rng)
+            timings["measure_s"] = time.perf_counter() - t
+            if 3 * len(meas) < p:
+                raise InfeasibleError(None, "calibration.measurements",
+                                      f"only {len(meas)} of {len(Q_sel)} configurations were visible to the tracker")
+        else:
+            meas = user
+        t = time.perf_counter()
+        est = estimate(mm, meas.Q, meas.Y, meas.sigma_m, basis, source=meas.source,
+                       max_iterations=cfg.max_lm_iterations)
+        timings["estimate_s"] = time.perf_counter() - t
+        t = time.perf_counter()
+        if val_user is not None:
+            held = val_user
+        else:
+            if real is None:
+                raise PipelineError(None, "calibration.validation_csv", "no validation file and no simulated robot")
+            held = heldout_measurements(robot, real, est, cfg, rng)
+        validation = va.validate(mm, est, held)
+        timings["validate_s"] = time.perf_counter() - t
+    new_robot = calibrated_robot(robot, mm, est.x)
+    return CalibrationOutcome(report, mm.names, cs, selection, meas, est, validation, new_robot, timings, grad, Qw)
+
+
+def heldout_measurements(robot, real, est: Estimate, cfg: Config, rng: np.random.Generator) -> ms.Measurements:
+    """>= n_heldout visible random poses (predicted with the identified tracker pose), measured."""
+    chain = cd.chain_from_robot(robot, est.transform_tracker_to_base)
+    margins = cd.FilterMargins(cfg.margin_collision_m, math.radians(1.0), 0.005)
+    parts: list[ms.Measurements] = []
+    have = 0
+    for _ in range(10):
+        need = cfg.n_heldout - have
+        Q, _ = cd.random_candidates(chain, int(need * 1.1) + 10, rng, margins)
+        m = ms.measure_simulated(real, Q, rng)
+        parts.append(m)
+        have += len(m)
+        if have >= cfg.n_heldout:
+            break
+    Q = np.concatenate([p.Q for p in parts])[: cfg.n_heldout]
+    Y = np.concatenate([p.Y for p in parts])[: cfg.n_heldout]
+    s = np.concatenate([p.sigma_m for p in parts])[: cfg.n_heldout]
+    if len(Q) < cfg.n_heldout:
+        raise InfeasibleError(None, "calibration.n_heldout", f"only {len(Q)} visible held-out poses found")
+    return ms.Measurements(Q, Y, s, "simulated tracker (held-out)", None, sum(p.n_requested for p in parts))
+
+
+def check(config: Config, robot) -> None:
+    """Early check of the user files (before the runner creates any directory)."""
+    if config.measurements_csv or config.validation_csv:
+        mm = em.MeasurementModel(robot)
+        _, basis = identify_parameter_set(robot, mm, config, np.random.default_rng(0))
+        if config.measurements_csv:
+            ms.read_csv(config.measurements_csv, robot, min_rows=basis.shape[1])
+        if config.validation_csv:
+            ms.read_csv(config.validation_csv, robot, min_rows=1)
+
+
+def summary_of(out: CalibrationOutcome, cfg: Config) -> dict:
+    v = out.validation
+    sel = out.selection
+    return {
+        "n_configurations": int(len(out.measurements)),
+        "n_configurations_commanded": int(out.measurements.n_requested),
+        "selection_method": cfg.selection_method if out.selection is not None else "measurement file",
+        "index_name": cfg.index_name,
+        "index_value": float(sel.index_value) if sel is not None else None,
+        "selection_time_s": float(sel.run_time_s) if sel is not None else None,
+        "selection_evaluations": int(sel.evaluations) if sel is not None else None,
+        "n_candidates": int(len(out.candidates)) if out.candidates is not None else 0,
+        "n_parameters": len(out.names),
+        "n_identifiable": int(out.estimate.theta.size),
+        "heldout_n_poses": v["n_poses"],
+        "heldout_rms_position_error_before_m": v["before"]["rms"],
+        "heldout_rms_position_error_after_m": v["after"]["rms"],
+        "heldout_mean_position_error_after_m": v["after"]["mean"],
+        "heldout_max_position_error_after_m": v["after"]["max"],
+        "heldout_max_position_error_before_m": v["before"]["max"],
+        "predicted_rms_position_error_m": v["predicted_rms_m"],
+        "actual_over_predicted": v["after"]["rms"] / v["predicted_rms_m"],
+        "tracker_noise_sigma_m": v["tracker_noise_sigma_m"],
+        "rms_after_over_sigma": v["after"]["rms"] / v["tracker_noise_sigma_m"],
+        "chi2_per_dof": out.estimate.chi2_per_dof,
+        "lm_iterations": out.estimate.iterations,
+        "timings_s": {k: round(t, 3) for k, t in out.timings_s.items()},
+    }
+
+
+def run(ctx) -> Any:
+    from pipeline.runner import StageResult
+
+    cfg: Config = ctx.config
+    t0 = time.perf_counter()
+    out = calibrate(ctx.robot, ctx.real, cfg, ctx.rng, getattr(ctx, "progress", None))
+    summary = summary_of(out, cfg)
+    summary["stage_time_s"] = time.perf_counter() - t0
+    est = out.estimate
+    arrays = {
+        "configurations_selected": out.measurements.Q,
+        "tracker_readings_m": out.measurements.Y,
+        "tracker_sigma_m": out.measurements.sigma_m,
+        "parameters_identified": est.theta,
+        "parameters_std": est.std,
+        "parameter_covariance": est.covariance,
+        "heldout_errors_before_m": out.validation["errors_before_m"],
+        "heldout_errors_after_m": out.validation["errors_after_m"],
+        "heldout_predicted_std_m": out.validation["predicted_std_m"],
+        "transform_tracker_to_base": est.transform_tracker_to_base.homogeneous,
+    }
+    if out.selection is not None:
+        arrays["index_history"] = np.array(out.selection.history, float).reshape(-1, 2)
+    data = {
+        "identifiability": out.report.as_dict(),
+        "identified": {n: [float(v), float(s)] for n, v, s in
+                       zip(out.report.identifiable_names, est.theta, est.std, strict=True)},
+        "validation": {k: v for k, v in out.validation.items() if not isinstance(v, np.ndarray)},
+        "selection": out.selection.as_dict() if out.selection is not None else None,
+        "candidate_counts": out.candidates.counts if out.candidates is not None else None,
+        "gradient_design": out.gradient.as_dict() if out.gradient is not None else None,
+    }
+    figures = {}
+    if cfg.figures:
+        from pipeline.calibration import plots
+
+        figures = plots.stage_figures(out)
+    md = ["### Identifiability", "", out.report.markdown(), "", "### Held-out validation (paper 004 Table 2 layout)",
+          "", va.table_markdown(out.validation)]
+    return StageResult(summary=summary, arrays=arrays, data=data, figures=figures, robot=out.robot,
+                       report_md="\n".join(md))
+

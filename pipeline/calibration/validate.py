@@ -1,0 +1,89 @@
+"""Validation on held-out poses (paper 004 §3.4, Table 2 layout).
+
+Errors are ``e_k = y_k - h(q_k, x, T_tb)`` between the tracker reading and the model's
+prediction, expressed in the robot base frame (``R_tb e_k``). "Before" uses the nominal kinematics
+with the tracker pose registered on the calibration data (closed form, paper 003 §2.2); "after"
+the identified parameters and tracker pose. The predicted error follows from the parameter
+covariance (paper 000 eq. 16 linear error propagation) plus the tracker noise:
+``E|e_k|^2 = trace(J_k C J_k^T) + 3 sigma_k^2``; the predicted RMS is the root of its mean.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from pipeline.calibration.error_model import MeasurementModel
+from pipeline.calibration.estimate import Estimate
+from pipeline.calibration.measure import Measurements
+
+
+def _stats(e: np.ndarray) -> dict[str, float]:
+    n = np.linalg.norm(e, axis=1)
+    return {"mean": float(n.mean()), "rms": float(np.sqrt(np.mean(n ** 2))), "max": float(n.max())}
+
+
+def _axis_stats(e: np.ndarray) -> dict[str, dict[str, float]]:
+    out = {}
+    for k, ax in enumerate("xyz"):
+        v = e[:, k]
+        out[ax] = {"max_abs": float(np.abs(v).max()), "half_peak_to_peak": float(0.5 * (v.max() - v.min())),
+                   "rms": float(np.sqrt(np.mean(v ** 2)))}
+    return out
+
+
+def validate(mm: MeasurementModel, est: Estimate, meas: Measurements) -> dict:
+    """Held-out statistics before/after calibration and the covariance prediction."""
+    Q, Y = meas.Q, meas.Y
+    x0 = np.zeros(mm.n)
+    R_before = est.registration.rotation
+    R_after = est.transform_tracker_to_base.rotation
+    e_before = (Y - mm.predict(Q, x0, est.registration)) @ R_before.T
+    pred_after, J = mm.jacobian(Q, est.x, est.registration, est.basis)
+    e_after = (Y - pred_after) @ R_after.T
+    var_model = np.einsum("nip,pq,niq->n", J, est.covariance, J)
+    var_total = var_model + 3 * meas.sigma_m ** 2
+    out = {
+        "n_poses": int(len(Q)),
+        "before": _stats(e_before) | {"axes": _axis_stats(e_before)},
+        "after": _stats(e_after) | {"axes": _axis_stats(e_after)},
+        "predicted_rms_m": float(np.sqrt(np.mean(var_total))),
+        "predicted_model_rms_m": float(np.sqrt(np.mean(var_model))),
+        "tracker_noise_sigma_m": float(np.sqrt(np.mean(meas.sigma_m ** 2))),
+        "errors_before_m": np.linalg.norm(e_before, axis=1),
+        "errors_after_m": np.linalg.norm(e_after, axis=1),
+        "predicted_std_m": np.sqrt(var_total),
+    }
+    if meas.rotvec is not None:
+        _, R_refl = mm.base_positions(Q, est.x)
+        _, R_refl0 = mm.base_positions(Q, x0)
+        R_meas = Rotation.from_rotvec(meas.rotvec).as_matrix()
+        for key, R_tb, Rr in (("before", est.registration.rotation, R_refl0), ("after", R_after, R_refl)):
+            R_pred = np.einsum("ji,njk->nik", R_tb, Rr)  # tracker-frame orientation
+            err = Rotation.from_matrix(np.einsum("nji,njk->nik", R_pred, R_meas)).as_rotvec()
+            ang = np.linalg.norm(err, axis=1)
+            out[key]["orientation_rad"] = {"mean": float(ang.mean()), "rms": float(np.sqrt(np.mean(ang ** 2))),
+                                           "max": float(ang.max())}
+    return out
+
+
+def table_markdown(v: dict) -> str:
+    """Paper 004 Table 2 layout: maximum and half peak-to-peak per axis, before/after, in mm."""
+    b, a = v["before"], v["after"]
+    lines = ["| error | max uncal. [mm] | max cal. [mm] | ± uncal. [mm] | ± cal. [mm] |", "|---|---|---|---|---|"]
+    for ax in "xyz":
+        lines.append(f"| e{ax} | {1e3 * b['axes'][ax]['max_abs']:.3f} | {1e3 * a['axes'][ax]['max_abs']:.3f} | "
+                     f"±{1e3 * b['axes'][ax]['half_peak_to_peak']:.3f} | ±{1e3 * a['axes'][ax]['half_peak_to_peak']:.3f} |")
+    lines += ["", "| |e| over held-out poses | mean [mm] | RMS [mm] | max [mm] |", "|---|---|---|---|"]
+    for key, s in (("before", b), ("after", a)):
+        lines.append(f"| {key} | {1e3 * s['mean']:.4f} | {1e3 * s['rms']:.4f} | {1e3 * s['max']:.4f} |")
+    lines.append(f"| predicted (covariance + noise) | | {1e3 * v['predicted_rms_m']:.4f} | |")
+    if "orientation_rad" in a:
+        lines += ["", "| orientation error | mean [deg] | RMS [deg] | max [deg] |", "|---|---|---|---|"]
+        for key, s in (("before", b), ("after", a)):
+            o = s["orientation_rad"]
+            lines.append(f"| {key} | {np.rad2deg(o['mean']):.4f} | {np.rad2deg(o['rms']):.4f} | "
+                         f"{np.rad2deg(o['max']):.4f} |")
+    else:
+        lines.append("\nOrientation errors: not measured (the laser tracker reads positions only).")
+    return "\n".join(lines)

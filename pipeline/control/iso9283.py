@@ -1,0 +1,119 @@
+"""The EN ISO 9283 test path (DESIGN.md "EN ISO 9283 test path", paper 004 §2.3.3).
+
+A cube of edge ``L`` with edges parallel to the base axes, centred at ``centre``; the measuring
+plane is a diagonal plane of the cube (through two opposite edges), spanned by the in-plane unit
+vectors ``u`` (along the edges it contains) and ``w`` (along the face diagonal). The plane is the
+rectangle ``L x sqrt(2) L`` with corners ``C1..C4``. ``P1`` is the cube centre; ``P2..P5`` lie on
+the rectangle's diagonals at ``corner_fraction`` (10 %) of the diagonal length from the corners.
+
+Path, each piece starting and ending at rest: line P2 -> P4, rectangle P4 -> P5 -> P2 -> P3 -> P4,
+transition to the large circle (diameter 0.8 L about P1, starting on the ray P1 -> P4), the circle,
+transition to the small circle (0.1 L), the small circle.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from pipeline.errors import ConfigError
+from pipeline.robot.paths import CartesianPath, CirclePath, LinePath, rectangle
+
+PLANES = {
+    "diagonal_x": (np.array([0.0, 1.0, 0.0]), np.array([1.0, 0.0, 1.0]) / np.sqrt(2)),
+    "diagonal_y": (np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 1.0]) / np.sqrt(2)),
+    "horizontal": (np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])),
+}
+
+
+class IsoPath(CartesianPath):
+    """Concatenation of rest-to-rest pieces; ``points`` holds P1..P5 and C1..C4 (m)."""
+
+    def __init__(self, pieces: list[CartesianPath], points: dict[str, np.ndarray], rotation: np.ndarray,
+                 edge_m: float, plane: str) -> None:
+        self.pieces = pieces
+        self.points = points
+        self.rotation = rotation
+        self.edge_m = edge_m
+        self.plane = plane
+        self.label = "iso9283"
+        self.breaks = np.concatenate([[0.0], np.cumsum([p.length_m for p in pieces])])
+        self.length_m = float(self.breaks[-1])
+
+    def _split(self, s_m):
+        s = np.clip(np.atleast_1d(np.asarray(s_m, float)), 0.0, self.length_m)
+        idx = np.clip(np.searchsorted(self.breaks, s, side="right") - 1, 0, len(self.pieces) - 1)
+        return s, idx
+
+    def position(self, s_m):
+        s, idx = self._split(s_m)
+        out = np.empty((len(s), 3))
+        for i, p in enumerate(self.pieces):
+            m = idx == i
+            if m.any():
+                out[m] = p.position(s[m] - self.breaks[i])
+        return out
+
+    def derivatives(self, s_m):
+        s, idx = self._split(s_m)
+        d1, d2 = np.empty((len(s), 3)), np.empty((len(s), 3))
+        for i, p in enumerate(self.pieces):
+            m = idx == i
+            if m.any():
+                d1[m], d2[m] = p.derivatives(s[m] - self.breaks[i])
+        return d1, d2
+
+    def segments(self) -> list[CartesianPath]:
+        return [sg for p in self.pieces for sg in p.segments()]
+
+
+def iso9283_path(robot=None, edge_m: float = 0.6, centre_m=(1.05, 0.0, 0.85), plane: str = "diagonal_x",
+                 rotation: np.ndarray | None = None, corner_fraction: float = 0.1,
+                 large_circle_fraction: float = 0.8, small_circle_fraction: float = 0.1,
+                 segments=("line", "rectangle", "circle_large", "circle_small")) -> IsoPath:
+    """Build the ISO 9283 path. ``rotation``: constant TCP orientation (default: tool z axis down).
+
+    ``robot`` is accepted for the contract (the workspace check is done by IK when the path is
+    executed).
+    """
+    del robot
+    if plane not in PLANES:
+        raise ConfigError(None, "control.iso.plane", f"unknown plane {plane!r}; one of {sorted(PLANES)}")
+    if edge_m <= 0:
+        raise ConfigError(None, "control.iso.edge_m", "must be > 0")
+    c = np.asarray(centre_m, float)
+    u, w = PLANES[plane]
+    half_u = edge_m / 2
+    half_w = edge_m / 2 * (np.sqrt(2) if plane != "horizontal" else 1.0)
+    C = {  # rectangle corners in order around the plane
+        "C1": c - half_u * u - half_w * w, "C2": c + half_u * u - half_w * w,
+        "C3": c + half_u * u + half_w * w, "C4": c - half_u * u + half_w * w,
+    }
+    f = corner_fraction
+    P = {"P1": c}
+    for name, corner in zip(("P2", "P3", "P4", "P5"), ("C1", "C2", "C3", "C4"), strict=True):
+        P[name] = C[corner] + f * 2 * (c - C[corner])  # 10 % of the diagonal from the corner
+    R = pin.utils.rotate("x", np.pi) if rotation is None else np.asarray(rotation, float)
+    normal = np.cross(u, w)
+    pieces: list[CartesianPath] = []
+    cur = None
+    if "line" in segments:
+        pieces.append(LinePath(P["P2"], P["P4"], R, "line P2-P4"))
+        cur = P["P4"]
+    if "rectangle" in segments:
+        if cur is None:
+            cur = P["P4"]
+        pieces.append(rectangle([P["P4"], P["P5"], P["P2"], P["P3"]], R, label="rectangle"))
+    d = (P["P4"] - c) / np.linalg.norm(P["P4"] - c)
+    for key, frac in (("circle_large", large_circle_fraction), ("circle_small", small_circle_fraction)):
+        if key not in segments:
+            continue
+        r = frac * edge_m / 2
+        start = c + r * d
+        if cur is not None and np.linalg.norm(start - cur) > 1e-9:
+            pieces.append(LinePath(cur, start, R, f"transition to {key}"))
+        pieces.append(CirclePath(c, normal, r, d, 2 * np.pi, R, key))
+        cur = start
+    if not pieces:
+        raise ConfigError(None, "control.iso.segments", "no path segment selected")
+    return IsoPath(pieces, {**P, **C}, R, edge_m, plane)

@@ -1,0 +1,159 @@
+"""Reference generation: TCP path -> jerk-limited speed profile -> IK -> consistent q_d, v_d, a_d.
+
+Paper 004 §2.3.2: "every sample step the inverse kinematic problem is solved numerically to
+transform the desired end-effector movement into joint positions, velocities and accelerations".
+
+* Each segment of the path (pieces with a continuous tangent) gets a rest-to-rest, jerk-limited
+  profile ``s(t)`` from ruckig (max speed, tangential acceleration, jerk); on curved pieces the
+  speed is also capped by the normal acceleration, ``s_dot <= sqrt(a_max / kappa_max)``.
+* ``p_dot = p'(s) s_dot``, ``p_ddot = p''(s) s_dot^2 + p'(s) s_ddot``; the orientation is constant.
+* IK at every sample warm-started from the previous one (:func:`pipeline.robot.paths.ik_track`),
+  then ``v_d = J^-1 [p_dot; 0]`` and ``a_d = J^-1 ([p_ddot; 0] - Jdot v_d)`` with ``Jdot v_d`` the
+  classical frame acceleration at zero joint acceleration.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+from ruckig import InputParameter, Result, Ruckig, Trajectory
+
+from pipeline.errors import InfeasibleError, SolverError
+from pipeline.robot.paths import CartesianPath
+
+
+@dataclass
+class Reference:
+    t_s: np.ndarray          # (N,)
+    q_d: np.ndarray          # (N, nq)
+    v_d: np.ndarray
+    a_d: np.ndarray
+    tcp_d_m: np.ndarray      # (N, 3) desired TCP position
+    tcp_speed_m_s: np.ndarray  # (N,)
+    segment: np.ndarray      # (N,) index of the segment
+    segment_labels: list[str]
+    s_m: np.ndarray          # (N,) arc length along the whole path
+
+
+def speed_profile(length_m: float, v_max: float, a_max: float, j_max: float, t_s: np.ndarray) -> np.ndarray:
+    """(len(t_s), 3) arrays of s, s_dot, s_ddot of a rest-to-rest ruckig profile sampled at t_s."""
+    otg = Ruckig(1)
+    inp = InputParameter(1)
+    inp.current_position, inp.current_velocity, inp.current_acceleration = [0.0], [0.0], [0.0]
+    inp.target_position, inp.target_velocity, inp.target_acceleration = [float(length_m)], [0.0], [0.0]
+    inp.max_velocity, inp.max_acceleration, inp.max_jerk = [float(v_max)], [float(a_max)], [float(j_max)]
+    traj = Trajectory(1)
+    res = otg.calculate(inp, traj)
+    if res not in (Result.Working, Result.Finished):
+        raise SolverError(None, "ruckig", f"speed profile failed ({res}) for length {length_m} m")
+    out = np.empty((len(t_s), 3))
+    for k, t in enumerate(t_s):
+        p, v, a = traj.at_time(float(min(t, traj.duration)))
+        out[k] = (p[0], v[0], a[0])
+    return out
+
+
+def profile_duration(length_m: float, v_max: float, a_max: float, j_max: float) -> float:
+    otg = Ruckig(1)
+    inp = InputParameter(1)
+    inp.current_position, inp.current_velocity, inp.current_acceleration = [0.0], [0.0], [0.0]
+    inp.target_position, inp.target_velocity, inp.target_acceleration = [float(length_m)], [0.0], [0.0]
+    inp.max_velocity, inp.max_acceleration, inp.max_jerk = [float(v_max)], [float(a_max)], [float(j_max)]
+    traj = Trajectory(1)
+    otg.calculate(inp, traj)
+    return float(traj.duration)
+
+
+def cartesian_reference(robot, path: CartesianPath, sample_time_s: float, speed_m_s: float,
+                        acceleration_m_s2: float, jerk_m_s3: float, q_start: np.ndarray, frame: str = "tcp",
+                        ik_tolerance_m: float = 1e-9) -> Reference:
+    """Sampled joint reference along ``path`` (its segments each rest-to-rest)."""
+    segs = path.segments()
+    vmax = []
+    for sg in segs:
+        kappa = sg.max_curvature_1_m()
+        vmax.append(min(speed_m_s, np.sqrt(acceleration_m_s2 / kappa)) if kappa > 1e-9 else speed_m_s)
+    durations = [profile_duration(sg.length_m, v, acceleration_m_s2, jerk_m_s3) for sg, v in zip(segs, vmax,
+                                                                                                  strict=True)]
+    starts = np.concatenate([[0.0], np.cumsum(durations)])
+    n = int(np.floor(starts[-1] / sample_time_s)) + 1
+    t = sample_time_s * np.arange(n)
+    seg = np.clip(np.searchsorted(starts, t, side="right") - 1, 0, len(segs) - 1)
+    P, Pd, Pdd = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
+    s_all = np.empty(n)
+    speed = np.empty(n)
+    offset = np.concatenate([[0.0], np.cumsum([sg.length_m for sg in segs])])
+    for i, sg in enumerate(segs):
+        m = seg == i
+        prof = speed_profile(sg.length_m, vmax[i], acceleration_m_s2, jerk_m_s3, t[m] - starts[i])
+        s, sd, sdd = prof.T
+        s = np.clip(s, 0.0, sg.length_m)
+        d1, d2 = sg.derivatives(s)
+        P[m] = sg.position(s)
+        Pd[m] = d1 * sd[:, None]
+        Pdd[m] = d2 * sd[:, None] ** 2 + d1 * sdd[:, None]
+        s_all[m] = offset[i] + s
+        speed[m] = sd
+    q, v, a = track(robot, path.rotation, P, Pd, Pdd, q_start, frame, t, ik_tolerance_m)
+    return Reference(t, q, v, a, P, speed, seg, [sg.label for sg in segs], s_all)
+
+
+def track(robot, rotation: np.ndarray, P: np.ndarray, Pd: np.ndarray, Pdd: np.ndarray, q_start: np.ndarray,
+          frame: str, t_s: np.ndarray, tolerance_m: float = 1e-9, max_iterations: int = 20):
+    """IK + joint velocities/accelerations at every sample in one pass.
+
+    Warm start ``q_k^0 = q_{k-1} + dt v_{k-1} + dt^2/2 a_{k-1}``; Newton ``dq = J^-1 e`` with
+    ``e = [p* - p, log3(R* R^T)]``; then ``v = J^-1 [p_dot; 0]``,
+    ``a = J^-1 ([p_ddot; 0] - Jdot v)`` (``Jdot v``: classical frame acceleration at zero ``a``).
+    Raises InfeasibleError naming the time, point and joint on failure, singularity or limits.
+    """
+    model = robot.model
+    data = model.createData()
+    fid = model.getFrameId(frame)
+    nq = model.nq
+    N = len(P)
+    q_out, v_out, a_out = np.empty((N, nq)), np.empty((N, nq)), np.empty((N, nq))
+    lo, hi, vlim = robot.limits.lower_rad, robot.limits.upper_rad, robot.limits.velocity_rad_s
+    zero = np.zeros(nq)
+    q = np.array(q_start, float)
+    v_prev = np.zeros(nq)
+    a_prev = np.zeros(nq)
+    for k in range(N):
+        if k > 0:
+            dt = t_s[k] - t_s[k - 1]
+            q = q + dt * v_prev + 0.5 * dt * dt * a_prev
+        err = np.inf
+        for _ in range(max_iterations):
+            pin.framesForwardKinematics(model, data, q)
+            cur = data.oMf[fid]
+            e = np.concatenate([P[k] - cur.translation, pin.log3(rotation @ cur.rotation.T)])
+            err = float(np.linalg.norm(e))
+            J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
+            if err < tolerance_m:
+                break
+            q = q + np.linalg.solve(J, e)
+        def where(k=k) -> str:
+            return f"TCP point {np.array2string(P[k], precision=4)} m at t = {t_s[k]:.4f} s"
+
+        cond = np.linalg.cond(J) if (k % 25 == 0 or err >= tolerance_m) else 1.0  # singularity watch
+        if err >= tolerance_m or not np.isfinite(cond) or cond > 1e6:
+            raise InfeasibleError(None, "ik", f"{where()} not reached (error {err:.1e} m, cond(J) {cond:.1e})")
+        bad = np.nonzero((q < lo) | (q > hi))[0]
+        if len(bad):
+            j = int(bad[0])
+            raise InfeasibleError(None, "ik", f"{where()} needs joint {j + 1} = {np.degrees(q[j]):.1f} deg outside "
+                                  f"[{np.degrees(lo[j]):.1f}, {np.degrees(hi[j]):.1f}] deg")
+        v = np.linalg.solve(J, np.concatenate([Pd[k], np.zeros(3)]))
+        pin.forwardKinematics(model, data, q, v, zero)
+        drift = pin.getFrameClassicalAcceleration(model, data, fid, pin.LOCAL_WORLD_ALIGNED).vector
+        a = np.linalg.solve(J, np.concatenate([Pdd[k], np.zeros(3)]) - drift)
+        over = np.nonzero(np.abs(v) > vlim)[0]
+        if len(over):
+            j = int(over[0])
+            raise InfeasibleError(None, "reference", f"{where()}: joint {j + 1} velocity {v[j]:.2f} rad/s exceeds "
+                                  f"{vlim[j]:.2f} rad/s")
+        q_out[k], v_out[k], a_out[k] = q, v, a
+        v_prev, a_prev = v, a
+    return q_out, v_out, a_out

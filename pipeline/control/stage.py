@@ -1,0 +1,235 @@
+"""Stage ``control``: model-based feedforward on the EN ISO 9283 path, simulated at 400 µs.
+
+Paper ``004_abbe750b8bbcc3aa.txt`` §2.3 (DESIGN.md "Control", "EN ISO 9283 test path"):
+
+1. servo design per joint from the reflected inertia (python-control, margins);
+2. the ISO path (cube of edge L, diagonal plane, P1..P5) with a ruckig speed profile, IK at every
+   sample with the best kinematics available (calibrated after stage 1) -> q_d, v_d, a_d;
+3. the cascade closed around the real robot's plant (delays, encoder noise) for each
+   feedforward variant (none, gravity, rigid body, rigid body + friction) from the best dynamics
+   (identified after stage 2) and, for comparison, from the nominal model;
+4. the same with the nominal kinematics (effect of the calibration on absolute TCP accuracy).
+
+Works without the upstream stages (then ctx.robot is the nominal model and the comparisons
+collapse to equal numbers; the summary says which models were used).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pinocchio as pin
+
+from pipeline.control.config import ControlConfig
+from pipeline.control.design import filter_alpha, loop_models, servo_report
+from pipeline.control.iso9283 import iso9283_path
+from pipeline.control.reference import cartesian_reference
+from pipeline.control.simulate import first_saturation, servo_gains, simulate_joint_trajectory
+from pipeline.control.validate import bode_figure, lag_figure, path_figure, run_metrics, tcp_figure
+from pipeline.errors import PipelineError
+from pipeline.robot.paths import start_configuration
+from pipeline.runner import StageContext, StageResult
+
+NAME = "control"
+DEPENDS: tuple[str, ...] = ("model", "calibration", "identification")
+Config = ControlConfig
+
+
+def _nominal_robot(ctx: StageContext):
+    from pipeline.robot.model import RobotModel
+    from pipeline.runner import resolve_robot_dir
+
+    return RobotModel.load(resolve_robot_dir(ctx.run))
+
+
+def _with_dynamics_of(kinematics_robot, dynamics_robot):
+    """Copy of ``kinematics_robot`` whose inertias, armature and friction are ``dynamics_robot``'s."""
+    out = kinematics_robot.copy()
+    for j in range(1, out.model.njoints):
+        out.model.inertias[j] = dynamics_robot.model.inertias[j].copy()
+    out.model.armature = np.array(dynamics_robot.model.armature).copy()
+    for name in ("viscous_Nms_rad", "coulomb_Nm", "rotor_inertia_kgm2"):
+        setattr(out.actuation, name, np.array(getattr(dynamics_robot.actuation, name)).copy())
+    return out
+
+
+def _upstream_robot(ctx: StageContext, stage: str):
+    out = ctx.upstream.get(stage)
+    return None if out is None else out.robot
+
+
+def run(ctx: StageContext) -> StageResult:
+    cfg: ControlConfig = ctx.config
+    if ctx.real is None:
+        raise PipelineError(None, "control", "the hidden robot (pipeline.robot.truth) is not available")
+    robot = ctx.robot
+    nominal = _nominal_robot(ctx)
+    calibrated = _upstream_robot(ctx, "calibration") is not None
+    identified = _upstream_robot(ctx, "identification") is not None
+    iso = cfg.iso
+    dt = cfg.sample_time_s
+    frame = robot.frame_tcp
+    rotation = pin.utils.rotate("x", np.pi) if iso.tool_down else None
+    path = iso9283_path(robot, iso.edge_m, iso.centre_m, iso.plane, rotation, iso.corner_fraction,
+                        iso.large_circle_fraction, iso.small_circle_fraction, tuple(iso.segments))
+    seeds = np.radians(np.atleast_2d(np.asarray(cfg.ik_seeds_deg, float)))
+    t0 = time.perf_counter()
+    q_start = start_configuration(robot, path.poses([0.0])[0], seeds, frame)
+    ref = cartesian_reference(robot, path, dt, iso.speed_m_s, iso.acceleration_m_s2, iso.jerk_m_s3, q_start,
+                              frame, cfg.ik_tolerance_m)
+    t_ref = time.perf_counter() - t0
+
+    gains = servo_gains(robot, np.mean(ref.q_d, axis=0), cfg)
+    nv = cfg.velocity_samples_per_position_sample
+    alpha = filter_alpha(cfg.velocity_filter_hz, dt / nv)
+    servo = servo_report(gains, dt, nv, cfg.measurement_delay_samples, alpha)
+
+    plant = ctx.real.plant
+    tcp_at_ref = plant.measure_tcp(ref.q_d, frame)
+    noise_seed = int(ctx.rng.integers(2**32))  # common random numbers across the variants
+
+    def simulate(model, q_d, v_d, a_d, variant):
+        return simulate_joint_trajectory(ctx.real, model, ref.t_s, q_d, v_d, a_d, cfg, feedforward=variant,
+                                         rng=np.random.default_rng(noise_seed), gains=gains, tcp_frame=frame)
+
+    runs, metrics = {}, {}
+    jobs = [(v, robot) for v in cfg.variants]
+    if cfg.compare_nominal_feedforward and identified:
+        jobs.append(("full_friction_nominal", _with_dynamics_of(robot, nominal)))
+    for name, model in ctx.progress.track(jobs, "closed loop on the ISO path"):
+        variant = "full_friction" if name == "full_friction_nominal" else name
+        res = simulate(model, ref.q_d, ref.v_d, ref.a_d, variant)
+        runs[name] = res
+        metrics[name] = run_metrics(res.lag_error_rad, res.tcp_position_m, ref.tcp_d_m, tcp_at_ref)
+        metrics[name]["max_torque_ratio"] = res.max_torque_ratio.tolist()
+        metrics[name]["realtime_factor"] = res.realtime_factor
+        metrics[name]["realtime_factor_cpu"] = res.realtime_factor_cpu
+        metrics[name]["saturation"] = first_saturation(res, cfg.saturation_ratio)
+
+    main = "full_friction" if "full_friction" in runs else list(runs)[-1]
+    # kinematics: the same control with the reference from the nominal kinematics
+    if calibrated:
+        nom_kin = _with_dynamics_of(nominal, robot)
+        q_start_n = start_configuration(nom_kin, path.poses([0.0])[0], np.vstack([q_start, seeds]), frame)
+        ref_n = cartesian_reference(nom_kin, path, dt, iso.speed_m_s, iso.acceleration_m_s2, iso.jerk_m_s3,
+                                    q_start_n, frame, cfg.ik_tolerance_m)
+        res_n = simulate(robot, ref_n.q_d, ref_n.v_d, ref_n.a_d, "full_friction" if "full_friction" in runs
+                         else main)
+        n = min(len(res_n.tcp_position_m), len(ref.tcp_d_m))
+        rms_nominal_kin = float(np.sqrt(np.mean(np.sum((res_n.tcp_position_m[:n] - ref.tcp_d_m[:n]) ** 2, 1))))
+    else:
+        rms_nominal_kin = metrics[main]["tcp_error_rms_m"]
+
+    # speed: compiled loop vs the plain Python loop on the first seconds of the path
+    rtf = float(np.median([m["realtime_factor"] for m in metrics.values()]))
+    speed = {"realtime_factor": rtf,
+             "realtime_factor_cpu": float(np.median([m["realtime_factor_cpu"] for m in metrics.values()]))}
+    if cfg.benchmark_python_seconds > 0:
+        k = min(len(ref.t_s), max(2, int(cfg.benchmark_python_seconds / dt)))
+        py_cfg = ControlConfig(**{**cfg.__dict__, "engine": "python", "settle_time_s": 0.0,
+                                  "on_saturation": "clip"})
+        res_py = simulate_joint_trajectory(ctx.real, robot, ref.t_s[:k], ref.q_d[:k], ref.v_d[:k], ref.a_d[:k],
+                                           py_cfg, feedforward=main if main in ("none", "gravity", "full",
+                                                                                 "full_friction") else "none",
+                                           rng=np.random.default_rng(noise_seed), gains=gains, tcp_frame=frame)
+        speed["python_loop_realtime_factor"] = res_py.realtime_factor
+        speed["speedup_vs_python_loop"] = rtf / res_py.realtime_factor
+
+    summary = _summary(cfg, ref, metrics, main, speed, rms_nominal_kin, calibrated, identified, servo, t_ref)
+    figures = _figures(ref, runs, path, tcp_at_ref, servo_models=[
+        loop_models(gains.inertia_kgm2[i], gains.kp[i], gains.kv[i], gains.ki[i], dt, nv,
+                    cfg.measurement_delay_samples, alpha) for i in range(min(3, robot.nq))])
+    step = max(1, int(round(0.002 / dt)))  # 2 ms for the viewer replay
+    arrays = {
+        "trajectory_iso_t": runs[main].t_s[::step], "trajectory_iso_q": runs[main].q[::step],
+        "trajectory_iso_desired_t": ref.t_s[::step], "trajectory_iso_desired_q": ref.q_d[::step],
+        "iso_tcp_desired_m": ref.tcp_d_m, "iso_path_s_m": ref.s_m, "iso_t_s": ref.t_s,
+        "iso_q_d": ref.q_d, "iso_v_d": ref.v_d, "iso_a_d": ref.a_d,
+        "servo_kp_1_s": gains.kp, "servo_kv_Nms_rad": gains.kv, "servo_ki_Nm_rad": gains.ki,
+    }
+    for name, res in runs.items():
+        arrays[f"lag_error_{name}_rad"] = res.lag_error_rad
+        arrays[f"tcp_{name}_m"] = res.tcp_position_m
+        arrays[f"tau_cmd_{name}_Nm"] = res.tau_cmd
+    data = {"metrics": metrics, "servo": servo, "iso_points_m": {k: v.tolist() for k, v in path.points.items()},
+            "segments": ref.segment_labels, "q_start_rad": q_start.tolist()}
+    return StageResult(summary=summary, arrays=arrays, data=data, figures=figures,
+                       report_md=_report(summary, metrics, servo))
+
+
+def _summary(cfg, ref, metrics, main, speed, rms_nominal_kin, calibrated, identified, servo, t_ref) -> dict:
+    s = {
+        "sample_time_s": cfg.sample_time_s,
+        "velocity_sample_time_s": cfg.sample_time_s / cfg.velocity_samples_per_position_sample,
+        "delay_samples": {"setpoint": cfg.setpoint_delay_samples, "measurement": cfg.measurement_delay_samples},
+        "feedforward_advanced": cfg.advance_feedforward,
+        "path_length_m": float(ref.s_m[-1]), "path_duration_s": float(ref.t_s[-1]),
+        "tcp_speed_m_s": cfg.iso.speed_m_s, "tcp_acceleration_m_s2": cfg.iso.acceleration_m_s2,
+        "feedforward_model": "identified" if identified else "nominal",
+        "kinematics": "calibrated" if calibrated else "nominal",
+        "tcp_error_max_m": {k: m["tcp_error_max_m"] for k, m in metrics.items()},
+        "tcp_error_rms_m": {k: m["tcp_error_rms_m"] for k, m in metrics.items()},
+        "tcp_tracking_error_max_m": {k: m["tcp_tracking_error_max_m"] for k, m in metrics.items()},
+        "tcp_tracking_error_rms_m": {k: m["tcp_tracking_error_rms_m"] for k, m in metrics.items()},
+        "lag_error_max_rad": {k: m["lag_error_max_rad"][:3] for k, m in metrics.items()},
+        "lag_error_rms_rad": {k: m["lag_error_rms_rad"][:3] for k, m in metrics.items()},
+        "max_torque_ratio": {k: max(m["max_torque_ratio"]) for k, m in metrics.items()},
+        "saturation": {k: m["saturation"] for k, m in metrics.items() if m["saturation"] is not None},
+        "tcp_error_rms_nominal_kinematics_m": rms_nominal_kin,
+        "tcp_error_rms_calibrated_kinematics_m": metrics[main]["tcp_error_rms_m"],
+        "servo_min_phase_margin_deg": {
+            "velocity": min(r["velocity"]["phase_margin_deg"] for r in servo),
+            "position": min(r["position"]["phase_margin_deg"] for r in servo)},
+        "reference_time_s": t_ref,
+        **speed,
+    }
+    if "none" in metrics and main != "none":
+        a, b = metrics["none"], metrics[main]
+        s["improvement"] = {
+            "tcp_error_max": a["tcp_error_max_m"] / b["tcp_error_max_m"],
+            "tcp_tracking_error_max": a["tcp_tracking_error_max_m"] / b["tcp_tracking_error_max_m"],
+            "lag_error_max_axes_1_3": [x / y for x, y in zip(a["lag_error_max_rad"][:3], b["lag_error_max_rad"][:3],
+                                                             strict=True)],
+        }
+    return s
+
+
+def _figures(ref, runs, path, tcp_at_ref, servo_models) -> dict:
+    show = [k for k in ("none", "full_friction") if k in runs] or list(runs)
+    lag = {k: runs[k].lag_error_rad for k in runs}
+    tcp = {k: np.linalg.norm(runs[k].tcp_position_m - tcp_at_ref, axis=1) for k in runs}
+    tcp_abs = {k: np.linalg.norm(runs[k].tcp_position_m - ref.tcp_d_m, axis=1) for k in runs}
+    return {
+        "lag_errors": lag_figure(ref.t_s, lag),
+        "tcp_error": tcp_figure(ref.s_m, tcp, tcp_abs),
+        "iso_path": path_figure(ref.tcp_d_m[::5], {k: runs[k].tcp_position_m[::5] for k in show}, path.points),
+        "servo_bode": bode_figure(servo_models, tuple(range(len(servo_models)))),
+    }
+
+
+def _report(summary, metrics, servo) -> str:
+    rows = ["| feedforward | TCP max [mm] | TCP RMS [mm] | tracking max [mm] | lag max a1/a2/a3 [mdeg] | "
+            "max torque ratio |", "|---|---|---|---|---|---|"]
+    for k, m in metrics.items():
+        lag = "/".join(f"{np.degrees(x) * 1e3:.1f}" for x in m["lag_error_max_rad"][:3])
+        rows.append(f"| {k} | {m['tcp_error_max_m'] * 1e3:.3f} | {m['tcp_error_rms_m'] * 1e3:.3f} | "
+                    f"{m['tcp_tracking_error_max_m'] * 1e3:.3f} | {lag} | {max(m['max_torque_ratio']):.2f} |")
+    sat = summary["saturation"]
+    if sat:
+        rows += ["", "**Torque saturation** (control.on_saturation = clip; errors are limited by it): "
+                 + "; ".join(f"{k}: first at t = {v['t_s']:.3f} s on joint {v['joint']}, peak |tau_cmd| / tau_max "
+                             f"{v['max_ratio']:.2f}" for k, v in sat.items())]
+    rows += ["", f"Real-time factor of the compiled loop: {summary['realtime_factor']:.1f}"
+             + (f" (plain Python loop {summary['python_loop_realtime_factor']:.1f}, speed-up "
+                f"{summary['speedup_vs_python_loop']:.1f}x)" if "python_loop_realtime_factor" in summary else ""),
+             f"TCP RMS error, nominal kinematics {summary['tcp_error_rms_nominal_kinematics_m'] * 1e3:.3f} mm, "
+             f"{summary['kinematics']} kinematics {summary['tcp_error_rms_calibrated_kinematics_m'] * 1e3:.3f} mm "
+             f"(feedforward from the {summary['feedforward_model']} model).",
+             "", "| joint | J [kg m²] | Kp [1/s] | Kv [N m s/rad] | vel. PM [deg] | vel. BW [Hz] | pos. PM [deg] | "
+             "pos. BW [Hz] |", "|---|---|---|---|---|---|---|---|"]
+    for r in servo:
+        rows.append(f"| {r['joint']} | {r['inertia_kgm2']:.2f} | {r['kp_1_s']:.1f} | {r['kv_Nms_rad']:.0f} | "
+                    f"{r['velocity']['phase_margin_deg']:.0f} | {r['velocity_bandwidth_hz']:.1f} | "
+                    f"{r['position']['phase_margin_deg']:.0f} | {r['position_bandwidth_hz']:.1f} |")
+    return "\n".join(rows)

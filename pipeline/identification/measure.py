@@ -1,0 +1,228 @@
+"""Identification data: the hidden robot following a trajectory, or a CSV file.
+
+Paper ``004_abbe750b8bbcc3aa.txt`` §4.3: the excitation is run for several periods and joint
+positions and motor torques are recorded. Two sources:
+
+* **simulation**: ``real.execute_joint_trajectory`` (ideal tracking of the commanded Fourier
+  trajectory; encoder and motor-torque noise added by the hidden robot's sensors);
+* **files**: CSV with a header; columns ``t`` (s, optional if ``sample_time_s`` is given), joint
+  positions ``q1..qn`` and torques ``tau1..taun``. Motor-side columns (``side="motor"``) are
+  converted with the gear matrix ``K`` of ``robot.yaml``: ``q = K^-1 q_motor``,
+  ``tau = K^T tau_motor``.
+
+Processing (:func:`process_periodic`, :func:`process_record`) turns them into samples of
+``(q, v, a, tau)`` for the regressor; see :mod:`pipeline.identification.signals`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pipeline.errors import DataFileError
+from pipeline.identification import signals
+from pipeline.identification.design import FourierTrajectory
+from pipeline.identification.regressor import RegressorModel, check_state_arrays
+
+
+@dataclass
+class JointRecord:
+    """Raw joint-side record: time, measured positions, measured torques (N, nq)."""
+
+    t_s: np.ndarray
+    q_rad: np.ndarray
+    tau_Nm: np.ndarray
+    source: str = ""
+
+    @property
+    def sample_time_s(self) -> float:
+        return float(np.median(np.diff(self.t_s)))
+
+    def validate(self, nq: int, min_samples: int = 10) -> None:
+        f = self.source or None
+        t = np.asarray(self.t_s, float)
+        for name, x in (("q", self.q_rad), ("tau", self.tau_Nm)):
+            if x.ndim != 2 or x.shape[1] != nq:
+                raise DataFileError(f, name, f"shape {x.shape}, expected (N, {nq})")
+            if not np.all(np.isfinite(x)):
+                bad = int(np.argwhere(~np.isfinite(x))[0, 0])
+                raise DataFileError(f, name, f"NaN or inf (first at sample {bad})")
+        if not (len(t) == len(self.q_rad) == len(self.tau_Nm)):
+            raise DataFileError(
+                f, "t/q/tau", f"mismatched lengths {len(t)}, {len(self.q_rad)}, {len(self.tau_Nm)}"
+            )
+        if len(t) < min_samples:
+            raise DataFileError(f, "samples", f"{len(t)} samples, need at least {min_samples}")
+        if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
+            raise DataFileError(f, "t", "time stamps must be finite and strictly increasing")
+        dt = np.diff(t)
+        if np.max(np.abs(dt - np.median(dt))) > 1e-3 * np.median(dt) + 1e-9:
+            raise DataFileError(f, "t", "samples are not uniformly spaced (resample first)")
+
+
+def simulate_excitation(
+    real: Any, traj: FourierTrajectory, periods: int, sample_time_s: float, rng: np.random.Generator
+) -> JointRecord:
+    """The hidden robot runs ``periods`` periods of ``traj`` (ideal tracking), sampled every
+    ``sample_time_s`` with its encoder and torque-sensor noise."""
+    n_per = int(round(traj.period_s / sample_time_s))
+    if abs(n_per * sample_time_s - traj.period_s) > 1e-9 * traj.period_s:
+        raise DataFileError(
+            None,
+            "identification.sample_time_s",
+            f"{sample_time_s} s does not divide the period {traj.period_s} s",
+        )
+    t = np.arange(n_per * periods) * sample_time_s
+    q, v, a = traj.evaluate(t)
+    meas = real.execute_joint_trajectory(t, q, v, a, rng)
+    return JointRecord(meas.t_s, meas.q_rad, meas.tau_Nm, "simulation")
+
+
+def load_joint_csv(
+    path: str | Path,
+    robot: Any,
+    side: str = "joint",
+    sample_time_s: float | None = None,
+    q_offset_rad: np.ndarray | None = None,
+) -> JointRecord:
+    """Read a CSV record (see the module docstring); ``side`` = "joint" or "motor"."""
+    path = Path(path)
+    nq = robot.nq
+    if not path.is_file():
+        raise DataFileError(path, None, "file not found")
+    if side not in ("joint", "motor"):
+        raise DataFileError(path, "side", f"must be 'joint' or 'motor', got {side!r}")
+    try:
+        with path.open() as fh:
+            header = [h.strip() for h in fh.readline().split(",")]
+        data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    except ValueError as exc:
+        raise DataFileError(path, "values", f"not numeric CSV ({exc})") from None
+    if data.shape[1] != len(header):
+        raise DataFileError(path, "header", f"{len(header)} names for {data.shape[1]} columns")
+    col = {h: i for i, h in enumerate(header)}
+    q_names = [f"q{i + 1}" for i in range(nq)]
+    tau_names = [f"tau{i + 1}" for i in range(nq)]
+    missing = [n for n in q_names + tau_names if n not in col]
+    if missing:
+        raise DataFileError(path, "header", f"missing columns {missing}")
+    q = data[:, [col[n] for n in q_names]]
+    tau = data[:, [col[n] for n in tau_names]]
+    if "t" in col:
+        t = data[:, col["t"]]
+    elif sample_time_s is not None:
+        t = np.arange(len(data)) * sample_time_s
+    else:
+        raise DataFileError(path, "t", "no time column and no sample_time_s given")
+    if side == "motor":
+        q, tau = motor_to_joint(q, tau, robot.actuation.gear_matrix)
+    if q_offset_rad is not None:
+        q = q + np.asarray(q_offset_rad, float)
+    rec = JointRecord(t, q, tau, str(path))
+    rec.validate(nq)
+    return rec
+
+
+def motor_to_joint(
+    q_motor: np.ndarray, tau_motor: np.ndarray, gear_matrix: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """``q = K^-1 q_motor``, ``tau = K^T tau_motor`` (rows are samples)."""
+    K = np.asarray(gear_matrix, float)
+    q = np.linalg.solve(K, np.asarray(q_motor, float).T).T
+    tau = (K.T @ np.asarray(tau_motor, float).T).T
+    return q, tau
+
+
+@dataclass
+class ProcessedData:
+    """Samples ready for estimation: regressor rows (sample-major) and torques."""
+
+    q: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    tau: np.ndarray  # (N, nq)
+    Y: np.ndarray  # (N*nq, n_std) standard regressor after the parallel decimation
+    sample_time_s: float
+
+    @property
+    def n_samples(self) -> int:
+        return self.q.shape[0]
+
+    @property
+    def y(self) -> np.ndarray:
+        return self.tau.ravel()
+
+
+def _periodic_lowpass(x: np.ndarray, cutoff_hz: float, fs: float, order: int = 4) -> np.ndarray:
+    """Zero-phase low-pass of one period of a periodic signal (three periods tiled)."""
+    n = x.shape[0]
+    tiled = np.concatenate([x, x, x], axis=0)
+    return signals.lowpass(tiled, cutoff_hz, fs, order)[n : 2 * n]
+
+
+def process_periodic(
+    rec: JointRecord,
+    reg: RegressorModel,
+    samples_per_period: int,
+    state_cutoff_hz: float,
+    decimation: int,
+    skip_periods: int = 0,
+) -> ProcessedData:
+    """Average over periods, filter the positions (zero phase, periodic), differentiate,
+    build the regressor at the full rate, then decimate regressor and torques in parallel
+    (the same zero-phase low-pass at 0.8 x the new Nyquist frequency, periodic)."""
+    nq = reg.nv
+    rec.validate(nq)
+    dt = rec.sample_time_s
+    fs = 1.0 / dt
+    n_periods = rec.q_rad.shape[0] // samples_per_period - skip_periods
+    if n_periods < 1:
+        raise DataFileError(rec.source or None, "samples", "less than one full period recorded")
+    start = skip_periods * samples_per_period
+    q_mean, _ = signals.average_periods(rec.q_rad[start:], samples_per_period)
+    tau_mean, _ = signals.average_periods(rec.tau_Nm[start:], samples_per_period)
+    q = _periodic_lowpass(q_mean, state_cutoff_hz, fs)
+    n = q.shape[0]
+    tiled = np.concatenate([q, q, q], axis=0)
+    v3 = signals.differentiate(tiled, dt)
+    a3 = signals.differentiate(v3, dt)
+    v, a = v3[n : 2 * n], a3[n : 2 * n]
+    Y = reg.stacked(q, v, a)
+    if decimation > 1:
+        cut = 0.8 * 0.5 * fs / decimation
+        Yd = _periodic_lowpass(Y.reshape(n, nq * Y.shape[1]), cut, fs).reshape(n * nq, -1)
+        taud = _periodic_lowpass(tau_mean, cut, fs)
+        keep = np.arange(0, n, decimation)
+        rows = (keep[:, None] * nq + np.arange(nq)[None, :]).ravel()
+        return ProcessedData(q[keep], v[keep], a[keep], taud[keep], Yd[rows], dt * decimation)
+    return ProcessedData(q, v, a, tau_mean, Y, dt)
+
+
+def process_record(
+    rec: JointRecord,
+    reg: RegressorModel,
+    state_cutoff_hz: float,
+    decimation: int,
+    border_samples: int = 20,
+) -> ProcessedData:
+    """Non-periodic record (e.g. the TX40 file): filter positions, differentiate, decimate
+    states and torques in parallel (zero-phase low-pass then every ``decimation``-th sample),
+    and drop ``border_samples`` decimated samples at both ends (filter transients)."""
+    nq = reg.nv
+    rec.validate(nq)
+    dt = rec.sample_time_s
+    fs = 1.0 / dt
+    st = signals.states_from_positions(rec.q_rad, dt, state_cutoff_hz)
+    q = signals.decimate(st.q, decimation, fs)
+    v = signals.decimate(st.v, decimation, fs)
+    a = signals.decimate(st.a, decimation, fs)
+    tau = signals.decimate(rec.tau_Nm, decimation, fs)
+    b = border_samples
+    if q.shape[0] <= 2 * b + 1:
+        raise DataFileError(rec.source or None, "samples", f"{rec.q_rad.shape[0]} samples are too few")
+    q, v, a, tau = (x[b:-b] if b > 0 else x for x in (q, v, a, tau))
+    check_state_arrays(q, v, a, nq, rec.source or None)
+    return ProcessedData(q, v, a, tau, reg.stacked(q, v, a), dt * decimation)

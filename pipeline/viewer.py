@@ -1,0 +1,328 @@
+"""Interactive 3-D viewer: the robot in meshcat (Pinocchio's ``MeshcatVisualizer``).
+
+Python API (notebooks)::
+
+    from pipeline.viewer import Viewer
+    v = Viewer(robot)                     # starts a meshcat server on localhost, prints its URL
+    v.show(q)                             # one configuration
+    v.show_configurations(Q, "calibration")   # TCP points of a set + an animation through it
+    v.play(t, q)                          # replay a joint trajectory (meshcat animation, scrubbable)
+    v.jupyter_cell()                      # embed in a notebook
+    v.close()
+
+Command line: ``python -m pipeline view [RUN_DIR]`` loads a run directory, draws the robot
+(the last model a stage handed on, else the run's nominal robot), every saved configuration
+set (arrays ``configurations_<name>`` of shape ``(N, nq)`` in a stage's ``results.npz``) and
+every saved trajectory (``trajectory_<name>_t`` ``(N,)`` with ``trajectory_<name>_q``
+``(N, nq)``), and plays them one after the other in a single animation.
+
+The visual model comes from the URDF's ``<visual>`` primitives, attached to the joints of
+``robot.model``, so a calibrated model (moved joint placements) is drawn correctly.
+"""
+
+from __future__ import annotations
+
+import re
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from pipeline.errors import PipelineError
+
+TRAJECTORY_RE = re.compile(r"^trajectory_(?P<name>.+)_t$")
+CONFIGURATIONS_PREFIX = "configurations_"
+COLORS = (0xE6550D, 0x3182BD, 0x31A354, 0x756BB1, 0xD62728, 0x8C564B)
+
+
+def visual_model(robot: Any) -> pin.GeometryModel:
+    """Visual geometry of ``robot`` built from its URDF text (primitives only)."""
+    urdf_text = getattr(robot, "urdf_text", None)
+    if urdf_text is None:
+        return pin.buildGeomFromUrdf(robot.model, str(robot.urdf_path), pin.GeometryType.VISUAL)
+    return pin.buildGeomFromUrdfString(robot.model, urdf_text, pin.GeometryType.VISUAL)
+
+
+class Viewer:
+    """The robot in a meshcat scene.
+
+    ``zmq_url``: connect to a running ``meshcat-server`` instead of starting one;
+    ``viewer``: an existing ``meshcat.Visualizer``; ``open_browser``: open the page.
+    """
+
+    def __init__(self, robot: Any, *, zmq_url: str | None = None, viewer: Any = None,
+                 open_browser: bool = False, root: str | None = None) -> None:
+        import meshcat
+        from pinocchio.visualize import MeshcatVisualizer
+
+        self.robot = robot
+        self.model = robot.model
+        self._own_server = viewer is None and zmq_url is None
+        if viewer is None:
+            viewer = meshcat.Visualizer(zmq_url=zmq_url)
+        self.vis = viewer
+        geometry = visual_model(robot)
+        self.viz = MeshcatVisualizer(self.model, geometry, geometry)
+        self.viz.initViewer(viewer=viewer, open=open_browser)
+        self.root = root or str(getattr(robot, "name", "robot"))
+        self.viz.loadViewerModel(rootNodeName=self.root)
+        self._data = self.model.createData()
+        self._clips: list[tuple[str, np.ndarray, np.ndarray]] = []     # (name, t, q) queued for animate()
+        self.show(np.zeros(self.model.nq))
+        self.set_camera()
+
+    # ------------------------------------------------------------------------ basics
+    @property
+    def url(self) -> str:
+        return self.vis.url()
+
+    def jupyter_cell(self, height: int = 400) -> Any:
+        return self.vis.jupyter_cell(height=height)
+
+    def set_camera(self, position_m: np.ndarray | None = None) -> None:
+        """Put the camera at ``position_m`` (world frame, z up); it looks at the origin
+        (meshcat's orbit target). Default: a three-quarter view from the front left, at a
+        distance that scales with the robot's height at q = 0."""
+        if position_m is None:
+            data = self.model.createData()
+            pin.framesForwardKinematics(self.model, data, np.zeros(self.model.nq))
+            height = max(0.3, float(max(f.translation[2] for f in data.oMf)))
+            position_m = height * np.array([0.75, -1.0, 0.55])
+        p = np.asarray(position_m, float)
+        # meshcat's camera lives in a y-up frame: (x, y, z)_world -> (x, z, -y)
+        self.vis["/Cameras/default/rotated/<object>"].set_property(
+            "position", [float(p[0]), float(p[2]), float(-p[1])])
+
+    def show(self, q: np.ndarray) -> None:
+        """Place the robot at configuration ``q``."""
+        self.viz.display(np.asarray(q, float))
+
+    def close(self) -> None:
+        """Stop the meshcat server this viewer started (if any)."""
+        proc = getattr(self.vis.window, "server_proc", None)
+        if self._own_server and proc is not None and proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)
+
+    def __enter__(self) -> Viewer:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------------ drawings
+    def _tcp_points(self, Q: np.ndarray, frame: str) -> np.ndarray:
+        if hasattr(self.robot, "positions"):
+            return np.asarray(self.robot.positions(Q, frame))
+        fid = self.model.getFrameId(frame)
+        out = []
+        for q in Q:
+            pin.framesForwardKinematics(self.model, self._data, q)
+            out.append(self._data.oMf[fid].translation.copy())
+        return np.array(out)
+
+    def show_points(self, points: np.ndarray, name: str, color: int = 0xE6550D, size_m: float = 0.02) -> None:
+        """Draw ``(N, 3)`` points as a point cloud under ``points/<name>``."""
+        import meshcat.geometry as g
+
+        P = np.atleast_2d(np.asarray(points, float))
+        rgb = np.array([(color >> 16) & 255, (color >> 8) & 255, color & 255], float) / 255.0
+        colors = np.tile(rgb[:, None], (1, len(P)))
+        self.vis["points"][name].set_object(g.PointCloud(P.T, colors, size=size_m))
+
+    def show_path(self, points: np.ndarray, name: str, color: int = 0x3182BD) -> None:
+        """Draw ``(N, 3)`` points as a polyline under ``paths/<name>``."""
+        import meshcat.geometry as g
+
+        P = np.atleast_2d(np.asarray(points, float))
+        self.vis["paths"][name].set_object(
+            g.Line(g.PointsGeometry(P.T), g.LineBasicMaterial(color=color, linewidth=2)))
+
+    def show_configurations(self, Q: np.ndarray, name: str = "configurations", *, frame: str = "tcp",
+                            seconds_each: float = 1.0, color: int = 0xE6550D, animate: bool = True) -> Any:
+        """Show a configuration set: its TCP points, the robot at ``Q[0]``, and (``animate``)
+        an animation that moves through the set, ``seconds_each`` per configuration (queued
+        after earlier clips; :meth:`clear_animation` starts afresh). Returns the Animation."""
+        Q = self._check_q(Q, name)
+        self.show_points(self._tcp_points(Q, frame if self.model.existFrame(frame) else "flange"), name, color)
+        self.show(Q[0])
+        t = np.arange(len(Q), dtype=float) * seconds_each
+        if animate:
+            self._clips.append((name, t, Q))
+            return self.animate()
+        return None
+
+    def play(self, t: np.ndarray, q: np.ndarray, name: str = "trajectory", *, fps: float = 30.0,
+             realtime: bool = False, speed: float = 1.0, frame: str = "tcp", color: int = 0x3182BD) -> Any:
+        """Replay a joint trajectory ``q(t)``: draws the TCP path and either sets a meshcat
+        animation (default; play/scrub it in the page's controls) or, ``realtime=True``,
+        moves the robot from Python in (scaled) real time, blocking until done.
+        Returns the meshcat Animation (None when ``realtime``)."""
+        t = np.asarray(t, float).ravel()
+        q = self._check_q(q, name)
+        if len(t) != len(q):
+            raise PipelineError(None, name, f"{len(t)} time stamps but {len(q)} configurations")
+        if np.any(np.diff(t) < 0):
+            raise PipelineError(None, name, "time stamps must not decrease")
+        self.show_path(self._tcp_points(q[:: max(1, len(q) // 500)], frame if self.model.existFrame(frame)
+                                        else "flange"), name, color)
+        if realtime:
+            frames = np.arange(t[0], t[-1] + 1e-12, 1.0 / fps)
+            start = time.perf_counter()
+            for tk in frames:
+                self.show(_interp(t, q, tk))
+                delay = (tk - t[0]) / speed - (time.perf_counter() - start)
+                if delay > 0:
+                    time.sleep(delay)
+            return None
+        self._clips.append((name, t, q))
+        return self.animate(fps=fps)
+
+    def clear_animation(self) -> None:
+        self._clips.clear()
+
+    def animate(self, fps: float = 30.0, gap_s: float = 0.5) -> Any:
+        """Send one meshcat animation playing every queued clip (configuration sets and
+        trajectories) one after the other; returns the ``meshcat.animation.Animation``."""
+        from meshcat.animation import Animation
+
+        anim = Animation(default_framerate=int(round(fps)))
+        geom = self.viz.visual_model
+        gdata = self.viz.visual_data
+        nodes = [self.viz.getViewerNodeName(obj, pin.GeometryType.VISUAL) for obj in geom.geometryObjects]
+        frame0 = 0
+        for _name, t, q in self._clips:
+            n_frames = max(1, int(np.ceil((t[-1] - t[0]) * fps))) + 1
+            for k in range(n_frames):
+                qk = _interp(t, q, t[0] + k / fps)
+                pin.forwardKinematics(self.model, self.viz.data, qk)
+                pin.updateGeometryPlacements(self.model, self.viz.data, geom, gdata)
+                with anim.at_frame(self.vis, frame0 + k) as frame_vis:
+                    for gid, node in enumerate(nodes):
+                        frame_vis[node].set_transform(gdata.oMg[gid].homogeneous)
+            frame0 += n_frames + int(round(gap_s * fps))
+        if self._clips:
+            self.vis.set_animation(anim, play=True, repetitions=1)
+        return anim
+
+    def _check_q(self, Q: np.ndarray, name: str) -> np.ndarray:
+        Q = np.atleast_2d(np.asarray(Q, float))
+        if Q.ndim != 2 or Q.shape[1] != self.model.nq or len(Q) == 0:
+            raise PipelineError(None, name, f"expected an (N, {self.model.nq}) array, got shape {Q.shape}")
+        return Q
+
+
+def _interp(t: np.ndarray, q: np.ndarray, tk: float) -> np.ndarray:
+    """Piecewise-linear q(tk), clamped to the ends."""
+    if len(t) == 1:
+        return q[0]
+    return np.array([np.interp(tk, t, q[:, j]) for j in range(q.shape[1])])
+
+
+# ------------------------------------------------------------------------------ run dirs
+def find_saved_motions(run_dir: str | Path) -> tuple[dict[str, np.ndarray], dict[str, tuple[np.ndarray, np.ndarray]]]:
+    """Configuration sets and trajectories saved by the stages of a run.
+
+    Returns ``({"<stage>/<name>": Q}, {"<stage>/<name>": (t, q)})``.
+    """
+    from pipeline.artefacts import RESULTS_NPZ, read_npz
+    from pipeline.runner import load_run
+
+    configurations: dict[str, np.ndarray] = {}
+    trajectories: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    for stage, out in load_run(run_dir).items():
+        if not (out.path / RESULTS_NPZ).exists():
+            continue
+        arrays = read_npz(out.path / RESULTS_NPZ)
+        for key, value in arrays.items():
+            if key.startswith(CONFIGURATIONS_PREFIX):
+                configurations[f"{stage}/{key[len(CONFIGURATIONS_PREFIX):]}"] = value
+            m = TRAJECTORY_RE.match(key)
+            if m and f"trajectory_{m['name']}_q" in arrays:
+                trajectories[f"{stage}/{m['name']}"] = (value, arrays[f"trajectory_{m['name']}_q"])
+    return configurations, trajectories
+
+
+def latest_run_dir(runs_dir: str | Path | None = None) -> Path | None:
+    from pipeline.runner import default_runs_dir
+
+    base = Path(runs_dir) if runs_dir is not None else default_runs_dir()
+    if not base.is_dir():
+        return None
+    runs = [p for p in base.iterdir() if p.is_dir() and (p / "config.yaml").exists()]
+    return max(runs, key=lambda p: p.stat().st_mtime) if runs else None
+
+
+def robot_of_run(run_dir: Path) -> Any:
+    """The last robot a stage of the run handed on, else the run's nominal robot."""
+    import yaml
+
+    from pipeline.config import RunConfig, stage_names
+    from pipeline.robot.model import RobotModel
+    from pipeline.runner import resolve_robot_dir
+
+    for stage in reversed(stage_names()):
+        if (run_dir / stage / "robot" / "robot.yaml").exists():
+            return RobotModel.load(run_dir / stage / "robot")
+    cfg_file = run_dir / "config.yaml"
+    robot = "rx130l"
+    if cfg_file.exists():
+        robot = (yaml.safe_load(cfg_file.read_text()) or {}).get("robot", robot)
+    return RobotModel.load(resolve_robot_dir(RunConfig(robot=str(robot), source=str(cfg_file))))
+
+
+def view_run(run_dir: str | Path | None = None, *, robot: str | None = None, configurations: str | None = None,
+             trajectory: str | None = None, open_browser: bool = False, wait: bool = True) -> Viewer:
+    """``python -m pipeline view``: show a run's robot, configuration sets and trajectories."""
+    from pipeline.config import RunConfig
+    from pipeline.robot.model import RobotModel
+    from pipeline.runner import resolve_robot_dir
+
+    path = Path(run_dir) if run_dir is not None else latest_run_dir()
+    if run_dir is not None and not Path(run_dir).is_dir():
+        raise PipelineError(run_dir, None, "run directory not found")
+    if robot is not None:
+        model = RobotModel.load(resolve_robot_dir(RunConfig(robot=robot, source="--robot")))
+    elif path is not None:
+        model = robot_of_run(path)
+    else:
+        model = RobotModel.load(resolve_robot_dir(RunConfig()))
+    sets, trajs = find_saved_motions(path) if path is not None else ({}, {})
+    if configurations is not None:
+        sets = {k: v for k, v in sets.items() if configurations in (k, k.split("/", 1)[-1])}
+        if not sets:
+            raise PipelineError(path, configurations, "no such configuration set in this run")
+        trajs = {} if trajectory is None else trajs
+    if trajectory is not None:
+        trajs = {k: v for k, v in trajs.items() if trajectory in (k, k.split("/", 1)[-1])}
+        if not trajs:
+            raise PipelineError(path, trajectory, "no such trajectory in this run")
+        sets = {} if configurations is None else sets
+    viewer = Viewer(model, open_browser=open_browser)
+    for k, (name, Q) in enumerate(sets.items()):
+        if Q.ndim == 2 and Q.shape[1] == model.nq:
+            viewer._clips.append((name, np.arange(len(Q), dtype=float), Q))
+            viewer.show_points(viewer._tcp_points(Q, "tcp"), name, COLORS[k % len(COLORS)])
+    for k, (name, (t, q)) in enumerate(trajs.items()):
+        if q.ndim == 2 and q.shape[1] == model.nq and len(t) == len(q):
+            viewer._clips.append((name, np.asarray(t, float), q))
+            viewer.show_path(viewer._tcp_points(q[:: max(1, len(q) // 500)], "tcp"), name,
+                             COLORS[(k + 3) % len(COLORS)])
+    viewer.animate()
+    what = ", ".join([*(f"configurations {n}" for n in sets), *(f"trajectory {n}" for n in trajs)])
+    print(f"robot {model.name} from {path or 'robots/'}; showing: {what or 'the robot only'}", file=sys.stderr)
+    print(f"open {viewer.url}", flush=True)
+    if wait:
+        print("press Ctrl-C to stop the viewer", file=sys.stderr)
+        try:
+            while True:
+                time.sleep(1.0)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            viewer.close()
+    return viewer
+

@@ -1,0 +1,260 @@
+"""Calibration stage: error model, candidates, estimation, bad input, end-to-end targets."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from pipeline.calibration import candidates as cd
+from pipeline.calibration import error_model as em
+from pipeline.calibration import measure as ms
+from pipeline.calibration import stage as st
+from pipeline.calibration.estimate import estimate, register_points
+from pipeline.errors import DataFileError, InfeasibleError, PipelineError, SolverError
+
+
+@pytest.fixture(scope="module")
+def robot():
+    from pipeline.robot.model import RobotModel
+
+    return RobotModel.load("rx130l")
+
+
+@pytest.fixture(scope="module")
+def mm(robot):
+    return em.MeasurementModel(robot)
+
+
+def _cfg(**kw):
+    base = dict(candidates="random", n_random_candidates=800, n_configurations=40, n_heldout=1000, figures=False)
+    base.update(kw)
+    return st.Config(**base)
+
+
+# ------------------------------------------------------------------ error model / identifiability
+def test_identifiable_set_found_by_analysis(robot, mm):
+    rep, basis = st.identify_parameter_set(robot, mm, st.Config(), np.random.default_rng(0))
+    names = rep.identifiable_names
+    # position-only data of a 6R arm with unknown tracker pose and reflector offset:
+    # 4 per joint - 4 (axis 1 into the tracker pose) - 2 (axis 6 into the reflector) + 6 + 3 = 27
+    assert rep.rank == 27 and len(names) == 27 and basis.shape == (mm.n, 27)
+    assert all(f"tracker.{c}" in names for c in ("dx", "dy", "dz", "rx", "ry", "rz"))
+    assert all(f"reflector.{c}" in names for c in ("dx", "dy", "dz"))
+    assert not any(n.startswith(("base.", "tool.")) for n in names)
+    # the dropped ones are explained: base vs tracker redundancy, joint-1 offset in the tracker yaw
+    assert "tracker.rz" in [n for n, _ in rep.combined["j1.dq"]]
+    assert "tracker.dx" in [n for n, _ in rep.combined["base.dx"]]
+    assert any(a.startswith("base.") or b.startswith("base.") for a, b, _ in rep.correlated_pairs)
+    assert "identifiable" in rep.markdown()
+    # the same rank with the modified-DH + Hayati model
+    rep2, basis2 = st.identify_parameter_set(robot, mm, st.Config(error_model="mdh_hayati"),
+                                             np.random.default_rng(0))
+    assert rep2.rank == 27 and any(n.endswith(".beta") for n in rep2.identifiable_names)
+
+
+def test_numpy_kinematics_and_jacobian_match_pinocchio_and_casadi(robot, mm):
+    ch = cd.chain_from_robot(robot)
+    Q = em.random_configurations(robot, 30, np.random.default_rng(3))
+    kin = cd.kinematics(ch, Q)
+    assert np.allclose(kin.p_reflector, robot.positions(Q, "reflector"), atol=1e-12)
+    assert np.allclose(cd.capsule_segments(ch, kin), robot.capsule_segments(Q), atol=1e-12)
+    T0 = robot.tracker.transform_tracker_to_base * pin.exp6(np.array([0.01, -0.02, 0.03, 0.01, 0.02, -0.03]))
+    Y, J = mm.jacobian(Q, np.zeros(mm.n), T0)
+    Y2, J2 = cd.nominal_jacobian(ch, Q, T0)
+    assert np.allclose(Y, Y2, atol=1e-12) and np.allclose(J, J2, atol=1e-10)
+
+
+def test_filter_is_conservative_against_the_sensor_rule(robot):
+    from pipeline.robot.sensors import tracker_visibility
+
+    ch = cd.chain_from_robot(robot)
+    Q = em.random_configurations(robot, 60000, np.random.default_rng(4))
+    mask, counts = cd.filter_configurations(ch, Q)
+    assert counts["feasible"] > 50 and counts["collision"] > 0 and counts["visibility"] > 0
+    Qf = Q[mask]
+    vis = tracker_visibility(robot, robot.tracker.transform_tracker_to_base, Qf)
+    assert vis.visible.all()
+    assert not any(robot.in_collision(q) for q in Qf[:50])
+
+
+def test_grid_filter_matches_flat_filter_on_a_small_grid(robot):
+    ch = cd.chain_from_robot(robot)
+    Qg, flat, counts = cd.filter_grid(ch, 4)
+    vals = cd.grid_values(ch, 4)
+    allQ = np.stack(np.meshgrid(*vals, indexing="ij"), axis=-1).reshape(-1, 6)
+    mask, _ = cd.filter_configurations(ch, allQ)
+    assert counts["total"] == 4 ** 6
+    assert np.array_equal(np.flatnonzero(mask), flat)
+    assert np.allclose(allQ[mask], Qg)
+
+
+# ------------------------------------------------------------------ estimation
+def test_registration_recovers_a_rigid_transform():
+    rng = np.random.default_rng(0)
+    T = pin.SE3(pin.exp3(rng.normal(size=3)), rng.normal(size=3))
+    Y = rng.normal(size=(20, 3))
+    P = Y @ T.rotation.T + T.translation
+    Te = register_points(Y, P)
+    assert np.allclose(Te.homogeneous, T.homogeneous, atol=1e-10)
+
+
+def test_lm_recovers_synthetic_errors_without_noise(robot, mm):
+    rng = np.random.default_rng(5)
+    rep, basis = st.identify_parameter_set(robot, mm, st.Config(), rng)
+    xt = np.zeros(mm.n)
+    xt[: 7 * 6] = rng.normal(size=42) * 5e-4
+    xt[mm.sl_reflector] = rng.normal(size=3) * 1e-3
+    Tt = robot.tracker.transform_tracker_to_base * pin.exp6(np.r_[rng.normal(size=3) * 0.05, rng.normal(size=3) * 0.03])
+    Q = em.random_configurations(robot, 40, rng)
+    Y = mm.predict(Q, xt, Tt)
+    est = estimate(mm, Q, Y, np.full(len(Q), 1e-5), basis)
+    Qh = em.random_configurations(robot, 200, rng)
+    err = np.linalg.norm(mm.predict(Qh, est.x, est.registration) - mm.predict(Qh, xt, Tt), axis=1)
+    assert err.max() < 1e-8
+    assert est.converged
+
+
+def test_too_few_or_degenerate_configurations_raise(robot, mm):
+    rng = np.random.default_rng(6)
+    _, basis = st.identify_parameter_set(robot, mm, st.Config(), rng)
+    Q = em.random_configurations(robot, 40, rng)
+    Q[:, 1:] = Q[0, 1:]  # only axis 1 moves: most parameters are not excited
+    Y = mm.predict(Q, np.zeros(mm.n), robot.tracker.transform_tracker_to_base)
+    with pytest.raises(SolverError, match="singular"):
+        estimate(mm, Q, Y, np.full(len(Q), 1e-5), basis, source="degenerate.csv")
+    with pytest.raises(SolverError, match="equations"):
+        estimate(mm, Q[:5], Y[:5], np.full(5, 1e-5), basis)
+
+
+def test_candidate_set_that_cannot_be_regular_raises(robot, mm):
+    from pipeline.calibration import design as ds
+    from pipeline.calibration import indices as ix
+
+    rng = np.random.default_rng(7)
+    _, basis = st.identify_parameter_set(robot, mm, st.Config(), rng)
+    ch = cd.chain_from_robot(robot)
+    Q = np.tile(em.random_configurations(robot, 1, rng), (200, 1))
+    Q[:, 0] = np.linspace(-1, 1, 200)
+    cs = cd.build_candidate_set(ch, Q, basis, robot.tracker.transform_tracker_to_base)
+    with pytest.raises(InfeasibleError, match="cannot make the information matrix regular"):
+        ds.remove_and_replace(cs.G, ix.IndexSpec("O3"), 30, rng)
+
+
+# ------------------------------------------------------------------ CSV input
+def _write(tmp_path, text):
+    p = tmp_path / "meas.csv"
+    p.write_text(text)
+    return p
+
+
+def test_csv_bad_inputs_name_file_and_problem(robot, tmp_path):
+    head = "q1,q2,q3,q4,q5,q6,x,y,z\n"
+    good = "0.1,0.2,0.3,0.1,0.2,0.3,1.0,2.0,0.5\n"
+    cases = {
+        "NaN": head + good + "0.1,0.2,nan,0.1,0.2,0.3,1.0,2.0,0.5\n",
+        "columns": head + good + "0.1,0.2,0.3,0.1,0.2,1.0,2.0,0.5\n",
+        "not a number": head + "0.1,0.2,abc,0.1,0.2,0.3,1.0,2.0,0.5\n",
+        "need at least": head + good * 5,
+        "expected columns": "a,b,c\n1,2,3\n",
+        "empty": "",
+    }
+    for problem, text in cases.items():
+        p = _write(tmp_path, text)
+        with pytest.raises(DataFileError) as exc:
+            ms.read_csv(p, robot, min_rows=27)
+        assert str(p) in str(exc.value)
+        assert problem in str(exc.value) or (problem == "columns" and "columns" in str(exc.value))
+    with pytest.raises(DataFileError, match="does not exist"):
+        ms.read_csv(tmp_path / "missing.csv", robot)
+
+
+def test_bad_csv_through_runner_writes_nothing(tmp_path):
+    from pipeline.config import quick_config
+    from pipeline.runner import run_pipeline
+
+    bad = tmp_path / "bad.csv"
+    bad.write_text("q1,q2,q3,q4,q5,q6,x,y,z\n" + "0.1,0.2,0.3,0.1,0.2,0.3,1.0,2.0,nan\n" * 30)
+    cfg = quick_config(**{"stages": ["model", "calibration"], "name": "badcsv",
+                          "calibration.measurements_csv": str(bad)})
+    with pytest.raises(PipelineError, match="bad.csv"):
+        run_pipeline(cfg, out_root=tmp_path / "runs", log=lambda m: None)
+    assert not (tmp_path / "runs" / "badcsv" / "calibration").exists()
+
+
+def test_csv_round_trip_gives_the_same_calibration(robot, tmp_path):
+    from pipeline.robot.truth import RealRobot
+
+    real = RealRobot.create(robot, 11)
+    rng = np.random.default_rng(11)
+    mmod = em.MeasurementModel(robot)
+    _, basis = st.identify_parameter_set(robot, mmod, st.Config(), rng)
+    ch = cd.chain_from_robot(robot)
+    Q, _ = cd.random_candidates(ch, 60, rng)
+    meas = ms.measure_simulated(real, Q, rng)
+    path = ms.write_csv(tmp_path / "m.csv", meas)
+    back = ms.read_csv(path, robot, min_rows=basis.shape[1])
+    assert np.allclose(back.Q, meas.Q) and np.allclose(back.Y, meas.Y)
+    e1 = estimate(mmod, meas.Q, meas.Y, meas.sigma_m, basis)
+    e2 = estimate(mmod, back.Q, back.Y, back.sigma_m, basis)
+    assert np.allclose(back.sigma_m, meas.sigma_m, rtol=1e-4)  # noise model vs sensor sigma
+    assert np.allclose(e1.x, e2.x, atol=1e-8)
+
+
+# ------------------------------------------------------------------ end-to-end targets
+def _check_targets(summary):
+    assert summary["n_configurations"] <= 50
+    assert summary["heldout_n_poses"] >= 1000
+    assert summary["heldout_rms_position_error_before_m"] > 5e-4           # millimetres before
+    assert summary["heldout_rms_position_error_after_m"] <= 3 * summary["tracker_noise_sigma_m"]
+    ratio = summary["heldout_rms_position_error_after_m"] / summary["predicted_rms_position_error_m"]
+    assert 1 / 1.5 <= ratio <= 1.5
+
+
+def _truth_gap(robot_a, robot_b, Q):
+    """RMS reflector-position difference after the best rigid alignment (base/tracker redundancy)."""
+    Pa, Pb = robot_a.positions(Q, "reflector"), robot_b.positions(Q, "reflector")
+    T = register_points(Pa, Pb)
+    return float(np.sqrt(np.mean(np.sum((Pa @ T.rotation.T + T.translation - Pb) ** 2, axis=1))))
+
+
+def test_quick_profile_stage_through_runner(tmp_path):
+    from pipeline.config import quick_config
+    from pipeline.robot.model import RobotModel
+    from pipeline.robot.truth import RealRobot
+    from pipeline.runner import run_pipeline
+
+    cfg = quick_config(**{"stages": ["model", "calibration"], "name": "calq"})
+    res = run_pipeline(cfg, out_root=tmp_path, log=lambda m: None)
+    out = res.outputs["calibration"]
+    s = out.summary
+    for key in ("n_configurations", "selection_method", "index_name", "index_value",
+                "heldout_rms_position_error_before_m", "heldout_rms_position_error_after_m",
+                "heldout_max_position_error_after_m", "predicted_rms_position_error_m", "tracker_noise_sigma_m"):
+        assert key in s
+    _check_targets(s)
+    assert s["stage_time_s"] < 30
+    assert out.arrays["configurations_selected"].shape == (s["n_configurations"], 6)
+    stage_dir = tmp_path / "calq" / "calibration"
+    assert (stage_dir / "heldout_errors.png").exists() and (stage_dir / "index_history.png").exists()
+    json.loads((stage_dir / "summary.json").read_text())
+    # the saved calibrated robot is much closer to the truth than the nominal one
+    nominal = RobotModel.load("rx130l")
+    calibrated = RobotModel.load(stage_dir / "robot")
+    truth = RealRobot.create(nominal, cfg.seed).truth
+    Q = em.random_configurations(nominal, 300, np.random.default_rng(0))
+    assert _truth_gap(calibrated, truth, Q) < 0.1 * _truth_gap(nominal, truth, Q)
+
+
+@pytest.mark.parametrize("name,seed", [("staubli_tx40", 3), ("rx130l", 4)])
+def test_targets_hold_for_other_robots_and_seeds(name, seed):
+    from pipeline.robot.model import RobotModel
+    from pipeline.robot.truth import RealRobot
+
+    robot = RobotModel.load(name)
+    real = RealRobot.create(robot, seed)
+    cfg = _cfg()
+    out = st.calibrate(robot, real, cfg, np.random.default_rng(seed))
+    _check_targets(st.summary_of(out, cfg))

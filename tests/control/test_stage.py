@@ -1,0 +1,63 @@
+"""Stage ``control`` on the quick profile: runs without upstream stages, uses calibrated ones."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.artefacts import StageOutput
+from pipeline.control import stage
+from pipeline.progress import Progress
+from pipeline.robot.truth import RealRobot, TruthConfig
+from pipeline.runner import StageContext, stage_rng
+
+REQUIRED = ("sample_time_s", "delay_samples", "tcp_error_max_m", "tcp_error_rms_m", "lag_error_max_rad",
+            "realtime_factor", "tcp_error_rms_nominal_kinematics_m", "tcp_error_rms_calibrated_kinematics_m")
+
+
+def _ctx(quick_config, robot, real, upstream, tmp_path: Path) -> StageContext:
+    return StageContext(run=quick_config, config=quick_config.control, robot=robot, real=real, upstream=upstream,
+                        out_dir=tmp_path, rng=stage_rng(quick_config.seed, "control"),
+                        progress=Progress(enabled=False))
+
+
+@pytest.fixture(scope="module")
+def real(rx130l):
+    return RealRobot.create(rx130l, 1, TruthConfig())
+
+
+def test_stage_without_upstream(quick_config, rx130l, real, tmp_path):
+    res = stage.run(_ctx(quick_config, rx130l.copy(), real, {}, tmp_path))
+    s = res.summary
+    for key in REQUIRED:
+        assert key in s, key
+    assert set(s["tcp_error_max_m"]) == {"none", "full_friction"}
+    assert len(s["lag_error_max_rad"]["none"]) == 3
+    assert s["sample_time_s"] == 4e-4 and s["delay_samples"] == {"setpoint": 2, "measurement": 1}
+    assert s["feedforward_model"] == "nominal" and s["kinematics"] == "nominal"
+    # without calibration both kinematics numbers are the same run
+    assert s["tcp_error_rms_nominal_kinematics_m"] == s["tcp_error_rms_calibrated_kinematics_m"]
+    # feedforward (nominal model) reduces the lag errors of axes 1-3
+    assert all(f < n for f, n in zip(s["lag_error_max_rad"]["full_friction"], s["lag_error_max_rad"]["none"],
+                                      strict=True))
+    assert s["realtime_factor"] > 0 and s["speedup_vs_python_loop"] > 1.0
+    t, q = res.arrays["trajectory_iso_t"], res.arrays["trajectory_iso_q"]
+    assert q.shape == (len(t), 6) and np.all(np.diff(t) > 0)
+    assert {"lag_errors", "tcp_error", "iso_path", "servo_bode"} <= set(res.figures)
+
+
+def test_stage_with_calibrated_kinematics(quick_config, rx130l, real, tmp_path):
+    # a perfect calibration: the hidden kinematics with the nominal dynamics
+    calibrated = stage._with_dynamics_of(real.truth, rx130l)
+    upstream = {"calibration": StageOutput({}, {}, {}, calibrated, tmp_path)}
+    cfg = quick_config.control
+    cfg.variants = ["full_friction"]
+    cfg.benchmark_python_seconds = 0.0
+    cfg.iso.segments = ["line"]
+    res = stage.run(_ctx(quick_config, calibrated.copy(), real, upstream, tmp_path))
+    s = res.summary
+    assert s["kinematics"] == "calibrated"
+    # nominal kinematics: mm-level absolute error; calibrated: only the tracking error remains
+    assert s["tcp_error_rms_nominal_kinematics_m"] > 5 * s["tcp_error_rms_calibrated_kinematics_m"]
