@@ -1,7 +1,7 @@
 """Signal processing for identification data (paper ``004_abbe750b8bbcc3aa.txt`` §4.1).
 
-Positions are low-pass filtered with a zero-phase Butterworth filter (``scipy.signal.butter`` +
-``filtfilt``), differentiated by central differences (``np.gradient``) to velocity and
+Positions are low-pass filtered with a zero-phase Butterworth filter (``scipy.signal.butter`` in
+second-order sections + ``sosfiltfilt``), differentiated by central differences (``np.gradient``) to velocity and
 acceleration, then the regressor rows and torques are decimated (the same zero-phase low-pass
 before keeping every ``factor``-th sample, the "parallel decimation" of Gautier). Periodic
 excitation data can be averaged over its periods, which divides the noise variance by the
@@ -26,11 +26,12 @@ def lowpass(x: np.ndarray, cutoff_hz: float, sample_rate_hz: float, order: int =
         raise DataFileError(
             None, "cutoff_hz", f"{cutoff_hz} Hz must be in (0, {nyq}) (Nyquist of the data)"
         )
-    b, a = scipy.signal.butter(order, cutoff_hz / nyq)
-    padlen = 3 * max(len(a), len(b))
+    # second-order sections: the (b, a) form loses all precision at cut-offs far below Nyquist
+    sos = scipy.signal.butter(order, cutoff_hz / nyq, output="sos")
+    padlen = 3 * (2 * len(sos) + 1)
     if x.shape[0] <= padlen:
         raise DataFileError(None, "samples", f"{x.shape[0]} samples are too few to filter")
-    return scipy.signal.filtfilt(b, a, x, axis=0)
+    return scipy.signal.sosfiltfilt(sos, x, axis=0)
 
 
 def differentiate(x: np.ndarray, sample_time_s: float) -> np.ndarray:

@@ -23,6 +23,7 @@ import yaml
 
 from pipeline.errors import RobotFileError
 from pipeline.robot.collision import CapsuleDistances, segment_distances
+from pipeline.robot.ik import IKResult, solve_ik
 from pipeline.robot.spec import Capsule, RobotSpec, load_robot_spec, robot_spec_to_yaml
 
 ROBOTS_DIR = Path(__file__).resolve().parents[2] / "robots"
@@ -36,18 +37,6 @@ class JointLimits:
     velocity_rad_s: np.ndarray
     effort_Nm: np.ndarray
     acceleration_rad_s2: np.ndarray
-
-
-@dataclass
-class IKResult:
-    """Outcome of :meth:`RobotModel.ik`; ``q`` is only meaningful when ``success``."""
-
-    q: np.ndarray
-    success: bool
-    position_error_m: float
-    rotation_error_rad: float
-    iterations: int
-    message: str
 
 
 def resolve_robot_files(robot: str | Path, yaml_path: str | Path | None = None) -> tuple[Path, Path]:
@@ -286,76 +275,10 @@ class RobotModel:
     def ik(self, target: pin.SE3, q0: np.ndarray, frame: str = "tcp", *, position_only: bool = False,
            tolerance_m: float = 1e-9, tolerance_rad: float = 1e-9, max_iterations: int = 200,
            restarts: int = 8, rng: np.random.Generator | None = None) -> IKResult:
-        """Inverse kinematics by damped least squares on the SE(3) log error, inside the joint limits.
-
-        Each iteration solves ``(J^T J + λ I) dq = J^T e`` with ``e = log6(T_current^-1 T_target)``
-        (local frame) and clamps ``q`` to the limits. If the start ``q0`` does not converge, up
-        to ``restarts`` random starts inside the limits are tried. Failure is reported
-        (``success=False``) with the best residual; a pose outside the tolerance is never
-        returned as a solution.
-        """
-        lower, upper = self.model.lowerPositionLimit, self.model.upperPositionLimit
-        fid = self.frame_id(frame)
-        rng = rng if rng is not None else np.random.default_rng(0)
-        best: IKResult | None = None
-        starts = [np.clip(np.asarray(q0, float), lower, upper)]
-        starts += [rng.uniform(lower, upper) for _ in range(restarts)]
-        for start in starts:
-            result = self._ik_from(target, start, fid, position_only, tolerance_m, tolerance_rad, max_iterations)
-            if result.success:
-                return result
-            if best is None or result.position_error_m + result.rotation_error_rad < (
-                best.position_error_m + best.rotation_error_rad
-            ):
-                best = result
-        assert best is not None
-        best.message = (f"IK did not reach the target within {tolerance_m:g} m / {tolerance_rad:g} rad inside the "
-                        f"joint limits (best residual {best.position_error_m:.3g} m, "
-                        f"{best.rotation_error_rad:.3g} rad)")
-        return best
-
-    def _ik_from(self, target: pin.SE3, q: np.ndarray, fid: int, position_only: bool, tol_m: float,
-                 tol_rad: float, max_iterations: int) -> IKResult:
-        """Levenberg–Marquardt from ``q``: a step is kept only if it lowers the error, else the
-        damping grows; steps are capped at 0.5 rad and projected onto the joint limits."""
-        model, data = self.model, self._data
-        lower, upper = model.lowerPositionLimit, model.upperPositionLimit
-
-        def residual(q_: np.ndarray) -> tuple[np.ndarray, pin.SE3, float, float]:
-            pin.forwardKinematics(model, data, q_)
-            current = pin.updateFramePlacement(model, data, fid).copy()
-            if position_only:
-                error = current.rotation.T @ (target.translation - current.translation)
-                return error, current, float(np.linalg.norm(error)), 0.0
-            error = pin.log6(current.actInv(target)).vector
-            return (error, current, float(np.linalg.norm(target.translation - current.translation)),
-                    float(np.linalg.norm(error[3:])))
-
-        damping = 1e-4
-        error, current, pos_err, rot_err = residual(q)
-        for iteration in range(max_iterations):
-            if pos_err <= tol_m and rot_err <= tol_rad:
-                return IKResult(q.copy(), True, pos_err, rot_err, iteration, "converged")
-            jac = pin.computeFrameJacobian(model, data, q, fid, pin.ReferenceFrame.LOCAL)
-            jac = jac[:3] if position_only else pin.Jlog6(current.actInv(target)) @ jac
-            gradient, hessian = jac.T @ error, jac.T @ jac
-            for _ in range(12):
-                step = np.linalg.solve(hessian + damping * np.eye(model.nv), gradient)
-                largest = np.max(np.abs(step))
-                if largest > 0.5:
-                    step *= 0.5 / largest
-                q_new = np.clip(q + step, lower, upper)
-                error_new, current_new, pos_new, rot_new = residual(q_new)
-                if error_new @ error_new < error @ error:
-                    q, error, current, pos_err, rot_err = q_new, error_new, current_new, pos_new, rot_new
-                    damping = max(damping / 10.0, 1e-12)
-                    break
-                damping *= 10.0
-            else:
-                break  # no descent possible from here: a local minimum at the limits
-        converged = pos_err <= tol_m and rot_err <= tol_rad
-        return IKResult(q.copy(), converged, pos_err, rot_err, max_iterations,
-                        "converged" if converged else "not converged")
+        """Inverse kinematics inside the joint limits (:func:`pipeline.robot.ik.solve_ik`)."""
+        return solve_ik(self.model, self._data, self.frame_id(frame), target, q0, position_only=position_only,
+                        tolerance_m=tolerance_m, tolerance_rad=tolerance_rad, max_iterations=max_iterations,
+                        restarts=restarts, rng=rng)
 
     # ----------------------------------------------------------------- dynamics
     def friction_torque(self, v: np.ndarray) -> np.ndarray:

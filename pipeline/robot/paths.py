@@ -246,11 +246,15 @@ def joint_path(robot, path: CartesianPath, n: int, q0: np.ndarray, frame: str = 
     return ik_track(robot, path.sample(n), q0, frame)
 
 
-def start_configuration(robot, pose: pin.SE3, seeds, frame: str = "tcp", tolerance_m: float = 1e-10) -> np.ndarray:
-    """IK from a cold start: damped Newton with step limiting from each seed; the first within limits.
-
-    Raises InfeasibleError naming the point if no seed converges.
+def start_configuration(robot, pose: pin.SE3, seeds, frame: str = "tcp", tolerance_m: float = 1e-10,
+                        n_random: int = 30) -> np.ndarray:
+    """IK from a cold start: damped Newton with step limiting from each seed, then from ``n_random``
+    random configurations within the limits (fixed-seed generator: deterministic); the first
+    solution within the limits wins. Raises InfeasibleError naming the point if none converges.
     """
+    lo_, hi_ = robot.limits.lower_rad, robot.limits.upper_rad
+    extra = np.random.default_rng(9283).uniform(lo_, hi_, (n_random, robot.model.nq))
+    seeds = np.vstack([np.atleast_2d(np.asarray(seeds, float)), extra]) if n_random else seeds
     model = robot.model
     data = model.createData()
     fid = model.getFrameId(frame)
@@ -269,4 +273,4 @@ def start_configuration(robot, pose: pin.SE3, seeds, frame: str = "tcp", toleran
         if np.linalg.norm(e) < tolerance_m * 1e3 and np.all(q >= lo) and np.all(q <= hi):
             return q
     raise InfeasibleError(None, "ik", f"start point {np.array2string(pose.translation, precision=4)} m "
-                          "not reachable from the seed configurations")
+                          f"not reachable (IK from {len(np.atleast_2d(seeds))} seed configurations failed)")
