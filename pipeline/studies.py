@@ -22,6 +22,10 @@ from pipeline.errors import PipelineError
 #: study name -> "module:function". Stage owners append their entries here.
 STUDIES: dict[str, str] = {
     # calibration
+    "calib-004": "pipeline.calibration.studies:study_004",
+    "calib-000": "pipeline.calibration.studies:study_000",
+    "calib-002": "pipeline.calibration.studies:study_002",
+    "calib-003": "pipeline.calibration.studies:study_003",
     # identification
     # control
     # trajectory

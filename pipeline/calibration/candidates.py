@@ -267,7 +267,6 @@ def filter_grid(chain: Chain, n_per_axis: int | list[int] = 13, margins: FilterM
         prefix = np.concatenate([np.repeat(prefix, sizes[i], axis=0),
                                  np.tile(vals[i], len(prefix))[:, None]], axis=1)
         Qp = np.concatenate([prefix, np.zeros((len(prefix), nq - prefix.shape[1]))], axis=1)
-        caps_now = [c for c in range(len(chain.capsule_r)) if chain.capsule_joint[c] <= i + 1]
         pairs = np.array([p for p in pre_pairs if chain.capsule_joint[p].max() == i + 1], int).reshape(-1, 2)
         floor = np.array([c for c in pre_floor if chain.capsule_joint[c] == i + 1], int)
         if len(pairs) or len(floor):
@@ -277,7 +276,6 @@ def filter_grid(chain: Chain, n_per_axis: int | list[int] = 13, margins: FilterM
                 seg = capsule_segments(chain, kin)
                 keep[s : s + 100_000] = _collision_ok(chain, seg, margins, pairs, floor)
             prefix = prefix[keep]
-        del caps_now
     n_prefix_ok = len(prefix)
     # expand along the last axis
     feas_Q, counts = [], {"total": total, "prefix_collision_free": n_prefix_ok,

@@ -192,30 +192,47 @@ class _State:
                 out[s : s + c.size] = ix.scores_of_matrices(self.spec, Ms, self.n + 1)
         return out
 
-    def _bound_and_prune(self, cand: np.ndarray, k_sub: int = 4, chunk: int = 16) -> tuple[int, float]:
+    def _bound_and_prune(self, cand: np.ndarray, k_sub: int = 4, chunk: int = 16,
+                         block: int = 512) -> tuple[int, float]:
+        """Exact best addition for lambda_min by branch and bound.
+
+        Two nested upper bounds of ``lambda_min(M + G^T G)`` (Rayleigh / Cauchy interlacing on the
+        eigenvectors V of the smallest eigenvalues of M): ``ub1 = lambda_1 + |G v_1|^2`` (cheap) and
+        ``ub4 = lambda_min(diag(lambda_1..4) + (G V_4)^T (G V_4)) <= ub1``. Candidates are visited in
+        order of decreasing ub1; ub4 is computed per block, exact eigenvalues only for candidates
+        whose ub4 beats the best exact value so far; the search stops when ub1 falls below it.
+        """
         ev, V = np.linalg.eigh(self.M)
         k = min(k_sub, self.p)
         Vk = V[:, :k]
-        # upper bound: lambda_min(diag(ev_k) + (G Vk)^T (G Vk)) >= lambda_min(M + G^T G)
-        GV = self.G[cand] @ Vk                                          # (N,m,k)
-        B = np.einsum("nmi,nmj->nij", GV, GV) + np.diag(ev[:k])[None]
-        ub = np.linalg.eigvalsh(B)[:, 0]
-        order = np.argsort(-ub)
+        G = self.G
+        g1 = np.einsum("nmi,i->nm", G, V[:, 0])
+        ub1_all = ev[0] + np.einsum("nm,nm->n", g1, g1)
+        ub1 = ub1_all[cand]
+        order = cand[np.argsort(-ub1)]
+        ub1_sorted = ub1_all[order]
         best_j, best_lam = -1, -np.inf
         n_eval = 0
-        for s in range(0, order.size, chunk):
-            idx = order[s : s + chunk]
-            if ub[idx[0]] <= best_lam:
+        D = np.diag(ev[:k])[None]
+        for s in range(0, order.size, block):
+            if ub1_sorted[s] <= best_lam:
                 break
-            Gc = self.G[cand[idx]]
-            Ms = self.M[None] + np.einsum("kmi,kmj->kij", Gc, Gc)
-            lam = np.linalg.eigvalsh(Ms)[:, 0]
-            n_eval += idx.size
-            i = int(np.argmax(lam))
-            if lam[i] > best_lam:
-                best_lam, best_j = float(lam[i]), int(cand[idx[i]])
+            blk = order[s : s + block]
+            GV = G[blk] @ Vk
+            ub4 = np.linalg.eigvalsh(np.einsum("nmi,nmj->nij", GV, GV) + D)[:, 0]
+            o4 = np.argsort(-ub4)
+            for t in range(0, o4.size, chunk):
+                idx = o4[t : t + chunk]
+                if ub4[idx[0]] <= best_lam:
+                    break
+                Gc = G[blk[idx]]
+                Ms = self.M[None] + np.einsum("kmi,kmj->kij", Gc, Gc)
+                lam = np.linalg.eigvalsh(Ms)[:, 0]
+                n_eval += idx.size
+                i = int(np.argmax(lam))
+                if lam[i] > best_lam:
+                    best_lam, best_j = float(lam[i]), int(blk[idx[i]])
         self.evaluations += n_eval
-        self.last_bound_evaluations = n_eval
         lam = max(best_lam, 0.0)
         return best_j, (math.sqrt(lam) if self.spec.name == "O3" else lam)
 
@@ -226,10 +243,12 @@ def _random_regular_start(G: np.ndarray, n: int, rng: np.random.Generator, tries
     N, m, p = G.shape
     pool = np.arange(N) if candidates is None else candidates
     if n * m < p:
-        raise InfeasibleError(None, "n_configurations",
+        raise InfeasibleError(None, "calibration.n_configurations",
                               f"{n} configurations x {m} coordinates < {p} identifiable parameters")
     if pool.size < n:
-        raise InfeasibleError(None, "candidates", f"only {pool.size} candidates for {n} configurations")
+        raise InfeasibleError(None, "calibration.candidates",
+                              f"only {pool.size} feasible candidates for {n} configurations "
+                              "(increase n_random_candidates or grid_per_axis)")
     for _ in range(tries):
         S = rng.choice(pool, size=n, replace=False)
         Gs = G[S]
@@ -240,10 +259,10 @@ def _random_regular_start(G: np.ndarray, n: int, rng: np.random.Generator, tries
     Mall = np.einsum("kmi,kmj->ij", G[pool], G[pool])
     ev = np.linalg.eigvalsh(Mall)
     if ev[0] <= 1e-10 * max(ev[-1], 1e-300):
-        raise InfeasibleError(None, "candidates",
+        raise InfeasibleError(None, "calibration.candidates",
                               "the candidate set cannot make the information matrix regular "
                               f"(rank {int(np.sum(ev > 1e-10 * ev[-1]))} < {p} parameters)")
-    raise InfeasibleError(None, "candidates",
+    raise InfeasibleError(None, "calibration.candidates",
                           f"no regular random subset of {n} configurations in {tries} tries")
 
 
@@ -252,13 +271,13 @@ def _check(G: np.ndarray) -> np.ndarray:
     if G.ndim != 3:
         raise ValueError("G must be (N, m, p)")
     if not np.all(np.isfinite(G)):
-        raise InfeasibleError(None, "candidates", "non-finite Jacobian entries")
+        raise InfeasibleError(None, "calibration.candidates", "non-finite Jacobian entries")
     return G
 
 
 def remove_and_replace(G: np.ndarray, spec: ix.IndexSpec, n_max: int, rng: np.random.Generator,
                        n_initial: int | None = None, positions: np.ndarray | None = None,
-                       max_iterations: int = 500, rel_tol: float = 1e-9,
+                       max_iterations: int = 500, rel_tol: float = 1e-6,
                        initial: np.ndarray | None = None) -> SelectionResult:
     """Paper 004 §3.3.1, steps 1-4.
 

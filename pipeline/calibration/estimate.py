@@ -78,7 +78,7 @@ def levenberg_marquardt(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigm
     lam = 1e-3
     converged = False
     it = 0
-    for it in range(1, max_iterations + 1):
+    for it in range(1, max_iterations + 1):  # noqa: B007 - the count is returned
         A = J.T @ J
         g = J.T @ r
         D = np.diag(np.maximum(np.diag(A), 1e-12 * max(np.diag(A).max(), 1e-300)))
@@ -127,8 +127,8 @@ def estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarr
     ev = np.linalg.eigvalsh(J0.T @ J0)
     if not ev[0] > 1e-12 * ev[-1]:
         raise SolverError(source, "information matrix",
-                          f"singular (smallest/largest eigenvalue {max(ev[0], 0.0) / ev[-1]:.3g}): the configurations do not "
-                          f"excite all {p} identifiable parameters")
+                          f"singular (smallest/largest eigenvalue {max(ev[0], 0.0) / ev[-1]:.3g}): "
+                          f"the configurations do not excite all {p} identifiable parameters")
     theta, x, J, it, conv, hist = levenberg_marquardt(mm, Q, Y, sigma, P, T_reg, max_iterations)
     A = J.T @ J
     C = np.linalg.inv(A)

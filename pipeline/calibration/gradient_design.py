@@ -119,16 +119,21 @@ def segment_distance_sq(p0, p1, q0, q1, eps: float = 1e-9):
 
 
 def gradient_design(robot, mm: MeasurementModel, basis: np.ndarray, Q_start: np.ndarray, spec: ix.IndexSpec,
-                    cfg: GradientDesignConfig | None = None) -> GradientDesignResult:
-    """Optimise the joint angles of ``len(Q_start)`` configurations (module docstring)."""
+                    cfg: GradientDesignConfig | None = None, transform_tracker_to_base=None) -> GradientDesignResult:
+    """Optimise the joint angles of ``len(Q_start)`` configurations (module docstring).
+
+    ``transform_tracker_to_base``: the tracker pose used for the incidence/beam constraints and the
+    Jacobians (default: nominal; better: registered from a few pilot measurements).
+    """
     cfg = cfg or GradientDesignConfig()
     t0 = time.perf_counter()
-    chain = cd.chain_from_robot(robot)
+    chain = cd.chain_from_robot(robot, transform_tracker_to_base)
     Q_start = np.asarray(Q_start, float)
     n, nq = Q_start.shape
     P = np.asarray(basis, float)
     p = P.shape[1]
-    T0 = robot.tracker.transform_tracker_to_base
+    T0 = transform_tracker_to_base if transform_tracker_to_base is not None else \
+        robot.tracker.transform_tracker_to_base
     if spec.name in ("A", "tcp_A", "tcp_A_mixed"):
         W = spec.weight_matrix(p)
     else:

@@ -53,6 +53,9 @@ class IndexSpec:
     n_working: int = 1
     knn: int = 3
     mix_weight: float = 1.0
+    #: ``A`` only: diagonal weights of the parameters (paper 000 eq. 25 projection P onto a subset,
+    #: e.g. the robot's own parameters without the tracker pose); None = all ones
+    parameter_weights: np.ndarray | None = None
     _W: np.ndarray | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
@@ -74,7 +77,7 @@ class IndexSpec:
         """W with ``index = trace(W M^-1)`` for the A-type indices."""
         if self._W is None or self._W.shape[0] != p:
             if self.name == "A":
-                W = np.eye(p)
+                W = np.eye(p) if self.parameter_weights is None else np.diag(np.asarray(self.parameter_weights, float))
             else:
                 Jw = np.asarray(self.working_jacobian, float)
                 W = Jw.T @ Jw / max(self.n_working, 1)
@@ -163,7 +166,7 @@ def evaluate(spec: IndexSpec, M: np.ndarray, n: int, positions: np.ndarray | Non
     if spec.name == "Od":
         return od_index(positions, spec.knn)
     ev = np.linalg.eigvalsh(M)
-    if spec.name in ("O1", "O2", "O3", "O4", "O5", "D", "E", "A"):
+    if spec.name in ("O1", "O2", "O3", "O4", "O5", "D", "E") or (spec.name == "A" and spec.parameter_weights is None):
         return float(_values_from_eigs(spec.name, ev, n))
     if spec.name == "Oc":
         o1 = float(_values_from_eigs("O1", ev, n))
@@ -203,7 +206,7 @@ def scores_of_matrices(spec: IndexSpec, Ms: np.ndarray, n: int,
             o3 = _values_from_eigs("O3", ev, n)
             od = np.array([od_index(P, spec.knn) for P in positions_sets[e]])
             out[e] = 2.0 / np.pi * (np.arctan(o1) + np.arctan(o3) + np.arctan(od)) / 3.0
-        elif spec.name in ("tcp_A", "tcp_A_mixed"):
+        elif spec.name in ("tcp_A", "tcp_A_mixed") or (spec.name == "A" and spec.parameter_weights is not None):
             W = spec.weight_matrix(Ms.shape[1])
             reg = ev[:, 0] > _REL_EIG_TOL * np.maximum(ev[:, -1], 1e-300)
             v = np.full(ev.shape[0], np.inf)

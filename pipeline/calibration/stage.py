@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -67,11 +67,13 @@ class Config:
     margin_beam_m: float = 0.02
     max_lm_iterations: int = 50
     gradient_max_iterations: int = 200
+    #: gradient design only: random configurations measured first to register the tracker pose
+    #: (visibility constraints need it); they count towards n_configurations and are used in the fit
+    n_pilot: int = 8
     #: user data instead of the simulated tracker (format: pipeline.calibration.measure)
     measurements_csv: str | None = None
     validation_csv: str | None = None
     figures: bool = True
-    extra: dict = field(default_factory=dict)
 
     def validate(self, source: str = "config") -> None:
         def bad(key: str, problem: str) -> ConfigError:
@@ -197,52 +199,64 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None
     cs = None
     grad = None
     Qw = None
-    if True:
-        if user is None:
-            if real is None:
-                raise PipelineError(None, "calibration", "no measurement file and no simulated robot")
-            t = time.perf_counter()
-            cs = build_candidates(robot, cfg, basis, rng)
-            timings["candidates_s"] = time.perf_counter() - t
-            spec, Qw = index_spec(cfg, robot, mm, basis, rng)
-            positions = cs.Y if spec.needs_positions else None
-            t = time.perf_counter()
-            method = "remove_and_replace" if cfg.selection_method == "gradient" else cfg.selection_method
-            kw: dict[str, Any] = {}
-            if method == "remove_and_replace":
-                kw["n_initial"] = cfg.n_initial
-            selection = ds.select(method, cs.G, spec, cfg.n_configurations, rng, positions=positions, **kw)
-            timings["selection_s"] = time.perf_counter() - t
-            Q_sel = cs.Q[selection.selected]
-            if cfg.selection_method == "gradient":
-                from pipeline.calibration.gradient_design import GradientDesignConfig, gradient_design
+    if user is None:
+        if real is None:
+            raise PipelineError(None, "calibration", "no measurement file and no simulated robot")
+        t = time.perf_counter()
+        cs = build_candidates(robot, cfg, basis, rng)
+        timings["candidates_s"] = time.perf_counter() - t
+        spec, Qw = index_spec(cfg, robot, mm, basis, rng)
+        positions = cs.Y if spec.needs_positions else None
+        pilot = None
+        n_design = cfg.n_configurations
+        if cfg.selection_method == "gradient":
+            pilot = ms.measure_simulated(real, cs.Q[rng.choice(len(cs), size=min(cfg.n_pilot, len(cs)),
+                                                                replace=False)], rng)
+            n_design = cfg.n_configurations - pilot.n_requested
+        t = time.perf_counter()
+        method = "remove_and_replace" if cfg.selection_method == "gradient" else cfg.selection_method
+        kw: dict[str, Any] = {}
+        if method == "remove_and_replace":
+            kw["n_initial"] = cfg.n_initial
+        selection = ds.select(method, cs.G, spec, n_design, rng, positions=positions, **kw)
+        timings["selection_s"] = time.perf_counter() - t
+        Q_sel = cs.Q[selection.selected]
+        if pilot is not None:
+            from pipeline.calibration.estimate import register_points
+            from pipeline.calibration.gradient_design import GradientDesignConfig, gradient_design
 
-                t = time.perf_counter()
-                grad = gradient_design(robot, mm, basis, Q_sel, spec, GradientDesignConfig(
-                    max_iterations=cfg.gradient_max_iterations))
-                timings["gradient_s"] = time.perf_counter() - t
-                Q_sel = grad.Q
             t = time.perf_counter()
-            meas = ms.measure_simulated(real, Q_sel, rng)
-            timings["measure_s"] = time.perf_counter() - t
-            if 3 * len(meas) < p:
-                raise InfeasibleError(None, "calibration.measurements",
-                                      f"only {len(meas)} of {len(Q_sel)} configurations were visible to the tracker")
-        else:
-            meas = user
+            T_pilot = register_points(pilot.Y, mm.base_positions(pilot.Q, np.zeros(mm.n))[0]) \
+                if len(pilot) >= 3 else None
+            grad = gradient_design(robot, mm, basis, Q_sel, spec, GradientDesignConfig(
+                max_iterations=cfg.gradient_max_iterations), transform_tracker_to_base=T_pilot)
+            timings["gradient_s"] = time.perf_counter() - t
+            Q_sel = grad.Q
         t = time.perf_counter()
-        est = estimate(mm, meas.Q, meas.Y, meas.sigma_m, basis, source=meas.source,
-                       max_iterations=cfg.max_lm_iterations)
-        timings["estimate_s"] = time.perf_counter() - t
-        t = time.perf_counter()
-        if val_user is not None:
-            held = val_user
-        else:
-            if real is None:
-                raise PipelineError(None, "calibration.validation_csv", "no validation file and no simulated robot")
-            held = heldout_measurements(robot, real, est, cfg, rng)
-        validation = va.validate(mm, est, held)
-        timings["validate_s"] = time.perf_counter() - t
+        meas = ms.measure_simulated(real, Q_sel, rng)
+        if pilot is not None:
+            meas = ms.Measurements(np.vstack([pilot.Q, meas.Q]), np.vstack([pilot.Y, meas.Y]),
+                                   np.concatenate([pilot.sigma_m, meas.sigma_m]), meas.source, None,
+                                   pilot.n_requested + meas.n_requested, np.vstack([pilot.invisible, meas.invisible]))
+        timings["measure_s"] = time.perf_counter() - t
+        if 3 * len(meas) < p:
+            raise InfeasibleError(None, "calibration.measurements",
+                                  f"only {len(meas)} of {len(Q_sel)} configurations were visible to the tracker")
+    else:
+        meas = user
+    t = time.perf_counter()
+    est = estimate(mm, meas.Q, meas.Y, meas.sigma_m, basis, source=meas.source,
+                   max_iterations=cfg.max_lm_iterations)
+    timings["estimate_s"] = time.perf_counter() - t
+    t = time.perf_counter()
+    if val_user is not None:
+        held = val_user
+    else:
+        if real is None:
+            raise PipelineError(None, "calibration.validation_csv", "no validation file and no simulated robot")
+        held = heldout_measurements(robot, real, est, cfg, rng)
+    validation = va.validate(mm, est, held)
+    timings["validate_s"] = time.perf_counter() - t
     new_robot = calibrated_robot(robot, mm, est.x)
     return CalibrationOutcome(report, mm.names, cs, selection, meas, est, validation, new_robot, timings, grad, Qw)
 
@@ -288,7 +302,8 @@ def summary_of(out: CalibrationOutcome, cfg: Config) -> dict:
         "n_configurations_commanded": int(out.measurements.n_requested),
         "selection_method": cfg.selection_method if out.selection is not None else "measurement file",
         "index_name": cfg.index_name,
-        "index_value": float(sel.index_value) if sel is not None else None,
+        "index_value": (float(out.gradient.index_value) if out.gradient is not None
+                        else float(sel.index_value) if sel is not None else None),
         "selection_time_s": float(sel.run_time_s) if sel is not None else None,
         "selection_evaluations": int(sel.evaluations) if sel is not None else None,
         "n_candidates": int(len(out.candidates)) if out.candidates is not None else 0,

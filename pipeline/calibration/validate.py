@@ -72,8 +72,9 @@ def table_markdown(v: dict) -> str:
     b, a = v["before"], v["after"]
     lines = ["| error | max uncal. [mm] | max cal. [mm] | ± uncal. [mm] | ± cal. [mm] |", "|---|---|---|---|---|"]
     for ax in "xyz":
-        lines.append(f"| e{ax} | {1e3 * b['axes'][ax]['max_abs']:.3f} | {1e3 * a['axes'][ax]['max_abs']:.3f} | "
-                     f"±{1e3 * b['axes'][ax]['half_peak_to_peak']:.3f} | ±{1e3 * a['axes'][ax]['half_peak_to_peak']:.3f} |")
+        ba, aa = b["axes"][ax], a["axes"][ax]
+        lines.append(f"| e{ax} | {1e3 * ba['max_abs']:.3f} | {1e3 * aa['max_abs']:.3f} | "
+                     f"±{1e3 * ba['half_peak_to_peak']:.3f} | ±{1e3 * aa['half_peak_to_peak']:.3f} |")
     lines += ["", "| |e| over held-out poses | mean [mm] | RMS [mm] | max [mm] |", "|---|---|---|---|"]
     for key, s in (("before", b), ("after", a)):
         lines.append(f"| {key} | {1e3 * s['mean']:.4f} | {1e3 * s['rms']:.4f} | {1e3 * s['max']:.4f} |")

@@ -14,9 +14,9 @@ class IsoPathConfig:
     """EN ISO 9283 test path (DESIGN.md): cube of edge L, centre, diagonal plane, speeds."""
 
     edge_m: float = 0.5
-    centre_m: list[float] = field(default_factory=lambda: [0.9, 0.0, 0.3])
+    centre_m: list[float] = field(default_factory=lambda: [1.0, 0.0, 0.6])
     plane: str = "diagonal_x"          # diagonal_x | diagonal_y | horizontal
-    tool_down: bool = True             # TCP z axis pointing down (else: along the path normal)
+    tool_down: bool = True             # TCP z axis pointing down (else: normal to the plane, away from the base)
     speed_m_s: float = 1.0
     acceleration_m_s2: float = 5.0
     jerk_m_s3: float = 50.0

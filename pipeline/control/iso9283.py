@@ -67,6 +67,19 @@ class IsoPath(CartesianPath):
         return [sg for p in self.pieces for sg in p.segments()]
 
 
+def tool_rotation(plane: str, tool_down: bool = True) -> np.ndarray:
+    """Constant TCP orientation: z axis pointing down, or against the measuring plane's normal."""
+    if tool_down:
+        return pin.utils.rotate("x", np.pi)
+    u, w = PLANES[plane]
+    z = -np.cross(u, w)
+    if z[0] < 0:  # face away from the robot base
+        z = -z
+    x = u - z * (u @ z)
+    x /= np.linalg.norm(x)
+    return np.column_stack([x, np.cross(z, x), z])
+
+
 def iso9283_path(robot=None, edge_m: float = 0.6, centre_m=(1.05, 0.0, 0.85), plane: str = "diagonal_x",
                  rotation: np.ndarray | None = None, corner_fraction: float = 0.1,
                  large_circle_fraction: float = 0.8, small_circle_fraction: float = 0.1,

@@ -99,12 +99,12 @@ class Plant:
                   measurement_delay_samples: int, velocity_filter_alpha: float,
                   q_d_fb: np.ndarray, v_ff: np.ndarray, tau_ff: np.ndarray, q0: np.ndarray,
                   rng: np.random.Generator, engine: str = "compiled", chunk_samples: int = 250,
-                  measure_tcp: bool = True, tcp_frame: str = "tcp") -> ServoRecord:
+                  measure_tcp: bool = True, tcp_frame: str = "tcp", v0: np.ndarray | None = None) -> ServoRecord:
         """Close the drives' loops around the robot for ``len(q_d_fb)`` position samples.
 
         ``q_d_fb`` (N, nq): set point aligned with the delayed measurement; ``v_ff``, ``tau_ff``
         (N, velocity_samples * nq): velocity and torque feedforward for each velocity-loop sub-sample
-        as they reach the drive. Starts at rest at ``q0``.
+        as they reach the drive. Starts at ``q0`` with velocity ``v0`` (default: at rest).
         ``engine``: "compiled" (CasADi/gcc, cached) or "python" (plain loop with pin.aba).
         """
         n, N = self.nq, len(q_d_fb)
@@ -115,8 +115,10 @@ class Plant:
         noise = self.encoder_noise_rad * rng.standard_normal((N, velocity_samples * n))
         U = np.hstack([q_d_fb, v_ff, tau_ff, noise])
         q_enc0 = np.floor(q0 / self.encoder_resolution_rad + 0.5) * self.encoder_resolution_rad
-        x0 = np.concatenate([q0, np.zeros(n), np.zeros(n), q_enc0, np.zeros(n),
-                             np.tile(q_enc0, measurement_delay_samples)])
+        v0 = np.zeros(n) if v0 is None else np.asarray(v0, float)
+        res = self.encoder_resolution_rad
+        q_prev = np.floor((q0 - v0 * sample_time_s / velocity_samples) / res + 0.5) * res  # consistent v_hat
+        x0 = np.concatenate([q0, v0, np.zeros(n), q_prev, v0, np.tile(q_enc0, measurement_delay_samples)])
         t0, c0 = time.perf_counter(), time.thread_time()
         if engine == "python":
             _, Y = loop.python_rollout(ls, self._model.model, self._p, x0, U, P, self._friction)

@@ -21,7 +21,7 @@ import pinocchio as pin
 from ruckig import InputParameter, Result, Ruckig, Trajectory
 
 from pipeline.errors import InfeasibleError, SolverError
-from pipeline.robot.paths import CartesianPath
+from pipeline.robot.paths import CartesianPath, limiting_joint
 
 
 @dataclass
@@ -139,7 +139,8 @@ def track(robot, rotation: np.ndarray, P: np.ndarray, Pd: np.ndarray, Pdd: np.nd
 
         cond = np.linalg.cond(J) if (k % 25 == 0 or err >= tolerance_m) else 1.0  # singularity watch
         if err >= tolerance_m or not np.isfinite(cond) or cond > 1e6:
-            raise InfeasibleError(None, "ik", f"{where()} not reached (error {err:.1e} m, cond(J) {cond:.1e})")
+            raise InfeasibleError(None, "ik", f"{where()} not reached (error {err:.1e} m, cond(J) {cond:.1e}; "
+                                  f"{limiting_joint(robot, q)})")
         bad = np.nonzero((q < lo) | (q > hi))[0]
         if len(bad):
             j = int(bad[0])

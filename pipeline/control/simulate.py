@@ -82,7 +82,13 @@ def resample(t_s: np.ndarray, q: np.ndarray, v: np.ndarray, a: np.ndarray, dt: f
 
 
 def drive_inputs(q_d, v_d, tau_ff, setpoint_delay: int, measurement_delay: int, advance: bool):
-    """What reaches the drive at each sample: (q_d aligned with the delayed measurement, v_ff, tau_ff)."""
+    """What reaches the drive at each sample: (q_d aligned with the delayed measurement, v_ff, tau_ff).
+
+    Set points travel ``setpoint_delay`` samples. With ``advance`` the PC sends the reference of
+    sample ``k + d`` at sample ``k`` (it knows the delay), so the drive sees ``ref[k]`` on time;
+    without, it sees ``ref[k - d]``. The drive compares the measurement, ``measurement_delay``
+    samples old, with its set point of that same sample.
+    """
     N = len(q_d)
     k = np.arange(N)
     shift = 0 if advance else setpoint_delay
@@ -108,8 +114,9 @@ def simulate_joint_trajectory(real, model, t_s, q_d, v_d, a_d, config: ControlCo
     """Run the trajectory (t_s (N,), q_d/v_d/a_d (N, nq)) on ``real.plant`` and return the record.
 
     ``model`` (RobotModel) gives the feedforward and the servo design (reflected inertia at the
-    mean of ``q_d``). The trajectory is resampled to the control grid if needed. The robot holds
-    ``q_d[0]`` for ``config.settle_time_s`` before the start (not part of the result).
+    mean of ``q_d``). The trajectory is resampled to the control grid if needed. A trajectory that
+    starts at rest is preceded by ``config.settle_time_s`` of holding ``q_d[0]`` (not part of the
+    result); one that starts moving starts with the plant on ``(q_d[0], v_d[0])``.
     Raises InfeasibleError naming time and joint if the torque command saturates
     (``config.on_saturation == "error"``).
     """
@@ -121,7 +128,10 @@ def simulate_joint_trajectory(real, model, t_s, q_d, v_d, a_d, config: ControlCo
                           f"t_s ({len(t_s)},) and nq = {model.model.nq}")
     dt = config.sample_time_s
     t, q_d, v_d, a_d = resample(np.asarray(t_s, float), q_d, v_d, a_d, dt)
-    n_settle = int(round(config.settle_time_s / dt))
+    moving = bool(np.abs(v_d[0]).max() > 1e-9)
+    # a trajectory that starts at rest is preceded by a hold (integrators settle on gravity); one that
+    # starts moving starts on its state directly
+    n_settle = 0 if moving else int(round(config.settle_time_s / dt))
     pad = lambda x, first: np.vstack([np.repeat(first[None], n_settle, 0), x])  # noqa: E731
     zero = np.zeros_like(q_d[0])
     Q, V, A = pad(q_d, q_d[0]), pad(v_d, zero), pad(a_d, zero)
@@ -144,7 +154,7 @@ def simulate_joint_trajectory(real, model, t_s, q_d, v_d, a_d, config: ControlCo
     plant = real.plant
     rec = plant.run_servo(gains.as_dict(), dt, nv, d_m, alpha,
                           q_fb, v_ff, tau_drive, Q[0], rng, engine=config.engine,
-                          chunk_samples=config.chunk_samples, tcp_frame=tcp_frame)
+                          chunk_samples=config.chunk_samples, tcp_frame=tcp_frame, v0=V[0])
     s = slice(n_settle, None)
     q_meas = rec.q_meas[s]
     ratio = rec.torque_ratio[s]

@@ -33,6 +33,17 @@ def run_metrics(lag_error_rad: np.ndarray, tcp_meas_m: np.ndarray, tcp_desired_m
     return out
 
 
+def registered_error(measured_m: np.ndarray, desired_m: np.ndarray) -> np.ndarray:
+    """|R p_meas + t - p_des| after the best-fit rigid registration (Kabsch) of the measured path onto
+    the desired one: the path accuracy free of the robot's placement in the world, which a tracker
+    calibration cannot separate from the tracker pose."""
+    a, b = measured_m.mean(axis=0), desired_m.mean(axis=0)
+    U, _, Vt = np.linalg.svd((measured_m - a).T @ (desired_m - b))
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
+    R = Vt.T @ D @ U.T
+    return np.linalg.norm((measured_m - a) @ R.T + b - desired_m, axis=1)
+
+
 VARIANT_STYLE = {"none": ("tab:red", "no feedforward"), "gravity": ("tab:orange", "gravity"),
                  "full": ("tab:green", "rigid body"), "full_friction": ("tab:blue", "rigid body + friction"),
                  "full_friction_nominal": ("tab:purple", "rigid body + friction (nominal model)")}
@@ -78,13 +89,13 @@ def tcp_figure(s_m: np.ndarray, tcp_tracking: dict[str, np.ndarray], tcp_absolut
 
 def path_figure(desired_m: np.ndarray, actual: dict[str, np.ndarray], points: dict[str, np.ndarray],
                 scale: float = 200.0) -> Figure:
-    """Desired TCP path and the measured ones (deviations magnified ``scale`` times), 3-D."""
+    """Desired TCP path and the measured ones (deviations from it magnified ``scale`` times), 3-D."""
     fig = Figure(figsize=(6, 5.5), constrained_layout=True)
     ax = fig.add_subplot(111, projection="3d")
     ax.plot(*desired_m.T, color="k", lw=0.8, label="desired")
     for name, p in actual.items():
         color, label = VARIANT_STYLE.get(name, ("k", name))
-        ax.plot(*(desired_m + scale * (p - desired_m)).T, color=color, lw=0.6, label=f"{label} (x{scale:g})")
+        ax.plot(*(desired_m + scale * (p - desired_m)).T, color=color, lw=0.6, label=f"{label} (deviation x{scale:g})")
     for k, p in points.items():
         if k.startswith("P"):
             ax.scatter(*p, color="k", s=8)

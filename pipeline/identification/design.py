@@ -39,6 +39,7 @@ import casadi as ca
 import numpy as np
 
 from pipeline.errors import InfeasibleError
+from pipeline.identification._threads import single_thread_blas
 from pipeline.identification.regressor import BaseParameters, RegressorModel
 
 
@@ -119,6 +120,16 @@ class ExcitationLimits:
     effort_Nm: np.ndarray
     floor_clearance_m: float
     self_clearance_m: float
+
+    def tightened(self, factor: float, clearance_m: float) -> ExcitationLimits:
+        """Limits scaled by ``factor`` about their middle and clearances ``+ clearance_m`` (the NLP
+        works inside the checked limits, so an iterate that stops slightly infeasible or peaks
+        between the NLP samples still passes the fine-grid check)."""
+        mid = 0.5 * (self.lower_rad + self.upper_rad)
+        half = 0.5 * (self.upper_rad - self.lower_rad) * factor
+        return ExcitationLimits(mid - half, mid + half, self.velocity_rad_s * factor,
+                                self.acceleration_rad_s2 * factor, self.effort_Nm * factor,
+                                self.floor_clearance_m + clearance_m, self.self_clearance_m + clearance_m)
 
     @classmethod
     def from_robot(
@@ -259,6 +270,14 @@ def random_trajectory(
     )
 
 
+#: the NLP keeps inside the checked limits by this factor and extra clearance
+NLP_LIMIT_FACTOR = 0.98
+NLP_EXTRA_CLEARANCE_M = 0.005
+
+#: oscillation scales tried, in turn, on a random draw that violates a limit or collides
+SHRINK_FACTORS = (1.0, 0.7, 0.5, 0.35)
+
+
 def random_feasible_trajectories(
     robot: Any,
     limits: ExcitationLimits,
@@ -269,15 +288,33 @@ def random_feasible_trajectories(
     max_tries: int | None = None,
     n_check: int = 200,
 ) -> list[FourierTrajectory]:
-    """``count`` random trajectories that pass :func:`check_trajectory` (collisions included)."""
+    """``count`` random trajectories that pass :func:`check_trajectory` (collisions included).
+
+    Plain rejection sampling for the first ``5 count`` draws; after that (compact arms whose
+    capsules collide for most random swings) a draw whose centre pose collides is skipped and
+    otherwise its oscillation is scaled by :data:`SHRINK_FACTORS` in turn, the first feasible
+    scale being kept."""
     out: list[FourierTrajectory] = []
     tries = 0
     max_tries = max_tries if max_tries is not None else 50 * count
+    plain_tries = 5 * count
     while len(out) < count and tries < max_tries:
         tries += 1
         traj = random_trajectory(robot, limits, harmonics, base_frequency_hz, rng, n_check)
-        if check_trajectory(robot, traj, limits, n_check).feasible:
-            out.append(traj)
+        # plain rejection sampling first; a compact arm (capsules close together) collides for
+        # most random swings, then shrink the oscillation about a collision-free centre
+        factors = SHRINK_FACTORS[:1] if tries <= plain_tries else SHRINK_FACTORS
+        if tries > plain_tries:
+            centre = FourierTrajectory(traj.coefficients * np.r_[1.0, np.zeros(2 * harmonics)], base_frequency_hz)
+            if not check_trajectory(robot, centre, limits, 2).feasible:
+                continue
+        for shrink in factors:
+            coef = traj.coefficients.copy()
+            coef[:, 1:] *= shrink
+            trial = FourierTrajectory(coef, base_frequency_hz)
+            if check_trajectory(robot, trial, limits, n_check).feasible:
+                out.append(trial)
+                break
     if len(out) < count:
         raise InfeasibleError(
             None,
@@ -643,6 +680,35 @@ def optimize_excitation(
     ``n_random`` random feasible trajectories give the baseline median; the ``n_starts`` best of
     them (by the criterion) are the starts of the NLP.
     """
+    with single_thread_blas():
+        return _optimize_excitation_impl(
+            robot, sym, reg, base, limits, rng, harmonics, base_frequency_hz, n_samples, n_starts,
+            n_random, max_iter, criterion, n_check, progress,
+        )
+
+
+def _optimize_excitation_impl(
+    robot: Any,
+    sym: Any,
+    reg: RegressorModel,
+    base: BaseParameters,
+    limits: ExcitationLimits,
+    rng: np.random.Generator,
+    harmonics: int = 5,
+    base_frequency_hz: float = 0.1,
+    n_samples: int = 100,
+    n_starts: int = 4,
+    n_random: int = 20,
+    max_iter: int = 150,
+    criterion: str = "cond",
+    n_check: int = 400,
+    progress: Any = None,
+) -> ExcitationResult:
+    """Random-start IPOPT optimisation of the excitation (see the module docstring).
+
+    ``n_random`` random feasible trajectories give the baseline median; the ``n_starts`` best of
+    them (by the criterion) are the starts of the NLP.
+    """
     nq = robot.nq
     L = harmonics
     t = np.arange(n_samples) / (n_samples * base_frequency_hz)
@@ -658,7 +724,8 @@ def optimize_excitation(
     order = np.argsort(cond_random)
     starts = [randoms[i] for i in order[:n_starts]]
 
-    solver, bounds, _obj = _build_nlp(robot, sym, crit, limits, L, max_iter)
+    inner = limits.tightened(NLP_LIMIT_FACTOR, NLP_EXTRA_CLEARANCE_M)
+    solver, bounds, _obj = _build_nlp(robot, sym, crit, inner, L, max_iter)
     best: tuple[float, FourierTrajectory, FeasibilityReport] | None = None
     histories, start_results, cond_starts = [], [], []
     iterable: Any = range(len(starts))

@@ -28,6 +28,7 @@ import casadi as ca
 import numpy as np
 
 from pipeline.errors import DataFileError, SolverError
+from pipeline.identification._threads import single_thread_blas
 
 #: lower bound of rotor inertia (kg m^2) and friction (N m s/rad, N m) in the physical fit
 POSITIVE_LOWER_BOUND = 1e-6
@@ -60,12 +61,14 @@ def _check_system(W: np.ndarray, y: np.ndarray, nv: int) -> None:
     if not (np.all(np.isfinite(W)) and np.all(np.isfinite(y))):
         raise DataFileError(None, "regressor/torque", "contains NaN or inf")
     n_samples = W.shape[0] // nv
-    if n_samples * nv <= W.shape[1]:
+    # Gautier's per-joint variance sigma_j^2 = ||rho_j||^2 / (r_j - c_j) needs r_j > c_j: ask for
+    # more samples than parameters (not only more equations)
+    if n_samples <= W.shape[1]:
         raise DataFileError(
             None,
             "samples",
-            f"{n_samples} samples x {nv} joints = {W.shape[0]} equations <= "
-            f"{W.shape[1]} base parameters",
+            f"{n_samples} samples ({W.shape[0]} equations) for {W.shape[1]} parameters: "
+            "need more samples than parameters",
         )
 
 
@@ -82,6 +85,11 @@ def _joint_sigmas(W: np.ndarray, res: np.ndarray, nv: int) -> np.ndarray:
 
 def ols(W: np.ndarray, y: np.ndarray, nv: int) -> LeastSquaresEstimate:
     """Ordinary least squares; covariance from one residual variance of all rows."""
+    with single_thread_blas():
+        return _ols(W, y, nv)
+
+
+def _ols(W: np.ndarray, y: np.ndarray, nv: int) -> LeastSquaresEstimate:
     _check_system(W, y, nv)
     beta, *_ = np.linalg.lstsq(W, y, rcond=None)
     res = (y - W @ beta).reshape(-1, nv)
@@ -93,7 +101,12 @@ def ols(W: np.ndarray, y: np.ndarray, nv: int) -> LeastSquaresEstimate:
 
 def wls(W: np.ndarray, y: np.ndarray, nv: int, iterations: int = 1) -> LeastSquaresEstimate:
     """Gautier's weighted least squares (per-joint residual sigma from the previous fit)."""
-    est = ols(W, y, nv)
+    with single_thread_blas():
+        return _wls(W, y, nv, iterations)
+
+
+def _wls(W: np.ndarray, y: np.ndarray, nv: int, iterations: int) -> LeastSquaresEstimate:
+    est = _ols(W, y, nv)
     for _ in range(iterations):
         w = np.tile(1.0 / est.joint_sigma_Nm, W.shape[0] // nv)
         Ww = W * w[:, None]
@@ -242,6 +255,14 @@ def physical_fit(
     if n_links * 10 + 4 * nv != n_std:
         raise DataFileError(None, "regressor", f"{n_std} columns do not match {nv} joints")
     _check_system(Y, y, nv)
+    with single_thread_blas():
+        return _physical_fit(Y, y, nv, p_nominal, joint_sigma_Nm, regularization, max_iter, fit_offsets,
+                             min_mass_kg, min_spread_m, n_links)
+
+
+def _physical_fit(Y, y, nv, p_nominal, joint_sigma_Nm, regularization, max_iter, fit_offsets,  # noqa: ANN001
+                  min_mass_kg, min_spread_m, n_links) -> PhysicalEstimate:  # noqa: ANN001
+    n_std = Y.shape[1]
     sig = np.ones(nv) if joint_sigma_Nm is None else np.asarray(joint_sigma_Nm, float)
     w = np.tile(1.0 / sig, Y.shape[0] // nv)
     # compress: ||A p - b||^2 = ||R p - r||^2 + const

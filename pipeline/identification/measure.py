@@ -146,6 +146,7 @@ class ProcessedData:
     tau: np.ndarray  # (N, nq)
     Y: np.ndarray  # (N*nq, n_std) standard regressor after the parallel decimation
     sample_time_s: float
+    noise_sigma_Nm: np.ndarray | None = None  # per raw sample, from the spread between periods
 
     @property
     def n_samples(self) -> int:
@@ -172,8 +173,14 @@ def process_periodic(
     skip_periods: int = 0,
 ) -> ProcessedData:
     """Average over periods, filter the positions (zero phase, periodic), differentiate,
-    build the regressor at the full rate, then decimate regressor and torques in parallel
-    (the same zero-phase low-pass at 0.8 x the new Nyquist frequency, periodic)."""
+    build the regressor at the full rate, then decimate regressor rows and torques in parallel
+    by block means of ``decimation`` samples.
+
+    A block mean is a linear combination of equations applied to both sides, so the model stays
+    exact (aliasing cannot bias it), and it keeps the torque noise white (sigma / sqrt(block)),
+    which a low-pass before subsampling does not: its correlated noise would make the
+    least-squares covariance too optimistic. ``noise_sigma_Nm`` is the per-sample torque noise
+    estimated from the spread between periods (pooled over the period)."""
     nq = reg.nv
     rec.validate(nq)
     dt = rec.sample_time_s
@@ -183,7 +190,8 @@ def process_periodic(
         raise DataFileError(rec.source or None, "samples", "less than one full period recorded")
     start = skip_periods * samples_per_period
     q_mean, _ = signals.average_periods(rec.q_rad[start:], samples_per_period)
-    tau_mean, _ = signals.average_periods(rec.tau_Nm[start:], samples_per_period)
+    tau_mean, tau_std = signals.average_periods(rec.tau_Nm[start:], samples_per_period)
+    noise = np.sqrt(np.mean(tau_std**2, axis=0)) if n_periods > 1 else np.full(nq, np.nan)
     q = _periodic_lowpass(q_mean, state_cutoff_hz, fs)
     n = q.shape[0]
     tiled = np.concatenate([q, q, q], axis=0)
@@ -191,14 +199,18 @@ def process_periodic(
     a3 = signals.differentiate(v3, dt)
     v, a = v3[n : 2 * n], a3[n : 2 * n]
     Y = reg.stacked(q, v, a)
-    if decimation > 1:
-        cut = 0.8 * 0.5 * fs / decimation
-        Yd = _periodic_lowpass(Y.reshape(n, nq * Y.shape[1]), cut, fs).reshape(n * nq, -1)
-        taud = _periodic_lowpass(tau_mean, cut, fs)
-        keep = np.arange(0, n, decimation)
-        rows = (keep[:, None] * nq + np.arange(nq)[None, :]).ravel()
-        return ProcessedData(q[keep], v[keep], a[keep], taud[keep], Yd[rows], dt * decimation)
-    return ProcessedData(q, v, a, tau_mean, Y, dt)
+    dec = max(int(decimation), 1)
+    m = n // dec
+    if m * nq <= Y.shape[1]:
+        raise DataFileError(
+            rec.source or None, "identification.decimation",
+            f"{m} samples after decimation by {dec} are too few for {Y.shape[1]} parameters",
+        )
+    p = Y.shape[1]
+    Yd = Y[: m * dec * nq].reshape(m, dec, nq, p).mean(axis=1).reshape(m * nq, p)
+    taud = tau_mean[: m * dec].reshape(m, dec, nq).mean(axis=1)
+    mid = np.arange(m) * dec + dec // 2
+    return ProcessedData(q[mid], v[mid], a[mid], taud, Yd, dt * dec, noise)
 
 
 def process_record(

@@ -151,11 +151,24 @@ class RegressorModel:
         """Regressor stacked sample-major: rows ``k*nv + j`` (sample k, joint j)."""
         Q, V, A = (np.atleast_2d(np.asarray(x, float)) for x in (Q, V, A))
         check_state_arrays(Q, V, A, self.nv)
-        n = Q.shape[0]
-        out = np.empty((n * self.nv, self.n_parameters))
+        n, nv = Q.shape[0], self.nv
+        n_link = self.n_parameters - 4 * nv
+        out = np.empty((n, nv, self.n_parameters))
+        model, data = self.model, self.data
         for k in range(n):
-            out[k * self.nv : (k + 1) * self.nv] = self.regressor(Q[k], V[k], A[k])
-        return out
+            out[k, :, :n_link] = pin.computeJointTorqueRegressor(model, data, Q[k], V[k], A[k])
+        # actuator columns for all samples at once (same formulas as actuator_columns)
+        K = self.gear_matrix
+        kd = np.abs(np.diag(K))
+        vm, am = V @ K.T, A @ K.T  # (n, nv) motor side
+        w = self.coulomb_width_rad_s
+        s = np.tanh(vm / (kd * w)) if w > 0 else np.sign(vm)
+        # column j of group g on joint i: K[j, i] * f_g(sample, j)
+        out[:, :, n_link : n_link + nv] = (am / kd**2)[:, None, :] * K.T[None]
+        out[:, :, n_link + nv : n_link + 2 * nv] = (vm / kd**2)[:, None, :] * K.T[None]
+        out[:, :, n_link + 2 * nv : n_link + 3 * nv] = (s / kd)[:, None, :] * K.T[None]
+        out[:, :, n_link + 3 * nv :] = np.eye(nv)[None]
+        return out.reshape(n * nv, self.n_parameters)
 
     def torques(self, Q: np.ndarray, V: np.ndarray, A: np.ndarray, p: np.ndarray) -> np.ndarray:
         """(N, nv) joint torques ``Y p``."""
@@ -252,6 +265,13 @@ def base_parameters_from_regressor(
     Y: np.ndarray, names: list[str], tolerance: float = BASE_QR_TOLERANCE
 ) -> BaseParameters:
     """Base parameters of a given (well excited) regressor by pivoted QR."""
+    from pipeline.identification._threads import single_thread_blas
+
+    with single_thread_blas():
+        return _base_from_regressor(Y, names, tolerance)
+
+
+def _base_from_regressor(Y: np.ndarray, names: list[str], tolerance: float) -> BaseParameters:
     norms = np.linalg.norm(Y, axis=0)
     zero = norms <= 1e-12 * max(norms.max(), 1e-300)
     scale = np.where(zero, 1.0, norms)

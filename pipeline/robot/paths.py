@@ -230,7 +230,8 @@ def ik_track(robot, poses: list[pin.SE3], q0: np.ndarray, frame: str = "tcp", to
         where = f"t = {times_s[k]:.4f} s" if times_s is not None else f"sample {k}"
         p = np.array2string(T.translation, precision=4)
         if err_n >= max(tolerance_m * 100, 1e-7):
-            raise InfeasibleError(None, "ik", f"TCP point {p} m at {where} not reached (error {err_n:.2e} m)")
+            raise InfeasibleError(None, "ik", f"TCP point {p} m at {where} not reached (error {err_n:.2e} m; "
+                                  f"{limiting_joint(robot, q)})")
         bad = np.nonzero((q < lo) | (q > hi))[0]
         if len(bad):
             j = int(bad[0])
@@ -244,6 +245,15 @@ def ik_track(robot, poses: list[pin.SE3], q0: np.ndarray, frame: str = "tcp", to
 def joint_path(robot, path: CartesianPath, n: int, q0: np.ndarray, frame: str = "tcp") -> np.ndarray:
     """(n, nq) joint positions along ``path`` sampled equally in arc length (IK warm-started)."""
     return ik_track(robot, path.sample(n), q0, frame)
+
+
+def limiting_joint(robot, q: np.ndarray) -> str:
+    """'joint i at x deg of [lo, hi] deg' for the joint closest to (or beyond) a limit, relative to its range."""
+    lo, hi = robot.limits.lower_rad, robot.limits.upper_rad
+    margin = np.minimum(q - lo, hi - q) / (hi - lo)
+    j = int(np.argmin(margin))
+    return (f"joint {j + 1} at {np.degrees(q[j]):.1f} deg of [{np.degrees(lo[j]):.1f}, "
+            f"{np.degrees(hi[j]):.1f}] deg")
 
 
 def start_configuration(robot, pose: pin.SE3, seeds, frame: str = "tcp", tolerance_m: float = 1e-10,

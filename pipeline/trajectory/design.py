@@ -10,11 +10,9 @@ time law is optimised).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import pinocchio as pin
 from scipy.interpolate import make_interp_spline
 
 from pipeline.errors import InfeasibleError
@@ -47,65 +45,32 @@ class JointPath:
         return q, dq, ddq
 
 
-@dataclass
-class PoseSequencePath:
-    """A Cartesian path given as a list of TCP poses at evenly spaced path parameters."""
-
-    poses: list[pin.SE3]
-    name: str = "poses"
-
-    def sample(self, n: int) -> list[pin.SE3]:
-        """Interpolate the poses (piecewise geodesic on SE(3)) at ``n`` even parameters."""
-        k = len(self.poses) - 1
-        out = []
-        for u in np.linspace(0.0, k, n):
-            i = min(int(np.floor(u)), k - 1)
-            frac = u - i
-            out.append(self.poses[i] * pin.exp6(frac * pin.log6(self.poses[i].actInv(self.poses[i + 1]))))
-        return out
-
-    @property
-    def length_m(self) -> float:
-        return float(sum(np.linalg.norm(b.translation - a.translation)
-                         for a, b in zip(self.poses[:-1], self.poses[1:])))
-
-
-def line_path(start: pin.SE3, end: pin.SE3) -> PoseSequencePath:
-    """Straight line of the TCP with geodesic orientation change."""
-    return PoseSequencePath([start, end], name="line")
-
-
-def joint_path_from_cartesian(robot: Any, path: Any, q_start: np.ndarray, n_points: int = 120,
-                              frame: str = "tcp", max_step_rad: float = 0.25,
+def joint_path_from_cartesian(robot: Any, path: Any, n_points: int, q_seed: np.ndarray,
+                              frame: str | None = None, max_step_rad: float = np.radians(15.0),
                               name: str = "path") -> JointPath:
-    """IK of ``path.sample(n_points)`` (or a list of poses) into a :class:`JointPath`.
+    """IK of a Cartesian path (``pipeline.robot.paths.CartesianPath``: line, circle, spline, ISO
+    9283 piece; or any object with ``sample(n) -> list[SE3]``) into a :class:`JointPath`.
 
-    Raises :class:`InfeasibleError` naming the first unreachable sample (IK failure, joint
-    limit) or a configuration jump larger than ``max_step_rad`` between neighbours.
+    The first pose is solved from ``q_seed`` (plus deterministic random restarts), the others
+    warm-started from their neighbour (stage 3's ``ik_track``). Raises :class:`InfeasibleError`
+    naming the unreachable point, or a joint jump larger than ``max_step_rad`` between neighbours
+    (singularity or branch change).
     """
-    poses = path.sample(n_points) if hasattr(path, "sample") else list(path)
-    n = len(poses)
-    s = np.linspace(0.0, 1.0, n)
-    q = np.asarray(q_start, float).copy()
-    Q = np.empty((n, robot.nq))
-    for k, pose in enumerate(poses):
-        res = robot.ik(pose, q, frame=frame)
-        p = pose.translation
-        where = f"{name} point {k} of {n} (s={s[k]:.3f}, xyz=[{p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}] m)"
-        if not res.success:
-            raise InfeasibleError(None, where, f"unreachable: IK failed ({res.message}, "
-                                  f"position error {res.position_error_m:.2e} m)")
-        qk = np.asarray(res.q, float)
-        if not robot.within_limits(qk):
-            raise InfeasibleError(None, where, "IK solution outside the joint limits")
-        if k > 0 and np.max(np.abs(qk - Q[k - 1])) > max_step_rad:
-            j = int(np.argmax(np.abs(qk - Q[k - 1])))
-            raise InfeasibleError(None, where, f"joint {j + 1} jumps "
-                                  f"{np.degrees(abs(qk[j] - Q[k - 1][j])):.1f} deg between path "
-                                  "samples (singularity or branch change)")
-        Q[k] = qk
-        q = qk
-    return JointPath(s, Q, name=name)
+    from pipeline.robot.paths import ik_track, start_configuration
+
+    frame = frame or robot.frame_tcp
+    poses = path.sample(n_points)
+    q0 = start_configuration(robot, poses[0], np.atleast_2d(q_seed), frame)
+    Q = ik_track(robot, poses, q0, frame)
+    step = np.max(np.abs(np.diff(Q, axis=0)), axis=1)
+    k = int(np.argmax(step))
+    if step[k] > max_step_rad:
+        p = poses[k + 1].translation
+        j = int(np.argmax(np.abs(Q[k + 1] - Q[k])))
+        raise InfeasibleError(None, f"{name} point {k + 1} of {n_points} ([{p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}] m)",
+                              f"joint {j + 1} jumps {np.degrees(step[k]):.1f} deg from the previous IK "
+                              "sample (singularity or branch change)")
+    return JointPath(np.linspace(0.0, 1.0, len(Q)), Q, name=name)
 
 
 def ptp_move_from_degrees(start_deg: Sequence[float], goal_deg: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:

@@ -48,15 +48,23 @@ class PlanningModel:
         return int(self.model.nq)
 
     @classmethod
-    def from_robot(cls, robot: Any) -> PlanningModel:
-        """Build from a :class:`pipeline.robot.model.RobotModel` (docs/ARCHITECTURE.md)."""
+    def from_robot(cls, robot: Any, torque_reserve: float = 0.0) -> PlanningModel:
+        """Build from a :class:`pipeline.robot.model.RobotModel` (docs/ARCHITECTURE.md).
+
+        ``torque_reserve`` (fraction) is kept free for the feedback controller: the planners see
+        ``effort_Nm = (1 - torque_reserve) * limit``.
+        """
+        if not 0.0 <= torque_reserve < 1.0:
+            from pipeline.errors import ConfigError
+
+            raise ConfigError(None, "trajectory.torque_reserve", f"must be in [0, 1), got {torque_reserve}")
         lim, act = robot.limits, robot.actuation
         return cls(
             model=robot.model,
             lower_rad=np.asarray(lim.lower_rad, float),
             upper_rad=np.asarray(lim.upper_rad, float),
             velocity_rad_s=np.asarray(lim.velocity_rad_s, float),
-            effort_Nm=np.asarray(lim.effort_Nm, float),
+            effort_Nm=np.asarray(lim.effort_Nm, float) * (1.0 - torque_reserve),
             viscous_Nms_rad=np.asarray(act.viscous_Nms_rad, float),
             coulomb_Nm=np.asarray(act.coulomb_Nm, float),
             coulomb_smoothing_rad_s=float(act.coulomb_smoothing_rad_s),

@@ -103,7 +103,8 @@ class PtpResult:
         return JointTrajectory(name, t, q, v, a, info={"k1": self.k1, "k2": self.k2})
 
 
-def _compile_nlp(solver_sx: ca.Function, cache: Path, name: str) -> Path:
+def _compile_nlp(solver_sx: ca.Function, cache: Path, name: str,
+                 flags: tuple[str, ...] = JIT_FLAGS) -> Path:
     """C code of the NLP's functions (objective, constraints and their derivatives) -> .so."""
     cache.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=cache) as tmp:
@@ -115,11 +116,11 @@ def _compile_nlp(solver_sx: ca.Function, cache: Path, name: str) -> Path:
             os.chdir(cwd)
         src = Path(tmp) / f"{name}.c"
         code = src.read_text()
-        key = hashlib.sha256((code + " ".join(JIT_FLAGS) + ca.__version__).encode()).hexdigest()[:20]
+        key = hashlib.sha256((code + " ".join(flags) + ca.__version__).encode()).hexdigest()[:20]
         lib = cache / f"{name}_{key}.so"
         if not lib.exists():
             tmp_lib = Path(tmp) / f"{name}.so"
-            cmd = ["gcc", *JIT_FLAGS, str(src), "-o", str(tmp_lib), "-lm"]
+            cmd = ["gcc", *flags, str(src), "-o", str(tmp_lib), "-lm"]
             res = subprocess.run(cmd, capture_output=True, text=True, check=False)
             if res.returncode != 0:
                 raise PipelineError(str(src), name, f"gcc failed: {res.stderr.strip()[:500]}")
@@ -136,21 +137,22 @@ class PtpProblem:
     """
 
     def __init__(self, pm: PlanningModel, sym: Any, n_intervals: int = 50, jit: bool = True,
-                 cache_dir: Path | None = None, ipopt_options: dict | None = None) -> None:
+                 cache_dir: Path | None = None, ipopt_options: dict | None = None,
+                 jit_flags: tuple[str, ...] = JIT_FLAGS, p_dyn: np.ndarray | None = None) -> None:
         t0 = time.perf_counter()
         self.pm, self.sym, self.N, self.nq = pm, sym, int(n_intervals), pm.nq
-        self.p_dyn_nominal = np.asarray(sym.nominal_dynamic_parameters(), float)
+        self.p_dyn_nominal = np.asarray(sym.nominal_dynamic_parameters() if p_dyn is None else p_dyn, float)
         self.coulomb_slice = sym.dyn.coulomb
         nq, N = self.nq, self.N
         self.v_scale = pm.velocity_rad_s.copy()
-        self.a_scale = pm.effort_Nm / np.maximum(pm.mass_diagonal(np.zeros(nq)), 1e-9)
-        n_dyn = self.p_dyn_nominal.size
+        # scales of the decision variables (constants in the generated code: independent of the
+        # torque reserve so that one compiled library serves every torque limit)
+        self.a_scale = np.asarray(pm.acceleration_rad_s2, float).copy()
         # decision variables (scaled): T, Q (nq x N+1), Vn = V / v_scale, An = A / a_scale (nodes)
         T = ca.MX.sym("T")
         Q = ca.MX.sym("Q", nq, N + 1)
         Vn = ca.MX.sym("V", nq, N + 1)
         An = ca.MX.sym("A", nq, N + 1)
-        p_dyn = ca.MX.sym("p_dyn", n_dyn)       # Coulomb entries zeroed: added below
         coulomb = ca.MX.sym("coulomb", nq)
         inv_width = ca.MX.sym("inv_width")
         inv_tau_max = ca.MX.sym("inv_tau_max", nq)
@@ -168,15 +170,21 @@ class PtpProblem:
         g_q = Q[:, 1:] - q0 - h * v0 - h**2 * (a0 / 3.0 + a1 / 6.0)
         g_v = (V[:, 1:] - v0 - 0.5 * h * (a0 + a1)) / ca.repmat(ca.DM(self.v_scale), 1, N)
         M = 2 * N + 1
-        rnea = sym.rnea.map(M)
+        # dynamic parameters are baked in as constants (derivatives w.r.t. a p_dyn input would
+        # multiply the generated code); Coulomb friction is added outside with its own parameters
+        pd = self.p_dyn_nominal.copy()
+        pd[self.coulomb_slice] = 0.0
+        qs, vs, as_ = (ca.SX.sym(nm, nq) for nm in ("q", "v", "a"))
+        rnea1 = ca.Function("rnea_ptp", [qs, vs, as_], [sym.rnea(qs, vs, as_, ca.DM(pd))])
+        rnea = rnea1.map(M)
         qa, va, aa = ca.horzcat(Q, q_mid), ca.horzcat(V, v_mid), ca.horzcat(A, a_mid)
-        tau = rnea(qa, va, aa, p_dyn) + ca.repmat(coulomb, 1, M) * ca.tanh(va * inv_width)
+        tau = rnea(qa, va, aa) + ca.repmat(coulomb, 1, M) * ca.tanh(va * inv_width)
         tau_n = tau * ca.repmat(inv_tau_max, 1, M)
         wt = ca.sum1(tau**2 * ca.repmat(w, 1, M))
         e_n, e_m = wt[:N + 1], wt[N + 1:]
         energy = h / 6.0 * (ca.sum2(e_n[:-1] + e_n[1:]) + 4 * ca.sum2(e_m))
         x = ca.vertcat(T, ca.vec(Q), ca.vec(Vn), ca.vec(An))
-        p = ca.vertcat(p_dyn, coulomb, inv_width, inv_tau_max, inv_v_max, w, k1, k2)
+        p = ca.vertcat(coulomb, inv_width, inv_tau_max, inv_v_max, w, k1, k2)
         g_vmid = v_mid * ca.repmat(inv_v_max, 1, N)
         g = ca.vertcat(ca.vec(g_q), ca.vec(g_v), ca.vec(tau_n), ca.vec(g_vmid))
         self.n_x, self.n_g, self.n_p = x.numel(), g.numel(), p.numel()
@@ -192,7 +200,8 @@ class PtpProblem:
         self.compile_time_s = 0.0
         if self.jit:
             t1 = time.perf_counter()
-            lib = _compile_nlp(solver, Path(cache_dir) if cache_dir else cache_dir_default(), name)
+            lib = _compile_nlp(solver, Path(cache_dir) if cache_dir else cache_dir_default(), name,
+                               tuple(jit_flags))
             solver = ca.nlpsol(name, "ipopt", str(lib), opts)
             self.library = lib
             self.compile_time_s = time.perf_counter() - t1
@@ -256,15 +265,15 @@ class PtpProblem:
 
     def solve(self, q0: np.ndarray, q1: np.ndarray, k1: float = 1.0, k2: float = 0.01,
               weights: np.ndarray | None = None, duration_s: float | None = None,
-              p_dyn: np.ndarray | None = None, lower_rad: np.ndarray | None = None,
+              lower_rad: np.ndarray | None = None,
               upper_rad: np.ndarray | None = None, velocity_rad_s: np.ndarray | None = None,
               effort_Nm: np.ndarray | None = None, x0: np.ndarray | None = None,
               max_duration_s: float = 60.0, zero_end_acceleration: bool = True,
               coulomb_widths_rad_s: tuple[float, ...] | None = None) -> PtpResult:
         """Solve one move; raises InfeasibleError / SolverError instead of returning a failure.
 
-        ``coulomb_widths_rad_s``: continuation of the tanh smoothing width, the last one being
-        the model's (default: the model's width only).
+        ``coulomb_widths_rad_s``: continuation of the tanh smoothing width (wide first, each solve
+        warm-starting the next); the model's width is always solved last.
         """
         pm, nq, N = self.pm, self.nq, self.N
         q0, q1 = np.asarray(q0, float), np.asarray(q1, float)
@@ -279,7 +288,7 @@ class PtpProblem:
                 raise InfeasibleError(None, f"ptp {nm} joint {j + 1}",
                                       f"{np.degrees(qq[j]):.2f} deg outside the limits "
                                       f"[{np.degrees(lo[j]):.1f}, {np.degrees(hi[j]):.1f}] deg")
-        pd = (self.p_dyn_nominal if p_dyn is None else np.asarray(p_dyn, float)).copy()
+        pd = self.p_dyn_nominal.copy()
         # static feasibility: holding torque at start and goal
         for nm, qq in (("start", q0), ("goal", q1)):
             tau_s = np.asarray(self.sym.rnea(qq, np.zeros(nq), np.zeros(nq), pd)).ravel()
@@ -291,7 +300,8 @@ class PtpProblem:
         coulomb = pd[self.coulomb_slice].copy()
         pd[self.coulomb_slice] = 0.0
         w = np.ones(nq) if weights is None else np.asarray(weights, float)
-        widths = coulomb_widths_rad_s or (self.sym.coulomb_smoothing_rad_s,)
+        w_model = float(self.sym.coulomb_smoothing_rad_s)
+        widths = tuple(float(x) for x in (coulomb_widths_rad_s or ()) if x > w_model) + (w_model,)
         # bounds
         lbT, ubT = (duration_s, duration_s) if duration_s is not None else (1e-3, max_duration_s)
         lbQ = np.tile(lo, (N + 1, 1))
@@ -317,12 +327,13 @@ class PtpProblem:
             else:
                 x0 = self.quintic_guess(q0, q1, duration_s)
         what = f"ptp move {np.round(np.degrees(q0), 1).tolist()} -> {np.round(np.degrees(q1), 1).tolist()} deg"
-        solve_time, iters = 0.0, 0
+        solve_time, cpu_time, iters = 0.0, 0.0, 0
         for width in widths:
-            p = np.concatenate([pd, coulomb, [1.0 / width], 1.0 / tmax, 1.0 / vmax, w, [k1, k2]])
-            t0 = time.perf_counter()
+            p = np.concatenate([coulomb, [1.0 / width], 1.0 / tmax, 1.0 / vmax, w, [k1, k2]])
+            t0, c0 = time.perf_counter(), time.process_time()
             sol = self.solver(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
             solve_time += time.perf_counter() - t0
+            cpu_time += time.process_time() - c0
             stats = self.solver.stats()
             iters += int(stats["iter_count"])
             if not stats.get("success", False):
@@ -337,7 +348,8 @@ class PtpProblem:
         energy, _ = self._energy_fn(xs, p)
         return PtpResult(np.linspace(0.0, T, N + 1), Q, V, A, T, float(energy), float(sol["f"]),
                          solve_time, iters, k1, k2,
-                         info={"x": xs, "jit": self.jit, "fixed_duration": duration_s is not None})
+                         info={"x": xs, "jit": self.jit, "fixed_duration": duration_s is not None,
+                               "cpu_time_s": cpu_time, "coulomb_widths_rad_s": list(widths)})
 
     def pareto(self, q0: np.ndarray, q1: np.ndarray, k2_values: list[float], weights: np.ndarray,
                **kw: Any) -> list[PtpResult]:

@@ -258,3 +258,14 @@ def test_targets_hold_for_other_robots_and_seeds(name, seed):
     cfg = _cfg()
     out = st.calibrate(robot, real, cfg, np.random.default_rng(seed))
     _check_targets(st.summary_of(out, cfg))
+
+
+def test_too_small_candidate_set_through_runner_writes_nothing(tmp_path):
+    from pipeline.config import quick_config
+    from pipeline.runner import run_pipeline
+
+    cfg = quick_config(**{"stages": ["model", "calibration"], "name": "fewcand",
+                          "calibration.n_random_candidates": 5})
+    with pytest.raises(PipelineError, match="candidates"):
+        run_pipeline(cfg, out_root=tmp_path / "runs", log=lambda m: None)
+    assert not (tmp_path / "runs" / "fewcand" / "calibration").exists()

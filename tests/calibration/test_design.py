@@ -67,7 +67,7 @@ def test_algorithms_beat_random(method):
 def test_remove_and_replace_is_locally_optimal():
     G, _ = _cands(120, p=8)
     spec = ix.IndexSpec("D")
-    res = ds.remove_and_replace(G, spec, 8, np.random.default_rng(2), n_initial=6)
+    res = ds.remove_and_replace(G, spec, 8, np.random.default_rng(2), n_initial=6, rel_tol=1e-12)
     S = list(res.selected)
     assert len(S) == 8
     base = res.index_value
@@ -87,3 +87,15 @@ def test_singular_candidate_set_raises():
         ds.remove_and_replace(G, ix.IndexSpec("O3"), 10, np.random.default_rng(0))
     with pytest.raises(InfeasibleError):
         ds.bsaa(G, ix.IndexSpec("O3"), 1, np.random.default_rng(0))
+
+
+def test_weighted_a_criterion_fast_path_matches_brute_force():
+    G, P = _cands(300)
+    w = (np.arange(G.shape[2]) % 2).astype(float)
+    spec = ix.IndexSpec("A", parameter_weights=w)
+    st = ds._State(G, spec, P, np.arange(8))
+    j, s = st.best_add()
+    brute = [ix.score(spec, st.M + G[c].T @ G[c], 9) for c in range(8, 300)]
+    assert j == 8 + int(np.argmax(brute)) and s == pytest.approx(max(brute), rel=1e-8)
+    M = st.M
+    assert ix.evaluate(spec, M, 8) == pytest.approx(np.sum(w * np.diag(np.linalg.inv(M))))

@@ -75,3 +75,31 @@ def test_iso9283_geometry(plane):
     segs = path.segments()
     for a, b in zip(segs[:-1], segs[1:], strict=True):
         np.testing.assert_allclose(a.position([a.length_m])[0], b.position([0.0])[0], atol=1e-12)
+
+
+def test_joint_path_follows_the_poses(rx130l):
+    import pinocchio as pin
+
+    from pipeline.robot.paths import joint_path, start_configuration
+
+    down = pin.utils.rotate("x", np.pi)
+    line = LinePath([0.8, -0.2, 0.3], [1.0, 0.2, 0.5], rotation=down)
+    q0 = start_configuration(rx130l, line.poses([0.0])[0], np.radians([[0.0, 17.0, 86.0, 0.0, 75.0, 0.0]]))
+    Q = joint_path(rx130l, line, 41, q0)
+    np.testing.assert_allclose(rx130l.positions(Q), line.position(np.linspace(0, line.length_m, 41)), atol=1e-8)
+    assert np.abs(np.diff(Q, axis=0)).max() < 0.1  # warm start keeps one IK branch
+
+
+def test_registered_error_removes_rigid_motion_only():
+    import pinocchio as pin
+
+    from pipeline.control.validate import registered_error
+
+    rng = np.random.default_rng(0)
+    P = rng.uniform(-0.3, 0.3, (200, 3))
+    T = pin.exp6(np.array([0.01, -0.02, 0.005, 0.01, 0.02, -0.01]))
+    moved = P @ T.rotation.T + T.translation
+    assert registered_error(moved, P).max() < 1e-12
+    bent = moved.copy()
+    bent[:, 2] += 1e-3 * P[:, 0] ** 2 / 0.09  # a non-rigid deformation stays visible
+    assert registered_error(bent, P).max() > 1e-4

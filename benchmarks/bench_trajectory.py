@@ -1,0 +1,70 @@
+"""Stage 4 targets, measured in one run (issue 6, paper 004 §5).
+
+Run: ``.venv/bin/python benchmarks/bench_trajectory.py [robot] [cp_segment]`` (default profile).
+Prints, each as a ratio measured here:
+
+* CP: our duration with toppra's constraints / toppra's (target within 0.5 %), and the fine-grid
+  torque violation with the full friction model of our solution and of toppra's (target: ours
+  <= 0.5 % where toppra's exceeds it);
+* PtP on (-45, 20, 30, 0, 40, 0) deg -> (45, 60, -20, 30, 50, 60) deg: duration / ruckig's
+  torque-feasible duration (target <= 0.87), fine-grid violation (<= 0.5 %), energy at ruckig's
+  duration / ruckig's (target <= 0.6), solve time after the one-time compile (target <= 2 s).
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+import numpy as np
+
+from pipeline.robot.model import RobotModel
+from pipeline.trajectory.config import TrajectoryConfig
+from pipeline.trajectory.dynamics import PlanningModel
+from pipeline.trajectory.solve import cp_joint_path, plan_cp, plan_ptp, ptp_problem, solve_ptp_verified
+
+
+def main(robot_name: str = "rx130l", segment: str = "circle_large") -> None:
+    cfg = TrajectoryConfig(cp_segment=segment)
+    robot = RobotModel.load(robot_name)
+    pm = PlanningModel.from_robot(robot)
+    t0 = time.perf_counter()
+    path, piece = cp_joint_path(robot, cfg)
+    cp = plan_cp(pm, path, cfg)
+    s = cp.summary()
+    print(f"CP {segment} ({piece.length_m:.3f} m, N = {cfg.cp_n_grid}), {time.perf_counter() - t0:.1f} s in all")
+    print(f"  toppra {s['cp_toppra_duration_s']:.5f} s ({1e3 * s['cp_toppra_solve_time_s']:.0f} ms); ours with "
+          f"toppra's constraints {s['cp_equal_constraints_duration_s']:.5f} s -> ratio "
+          f"{s['cp_equal_vs_toppra_ratio']:.6f} (target |ratio - 1| <= 0.005)")
+    print(f"  full friction: ours {s['cp_duration_s']:.5f} s ({s['cp_solve_time_s']:.2f} s), fine-grid violation "
+          f"ours {100 * s['cp_fine_violation']:.3f} % vs toppra "
+          f"{100 * s['cp_toppra_fine_violation_full_friction']:.2f} % (target ours <= 0.5 %)")
+    print(f"  smooth variant {s['cp_smooth_duration_s']:.5f} s: time cost {100 * s['cp_smooth_time_cost']:.1f} %, "
+          f"violation {100 * s['cp_smooth_fine_violation']:.3f} %, solve {s['cp_smooth_solve_time_s']:.2f} s")
+    print(f"  share of time with a constraint >= 98 % active: {s['cp_active_fraction']:.3f}")
+
+    t0 = time.perf_counter()
+    problem = ptp_problem(pm, robot, cfg)
+    print(f"PtP problem (N = {cfg.ptp_n_intervals}): build {problem.build_time_s:.1f} s, compile "
+          f"{problem.compile_time_s:.1f} s (0 when cached), ready after {time.perf_counter() - t0:.1f} s")
+    q0, q1 = np.radians(cfg.ptp_start_deg), np.radians(cfg.ptp_goal_deg)
+    ptp = plan_ptp(pm, problem, q0, q1, cfg)
+    p = ptp.summary()
+    # solve time after compile: a second, cold-started solve of the same move
+    again = solve_ptp_verified(pm, problem, q0, q1, cfg, cfg.ptp_k1, cfg.ptp_k2, ptp.weights)
+    print(f"  PtP {p['ptp_duration_s']:.4f} s vs ruckig {p['ptp_ruckig_duration_s']:.4f} s -> ratio "
+          f"{p['ptp_duration_vs_ruckig_ratio']:.3f} (target <= 0.87)")
+    print(f"  fine-grid violation {100 * p['ptp_fine_violation']:.3f} % (target <= 0.5 %), ruckig "
+          f"{100 * p['ptp_ruckig_fine_violation']:.3f} %")
+    print(f"  energy ({cfg.ptp_energy}) at ruckig's duration / ruckig's: "
+          f"{p['ptp_energy_at_ruckig_duration_ratio']:.3f} (target <= 0.6)")
+    print(f"  solve time after compile {again.solve_time_s:.2f} s wall, {again.info['cpu_time_s']:.2f} s CPU "
+          "(CPU time excludes the other processes on a shared box) (first solve "
+          f"{again.info['first_solve_time_s']:.2f} s, {again.info['tightening_rounds']} tightening re-solves, "
+          f"{again.iterations} IPOPT iterations; target <= 2 s)")
+    print(f"  ruckig search {p['ptp_ruckig_search_time_s']:.1f} s; Pareto: " + ", ".join(
+        f"k2={r['k2']:g}: {r['duration_s']:.3f} s / {r['energy']:.3f}" for r in p["ptp_pareto"]))
+
+
+if __name__ == "__main__":
+    main(*sys.argv[1:])

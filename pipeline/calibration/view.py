@@ -1,0 +1,32 @@
+"""Meshcat view of a calibration: chosen configurations, reflector points, tracker and beams."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+
+def show_calibration(robot, Q: np.ndarray, transform_tracker_to_base: pin.SE3 | None = None,
+                     viewer: Any = None, seconds_each: float = 1.0) -> Any:
+    """Open (or reuse) a :class:`pipeline.viewer.Viewer`, draw the configurations ``Q`` (reflector
+    points + an animation through them), the tracker as a sphere and a beam to every point."""
+    import meshcat.geometry as g
+    import meshcat.transformations as tf
+
+    from pipeline.viewer import Viewer
+
+    v = viewer if viewer is not None else Viewer(robot)
+    T = transform_tracker_to_base if transform_tracker_to_base is not None else \
+        robot.tracker.transform_tracker_to_base
+    P = robot.positions(Q, robot.frame_reflector)
+    v.vis["tracker"].set_object(g.Sphere(0.06), g.MeshLambertMaterial(color=0x444444))
+    v.vis["tracker"].set_transform(tf.translation_matrix(np.asarray(T.translation, float)))
+    segs = np.empty((3, 2 * len(P)))
+    segs[:, 0::2] = np.asarray(T.translation, float)[:, None]
+    segs[:, 1::2] = P.T
+    v.vis["beams"].set_object(g.LineSegments(g.PointsGeometry(segs),
+                                             g.LineBasicMaterial(color=0xD62728, linewidth=1)))
+    v.show_configurations(Q, "calibration", frame=robot.frame_reflector, seconds_each=seconds_each)
+    return v

@@ -1,0 +1,22 @@
+"""Stage 2: dynamic identification with optimal Fourier excitation (paper 004 §4; issue 4).
+
+Public entry points:
+
+- :mod:`~pipeline.identification.regressor`: ``RegressorModel`` (``pin.computeJointTorqueRegressor``
+  + rotor inertia, viscous and Coulomb friction, torque offsets through the gear matrix),
+  ``base_parameters`` (pivoted QR, readable combinations), ``standard_parameters``.
+- :mod:`~pipeline.identification.design`: ``FourierTrajectory`` (Swevers, rest to rest),
+  ``optimize_excitation`` (CasADi/IPOPT, exact gradient of cond or log det, limits, torques,
+  floor and capsule self-collision at every sample), ``random_feasible_trajectories``,
+  ``check_trajectory``.
+- :mod:`~pipeline.identification.signals`: zero-phase Butterworth, differentiation, decimation,
+  period averaging.
+- :mod:`~pipeline.identification.measure`: ``simulate_excitation`` (hidden robot), ``load_joint_csv``
+  (joint or motor side), ``process_periodic`` / ``process_record``.
+- :mod:`~pipeline.identification.estimate`: ``ols``, ``wls`` (Gautier), ``physical_fit``
+  (log-Cholesky, IPOPT), ``is_physically_consistent``.
+- :mod:`~pipeline.identification.validate`: ISO 9283 validation trajectory, torque RMS, z-scores.
+- :mod:`~pipeline.identification.tx40`: ``run_tx40`` on the real Stäubli TX40 record.
+- :mod:`~pipeline.identification.stage`: the runner stage ``identification`` and
+  ``identified_robot(robot, p)`` (a ``RobotModel`` with identified inertias, rotor inertia, friction).
+"""

@@ -1,0 +1,459 @@
+"""Stage ``identification``: optimal Fourier excitation, measurement, estimation, validation,
+and the real Stäubli TX40 record (paper ``004_abbe750b8bbcc3aa.txt`` §4; issue 4).
+
+1. Regressor of the current model (calibrated kinematics when the run has a calibration) and its
+   base parameters (structure from the nominal robot, pivoted QR; :mod:`.regressor`).
+2. Excitation: Fourier trajectory minimising the condition number of the base regressor under
+   limits, torques, floor and self-collision (CasADi/IPOPT, random starts; :mod:`.design`),
+   against the median of 20 random feasible trajectories.
+3. Data: the hidden robot follows ``periods`` periods (ideal tracking, sensor noise), or a CSV file.
+4. Period averaging, zero-phase filtering, differentiation, block decimation (:mod:`.measure`).
+5. OLS, Gautier's WLS (covariance -> base parameter sigmas) and the physically consistent fit
+   (log-Cholesky, IPOPT) whose standard parameters become the handed-on ``RobotModel``.
+6. Validation on the ISO 9283 path (measured vs predicted torques).
+7. The TX40 record: base parameters, condition number, held-out RMS (:mod:`.tx40`).
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from pipeline.errors import ConfigError, DataFileError, InfeasibleError, PipelineError
+from pipeline.identification import design as design_mod
+from pipeline.identification import estimate as est_mod
+from pipeline.identification import measure as meas_mod
+from pipeline.identification import validate as val_mod
+from pipeline.identification._threads import single_thread_blas
+from pipeline.identification.regressor import (
+    BASE_QR_TOLERANCE,
+    BaseParameters,
+    RegressorModel,
+    base_parameters,
+    standard_parameters,
+)
+from pipeline.identification.tx40 import Tx40Config, Tx40Result, run_tx40
+from pipeline.runner import StageContext, StageResult
+
+NAME = "identification"
+DEPENDS: tuple[str, ...] = ("model", "calibration")
+
+
+@dataclass
+class ExcitationConfig:
+    """Fourier excitation and its optimisation (``design.optimize_excitation``)."""
+
+    harmonics: int = 5
+    base_frequency_hz: float = 0.1
+    n_samples: int = 100  # samples of one period in the NLP (criterion and constraints)
+    n_starts: int = 3  # IPOPT runs from the best random feasible trajectories
+    n_random: int = 20  # random feasible trajectories for the baseline median
+    max_iter: int = 120
+    criterion: str = "cond"  # cond | logdet
+    position_margin: float = 0.95
+    velocity_margin: float = 0.95
+    acceleration_margin: float = 0.95
+    torque_margin: float = 0.8  # of the torque limit, for the nominal model (truth differs)
+    floor_clearance_m: float = 0.05
+    self_clearance_m: float = 0.02
+    n_check: int = 400  # fine grid of the final feasibility check
+
+
+@dataclass
+class Config:
+    """Settings of the ``identification`` stage."""
+
+    excitation: ExcitationConfig = field(default_factory=ExcitationConfig)
+    periods: int = 4
+    sample_time_s: float = 4e-4  # torque/encoder sampling (control loop)
+    state_cutoff_factor: float = 4.0  # position low-pass at this x the highest harmonic frequency
+    decimation: int = 25  # block means of this many samples (parallel decimation)
+    base_tolerance: float = BASE_QR_TOLERANCE
+    base_samples: int = 300
+    regularization: float = 1e-3  # pull of the physical fit towards the nominal model
+    physical_max_iter: int = 1000
+    validation: str = "iso9283"  # iso9283 | fourier
+    validation_sample_time_s: float = 4e-3
+    data_file: str = ""  # CSV record instead of the simulated experiment
+    data_side: str = "joint"  # joint | motor (columns of data_file)
+    data_cutoff_hz: float = 20.0  # position low-pass for a (non-periodic) data_file
+    data_decimation: int = 10
+    # actuator columns: "gear" = motor-side rotor/friction through the gear matrix (coupled axes,
+    # e.g. TX40 5/6), "none" = diagonal joint-side (RobotModel, SymbolicRobot and the hidden robot),
+    # "auto" = gear for a data_file (a real drive train), none for the simulated hidden robot
+    actuator_coupling: str = "auto"
+    run_tx40: bool = True
+    tx40: Tx40Config = field(default_factory=Tx40Config)
+    score_against_truth: bool = False  # evaluation only: z-scores of the base estimate vs truth
+    replay_rate_hz: float = 50.0
+
+
+def _validate_config(cfg: Config, source: Any) -> None:
+    ex = cfg.excitation
+    checks = [
+        ("identification.excitation.harmonics", ex.harmonics >= 1, "must be >= 1"),
+        ("identification.excitation.base_frequency_hz", ex.base_frequency_hz > 0, "must be > 0"),
+        ("identification.excitation.n_samples", ex.n_samples >= 10, "must be >= 10"),
+        ("identification.excitation.n_starts", ex.n_starts >= 1, "must be >= 1"),
+        ("identification.excitation.n_random", ex.n_random >= 1, "must be >= 1"),
+        ("identification.excitation.criterion", ex.criterion in ("cond", "logdet"), "must be cond or logdet"),
+        ("identification.periods", cfg.periods >= 1, "must be >= 1"),
+        ("identification.sample_time_s", cfg.sample_time_s > 0, "must be > 0"),
+        ("identification.decimation", cfg.decimation >= 1, "must be >= 1"),
+        ("identification.validation", cfg.validation in ("iso9283", "fourier"), "must be iso9283 or fourier"),
+        ("identification.data_side", cfg.data_side in ("joint", "motor"), "must be joint or motor"),
+        ("identification.state_cutoff_factor", cfg.state_cutoff_factor > 1, "must be > 1"),
+        ("identification.actuator_coupling", cfg.actuator_coupling in ("auto", "gear", "none"),
+         "must be auto, gear or none"),
+    ]
+    for fld, ok, problem in checks:
+        if not ok:
+            raise ConfigError(source, fld, problem)
+    for name in ("position_margin", "velocity_margin", "acceleration_margin", "torque_margin"):
+        v = getattr(ex, name)
+        if not 0 < v <= 1:
+            raise ConfigError(source, f"identification.excitation.{name}", f"must be in (0, 1], got {v}")
+    per = 1.0 / ex.base_frequency_hz
+    n = per / cfg.sample_time_s
+    if abs(n - round(n)) > 1e-6:
+        raise ConfigError(source, "identification.sample_time_s",
+                          f"{cfg.sample_time_s} s does not divide the period {per} s")
+
+
+def _nominal_robot(ctx: StageContext) -> Any:
+    """The robot as loaded from its files (structure of the base parameters)."""
+    try:
+        from pipeline.robot.model import RobotModel
+        from pipeline.runner import resolve_robot_dir
+
+        return RobotModel.load(resolve_robot_dir(ctx.run))
+    except PipelineError:
+        return ctx.robot
+
+
+def identified_robot(robot: Any, p: np.ndarray) -> Any:
+    """Copy of ``robot`` with the standard parameters ``p`` (inertias, rotor inertia, viscous and
+    Coulomb friction; torque offsets are not part of a RobotModel)."""
+    from pipeline.robot.symbolic import set_dynamic_parameters
+
+    nq = robot.nq
+    model = set_dynamic_parameters(robot.model, p)
+    spec = copy.deepcopy(robot.spec)
+    off = 10 * (robot.model.njoints - 1)
+    spec.actuation.rotor_inertia_kgm2 = p[off : off + nq].copy()
+    spec.actuation.viscous_Nms_rad = p[off + nq : off + 2 * nq].copy()
+    spec.actuation.coulomb_Nm = p[off + 2 * nq : off + 3 * nq].copy()
+    return robot.with_model(model, spec)
+
+
+def _fourier_validation(robot: Any, limits: design_mod.ExcitationLimits, ex: ExcitationConfig,
+                        sample_time_s: float, rng: np.random.Generator) -> val_mod.ValidationTrajectory:
+    tr = design_mod.random_feasible_trajectories(robot, limits, ex.harmonics, ex.base_frequency_hz, 1, rng)[0]
+    t = np.arange(int(round(tr.period_s / sample_time_s))) * sample_time_s
+    q, v, a = tr.evaluate(t)
+    return val_mod.ValidationTrajectory(t, q, v, a, "fourier", "a random feasible Fourier trajectory")
+
+
+# ----------------------------------------------------------------------------------- figures
+def _fig_torques(t: np.ndarray, measured: np.ndarray, predicted: np.ndarray, title: str) -> Figure:
+    nq = measured.shape[1]
+    fig = Figure(figsize=(10, 1.6 * nq))
+    axes = fig.subplots(nq, 1, sharex=True)
+    for j in range(nq):
+        ax = axes[j]
+        ax.plot(t, measured[:, j], lw=0.6, color="0.6", label="measured")
+        ax.plot(t, predicted[:, j], lw=1.0, color="C0", label="predicted")
+        ax.set_ylabel(f"tau{j + 1} [N m]")
+    axes[0].legend(loc="upper right", fontsize=8)
+    axes[0].set_title(title)
+    axes[-1].set_xlabel("t [s]")
+    fig.tight_layout()
+    return fig
+
+
+def _fig_parameters(base: BaseParameters, beta: np.ndarray, sigma: np.ndarray,
+                    z: np.ndarray | None) -> Figure:
+    fig = Figure(figsize=(12, 4))
+    ax = fig.subplots()
+    k = np.arange(base.n_base)
+    if z is not None:
+        ax.errorbar(k, z, yerr=np.ones_like(z), fmt="o", ms=3, lw=0.8)
+        ax.axhline(3, color="r", lw=0.6)
+        ax.axhline(-3, color="r", lw=0.6)
+        ax.set_ylabel("(estimate - truth) / sigma")
+        ax.set_title("base parameter errors in units of their estimated sigma (bars: 1 sigma)")
+    else:
+        rel = 3 * sigma / np.maximum(np.abs(beta), 1e-12)
+        ax.semilogy(k, rel, "o", ms=3)
+        ax.set_ylabel("3 sigma / |estimate|")
+        ax.set_title("relative 3-sigma uncertainty of each base parameter")
+    ax.set_xlabel("base parameter index (names in results.json)")
+    fig.tight_layout()
+    return fig
+
+
+def _fig_convergence(res: design_mod.ExcitationResult) -> Figure:
+    fig = Figure(figsize=(7, 4))
+    ax = fig.subplots()
+    for i, h in enumerate(res.cond_history):
+        if h:
+            ax.semilogy(np.arange(len(h)), h, label=f"start {i + 1}")
+    ax.axhline(res.cond_random_median, color="k", ls="--", lw=0.8, label="median of random feasible")
+    ax.axhline(res.cond_optimized, color="g", ls=":", lw=0.8, label="optimised (fine-grid feasible)")
+    ax.set_xlabel("IPOPT iteration")
+    ax.set_ylabel("cond(W_base)")
+    ax.set_title("excitation optimisation")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+# --------------------------------------------------------------------------------------- run
+def run(ctx: StageContext) -> StageResult:
+    with single_thread_blas():
+        return _run(ctx)
+
+
+def _run(ctx: StageContext) -> StageResult:
+    cfg: Config = ctx.config
+    source = getattr(ctx.run, "source", None)
+    _validate_config(cfg, source)
+    ex = cfg.excitation
+    robot = ctx.robot
+    nq = robot.nq
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    if not cfg.data_file and ctx.real is None:
+        raise PipelineError(None, "identification", "no hidden robot to measure and no data_file given")
+
+    from pipeline.robot.symbolic import SymbolicRobot
+
+    act = robot.actuation
+    coupled = cfg.actuator_coupling == "gear" or (cfg.actuator_coupling == "auto" and bool(cfg.data_file))
+    K = act.gear_matrix if coupled else np.eye(nq)
+    reg = RegressorModel(robot.model, K, act.coulomb_smoothing_rad_s)
+    nominal = _nominal_robot(ctx)
+    reg_nominal = RegressorModel(nominal.model, K, act.coulomb_smoothing_rad_s)
+    # Base parameters of the nominal structure (exact zeros: the design criterion) and of the
+    # current model (calibrated kinematics: small placement errors make a few more parameters
+    # weakly identifiable; leaving them out would bias the estimate of the others).
+    base_design = base_parameters(reg_nominal, ctx.rng, cfg.base_samples, cfg.base_tolerance,
+                                  robot.limits.lower_rad, robot.limits.upper_rad)
+    base = base_parameters(reg, ctx.rng, cfg.base_samples, cfg.base_tolerance,
+                           robot.limits.lower_rad, robot.limits.upper_rad)
+    timings["base_parameters_s"] = time.perf_counter() - t0
+    data = None
+    if cfg.data_file:  # read and check the user's record before any long computation
+        rec = meas_mod.load_joint_csv(cfg.data_file, robot, cfg.data_side)
+        _check_record_limits(rec, robot, cfg.data_file)
+        data = meas_mod.process_record(rec, reg, cfg.data_cutoff_hz, cfg.data_decimation)
+        data_source = str(cfg.data_file)
+
+    limits = design_mod.ExcitationLimits.from_robot(
+        robot, ex.position_margin, ex.velocity_margin, ex.acceleration_margin, ex.torque_margin,
+        ex.floor_clearance_m, ex.self_clearance_m)
+    t1 = time.perf_counter()
+    sym = SymbolicRobot(robot)
+    exc = design_mod.optimize_excitation(
+        robot, sym, reg, base_design, limits, ctx.rng, ex.harmonics, ex.base_frequency_hz, ex.n_samples,
+        ex.n_starts, ex.n_random, ex.max_iter, ex.criterion, ex.n_check, ctx.progress)
+    timings["excitation_s"] = time.perf_counter() - t1
+    traj = exc.trajectory
+    if not exc.feasibility.feasible:
+        raise InfeasibleError(None, "identification.excitation",
+                              f"the excitation violates the limits: {exc.feasibility.to_dict()}")
+
+    # ---------------------------------------------------------------- data
+    t1 = time.perf_counter()
+    if data is None:
+        rec = meas_mod.simulate_excitation(ctx.real, traj, cfg.periods, cfg.sample_time_s, ctx.rng)
+        n_per = int(round(traj.period_s / cfg.sample_time_s))
+        cutoff = cfg.state_cutoff_factor * ex.harmonics * ex.base_frequency_hz
+        data = meas_mod.process_periodic(rec, reg, n_per, cutoff, cfg.decimation)
+        data_source = "simulation (ideal tracking of the hidden robot)"
+    timings["data_s"] = time.perf_counter() - t1
+
+    # ---------------------------------------------------------------- estimation
+    t1 = time.perf_counter()
+    Wb = base.base_regressor(data.Y)
+    y = data.y
+    ols = est_mod.ols(Wb, y, nq)
+    wls = est_mod.wls(Wb, y, nq)
+    p_nom = standard_parameters(robot.model, act.rotor_inertia_kgm2, act.viscous_Nms_rad, act.coulomb_Nm)
+    phys = est_mod.physical_fit(data.Y, y, nq, p_nom, wls.joint_sigma_Nm, cfg.regularization,
+                                cfg.physical_max_iter)
+    timings["estimation_s"] = time.perf_counter() - t1
+    new_robot = identified_robot(robot, phys.p)
+
+    # ---------------------------------------------------------------- validation
+    t1 = time.perf_counter()
+    vt = val_mod.validation_trajectory(
+        robot, cfg.validation_sample_time_s,
+        lambda: _fourier_validation(robot, limits, ex, cfg.validation_sample_time_s, ctx.rng),
+        use_iso=cfg.validation == "iso9283")
+    noise_sigma = data.noise_sigma_Nm
+    if ctx.real is not None:
+        meas_v = ctx.real.execute_joint_trajectory(vt.t_s, vt.q, vt.v, vt.a, ctx.rng)
+        tau_v = meas_v.tau_Nm
+        Yv = reg.stacked(vt.q, vt.v, vt.a)
+        pred_phys = (Yv @ phys.p).reshape(-1, nq)
+        pred_wls = (base.base_regressor(Yv) @ wls.beta).reshape(-1, nq)
+        rms_phys, rel_phys = val_mod.torque_rms(tau_v, pred_phys)
+        rms_wls, rel_wls = val_mod.torque_rms(tau_v, pred_wls)
+        if noise_sigma is None or not np.all(np.isfinite(noise_sigma)):
+            noise_sigma = np.asarray(meas_v.tau_sigma_Nm, float)
+    else:
+        tau_v = pred_phys = None
+        rms_phys = rel_phys = rms_wls = rel_wls = np.full(nq, np.nan)
+    timings["validation_s"] = time.perf_counter() - t1
+
+    truth = None
+    if cfg.score_against_truth and ctx.real is not None and not cfg.data_file:
+        truth = val_mod.truth_scores(ctx.real, base, wls.beta, wls.sigma)
+
+    # ---------------------------------------------------------------- TX40 record
+    tx: Tx40Result | None = None
+    if cfg.run_tx40:
+        t1 = time.perf_counter()
+        from pipeline.robot.model import RobotModel
+
+        tx = run_tx40(RobotModel.load("staubli_tx40"), cfg.tx40, np.random.default_rng(0))
+        timings["tx40_s"] = time.perf_counter() - t1
+    timings["total_s"] = time.perf_counter() - t0
+
+    # ---------------------------------------------------------------- outputs
+    ratio = rms_phys / noise_sigma if noise_sigma is not None else np.full(nq, np.nan)
+    summary: dict[str, Any] = {
+        "n_base_parameters": base.n_base,
+        "n_base_parameters_structural": base_design.n_base,
+        "cond_optimized": exc.cond_optimized,
+        "cond_random_median": exc.cond_random_median,
+        "cond_improvement": exc.cond_random_median / exc.cond_optimized,
+        "excitation_criterion": ex.criterion,
+        "validation_trajectory": vt.label,
+        "validation_torque_rms_Nm": rms_phys.tolist(),
+        "validation_relative_error": rel_phys.tolist(),
+        "validation_torque_rms_wls_Nm": rms_wls.tolist(),
+        "torque_noise_sigma_Nm": None if noise_sigma is None else np.asarray(noise_sigma).tolist(),
+        "validation_rms_over_noise": ratio.tolist(),
+        "fraction_within_3sigma": None if truth is None else truth["fraction_within_3sigma"],
+        "physically_consistent": bool(phys.consistent),
+        "fit_rms_Nm_wls": wls.rms_Nm,
+        "data_source": data_source,
+        "actuator_coupling": "gear matrix" if coupled else "diagonal (joint side)",
+        "n_samples_fit": data.n_samples,
+        "runtime_s": timings["total_s"],
+    }
+    if tx is not None:
+        summary.update(tx.summary())
+    t_rep = np.arange(0.0, traj.period_s, 1.0 / cfg.replay_rate_hz)
+    q_rep, _, _ = traj.evaluate(t_rep)
+    arrays: dict[str, np.ndarray] = {
+        "trajectory_excitation_t": t_rep,
+        "trajectory_excitation_q": q_rep,
+        "excitation_coefficients": traj.coefficients,
+        "base_beta": wls.beta,
+        "base_sigma": wls.sigma,
+        "base_beta_ols": ols.beta,
+        "base_matrix_E": base.matrix,
+        "standard_parameters_physical": phys.p,
+        "standard_parameters_nominal": p_nom,
+        "cond_random": np.asarray(exc.cond_random),
+        "validation_t_s": vt.t_s,
+        "validation_q": vt.q,
+    }
+    if tau_v is not None:
+        arrays["validation_tau_measured_Nm"] = tau_v
+        arrays["validation_tau_predicted_Nm"] = pred_phys
+    if truth is not None:
+        arrays["base_beta_true"] = truth["beta_true"]
+        arrays["base_z"] = truth["z"]
+    data_out = {
+        "base_parameter_names": base.names,
+        "standard_parameter_names": base.standard_names,
+        "base_qr_tolerance": base.tolerance,
+        "base_rank_gap": base.rank_gap,
+        "excitation": {
+            "trajectory": traj.to_dict(),
+            "starts": exc.start_results,
+            "feasibility": exc.feasibility.to_dict(),
+            "cond_starts": exc.cond_starts,
+            "cond_history": exc.cond_history,
+            **exc.details,
+        },
+        "estimation": {
+            "joint_sigma_Nm_wls": wls.joint_sigma_Nm.tolist(),
+            "physical_status": phys.status,
+            "physical_iterations": phys.iterations,
+            "min_pseudo_inertia_eig": phys.min_pseudo_inertia_eig,
+        },
+        "validation": {"label": vt.label, "note": vt.note, "rms_wls_Nm": rms_wls.tolist(),
+                       "relative_wls": rel_wls.tolist()},
+        "timings_s": timings,
+    }
+    if truth is not None:
+        data_out["truth_scores"] = {"max_abs_z": truth["max_abs_z"],
+                                    "fraction_within_3sigma": truth["fraction_within_3sigma"]}
+    if tx is not None:
+        data_out["tx40"] = {
+            "heldout_rms_per_joint_Nm": tx.heldout_rms_per_joint_Nm,
+            "train_rms_Nm": tx.train_rms_Nm,
+            "ols_rotor_inertia_axis6_base": tx.details.get("ols_ia6_base_value"),
+            **{k: v for k, v in tx.details.items() if k != "ols_ia6_base_value"},
+        }
+    figures = {"convergence": _fig_convergence(exc),
+               "parameters": _fig_parameters(base, wls.beta, wls.sigma, None if truth is None else truth["z"])}
+    if tau_v is not None:
+        figures["validation_torques"] = _fig_torques(vt.t_s, tau_v, pred_phys,
+                                                     f"validation on {vt.label}: measured vs identified model")
+    if tx is not None:
+        figures["tx40_heldout"] = _fig_torques(tx.heldout_t_s, tx.heldout_tau_Nm, tx.heldout_pred_Nm["physical"],
+                                               "TX40 held-out 30 %: measured vs physically consistent fit")
+    return StageResult(summary=summary, arrays=arrays, data=data_out, figures=figures, robot=new_robot,
+                       report_md=_report(summary, tx))
+
+
+def _check_record_limits(rec: meas_mod.JointRecord, robot: Any, file: Any) -> None:
+    lo, hi = robot.limits.lower_rad, robot.limits.upper_rad
+    bad = np.argwhere((rec.q_rad < lo - 1e-6) | (rec.q_rad > hi + 1e-6))
+    if bad.size:
+        k, j = bad[0]
+        raise DataFileError(file, f"q{j + 1}", f"sample {k}: {rec.q_rad[k, j]:.4f} rad outside the joint "
+                            f"limits [{lo[j]:.4f}, {hi[j]:.4f}]")
+
+
+def _report(summary: dict, tx: Tx40Result | None) -> str:
+    lines = [
+        f"Excitation: cond {summary['cond_optimized']:.1f} optimised vs median "
+        f"{summary['cond_random_median']:.1f} of random feasible Fourier trajectories "
+        f"({summary['cond_improvement']:.1f}x).",
+        "",
+        "| joint | validation RMS [N m] | noise sigma [N m] | RMS / sigma |",
+        "|---|---|---|---|",
+    ]
+    sig = summary["torque_noise_sigma_Nm"] or [float("nan")] * len(summary["validation_torque_rms_Nm"])
+    for j, (r, s) in enumerate(zip(summary["validation_torque_rms_Nm"], sig, strict=True)):
+        lines.append(f"| {j + 1} | {r:.3f} | {s:.3f} | {r / s:.2f} |")
+    if tx is not None:
+        lines += [
+            "",
+            "| TX40 record | ours | reference (README) |",
+            "|---|---|---|",
+            f"| base parameters | {tx.n_base_parameters} | 58 |",
+            f"| condition number | {tx.condition_number:.0f} | ~970 |",
+            f"| RMS, OLS fitted and scored on all samples, raw torques [N m] | "
+            f"{tx.rms_all_ols_raw_torque_Nm:.2f} | ~3.35 |",
+            f"| RMS, same, low-passed torques [N m] | {tx.rms_all_ols_Nm:.2f} | |",
+            f"| held-out RMS (last 30 %), OLS [N m] | {tx.heldout_rms_Nm['ols']:.2f} | |",
+            f"| held-out RMS (last 30 %), physically consistent [N m] | {tx.heldout_rms_Nm['physical']:.2f} | |",
+            f"| physically consistent | {tx.physically_consistent} | no (negative rotor inertia axis 6) |",
+        ]
+    return "\n".join(lines)
+
+
+__all__ = ["NAME", "DEPENDS", "Config", "ExcitationConfig", "run", "identified_robot"]

@@ -1,0 +1,101 @@
+"""Validation of an identified model (paper ``004_abbe750b8bbcc3aa.txt`` §4.3, Fig. 5(b)).
+
+* Torque prediction on a trajectory that was not used for the fit: the EN ISO 9283 path
+  (DESIGN.md; built with stage 3's ``iso9283_path`` + ``cartesian_reference``) or, when that path
+  is out of reach of the robot, a different random Fourier trajectory (the label says which).
+  The measured torque (sensor noise included) is compared with the model's prediction at the
+  commanded states: per joint RMS error and relative error ``RMS / RMS(measured)``.
+* In simulation, each base parameter's error against the truth in units of its estimated
+  standard deviation, ``z_k = (beta_hat_k - beta_true_k) / sigma_k`` (tests only, or
+  :func:`truth_scores` when the stage is explicitly allowed to score against the truth).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from pipeline.errors import PipelineError
+from pipeline.identification.regressor import BaseParameters
+
+
+@dataclass
+class ValidationTrajectory:
+    t_s: np.ndarray
+    q: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    label: str
+    note: str = ""
+
+
+def iso_validation_trajectory(robot: Any, sample_time_s: float) -> ValidationTrajectory:
+    """The ISO 9283 path of the control stage's default configuration, as joint reference."""
+    from pipeline.control.config import ControlConfig
+    from pipeline.control.iso9283 import iso9283_path, tool_rotation
+    from pipeline.control.reference import cartesian_reference
+    from pipeline.robot.paths import start_configuration
+
+    cfg = ControlConfig()
+    iso = cfg.iso
+    rotation = tool_rotation(iso.plane, iso.tool_down)
+    path = iso9283_path(robot, iso.edge_m, iso.centre_m, iso.plane, rotation, iso.corner_fraction,
+                        iso.large_circle_fraction, iso.small_circle_fraction, tuple(iso.segments))
+    seeds = np.radians(np.atleast_2d(np.asarray(cfg.ik_seeds_deg, float)))
+    q_start = start_configuration(robot, path.poses([0.0])[0], seeds, robot.frame_tcp)
+    ref = cartesian_reference(robot, path, sample_time_s, iso.speed_m_s, iso.acceleration_m_s2,
+                              iso.jerk_m_s3, q_start, robot.frame_tcp, cfg.ik_tolerance_m)
+    return ValidationTrajectory(ref.t_s, ref.q_d, ref.v_d, ref.a_d, "iso9283",
+                                f"edge {iso.edge_m} m, centre {iso.centre_m} m, {iso.speed_m_s} m/s")
+
+
+def validation_trajectory(
+    robot: Any, sample_time_s: float, fallback: Any, use_iso: bool = True
+) -> ValidationTrajectory:
+    """ISO 9283 path if it can be built for ``robot`` (within limits), else ``fallback()``."""
+    note = ""
+    if use_iso:
+        try:
+            vt = iso_validation_trajectory(robot, sample_time_s)
+            ok = bool(np.all(vt.q >= robot.limits.lower_rad) and np.all(vt.q <= robot.limits.upper_rad))
+            ok = ok and bool(np.all(np.abs(vt.v) <= robot.limits.velocity_rad_s * 1.0001))
+            if ok:
+                return vt
+            note = "ISO 9283 path exceeds the joint limits of this robot"
+        except (PipelineError, ImportError) as exc:
+            note = f"ISO 9283 path unavailable ({exc})"
+    vt = fallback()
+    vt.note = (note + "; " if note else "") + vt.note
+    return vt
+
+
+def torque_rms(measured: np.ndarray, predicted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per joint RMS error and relative error ``RMS(err) / RMS(measured)``."""
+    err = np.asarray(measured, float) - np.asarray(predicted, float)
+    rms = np.sqrt(np.mean(err**2, axis=0))
+    rel = rms / np.maximum(np.sqrt(np.mean(np.asarray(measured, float) ** 2, axis=0)), 1e-12)
+    return rms, rel
+
+
+def z_scores(beta: np.ndarray, sigma: np.ndarray, beta_true: np.ndarray) -> np.ndarray:
+    return (np.asarray(beta) - np.asarray(beta_true)) / np.maximum(np.asarray(sigma), 1e-300)
+
+
+def fraction_within(z: np.ndarray, k: float = 3.0) -> float:
+    return float(np.mean(np.abs(z) <= k))
+
+
+def truth_scores(real: Any, base: BaseParameters, beta: np.ndarray, sigma: np.ndarray) -> dict:
+    """Score the base estimate against the hidden robot (evaluation only: call it after the
+    estimate is final; the stage does so only with ``score_against_truth``)."""
+    p_true = np.asarray(real.dynamic_parameters, float)
+    beta_true = base.from_standard(p_true)
+    z = z_scores(beta, sigma, beta_true)
+    return {
+        "beta_true": beta_true,
+        "z": z,
+        "fraction_within_3sigma": fraction_within(z, 3.0),
+        "max_abs_z": float(np.max(np.abs(z))),
+    }

@@ -1,0 +1,227 @@
+"""High-level planning: CP (convex + friction refinement + smooth variant + toppra baseline) and
+PtP (time/energy NLP + ruckig baseline + fixed-duration energy optimum + Pareto sweep), each
+re-checked on a fine time grid with the full friction model.
+
+Public entry points: :func:`cp_joint_path`, :func:`plan_cp`, :func:`plan_ptp`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from pipeline.errors import ConfigError
+from pipeline.trajectory.baselines import RuckigResult, ruckig_torque_feasible, toppra_cp
+from pipeline.trajectory.config import TrajectoryConfig
+from pipeline.trajectory.cp import (
+    CPProfile,
+    SmoothCPResult,
+    cp_constraint_activity,
+    solve_cp_convex,
+    solve_cp_refined,
+    solve_cp_smooth,
+)
+from pipeline.trajectory.design import JointPath, joint_path_from_cartesian
+from pipeline.trajectory.dynamics import PlanningModel
+from pipeline.trajectory.ptp import PtpProblem, PtpResult, energy_weights
+from pipeline.trajectory.trajectories import JointTrajectory, TorqueCheck, check_trajectory
+
+
+def cp_joint_path(robot: Any, cfg: TrajectoryConfig) -> tuple[JointPath, Any]:
+    """The configured piece of the EN ISO 9283 path (stage 3's builder) and its joint path by IK.
+
+    Raises InfeasibleError naming the first unreachable sample or a joint jump larger than
+    ``cp_max_ik_step_deg`` between samples.
+    """
+    from pipeline.control.iso9283 import iso9283_path, tool_rotation
+
+    if cfg.cp_segment not in ("line", "circle_large", "circle_small"):
+        raise ConfigError(None, "trajectory.cp_segment",
+                          f"{cfg.cp_segment!r} is not a smooth ISO piece (line, circle_large, circle_small)")
+    iso = iso9283_path(robot, cfg.cp_edge_m, tuple(cfg.cp_centre_m), cfg.cp_plane,
+                       tool_rotation(cfg.cp_plane, True), segments=(cfg.cp_segment,))
+    piece = iso.pieces[0]
+    path = joint_path_from_cartesian(robot, piece, cfg.cp_ik_points, np.radians(cfg.cp_ik_seed_deg),
+                                     robot.frame_tcp, np.radians(cfg.cp_max_ik_step_deg),
+                                     name=f"trajectory.cp_segment {cfg.cp_segment}")
+    return path, piece
+
+
+@dataclass
+class CPPlan:
+    path: JointPath
+    toppra: CPProfile                 # baseline: rigid body + Coulomb, grid points
+    equal: CPProfile                  # our convex problem with toppra's constraints
+    convex: CPProfile                 # rigid body + Coulomb at grid points and midpoints
+    optimal: CPProfile                # + viscous and smooth Coulomb (the result)
+    smooth: SmoothCPResult | None
+    trajectories: dict[str, JointTrajectory] = field(default_factory=dict)
+    checks: dict[str, TorqueCheck] = field(default_factory=dict)
+    activity: dict = field(default_factory=dict)
+    timings_s: dict = field(default_factory=dict)
+
+    def summary(self) -> dict:
+        s = {
+            "cp_duration_s": self.optimal.duration_s,
+            "cp_toppra_duration_s": self.toppra.duration_s,
+            "cp_equal_constraints_duration_s": self.equal.duration_s,
+            "cp_equal_vs_toppra_ratio": self.equal.duration_s / self.toppra.duration_s,
+            "cp_convex_duration_s": self.convex.duration_s,
+            "cp_fine_violation": self.checks["cp"].violation,
+            "cp_fine_max_velocity_ratio": self.checks["cp"].max_velocity_ratio,
+            "cp_toppra_fine_violation_full_friction": self.checks["cp_toppra"].violation,
+            "cp_toppra_fine_violation_rigid_coulomb": self.checks["cp_toppra_rigid"].violation,
+            "cp_active_fraction": self.activity.get("active_fraction"),
+            "cp_solve_time_s": self.timings_s.get("cp_convex", 0.0) + self.timings_s.get("cp_refined", 0.0),
+            "cp_toppra_solve_time_s": self.toppra.solve_time_s,
+        }
+        if self.smooth is not None:
+            s["cp_smooth_duration_s"] = self.smooth.duration_s
+            s["cp_smooth_time_cost"] = self.smooth.duration_s / self.optimal.duration_s - 1.0
+            s["cp_smooth_fine_violation"] = self.checks["cp_smooth"].violation
+            s["cp_smooth_solve_time_s"] = self.smooth.solve_time_s
+        return s
+
+
+def plan_cp(pm: PlanningModel, path: JointPath, cfg: TrajectoryConfig) -> CPPlan:
+    """Time-optimal CP on ``path``: toppra baseline, our convex problem with toppra's
+    constraints (equal-constraints comparison), convex + midpoints, friction refinement,
+    smooth variant; all re-checked on a ``cfg.fine_dt_s`` grid with the full friction model."""
+    N = cfg.cp_n_grid
+    tim = {}
+    tp = toppra_cp(pm, path, N)
+    eq = solve_cp_convex(pm, path, N, midpoints=False, name="cp_equal")
+    t0 = time.perf_counter()
+    cv = solve_cp_convex(pm, path, N, midpoints=True, name="cp_convex")
+    tim["cp_convex"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    opt = solve_cp_refined(pm, path, cv, midpoints=True, name="cp", torque_margin=cfg.cp_torque_margin)
+    # verify on the fine grid; tighten the limits of joints that exceed the tolerance and re-solve
+    scale = np.ones(pm.nq)
+    for _ in range(cfg.max_tightening_rounds):
+        chk = check_trajectory(pm, opt.sample(path, cfg.fine_dt_s))
+        ratio = chk.torque_ratio.max(axis=0)
+        bad = ratio > 1.0 + cfg.violation_tolerance
+        if not bad.any():
+            break
+        scale[bad] = scale[bad] / ratio[bad] * (1.0 - 0.25 * cfg.violation_tolerance)
+        opt = solve_cp_refined(pm, path, opt, midpoints=True, name="cp", torque_margin=cfg.cp_torque_margin,
+                               torque_scale=scale)
+    tim["cp_refined"] = time.perf_counter() - t0
+    sm = None
+    if cfg.cp_smooth:
+        sm = solve_cp_smooth(pm, path, opt, cfg.cp_smooth_intervals, cfg.cp_smooth_jerk_rise_time_s,
+                             torque_margin=cfg.cp_smooth_torque_margin)
+    trajs = {"cp": opt.sample(path, cfg.fine_dt_s), "cp_toppra": tp.sample(path, cfg.fine_dt_s)}
+    if sm is not None:
+        trajs["cp_smooth"] = sm.sample(path, cfg.fine_dt_s)
+    checks = {k: check_trajectory(pm, v) for k, v in trajs.items()}
+    # toppra against the model it was given (rigid body + sharp Coulomb), for reference
+    tr = trajs["cp_toppra"]
+    rigid = pm.rigid_torques(tr.q, tr.v, tr.a) + pm.coulomb_Nm * np.sign(np.where(np.abs(tr.v) < 1e-9, 0, tr.v))
+    r = np.abs(rigid) / pm.effort_Nm
+    checks["cp_toppra_rigid"] = TorqueCheck(tr.t_s, rigid, r, np.abs(tr.v) / pm.velocity_rad_s,
+                                            float(r.max()), float(max(0.0, r.max() - 1.0)), 0.0, 0.0)
+    act = cp_constraint_activity(pm, path, trajs["cp"], checks["cp"].tau_Nm)
+    return CPPlan(path, tp, eq, cv, opt, sm, trajs, checks, act, tim)
+
+
+@dataclass
+class PTPPlan:
+    q0: np.ndarray
+    q1: np.ndarray
+    weights: np.ndarray
+    result: PtpResult
+    ruckig: RuckigResult
+    at_ruckig_duration: PtpResult
+    pareto: list[PtpResult]
+    trajectories: dict[str, JointTrajectory] = field(default_factory=dict)
+    checks: dict[str, TorqueCheck] = field(default_factory=dict)
+    compile_time_s: float = 0.0
+    build_time_s: float = 0.0
+
+    def summary(self) -> dict:
+        e_nlp = self.checks["ptp_energy_at_ruckig_duration"].energy
+        e_rk = self.checks["ptp_ruckig"].energy
+        return {
+            "ptp_duration_s": self.result.duration_s,
+            "ptp_ruckig_duration_s": self.ruckig.duration_s,
+            "ptp_duration_vs_ruckig_ratio": self.result.duration_s / self.ruckig.duration_s,
+            "ptp_fine_violation": self.checks["ptp"].violation,
+            "ptp_fine_max_velocity_ratio": self.checks["ptp"].max_velocity_ratio,
+            "ptp_ruckig_fine_violation": self.checks["ptp_ruckig"].violation,
+            "ptp_energy": self.checks["ptp"].energy,
+            "ptp_energy_at_ruckig_duration": e_nlp,
+            "ptp_ruckig_energy": e_rk,
+            "ptp_energy_at_ruckig_duration_ratio": e_nlp / e_rk,
+            "ptp_energy_at_ruckig_duration_fine_violation": self.checks["ptp_energy_at_ruckig_duration"].violation,
+            "ptp_solve_time_s": self.result.solve_time_s,
+            "ptp_solve_cpu_time_s": self.result.info.get("cpu_time_s"),
+            "ptp_first_solve_time_s": self.result.info.get("first_solve_time_s"),
+            "ptp_tightening_rounds": self.result.info.get("tightening_rounds"),
+            "ptp_iterations": self.result.iterations,
+            "ptp_compile_time_s": self.compile_time_s,
+            "ptp_ruckig_search_time_s": self.ruckig.search_time_s,
+            "ptp_pareto": [{"k2": r.k2, "duration_s": r.duration_s, "energy": r.energy} for r in self.pareto],
+        }
+
+
+def ptp_problem(pm: PlanningModel, robot: Any, cfg: TrajectoryConfig) -> PtpProblem:
+    """The PtP NLP for ``robot``'s dynamics (symbolic bridge), compiled once and cached on disk."""
+    from pipeline.robot.symbolic import SymbolicRobot
+
+    return PtpProblem(pm, SymbolicRobot(robot), cfg.ptp_n_intervals, jit=cfg.ptp_jit,
+                      ipopt_options={"ipopt.tol": 1e-6, "ipopt.acceptable_tol": 1e-4},
+                      jit_flags=(*cfg.ptp_jit_flags, "-shared", "-fPIC"))
+
+
+def solve_ptp_verified(pm: PlanningModel, problem: PtpProblem, q0: np.ndarray, q1: np.ndarray,
+                       cfg: TrajectoryConfig, k1: float, k2: float, weights: np.ndarray,
+                       duration_s: float | None = None) -> PtpResult:
+    """Solve, re-check torques on the fine grid, and while a joint exceeds its limit by more than
+    ``cfg.violation_tolerance`` tighten that joint's limit by the excess and re-solve (warm start).
+    The returned result records the rounds and total solve time."""
+    widths = tuple(cfg.ptp_coulomb_widths_rad_s)
+    res = problem.solve(q0, q1, k1, k2, weights=weights, duration_s=duration_s, coulomb_widths_rad_s=widths)
+    scale = np.ones(pm.nq)
+    first = total = res.solve_time_s
+    cpu = res.info["cpu_time_s"]
+    iters, rounds = res.iterations, 0
+    for _ in range(cfg.max_tightening_rounds):
+        chk = check_trajectory(pm, res.sample(cfg.fine_dt_s))
+        ratio = chk.torque_ratio.max(axis=0)
+        bad = ratio > 1.0 + cfg.violation_tolerance
+        if not bad.any():
+            break
+        rounds += 1
+        scale[bad] = scale[bad] / ratio[bad] * (1.0 - 0.25 * cfg.violation_tolerance)
+        res = problem.solve(q0, q1, k1, k2, weights=weights, duration_s=duration_s, effort_Nm=pm.effort_Nm * scale,
+                            x0=res.info["x"], coulomb_widths_rad_s=())
+        total += res.solve_time_s
+        cpu += res.info["cpu_time_s"]
+        iters += res.iterations
+    res.info.update({"tightening_rounds": rounds, "torque_scale": scale.tolist(),
+                     "first_solve_time_s": first, "cpu_time_s": cpu})
+    res.solve_time_s, res.iterations = total, iters
+    return res
+
+
+def plan_ptp(pm: PlanningModel, problem: PtpProblem, q0: np.ndarray, q1: np.ndarray,
+             cfg: TrajectoryConfig, pareto: bool = True) -> PTPPlan:
+    """Time-optimal PtP (k1, k2), ruckig baseline, minimum energy at ruckig's duration, Pareto sweep."""
+    w = energy_weights(pm, cfg.ptp_energy, cfg.motor_resistance_ohm, cfg.torque_constant_Nm_A,
+                       getattr(getattr(pm.robot, "actuation", None), "gear_ratio", None))
+    widths = tuple(cfg.ptp_coulomb_widths_rad_s)
+    res = solve_ptp_verified(pm, problem, q0, q1, cfg, cfg.ptp_k1, cfg.ptp_k2, w)
+    rk = ruckig_torque_feasible(pm, q0, q1, cfg.ruckig_check_dt_s, tuple(cfg.ruckig_jerk_ratios_1_s),
+                                joint_rounds=cfg.ruckig_joint_rounds)
+    fixed = solve_ptp_verified(pm, problem, q0, q1, cfg, 0.0, 1.0, w, duration_s=rk.duration_s)
+    sweep = problem.pareto(q0, q1, list(cfg.ptp_pareto_k2), w, coulomb_widths_rad_s=widths) if pareto else []
+    trajs = {"ptp": res.sample(cfg.fine_dt_s, "ptp"), "ptp_ruckig": rk.trajectory,
+             "ptp_energy_at_ruckig_duration": fixed.sample(cfg.fine_dt_s, "ptp_energy_at_ruckig_duration")}
+    checks = {k: check_trajectory(pm, v, energy_weights=w) for k, v in trajs.items()}
+    return PTPPlan(np.asarray(q0, float), np.asarray(q1, float), w, res, rk, fixed, sweep, trajs, checks,
+                   problem.compile_time_s, problem.build_time_s)

@@ -1,0 +1,137 @@
+"""Stage ``trajectory``: time-optimal CP and time/energy-optimal PtP motion (paper 004 §5).
+
+Paper ``004_abbe750b8bbcc3aa.txt`` §5 and DESIGN.md "Trajectories":
+
+1. CP: a smooth piece of the EN ISO 9283 path -> joint path by IK -> convex minimum-time problem
+   (Verscheure, b = sdot^2, SOC objective, torques at grid points and midpoints) -> refinement with
+   viscous + smooth Coulomb friction -> smooth (continuous jerk) variant; toppra on the same grid
+   as baseline;
+2. PtP: ``min k1 T + k2 int tau^T W tau dt`` with the full dynamics of the best model (identified
+   after stage 2), compiled once; ruckig with the most aggressive torque-feasible kinematic limits
+   as baseline; the minimum-energy motion at ruckig's duration; a Pareto sweep over k2;
+3. every trajectory re-checked on a fine time grid with the full friction model and executed in
+   stage 3's 400 µs servo simulation of the real robot.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from pipeline.runner import StageContext, StageResult
+from pipeline.trajectory.config import TrajectoryConfig
+from pipeline.trajectory.dynamics import PlanningModel
+from pipeline.trajectory.solve import cp_joint_path, plan_cp, plan_ptp, ptp_problem
+from pipeline.trajectory.validate import (
+    activity_figure,
+    comparison_figure,
+    pareto_figure,
+    simulate_on_real,
+)
+
+NAME = "trajectory"
+DEPENDS: tuple[str, ...] = ("model", "identification")
+Config = TrajectoryConfig
+
+
+def _control_config(ctx: StageContext):
+    from pipeline.control.config import ControlConfig
+
+    base = getattr(ctx.run, "sections", {}).get("control") if hasattr(ctx.run, "sections") else None
+    cfg = base if isinstance(base, ControlConfig) else ControlConfig()
+    return ControlConfig(**{**cfg.__dict__, "on_saturation": "clip", "benchmark_python_seconds": 0.0})
+
+
+def run(ctx: StageContext) -> StageResult:
+    cfg: TrajectoryConfig = ctx.config
+    robot = ctx.robot
+    pm = PlanningModel.from_robot(robot, cfg.torque_reserve)
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    path, piece = cp_joint_path(robot, cfg)
+    cp = plan_cp(pm, path, cfg)
+    timings["cp_s"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    problem = ptp_problem(pm, robot, cfg)
+    timings["ptp_build_and_compile_s"] = time.perf_counter() - t0
+    q0, q1 = np.radians(cfg.ptp_start_deg), np.radians(cfg.ptp_goal_deg)
+    t0 = time.perf_counter()
+    ptp = plan_ptp(pm, problem, q0, q1, cfg)
+    timings["ptp_s"] = time.perf_counter() - t0
+
+    summary = {**cp.summary(), **ptp.summary()}
+    summary["cp_segment"] = cfg.cp_segment
+    summary["cp_path_length_m"] = float(piece.length_m)
+    summary["dynamics_source"] = "identified" if ctx.upstream.get("identification") is not None else "nominal"
+    summary["ptp_energy_measure"] = cfg.ptp_energy
+    summary["torque_reserve"] = cfg.torque_reserve
+    sims: dict[str, dict] = {}
+    if cfg.simulate and ctx.real is not None:
+        t0 = time.perf_counter()
+        ccfg = _control_config(ctx)
+        seed = int(ctx.rng.integers(2**32))
+        items = {"cp": cp.trajectories["cp"], "ptp": ptp.trajectories["ptp"]}
+        if "cp_smooth" in cp.trajectories:
+            items["cp_smooth"] = cp.trajectories["cp_smooth"]
+        for name, tr in ctx.progress.track(list(items.items()), "trajectory: servo simulation"):
+            sims[name] = simulate_on_real(ctx.real, robot, tr, ccfg, np.random.default_rng(seed))
+            summary[f"{name}_sim_max_torque_ratio"] = sims[name]["max_torque_ratio"]
+            summary[f"{name}_sim_tcp_error_max_m"] = sims[name].get("tcp_error_max_m")
+            summary[f"{name}_sim_tcp_tracking_error_max_m"] = sims[name].get("tcp_tracking_error_max_m")
+            summary[f"{name}_sim_duration_s"] = sims[name]["duration_s"]
+        timings["simulation_s"] = time.perf_counter() - t0
+    summary["timings_s"] = timings
+
+    tr_cp = cp.trajectories["cp"]
+    tr_ptp = ptp.trajectories["ptp"]
+    arrays = {
+        "trajectory_cp_t": tr_cp.t_s, "trajectory_cp_q": tr_cp.q,
+        "trajectory_ptp_t": tr_ptp.t_s, "trajectory_ptp_q": tr_ptp.q,
+        "cp_s": cp.optimal.s, "cp_sdot": cp.optimal.sdot, "cp_toppra_sdot": cp.toppra.sdot,
+        "cp_torque_ratio": cp.checks["cp"].torque_ratio, "cp_velocity_ratio": cp.checks["cp"].velocity_ratio,
+        "ptp_ruckig_t": ptp.trajectories["ptp_ruckig"].t_s, "ptp_ruckig_q": ptp.trajectories["ptp_ruckig"].q,
+    }
+    if cp.smooth is not None:
+        arrays["trajectory_cp_smooth_t"] = cp.trajectories["cp_smooth"].t_s
+        arrays["trajectory_cp_smooth_q"] = cp.trajectories["cp_smooth"].q
+    figures = {
+        "cp_normalised": activity_figure(pm, tr_cp, cp.checks["cp"],
+                                         f"CP {cfg.cp_segment}: time-optimal with full friction "
+                                         f"({cp.optimal.duration_s:.4f} s)"),
+        "cp_vs_toppra": comparison_figure(pm, [(k, cp.trajectories[k], cp.checks[k]) for k in cp.trajectories],
+                                          "CP: torque ratio with the full friction model"),
+        "ptp_normalised": activity_figure(pm, tr_ptp, ptp.checks["ptp"],
+                                          f"PtP: k1 = {cfg.ptp_k1:g}, k2 = {cfg.ptp_k2:g} "
+                                          f"({ptp.result.duration_s:.4f} s)"),
+        "ptp_vs_ruckig": comparison_figure(pm, [(k, ptp.trajectories[k], ptp.checks[k]) for k in ptp.trajectories],
+                                           "PtP: torque ratio with the full friction model"),
+        "ptp_pareto": pareto_figure([(r.k2, r.duration_s, r.energy) for r in ptp.pareto],
+                                    (ptp.ruckig.duration_s, ptp.checks["ptp_ruckig"].energy),
+                                    f"energy ({cfg.ptp_energy})"),
+    }
+    data = {"simulation": sims, "ruckig": {"jerk_ratio_1_s": ptp.ruckig.jerk_ratio_1_s, **ptp.ruckig.info,
+                                           "evaluations": ptp.ruckig.evaluations},
+            "cp_info": {"convex": cp.convex.info, "refined": cp.optimal.info,
+                        "smooth": cp.smooth.info if cp.smooth else None, "toppra": cp.toppra.info}}
+    rows = [
+        ("CP duration [s] (full friction)", summary["cp_duration_s"]),
+        ("CP toppra duration [s] (rigid body + Coulomb)", summary["cp_toppra_duration_s"]),
+        ("CP ours with toppra's constraints / toppra", summary["cp_equal_vs_toppra_ratio"]),
+        ("CP fine-grid torque violation, ours / toppra (full friction)",
+         f"{summary['cp_fine_violation']:.4f} / {summary['cp_toppra_fine_violation_full_friction']:.4f}"),
+        ("CP smooth duration [s] (time cost)",
+         f"{summary.get('cp_smooth_duration_s', float('nan')):.4f} "
+         f"({summary.get('cp_smooth_time_cost', 0) * 100:.1f} %)"),
+        ("PtP duration [s] / ruckig [s]", f"{summary['ptp_duration_s']:.4f} / {summary['ptp_ruckig_duration_s']:.4f}"),
+        ("PtP fine-grid torque violation", summary["ptp_fine_violation"]),
+        ("PtP energy at ruckig's duration / ruckig's", summary["ptp_energy_at_ruckig_duration_ratio"]),
+        ("PtP solve time [s] (after compile)", summary["ptp_solve_time_s"]),
+    ]
+    for name, s in sims.items():
+        rows.append((f"{name}: simulated max torque ratio, TCP error max [mm]",
+                     f"{s['max_torque_ratio']:.4f}, {1e3 * s.get('tcp_error_max_m', float('nan')):.3f}"))
+    report = "| quantity | value |\n|---|---|\n" + "\n".join(
+        f"| {k} | {v:.4g} |" if isinstance(v, float) else f"| {k} | {v} |" for k, v in rows)
+    return StageResult(summary=summary, arrays=arrays, data=data, figures=figures, report_md=report)

@@ -1,0 +1,101 @@
+"""Verification of planned trajectories: fine-grid torque check, execution in stage 3's servo
+simulation on the real robot, and the plots (paper 004 Fig. 8 style, Pareto front)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from pipeline.trajectory.dynamics import PlanningModel
+from pipeline.trajectory.trajectories import JointTrajectory, TorqueCheck
+
+
+def simulate_on_real(real: Any, robot: Any, traj: JointTrajectory, control_config: Any = None,
+                     rng: np.random.Generator | None = None) -> dict:
+    """Run ``traj`` through ``pipeline.control.simulate.simulate_joint_trajectory`` (cascade with
+    full-friction feedforward from ``robot``) and report duration, max torque ratio and the TCP
+    error of the (ideal-tracker) measured TCP against the planned TCP ``fk(q_d)``."""
+    from pipeline.control.config import ControlConfig
+    from pipeline.control.simulate import simulate_joint_trajectory
+
+    cfg = control_config or ControlConfig(on_saturation="clip", benchmark_python_seconds=0.0)
+    if getattr(cfg, "on_saturation", "clip") != "clip":
+        cfg = ControlConfig(**{**cfg.__dict__, "on_saturation": "clip"})
+    res = simulate_joint_trajectory(real, robot, traj.t_s, traj.q, traj.v, traj.a, cfg,
+                                    feedforward="full_friction", rng=rng)
+    out = {"duration_s": float(res.t_s[-1] - res.t_s[0]),
+           "max_torque_ratio": float(np.max(res.max_torque_ratio)),
+           "max_torque_ratio_per_joint": np.asarray(res.max_torque_ratio, float).tolist(),
+           "lag_error_max_rad": float(np.max(np.abs(res.lag_error_rad))),
+           "realtime_factor": float(res.realtime_factor)}
+    if res.tcp_position_m is not None:
+        # against the planned TCP of the model (includes the residual kinematic error) ...
+        desired = robot.positions(res.q_d, robot.frame_tcp)
+        e = np.linalg.norm(res.tcp_position_m - desired, axis=1)
+        out["tcp_error_max_m"] = float(e.max())
+        out["tcp_error_rms_m"] = float(np.sqrt(np.mean(e**2)))
+        # ... and against the tracker reading of the robot standing at q_d (dynamic tracking error)
+        if hasattr(real.plant, "measure_tcp"):
+            e = np.linalg.norm(res.tcp_position_m - real.plant.measure_tcp(res.q_d), axis=1)
+            out["tcp_tracking_error_max_m"] = float(e.max())
+            out["tcp_tracking_error_rms_m"] = float(np.sqrt(np.mean(e**2)))
+    return out
+
+
+def activity_figure(pm: PlanningModel, traj: JointTrajectory, check: TorqueCheck, title: str) -> Figure:
+    """Normalised torques and speeds of every joint and their envelope (paper 004 Fig. 8):
+    on a time-optimal trajectory at least one of them is at 1 at every instant."""
+    fig = Figure(figsize=(8, 5), constrained_layout=True)
+    ax1, ax2 = fig.subplots(2, 1, sharex=True)
+    for j in range(pm.nq):
+        ax1.plot(check.t_s, check.tau_Nm[:, j] / pm.effort_Nm[j], lw=0.9, label=f"axis {j + 1}")
+        ax2.plot(traj.t_s, traj.v[:, j] / pm.velocity_rad_s[j], lw=0.9)
+    env = np.maximum(check.torque_ratio.max(axis=1), check.velocity_ratio.max(axis=1))
+    ax2.plot(check.t_s, env, "k--", lw=1.0, label="max over torque and speed ratios")
+    for ax, lab in ((ax1, "tau / tau_max"), (ax2, "qdot / qdot_max")):
+        ax.axhline(1.0, color="grey", lw=0.6)
+        ax.axhline(-1.0, color="grey", lw=0.6)
+        ax.set_ylabel(lab)
+        ax.grid(alpha=0.3)
+    ax1.legend(fontsize=7, ncol=6, loc="lower center")
+    ax2.legend(fontsize=7, loc="lower center")
+    ax2.set_xlabel("t [s]")
+    ax1.set_title(title)
+    return fig
+
+
+def pareto_figure(points: list[tuple[float, float, float]], ruckig: tuple[float, float] | None,
+                  energy_label: str) -> Figure:
+    """Duration against energy for the k2 sweep (k2 annotated), ruckig's point for reference."""
+    fig = Figure(figsize=(6, 4), constrained_layout=True)
+    ax = fig.subplots()
+    T = [p[1] for p in points]
+    E = [p[2] for p in points]
+    ax.plot(T, E, "o-", label="PtP NLP (k1 = 1)")
+    for k2, t, e in points:
+        ax.annotate(f"k2={k2:g}", (t, e), fontsize=7, textcoords="offset points", xytext=(4, 4))
+    if ruckig is not None:
+        ax.plot([ruckig[0]], [ruckig[1]], "s", color="tab:red", label="ruckig (torque-feasible limits)")
+    ax.set_xlabel("duration [s]")
+    ax.set_ylabel(energy_label)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return fig
+
+
+def comparison_figure(pm: PlanningModel, items: list[tuple[str, JointTrajectory, TorqueCheck]],
+                      title: str) -> Figure:
+    """Max torque ratio over joints against time for several trajectories."""
+    fig = Figure(figsize=(8, 3), constrained_layout=True)
+    ax = fig.subplots()
+    for name, _, chk in items:
+        ax.plot(chk.t_s, chk.torque_ratio.max(axis=1), lw=0.9, label=f"{name} ({chk.t_s[-1]:.3f} s)")
+    ax.axhline(1.0, color="grey", lw=0.6)
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("max_i |tau_i| / tau_max,i")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return fig

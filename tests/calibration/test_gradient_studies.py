@@ -1,0 +1,83 @@
+"""Gradient-based design (paper 000) and the paper studies (slow ones behind the marker)."""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from pipeline.calibration import candidates as cd
+from pipeline.calibration import design as ds
+from pipeline.calibration import error_model as em
+from pipeline.calibration import stage as st
+from pipeline.calibration.gradient_design import GradientDesignConfig, gradient_design, segment_distance_sq
+from pipeline.robot.collision import segment_distances
+
+
+def test_casadi_segment_distance_matches_numpy():
+    rng = np.random.default_rng(0)
+    a, b, c, d = (ca.SX.sym(n, 3) for n in "abcd")
+    f = ca.Function("d", [a, b, c, d], [segment_distance_sq(a, b, c, d)])
+    P = rng.normal(size=(200, 4, 3))
+    P[:20, 3] = P[:20, 2] + 2 * (P[:20, 1] - P[:20, 0])   # parallel segments
+    ref = segment_distances(P[:, 0], P[:, 1], P[:, 2], P[:, 3])
+    got = np.array([np.sqrt(float(f(*p))) for p in P])
+    assert np.allclose(got, ref, atol=1e-4)
+
+
+def test_gradient_design_improves_and_stays_feasible():
+    from pipeline.robot.model import RobotModel
+    from pipeline.robot.sensors import tracker_visibility
+
+    robot = RobotModel.load("rx130l")
+    mm = em.MeasurementModel(robot)
+    rng = np.random.default_rng(1)
+    cfg = st.Config(candidates="random", n_random_candidates=400, index_name="tcp_A", n_working_configurations=2)
+    _, basis = st.identify_parameter_set(robot, mm, cfg, rng)
+    cs = st.build_candidates(robot, cfg, basis, rng)
+    spec, _ = st.index_spec(cfg, robot, mm, basis, rng)
+    start = ds.remove_and_replace(cs.G, spec, 20, rng, n_initial=20)
+    res = gradient_design(robot, mm, basis, cs.Q[start.selected], spec, GradientDesignConfig(max_iterations=25))
+    assert res.index_value < res.index_value_start
+    assert res.index_value_start == pytest.approx(start.index_value, rel=1e-6)
+    chain = cd.chain_from_robot(robot)
+    mask, _ = cd.filter_configurations(chain, res.Q, cd.FilterMargins(0.0, 0.0, 0.0))
+    assert mask.all()
+    assert tracker_visibility(robot, robot.tracker.transform_tracker_to_base, res.Q).visible.all()
+    assert res.run_time_s < 120 and res.evaluations > 0
+
+
+@pytest.mark.slow
+def test_study_002_finds_two_redundant_parameters(capsys):
+    from pipeline.calibration import studies
+
+    studies.study_002([])
+    assert "rank 23 (paper: 23), redundant 2" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_study_004_optimal_design_beats_linear_scan():
+    from pipeline.calibration import studies
+
+    row = studies._study_004_seed(("rx130l", 1, 9, 32, 1000))
+    assert row["O3_rr"] > 1.2 * row["O3_linear"]
+    assert row["rr"]["after"]["rms"] < row["rr"]["before"]["rms"] / 20
+
+
+@pytest.mark.slow
+def test_study_000_tcp_criterion_beats_random_and_parameter_criterion():
+    from pipeline.calibration import studies
+
+    rows = [studies._study_000_arm(("rx130l", f2, f4, 0, 60, 1000, 60)) for f2, f4 in ((0.9, 1.0), (1.1, 0.9))]
+    for r in rows:
+        assert r["tcp_oed"] < r["random"] and r["tcp_oed"] < r["parameter_oed"]
+        assert r["tcp_oed"] <= r["tcp_oed_discrete"] * (1 + 1e-9)
+
+
+@pytest.mark.slow
+def test_study_003_all_methods_calibrate():
+    from pipeline.calibration import studies
+
+    row = studies._study_003_seed((0, 200, 30, 50, 1.5, 0.01))
+    for key in ["none"] + [f"{a}_{n}" for a in ("detmax", "bsaa") for n in ("O1", "O2", "O3", "Oc")]:
+        assert row[key]["rms"] < 1e-4   # from mm-level errors to tens of µm

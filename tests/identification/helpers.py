@@ -1,0 +1,53 @@
+"""Shared set-up of the identification tests: a stage context without the runner.
+
+``calibrated_robot`` gives the nominal robot the hidden robot's kinematics (what a perfect
+calibration stage would hand on); tests may read the truth, stage code may not.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pipeline.config import CONFIGS_DIR, load_config
+from pipeline.progress import Progress
+from pipeline.robot.model import RobotModel
+from pipeline.robot.symbolic import apply_kinematic_errors
+from pipeline.robot.truth import RealRobot
+from pipeline.runner import StageContext, stage_rng
+
+
+def calibrated_robot(nominal: RobotModel, real: RealRobot) -> RobotModel:
+    model = apply_kinematic_errors(nominal.model, real.kinematic_errors, nominal.frame_flange,
+                                   (nominal.frame_tcp, nominal.frame_reflector))
+    model.armature = nominal.model.armature.copy()
+    return nominal.with_model(model)
+
+
+def quick_context(tmp_path: Path, seed: int = 1, robot: str = "rx130l", overrides: dict | None = None,
+                  calibrated: bool = True) -> tuple[StageContext, RealRobot]:
+    """Quick-profile context of the identification stage (config from configs/quick.yaml)."""
+    from pipeline.config import build_dataclass, to_plain
+    from pipeline.identification import stage
+
+    cfg = load_config(CONFIGS_DIR / "quick.yaml")
+    section: dict[str, Any] = {}
+    raw = cfg.sections.get("identification")
+    if raw is not None:
+        section.update(raw if isinstance(raw, dict) else to_plain(raw))
+    section.update(overrides or {})
+    config = build_dataclass(stage.Config, section, "identification", "test")
+    nominal = RobotModel.load(robot)
+    real = RealRobot.create(nominal, seed)
+    rob = calibrated_robot(nominal, real) if calibrated else nominal.copy()
+    out = tmp_path / "identification"
+    out.mkdir(parents=True, exist_ok=True)
+    ctx = StageContext(run=cfg, config=config, robot=rob, real=real, upstream={}, out_dir=out,
+                       rng=stage_rng(seed, "identification"), progress=Progress(enabled=False))
+    return ctx, real
+
+
+def true_base(real: RealRobot, E: np.ndarray) -> np.ndarray:
+    return E.T @ np.asarray(real.dynamic_parameters, float)

@@ -1,0 +1,93 @@
+"""Fourier excitation: rest-to-rest, derivatives, exact criterion gradient, constraints."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.identification import design as D
+from pipeline.identification.regressor import RegressorModel, base_parameters
+from pipeline.robot.symbolic import SymbolicRobot
+
+
+@pytest.fixture(scope="module")
+def setup(rx130l):
+    act = rx130l.actuation
+    reg = RegressorModel(rx130l.model, act.gear_matrix, act.coulomb_smoothing_rad_s)
+    base = base_parameters(reg, np.random.default_rng(0), lower=rx130l.limits.lower_rad,
+                           upper=rx130l.limits.upper_rad)
+    limits = D.ExcitationLimits.from_robot(rx130l, 0.95, 0.95, 0.95, 0.8, 0.05, 0.02)
+    sym = SymbolicRobot(rx130l)
+    return reg, base, limits, sym
+
+
+def test_fourier_derivatives_and_rest(rx130l, setup):
+    _, _, limits, _ = setup
+    traj = D.random_trajectory(rx130l, limits, 5, 0.1, np.random.default_rng(1))
+    h = 1e-4
+    t = np.linspace(0.3, 9.7, 17)
+    q, v, a = traj.evaluate(t)
+    qp, vp, _ = traj.evaluate(t + h)
+    qm, vm, _ = traj.evaluate(t - h)
+    np.testing.assert_allclose((qp - qm) / (2 * h), v, atol=1e-6)
+    np.testing.assert_allclose((vp - vm) / (2 * h), a, atol=1e-5)
+    q0, v0, a0 = traj.evaluate(np.array([0.0, traj.period_s]))
+    np.testing.assert_allclose(v0, 0.0, atol=1e-12)
+    np.testing.assert_allclose(a0, 0.0, atol=1e-12)
+    np.testing.assert_allclose(q0[0], q0[1], atol=1e-12)  # periodic
+
+
+@pytest.mark.parametrize("criterion", ["cond", "logdet"])
+def test_criterion_gradient_is_exact(rx130l, setup, criterion):
+    reg, base, limits, sym = setup
+    traj = D.random_trajectory(rx130l, limits, 5, 0.1, np.random.default_rng(2))
+    basis = D.fourier_basis(np.arange(50) * 0.2, 0.1, 5)
+    crit = D.ExcitationCriterion(D.regressor_casadi(sym, reg, base), basis, rx130l.nq, criterion)
+    x = traj.coefficients.ravel()
+    W = crit.matrix(x)
+    np.testing.assert_allclose(W, base.base_regressor(reg.stacked(*traj.evaluate(np.arange(50) * 0.2))),
+                               atol=1e-9)
+    f, g = crit.value_and_gradient(x)
+    if criterion == "cond":
+        assert np.exp(0.5 * f) == pytest.approx(D.condition_number(W), rel=1e-8)
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        d = rng.normal(size=x.size) * 1e-6
+        fp, _ = crit.value_and_gradient(x + d, gradient=False)
+        fm, _ = crit.value_and_gradient(x - d, gradient=False)
+        assert (fp - fm) / 2 == pytest.approx(g @ d, rel=1e-4, abs=1e-12)
+
+
+def test_symbolic_capsule_clearances_match_the_model(rx130l, setup):
+    *_, sym = setup
+    f = D.capsule_clearance_function(rx130l, sym)
+    rng = np.random.default_rng(4)
+    for _ in range(30):
+        q = rng.uniform(rx130l.limits.lower_rad, rx130l.limits.upper_rad)
+        pair, floor = (np.asarray(x).ravel() for x in f(q))
+        p2, f2 = rx130l.capsule_clearances(rx130l.capsule_segments(q))
+        np.testing.assert_allclose(pair, p2[0], atol=1e-6)
+        assert floor.min() == pytest.approx(f2[0].min(), abs=1e-9)
+
+
+def test_optimised_excitation_is_feasible_and_better_than_random(rx130l, setup):
+    reg, base, limits, sym = setup
+    res = D.optimize_excitation(rx130l, sym, reg, base, limits, np.random.default_rng(5), n_samples=50,
+                                n_starts=1, n_random=8, max_iter=25)
+    assert res.feasibility.feasible
+    report = D.check_trajectory(rx130l, res.trajectory, limits, 800)
+    assert report.feasible  # also on a finer grid than the one of the check
+    assert res.cond_optimized < res.cond_starts[0] < np.inf
+    assert res.cond_optimized < res.cond_random_median
+    assert len(res.cond_random) == 8 and res.cond_history[0]
+
+
+def test_check_trajectory_flags_a_limit_violation(rx130l, setup):
+    _, _, limits, _ = setup
+    traj = D.random_trajectory(rx130l, limits, 5, 0.1, np.random.default_rng(6))
+    coef = traj.coefficients.copy()
+    coef[:, 1:] *= 5.0
+    bad = D.FourierTrajectory(coef, traj.base_frequency_hz)
+    report = D.check_trajectory(rx130l, bad, limits)
+    assert not report.feasible
+    assert max(report.position_ratio, report.velocity_ratio, report.acceleration_ratio, report.torque_ratio) > 1

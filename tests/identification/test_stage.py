@@ -1,0 +1,167 @@
+"""The identification stage in the quick profile, scored against the hidden robot (tests may
+read the truth), and its handling of bad input."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from pipeline.errors import DataFileError, InfeasibleError, PipelineError
+from pipeline.identification import stage
+from pipeline.identification.estimate import is_physically_consistent
+from pipeline.robot.model import RobotModel
+
+from .helpers import quick_context, true_base
+
+SUMMARY_KEYS = (
+    "n_base_parameters", "cond_optimized", "cond_random_median", "validation_torque_rms_Nm",
+    "torque_noise_sigma_Nm", "fraction_within_3sigma", "physically_consistent",
+    "tx40_heldout_rms_Nm_ols", "tx40_heldout_rms_Nm_physical", "tx40_physically_consistent",
+)
+
+
+@pytest.fixture(scope="module")
+def quick_run(tmp_path_factory):
+    ctx, real = quick_context(tmp_path_factory.mktemp("id"))
+    return ctx, real, stage.run(ctx)
+
+
+def test_summary_has_the_issue_keys_and_is_json(quick_run):
+    _, _, res = quick_run
+    for key in SUMMARY_KEYS:
+        assert key in res.summary, key
+    json.dumps(res.summary)
+    json.dumps(res.data)
+    assert res.summary["fraction_within_3sigma"] is None  # the stage does not read the truth
+    assert res.arrays["trajectory_excitation_q"].shape == (len(res.arrays["trajectory_excitation_t"]), 6)
+    assert set(res.figures) >= {"convergence", "parameters", "validation_torques", "tx40_heldout"}
+
+
+def test_excitation_beats_random(quick_run):
+    _, _, res = quick_run
+    s = res.summary
+    assert s["cond_optimized"] < s["cond_random_median"]
+    assert s["n_base_parameters"] >= s["n_base_parameters_structural"] > 30
+
+
+def test_base_parameters_within_three_sigma_of_the_truth(quick_run):
+    _, real, res = quick_run
+    beta_true = true_base(real, res.arrays["base_matrix_E"])
+    z = (res.arrays["base_beta"] - beta_true) / res.arrays["base_sigma"]
+    assert np.mean(np.abs(z) <= 3) >= 0.95
+    assert 0.5 < np.sqrt(np.mean(z**2)) < 2.0  # sigmas neither optimistic nor pessimistic
+
+
+def test_validation_torques_at_noise_level(quick_run):
+    _, _, res = quick_run
+    rms = np.asarray(res.summary["validation_torque_rms_Nm"])
+    sigma = np.asarray(res.summary["torque_noise_sigma_Nm"])
+    assert np.all(rms <= 1.3 * sigma)
+
+
+def test_handed_on_robot_is_physical_and_round_trips(quick_run, tmp_path):
+    ctx, real, res = quick_run
+    robot = res.robot
+    assert res.summary["physically_consistent"]
+    p = res.arrays["standard_parameters_physical"]
+    for i in range(6):
+        assert is_physically_consistent(p[10 * i : 10 * i + 10])
+    act = robot.actuation
+    assert np.all(act.rotor_inertia_kgm2 > 0) and np.all(act.viscous_Nms_rad > 0) and np.all(act.coulomb_Nm > 0)
+    # closer to the truth's torques than the nominal model on random states
+    rng = np.random.default_rng(0)
+    err_id, err_nom = [], []
+    for _ in range(50):
+        q = rng.uniform(robot.limits.lower_rad, robot.limits.upper_rad)
+        v, a = rng.normal(size=(2, 6))
+        tau = real.truth.inverse_dynamics(q, v, a)
+        err_id.append(robot.inverse_dynamics(q, v, a) - tau)
+        err_nom.append(ctx.robot.inverse_dynamics(q, v, a) - tau)
+    assert np.sqrt(np.mean(np.square(err_id))) < 0.5 * np.sqrt(np.mean(np.square(err_nom)))
+    back = RobotModel.load(robot.save(tmp_path / "robot"))
+    np.testing.assert_allclose(back.model.armature, robot.model.armature)
+    np.testing.assert_allclose(back.actuation.viscous_Nms_rad, act.viscous_Nms_rad)
+
+
+def _write_csv(path, t, q, tau):
+    header = "t," + ",".join(f"q{i + 1}" for i in range(6)) + "," + ",".join(f"tau{i + 1}" for i in range(6))
+    np.savetxt(path, np.column_stack([t, q, tau]), delimiter=",", header=header, comments="")
+
+
+@pytest.mark.parametrize("problem", ["nan", "short_row", "too_few", "outside_limits"])
+def test_bad_data_files_raise_and_write_nothing(tmp_path, problem):
+    t = np.arange(400) * 0.01
+    q = 0.1 * np.sin(np.outer(t, np.arange(1, 7)))
+    tau = np.cos(np.outer(t, np.arange(1, 7)))
+    path = tmp_path / "record.csv"
+    if problem == "nan":
+        q[123, 2] = np.nan
+    if problem == "too_few":
+        t, q, tau = t[:40], q[:40], tau[:40]
+    if problem == "outside_limits":
+        q[200, 0] = 4.0
+    _write_csv(path, t, q, tau)
+    if problem == "short_row":
+        lines = path.read_text().splitlines()
+        lines[100] = ",".join(lines[100].split(",")[:-1])
+        path.write_text("\n".join(lines) + "\n")
+    ctx, _ = quick_context(tmp_path / "run", overrides={
+        "data_file": str(path), "run_tx40": False,
+        "excitation": {"n_samples": 30, "n_starts": 1, "n_random": 2, "max_iter": 3}})
+    with pytest.raises(DataFileError) as info:
+        stage.run(ctx)
+    assert "record.csv" in str(info.value)
+    assert not any(ctx.out_dir.iterdir())
+
+
+def test_infeasible_excitation_limits_raise(tmp_path):
+    ctx, _ = quick_context(tmp_path, overrides={"run_tx40": False, "excitation": {"torque_margin": 0.05}})
+    with pytest.raises(InfeasibleError, match="excitation"):
+        stage.run(ctx)
+    assert not any(ctx.out_dir.iterdir())
+
+
+def test_bad_config_values(tmp_path):
+    ctx, _ = quick_context(tmp_path, overrides={"sample_time_s": 0.003})
+    with pytest.raises(PipelineError, match="does not divide"):
+        stage.run(ctx)
+
+
+def test_stage_runs_on_a_joint_csv_record(tmp_path):
+    """A user record (CSV, joint side) instead of the simulated experiment."""
+    from pipeline.identification import design as D
+
+    ctx, real = quick_context(tmp_path / "run", overrides={
+        "run_tx40": False, "excitation": {"n_samples": 30, "n_starts": 1, "n_random": 3, "max_iter": 5}})
+    robot = ctx.robot
+    limits = D.ExcitationLimits.from_robot(robot, 0.95, 0.95, 0.95, 0.8, 0.05, 0.02)
+    traj = D.random_feasible_trajectories(robot, limits, 5, 0.1, 1, np.random.default_rng(7))[0]
+    t = np.arange(2 * 5000) * 0.002
+    meas = real.execute_joint_trajectory(t, *traj.evaluate(t), np.random.default_rng(8))
+    path = tmp_path / "record.csv"
+    _write_csv(path, t, meas.q_rad, meas.tau_Nm)
+    ctx.config.data_file = str(path)
+    res = stage.run(ctx)
+    assert res.summary["data_source"] == str(path)
+    assert res.summary["physically_consistent"]
+    sigma = np.asarray(meas.tau_sigma_Nm)
+    # the fit residual of the low-passed torques is below the raw noise
+    assert res.summary["fit_rms_Nm_wls"] < np.sqrt(np.mean(sigma**2))
+    rms = np.asarray(res.summary["validation_torque_rms_Nm"])
+    assert np.all(rms <= 1.5 * sigma)
+
+
+def test_motor_side_csv_is_converted_with_the_gear_matrix(tmp_path):
+    from pipeline.identification.measure import load_joint_csv
+
+    tx40 = RobotModel.load("staubli_tx40")
+    K = tx40.actuation.gear_matrix
+    rng = np.random.default_rng(9)
+    q, tau = rng.normal(size=(2, 50, 6))
+    t = np.arange(50) * 0.01
+    _write_csv(tmp_path / "motor.csv", t, q @ K.T, np.linalg.solve(K.T, tau.T).T)
+    rec = load_joint_csv(tmp_path / "motor.csv", tx40, side="motor")
+    np.testing.assert_allclose(rec.q_rad, q, atol=1e-12)
+    np.testing.assert_allclose(rec.tau_Nm, tau, atol=1e-12)

@@ -1,0 +1,42 @@
+"""Shared trajectory fixtures: the nominal RX130L planning model, a joint path of the quick ISO
+line, and ONE compiled PtP problem (quick settings: N = 25, gcc -O0; cached on disk by the hash
+of its code, so the notebook and the stage test reuse the library)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+
+@pytest.fixture(scope="session")
+def quick_traj_config():
+    from pipeline.config import CONFIGS_DIR, load_config
+
+    return load_config(CONFIGS_DIR / "quick.yaml").trajectory
+
+
+@pytest.fixture(scope="session")
+def pm(rx130l):
+    from pipeline.trajectory.dynamics import PlanningModel
+
+    return PlanningModel.from_robot(rx130l)
+
+
+@pytest.fixture(scope="session")
+def line_path(rx130l, quick_traj_config):
+    from pipeline.trajectory.solve import cp_joint_path
+
+    path, _ = cp_joint_path(rx130l, quick_traj_config)
+    return path
+
+
+@pytest.fixture(scope="session")
+def ptp_problem(rx130l, pm, quick_traj_config):
+    from pipeline.trajectory.solve import ptp_problem
+
+    return ptp_problem(pm, rx130l, quick_traj_config)
+
+
+@pytest.fixture(scope="session")
+def big_move():
+    return np.radians([-45, 20, 30, 0, 40, 0]), np.radians([45, 60, -20, 30, 50, 60])

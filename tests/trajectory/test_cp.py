@@ -1,0 +1,79 @@
+"""Continuous path: convex formulation vs toppra, friction refinement, smooth variant, errors."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from pipeline.errors import InfeasibleError
+from pipeline.trajectory.baselines import toppra_cp
+from pipeline.trajectory.cp import solve_cp_convex, solve_cp_refined, solve_cp_smooth
+from pipeline.trajectory.design import JointPath
+from pipeline.trajectory.solve import cp_joint_path, plan_cp
+from pipeline.trajectory.trajectories import check_trajectory
+
+
+def test_convex_with_toppra_constraints_matches_toppra(pm, line_path):
+    tp = toppra_cp(pm, line_path, 150)
+    eq = solve_cp_convex(pm, line_path, 150, midpoints=False)
+    assert abs(eq.duration_s / tp.duration_s - 1.0) < 0.005
+    # rest to rest, speeds within limits at the grid
+    assert eq.sdot[0] == pytest.approx(0.0, abs=1e-9) and eq.sdot[-1] == pytest.approx(0.0, abs=1e-9)
+    q, dq, _ = line_path.derivatives(eq.s)
+    assert np.all(np.abs(dq) * eq.sdot[:, None] <= pm.velocity_rad_s * (1 + 1e-6))
+
+
+def test_refined_respects_full_friction_where_toppra_does_not(pm, line_path, quick_traj_config):
+    plan = plan_cp(pm, line_path, dataclasses.replace(quick_traj_config, cp_smooth=False))
+    tol = quick_traj_config.violation_tolerance
+    assert plan.checks["cp"].violation <= tol
+    assert plan.checks["cp_toppra"].violation > tol          # viscous friction is not in toppra
+    assert plan.optimal.duration_s >= plan.equal.duration_s   # more torque demand -> not faster
+    tr = plan.trajectories["cp"]
+    # the sampled trajectory follows the path from its start to its end, at rest at both ends
+    assert np.allclose(tr.q[0], line_path(0.0), atol=1e-9) and np.allclose(tr.q[-1], line_path(1.0), atol=1e-6)
+    assert np.abs(tr.v[0]).max() < 1e-9 and np.abs(tr.v[-1]).max() < 1e-6
+    # time-optimal: some constraint is (nearly) active most of the time
+    assert plan.activity["active_fraction"] > 0.5
+
+
+def test_smooth_variant_is_continuous_and_slower(pm, line_path):
+    cv = solve_cp_convex(pm, line_path, 120)
+    opt = solve_cp_refined(pm, line_path, cv)
+    sm = solve_cp_smooth(pm, line_path, opt, n_intervals=40, torque_margin=0.004)
+    assert sm.duration_s >= opt.duration_s * (1 - 1e-6)
+    dt = 2e-4
+    tr = sm.sample(line_path, dt)
+    jump_a = np.abs(np.diff(tr.a, axis=0)).max(axis=0)
+    jerk_bound = sm.jerk_limit_rad_s3
+    # accelerations change at most by (jerk limit) * dt (+ slack for the sampled jerk limit)
+    assert np.all(jump_a <= 2.0 * jerk_bound * dt + 1e-9)
+    assert np.abs(tr.a[0]).max() < 1e-6 and np.abs(tr.a[-1]).max() < 1e-3
+    assert check_trajectory(pm, tr).violation <= 0.01
+
+
+def test_piecewise_acceleration_profile_jumps(pm, line_path):
+    """The non-smooth optimum has acceleration jumps (that is what the smooth variant removes)."""
+    opt = solve_cp_refined(pm, line_path, solve_cp_convex(pm, line_path, 120))
+    tr = opt.sample(line_path, 2e-4)
+    assert np.abs(tr.a[1] - tr.a[0]).max() < np.abs(np.diff(tr.a, axis=0)).max()
+
+
+def test_unreachable_path_names_the_point(rx130l, quick_traj_config):
+    cfg = dataclasses.replace(quick_traj_config, cp_centre_m=[2.5, 0.0, 0.3])
+    with pytest.raises(InfeasibleError) as err:
+        cp_joint_path(rx130l, cfg)
+    assert "m" in str(err.value) and ("not reach" in str(err.value) or "point" in str(err.value))
+
+
+def test_joint_path_rejects_too_few_samples():
+    with pytest.raises(InfeasibleError):
+        JointPath(np.linspace(0, 1, 4), np.zeros((4, 6)))
+
+
+def test_impossible_torque_limits_raise(pm, line_path):
+    weak = dataclasses.replace(pm, effort_Nm=pm.effort_Nm * 0.05)   # cannot even hold against gravity
+    with pytest.raises(InfeasibleError):
+        solve_cp_convex(weak, line_path, 60)
