@@ -2,7 +2,8 @@
 
 Perturbations (DESIGN.md, "Truth perturbations", 1-sigma): joint placements 0.5 mm in
 translation and 0.3 mrad in rotation (6 per joint, applied as ``M_i exp6(delta_i)``), joint
-zero offsets 1 mrad, tool/reflector 0.5 mm and 0.3 mrad, tracker placement a few cm and
+zero offsets 1 mrad (joint 1's placement and zero are the base-frame convention: zero), the
+tool as a rigid body carrying TCP and reflector 0.5 mm and 0.3 mrad, tracker placement a few cm and
 degrees away from its nominal pose; inertial parameters 10–20 % (mass log-normal, centre of
 mass shifted, second moments scaled and rotated so every link stays physically consistent),
 rotor inertia and friction 20 %.
@@ -112,6 +113,12 @@ class RealRobot:
                 config.placement_rotation_sigma_rad * rng.standard_normal(3),
             ])
         errors[layout.joint_offsets] = config.joint_offset_sigma_rad * rng.standard_normal(nq)
+        # The base frame is defined by axis 1 and its zero (the convention a tracker calibration
+        # can realise: any placement error of joint 1 is indistinguishable from the unknown
+        # tracker pose), so joint 1's placement and zero-offset errors are a choice of frame,
+        # not robot errors: they are zero in the truth. Drawn anyway to keep the stream layout.
+        errors[layout.placement(1)] = 0.0
+        errors[layout.joint_offsets.start] = 0.0
         errors[layout.tool] = np.concatenate([config.tool_translation_sigma_m * rng.standard_normal(3),
                                               config.tool_rotation_sigma_rad * rng.standard_normal(3)])
         model = apply_kinematic_errors(nominal.model, errors, nominal.frame_flange,
