@@ -21,18 +21,21 @@ import numpy as np
 from pipeline.robot.model import RobotModel
 from pipeline.trajectory.config import TrajectoryConfig
 from pipeline.trajectory.dynamics import PlanningModel
+from pipeline.trajectory.ptp import energy_weights
 from pipeline.trajectory.solve import cp_joint_path, plan_cp, plan_ptp, ptp_problem, solve_ptp_verified
+from pipeline.trajectory.trajectories import check_trajectory
 
 
 def main(robot_name: str = "rx130l", segment: str = "circle_large") -> None:
     cfg = TrajectoryConfig(cp_segment=segment)
     robot = RobotModel.load(robot_name)
-    pm = PlanningModel.from_robot(robot)
+    pm = PlanningModel.from_robot(robot, cfg.torque_reserve)
     t0 = time.perf_counter()
     path, piece = cp_joint_path(robot, cfg)
     cp = plan_cp(pm, path, cfg)
     s = cp.summary()
-    print(f"CP {segment} ({piece.length_m:.3f} m, N = {cfg.cp_n_grid}), {time.perf_counter() - t0:.1f} s in all")
+    print(f"CP {segment} ({piece.length_m:.3f} m, N = {cfg.cp_n_grid}), {time.perf_counter() - t0:.1f} s in all; "
+          f"planning limits = {1 - cfg.torque_reserve:.2f} x torque limits (reserve for the servo)")
     print(f"  toppra {s['cp_toppra_duration_s']:.5f} s ({1e3 * s['cp_toppra_solve_time_s']:.0f} ms); ours with "
           f"toppra's constraints {s['cp_equal_constraints_duration_s']:.5f} s -> ratio "
           f"{s['cp_equal_vs_toppra_ratio']:.6f} (target |ratio - 1| <= 0.005)")
@@ -62,6 +65,12 @@ def main(robot_name: str = "rx130l", segment: str = "circle_large") -> None:
           "(CPU time excludes the other processes on a shared box) (first solve "
           f"{again.info['first_solve_time_s']:.2f} s, {again.info['tightening_rounds']} tightening re-solves, "
           f"{again.iterations} IPOPT iterations; target <= 2 s)")
+    for measure in ("torque", "normalised", "electrical"):
+        w = energy_weights(pm, measure, cfg.motor_resistance_ohm, cfg.torque_constant_Nm_A, robot.actuation.gear_ratio)
+        fixed = solve_ptp_verified(pm, problem, q0, q1, cfg, 0.0, 1.0, w, duration_s=ptp.ruckig.duration_s)
+        e_nlp = check_trajectory(pm, fixed.sample(cfg.fine_dt_s), energy_weights=w).energy
+        e_rk = check_trajectory(pm, ptp.ruckig.trajectory, energy_weights=w).energy
+        print(f"  energy measure {measure:10s}: at ruckig's duration NLP / ruckig = {e_nlp / e_rk:.3f}")
     print(f"  ruckig search {p['ptp_ruckig_search_time_s']:.1f} s; Pareto: " + ", ".join(
         f"k2={r['k2']:g}: {r['duration_s']:.3f} s / {r['energy']:.3f}" for r in p["ptp_pareto"]))
 

@@ -187,7 +187,7 @@ class _State:
                 else:
                     o1 = ix._values_from_eigs("O1", ev, self.n + 1)
                     o3 = ix._values_from_eigs("O3", ev, self.n + 1)
-                    out[s : s + c.size] = 2 / np.pi * (np.arctan(o1) + np.arctan(o3) + np.arctan(od)) / 3
+                    out[s : s + c.size] = ix.oc_combine(self.spec, o1, o3, od)
             else:
                 out[s : s + c.size] = ix.scores_of_matrices(self.spec, Ms, self.n + 1)
         return out

@@ -56,6 +56,11 @@ class IndexSpec:
     #: ``A`` only: diagonal weights of the parameters (paper 000 eq. 25 projection P onto a subset,
     #: e.g. the robot's own parameters without the tracker pose); None = all ones
     parameter_weights: np.ndarray | None = None
+    #: ``Oc`` only: O1 and O3 are multiplied by ``oc_jacobian_scale`` and Od by ``oc_od_scale`` before
+    #: the arctan normalisation (paper 003 eq. 34 is unit dependent: e.g. the tracker sigma in m
+    #: un-whitens the Jacobian, 1e-6 turns Od from 1/m^2 into 1/mm^2)
+    oc_jacobian_scale: float = 1.0
+    oc_od_scale: float = 1.0
     _W: np.ndarray | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
@@ -130,6 +135,12 @@ def od_index_batch(base: np.ndarray, extra: np.ndarray, knn: int = 3) -> np.ndar
     return out
 
 
+def oc_combine(spec: IndexSpec, o1, o3, od):
+    """Paper 003 eq. 35: ``Oc = (2/pi) (atan O1 + atan O3 + atan Od) / 3`` (with the spec's unit scales)."""
+    a, b = spec.oc_jacobian_scale, spec.oc_od_scale
+    return 2.0 / np.pi * (np.arctan(a * o1) + np.arctan(a * o3) + np.arctan(b * od)) / 3.0
+
+
 def _values_from_eigs(name: str, ev: np.ndarray, n: int) -> np.ndarray:
     """Index values from ascending eigenvalues of M (batched over leading axes)."""
     p = ev.shape[-1]
@@ -172,7 +183,7 @@ def evaluate(spec: IndexSpec, M: np.ndarray, n: int, positions: np.ndarray | Non
         o1 = float(_values_from_eigs("O1", ev, n))
         o3 = float(_values_from_eigs("O3", ev, n))
         od = od_index(positions, spec.knn)
-        return float(2.0 / np.pi * (np.arctan(o1) + np.arctan(o3) + np.arctan(od)) / 3.0)
+        return float(oc_combine(spec, o1, o3, od))
     # TCP A-criterion
     if ev[0] <= _REL_EIG_TOL * max(ev[-1], 1e-300):
         return float("inf")
@@ -205,7 +216,7 @@ def scores_of_matrices(spec: IndexSpec, Ms: np.ndarray, n: int,
             o1 = _values_from_eigs("O1", ev, n)
             o3 = _values_from_eigs("O3", ev, n)
             od = np.array([od_index(P, spec.knn) for P in positions_sets[e]])
-            out[e] = 2.0 / np.pi * (np.arctan(o1) + np.arctan(o3) + np.arctan(od)) / 3.0
+            out[e] = oc_combine(spec, o1, o3, od)
         elif spec.name in ("tcp_A", "tcp_A_mixed") or (spec.name == "A" and spec.parameter_weights is not None):
             W = spec.weight_matrix(Ms.shape[1])
             reg = ev[:, 0] > _REL_EIG_TOL * np.maximum(ev[:, -1], 1e-300)

@@ -379,7 +379,8 @@ def _study_003_seed(args) -> dict:
         out["none"] = evaluate(ds.random_design(G, ix.IndexSpec("O3"), n_sel, rng).selected)
         for alg in ("detmax", "bsaa"):
             for name in ("O1", "O2", "O3", "Oc"):
-                spec = ix.IndexSpec(name)
+                # O1/O3 of the un-whitened Jacobian and Od in mm (the paper's units) inside Oc
+                spec = ix.IndexSpec(name, oc_jacobian_scale=sig, oc_od_scale=1e-6)
                 sel = ds.select(alg, G, spec, n_sel, rng, positions=Yc)
                 out[f"{alg}_{name}"] = evaluate(sel.selected) | {"time_s": sel.run_time_s,
                                                                  "evaluations": sel.evaluations}

@@ -7,7 +7,8 @@ One call of ``step`` covers one position-loop sample ``T_p`` (paper 004 §2.3: 4
         v_cmd   = v_ff[j] + e_p                                   velocity feedforward per sub-sample
         q_enc   = round((q + noise) / res) * res                  encoder: noise + quantisation
         v_hat  <- v_hat + alpha ((q_enc - q_enc_prev) / T_v - v_hat)   differenced, low-passed
-        e_v     = v_cmd - v_hat ;  I <- clip(I + Ki T_v e_v, +-tau_max)
+        e_v     = v_cmd - v_hat ;  I <- clip(I + Ki T_v e_v, +-tau_max), held while
+                  |tau_cmd| > tau_max and e_v pushes further (conditional-integration anti-windup)
         tau_cmd = tau_ff[j] + Kv e_v + I                          ideal current loop
     plant: n_sub semi-implicit Euler substeps of  qdd = ABA(q, v, sat(tau_cmd) - friction(v))
 
@@ -117,7 +118,12 @@ def build_step(ls: LoopStructure) -> ca.Function:
         v_hat = v_hat + alpha * ((q_enc - q_prev) / Tv - v_hat)
         q_prev = q_enc
         e_v = v_ff[j] + e_p - v_hat
-        integ = ca.fmin(ca.fmax(integ + ki * Tv * e_v, -effort), effort)
+        integ_new = ca.fmin(ca.fmax(integ + ki * Tv * e_v, -effort), effort)
+        tau_new = tau_ff[j] + kv * e_v + integ_new
+        # anti-windup (conditional integration): hold I while the command is beyond the limit
+        # and the error pushes it further out
+        hold = ca.logic_and(ca.fabs(tau_new) > effort, e_v * tau_new > 0)
+        integ = ca.if_else(hold, integ, integ_new)
         tau_cmd = tau_ff[j] + kv * e_v + integ
         tau_sum = tau_sum + tau_cmd
         ratio = ca.fmax(ratio, ca.fabs(tau_cmd) / effort)
@@ -206,8 +212,12 @@ def python_rollout(ls: LoopStructure, model: pin.Model, p_dyn: np.ndarray, x0: n
             v_hat = v_hat + alpha * ((q_enc - q_prev) / Tv - v_hat)
             q_prev = q_enc
             e_v = u[(1 + j) * n:(2 + j) * n] + e_p - v_hat
-            integ = np.clip(integ + ki * Tv * e_v, -effort, effort)
-            tau_cmd = u[(1 + nv_ + j) * n:(2 + nv_ + j) * n] + kv * e_v + integ
+            tau_ff_j = u[(1 + nv_ + j) * n:(2 + nv_ + j) * n]
+            integ_new = np.clip(integ + ki * Tv * e_v, -effort, effort)
+            tau_new = tau_ff_j + kv * e_v + integ_new
+            hold = (np.abs(tau_new) > effort) & (e_v * tau_new > 0)
+            integ = np.where(hold, integ, integ_new)
+            tau_cmd = tau_ff_j + kv * e_v + integ
             tau_sum += tau_cmd
             ratio = np.maximum(ratio, np.abs(tau_cmd) / effort)
             tau_sat = np.clip(tau_cmd, -effort, effort)

@@ -11,7 +11,11 @@ the current set value::
 
 Set points reach the drives ``setpoint_delay_samples`` late; with ``advance_feedforward`` they are
 sent that many samples early so they arrive on time. The drive aligns its set point with the
-measurement, which is ``measurement_delay_samples`` old.
+measurement, which is ``measurement_delay_samples`` old. Within a position sample the velocity
+loop gets its own set points: ``v_d`` delayed by the known group delay of the differenced and
+low-passed encoder velocity, and ``tau_ff`` at the middle of each 200 µs hold (both interpolated);
+without that a held 400 µs set point lags by 100 µs on average, which alone leaves a lag error
+``~ a * 100 µs / Kp`` (measured: 1.3 mdeg on axis 1 of the ISO path with the exact model).
 """
 
 from __future__ import annotations

@@ -3,7 +3,10 @@
 * Lag error per joint: ``e_i(t) = q_d,i(t) - q_i(t)`` (encoder), max |e| and RMS.
 * TCP path error: ``|p_meas(t) - p_d(t)|`` with ``p_meas`` the TCP position of the real robot
   (ideal laser tracker registered to the base) and ``p_d`` the desired TCP of the Cartesian
-  path (absolute: includes the kinematic model error), and the tracking part
+  path (absolute: includes the kinematic model error); the same after a best-fit rigid
+  registration of the measured path onto the desired one (how a tracker measurement of a path is
+  compared, paper 004 §2.3.3; removes the robot's placement, which a tracker calibration cannot
+  separate from the tracker pose, and a constant TCP offset); and the tracking part
   ``|p_meas(t) - p(q_d(t))|`` against the real robot standing at the reference joints.
 """
 
@@ -27,6 +30,8 @@ def run_metrics(lag_error_rad: np.ndarray, tcp_meas_m: np.ndarray, tcp_desired_m
     }
     e_abs = np.linalg.norm(tcp_meas_m - tcp_desired_m, axis=1)
     out["tcp_error_max_m"], out["tcp_error_rms_m"] = error_stats(e_abs).values()
+    e_reg = registered_error(tcp_meas_m, tcp_desired_m)
+    out["tcp_error_registered_max_m"], out["tcp_error_registered_rms_m"] = error_stats(e_reg).values()
     if tcp_at_reference_m is not None:
         e_trk = np.linalg.norm(tcp_meas_m - tcp_at_reference_m, axis=1)
         out["tcp_tracking_error_max_m"], out["tcp_tracking_error_rms_m"] = error_stats(e_trk).values()

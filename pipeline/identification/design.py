@@ -372,10 +372,12 @@ class ExcitationCriterion:
         basis: tuple[np.ndarray, np.ndarray, np.ndarray],
         nq: int,
         criterion: str = "cond",
+        softness: float = 0.0,
     ) -> None:
         if criterion not in ("cond", "logdet"):
             raise ValueError(f"criterion must be 'cond' or 'logdet', got {criterion!r}")
         self.criterion = criterion
+        self.softness = float(softness)
         self.bq, self.bv, self.ba = basis
         self.n = self.bq.shape[0]
         self.nq = nq
@@ -411,7 +413,17 @@ class ExcitationCriterion:
         G = W.T @ W
         lam, U = np.linalg.eigh(G)
         lam = np.maximum(lam, 1e-300)
-        if self.criterion == "cond":
+        if self.criterion == "cond" and self.softness > 0:
+            # smooth surrogate: soft max minus soft min of log(lambda) (log-sum-exp, sharpness
+            # 1/softness); tends to log(lambda_max / lambda_min) as softness -> 0
+            ll = np.log(lam)
+            b = 1.0 / self.softness
+            w_hi = np.exp(b * (ll - ll.max()))
+            w_lo = np.exp(-b * (ll - ll.min()))
+            f = float(ll.max() + np.log(w_hi.sum()) / b - ll.min() + np.log(w_lo.sum()) / b)
+            w_hi, w_lo = w_hi / w_hi.sum(), w_lo / w_lo.sum()
+            dG = (U * ((w_hi - w_lo) / lam)) @ U.T
+        elif self.criterion == "cond":
             f = float(np.log(lam[-1]) - np.log(lam[0]))
             dG = np.outer(U[:, -1], U[:, -1]) / lam[-1] - np.outer(U[:, 0], U[:, 0]) / lam[0]
         else:
@@ -726,14 +738,16 @@ def _optimize_excitation_impl(
 
     inner = limits.tightened(NLP_LIMIT_FACTOR, NLP_EXTRA_CLEARANCE_M)
     solver, bounds, _obj = _build_nlp(robot, sym, crit, inner, L, max_iter)
-    best: tuple[float, FourierTrajectory, FeasibilityReport] | None = None
+    best: tuple[float, FourierTrajectory, FeasibilityReport, float] | None = None
     histories, start_results, cond_starts = [], [], []
     iterable: Any = range(len(starts))
     if progress is not None:
         iterable = progress.track(iterable, "excitation starts")
     nc = nq * (2 * L + 1)
     for k in iterable:
-        x0 = starts[k].coefficients.ravel()
+        c0 = starts[k].coefficients.copy()
+        c0[:, 1:] *= NLP_LIMIT_FACTOR - 0.01  # start inside the NLP's tighter limits
+        x0 = c0.ravel()
         z0 = np.concatenate([x0, crit.states(x0).ravel(order="F")])
         cond0 = condition_number(crit.matrix(x0))
         cond_starts.append(cond0)
@@ -743,6 +757,7 @@ def _optimize_excitation_impl(
         traj = FourierTrajectory(xk.reshape(nq, 2 * L + 1), base_frequency_hz)
         traj, feas = shrink_to_feasible(robot, traj, limits, n_check)
         condk = condition_number(crit.matrix(traj.coefficients.ravel()))
+        score = crit.value_and_gradient(traj.coefficients.ravel(), gradient=False)[0]
         objs = list(st.get("iterations", {}).get("obj", []))
         hist = [float(np.exp(0.5 * o)) for o in objs] if criterion == "cond" else []
         histories.append(hist)
@@ -756,13 +771,13 @@ def _optimize_excitation_impl(
                 "feasibility": feas.to_dict(),
             }
         )
-        if feas.feasible and (best is None or condk < best[0]):
-            best = (condk, traj, feas)
+        if feas.feasible and (best is None or score < best[3]):
+            best = (condk, traj, feas, score)
     if best is None:
         # no optimum passed the fine-grid/collision check: keep the best random start
         i0 = int(order[0])
         tr = randoms[i0]
-        best = (cond_random[i0], tr, check_trajectory(robot, tr, limits, n_check))
+        best = (cond_random[i0], tr, check_trajectory(robot, tr, limits, n_check), 0.0)
     return ExcitationResult(
         trajectory=best[1],
         cond_optimized=float(best[0]),

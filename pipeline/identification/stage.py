@@ -53,7 +53,7 @@ class ExcitationConfig:
     n_samples: int = 100  # samples of one period in the NLP (criterion and constraints)
     n_starts: int = 3  # IPOPT runs from the best random feasible trajectories
     n_random: int = 20  # random feasible trajectories for the baseline median
-    max_iter: int = 120
+    max_iter: int = 100
     criterion: str = "cond"  # cond | logdet
     position_margin: float = 0.95
     velocity_margin: float = 0.95
@@ -176,23 +176,27 @@ def _fig_torques(t: np.ndarray, measured: np.ndarray, predicted: np.ndarray, tit
     return fig
 
 
-def _fig_parameters(base: BaseParameters, beta: np.ndarray, sigma: np.ndarray,
-                    z: np.ndarray | None) -> Figure:
-    fig = Figure(figsize=(12, 4))
-    ax = fig.subplots()
+def _fig_parameters(base: BaseParameters, beta: np.ndarray, sigma: np.ndarray, beta_phys: np.ndarray,
+                    beta_nom: np.ndarray, z: np.ndarray | None) -> Figure:
+    """Base parameters: WLS estimate with 3-sigma error bars, the physically consistent fit and the
+    nominal model, each divided by a per-parameter scale; with a truth score, the z-scores too."""
+    fig = Figure(figsize=(12, 7 if z is not None else 4))
+    axes = fig.subplots(2 if z is not None else 1, 1, squeeze=False)[:, 0]
     k = np.arange(base.n_base)
+    scale = np.maximum.reduce([np.abs(beta), np.abs(beta_nom), 3 * sigma, np.full_like(beta, 1e-9)])
+    ax = axes[0]
+    ax.errorbar(k, beta / scale, yerr=3 * sigma / scale, fmt="o", ms=3, lw=0.8, label="WLS +- 3 sigma")
+    ax.plot(k, beta_phys / scale, "x", ms=4, label="physically consistent fit")
+    ax.plot(k, beta_nom / scale, "_", ms=8, color="k", label="nominal model")
+    ax.set_ylabel("value / scale")
+    ax.set_title("base parameters (scale per parameter: max of |estimate|, |nominal|, 3 sigma)")
+    ax.legend(fontsize=8, ncol=3)
     if z is not None:
-        ax.errorbar(k, z, yerr=np.ones_like(z), fmt="o", ms=3, lw=0.8)
-        ax.axhline(3, color="r", lw=0.6)
-        ax.axhline(-3, color="r", lw=0.6)
-        ax.set_ylabel("(estimate - truth) / sigma")
-        ax.set_title("base parameter errors in units of their estimated sigma (bars: 1 sigma)")
-    else:
-        rel = 3 * sigma / np.maximum(np.abs(beta), 1e-12)
-        ax.semilogy(k, rel, "o", ms=3)
-        ax.set_ylabel("3 sigma / |estimate|")
-        ax.set_title("relative 3-sigma uncertainty of each base parameter")
-    ax.set_xlabel("base parameter index (names in results.json)")
+        axes[1].errorbar(k, z, yerr=np.ones_like(z), fmt="o", ms=3, lw=0.8)
+        axes[1].axhline(3, color="r", lw=0.6)
+        axes[1].axhline(-3, color="r", lw=0.6)
+        axes[1].set_ylabel("(estimate - truth) / sigma")
+    axes[-1].set_xlabel("base parameter index (names in results.json)")
     fig.tight_layout()
     return fig
 
@@ -322,7 +326,7 @@ def _run(ctx: StageContext) -> StageResult:
         t1 = time.perf_counter()
         from pipeline.robot.model import RobotModel
 
-        tx = run_tx40(RobotModel.load("staubli_tx40"), cfg.tx40, np.random.default_rng(0))
+        tx = run_tx40(RobotModel.load("staubli_tx40"), cfg.tx40, np.random.default_rng(ctx.rng.integers(2**32)))
         timings["tx40_s"] = time.perf_counter() - t1
     timings["total_s"] = time.perf_counter() - t0
 
@@ -407,7 +411,8 @@ def _run(ctx: StageContext) -> StageResult:
             **{k: v for k, v in tx.details.items() if k != "ols_ia6_base_value"},
         }
     figures = {"convergence": _fig_convergence(exc),
-               "parameters": _fig_parameters(base, wls.beta, wls.sigma, None if truth is None else truth["z"])}
+               "parameters": _fig_parameters(base, wls.beta, wls.sigma, base.from_standard(phys.p),
+                                             base.from_standard(p_nom), None if truth is None else truth["z"])}
     if tau_v is not None:
         figures["validation_torques"] = _fig_torques(vt.t_s, tau_v, pred_phys,
                                                      f"validation on {vt.label}: measured vs identified model")

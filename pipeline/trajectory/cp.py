@@ -91,6 +91,16 @@ def _eval_points(path: JointPath, s: np.ndarray, midpoints: bool) -> tuple[np.nd
     return s[:-1].copy(), ["start"]
 
 
+def _check_static(pm: PlanningModel, s: np.ndarray, g: np.ndarray, tau_max: np.ndarray, name: str) -> None:
+    """No parametrisation exists if holding the path still already exceeds a torque limit."""
+    over = np.abs(g) > tau_max
+    if over.any():
+        k, j = np.argwhere(over)[0]
+        raise InfeasibleError(None, f"{name} at s = {s[k]:.3f} joint {j + 1} torque limit",
+                              f"holding torque + Coulomb friction {g[k, j]:.1f} N·m exceeds the limit "
+                              f"{tau_max[j]:.1f} N·m even at crawling speed")
+
+
 def _velocity_bound_b(pm: PlanningModel, dq: np.ndarray) -> np.ndarray:
     """Upper bound on b = sdot^2 from joint speed limits at points with path tangent dq."""
     with np.errstate(divide="ignore"):
@@ -114,6 +124,7 @@ def solve_cp_convex(pm: PlanningModel, path: JointPath, n_grid: int = 400, midpo
     pc = path_coefficients(pm, pts, q, dq, ddq)
     fc = pm.coulomb_Nm * np.sign(dq) if coulomb else np.zeros_like(dq)
     tau_max = pm.effort_Nm * torque_scale
+    _check_static(pm, pts, pc.g + fc, tau_max, path.name)
 
     b = ca.SX.sym("b", N + 1)
     a = ca.SX.sym("a", N)

@@ -113,8 +113,15 @@ def plan_cp(pm: PlanningModel, path: JointPath, cfg: TrajectoryConfig) -> CPPlan
     tim["cp_refined"] = time.perf_counter() - t0
     sm = None
     if cfg.cp_smooth:
-        sm = solve_cp_smooth(pm, path, opt, cfg.cp_smooth_intervals, cfg.cp_smooth_jerk_rise_time_s,
-                             torque_margin=cfg.cp_smooth_torque_margin)
+        margin = cfg.cp_smooth_torque_margin
+        for _ in range(cfg.max_tightening_rounds + 1):
+            sm = solve_cp_smooth(pm, path, opt, cfg.cp_smooth_intervals, cfg.cp_smooth_jerk_rise_time_s,
+                                 torque_margin=margin)
+            over = check_trajectory(pm, sm.sample(path, cfg.fine_dt_s)).max_torque_ratio - 1.0
+            if over <= cfg.violation_tolerance:
+                break
+            margin = 1.0 - (1.0 - margin) / (1.0 + over) * (1.0 - 0.25 * cfg.violation_tolerance)
+        sm.info["torque_margin"] = margin
     trajs = {"cp": opt.sample(path, cfg.fine_dt_s), "cp_toppra": tp.sample(path, cfg.fine_dt_s)}
     if sm is not None:
         trajs["cp_smooth"] = sm.sample(path, cfg.fine_dt_s)
@@ -174,19 +181,22 @@ def ptp_problem(pm: PlanningModel, robot: Any, cfg: TrajectoryConfig) -> PtpProb
     from pipeline.robot.symbolic import SymbolicRobot
 
     return PtpProblem(pm, SymbolicRobot(robot), cfg.ptp_n_intervals, jit=cfg.ptp_jit,
-                      ipopt_options={"ipopt.tol": 1e-6, "ipopt.acceptable_tol": 1e-4},
+                      ipopt_options={"ipopt.tol": 1e-6, "ipopt.acceptable_tol": 1e-4,
+                                     "ipopt.mu_strategy": "adaptive"},
                       jit_flags=(*cfg.ptp_jit_flags, "-shared", "-fPIC"))
 
 
 def solve_ptp_verified(pm: PlanningModel, problem: PtpProblem, q0: np.ndarray, q1: np.ndarray,
                        cfg: TrajectoryConfig, k1: float, k2: float, weights: np.ndarray,
-                       duration_s: float | None = None) -> PtpResult:
+                       duration_s: float | None = None, x0: np.ndarray | None = None,
+                       torque_scale: np.ndarray | None = None) -> PtpResult:
     """Solve, re-check torques on the fine grid, and while a joint exceeds its limit by more than
     ``cfg.violation_tolerance`` tighten that joint's limit by the excess and re-solve (warm start).
     The returned result records the rounds and total solve time."""
-    widths = tuple(cfg.ptp_coulomb_widths_rad_s)
-    res = problem.solve(q0, q1, k1, k2, weights=weights, duration_s=duration_s, coulomb_widths_rad_s=widths)
-    scale = np.ones(pm.nq)
+    widths = tuple(cfg.ptp_coulomb_widths_rad_s) if x0 is None else ()
+    scale = np.ones(pm.nq) if torque_scale is None else np.asarray(torque_scale, float).copy()
+    res = problem.solve(q0, q1, k1, k2, weights=weights, duration_s=duration_s, effort_Nm=pm.effort_Nm * scale,
+                        x0=x0, coulomb_widths_rad_s=widths)
     first = total = res.solve_time_s
     cpu = res.info["cpu_time_s"]
     iters, rounds = res.iterations, 0
@@ -214,12 +224,26 @@ def plan_ptp(pm: PlanningModel, problem: PtpProblem, q0: np.ndarray, q1: np.ndar
     """Time-optimal PtP (k1, k2), ruckig baseline, minimum energy at ruckig's duration, Pareto sweep."""
     w = energy_weights(pm, cfg.ptp_energy, cfg.motor_resistance_ohm, cfg.torque_constant_Nm_A,
                        getattr(getattr(pm.robot, "actuation", None), "gear_ratio", None))
-    widths = tuple(cfg.ptp_coulomb_widths_rad_s)
     res = solve_ptp_verified(pm, problem, q0, q1, cfg, cfg.ptp_k1, cfg.ptp_k2, w)
     rk = ruckig_torque_feasible(pm, q0, q1, cfg.ruckig_check_dt_s, tuple(cfg.ruckig_jerk_ratios_1_s),
                                 joint_rounds=cfg.ruckig_joint_rounds)
     fixed = solve_ptp_verified(pm, problem, q0, q1, cfg, 0.0, 1.0, w, duration_s=rk.duration_s)
-    sweep = problem.pareto(q0, q1, list(cfg.ptp_pareto_k2), w, coulomb_widths_rad_s=widths) if pareto else []
+    sweep: list[PtpResult] = []
+    if pareto:
+        # continuation from the main solution outwards (k1 = 1), same verification as the main one
+        ks = sorted(float(k) for k in cfg.ptp_pareto_k2)
+        up = [k for k in ks if k > cfg.ptp_k2 and not np.isclose(k, cfg.ptp_k2)]
+        down = [k for k in reversed(ks) if k < cfg.ptp_k2 and not np.isclose(k, cfg.ptp_k2)]
+        scale0 = np.asarray(res.info["torque_scale"])
+        for branch in (up, down):
+            prev = res
+            for k2 in branch:
+                prev = solve_ptp_verified(pm, problem, q0, q1, cfg, 1.0, k2, w, x0=prev.info["x"],
+                                          torque_scale=scale0)
+                sweep.append(prev)
+        if cfg.ptp_k1 == 1.0 and any(np.isclose(k, cfg.ptp_k2) for k in ks):
+            sweep.append(res)          # the main solution is a point of the front too
+        sweep.sort(key=lambda r: r.k2)
     trajs = {"ptp": res.sample(cfg.fine_dt_s, "ptp"), "ptp_ruckig": rk.trajectory,
              "ptp_energy_at_ruckig_duration": fixed.sample(cfg.fine_dt_s, "ptp_energy_at_ruckig_duration")}
     checks = {k: check_trajectory(pm, v, energy_weights=w) for k, v in trajs.items()}

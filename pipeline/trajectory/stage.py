@@ -35,6 +35,40 @@ DEPENDS: tuple[str, ...] = ("model", "identification")
 Config = TrajectoryConfig
 
 
+def check(config: TrajectoryConfig, robot) -> None:
+    """Validate the section before anything runs (ConfigError naming the field)."""
+    from pipeline.errors import ConfigError
+
+    def bad(field: str, problem: str) -> ConfigError:
+        return ConfigError(None, f"trajectory.{field}", problem)
+
+    nq = robot.nq
+    if config.cp_segment not in ("line", "circle_large", "circle_small"):
+        raise bad("cp_segment", f"{config.cp_segment!r}: expected line, circle_large or circle_small")
+    if config.ptp_energy not in ("torque", "normalised", "electrical"):
+        raise bad("ptp_energy", f"{config.ptp_energy!r}: expected torque, normalised or electrical")
+    for field in ("ptp_start_deg", "ptp_goal_deg", "cp_ik_seed_deg", "motor_resistance_ohm", "torque_constant_Nm_A"):
+        if len(getattr(config, field)) != nq:
+            raise bad(field, f"expected {nq} numbers, got {len(getattr(config, field))}")
+    for field in ("cp_n_grid", "cp_ik_points", "cp_smooth_intervals", "ptp_n_intervals"):
+        if getattr(config, field) < 6:
+            raise bad(field, f"must be >= 6, got {getattr(config, field)}")
+    for field in ("fine_dt_s", "ruckig_check_dt_s", "cp_edge_m", "cp_smooth_jerk_rise_time_s", "ptp_k1"):
+        if not getattr(config, field) > 0:
+            raise bad(field, f"must be positive, got {getattr(config, field)}")
+    if config.ruckig_check_dt_s > 5e-4:
+        raise bad("ruckig_check_dt_s", "torques must be checked at least every 0.5 ms")
+    if not 0.0 <= config.torque_reserve < 1.0:
+        raise bad("torque_reserve", f"must be in [0, 1), got {config.torque_reserve}")
+    lo, hi = np.degrees(robot.limits.lower_rad), np.degrees(robot.limits.upper_rad)
+    for field in ("ptp_start_deg", "ptp_goal_deg"):
+        q = np.asarray(getattr(config, field), float)
+        out = np.flatnonzero((q < lo) | (q > hi))
+        if out.size:
+            j = int(out[0])
+            raise bad(field, f"joint {j + 1} = {q[j]:.1f} deg outside [{lo[j]:.1f}, {hi[j]:.1f}] deg")
+
+
 def _control_config(ctx: StageContext):
     from pipeline.control.config import ControlConfig
 

@@ -30,11 +30,13 @@ def test_sx_aba_matches_pinocchio_with_friction_and_saturation(truth):
         np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-9)
 
 
-@pytest.mark.parametrize("delay", [0, 2])
-def test_compiled_rollout_equals_python_loop(truth, delay):
-    plant = Plant(truth, encoder_noise_rad=2e-6)
+@pytest.mark.parametrize(("delay", "effort_scale"), [(0, 1.0), (2, 0.15)])
+def test_compiled_rollout_equals_python_loop(truth, delay, effort_scale):
+    robot = truth.copy()
+    robot.model.effortLimit[:] = robot.model.effortLimit * effort_scale  # 0.15: saturates, anti-windup acts
+    plant = Plant(robot, encoder_noise_rad=2e-6)
     ls = loop.LoopStructure(dynamics.chain_structure(truth.model), 2, 2, delay, 50)
-    P = loop.loop_parameters(dynamics.parameter_vector(truth), np.full(6, 30.0), np.array([3e3, 5e3, 2e3, 50, 40, 20]),
+    P = loop.loop_parameters(plant._p, np.full(6, 30.0), np.array([3e3, 5e3, 2e3, 50, 40, 20]),
                              np.array([2e5, 3e5, 1e5, 3e3, 2e3, 1e3]), 0.4, 1e-7, 4e-4)
     rng = np.random.default_rng(1)
     N = 100
@@ -53,7 +55,9 @@ def test_compiled_rollout_equals_python_loop(truth, delay):
         x = np.asarray(X)[:, -1]
         Y.append(np.asarray(Yc).T)
     Y = np.vstack(Y)
-    x_py, Y_py = loop.python_rollout(ls, truth.model, plant._p, x0, U, P, plant._friction)
+    x_py, Y_py = loop.python_rollout(ls, robot.model, plant._p, x0, U, P, plant._friction)
+    if effort_scale < 1.0:
+        assert Y[:, 18:24].max() > 1.5  # torque_ratio block: the saturated branch was exercised
     np.testing.assert_allclose(Y, Y_py, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(x, x_py, rtol=1e-9, atol=1e-9)
 

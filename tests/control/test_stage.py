@@ -33,7 +33,7 @@ def test_stage_without_upstream(quick_config, rx130l, real, tmp_path):
     s = res.summary
     for key in REQUIRED:
         assert key in s, key
-    assert set(s["tcp_error_max_m"]) == {"none", "full_friction"}
+    assert set(s["tcp_error_max_m"]) == {"none", "full_friction"} == set(s["tcp_error_registered_max_m"])
     assert len(s["lag_error_max_rad"]["none"]) == 3
     assert s["sample_time_s"] == 4e-4 and s["delay_samples"] == {"setpoint": 2, "measurement": 1}
     assert s["feedforward_model"] == "nominal" and s["kinematics"] == "nominal"
@@ -61,3 +61,14 @@ def test_stage_with_calibrated_kinematics(quick_config, rx130l, real, tmp_path):
     assert s["kinematics"] == "calibrated"
     # nominal kinematics: mm-level absolute error; calibrated: only the tracking error remains
     assert s["tcp_error_rms_nominal_kinematics_m"] > 5 * s["tcp_error_rms_calibrated_kinematics_m"]
+
+
+@pytest.mark.parametrize("kwargs", [{"engine": "fortran"}, {"on_saturation": "ignore"}, {"variants": ["magic"]},
+                                    {"setpoint_delay_samples": -1}, {"iso": {"plane": "vertical"}},
+                                    {"iso": {"edge_m": 0.0}}])
+def test_bad_config_is_a_config_error(kwargs):
+    from pipeline.control.config import ControlConfig
+    from pipeline.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="control"):
+        ControlConfig(**kwargs)

@@ -19,6 +19,7 @@ def test_feedforward_targets_on_the_iso_path(tmp_path):
     none, ff = "none", "full_friction"
     # identified full feedforward: >= 5x smaller max TCP tracking error and max lag error of axes 1-3
     assert s["tcp_tracking_error_max_m"][none] >= 5 * s["tcp_tracking_error_max_m"][ff]
+    assert s["tcp_error_registered_max_m"][none] >= 5 * s["tcp_error_registered_max_m"][ff]
     assert np.all(np.asarray(s["lag_error_max_rad"][none]) >= 5 * np.asarray(s["lag_error_max_rad"][ff]))
     assert s["realtime_factor"] >= 10
     assert s["tcp_error_rms_calibrated_kinematics_m"] < s["tcp_error_rms_nominal_kinematics_m"]

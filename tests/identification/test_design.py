@@ -91,3 +91,16 @@ def test_check_trajectory_flags_a_limit_violation(rx130l, setup):
     report = D.check_trajectory(rx130l, bad, limits)
     assert not report.feasible
     assert max(report.position_ratio, report.velocity_ratio, report.acceleration_ratio, report.torque_ratio) > 1
+
+
+def test_logdet_option_runs_and_improves_the_determinant(rx130l, setup):
+    reg, base, limits, sym = setup
+    res = D.optimize_excitation(rx130l, sym, reg, base, limits, np.random.default_rng(7), n_samples=40,
+                                n_starts=1, n_random=3, max_iter=10, criterion="logdet")
+    assert res.criterion == "logdet" and res.feasibility.feasible
+    basis = D.fourier_basis(np.arange(40) * 0.25, 0.1, 5)
+    crit = D.ExcitationCriterion(D.regressor_casadi(sym, reg, base), basis, rx130l.nq, "logdet")
+    start = [t for t in D.random_feasible_trajectories(rx130l, limits, 5, 0.1, 3, np.random.default_rng(7))]
+    f_best_start = min(crit.value_and_gradient(t.coefficients.ravel(), False)[0] for t in start)
+    f_opt, _ = crit.value_and_gradient(res.trajectory.coefficients.ravel(), False)
+    assert f_opt < f_best_start

@@ -75,5 +75,5 @@ def test_joint_path_rejects_too_few_samples():
 
 def test_impossible_torque_limits_raise(pm, line_path):
     weak = dataclasses.replace(pm, effort_Nm=pm.effort_Nm * 0.05)   # cannot even hold against gravity
-    with pytest.raises(InfeasibleError):
+    with pytest.raises(InfeasibleError, match="joint 2 torque limit"):
         solve_cp_convex(weak, line_path, 60)

@@ -40,3 +40,17 @@ def test_stage_quick(quick_config, rx130l, ptp_problem, tmp_path):
         assert q.shape == (len(t), 6) and np.all(np.diff(t) > 0)
     assert {"cp_normalised", "ptp_normalised", "ptp_pareto"} <= set(res.figures)
     assert "toppra" in res.report_md
+
+
+def test_check_names_bad_fields(quick_config, rx130l):
+    import pytest
+
+    from pipeline.errors import ConfigError
+
+    base = quick_config.trajectory
+    for field, value, match in (("cp_segment", "rectangle", "cp_segment"), ("ptp_energy", "joules", "ptp_energy"),
+                                ("ptp_goal_deg", [0, 170, 0, 0, 0, 0], "joint 2"),
+                                ("ruckig_check_dt_s", 1e-3, "0.5 ms"), ("ptp_start_deg", [0.0] * 5, "6 numbers")):
+        with pytest.raises(ConfigError, match=match):
+            stage.check(dataclasses.replace(base, **{field: value}), rx130l)
+    stage.check(base, rx130l)
