@@ -24,6 +24,7 @@ unselected, Metropolis acceptance, geometric cooling 0.98, Markov chain length 1
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass, field
@@ -31,7 +32,17 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pipeline.calibration import indices as ix
+from pipeline.calibration._blas import single_thread_blas
 from pipeline.errors import InfeasibleError
+
+
+def _one_blas_thread(fn):
+    """Run a selection algorithm with one OpenBLAS thread (many tiny factorisations)."""
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        with single_thread_blas():
+            return fn(*args, **kwargs)
+    return wrapper
 
 
 @dataclass
@@ -249,19 +260,17 @@ def _random_regular_start(G: np.ndarray, n: int, rng: np.random.Generator, tries
         raise InfeasibleError(None, "calibration.candidates",
                               f"only {pool.size} feasible candidates for {n} configurations "
                               "(increase n_random_candidates or grid_per_axis)")
+    ev_all = np.linalg.eigvalsh(np.einsum("kmi,kmj->ij", G[pool], G[pool]))
+    if ev_all[0] <= 1e-10 * max(ev_all[-1], 1e-300):
+        raise InfeasibleError(None, "calibration.candidates",
+                              "the candidate set cannot make the information matrix regular "
+                              f"(rank {int(np.sum(ev_all > 1e-10 * ev_all[-1]))} < {p} parameters)")
     for _ in range(tries):
         S = rng.choice(pool, size=n, replace=False)
         Gs = G[S]
         ev = np.linalg.eigvalsh(np.einsum("kmi,kmj->ij", Gs, Gs))
         if ev[0] > 1e-10 * max(ev[-1], 1e-300):
             return S
-    # full candidate set singular? then no subset can be regular
-    Mall = np.einsum("kmi,kmj->ij", G[pool], G[pool])
-    ev = np.linalg.eigvalsh(Mall)
-    if ev[0] <= 1e-10 * max(ev[-1], 1e-300):
-        raise InfeasibleError(None, "calibration.candidates",
-                              "the candidate set cannot make the information matrix regular "
-                              f"(rank {int(np.sum(ev > 1e-10 * ev[-1]))} < {p} parameters)")
     raise InfeasibleError(None, "calibration.candidates",
                           f"no regular random subset of {n} configurations in {tries} tries")
 
@@ -275,6 +284,7 @@ def _check(G: np.ndarray) -> np.ndarray:
     return G
 
 
+@_one_blas_thread
 def remove_and_replace(G: np.ndarray, spec: ix.IndexSpec, n_max: int, rng: np.random.Generator,
                        n_initial: int | None = None, positions: np.ndarray | None = None,
                        max_iterations: int = 500, rel_tol: float = 1e-6,
@@ -342,6 +352,7 @@ def remove_and_replace(G: np.ndarray, spec: ix.IndexSpec, n_max: int, rng: np.ra
                            time.perf_counter() - t0, st.evaluations, hist)
 
 
+@_one_blas_thread
 def detmax(G: np.ndarray, spec: ix.IndexSpec, n: int, rng: np.random.Generator,
            positions: np.ndarray | None = None, max_depth: int = 3, max_iterations: int = 500,
            rel_tol: float = 1e-9) -> SelectionResult:
@@ -380,6 +391,7 @@ def detmax(G: np.ndarray, spec: ix.IndexSpec, n: int, rng: np.random.Generator,
                            time.perf_counter() - t0, st.evaluations, hist)
 
 
+@_one_blas_thread
 def bsaa(G: np.ndarray, spec: ix.IndexSpec, n: int, rng: np.random.Generator,
          positions: np.ndarray | None = None, t_initial: float = 1e20, t_final: float = 1e-50,
          cooling: float = 0.98, chain_length: int = 1) -> SelectionResult:
@@ -433,6 +445,7 @@ def bsaa(G: np.ndarray, spec: ix.IndexSpec, n: int, rng: np.random.Generator,
                            time.perf_counter() - t0, st.evaluations, hist)
 
 
+@_one_blas_thread
 def random_design(G: np.ndarray, spec: ix.IndexSpec, n: int, rng: np.random.Generator,
                   positions: np.ndarray | None = None) -> SelectionResult:
     """Heuristic baseline: a random regular subset (paper 000's 'heuristic', paper 003's 'none')."""
@@ -443,6 +456,7 @@ def random_design(G: np.ndarray, spec: ix.IndexSpec, n: int, rng: np.random.Gene
                            time.perf_counter() - t0, 1, [(0, st.value())])
 
 
+@_one_blas_thread
 def linear_scan_design(G: np.ndarray, spec: ix.IndexSpec, n: int,
                        positions: np.ndarray | None = None) -> SelectionResult:
     """Paper 004's comparison: ``n`` candidates equally spaced through the (grid-ordered) set."""

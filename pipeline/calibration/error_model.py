@@ -206,7 +206,7 @@ def identifiability(J: np.ndarray, names: list[str], rel_tol: float = 1e-7,
     scale = np.where(norms > 1e-12 * max(norms.max(), 1e-300), norms, np.inf)
     Jn = J / scale
     s = np.linalg.svd(Jn, compute_uv=False)
-    _, _, Vt = np.linalg.svd(Jn, full_matrices=True)
+    _, _, Vt = np.linalg.svd(Jn, full_matrices=Jn.shape[0] < n)
     tol = rel_tol * s[0]
     rank = int(np.sum(s > tol))
     zero_cols = [i for i in range(n) if not np.isfinite(scale[i])]

@@ -15,18 +15,32 @@ of one period, ``W = [Y_b(q(t_k), v(t_k), a(t_k))]_k`` (``cond(W)^2 = lambda_max
 ``G = W^T W``), or, as an option, ``-log det G`` (D-optimality). IPOPT (through CasADi) solves
 
     min_x  f(x) = log lambda_max(G) - log lambda_min(G)        (= 2 log cond W)
-    s.t.   q, v, a within margin x limits at every sample       (linear in x)
+    s.t.   q, v, a within the limits at every sample             (simple bounds, see below)
            |tau_nominal(q, v, a)| <= margin x tau_max            (symbolic RNEA, exact Jacobian)
            z_tcp(q) >= floor + clearance                        (symbolic FK)
+           capsule pair distances >= clearance, capsule end points above the floor
            rest-to-rest equalities.
+
+The NLP is lifted: the sample states ``S = [q; v; a]_k`` are variables tied to the coefficients by
+linear equalities, so every nonlinear constraint touches one sample (block-sparse Jacobian from
+the per-sample CasADi function mapped with ``.map(N)``) and the kinematic limits are bounds. The
+capsule distance is Ericson's segment-segment distance written with ``if_else`` clamps (the
+symbolic twin of ``RobotModel.capsule_clearances``). The NLP works inside the checked limits
+(factor 0.98, +5 mm clearance); the result is re-checked on a fine grid (``check_trajectory``:
+limits, nominal torques, all capsules) and, if IPOPT stopped on a slightly infeasible iterate,
+its oscillation is shrunk until the check passes; a start that still fails is rejected.
+
+``log cond`` is not differentiable where the extreme eigenvalues cross, which makes IPOPT's line
+search erratic; by default (``softness`` w > 0) IPOPT minimises the smooth surrogate
+``w log sum_i exp(log lambda_i / w) + w log sum_i exp(-log lambda_i / w)`` (soft max minus soft
+min of ``log lambda``), which bounds ``2 log cond`` from above by at most ``2 w log n_b``; the
+starts, the selection of the best start and every reported figure use the exact condition number.
 
 ``f`` and its exact gradient are computed in a CasADi ``Callback``: the regressor and its
 vector-Jacobian product come from the symbolic regressor mapped over the samples (``.map(N)``),
 and ``d lambda = u^T dG u`` for a simple eigenvalue (so the gradient is exact wherever the extreme
-eigenvalues are simple; IPOPT uses a limited-memory Hessian). Self-collision and the floor
-clearance of every capsule are checked with ``RobotModel.capsule_clearances`` on a fine grid after
-the solve; a start whose optimum collides is rejected. Several random feasible starts are solved
-and the best feasible optimum is kept. The baseline is the median condition number of random
+eigenvalues are simple; IPOPT uses a limited-memory Hessian). Several random feasible starts are
+solved and the best feasible optimum is kept. The baseline is the median condition number of random
 feasible Fourier trajectories with the same harmonics and limits.
 """
 
@@ -686,6 +700,7 @@ def optimize_excitation(
     criterion: str = "cond",
     n_check: int = 400,
     progress: Any = None,
+    softness: float = 0.0,
 ) -> ExcitationResult:
     """Random-start IPOPT optimisation of the excitation (see the module docstring).
 
@@ -695,7 +710,7 @@ def optimize_excitation(
     with single_thread_blas():
         return _optimize_excitation_impl(
             robot, sym, reg, base, limits, rng, harmonics, base_frequency_hz, n_samples, n_starts,
-            n_random, max_iter, criterion, n_check, progress,
+            n_random, max_iter, criterion, n_check, progress, softness,
         )
 
 
@@ -715,6 +730,7 @@ def _optimize_excitation_impl(
     criterion: str = "cond",
     n_check: int = 400,
     progress: Any = None,
+    softness: float = 0.0,
 ) -> ExcitationResult:
     """Random-start IPOPT optimisation of the excitation (see the module docstring).
 
@@ -726,7 +742,7 @@ def _optimize_excitation_impl(
     t = np.arange(n_samples) / (n_samples * base_frequency_hz)
     basis = fourier_basis(t, base_frequency_hz, L)
     y_base = regressor_casadi(sym, reg, base)
-    crit = ExcitationCriterion(y_base, basis, nq, criterion)
+    crit = ExcitationCriterion(y_base, basis, nq, criterion, softness)
 
     randoms = random_feasible_trajectories(
         robot, limits, L, base_frequency_hz, max(n_random, n_starts), rng, n_check=n_check // 2
@@ -757,7 +773,8 @@ def _optimize_excitation_impl(
         traj = FourierTrajectory(xk.reshape(nq, 2 * L + 1), base_frequency_hz)
         traj, feas = shrink_to_feasible(robot, traj, limits, n_check)
         condk = condition_number(crit.matrix(traj.coefficients.ravel()))
-        score = crit.value_and_gradient(traj.coefficients.ravel(), gradient=False)[0]
+        score = (np.log(condk) if criterion == "cond"
+                 else crit.value_and_gradient(traj.coefficients.ravel(), gradient=False)[0])
         objs = list(st.get("iterations", {}).get("obj", []))
         hist = [float(np.exp(0.5 * o)) for o in objs] if criterion == "cond" else []
         histories.append(hist)

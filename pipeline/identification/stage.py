@@ -55,6 +55,9 @@ class ExcitationConfig:
     n_random: int = 20  # random feasible trajectories for the baseline median
     max_iter: int = 100
     criterion: str = "cond"  # cond | logdet
+    # >0: IPOPT minimises a smooth surrogate of log cond, soft max - soft min of log(eigenvalues)
+    # of W^T W (log-sum-exp with this width); the reported condition number is the exact one
+    cond_softness: float = 0.2
     position_margin: float = 0.95
     velocity_margin: float = 0.95
     acceleration_margin: float = 0.95
@@ -265,7 +268,7 @@ def _run(ctx: StageContext) -> StageResult:
     sym = SymbolicRobot(robot)
     exc = design_mod.optimize_excitation(
         robot, sym, reg, base_design, limits, ctx.rng, ex.harmonics, ex.base_frequency_hz, ex.n_samples,
-        ex.n_starts, ex.n_random, ex.max_iter, ex.criterion, ex.n_check, ctx.progress)
+        ex.n_starts, ex.n_random, ex.max_iter, ex.criterion, ex.n_check, ctx.progress, ex.cond_softness)
     timings["excitation_s"] = time.perf_counter() - t1
     traj = exc.trajectory
     if not exc.feasibility.feasible:

@@ -105,20 +105,24 @@ class PtpResult:
 
 def _compile_nlp(solver_sx: ca.Function, cache: Path, name: str,
                  flags: tuple[str, ...] = JIT_FLAGS) -> Path:
-    """C code of the NLP's functions (objective, constraints and their derivatives) -> .so."""
+    """C code of the NLP's functions (objective, constraints and their derivatives) -> .so.
+
+    The library is named by the SHA-256 of the code, the gcc flags and the CasADi version: the
+    code contains the robot's kinematic and dynamic parameters, so any model change compiles
+    anew and an unchanged model is never compiled twice (concurrent builders write the same file
+    atomically)."""
     cache.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=cache) as tmp:
-        cwd = os.getcwd()
-        try:
-            os.chdir(tmp)
-            solver_sx.generate_dependencies(f"{name}.c")
-        finally:
-            os.chdir(cwd)
-        src = Path(tmp) / f"{name}.c"
-        code = src.read_text()
-        key = hashlib.sha256((code + " ".join(flags) + ca.__version__).encode()).hexdigest()[:20]
-        lib = cache / f"{name}_{key}.so"
-        if not lib.exists():
+    gen = ca.CodeGenerator(f"{name}.c", {"with_header": False})
+    gen.add(solver_sx.oracle())          # what nlpsol(name, "ipopt", library) loads first
+    for fn in solver_sx.get_function():  # nlp_f, nlp_g, nlp_grad_f, nlp_jac_g, nlp_hess_l, ...
+        gen.add(solver_sx.get_function(fn))
+    code = gen.dump()
+    key = hashlib.sha256((code + " ".join(flags) + ca.__version__).encode()).hexdigest()[:20]
+    lib = cache / f"{name}_{key}.so"
+    if not lib.exists():
+        with tempfile.TemporaryDirectory(dir=cache) as tmp:
+            src = Path(tmp) / f"{name}.c"
+            src.write_text(code)
             tmp_lib = Path(tmp) / f"{name}.so"
             cmd = ["gcc", *flags, str(src), "-o", str(tmp_lib), "-lm"]
             res = subprocess.run(cmd, capture_output=True, text=True, check=False)

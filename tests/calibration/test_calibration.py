@@ -269,3 +269,15 @@ def test_too_small_candidate_set_through_runner_writes_nothing(tmp_path):
     with pytest.raises(PipelineError, match="candidates"):
         run_pipeline(cfg, out_root=tmp_path / "runs", log=lambda m: None)
     assert not (tmp_path / "runs" / "fewcand" / "calibration").exists()
+
+
+@pytest.mark.parametrize("key,value,problem", [("index_name", "O9", "index_name"),
+                                               ("selection_method", "greedy", "selection_method"),
+                                               ("n_configurations", 0, "n_configurations"),
+                                               ("error_model", "dh", "error_model")])
+def test_bad_config_values_name_the_field(key, value, problem):
+    from pipeline.config import quick_config
+    from pipeline.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=f"calibration.{problem}"):
+        quick_config(**{f"calibration.{key}": value})
