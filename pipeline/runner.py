@@ -133,13 +133,17 @@ def _make_real(nominal: Any, cfg: RunConfig) -> Any:
     return RealRobot.create(nominal, cfg.seed, truth_cfg)
 
 
+_ROBOT_PACKAGE = Path(__file__).resolve().parent / "robot"
+
+
 def _code_hash(module: Any) -> str:
-    """Hash of the .py files of the stage's package ("" for objects without a file)."""
+    """Hash of the .py files of the stage's package and of ``pipeline/robot`` (the model, the
+    hidden robot and its sensors every stage stands on); "" for objects without a file."""
     path = getattr(module, "__file__", None)
     if not path:
         return ""
     folder = Path(path).parent
-    return artefacts.hash_tree(folder, suffixes=(".py",))
+    return artefacts.hash_tree(folder, suffixes=(".py",)) + artefacts.hash_tree(_ROBOT_PACKAGE, suffixes=(".py",))
 
 
 def _copy_robot(robot: Any) -> Any:

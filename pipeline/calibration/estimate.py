@@ -142,18 +142,30 @@ def estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarr
 
 
 def calibrated_robot(robot, mm: MeasurementModel, x: np.ndarray):
-    """``RobotModel`` whose joint placements include the identified kinematic errors and whose
-    reflector offset includes the identified offset error (tool/TCP frame unchanged unless tool
-    parameters were identified)."""
-    model = apply_kinematic_errors(robot.model, x[mm.sl_kin], robot.frame_flange,
+    """``RobotModel`` with the identified kinematic errors (lead's conventions, docs/requests/calibration.md).
+
+    - Joint placements and zero offsets: the identified ``j{i}.*`` errors (``apply_kinematic_errors``).
+      Base frame = joint 1's frame: ``j1.*`` and ``base.*`` are not identifiable from tracker
+      readings (they are the unknown tracker pose) and stay zero.
+    - Rigid tool: the identified reflector-offset correction ``dr`` (reflector frame) is applied as a
+      tool *translation* ``tool.dx,dy,dz = R_flange_reflector dr`` in the flange frame, so the TCP moves
+      with the reflector. Tool rotations are unobservable with one reflector and stay nominal.
+    The robot.yaml facts (TCP and reflector in the flange frame) are updated to match, so
+    ``save``/``load`` reproduce the model.
+    """
+    x = np.asarray(x, float)
+    x_kin = x[mm.sl_kin].copy()
+    fl_id = robot.model.getFrameId(robot.frame_flange)
+    rf_id = robot.model.getFrameId(robot.frame_reflector)
+    rel0 = robot.model.frames[fl_id].placement.inverse() * robot.model.frames[rf_id].placement
+    tool = mm.sym.kin.tool
+    x_kin[tool.start : tool.start + 3] += rel0.rotation @ x[mm.sl_reflector]
+    model = apply_kinematic_errors(robot.model, x_kin, robot.frame_flange,
                                    (robot.frame_tcp, robot.frame_reflector))
-    fid = model.getFrameId(robot.frame_reflector)
-    fr = model.frames[fid]
-    dr = x[mm.sl_reflector]
-    model.frames[fid].placement = pin.SE3(fr.placement.rotation, fr.placement.translation + fr.placement.rotation @ dr)
     new = robot.with_model(model)
-    # keep the yaml facts consistent with the model's reflector frame (in the flange frame)
-    fl = model.frames[model.getFrameId(robot.frame_flange)]
-    rel = fl.placement.inverse() * model.frames[fid].placement
-    new.spec.tool.reflector_offset_m = np.asarray(rel.translation, float).copy()
+    fl = model.frames[model.getFrameId(robot.frame_flange)].placement
+    tcp = fl.inverse() * model.frames[model.getFrameId(robot.frame_tcp)].placement
+    rfl = fl.inverse() * model.frames[model.getFrameId(robot.frame_reflector)].placement
+    new.spec.tool.transform_tcp_to_flange = pin.SE3(tcp.rotation.copy(), tcp.translation.copy())
+    new.spec.tool.reflector_offset_m = np.asarray(rfl.translation, float).copy()
     return new

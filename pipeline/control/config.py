@@ -62,6 +62,11 @@ class ControlConfig:
     #: cold-start seeds (deg) for the IK of the first path point, tried in order
     ik_seeds_deg: list[list[float]] = field(default_factory=lambda: [[0.0, 17.0, 86.0, 0.0, 75.0, 0.0],
                                                                       [0.0, 30.0, 70.0, 0.0, 80.0, 0.0]])
+    #: the point that follows the ISO path and whose error is scored: the laser tracker's reflector,
+    #: as paper 004 measures the path with the tracker ("reflector"), or the tool centre point ("tcp";
+    #: its offset from the reflector is not observable by the calibration, so its absolute error
+    #: keeps the tool's unidentified part)
+    path_frame: str = "reflector"
     iso: IsoPathConfig = field(default_factory=IsoPathConfig)
     benchmark_python_seconds: float = 0.5       # >0: time the plain-Python loop for this simulated time
 
@@ -74,6 +79,8 @@ class ControlConfig:
             raise ConfigError(None, "control.delay_samples", "delays must be >= 0 samples")
         if self.engine not in ("compiled", "python"):
             raise ConfigError(None, "control.engine", f"unknown engine {self.engine!r} (compiled|python)")
+        if self.path_frame not in ("reflector", "tcp"):
+            raise ConfigError(None, "control.path_frame", f"{self.path_frame!r} is not reflector|tcp")
         if self.on_saturation not in ("error", "clip"):
             raise ConfigError(None, "control.on_saturation", f"{self.on_saturation!r} is not error|clip")
         bad = set(self.variants) - set(FEEDFORWARD_VARIANTS)

@@ -83,7 +83,7 @@ def run(ctx: StageContext) -> StageResult:
     identified = _upstream_robot(ctx, "identification") is not None
     iso = cfg.iso
     dt = cfg.sample_time_s
-    frame = robot.frame_tcp
+    frame = robot.frame_reflector if cfg.path_frame == "reflector" else robot.frame_tcp
     rotation = tool_rotation(iso.plane, iso.tool_down)
     path = iso9283_path(robot, iso.edge_m, iso.centre_m, iso.plane, rotation, iso.corner_fraction,
                         iso.large_circle_fraction, iso.small_circle_fraction, tuple(iso.segments))

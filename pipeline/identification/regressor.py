@@ -55,6 +55,9 @@ ACTUATOR_PARAMETER_NAMES: tuple[str, ...] = ("Ia", "fv", "fc", "off")
 
 #: relative tolerance on |R_kk| / |R_00| of the pivoted QR below which a column is dependent
 BASE_QR_TOLERANCE = 1e-8
+#: columns whose norm is below this fraction of the largest are zero (round-off of a structurally
+#: zero column must not become a unit column in the normalised QR)
+ZERO_COLUMN_TOLERANCE = 1e-10
 
 
 def parameter_names(model: pin.Model) -> list[str]:
@@ -249,7 +252,8 @@ def base_parameters(
 
     Pivoted QR of the stacked regressor (``scipy.linalg.qr(pivoting=True)``); the rank is the
     number of ``|R_kk| > tolerance * |R_00|``. Columns are normalised before the QR so the pivoting
-    does not depend on the parameter units.
+    does not depend on the parameter units; columns below :data:`ZERO_COLUMN_TOLERANCE` of the
+    largest norm are zero.
     """
     nv = reg.nv
     lo = -np.pi * np.ones(nv) if lower is None else np.asarray(lower)
@@ -273,7 +277,7 @@ def base_parameters_from_regressor(
 
 def _base_from_regressor(Y: np.ndarray, names: list[str], tolerance: float) -> BaseParameters:
     norms = np.linalg.norm(Y, axis=0)
-    zero = norms <= 1e-12 * max(norms.max(), 1e-300)
+    zero = norms <= ZERO_COLUMN_TOLERANCE * max(norms.max(), 1e-300)
     scale = np.where(zero, 1.0, norms)
     Ys = Y / scale
     Ys[:, zero] = 0.0

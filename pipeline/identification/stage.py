@@ -92,7 +92,7 @@ class Config:
     actuator_coupling: str = "auto"
     run_tx40: bool = True
     tx40: Tx40Config = field(default_factory=Tx40Config)
-    score_against_truth: bool = False  # evaluation only: z-scores of the base estimate vs truth
+    score_against_truth: bool = True  # simulated runs: z-scores of the final base estimate vs the truth
     replay_rate_hz: float = 50.0
 
 

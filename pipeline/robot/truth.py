@@ -2,7 +2,8 @@
 
 Perturbations (DESIGN.md, "Truth perturbations", 1-sigma): joint placements 0.5 mm in
 translation and 0.3 mrad in rotation (6 per joint, applied as ``M_i exp6(delta_i)``), joint
-zero offsets 1 mrad (joint 1's placement and zero are the base-frame convention: zero), the
+zero offsets 1 mrad (joint 1's placement and zero, and joint 2's along/about axis 1, are the
+base-frame convention: zero), the
 tool as a rigid body carrying TCP and reflector 0.5 mm and 0.3 mrad, tracker placement a few cm and
 degrees away from its nominal pose; inertial parameters 10–20 % (mass log-normal, centre of
 mass shifted, second moments scaled and rotated so every link stays physically consistent),
@@ -25,7 +26,7 @@ from scipy.linalg import expm
 from pipeline.errors import ConfigError
 from pipeline.robot.model import RobotModel
 from pipeline.robot.sensors import Encoders, LaserTracker, TorqueSensor
-from pipeline.robot.symbolic import KinematicLayout, apply_kinematic_errors
+from pipeline.robot.symbolic import KinematicLayout, apply_kinematic_errors, joint_infos
 
 #: fixed salt so the truth stream is independent of every stage's stream
 _TRUTH_SALT = 0x74727574
@@ -65,6 +66,25 @@ class JointMeasurement:
     tau_Nm: np.ndarray
     tau_sigma_Nm: np.ndarray
     q_sigma_rad: float
+
+
+def _without_base_components(nominal: RobotModel, error_2: np.ndarray) -> np.ndarray:
+    """Joint 2's placement error less its translation along and rotation about axis 1.
+
+    For an arm whose axis 2 meets axis 1 (the RX130L and TX40), moving joint 2 along axis 1 or
+    turning it about axis 1 is the same as moving the base frame, so under the convention
+    "base frame = axes 1 and 2" these two components are zero (the calibration's
+    identifiability analysis finds them combined with the tracker pose). First order in the
+    error, which is what ``exp6`` of a sub-millimetre error is.
+    """
+    model = nominal.model
+    axis_1 = joint_infos(model)[0].s_angular
+    axis_1 = axis_1 / np.linalg.norm(axis_1)
+    in_joint_2 = model.jointPlacements[2].rotation.T @ axis_1  # axis 1 in joint 2's placement frame
+    translation, rotation = error_2[:3].copy(), error_2[3:].copy()
+    translation -= (translation @ in_joint_2) * in_joint_2
+    rotation -= (rotation @ in_joint_2) * in_joint_2
+    return np.concatenate([translation, rotation])
 
 
 def _perturb_inertia(inertia: pin.Inertia, rng: np.random.Generator, cfg: TruthConfig) -> pin.Inertia:
@@ -119,6 +139,7 @@ class RealRobot:
         # not robot errors: they are zero in the truth. Drawn anyway to keep the stream layout.
         errors[layout.placement(1)] = 0.0
         errors[layout.joint_offsets.start] = 0.0
+        errors[layout.placement(2)] = _without_base_components(nominal, errors[layout.placement(2)])
         errors[layout.tool] = np.concatenate([config.tool_translation_sigma_m * rng.standard_normal(3),
                                               config.tool_rotation_sigma_rad * rng.standard_normal(3)])
         model = apply_kinematic_errors(nominal.model, errors, nominal.frame_flange,

@@ -165,3 +165,30 @@ def test_motor_side_csv_is_converted_with_the_gear_matrix(tmp_path):
     rec = load_joint_csv(tmp_path / "motor.csv", tx40, side="motor")
     np.testing.assert_allclose(rec.q_rad, q, atol=1e-12)
     np.testing.assert_allclose(rec.tau_Nm, tau, atol=1e-12)
+
+
+def test_runner_leaves_no_stage_directory_on_bad_input(tmp_path, monkeypatch):
+    """Through the runner (calibration left out of the dependencies to keep this fast)."""
+    from types import SimpleNamespace
+
+    from pipeline import config as config_mod
+    from pipeline.config import CONFIGS_DIR, load_config
+    from pipeline.runner import run_pipeline
+
+    path = tmp_path / "record.csv"
+    t = np.arange(400) * 0.01
+    q = 0.1 * np.sin(np.outer(t, np.arange(1, 7)))
+    q[10, 3] = np.nan
+    _write_csv(path, t, q, np.cos(np.outer(t, np.arange(1, 7))))
+    wrapper = SimpleNamespace(NAME=stage.NAME, DEPENDS=("model",), Config=stage.Config, run=stage.run,
+                              __file__=stage.__file__)
+    cfg = load_config(CONFIGS_DIR / "quick.yaml", stages=["identification"],
+                      values={"identification.data_file": str(path), "identification.run_tx40": False})
+    registry = {"model": config_mod.STAGES["model"], "identification": wrapper}
+    monkeypatch.setattr(config_mod, "STAGES", registry)
+    with pytest.raises(DataFileError, match="record.csv"):
+        run_pipeline(cfg, out_root=tmp_path / "runs")
+    run_dir = tmp_path / "runs" / cfg.name
+    assert (run_dir / "model" / "summary.json").exists()
+    assert not (run_dir / "identification").exists()
+    assert not [p for p in run_dir.iterdir() if "identification" in p.name]
