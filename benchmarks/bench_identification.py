@@ -20,7 +20,7 @@ import pinocchio as pin
 
 from pipeline.identification import design as D
 from pipeline.identification import estimate as E
-from pipeline.identification._threads import single_thread_blas
+from pipeline.blas import single_thread_blas
 from pipeline.identification.regressor import RegressorModel, base_parameters, standard_parameters
 from pipeline.robot.model import RobotModel
 from pipeline.robot.symbolic import SymbolicRobot

@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pipeline.calibration import indices as ix
-from pipeline.calibration._blas import single_thread_blas
+from pipeline.blas import single_thread_blas
 from pipeline.errors import InfeasibleError
 
 

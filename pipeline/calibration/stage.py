@@ -28,7 +28,7 @@ from pipeline.calibration import error_model as em
 from pipeline.calibration import indices as ix
 from pipeline.calibration import measure as ms
 from pipeline.calibration import validate as va
-from pipeline.calibration._blas import single_thread_blas
+from pipeline.blas import single_thread_blas
 from pipeline.calibration.estimate import Estimate, calibrated_robot, estimate
 from pipeline.errors import ConfigError, InfeasibleError, PipelineError
 

@@ -34,7 +34,7 @@ from pipeline.calibration import design as ds
 from pipeline.calibration import error_model as em
 from pipeline.calibration import indices as ix
 from pipeline.calibration import stage as st
-from pipeline.calibration._blas import single_thread_blas
+from pipeline.blas import single_thread_blas
 from pipeline.calibration.estimate import estimate
 
 

@@ -53,7 +53,7 @@ import casadi as ca
 import numpy as np
 
 from pipeline.errors import InfeasibleError
-from pipeline.identification._threads import single_thread_blas
+from pipeline.blas import single_thread_blas
 from pipeline.identification.regressor import BaseParameters, RegressorModel
 
 

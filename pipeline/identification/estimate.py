@@ -28,7 +28,7 @@ import casadi as ca
 import numpy as np
 
 from pipeline.errors import DataFileError, SolverError
-from pipeline.identification._threads import single_thread_blas
+from pipeline.blas import single_thread_blas
 
 #: lower bound of rotor inertia (kg m^2) and friction (N m s/rad, N m) in the physical fit
 POSITIVE_LOWER_BOUND = 1e-6

@@ -269,7 +269,7 @@ def base_parameters_from_regressor(
     Y: np.ndarray, names: list[str], tolerance: float = BASE_QR_TOLERANCE
 ) -> BaseParameters:
     """Base parameters of a given (well excited) regressor by pivoted QR."""
-    from pipeline.identification._threads import single_thread_blas
+    from pipeline.blas import single_thread_blas
 
     with single_thread_blas():
         return _base_from_regressor(Y, names, tolerance)

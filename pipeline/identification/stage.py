@@ -29,7 +29,7 @@ from pipeline.identification import design as design_mod
 from pipeline.identification import estimate as est_mod
 from pipeline.identification import measure as meas_mod
 from pipeline.identification import validate as val_mod
-from pipeline.identification._threads import single_thread_blas
+from pipeline.blas import single_thread_blas
 from pipeline.identification.regressor import (
     BASE_QR_TOLERANCE,
     BaseParameters,

@@ -27,7 +27,7 @@ import numpy as np
 from pipeline.config import REPO_ROOT
 from pipeline.errors import DataFileError
 from pipeline.identification import estimate as est_mod
-from pipeline.identification._threads import single_thread_blas
+from pipeline.blas import single_thread_blas
 from pipeline.identification.measure import JointRecord, ProcessedData, motor_to_joint, process_record
 from pipeline.identification.regressor import (
     BaseParameters,
