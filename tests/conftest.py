@@ -93,3 +93,23 @@ def fake_stages(monkeypatch):
     registry = {"a": fakes.make("a"), "b": fakes.make("b", ("a",)), "c": fakes.make("c", ("b",))}
     monkeypatch.setattr(config, "STAGES", registry)
     return fakes
+
+
+# ---------------------------------------------------------------------------- notebooks
+NOTEBOOKS = REPO / "notebooks"
+
+
+def _execute_notebook(name: str, workdir: Path) -> str:
+    import nbformat
+    from nbclient import NotebookClient
+
+    nb = nbformat.read(NOTEBOOKS / name, as_version=4)
+    NotebookClient(nb, timeout=300, kernel_name="python3", resources={"metadata": {"path": str(workdir)}}).execute()
+    return "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", []))
+
+
+@pytest.fixture
+def execute_notebook():
+    """``execute_notebook(name, workdir) -> str``: run ``notebooks/<name>`` top to bottom in
+    ``workdir`` and return the text of all its outputs."""
+    return _execute_notebook

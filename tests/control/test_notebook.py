@@ -2,16 +2,7 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 
-import nbformat
-from nbclient import NotebookClient
-
-NOTEBOOK = Path(__file__).resolve().parents[2] / "notebooks" / "03_control.ipynb"
-
-
-def test_control_notebook_executes(tmp_path):
-    nb = nbformat.read(NOTEBOOK, as_version=4)
-    NotebookClient(nb, timeout=300, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}}).execute()
-    text = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", []))
+def test_control_notebook_executes(tmp_path, execute_notebook):
+    text = execute_notebook("03_control.ipynb", tmp_path)
     assert "velocity loop PM" in text and "real-time factor" in text
