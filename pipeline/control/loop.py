@@ -22,10 +22,7 @@ keyed by a hash of the structure, the loop settings, CasADi's version and this s
 from __future__ import annotations
 
 import hashlib
-import os
 import platform
-import subprocess
-import tempfile
 import threading
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,9 +31,9 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
+from pipeline import codegen
 from pipeline.control import dynamics
 from pipeline.control.dynamics import ChainStructure
-from pipeline.errors import SolverError
 
 
 @dataclass(frozen=True)
@@ -148,34 +145,18 @@ _CACHE: dict[str, ca.Function] = {}
 _LOCK = threading.Lock()
 
 
-def cache_dir() -> Path:
-    root = Path(os.environ.get("PIPELINE_CACHE", Path.home() / ".cache" / "pipeline"))
-    return root / "control"
-
-
 def compiled_rollout(ls: LoopStructure) -> ca.Function:
-    """``roll(x0, U (n_input x chunk), P) -> (X, Y)`` compiled with gcc, cached in memory and on disk."""
+    """``roll(x0, U (n_input x chunk), P) -> (X, Y)`` compiled with gcc, cached in memory and on disk.
+
+    The disk cache is keyed by the loop structure (:meth:`LoopStructure.key`), so the costly
+    code generation of the rolled-out step runs only when the library is missing."""
     key = ls.key()
     with _LOCK:
         if key in _CACHE:
             return _CACHE[key]
-        d = cache_dir()
-        d.mkdir(parents=True, exist_ok=True)
-        so = d / f"rollout_{key}.so"
-        if not so.exists():
-            roll = build_step(ls).mapaccum("roll", ls.chunk_samples, [0], [0])
-            with tempfile.TemporaryDirectory(dir=d) as tmp:
-                cg = ca.CodeGenerator(f"roll_{key}.c", {"with_header": False})
-                cg.add(roll)
-                cg.generate(tmp + os.sep)
-                c_file = Path(tmp) / f"roll_{key}.c"
-                tmp_so = Path(tmp) / so.name
-                proc = subprocess.run(["gcc", "-shared", "-fPIC", *GCC_FLAGS, str(c_file), "-o", str(tmp_so)],
-                                      capture_output=True, text=True)
-                if proc.returncode != 0:
-                    raise SolverError(str(c_file), "gcc", proc.stderr.strip()[-400:])
-                os.replace(tmp_so, so)  # atomic
-        f = ca.external("roll", str(so))
+        library = codegen.build_library("roll", lambda: [build_step(ls).mapaccum("roll", ls.chunk_samples, [0], [0])],
+                                        subdir="control", flags=GCC_FLAGS, key=key)
+        f = ca.external("roll", str(library))
         _CACHE[key] = f
         return f
 

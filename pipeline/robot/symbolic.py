@@ -42,10 +42,6 @@ Nothing here depends on ``K``.
 
 from __future__ import annotations
 
-import hashlib
-import os
-import subprocess
-import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -55,6 +51,7 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
+from pipeline import codegen
 from pipeline.errors import PipelineError, RobotFileError
 from pipeline.robot import spatial_sx as sx
 
@@ -63,7 +60,7 @@ INERTIAL_COMPONENTS = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz",
 DEFAULT_FLANGE_FRAME = "flange"
 DEFAULT_TOOL_FRAMES = ("tcp", "reflector")
 DEFAULT_COULOMB_SMOOTHING_RAD_S = 0.01
-JIT_FLAGS = ("-O2", "-shared", "-fPIC")
+JIT_FLAGS = ("-O2",)
 
 
 # --------------------------------------------------------------------------------------------
@@ -374,40 +371,9 @@ def set_dynamic_parameters(model: pin.Model, p_dyn: Any) -> pin.Model:
 # --------------------------------------------------------------------------------------------
 
 
-def default_cache_dir() -> Path:
-    """``$PIPELINE_CACHE_DIR`` or ``~/.cache/pipeline``."""
-    env = os.environ.get("PIPELINE_CACHE_DIR")
-    return Path(env) if env else Path.home() / ".cache" / "pipeline"
-
-
 def compile_function(function: ca.Function, cache_dir: Path | None = None) -> ca.Function:
-    """Compile ``function`` to a shared library with gcc and load it with ``ca.external``.
-
-    The library is cached under ``cache_dir/casadi`` keyed by the SHA-256 of the generated C code
-    (so any change of the model or of the expression gives a new library). The result has the
-    same inputs/outputs; it is evaluated numerically or inside MX graphs (not with SX arguments).
-    """
-    cache = (cache_dir or default_cache_dir()) / "casadi"
-    cache.mkdir(parents=True, exist_ok=True)
-    name = function.name()
-    gen = ca.CodeGenerator(f"{name}.c", {"with_header": False})
-    gen.add(function)
-    source = gen.dump()
-    key = hashlib.sha256(
-        (source + " ".join(JIT_FLAGS) + ca.__version__).encode()
-    ).hexdigest()[:20]
-    lib = cache / f"{name}_{key}.so"
-    if not lib.exists():
-        with tempfile.TemporaryDirectory(dir=cache) as tmp:
-            src = Path(tmp) / f"{name}.c"
-            src.write_text(source)
-            tmp_lib = Path(tmp) / f"{name}.so"
-            cmd = ["gcc", *JIT_FLAGS, str(src), "-o", str(tmp_lib), "-lm"]
-            result = subprocess.run(cmd, capture_output=True, text=True, check=False)
-            if result.returncode != 0:
-                raise PipelineError(str(src), name, f"gcc failed: {result.stderr.strip()[:500]}")
-            os.replace(tmp_lib, lib)  # atomic: concurrent builders write the same content
-    return ca.external(name, str(lib))
+    """``function`` compiled with gcc and cached (:func:`pipeline.codegen.compile_function`)."""
+    return codegen.compile_function(function, subdir="casadi", flags=JIT_FLAGS, cache_dir=cache_dir)
 
 
 # --------------------------------------------------------------------------------------------

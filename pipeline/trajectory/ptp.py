@@ -28,10 +28,6 @@ keyed by the SHA-256 of the generated code, so a user pays the compile at most o
 
 from __future__ import annotations
 
-import hashlib
-import os
-import subprocess
-import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,17 +36,13 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from pipeline import codegen
 from pipeline.errors import InfeasibleError, PipelineError, SolverError
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.trajectories import JointTrajectory
 
-JIT_FLAGS = ("-O1", "-shared", "-fPIC")
+JIT_FLAGS = ("-O1",)
 FORMULATION_VERSION = "ptp-v1"
-
-
-def cache_dir_default() -> Path:
-    env = os.environ.get("PIPELINE_CACHE_DIR")
-    return (Path(env) if env else Path.home() / ".cache" / "pipeline") / "trajectory"
 
 
 def energy_weights(pm: PlanningModel, kind: str, motor_resistance_ohm: Any = None,
@@ -103,33 +95,17 @@ class PtpResult:
         return JointTrajectory(name, t, q, v, a, info={"k1": self.k1, "k2": self.k2})
 
 
-def _compile_nlp(solver_sx: ca.Function, cache: Path, name: str,
+def _compile_nlp(solver_sx: ca.Function, cache_dir: Path | None, name: str,
                  flags: tuple[str, ...] = JIT_FLAGS) -> Path:
     """C code of the NLP's functions (objective, constraints and their derivatives) -> .so.
 
-    The library is named by the SHA-256 of the code, the gcc flags and the CasADi version: the
-    code contains the robot's kinematic and dynamic parameters, so any model change compiles
-    anew and an unchanged model is never compiled twice (concurrent builders write the same file
-    atomically)."""
-    cache.mkdir(parents=True, exist_ok=True)
-    gen = ca.CodeGenerator(f"{name}.c", {"with_header": False})
-    gen.add(solver_sx.oracle())          # what nlpsol(name, "ipopt", library) loads first
-    for fn in solver_sx.get_function():  # nlp_f, nlp_g, nlp_grad_f, nlp_jac_g, nlp_hess_l, ...
-        gen.add(solver_sx.get_function(fn))
-    code = gen.dump()
-    key = hashlib.sha256((code + " ".join(flags) + ca.__version__).encode()).hexdigest()[:20]
-    lib = cache / f"{name}_{key}.so"
-    if not lib.exists():
-        with tempfile.TemporaryDirectory(dir=cache) as tmp:
-            src = Path(tmp) / f"{name}.c"
-            src.write_text(code)
-            tmp_lib = Path(tmp) / f"{name}.so"
-            cmd = ["gcc", *flags, str(src), "-o", str(tmp_lib), "-lm"]
-            res = subprocess.run(cmd, capture_output=True, text=True, check=False)
-            if res.returncode != 0:
-                raise PipelineError(str(src), name, f"gcc failed: {res.stderr.strip()[:500]}")
-            os.replace(tmp_lib, lib)
-    return lib
+    Named by the SHA-256 of the code (:func:`pipeline.codegen.build_library`): the code contains
+    the robot's kinematic and dynamic parameters, so any model change compiles anew and an
+    unchanged model is never compiled twice."""
+    # what nlpsol(name, "ipopt", library) loads: the oracle, then nlp_f, nlp_g, nlp_grad_f, ...
+    functions = [solver_sx.oracle(), *(solver_sx.get_function(fn) for fn in solver_sx.get_function())]
+    return codegen.build_library(name, functions, subdir="trajectory", flags=flags,
+                                 cache_dir=cache_dir)
 
 
 class PtpProblem:
@@ -204,7 +180,7 @@ class PtpProblem:
         self.compile_time_s = 0.0
         if self.jit:
             t1 = time.perf_counter()
-            lib = _compile_nlp(solver, Path(cache_dir) if cache_dir else cache_dir_default(), name,
+            lib = _compile_nlp(solver, Path(cache_dir) if cache_dir else None, name,
                                tuple(jit_flags))
             solver = ca.nlpsol(name, "ipopt", str(lib), opts)
             self.library = lib
