@@ -20,11 +20,11 @@ import time
 
 import numpy as np
 
+from pipeline.blas import single_thread_blas
 from pipeline.calibration import design as ds
 from pipeline.calibration import error_model as em
 from pipeline.calibration import indices as ix
 from pipeline.calibration import stage as st
-from pipeline.blas import single_thread_blas
 from pipeline.calibration.gradient_design import GradientDesignConfig, gradient_design
 from pipeline.robot.model import RobotModel
 

@@ -18,9 +18,9 @@ import time
 import numpy as np
 import pinocchio as pin
 
+from pipeline.blas import single_thread_blas
 from pipeline.identification import design as D
 from pipeline.identification import estimate as E
-from pipeline.blas import single_thread_blas
 from pipeline.identification.regressor import RegressorModel, base_parameters, standard_parameters
 from pipeline.robot.model import RobotModel
 from pipeline.robot.symbolic import SymbolicRobot

@@ -31,8 +31,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pipeline.calibration import indices as ix
 from pipeline.blas import single_thread_blas
+from pipeline.calibration import indices as ix
 from pipeline.errors import InfeasibleError
 
 

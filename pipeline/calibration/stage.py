@@ -22,13 +22,13 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.blas import single_thread_blas
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import design as ds
 from pipeline.calibration import error_model as em
 from pipeline.calibration import indices as ix
 from pipeline.calibration import measure as ms
 from pipeline.calibration import validate as va
-from pipeline.blas import single_thread_blas
 from pipeline.calibration.estimate import Estimate, calibrated_robot, estimate
 from pipeline.errors import ConfigError, InfeasibleError, PipelineError
 

@@ -29,12 +29,12 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
+from pipeline.blas import single_thread_blas
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import design as ds
 from pipeline.calibration import error_model as em
 from pipeline.calibration import indices as ix
 from pipeline.calibration import stage as st
-from pipeline.blas import single_thread_blas
 from pipeline.calibration.estimate import estimate
 
 

@@ -37,8 +37,8 @@ class Reference:
     s_m: np.ndarray          # (N,) arc length along the whole path
 
 
-def speed_profile(length_m: float, v_max: float, a_max: float, j_max: float, t_s: np.ndarray) -> np.ndarray:
-    """(len(t_s), 3) arrays of s, s_dot, s_ddot of a rest-to-rest ruckig profile sampled at t_s."""
+def _ruckig_profile(length_m: float, v_max: float, a_max: float, j_max: float) -> Trajectory:
+    """Rest-to-rest jerk-limited ruckig profile of one axis over ``length_m``."""
     otg = Ruckig(1)
     inp = InputParameter(1)
     inp.current_position, inp.current_velocity, inp.current_acceleration = [0.0], [0.0], [0.0]
@@ -48,6 +48,12 @@ def speed_profile(length_m: float, v_max: float, a_max: float, j_max: float, t_s
     res = otg.calculate(inp, traj)
     if res not in (Result.Working, Result.Finished):
         raise SolverError(None, "ruckig", f"speed profile failed ({res}) for length {length_m} m")
+    return traj
+
+
+def speed_profile(length_m: float, v_max: float, a_max: float, j_max: float, t_s: np.ndarray) -> np.ndarray:
+    """(len(t_s), 3) arrays of s, s_dot, s_ddot of a rest-to-rest ruckig profile sampled at t_s."""
+    traj = _ruckig_profile(length_m, v_max, a_max, j_max)
     out = np.empty((len(t_s), 3))
     for k, t in enumerate(t_s):
         p, v, a = traj.at_time(float(min(t, traj.duration)))
@@ -56,14 +62,7 @@ def speed_profile(length_m: float, v_max: float, a_max: float, j_max: float, t_s
 
 
 def profile_duration(length_m: float, v_max: float, a_max: float, j_max: float) -> float:
-    otg = Ruckig(1)
-    inp = InputParameter(1)
-    inp.current_position, inp.current_velocity, inp.current_acceleration = [0.0], [0.0], [0.0]
-    inp.target_position, inp.target_velocity, inp.target_acceleration = [float(length_m)], [0.0], [0.0]
-    inp.max_velocity, inp.max_acceleration, inp.max_jerk = [float(v_max)], [float(a_max)], [float(j_max)]
-    traj = Trajectory(1)
-    otg.calculate(inp, traj)
-    return float(traj.duration)
+    return float(_ruckig_profile(length_m, v_max, a_max, j_max).duration)
 
 
 def cartesian_reference(robot, path: CartesianPath, sample_time_s: float, speed_m_s: float,

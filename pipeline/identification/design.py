@@ -52,8 +52,8 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from pipeline.errors import InfeasibleError
 from pipeline.blas import single_thread_blas
+from pipeline.errors import InfeasibleError
 from pipeline.identification.regressor import BaseParameters, RegressorModel
 
 
@@ -684,34 +684,12 @@ def shrink_to_feasible(
     return traj, report
 
 
-def optimize_excitation(
-    robot: Any,
-    sym: Any,
-    reg: RegressorModel,
-    base: BaseParameters,
-    limits: ExcitationLimits,
-    rng: np.random.Generator,
-    harmonics: int = 5,
-    base_frequency_hz: float = 0.1,
-    n_samples: int = 100,
-    n_starts: int = 4,
-    n_random: int = 20,
-    max_iter: int = 150,
-    criterion: str = "cond",
-    n_check: int = 400,
-    progress: Any = None,
-    softness: float = 0.0,
-) -> ExcitationResult:
-    """Random-start IPOPT optimisation of the excitation (see the module docstring).
-
-    ``n_random`` random feasible trajectories give the baseline median; the ``n_starts`` best of
-    them (by the criterion) are the starts of the NLP.
-    """
+def optimize_excitation(robot: Any, sym: Any, reg: RegressorModel, base: BaseParameters, limits: ExcitationLimits,
+                        rng: np.random.Generator, **options: Any) -> ExcitationResult:
+    """Random-start IPOPT optimisation of the excitation (see the module docstring) with one BLAS
+    thread; ``options`` are those of :func:`_optimize_excitation_impl`."""
     with single_thread_blas():
-        return _optimize_excitation_impl(
-            robot, sym, reg, base, limits, rng, harmonics, base_frequency_hz, n_samples, n_starts,
-            n_random, max_iter, criterion, n_check, progress, softness,
-        )
+        return _optimize_excitation_impl(robot, sym, reg, base, limits, rng, **options)
 
 
 def _optimize_excitation_impl(

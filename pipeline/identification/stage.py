@@ -24,12 +24,12 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
+from pipeline.blas import single_thread_blas
 from pipeline.errors import ConfigError, DataFileError, InfeasibleError, PipelineError
 from pipeline.identification import design as design_mod
 from pipeline.identification import estimate as est_mod
 from pipeline.identification import measure as meas_mod
 from pipeline.identification import validate as val_mod
-from pipeline.blas import single_thread_blas
 from pipeline.identification.regressor import (
     BASE_QR_TOLERANCE,
     BaseParameters,
@@ -267,8 +267,9 @@ def _run(ctx: StageContext) -> StageResult:
     t1 = time.perf_counter()
     sym = SymbolicRobot(robot)
     exc = design_mod.optimize_excitation(
-        robot, sym, reg, base_design, limits, ctx.rng, ex.harmonics, ex.base_frequency_hz, ex.n_samples,
-        ex.n_starts, ex.n_random, ex.max_iter, ex.criterion, ex.n_check, ctx.progress, ex.cond_softness)
+        robot, sym, reg, base_design, limits, ctx.rng, harmonics=ex.harmonics, base_frequency_hz=ex.base_frequency_hz,
+        n_samples=ex.n_samples, n_starts=ex.n_starts, n_random=ex.n_random, max_iter=ex.max_iter,
+        criterion=ex.criterion, n_check=ex.n_check, progress=ctx.progress, softness=ex.cond_softness)
     timings["excitation_s"] = time.perf_counter() - t1
     traj = exc.trajectory
     if not exc.feasibility.feasible:

@@ -24,10 +24,10 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.blas import single_thread_blas
 from pipeline.config import REPO_ROOT
 from pipeline.errors import DataFileError
 from pipeline.identification import estimate as est_mod
-from pipeline.blas import single_thread_blas
 from pipeline.identification.measure import JointRecord, ProcessedData, motor_to_joint, process_record
 from pipeline.identification.regressor import (
     BaseParameters,
