@@ -61,18 +61,6 @@ def test_criterion_gradient_is_exact(rx130l, setup, criterion, softness):
         assert (fp - fm) / 2 == pytest.approx(g @ d, rel=1e-4, abs=1e-12)
 
 
-def test_symbolic_capsule_clearances_match_the_model(rx130l, setup):
-    *_, sym = setup
-    f = D.capsule_clearance_function(rx130l, sym)
-    rng = np.random.default_rng(4)
-    for _ in range(30):
-        q = rng.uniform(rx130l.limits.lower_rad, rx130l.limits.upper_rad)
-        pair, floor = (np.asarray(x).ravel() for x in f(q))
-        p2, f2 = rx130l.capsule_clearances(rx130l.capsule_segments(q))
-        np.testing.assert_allclose(pair, p2[0], atol=1e-6)
-        assert floor.min() == pytest.approx(f2[0].min(), abs=1e-9)
-
-
 def test_optimised_excitation_is_feasible_and_better_than_random(rx130l, setup):
     reg, base, limits, sym = setup
     res = D.optimize_excitation(rx130l, sym, reg, base, limits, np.random.default_rng(5), n_samples=50,
