@@ -33,7 +33,8 @@ import numpy as np
 import pinocchio as pin
 
 from pipeline.robot import spatial_sx as sx
-from pipeline.robot.symbolic import KINEMATIC_COMPONENTS, SymbolicRobot
+from pipeline.robot.parameters import KINEMATIC_COMPONENTS
+from pipeline.robot.symbolic import SymbolicRobot
 
 TRACKER_NAMES = [f"tracker.{c}" for c in KINEMATIC_COMPONENTS]
 REFLECTOR_NAMES = ["reflector.dx", "reflector.dy", "reflector.dz"]

@@ -22,7 +22,7 @@ from scipy.spatial.transform import Rotation
 
 from pipeline.calibration.error_model import MeasurementModel
 from pipeline.errors import SolverError
-from pipeline.robot.symbolic import apply_kinematic_errors
+from pipeline.robot.parameters import apply_kinematic_errors
 
 
 def register_points(tracker_points: np.ndarray, base_points: np.ndarray) -> pin.SE3:

@@ -9,14 +9,19 @@ Objective (paper 000 eq. 24a with the KPI covariance ``C_s``): the index of an
 ``G_k = J_k P / sigma_k`` the whitened identification Jacobian (exact, CasADi AD of the measurement
 model at ``x = 0``), ``W = J_w^T J_w / n_w`` for the TCP criterion. Constraints per configuration
 (paper 000 eqs. 19-24): joint limits (bounds); laser incidence ``cos(beta) >= cos(beta_max - margin)``;
-capsule-capsule distances of non-adjacent links ``>= margin`` (segment-segment distance in closed
-form with clamped parameters as in Lumelsky's algorithm, paper 000 eq. 20, squared to avoid the
-square root); capsule end points above the floor; the tracker beam (a thin segment) clear of every
-link capsule and obstacle; robot capsules clear of optional obstacle capsules.
+capsule-capsule clearances of non-adjacent links and capsule end points above the floor
+``>= margin`` (the shared :func:`pipeline.robot.collision_sx.capsule_clearance_function`,
+segment-segment distance in closed form with clamped parameters, Ericson §5.1.9 / Lumelsky,
+paper 000 eq. 20); the tracker beam (a thin segment) clear of every link capsule and obstacle and
+robot capsules clear of optional obstacle capsules (:func:`~pipeline.robot.collision_sx.segment_distance_sx`).
+All kinematics is :class:`pipeline.robot.symbolic.SymbolicRobot` forward kinematics at the nominal
+kinematic parameters (``p_kin = 0``), i.e. the same model as the numeric filters and the sensor rule.
 
 Solved by IPOPT (limited-memory Hessian) warm-started from a discrete design (remove-and-replace).
-Every configuration of the result is re-checked with the numpy filter (no margins); a configuration
-that fails is replaced by its warm start, so the result is never less feasible than the start.
+Every configuration of the result is re-checked with the numeric rules (Pinocchio capsules,
+:func:`pipeline.robot.sensors.tracker_visibility`, joint limits, obstacles; no margins); a
+configuration that fails is replaced by its warm start, so the result is never less feasible than
+the start.
 """
 
 from __future__ import annotations
@@ -28,9 +33,11 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from pipeline.calibration import candidates as cd
 from pipeline.calibration import indices as ix
 from pipeline.calibration.error_model import MeasurementModel, se3_to_vector
+from pipeline.robot.collision import segment_distances
+from pipeline.robot.collision_sx import capsule_clearance_function, segment_distance_sx
+from pipeline.robot.sensors import BEAM_END_CLEARANCE_M, tracker_visibility
 
 
 @dataclass
@@ -66,56 +73,30 @@ class GradientDesignResult:
                 "n_configurations": int(len(self.Q))}
 
 
-def _rot_axis_sx(axis: np.ndarray, q) -> ca.SX:
-    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return ca.DM.eye(3) + ca.sin(q) * ca.DM(K) + (1 - ca.cos(q)) * ca.DM(K @ K)
-
-
-def _fk_sx(chain: cd.Chain, q: ca.SX):
-    """Post-motion joint frames (R, o) and the reflector point/axis as SX."""
-    R = ca.DM.eye(3)
-    o = ca.DM.zeros(3, 1)
-    frames = []
-    for i in range(chain.nq):
-        o = o + R @ ca.DM(chain.p_place[i])
-        R = R @ ca.DM(chain.R_place[i]) @ _rot_axis_sx(chain.axis[i], q[i])
-        frames.append((R, o))
-    p_refl = o + R @ ca.DM(chain.reflector_p)
-    axis = R @ ca.DM(chain.reflector_axis_joint)
-    return frames, p_refl, axis
-
-
-def _capsule_world(chain: cd.Chain, frames, c: int):
-    j = int(chain.capsule_joint[c])
-    a, b = chain.capsule_p[c]
-    if j == 0:
-        return ca.DM(a), ca.DM(b)
-    R, o = frames[j - 1]
-    return o + R @ ca.DM(a), o + R @ ca.DM(b)
-
-
-def segment_distance_sq(p0, p1, q0, q1, eps: float = 1e-9):
-    """Squared distance between segments (closed form with clamped parameters; Ericson §5.1.9,
-    Lumelsky 1985), continuous and piecewise smooth; ``eps`` regularises parallel segments."""
-    d1 = p1 - p0
-    d2 = q1 - q0
-    r = p0 - q0
-    a = ca.dot(d1, d1)
-    e = ca.dot(d2, d2)
-    f = ca.dot(d2, r)
-    c = ca.dot(d1, r)
-    b = ca.dot(d1, d2)
-    denom = a * e - b * b + eps
-
-    def clamp(x):
-        return ca.fmin(ca.fmax(x, 0), 1)
-
-    s = clamp((b * f - c * e) / denom)
-    t = (b * s + f) / (e + eps)
-    s = ca.if_else(t < 0, clamp(-c / (a + eps)), ca.if_else(t > 1, clamp((b - c) / (a + eps)), s))
-    t = clamp(t)
-    diff = p0 + s * d1 - q0 - t * d2
-    return ca.dot(diff, diff)
+def feasible_configurations(robot, Q: np.ndarray, transform_tracker_to_base, obstacles=()) -> np.ndarray:
+    """Mask of the rows of ``Q`` inside the joint limits, free of self/floor collision
+    (``RobotModel.capsule_clearances >= 0``), measurable (:func:`pipeline.robot.sensors.tracker_visibility`)
+    and with the beam and the moving capsules clear of the obstacle capsules ``(p0, p1, radius_m)``."""
+    Q = np.atleast_2d(np.asarray(Q, float))
+    ok = np.all((Q >= robot.limits.lower_rad) & (Q <= robot.limits.upper_rad), axis=1)
+    seg = robot.capsule_segments(Q)
+    pair, floor = robot.capsule_clearances(seg)
+    ok &= np.all(pair >= 0, axis=1) & np.all(floor >= 0, axis=1)
+    ok &= tracker_visibility(robot, transform_tracker_to_base, Q).visible
+    if len(obstacles):
+        pos = robot.positions(Q, robot.frame_reflector)
+        tracker = np.broadcast_to(np.asarray(transform_tracker_to_base.translation, float), pos.shape)
+        beam = tracker - pos
+        beam_end = pos + BEAM_END_CLEARANCE_M * beam / np.linalg.norm(beam, axis=1, keepdims=True)
+        moving = [robot.model.frames[robot.frame_id(c.frame)].parentJoint >= 1 for c in robot.capsules]
+        for o0, o1, r_o in obstacles:
+            o0b, o1b = np.broadcast_to(o0, pos.shape), np.broadcast_to(o1, pos.shape)
+            ok &= segment_distances(beam_end, tracker, o0b, o1b) >= r_o
+            for c, cap in enumerate(robot.capsules):
+                if moving[c]:
+                    d = segment_distances(seg[:, c, 0], seg[:, c, 1], o0b, o1b)
+                    ok &= d >= cap.radius_m + r_o
+    return ok
 
 
 def gradient_design(robot, mm: MeasurementModel, basis: np.ndarray, Q_start: np.ndarray, spec: ix.IndexSpec,
@@ -127,7 +108,6 @@ def gradient_design(robot, mm: MeasurementModel, basis: np.ndarray, Q_start: np.
     """
     cfg = cfg or GradientDesignConfig()
     t0 = time.perf_counter()
-    chain = cd.chain_from_robot(robot, transform_tracker_to_base)
     Q_start = np.asarray(Q_start, float)
     n, nq = Q_start.shape
     P = np.asarray(basis, float)
@@ -138,43 +118,52 @@ def gradient_design(robot, mm: MeasurementModel, basis: np.ndarray, Q_start: np.
         W = spec.weight_matrix(p)
     else:
         raise ValueError(f"gradient design supports the A-type indices, not {spec.name}")
+    tracker_spec = robot.tracker
+    lower, upper = np.asarray(robot.limits.lower_rad, float), np.asarray(robot.limits.upper_rad, float)
+    radii = [c.radius_m for c in robot.capsules]
+    obstacles = [(np.asarray(o0, float), np.asarray(o1, float), float(r_o)) for o0, o1, r_o in cfg.obstacles]
 
     # per-configuration information matrix as a function of q (exact AD of the measurement model)
     q = ca.SX.sym("q", nq)
     y, J = mm.hj(q, ca.DM.zeros(mm.n), ca.DM(se3_to_vector(T0)))
-    sigma = chain.noise_const_m + chain.noise_per_m * ca.norm_2(y)
+    sigma = tracker_spec.noise_const_m + tracker_spec.noise_per_m * ca.norm_2(y)
     G = (J @ ca.DM(P)) / sigma
     info = ca.Function("info", [q], [G.T @ G])
-    # constraints of one configuration
-    frames, p_refl, axis = _fk_sx(chain, q)
-    tracker = ca.DM(chain.tracker_t)
+    # constraints of one configuration, on SymbolicRobot FK at the nominal parameters
+    sym = mm.sym
+    p_kin = ca.DM(sym.nominal_kinematic_parameters())
+    p_refl, R_refl = sym.fk(robot.frame_reflector)(q, p_kin)
+    axis = R_refl @ ca.DM(np.asarray(robot.reflector_axis, float))   # as tracker_visibility
+    caps = []
+    for cap in robot.capsules:
+        pos, rot = sym.fk(cap.frame)(q, p_kin)
+        caps.append((pos + rot @ ca.DM(np.asarray(cap.p0, float)), pos + rot @ ca.DM(np.asarray(cap.p1, float))))
+    # capsule of the reflector's own link (rigid, known geometry: a small beam margin only)
+    last_joint = robot.model.frames[robot.frame_id(robot.frame_reflector)].parentJoint
+    on_last = [robot.model.frames[robot.frame_id(c.frame)].parentJoint == last_joint for c in robot.capsules]
+    moving = [robot.model.frames[robot.frame_id(c.frame)].parentJoint >= 1 for c in robot.capsules]
+    tracker = ca.DM(np.asarray(T0.translation, float))
     beam = tracker - p_refl
     dist = ca.norm_2(beam)
     g, lb = [], []
     g.append(ca.dot(axis, beam) / dist)
-    lb.append(math.cos(max(chain.max_incidence_rad - math.radians(cfg.margin_incidence_deg), 0.0)))
-    caps = [_capsule_world(chain, frames, c) for c in range(len(chain.capsule_r))]
-    for a, b in chain.self_pairs:
-        g.append(segment_distance_sq(*caps[a], *caps[b]))
-        lb.append((chain.capsule_r[a] + chain.capsule_r[b] + cfg.margin_collision_m) ** 2)
-    for c in chain.floor_caps:
-        for end in caps[c]:
-            g.append(end[2])
-            lb.append(chain.floor_z + chain.capsule_r[c] + cfg.margin_collision_m)
-    beam_end = p_refl + cd.BEAM_END_CLEARANCE_M * beam / dist
-    for c in range(len(chain.capsule_r)):
-        margin = 0.001 if chain.capsule_joint[c] == chain.nq else cfg.margin_beam_m
-        g.append(segment_distance_sq(beam_end, tracker, *caps[c]))
-        lb.append((chain.capsule_r[c] + margin) ** 2)
-    for (o0, o1, r_o) in cfg.obstacles:
-        o0, o1 = ca.DM(np.asarray(o0, float)), ca.DM(np.asarray(o1, float))
-        g.append(segment_distance_sq(beam_end, tracker, o0, o1))
-        lb.append((r_o + cfg.margin_beam_m) ** 2)
-        for c in range(len(chain.capsule_r)):
-            if chain.capsule_joint[c] >= 1:
-                g.append(segment_distance_sq(*caps[c], o0, o1))
-                lb.append((chain.capsule_r[c] + r_o + cfg.margin_collision_m) ** 2)
-    cons = ca.Function("cons", [q], [ca.vertcat(*g)])
+    lb.append(math.cos(max(tracker_spec.max_incidence_rad - math.radians(cfg.margin_incidence_deg), 0.0)))
+    pair_clear, floor_clear = capsule_clearance_function(robot, sym)(q)
+    g += [pair_clear, floor_clear]
+    lb += [cfg.margin_collision_m] * (pair_clear.numel() + floor_clear.numel())
+    beam_end = p_refl + BEAM_END_CLEARANCE_M * beam / dist
+    for c, (a, b) in enumerate(caps):
+        g.append(segment_distance_sx(beam_end, tracker, a, b) - radii[c])
+        lb.append(0.001 if on_last[c] else cfg.margin_beam_m)
+    for (o0, o1, r_o) in obstacles:
+        o0_dm, o1_dm = ca.DM(o0), ca.DM(o1)
+        g.append(segment_distance_sx(beam_end, tracker, o0_dm, o1_dm) - r_o)
+        lb.append(cfg.margin_beam_m)
+        for c, (a, b) in enumerate(caps):
+            if moving[c]:
+                g.append(segment_distance_sx(a, b, o0_dm, o1_dm) - radii[c] - r_o)
+                lb.append(cfg.margin_collision_m)
+    cons = ca.Function("cons", [q], [ca.vertcat(*g)], {"cse": True})
     n_g = len(lb)
 
     # NLP over all configurations (MX graph with mapped SX functions)
@@ -194,14 +183,14 @@ def gradient_design(robot, mm: MeasurementModel, basis: np.ndarray, Q_start: np.
             "ipopt.hessian_approximation": "limited-memory", "print_time": False,
             "ipopt.acceptable_tol": 1e-4, "ipopt.acceptable_iter": 5, "ipopt.mu_strategy": "adaptive"}
     solver = ca.nlpsol("oed", "ipopt", nlp, opts)
-    lbx = np.tile(chain.lower, n)
-    ubx = np.tile(chain.upper, n)
+    lbx = np.tile(lower, n)
+    ubx = np.tile(upper, n)
     x0 = np.clip(Q_start.reshape(-1), lbx, ubx)
     sol = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=np.tile(lb, n), ubg=np.full(n * n_g, np.inf))
     stats = solver.stats()
     Q = np.asarray(sol["x"]).reshape(n, nq)
-    # re-check every configuration with the numpy rules (no margins) and revert failures
-    mask, _ = cd.filter_configurations(chain, Q, cd.FilterMargins(0.0, 0.0, 0.0))
+    # re-check every configuration with the numeric rules (no margins) and revert failures
+    mask = feasible_configurations(robot, Q, T0, obstacles)
     reverted = int((~mask).sum())
     Q[~mask] = Q_start[~mask]
     phi_end = float(phi_f(Q.T))

@@ -142,7 +142,7 @@ def _nominal_robot(ctx: StageContext) -> Any:
 def identified_robot(robot: Any, p: np.ndarray) -> Any:
     """Copy of ``robot`` with the standard parameters ``p`` (inertias, rotor inertia, viscous and
     Coulomb friction; torque offsets are not part of a RobotModel)."""
-    from pipeline.robot.symbolic import set_dynamic_parameters
+    from pipeline.robot.parameters import set_dynamic_parameters
 
     nq = robot.nq
     model = set_dynamic_parameters(robot.model, p)

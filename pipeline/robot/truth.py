@@ -25,8 +25,8 @@ from scipy.linalg import expm
 
 from pipeline.errors import ConfigError
 from pipeline.robot.model import RobotModel
+from pipeline.robot.parameters import KinematicLayout, apply_kinematic_errors, joint_infos
 from pipeline.robot.sensors import Encoders, LaserTracker, TorqueSensor
-from pipeline.robot.symbolic import KinematicLayout, apply_kinematic_errors, joint_infos
 
 #: fixed salt so the truth stream is independent of every stage's stream
 _TRUTH_SALT = 0x74727574
@@ -210,7 +210,7 @@ class RealRobot:
     @property
     def dynamic_parameters(self) -> np.ndarray:
         """Tests only: the true ``p_dyn`` (SymbolicRobot layout, offsets zero)."""
-        from pipeline.robot.symbolic import pinocchio_dynamic_parameters
+        from pipeline.robot.parameters import pinocchio_dynamic_parameters
 
         act = self._truth.actuation
         return pinocchio_dynamic_parameters(self._truth.model, act.viscous_Nms_rad, act.coulomb_Nm)

@@ -14,7 +14,7 @@ import numpy as np
 from pipeline.config import CONFIGS_DIR, load_config
 from pipeline.progress import Progress
 from pipeline.robot.model import RobotModel
-from pipeline.robot.symbolic import apply_kinematic_errors
+from pipeline.robot.parameters import apply_kinematic_errors
 from pipeline.robot.truth import RealRobot
 from pipeline.runner import StageContext, stage_rng
 

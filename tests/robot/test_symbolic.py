@@ -11,8 +11,7 @@ import pinocchio as pin
 import pytest
 
 from pipeline.errors import PipelineError, RobotFileError
-from pipeline.robot.symbolic import (
-    SymbolicRobot,
+from pipeline.robot.parameters import (
     apply_kinematic_errors,
     dynamic_parameter_names,
     dynamic_parameter_problems,
@@ -20,6 +19,7 @@ from pipeline.robot.symbolic import (
     pinocchio_dynamic_parameters,
     set_dynamic_parameters,
 )
+from pipeline.robot.symbolic import SymbolicRobot
 
 REPO = Path(__file__).resolve().parents[2]
 TX40_URDF = Path("/work/shared/data/staubli_tx40/tx40_mdh_modified.urdf")

@@ -8,8 +8,8 @@ import pytest
 
 from pipeline.errors import ConfigError
 from pipeline.robot.model import RobotModel
+from pipeline.robot.parameters import KinematicLayout, dynamic_parameter_problems
 from pipeline.robot.sensors import tracker_visibility
-from pipeline.robot.symbolic import KinematicLayout, dynamic_parameter_problems
 from pipeline.robot.truth import RealRobot, TruthConfig
 
 
