@@ -21,6 +21,7 @@ import pinocchio as pin
 from pipeline.blas import single_thread_blas
 from pipeline.identification import design as D
 from pipeline.identification import estimate as E
+from pipeline.identification import fourier
 from pipeline.identification.regressor import RegressorModel, base_parameters, standard_parameters
 from pipeline.robot.model import RobotModel
 from pipeline.robot.symbolic import SymbolicRobot
@@ -46,11 +47,11 @@ def main() -> None:
     print(f"regressor per sample {t_reg * 1e6:.1f} us = {t_reg / t_rnea:.1f} x pin.rnea ({t_rnea * 1e6:.2f} us)")
     with single_thread_blas():
         base = base_parameters(reg, rng, lower=robot.limits.lower_rad, upper=robot.limits.upper_rad)
-        limits = D.ExcitationLimits.from_robot(robot, 0.95, 0.95, 0.95, 0.8, 0.05, 0.02)
+        limits = fourier.ExcitationLimits.from_robot(robot, 0.95, 0.95, 0.95, 0.8, 0.05, 0.02)
         sym = SymbolicRobot(robot)
         crit = D.ExcitationCriterion(D.regressor_casadi(sym, reg, base),
-                                     D.fourier_basis(np.arange(100) * 0.1, 0.1, 5), robot.nq)
-        x = D.random_trajectory(robot, limits, 5, 0.1, rng).coefficients.ravel()
+                                     fourier.fourier_basis(np.arange(100) * 0.1, 0.1, 5), robot.nq)
+        x = fourier.random_trajectory(robot, limits, 5, 0.1, rng).coefficients.ravel()
         t_val = _time(lambda: crit.value_and_gradient(x, gradient=False), 50)
         t_grad = _time(lambda: crit.value_and_gradient(x), 50)
         print(f"criterion value {t_val * 1e3:.2f} ms, value + exact gradient {t_grad * 1e3:.2f} ms "

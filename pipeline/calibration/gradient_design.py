@@ -148,21 +148,26 @@ def gradient_design(robot, mm: MeasurementModel, basis: np.ndarray, Q_start: np.
     g, lb = [], []
     g.append(ca.dot(axis, beam) / dist)
     lb.append(math.cos(max(tracker_spec.max_incidence_rad - math.radians(cfg.margin_incidence_deg), 0.0)))
+    # distances enter squared (d^2 >= (r + margin)^2, as in the reference formulation): the
+    # shared distance is sqrt(d.d + 1e-12), so its square is the smooth polynomial d.d + 1e-12
     pair_clear, floor_clear = capsule_clearance_function(robot, sym)(q)
-    g += [pair_clear, floor_clear]
-    lb += [cfg.margin_collision_m] * (pair_clear.numel() + floor_clear.numel())
+    pair_radii = [radii[i] + radii[k] for i, k in robot.self_collision_pairs]
+    g.append((pair_clear + ca.DM(pair_radii)) ** 2)
+    lb += [(r + cfg.margin_collision_m) ** 2 for r in pair_radii]
+    g.append(floor_clear)
+    lb += [cfg.margin_collision_m] * floor_clear.numel()
     beam_end = p_refl + BEAM_END_CLEARANCE_M * beam / dist
     for c, (a, b) in enumerate(caps):
-        g.append(segment_distance_sx(beam_end, tracker, a, b) - radii[c])
-        lb.append(0.001 if on_last[c] else cfg.margin_beam_m)
+        g.append(segment_distance_sx(beam_end, tracker, a, b) ** 2)
+        lb.append((radii[c] + (0.001 if on_last[c] else cfg.margin_beam_m)) ** 2)
     for (o0, o1, r_o) in obstacles:
         o0_dm, o1_dm = ca.DM(o0), ca.DM(o1)
-        g.append(segment_distance_sx(beam_end, tracker, o0_dm, o1_dm) - r_o)
-        lb.append(cfg.margin_beam_m)
+        g.append(segment_distance_sx(beam_end, tracker, o0_dm, o1_dm) ** 2)
+        lb.append((r_o + cfg.margin_beam_m) ** 2)
         for c, (a, b) in enumerate(caps):
             if moving[c]:
-                g.append(segment_distance_sx(a, b, o0_dm, o1_dm) - radii[c] - r_o)
-                lb.append(cfg.margin_collision_m)
+                g.append(segment_distance_sx(a, b, o0_dm, o1_dm) ** 2)
+                lb.append((radii[c] + r_o + cfg.margin_collision_m) ** 2)
     cons = ca.Function("cons", [q], [ca.vertcat(*g)], {"cse": True})
     n_g = len(lb)
 

@@ -24,7 +24,7 @@ import numpy as np
 
 from pipeline.errors import DataFileError
 from pipeline.identification import signals
-from pipeline.identification.design import FourierTrajectory
+from pipeline.identification.fourier import FourierTrajectory
 from pipeline.identification.regressor import RegressorModel, check_state_arrays
 
 

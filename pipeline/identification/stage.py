@@ -28,6 +28,7 @@ from pipeline.blas import single_thread_blas
 from pipeline.errors import ConfigError, DataFileError, InfeasibleError, PipelineError
 from pipeline.identification import design as design_mod
 from pipeline.identification import estimate as est_mod
+from pipeline.identification import fourier
 from pipeline.identification import measure as meas_mod
 from pipeline.identification import validate as val_mod
 from pipeline.identification.regressor import (
@@ -154,9 +155,9 @@ def identified_robot(robot: Any, p: np.ndarray) -> Any:
     return robot.with_model(model, spec)
 
 
-def _fourier_validation(robot: Any, limits: design_mod.ExcitationLimits, ex: ExcitationConfig,
+def _fourier_validation(robot: Any, limits: fourier.ExcitationLimits, ex: ExcitationConfig,
                         sample_time_s: float, rng: np.random.Generator) -> val_mod.ValidationTrajectory:
-    tr = design_mod.random_feasible_trajectories(robot, limits, ex.harmonics, ex.base_frequency_hz, 1, rng)[0]
+    tr = fourier.random_feasible_trajectories(robot, limits, ex.harmonics, ex.base_frequency_hz, 1, rng)[0]
     t = np.arange(int(round(tr.period_s / sample_time_s))) * sample_time_s
     q, v, a = tr.evaluate(t)
     return val_mod.ValidationTrajectory(t, q, v, a, "fourier", "a random feasible Fourier trajectory")
@@ -261,7 +262,7 @@ def _run(ctx: StageContext) -> StageResult:
         data = meas_mod.process_record(rec, reg, cfg.data_cutoff_hz, cfg.data_decimation)
         data_source = str(cfg.data_file)
 
-    limits = design_mod.ExcitationLimits.from_robot(
+    limits = fourier.ExcitationLimits.from_robot(
         robot, ex.position_margin, ex.velocity_margin, ex.acceleration_margin, ex.torque_margin,
         ex.floor_clearance_m, ex.self_clearance_m)
     t1 = time.perf_counter()

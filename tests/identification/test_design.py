@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from pipeline.identification import design as D
+from pipeline.identification import fourier as F
 from pipeline.identification.regressor import RegressorModel, base_parameters
 from pipeline.robot.symbolic import SymbolicRobot
 
@@ -16,14 +17,14 @@ def setup(rx130l):
     reg = RegressorModel(rx130l.model, act.gear_matrix, act.coulomb_smoothing_rad_s)
     base = base_parameters(reg, np.random.default_rng(0), lower=rx130l.limits.lower_rad,
                            upper=rx130l.limits.upper_rad)
-    limits = D.ExcitationLimits.from_robot(rx130l, 0.95, 0.95, 0.95, 0.8, 0.05, 0.02)
+    limits = F.ExcitationLimits.from_robot(rx130l, 0.95, 0.95, 0.95, 0.8, 0.05, 0.02)
     sym = SymbolicRobot(rx130l)
     return reg, base, limits, sym
 
 
 def test_fourier_derivatives_and_rest(rx130l, setup):
     _, _, limits, _ = setup
-    traj = D.random_trajectory(rx130l, limits, 5, 0.1, np.random.default_rng(1))
+    traj = F.random_trajectory(rx130l, limits, 5, 0.1, np.random.default_rng(1))
     h = 1e-4
     t = np.linspace(0.3, 9.7, 17)
     q, v, a = traj.evaluate(t)
@@ -40,8 +41,8 @@ def test_fourier_derivatives_and_rest(rx130l, setup):
 @pytest.mark.parametrize("criterion,softness", [("cond", 0.0), ("cond", 0.2), ("logdet", 0.0)])
 def test_criterion_gradient_is_exact(rx130l, setup, criterion, softness):
     reg, base, limits, sym = setup
-    traj = D.random_trajectory(rx130l, limits, 5, 0.1, np.random.default_rng(2))
-    basis = D.fourier_basis(np.arange(50) * 0.2, 0.1, 5)
+    traj = F.random_trajectory(rx130l, limits, 5, 0.1, np.random.default_rng(2))
+    basis = F.fourier_basis(np.arange(50) * 0.2, 0.1, 5)
     crit = D.ExcitationCriterion(D.regressor_casadi(sym, reg, base), basis, rx130l.nq, criterion, softness)
     x = traj.coefficients.ravel()
     W = crit.matrix(x)
@@ -66,7 +67,7 @@ def test_optimised_excitation_is_feasible_and_better_than_random(rx130l, setup):
     res = D.optimize_excitation(rx130l, sym, reg, base, limits, np.random.default_rng(5), n_samples=50,
                                 n_starts=1, n_random=8, max_iter=25)
     assert res.feasibility.feasible
-    report = D.check_trajectory(rx130l, res.trajectory, limits, 800)
+    report = F.check_trajectory(rx130l, res.trajectory, limits, 800)
     assert report.feasible  # also on a finer grid than the one of the check
     assert res.cond_optimized < res.cond_starts[0] < np.inf
     assert res.cond_optimized < res.cond_random_median
@@ -75,11 +76,11 @@ def test_optimised_excitation_is_feasible_and_better_than_random(rx130l, setup):
 
 def test_check_trajectory_flags_a_limit_violation(rx130l, setup):
     _, _, limits, _ = setup
-    traj = D.random_trajectory(rx130l, limits, 5, 0.1, np.random.default_rng(6))
+    traj = F.random_trajectory(rx130l, limits, 5, 0.1, np.random.default_rng(6))
     coef = traj.coefficients.copy()
     coef[:, 1:] *= 5.0
-    bad = D.FourierTrajectory(coef, traj.base_frequency_hz)
-    report = D.check_trajectory(rx130l, bad, limits)
+    bad = F.FourierTrajectory(coef, traj.base_frequency_hz)
+    report = F.check_trajectory(rx130l, bad, limits)
     assert not report.feasible
     assert max(report.position_ratio, report.velocity_ratio, report.acceleration_ratio, report.torque_ratio) > 1
 
@@ -89,9 +90,9 @@ def test_logdet_option_runs_and_improves_the_determinant(rx130l, setup):
     res = D.optimize_excitation(rx130l, sym, reg, base, limits, np.random.default_rng(7), n_samples=40,
                                 n_starts=1, n_random=3, max_iter=10, criterion="logdet")
     assert res.criterion == "logdet" and res.feasibility.feasible
-    basis = D.fourier_basis(np.arange(40) * 0.25, 0.1, 5)
+    basis = F.fourier_basis(np.arange(40) * 0.25, 0.1, 5)
     crit = D.ExcitationCriterion(D.regressor_casadi(sym, reg, base), basis, rx130l.nq, "logdet")
-    start = [t for t in D.random_feasible_trajectories(rx130l, limits, 5, 0.1, 3, np.random.default_rng(7))]
+    start = [t for t in F.random_feasible_trajectories(rx130l, limits, 5, 0.1, 3, np.random.default_rng(7))]
     f_best_start = min(crit.value_and_gradient(t.coefficients.ravel(), False)[0] for t in start)
     f_opt, _ = crit.value_and_gradient(res.trajectory.coefficients.ravel(), False)
     assert f_opt < f_best_start

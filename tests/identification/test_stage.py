@@ -132,13 +132,13 @@ def test_bad_config_values(tmp_path):
 
 def test_stage_runs_on_a_joint_csv_record(tmp_path):
     """A user record (CSV, joint side) instead of the simulated experiment."""
-    from pipeline.identification import design as D
+    from pipeline.identification import fourier
 
     ctx, real = quick_context(tmp_path / "run", overrides={
         "run_tx40": False, "excitation": {"n_samples": 30, "n_starts": 1, "n_random": 3, "max_iter": 5}})
     robot = ctx.robot
-    limits = D.ExcitationLimits.from_robot(robot, 0.95, 0.95, 0.95, 0.8, 0.05, 0.02)
-    traj = D.random_feasible_trajectories(robot, limits, 5, 0.1, 1, np.random.default_rng(7))[0]
+    limits = fourier.ExcitationLimits.from_robot(robot, 0.95, 0.95, 0.95, 0.8, 0.05, 0.02)
+    traj = fourier.random_feasible_trajectories(robot, limits, 5, 0.1, 1, np.random.default_rng(7))[0]
     t = np.arange(2 * 5000) * 0.002
     meas = real.execute_joint_trajectory(t, *traj.evaluate(t), np.random.default_rng(8))
     path = tmp_path / "record.csv"
