@@ -10,19 +10,21 @@ from pipeline.calibration import candidates as cd
 from pipeline.calibration import design as ds
 from pipeline.calibration import error_model as em
 from pipeline.calibration import stage as st
-from pipeline.calibration.gradient_design import GradientDesignConfig, gradient_design, segment_distance_sq
+from pipeline.calibration.gradient_design import GradientDesignConfig, gradient_design
 from pipeline.robot.collision import segment_distances
+from pipeline.robot.collision_sx import segment_distance_sx
 
 
-def test_casadi_segment_distance_matches_numpy():
+def test_squared_casadi_segment_distance_matches_numpy():
+    """The NLP's squared form of the shared distance (gradient design constraints)."""
     rng = np.random.default_rng(0)
     a, b, c, d = (ca.SX.sym(n, 3) for n in "abcd")
-    f = ca.Function("d", [a, b, c, d], [segment_distance_sq(a, b, c, d)])
+    f = ca.Function("d", [a, b, c, d], [segment_distance_sx(a, b, c, d) ** 2])
     P = rng.normal(size=(200, 4, 3))
     P[:20, 3] = P[:20, 2] + 2 * (P[:20, 1] - P[:20, 0])   # parallel segments
     ref = segment_distances(P[:, 0], P[:, 1], P[:, 2], P[:, 3])
     got = np.array([np.sqrt(float(f(*p))) for p in P])
-    assert np.allclose(got, ref, atol=1e-4)
+    assert np.allclose(got, ref, atol=1e-6)
 
 
 def test_gradient_design_improves_and_stays_feasible():
