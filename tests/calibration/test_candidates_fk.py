@@ -1,0 +1,34 @@
+"""The vectorised numpy chain of the candidate filter against Pinocchio (RobotModel)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.calibration import candidates as cd
+from pipeline.robot.model import RobotModel
+
+
+@pytest.mark.parametrize("name", ["rx130l", "staubli_tx40"])
+def test_numpy_chain_matches_pinocchio(name):
+    robot = RobotModel.load(name)
+    ch = cd.chain_from_robot(robot)
+    rng = np.random.default_rng(7)
+    # random configurations, also outside the joint limits (the kinematics must not care)
+    Q = rng.uniform(ch.lower - 0.5, ch.upper + 0.5, size=(200, robot.nq))
+    kin = cd.kinematics(ch, Q)
+    seg = cd.capsule_segments(ch, kin)
+    assert np.allclose(kin.p_reflector, robot.positions(Q, robot.frame_reflector), atol=1e-12, rtol=0)
+    assert np.allclose(kin.o_flange, robot.positions(Q, robot.frame_flange), atol=1e-12, rtol=0)
+    _, R_refl = robot.poses(Q, robot.frame_reflector)
+    assert np.allclose(kin.reflector_axis, R_refl @ robot.reflector_axis, atol=1e-12, rtol=0)
+    assert np.allclose(seg, robot.capsule_segments(Q), atol=1e-12, rtol=0)
+    # the clearances the filter thresholds are Pinocchio's
+    pair, floor = robot.capsule_clearances(seg)
+    pair_ref, floor_ref = robot.capsule_clearances(robot.capsule_segments(Q))
+    assert np.allclose(pair, pair_ref, atol=1e-12, rtol=0) and np.allclose(floor, floor_ref, atol=1e-12, rtol=0)
+    # margin-free filter verdicts agree with the Pinocchio collision rule
+    mask, _ = cd.filter_configurations(ch, Q, cd.FilterMargins(0.0, 0.0, 0.0), visibility=False)
+    inside = np.all((Q >= ch.lower) & (Q <= ch.upper), axis=1)
+    ref = inside & np.all(pair_ref >= 0, axis=1) & np.all(floor_ref >= 0, axis=1)
+    assert np.array_equal(mask, ref)
