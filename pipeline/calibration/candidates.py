@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -252,14 +253,15 @@ def grid_values(chain: Chain, n_per_axis: int | list[int]) -> list[np.ndarray]:
 
 
 def filter_grid(chain: Chain, n_per_axis: int | list[int] = 13, margins: FilterMargins | None = None,
-                chunk: int = 20_000) -> tuple[np.ndarray, np.ndarray, dict]:
+                chunk: int = 20_000, progress: Any = None) -> tuple[np.ndarray, np.ndarray, dict]:
     """Coarse-first filtering of the full joint-space grid.
 
     Returns the feasible configurations (M, nq) in lexicographic grid order, their flat grid
     indices, and counts. The prefix grid over axes 1..nq-1 (last axis at its first value is
     irrelevant for capsules not on the last link) is checked for collisions between capsules that
     do not hang on the last joint; survivors are expanded along the last axis in chunks and checked
-    for the remaining pairs, floor and visibility.
+    for the remaining pairs, floor and visibility. ``progress``: an optional
+    :class:`pipeline.progress.TaskHandle` advanced over the collision-free prefixes.
     """
     t0 = time.perf_counter()
     margins = margins or FilterMargins()
@@ -288,6 +290,8 @@ def filter_grid(chain: Chain, n_per_axis: int | list[int] = 13, margins: FilterM
                 keep[s : s + 100_000] = _collision_ok(chain, seg, margins, pairs, floor)
             prefix = prefix[keep]
     n_prefix_ok = len(prefix)
+    if progress is not None:
+        progress.update(total=n_prefix_ok)
     # expand along the last axis
     feas_Q, counts = [], {"total": total, "prefix_collision_free": n_prefix_ok,
                           "collision": 0, "visibility": 0}
@@ -306,6 +310,8 @@ def filter_grid(chain: Chain, n_per_axis: int | list[int] = 13, margins: FilterM
             vis = _visibility_ok(chain, sub, seg[idx], margins)
             counts["visibility"] += int((~vis).sum())
             feas_Q.append(Q[idx[vis]])
+        if progress is not None:
+            progress.advance(len(P))
     Qf = np.concatenate(feas_Q) if feas_Q else np.zeros((0, nq))
     # flat grid indices (lexicographic, axis 1 slowest)
     steps = [(chain.upper[i] - chain.lower[i]) / sizes[i] for i in range(nq)]

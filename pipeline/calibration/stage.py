@@ -31,6 +31,7 @@ from pipeline.calibration import measure as ms
 from pipeline.calibration import validate as va
 from pipeline.calibration.estimate import Estimate, calibrated_robot, estimate
 from pipeline.errors import ConfigError, InfeasibleError, PipelineError
+from pipeline.progress import task
 
 NAME = "calibration"
 DEPENDS: tuple[str, ...] = ("model",)
@@ -146,7 +147,8 @@ def build_candidates(robot, cfg: Config, basis: np.ndarray, rng: np.random.Gener
     margins = cd.FilterMargins(cfg.margin_collision_m, math.radians(cfg.margin_incidence_deg), cfg.margin_beam_m)
     grid_index = None
     if cfg.candidates == "grid":
-        Q, grid_index, counts = cd.filter_grid(chain, cfg.grid_per_axis, margins)
+        with task(f"calibration: filtering the {cfg.grid_per_axis}^{robot.nq} grid") as bar:
+            Q, grid_index, counts = cd.filter_grid(chain, cfg.grid_per_axis, margins, progress=bar)
     else:
         Q, counts = cd.random_candidates(chain, cfg.n_random_candidates, rng, margins)
     if len(Q) == 0:
