@@ -140,7 +140,7 @@ class RunConfig:
     sections: dict[str, Any] = field(default_factory=dict)
     source: str = "<defaults>"          # where it came from, for messages
     base_dir: Path = field(default_factory=Path.cwd)   # relative robot paths resolve here first
-    origins: dict[str, str] = field(default_factory=dict)  # top-level key -> file or "--set" that set it
+    origins: dict[str, str] = field(default_factory=dict)  # top-level key or section -> file or "--set" (last)
 
     def __getattr__(self, item: str) -> Any:
         # only called when normal lookup fails: expose sections as attributes
@@ -354,6 +354,8 @@ def build_dataclass(cls: type, values: Mapping[str, Any], where: str, source: st
         kwargs[key] = coerce(value, hints.get(key, Any), dotted, source)
     try:
         instance = cls(**kwargs)
+    except ConfigError as exc:  # a dataclass's own __post_init__ check: name where the value came from
+        raise _with_source(exc, source) from None
     except PipelineError:
         raise
     except (TypeError, ValueError) as exc:
@@ -486,6 +488,8 @@ def load_config(
             build_dataclass(cls, _merge(merged, value), section, src)
             merged = _merge(merged, value)
         src = items[-1][0] if items else source
+        if items:
+            cfg.origins[section] = src
         instance = build_dataclass(cls, merged, section, src)
         _semantic_check(instance, src)
         cfg.sections[section] = instance
@@ -506,10 +510,20 @@ def _semantic_check(instance: Any, source: str) -> None:
         params = inspect.signature(validate).parameters
     except (TypeError, ValueError):
         params = {}
-    if params:
-        validate(source)
-    else:
-        validate()
+    try:
+        if params:
+            validate(source)
+        else:
+            validate()
+    except ConfigError as exc:
+        raise _with_source(exc, source) from None
+
+
+def _with_source(exc: ConfigError, source: str) -> ConfigError:
+    """``exc`` naming ``source`` (the file or ``--set``) when it names no file itself."""
+    if exc.file is not None and exc.file not in ("None", "config"):
+        return exc
+    return ConfigError(source, exc.field, exc.problem)
 
 
 def quick_config(**overrides: Any) -> RunConfig:

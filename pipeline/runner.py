@@ -368,10 +368,19 @@ def run_pipeline(
         check = getattr(plan.module, "check", None)
         will_run = plan.name in forced or artefacts.read_inputs_hash(run_dir / plan.name) != plan.inputs_sha256
         if callable(check) and will_run:
-            check(plan.config, nominal)
+            try:
+                check(plan.config, nominal)
+            except ConfigError as exc:  # name the file (or --set) the stage's section came from
+                if exc.file is not None:
+                    raise
+                raise ConfigError(cfg.origins.get(plan.name, cfg.source), exc.field, exc.problem) from None
 
     # ---- run --------------------------------------------------------------------------------
-    run_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        run_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError("--out" if out_root is not None else None, str(run_dir),
+                          f"cannot create the run directory ({exc.strerror or exc})") from None
     artefacts.clean_leftovers(run_dir)
     artefacts.write_text(run_dir / "config.yaml", cfg.to_yaml())
     outputs: dict[str, StageOutput] = {}

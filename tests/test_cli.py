@@ -137,3 +137,26 @@ def test_study_registry(monkeypatch, capsys):
 
 def _demo_study(argv: list[str]) -> None:
     globals()["_CALLS"].append(argv)
+
+
+def test_joint_without_limits_is_one_line(tmp_path, robot_copy):
+    urdf = robot_copy / "rx130l.urdf"
+    text = urdf.read_text()
+    start = text.index("<limit", text.index('<joint name="joint_2"'))
+    urdf.write_text(text[:start] + text[text.index("/>", start) + 2:])
+    out = tmp_path / "runs"
+    proc = run_cli("run", "--stages", "model", "--set", f"robot={robot_copy}", "--out", str(out))
+    assert_one_line_error(proc, out, str(urdf), "joint joint_2: <limit>", "lower")
+
+
+def test_out_that_is_a_file(tmp_path):
+    target = tmp_path / "a_file"
+    target.write_text("")
+    proc = run_cli("run", "--stages", "model", "--out", str(target))
+    assert_one_line_error(proc, tmp_path / "nothing", "--out", "cannot create the run directory")
+
+
+def test_stage_check_names_the_source(tmp_path):
+    out = tmp_path / "runs"
+    proc = run_cli("run", "--set", "trajectory.cp_segment=zigzag", "--out", str(out))
+    assert_one_line_error(proc, out, "--set", "trajectory.cp_segment")

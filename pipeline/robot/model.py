@@ -66,6 +66,25 @@ def _check_urdf_xml(urdf: Path) -> ET.Element:
         raise RobotFileError(urdf, "xml", f"not valid XML ({exc})") from None
     if root.tag != "robot":
         raise RobotFileError(urdf, "xml", f"root element is <{root.tag}>, expected <robot>")
+    # what urdfdom would otherwise reject with several lines of C++ errors on stderr
+    links = {link.get("name") for link in root.findall("link")}
+    for joint in root.findall("joint"):
+        name, kind = joint.get("name"), joint.get("type")
+        for tag in ("parent", "child"):
+            element = joint.find(tag)
+            if element is None or element.get("link") not in links:
+                raise RobotFileError(urdf, f"joint {name}: <{tag}>", "missing or names an unknown link")
+        if kind in ("revolute", "prismatic"):
+            limit = joint.find("limit")
+            missing = [a for a in ("lower", "upper", "velocity", "effort") if limit is None or limit.get(a) is None]
+            if missing:
+                raise RobotFileError(urdf, f"joint {name}: <limit>", f"a {kind} joint needs {', '.join(missing)}")
+            for attribute in ("lower", "upper", "velocity", "effort"):
+                try:
+                    float(limit.get(attribute))
+                except ValueError:
+                    raise RobotFileError(urdf, f"joint {name}: <limit {attribute}>",
+                                         f"not a number: {limit.get(attribute)!r}") from None
     return root
 
 
