@@ -3,7 +3,7 @@
 ``pinocchio.casadi`` is not in the PyPI wheel, so forward kinematics and the recursive
 Newton-Euler algorithm are rebuilt here from the model's own data (``jointPlacements``, joint
 motion subspaces, ``inertias``, ``armature``, ``frames``, ``gravity``); see
-``/work/shared/DESIGN.md`` section "Symbolic bridge" and ``docs/ARCHITECTURE.md``.
+``docs/DESIGN.md`` section "Symbolic bridge" and ``docs/ARCHITECTURE.md``.
 
 The parameter layouts (kinematic errors ``p_kin``, dynamic parameters ``p_dyn``) and their
 numeric counterparts on a ``pin.Model`` are in :mod:`pipeline.robot.parameters`.

@@ -11,6 +11,7 @@ import pinocchio as pin
 import pytest
 
 from pipeline.errors import PipelineError, RobotFileError
+from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import (
     apply_kinematic_errors,
     dynamic_parameter_names,
@@ -22,60 +23,14 @@ from pipeline.robot.parameters import (
 from pipeline.robot.symbolic import SymbolicRobot
 
 REPO = Path(__file__).resolve().parents[2]
-TX40_URDF = Path("/work/shared/data/staubli_tx40/tx40_mdh_modified.urdf")
 N_STATES = 100
 TOL = 1e-9
 ROBOTS = ("rx130l", "staubli_tx40")
 
 
-def _bare_robot(name: str) -> pin.Model:
-    """Fallback while RobotModel/robot folders are not there: URDF + hand-made tool frames."""
-    if name == "rx130l":
-        model = pin.buildModelFromUrdf(str(REPO / "robots" / "rx130l" / "rx130l.urdf"))
-        flange = "flange"
-        model.armature = np.array([3.0, 3.0, 1.0, 0.2, 0.2, 0.1])
-    else:
-        model = pin.buildModelFromUrdf(str(TX40_URDF))
-        fid = model.getFrameId("tool0")
-        tool0 = model.frames[fid]
-        model.addFrame(
-            pin.Frame("flange", tool0.parentJoint, fid, tool0.placement, pin.FrameType.OP_FRAME)
-        )
-        flange = "flange"
-        model.armature = np.array([0.362, 0.362, 0.0988, 0.0313, 0.0468, 0.0105])
-    fid = model.getFrameId(flange)
-    fl = model.frames[fid]
-    tcp = fl.placement * pin.SE3(pin.rpy.rpyToMatrix(0.1, -0.2, 0.3), np.array([0.01, 0.02, 0.2]))
-    refl = fl.placement * pin.SE3(np.eye(3), np.array([0.05, 0.0, 0.12]))
-    model.addFrame(pin.Frame("tcp", fl.parentJoint, fid, tcp, pin.FrameType.OP_FRAME))
-    model.addFrame(pin.Frame("reflector", fl.parentJoint, fid, refl, pin.FrameType.OP_FRAME))
-    return model
-
-
-def _load(name: str):
-    """``RobotModel.load(name)`` once the foundation is there, else the bare URDF fallback."""
-    try:
-        from pipeline.robot.model import RobotModel
-    except ImportError:
-        RobotModel = None
-    if RobotModel is not None and (REPO / "robots" / name).is_dir():
-        return RobotModel.load(name)
-    return _bare_robot(name)
-
-
 @pytest.fixture(scope="module", params=ROBOTS)
 def case(request):
-    robot = _load(request.param)
-    if isinstance(robot, pin.Model):
-        sym = SymbolicRobot(
-            robot,
-            viscous_Nms_rad=np.linspace(1.0, 6.0, robot.nq),
-            coulomb_Nm=np.linspace(2.0, 0.5, robot.nq),
-            coulomb_smoothing_rad_s=0.02,
-        )
-    else:
-        sym = SymbolicRobot(robot)
-    return sym
+    return SymbolicRobot(RobotModel.load(request.param))
 
 
 def _model(sym: SymbolicRobot) -> pin.Model:
@@ -443,8 +398,6 @@ def test_agrees_with_robot_model_dynamics(case):
     """With a RobotModel, the nominal symbolic dynamics are the RobotModel's (friction included)."""
     sym = case
     robot = sym.robot
-    if robot is None:
-        pytest.skip("RobotModel not available (bare URDF fallback)")
     assert sym.coulomb_smoothing_rad_s == robot.actuation.coulomb_smoothing_rad_s
     rng = np.random.default_rng(21)
     p = sym.nominal_dynamic_parameters()
