@@ -315,9 +315,13 @@ def write_report(run_dir: Path, cfg: RunConfig | None = None, current: Sequence[
         if manifest.get("finished_utc"):
             lines += [f"finished {manifest['finished_utc']} in {manifest.get('duration_s', 0):.1f} s", ""]
         summary = artefacts.read_json(d / artefacts.SUMMARY) if (d / artefacts.SUMMARY).exists() else {}
-        lines += [summary_table(summary)]
-        if (d / artefacts.REPORT_MD).exists():
-            lines += [(d / artefacts.REPORT_MD).read_text(encoding="utf-8").rstrip(), ""]
+        report_md = d / artefacts.REPORT_MD
+        stage_md = report_md.read_text(encoding="utf-8").rstrip() if report_md.exists() else ""
+        if stage_md:  # the stage's own tables first; every headline figure folded below them
+            lines += [stage_md, "", f"<details><summary>all figures of <code>{name}/summary.json</code></summary>",
+                      "", summary_table(summary), "</details>", ""]
+        else:
+            lines += [summary_table(summary)]
         figures = manifest.get("figures") or sorted(p.name for p in d.glob("*.png"))
         for fig in figures:
             lines += [f"![{name}: {Path(fig).stem}]({name}/{fig})", ""]

@@ -64,9 +64,13 @@ def run(ctx: StageContext) -> StageResult:
         "picture_q_rad": q,
         "flange_at_zero_m": robot.fk(np.zeros(robot.nq), robot.frame_flange).translation,
     }
-    rows = ["| joint | lower [deg] | upper [deg] | velocity [deg/s] | torque [N·m] |", "|---|---|---|---|---|"]
+    rows = [f"**{robot.name}**: {robot.nq} DOF, reach {summary['reach_m']:.3f} m (axis 1 to flange), moving mass "
+            f"{summary['moving_mass_kg']:.1f} kg, payload {summary['payload_kg']:.1f} kg.", "",
+            "| joint | lower [deg] | upper [deg] | velocity [deg/s] | torque [N·m] | gear ratio |",
+            "|---|---|---|---|---|---|"]
     for i, name in enumerate(summary.get("joint_names", [f"q{i + 1}" for i in range(robot.nq)])):
         rows.append(f"| {name} | {np.rad2deg(lim.lower_rad[i]):.1f} | {np.rad2deg(lim.upper_rad[i]):.1f} | "
-                    f"{np.rad2deg(lim.velocity_rad_s[i]):.0f} | {lim.effort_Nm[i]:.0f} |")
+                    f"{np.rad2deg(lim.velocity_rad_s[i]):.0f} | {lim.effort_Nm[i]:.0f} | "
+                    f"{robot.actuation.gear_ratio[i]:g} |")
     return StageResult(summary=summary, arrays=arrays, figures={"robot": fig},
                        data={"pose_deg": np.rad2deg(q)}, report_md="\n".join(rows))
