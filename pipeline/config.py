@@ -483,15 +483,24 @@ def load_config(
             cfg.sections[section] = {}
             continue
         # validate each layer on its own (so errors name the right file), then merge
+        # a range problem of the merged section is blamed on the layer from which on it persists
+        # (a bad value in a file that a later --set repairs is no error)
         merged: dict[str, Any] = {}
+        culprit: str | None = None
         for src, value in items:
-            build_dataclass(cls, _merge(merged, value), section, src)
             merged = _merge(merged, value)
+            try:
+                _semantic_check(build_dataclass(cls, merged, section, src), src)
+            except ConfigError:
+                if culprit is None:
+                    culprit = src
+            else:
+                culprit = None
         src = items[-1][0] if items else source
         if items:
             cfg.origins[section] = src
         instance = build_dataclass(cls, merged, section, src)
-        _semantic_check(instance, src)
+        _semantic_check(instance, culprit or src)
         cfg.sections[section] = instance
     return cfg
 

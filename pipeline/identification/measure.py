@@ -36,6 +36,13 @@ class JointRecord:
     q_rad: np.ndarray
     tau_Nm: np.ndarray
     source: str = ""
+    line_numbers: np.ndarray | None = None  # file line of each sample (header = line 1), if from a file
+
+    def where(self, k: int) -> str:
+        """``"line 57"`` for a file record, else ``"sample 55"``."""
+        if self.line_numbers is not None and 0 <= k < len(self.line_numbers):
+            return f"line {int(self.line_numbers[k])}"
+        return f"sample {k}"
 
     @property
     def sample_time_s(self) -> float:
@@ -48,8 +55,8 @@ class JointRecord:
             if x.ndim != 2 or x.shape[1] != nq:
                 raise DataFileError(f, name, f"shape {x.shape}, expected (N, {nq})")
             if not np.all(np.isfinite(x)):
-                bad = int(np.argwhere(~np.isfinite(x))[0, 0])
-                raise DataFileError(f, name, f"NaN or inf (first at sample {bad})")
+                k, j = (int(i) for i in np.argwhere(~np.isfinite(x))[0])
+                raise DataFileError(f, f"{name}{j + 1}", f"NaN or inf ({self.where(k)})")
         if not (len(t) == len(self.q_rad) == len(self.tau_Nm)):
             raise DataFileError(
                 f, "t/q/tau", f"mismatched lengths {len(t)}, {len(self.q_rad)}, {len(self.tau_Nm)}"
@@ -57,7 +64,9 @@ class JointRecord:
         if len(t) < min_samples:
             raise DataFileError(f, "samples", f"{len(t)} samples, need at least {min_samples}")
         if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
-            raise DataFileError(f, "t", "time stamps must be finite and strictly increasing")
+            bad = np.flatnonzero(~np.isfinite(t[1:]) | (np.diff(t) <= 0))
+            where = f" ({self.where(int(bad[0]) + 1)})" if bad.size else ""
+            raise DataFileError(f, "t", f"time stamps must be finite and strictly increasing{where}")
         dt = np.diff(t)
         if np.max(np.abs(dt - np.median(dt))) > 1e-3 * np.median(dt) + 1e-9:
             raise DataFileError(f, "t", "samples are not uniformly spaced (resample first)")
@@ -81,38 +90,100 @@ def simulate_excitation(
     return JointRecord(meas.t_s, meas.q_rad, meas.tau_Nm, "simulation")
 
 
+def read_csv_table(path: str | Path) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """Read a numeric CSV file with a header line: ``(names, data (N, n_columns), line_numbers)``.
+
+    ``line_numbers[k]`` is the file line of data row ``k`` (the header is line 1); blank lines are
+    skipped. Every problem raises :class:`DataFileError` naming the file, the line and the column:
+    a missing header, no data rows, a row with too few or too many values, a value that is not a
+    number. NaN/inf values are returned as read (checked per column by :func:`load_joint_csv`).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise DataFileError(path, None, "file not found")
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DataFileError(path, None, f"cannot read: {exc}") from None
+    numbered = [(i + 1, ln) for i, ln in enumerate(lines) if ln.strip()]
+    if not numbered:
+        raise DataFileError(path, None, "empty file (expected a header line and data rows)")
+    header_line, header_text = numbered[0]
+    header = [h.strip() for h in header_text.split(",")]
+    if any(not h for h in header):
+        raise DataFileError(path, f"line {header_line}", "empty column name in the header")
+    dup = sorted({h for h in header if header.count(h) > 1})
+    if dup:
+        raise DataFileError(path, f"line {header_line}", f"duplicate column names {dup}")
+    try:
+        [float(h) for h in header]
+    except ValueError:
+        pass
+    else:
+        raise DataFileError(path, f"line {header_line}", "no header line (the first line is numbers)")
+    rows = numbered[1:]
+    if not rows:
+        raise DataFileError(path, None, f"no data rows (only the header on line {header_line})")
+    n_col = len(header)
+    cells = []
+    for line_no, text in rows:
+        parts = text.split(",")
+        if len(parts) != n_col:
+            raise DataFileError(path, f"line {line_no}",
+                                f"{len(parts)} values, expected {n_col} (one per header column)")
+        cells.append(parts)
+    line_numbers = np.array([ln for ln, _ in rows], dtype=int)
+    try:
+        data = np.array(cells, dtype=float)
+    except ValueError:
+        for (line_no, _), parts in zip(rows, cells, strict=True):
+            for name, cell in zip(header, parts, strict=True):
+                try:
+                    float(cell)
+                except ValueError:
+                    raise DataFileError(path, f"line {line_no}",
+                                        f"column {name}: {cell.strip()!r} is not a number") from None
+        raise
+    return header, data.reshape(len(rows), n_col), line_numbers
+
+
 def load_joint_csv(
     path: str | Path,
     robot: Any,
     side: str = "joint",
     sample_time_s: float | None = None,
     q_offset_rad: np.ndarray | None = None,
+    min_samples: int = 10,
 ) -> JointRecord:
-    """Read a CSV record (see the module docstring); ``side`` = "joint" or "motor"."""
+    """Read a CSV record (see the module docstring); ``side`` = "joint" or "motor".
+
+    Errors name the file, the column (``q3``) and the file line (header = line 1)."""
     path = Path(path)
     nq = robot.nq
-    if not path.is_file():
-        raise DataFileError(path, None, "file not found")
     if side not in ("joint", "motor"):
         raise DataFileError(path, "side", f"must be 'joint' or 'motor', got {side!r}")
-    try:
-        with path.open() as fh:
-            header = [h.strip() for h in fh.readline().split(",")]
-        data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
-    except ValueError as exc:
-        raise DataFileError(path, "values", f"not numeric CSV ({exc})") from None
-    if data.shape[1] != len(header):
-        raise DataFileError(path, "header", f"{len(header)} names for {data.shape[1]} columns")
+    header, data, line_numbers = read_csv_table(path)
     col = {h: i for i, h in enumerate(header)}
     q_names = [f"q{i + 1}" for i in range(nq)]
     tau_names = [f"tau{i + 1}" for i in range(nq)]
     missing = [n for n in q_names + tau_names if n not in col]
     if missing:
-        raise DataFileError(path, "header", f"missing columns {missing}")
+        raise DataFileError(path, "header", f"missing columns {missing} (found {header})")
+    used = (["t"] if "t" in col else []) + q_names + tau_names
+    for name in used:
+        bad = np.flatnonzero(~np.isfinite(data[:, col[name]]))
+        if bad.size:
+            raise DataFileError(path, name, f"NaN or inf on line {line_numbers[bad[0]]}"
+                                + (f" ({bad.size} values)" if bad.size > 1 else ""))
+    if len(data) < min_samples:
+        raise DataFileError(path, "samples", f"{len(data)} data rows, need at least {min_samples}")
     q = data[:, [col[n] for n in q_names]]
     tau = data[:, [col[n] for n in tau_names]]
     if "t" in col:
         t = data[:, col["t"]]
+        bad = np.flatnonzero(np.diff(t) <= 0)
+        if bad.size:
+            raise DataFileError(path, "t", f"time stamps must increase strictly (line {line_numbers[bad[0] + 1]})")
     elif sample_time_s is not None:
         t = np.arange(len(data)) * sample_time_s
     else:
@@ -121,8 +192,8 @@ def load_joint_csv(
         q, tau = motor_to_joint(q, tau, robot.actuation.gear_matrix)
     if q_offset_rad is not None:
         q = q + np.asarray(q_offset_rad, float)
-    rec = JointRecord(t, q, tau, str(path))
-    rec.validate(nq)
+    rec = JointRecord(t, q, tau, str(path), line_numbers)
+    rec.validate(nq, min_samples)
     return rec
 
 

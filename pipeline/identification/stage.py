@@ -6,11 +6,16 @@ and the real Stäubli TX40 record (paper ``004_abbe750b8bbcc3aa.txt`` §4; issue
 2. Excitation: Fourier trajectory minimising the condition number of the base regressor under
    limits, torques, floor and self-collision (CasADi/IPOPT, random starts; :mod:`.design`),
    against the median of 20 random feasible trajectories.
-3. Data: the hidden robot follows ``periods`` periods (ideal tracking, sensor noise), or a CSV file.
+3. Data: the hidden robot follows ``periods`` periods (ideal tracking, sensor noise), or the
+   user's CSV record (``data_file``): then no excitation is designed, the condition number is the
+   one of the record's base regressor, validation is on the record's held-out tail (fit on the
+   first ``data_train_fraction``, :func:`.tx40.heldout_validation`), the noise sigma comes from
+   the WLS residuals and the hidden robot (``ctx.real``) is never used. :func:`check` reads and
+   checks the record before any stage runs.
 4. Period averaging, zero-phase filtering, differentiation, block decimation (:mod:`.measure`).
 5. OLS, Gautier's WLS (covariance -> base parameter sigmas) and the physically consistent fit
    (log-Cholesky, IPOPT) whose standard parameters become the handed-on ``RobotModel``.
-6. Validation on the ISO 9283 path (measured vs predicted torques).
+6. Validation on the ISO 9283 path (measured vs predicted torques), or the held-out tail of a record.
 7. The TX40 record: base parameters, condition number, held-out RMS (:mod:`.tx40`).
 """
 
@@ -38,7 +43,7 @@ from pipeline.identification.regressor import (
     base_parameters,
     standard_parameters,
 )
-from pipeline.identification.tx40 import Tx40Config, Tx40Result, run_tx40
+from pipeline.identification.tx40 import Tx40Config, Tx40Result, heldout_validation, run_tx40
 from pipeline.runner import StageContext, StageResult
 
 NAME = "identification"
@@ -95,38 +100,64 @@ class Config:
     tx40: Tx40Config = field(default_factory=Tx40Config)
     score_against_truth: bool = True  # simulated runs: z-scores of the final base estimate vs the truth
     replay_rate_hz: float = 50.0
+    # data_file: validation fits on this first fraction of the record, scores on the rest
+    data_train_fraction: float = 0.7
 
-
-def _validate_config(cfg: Config, source: Any) -> None:
-    ex = cfg.excitation
-    checks = [
-        ("identification.excitation.harmonics", ex.harmonics >= 1, "must be >= 1"),
-        ("identification.excitation.base_frequency_hz", ex.base_frequency_hz > 0, "must be > 0"),
-        ("identification.excitation.n_samples", ex.n_samples >= 10, "must be >= 10"),
-        ("identification.excitation.n_starts", ex.n_starts >= 1, "must be >= 1"),
-        ("identification.excitation.n_random", ex.n_random >= 1, "must be >= 1"),
-        ("identification.excitation.criterion", ex.criterion in ("cond", "logdet"), "must be cond or logdet"),
-        ("identification.periods", cfg.periods >= 1, "must be >= 1"),
-        ("identification.sample_time_s", cfg.sample_time_s > 0, "must be > 0"),
-        ("identification.decimation", cfg.decimation >= 1, "must be >= 1"),
-        ("identification.validation", cfg.validation in ("iso9283", "fourier"), "must be iso9283 or fourier"),
-        ("identification.data_side", cfg.data_side in ("joint", "motor"), "must be joint or motor"),
-        ("identification.state_cutoff_factor", cfg.state_cutoff_factor > 1, "must be > 1"),
-        ("identification.actuator_coupling", cfg.actuator_coupling in ("auto", "gear", "none"),
-         "must be auto, gear or none"),
-    ]
-    for fld, ok, problem in checks:
-        if not ok:
-            raise ConfigError(source, fld, problem)
-    for name in ("position_margin", "velocity_margin", "acceleration_margin", "torque_margin"):
-        v = getattr(ex, name)
-        if not 0 < v <= 1:
-            raise ConfigError(source, f"identification.excitation.{name}", f"must be in (0, 1], got {v}")
-    per = 1.0 / ex.base_frequency_hz
-    n = per / cfg.sample_time_s
-    if abs(n - round(n)) > 1e-6:
-        raise ConfigError(source, "identification.sample_time_s",
-                          f"{cfg.sample_time_s} s does not divide the period {per} s")
+    def validate(self, source: Any = None) -> None:
+        """Range checks of values of the right type (called by ``pipeline.config`` at load time
+        with the file or ``--set`` that set them, and again by :func:`run`)."""
+        ex = self.excitation
+        p = "identification."
+        checks = [
+            ("excitation.harmonics", ex.harmonics >= 1, "must be >= 1"),
+            ("excitation.base_frequency_hz", ex.base_frequency_hz > 0, "must be > 0"),
+            ("excitation.n_samples", ex.n_samples >= 10, "must be >= 10"),
+            ("excitation.n_starts", ex.n_starts >= 1, "must be >= 1"),
+            ("excitation.n_random", ex.n_random >= 1, "must be >= 1"),
+            ("excitation.max_iter", ex.max_iter >= 0, "must be >= 0"),
+            ("excitation.n_check", ex.n_check >= 2, "must be >= 2"),
+            ("excitation.criterion", ex.criterion in ("cond", "logdet"), "must be cond or logdet"),
+            ("excitation.cond_softness", ex.cond_softness >= 0, "must be >= 0"),
+            ("excitation.floor_clearance_m", ex.floor_clearance_m >= 0, "must be >= 0"),
+            ("excitation.self_clearance_m", ex.self_clearance_m >= 0, "must be >= 0"),
+            ("periods", self.periods >= 1, "must be >= 1"),
+            ("sample_time_s", self.sample_time_s > 0, "must be > 0"),
+            ("state_cutoff_factor", self.state_cutoff_factor > 1, "must be > 1"),
+            ("decimation", self.decimation >= 1, "must be >= 1"),
+            ("base_tolerance", self.base_tolerance > 0, "must be > 0"),
+            ("base_samples", self.base_samples >= 1, "must be >= 1"),
+            ("regularization", self.regularization >= 0, "must be >= 0"),
+            ("physical_max_iter", self.physical_max_iter >= 1, "must be >= 1"),
+            ("validation", self.validation in ("iso9283", "fourier"), "must be iso9283 or fourier"),
+            ("validation_sample_time_s", self.validation_sample_time_s > 0, "must be > 0"),
+            ("data_side", self.data_side in ("joint", "motor"), "must be joint or motor"),
+            ("data_cutoff_hz", self.data_cutoff_hz > 0, "must be > 0"),
+            ("data_decimation", self.data_decimation >= 1, "must be >= 1"),
+            ("actuator_coupling", self.actuator_coupling in ("auto", "gear", "none"), "must be auto, gear or none"),
+            ("replay_rate_hz", self.replay_rate_hz > 0, "must be > 0"),
+            ("data_train_fraction", 0 < self.data_train_fraction < 1, "must be in (0, 1)"),
+            ("tx40.train_fraction", 0 < self.tx40.train_fraction < 1, "must be in (0, 1)"),
+            ("tx40.cutoff_hz", self.tx40.cutoff_hz > 0, "must be > 0"),
+            ("tx40.decimation", self.tx40.decimation >= 1, "must be >= 1"),
+            ("tx40.border_samples", self.tx40.border_samples >= 0, "must be >= 0"),
+            ("tx40.max_samples", self.tx40.max_samples >= 0, "must be >= 0"),
+        ]
+        for fld, ok, problem in checks:
+            if not ok:
+                value = self
+                for part in fld.split("."):
+                    value = getattr(value, part)
+                raise ConfigError(source, p + fld, f"{problem}, got {value!r}")
+        for name in ("position_margin", "velocity_margin", "acceleration_margin", "torque_margin"):
+            v = getattr(ex, name)
+            if not 0 < v <= 1:
+                raise ConfigError(source, f"{p}excitation.{name}", f"must be in (0, 1], got {v}")
+        if not self.data_file:  # the simulated experiment samples whole periods
+            per = 1.0 / ex.base_frequency_hz
+            n = per / self.sample_time_s
+            if abs(n - round(n)) > 1e-6:
+                raise ConfigError(source, p + "sample_time_s",
+                                  f"{self.sample_time_s} s does not divide the period {per} s")
 
 
 def _nominal_robot(ctx: StageContext) -> Any:
@@ -221,30 +252,76 @@ def _fig_convergence(res: design_mod.ExcitationResult) -> Figure:
     return fig
 
 
+# --------------------------------------------------------------------------------- early checks
+#: processed samples dropped at each end of a data_file record (filter transients)
+DATA_BORDER_SAMPLES = 20
+
+
+def _load_user_record(cfg: Config, robot: Any) -> meas_mod.JointRecord:
+    """Read and check ``cfg.data_file``: format, columns, NaN, time stamps, joint limits, enough
+    samples for the held-out fit, and a position cut-off below the Nyquist frequency."""
+    file = cfg.data_file
+    rec = meas_mod.load_joint_csv(file, robot, cfg.data_side)
+    _check_record_limits(rec, robot, file)
+    fs = 1.0 / rec.sample_time_s
+    if not cfg.data_cutoff_hz < 0.5 * fs:
+        raise ConfigError(None, "identification.data_cutoff_hz",
+                          f"{cfg.data_cutoff_hz} Hz is not below the Nyquist frequency {0.5 * fs:g} Hz of {file}")
+    n_raw = rec.q_rad.shape[0]
+    n_proc = -(-n_raw // cfg.data_decimation) - 2 * DATA_BORDER_SAMPLES
+    n_train = int(cfg.data_train_fraction * n_proc)
+    n_params = 10 * (robot.model.njoints - 1) + 4 * robot.nq  # standard parameters >= base ones
+    if n_train * robot.nq <= n_params or n_proc - n_train < 1:
+        need_train = n_params // robot.nq + 1
+        need_raw = (int(np.ceil(need_train / cfg.data_train_fraction)) + 1 + 2 * DATA_BORDER_SAMPLES) \
+            * cfg.data_decimation
+        raise DataFileError(
+            file, "samples",
+            f"{n_raw} samples are too few: the fit on the first {cfg.data_train_fraction:g} of the record "
+            f"(after decimation by {cfg.data_decimation}, {DATA_BORDER_SAMPLES} samples dropped at each "
+            f"end) needs more than {n_params} torque values; record at least about {need_raw} samples")
+    return rec
+
+
+def check(config: Config, robot: Any) -> None:
+    """Called by the runner before any stage runs or anything is written: the configuration and
+    the user's record (``data_file``) if any, so a bad file is reported before calibration runs."""
+    config.validate(None)
+    if config.data_file:
+        _load_user_record(config, robot)
+
+
 # --------------------------------------------------------------------------------------- run
 def run(ctx: StageContext) -> StageResult:
     with single_thread_blas():
         return _run(ctx)
 
 
+def _replay(t: np.ndarray, q: np.ndarray, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    """Every k-th sample so that the replay runs at about ``rate_hz``."""
+    dt = float(np.median(np.diff(t))) if len(t) > 1 else 1.0 / rate_hz
+    step = max(1, int(round(1.0 / (rate_hz * dt))))
+    return t[::step] - t[0], q[::step]
+
+
 def _run(ctx: StageContext) -> StageResult:
     cfg: Config = ctx.config
     source = getattr(ctx.run, "source", None)
-    _validate_config(cfg, source)
+    cfg.validate(source)
     ex = cfg.excitation
     robot = ctx.robot
     nq = robot.nq
+    user_data = bool(cfg.data_file)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    if not cfg.data_file and ctx.real is None:
+    if not user_data and ctx.real is None:
         raise PipelineError(None, "identification", "no hidden robot to measure and no data_file given")
 
-    from pipeline.robot.symbolic import SymbolicRobot
-
     act = robot.actuation
-    coupled = cfg.actuator_coupling == "gear" or (cfg.actuator_coupling == "auto" and bool(cfg.data_file))
+    coupled = cfg.actuator_coupling == "gear" or (cfg.actuator_coupling == "auto" and user_data)
     K = act.gear_matrix if coupled else np.eye(nq)
     reg = RegressorModel(robot.model, K, act.coulomb_smoothing_rad_s)
+    rec = _load_user_record(cfg, robot) if user_data else None  # before any long computation
     nominal = _nominal_robot(ctx)
     reg_nominal = RegressorModel(nominal.model, K, act.coulomb_smoothing_rad_s)
     # Base parameters of the nominal structure (exact zeros: the design criterion) and of the
@@ -255,42 +332,45 @@ def _run(ctx: StageContext) -> StageResult:
     base = base_parameters(reg, ctx.rng, cfg.base_samples, cfg.base_tolerance,
                            robot.limits.lower_rad, robot.limits.upper_rad)
     timings["base_parameters_s"] = time.perf_counter() - t0
-    data = None
-    if cfg.data_file:  # read and check the user's record before any long computation
-        rec = meas_mod.load_joint_csv(cfg.data_file, robot, cfg.data_side)
-        _check_record_limits(rec, robot, cfg.data_file)
-        data = meas_mod.process_record(rec, reg, cfg.data_cutoff_hz, cfg.data_decimation)
+
+    # ---------------------------------------------------------------- excitation and data
+    exc: design_mod.ExcitationResult | None = None
+    limits = traj = None
+    t1 = time.perf_counter()
+    if rec is not None:  # the user's record: no excitation to design, nothing simulated
+        data = meas_mod.process_record(rec, reg, cfg.data_cutoff_hz, cfg.data_decimation, DATA_BORDER_SAMPLES)
         data_source = str(cfg.data_file)
+    else:
+        from pipeline.robot.symbolic import SymbolicRobot
 
-    limits = fourier.ExcitationLimits.from_robot(
-        robot, ex.position_margin, ex.velocity_margin, ex.acceleration_margin, ex.torque_margin,
-        ex.floor_clearance_m, ex.self_clearance_m)
-    t1 = time.perf_counter()
-    sym = SymbolicRobot(robot)
-    exc = design_mod.optimize_excitation(
-        robot, sym, reg, base_design, limits, ctx.rng, harmonics=ex.harmonics, base_frequency_hz=ex.base_frequency_hz,
-        n_samples=ex.n_samples, n_starts=ex.n_starts, n_random=ex.n_random, max_iter=ex.max_iter,
-        criterion=ex.criterion, n_check=ex.n_check, progress=ctx.progress, softness=ex.cond_softness)
-    timings["excitation_s"] = time.perf_counter() - t1
-    traj = exc.trajectory
-    if not exc.feasibility.feasible:
-        raise InfeasibleError(None, "identification.excitation",
-                              f"the excitation violates the limits: {exc.feasibility.to_dict()}")
-
-    # ---------------------------------------------------------------- data
-    t1 = time.perf_counter()
-    if data is None:
-        rec = meas_mod.simulate_excitation(ctx.real, traj, cfg.periods, cfg.sample_time_s, ctx.rng)
+        limits = fourier.ExcitationLimits.from_robot(
+            robot, ex.position_margin, ex.velocity_margin, ex.acceleration_margin, ex.torque_margin,
+            ex.floor_clearance_m, ex.self_clearance_m)
+        sym = SymbolicRobot(robot)
+        exc = design_mod.optimize_excitation(
+            robot, sym, reg, base_design, limits, ctx.rng, harmonics=ex.harmonics,
+            base_frequency_hz=ex.base_frequency_hz, n_samples=ex.n_samples, n_starts=ex.n_starts,
+            n_random=ex.n_random, max_iter=ex.max_iter, criterion=ex.criterion, n_check=ex.n_check,
+            progress=ctx.progress, softness=ex.cond_softness)
+        timings["excitation_s"] = time.perf_counter() - t1
+        traj = exc.trajectory
+        if not exc.feasibility.feasible:
+            raise InfeasibleError(None, "identification.excitation",
+                                  f"the excitation violates the limits: {exc.feasibility.to_dict()}")
+        t1 = time.perf_counter()
+        sim = meas_mod.simulate_excitation(ctx.real, traj, cfg.periods, cfg.sample_time_s, ctx.rng)
         n_per = int(round(traj.period_s / cfg.sample_time_s))
         cutoff = cfg.state_cutoff_factor * ex.harmonics * ex.base_frequency_hz
-        data = meas_mod.process_periodic(rec, reg, n_per, cutoff, cfg.decimation)
+        data = meas_mod.process_periodic(sim, reg, n_per, cutoff, cfg.decimation)
         data_source = "simulation (ideal tracking of the hidden robot)"
     timings["data_s"] = time.perf_counter() - t1
 
-    # ---------------------------------------------------------------- estimation
+    # ---------------------------------------------------------------- estimation (all samples)
     t1 = time.perf_counter()
     Wb = base.base_regressor(data.Y)
     y = data.y
+    cond_data = float(np.linalg.cond(Wb))  # of the base set estimated below
+    cond_data_structural = float(np.linalg.cond(base_design.base_regressor(data.Y)))  # design criterion's set
     ols = est_mod.ols(Wb, y, nq)
     wls = est_mod.wls(Wb, y, nq)
     p_nom = standard_parameters(robot.model, act.rotor_inertia_kgm2, act.viscous_Nms_rad, act.coulomb_Nm)
@@ -301,12 +381,28 @@ def _run(ctx: StageContext) -> StageResult:
 
     # ---------------------------------------------------------------- validation
     t1 = time.perf_counter()
-    vt = val_mod.validation_trajectory(
-        robot, cfg.validation_sample_time_s,
-        lambda: _fourier_validation(robot, limits, ex, cfg.validation_sample_time_s, ctx.rng),
-        use_iso=cfg.validation == "iso9283")
-    noise_sigma = data.noise_sigma_Nm
-    if ctx.real is not None:
+    if rec is not None:
+        # held-out tail of the user's record: a separate fit on the first part (tx40 route)
+        ho = heldout_validation(data, base, p_nom, nq, cfg.data_train_fraction, cfg.regularization,
+                                cfg.physical_max_iter, "identification.data_train_fraction")
+        pct = round(100 * (1 - cfg.data_train_fraction))
+        vt = val_mod.ValidationTrajectory(
+            ho.t_s, ho.q, np.empty((0, nq)), np.empty((0, nq)), f"held-out last {pct} % of the user's record",
+            f"fit on the first {ho.n_train} of {ho.n_samples} processed samples, scored on the rest")
+        tau_v, pred_phys = ho.tau_Nm, ho.pred["physical"]
+        rms_phys, rel_phys = val_mod.torque_rms(tau_v, pred_phys)
+        rms_wls, rel_wls = val_mod.torque_rms(tau_v, ho.pred["wls"])
+        # residual sigma per joint of the WLS fit on all samples (processed torques, like the RMS)
+        noise_sigma: np.ndarray | None = np.asarray(wls.joint_sigma_Nm, float)
+        noise_source = "residuals of the WLS fit (processed torques)"
+    else:
+        assert limits is not None
+        vt = val_mod.validation_trajectory(
+            robot, cfg.validation_sample_time_s,
+            lambda: _fourier_validation(robot, limits, ex, cfg.validation_sample_time_s, ctx.rng),
+            use_iso=cfg.validation == "iso9283")
+        noise_sigma = data.noise_sigma_Nm
+        noise_source = "spread between excitation periods"
         meas_v = ctx.real.execute_joint_trajectory(vt.t_s, vt.q, vt.v, vt.a, ctx.rng)
         tau_v = meas_v.tau_Nm
         Yv = reg.stacked(vt.q, vt.v, vt.a)
@@ -316,13 +412,11 @@ def _run(ctx: StageContext) -> StageResult:
         rms_wls, rel_wls = val_mod.torque_rms(tau_v, pred_wls)
         if noise_sigma is None or not np.all(np.isfinite(noise_sigma)):
             noise_sigma = np.asarray(meas_v.tau_sigma_Nm, float)
-    else:
-        tau_v = pred_phys = None
-        rms_phys = rel_phys = rms_wls = rel_wls = np.full(nq, np.nan)
+            noise_source = "torque sensor of the simulation"
     timings["validation_s"] = time.perf_counter() - t1
 
     truth = None
-    if cfg.score_against_truth and ctx.real is not None and not cfg.data_file:
+    if cfg.score_against_truth and not user_data and ctx.real is not None:
         truth = val_mod.truth_scores(ctx.real, base, wls.beta, wls.sigma)
 
     # ---------------------------------------------------------------- TX40 record
@@ -340,15 +434,19 @@ def _run(ctx: StageContext) -> StageResult:
     summary: dict[str, Any] = {
         "n_base_parameters": base.n_base,
         "n_base_parameters_structural": base_design.n_base,
-        "cond_optimized": exc.cond_optimized,
-        "cond_random_median": exc.cond_random_median,
-        "cond_improvement": exc.cond_random_median / exc.cond_optimized,
-        "excitation_criterion": ex.criterion,
+        "excitation": "from the user's record" if exc is None else f"optimised Fourier trajectory ({ex.criterion})",
+        "cond_optimized": None if exc is None else exc.cond_optimized,
+        "cond_random_median": None if exc is None else exc.cond_random_median,
+        "cond_improvement": None if exc is None else exc.cond_random_median / exc.cond_optimized,
+        "cond_base_regressor_data": cond_data,
+        "cond_base_regressor_data_structural": cond_data_structural,
+        "excitation_criterion": None if exc is None else ex.criterion,
         "validation_trajectory": vt.label,
         "validation_torque_rms_Nm": rms_phys.tolist(),
         "validation_relative_error": rel_phys.tolist(),
         "validation_torque_rms_wls_Nm": rms_wls.tolist(),
         "torque_noise_sigma_Nm": None if noise_sigma is None else np.asarray(noise_sigma).tolist(),
+        "torque_noise_source": noise_source,
         "validation_rms_over_noise": ratio.tolist(),
         "fraction_within_3sigma": None if truth is None else truth["fraction_within_3sigma"],
         "physically_consistent": bool(phys.consistent),
@@ -360,41 +458,49 @@ def _run(ctx: StageContext) -> StageResult:
     }
     if tx is not None:
         summary.update(tx.summary())
-    t_rep = np.arange(0.0, traj.period_s, 1.0 / cfg.replay_rate_hz)
-    q_rep, _, _ = traj.evaluate(t_rep)
+    if traj is not None:
+        t_rep = np.arange(0.0, traj.period_s, 1.0 / cfg.replay_rate_hz)
+        q_rep, _, _ = traj.evaluate(t_rep)
+    else:  # the user's (processed: filtered, decimated, borders dropped) trajectory
+        t_rep, q_rep = _replay(np.arange(data.n_samples) * data.sample_time_s, data.q, cfg.replay_rate_hz)
     arrays: dict[str, np.ndarray] = {
         "trajectory_excitation_t": t_rep,
         "trajectory_excitation_q": q_rep,
-        "excitation_coefficients": traj.coefficients,
         "base_beta": wls.beta,
         "base_sigma": wls.sigma,
         "base_beta_ols": ols.beta,
         "base_matrix_E": base.matrix,
         "standard_parameters_physical": phys.p,
         "standard_parameters_nominal": p_nom,
-        "cond_random": np.asarray(exc.cond_random),
         "validation_t_s": vt.t_s,
         "validation_q": vt.q,
+        "validation_tau_measured_Nm": tau_v,
+        "validation_tau_predicted_Nm": pred_phys,
     }
-    if tau_v is not None:
-        arrays["validation_tau_measured_Nm"] = tau_v
-        arrays["validation_tau_predicted_Nm"] = pred_phys
+    if exc is not None and traj is not None:
+        arrays["excitation_coefficients"] = traj.coefficients
+        arrays["cond_random"] = np.asarray(exc.cond_random)
     if truth is not None:
         arrays["base_beta_true"] = truth["beta_true"]
         arrays["base_z"] = truth["z"]
-    data_out = {
-        "base_parameter_names": base.names,
-        "standard_parameter_names": base.standard_names,
-        "base_qr_tolerance": base.tolerance,
-        "base_rank_gap": base.rank_gap,
-        "excitation": {
+    if exc is not None and traj is not None:
+        excitation_data: dict[str, Any] = {
             "trajectory": traj.to_dict(),
             "starts": exc.start_results,
             "feasibility": exc.feasibility.to_dict(),
             "cond_starts": exc.cond_starts,
             "cond_history": exc.cond_history,
             **exc.details,
-        },
+        }
+    else:
+        excitation_data = {"source": "user record", "file": str(cfg.data_file),
+                           "cond_base_regressor": cond_data}
+    data_out = {
+        "base_parameter_names": base.names,
+        "standard_parameter_names": base.standard_names,
+        "base_qr_tolerance": base.tolerance,
+        "base_rank_gap": base.rank_gap,
+        "excitation": excitation_data,
         "estimation": {
             "joint_sigma_Nm_wls": wls.joint_sigma_Nm.tolist(),
             "physical_status": phys.status,
@@ -415,12 +521,13 @@ def _run(ctx: StageContext) -> StageResult:
             "ols_rotor_inertia_axis6_base": tx.details.get("ols_ia6_base_value"),
             **{k: v for k, v in tx.details.items() if k != "ols_ia6_base_value"},
         }
-    figures = {"convergence": _fig_convergence(exc),
-               "parameters": _fig_parameters(base, wls.beta, wls.sigma, base.from_standard(phys.p),
-                                             base.from_standard(p_nom), None if truth is None else truth["z"])}
-    if tau_v is not None:
-        figures["validation_torques"] = _fig_torques(vt.t_s, tau_v, pred_phys,
-                                                     f"validation on {vt.label}: measured vs identified model")
+    figures: dict[str, Figure] = {}
+    if exc is not None:
+        figures["convergence"] = _fig_convergence(exc)
+    figures["parameters"] = _fig_parameters(base, wls.beta, wls.sigma, base.from_standard(phys.p),
+                                            base.from_standard(p_nom), None if truth is None else truth["z"])
+    figures["validation_torques"] = _fig_torques(vt.t_s, tau_v, pred_phys,
+                                                 f"validation on {vt.label}: measured vs identified model")
     if tx is not None:
         figures["tx40_heldout"] = _fig_torques(tx.heldout_t_s, tx.heldout_tau_Nm, tx.heldout_pred_Nm["physical"],
                                                "TX40 held-out 30 %: measured vs physically consistent fit")
@@ -432,16 +539,24 @@ def _check_record_limits(rec: meas_mod.JointRecord, robot: Any, file: Any) -> No
     lo, hi = robot.limits.lower_rad, robot.limits.upper_rad
     bad = np.argwhere((rec.q_rad < lo - 1e-6) | (rec.q_rad > hi + 1e-6))
     if bad.size:
-        k, j = bad[0]
-        raise DataFileError(file, f"q{j + 1}", f"sample {k}: {rec.q_rad[k, j]:.4f} rad outside the joint "
+        k, j = (int(i) for i in bad[0])
+        raise DataFileError(file, f"q{j + 1}", f"{rec.where(k)}: {rec.q_rad[k, j]:.4f} rad outside the joint "
                             f"limits [{lo[j]:.4f}, {hi[j]:.4f}]")
 
 
 def _report(summary: dict, tx: Tx40Result | None) -> str:
+    if summary["cond_optimized"] is None:
+        head = (f"Excitation: from the user's record ({summary['data_source']}); condition number of "
+                f"its base regressor {summary['cond_base_regressor_data']:.1f} "
+                f"({summary['cond_base_regressor_data_structural']:.1f} for the structural base parameters, "
+                f"the excitation criterion). Validation on the "
+                f"{summary['validation_trajectory']}; noise sigma from the {summary['torque_noise_source']}.")
+    else:
+        head = (f"Excitation: cond {summary['cond_optimized']:.1f} optimised vs median "
+                f"{summary['cond_random_median']:.1f} of random feasible Fourier trajectories "
+                f"({summary['cond_improvement']:.1f}x).")
     lines = [
-        f"Excitation: cond {summary['cond_optimized']:.1f} optimised vs median "
-        f"{summary['cond_random_median']:.1f} of random feasible Fourier trajectories "
-        f"({summary['cond_improvement']:.1f}x).",
+        head,
         "",
         "| joint | validation RMS [N m] | noise sigma [N m] | RMS / sigma |",
         "|---|---|---|---|",
@@ -466,4 +581,4 @@ def _report(summary: dict, tx: Tx40Result | None) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["NAME", "DEPENDS", "Config", "ExcitationConfig", "run", "identified_robot"]
+__all__ = ["NAME", "DEPENDS", "Config", "ExcitationConfig", "check", "run", "identified_robot"]

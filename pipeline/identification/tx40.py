@@ -119,6 +119,55 @@ def _rms(r: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.asarray(r) ** 2)))
 
 
+@dataclass
+class HeldOutValidation:
+    """Fit on the first ``train_fraction`` of a record, score on the rest (:func:`heldout_validation`)."""
+
+    ols: est_mod.LeastSquaresEstimate
+    wls: est_mod.LeastSquaresEstimate
+    phys: est_mod.PhysicalEstimate
+    n_train: int
+    n_samples: int
+    t_s: np.ndarray  # times of the held-out samples (processed rate, from the record's start)
+    q: np.ndarray  # held-out positions (n_test, nq)
+    tau_Nm: np.ndarray  # measured (processed) held-out torques (n_test, nq)
+    pred: dict[str, np.ndarray]  # "ols" | "wls" | "physical" -> predicted held-out torques
+    rms_Nm: dict[str, float]  # overall RMS error per estimator
+    rms_per_joint_Nm: dict[str, list[float]]
+
+
+def heldout_validation(
+    data: ProcessedData, base: BaseParameters, p_nominal: np.ndarray, nq: int, train_fraction: float,
+    regularization: float, max_iter: int, field_name: str = "train_fraction",
+) -> HeldOutValidation:
+    """Held-out test of a (non-periodic) record: OLS, Gautier's WLS and the physically consistent
+    fit (log-Cholesky, paper ``004_abbe750b8bbcc3aa.txt`` §4.1) on the first ``train_fraction`` of
+    the processed samples, torques predicted on the rest (the last samples, never seen by the fit)."""
+    n = data.n_samples
+    ntr = int(train_fraction * n)
+    if not 0 < ntr < n:
+        raise DataFileError(None, field_name, f"{train_fraction} of {n} samples leaves no data to fit or to score")
+    Wb = base.base_regressor(data.Y)
+    y = data.y
+    tr, te = slice(0, ntr * nq), slice(ntr * nq, None)
+    ols = est_mod.ols(Wb[tr], y[tr], nq)
+    wls = est_mod.wls(Wb[tr], y[tr], nq)
+    phys = est_mod.physical_fit(data.Y[tr], y[tr], nq, p_nominal, wls.joint_sigma_Nm,
+                                regularization=regularization, max_iter=max_iter)
+    pred = {
+        "ols": (Wb[te] @ ols.beta).reshape(-1, nq),
+        "wls": (Wb[te] @ wls.beta).reshape(-1, nq),
+        "physical": (data.Y[te] @ phys.p).reshape(-1, nq),
+    }
+    tau_te = y[te].reshape(-1, nq)
+    return HeldOutValidation(
+        ols=ols, wls=wls, phys=phys, n_train=ntr, n_samples=n,
+        t_s=np.arange(ntr, n) * data.sample_time_s, q=data.q[ntr:], tau_Nm=tau_te, pred=pred,
+        rms_Nm={k: _rms(tau_te - v) for k, v in pred.items()},
+        rms_per_joint_Nm={k: np.sqrt(np.mean((tau_te - v) ** 2, axis=0)).tolist() for k, v in pred.items()},
+    )
+
+
 def run_tx40(robot: Any, config: Tx40Config | None = None, rng: np.random.Generator | None = None) -> Tx40Result:
     """The whole TX40 study (see the module docstring)."""
     with single_thread_blas():
@@ -143,24 +192,10 @@ def _run_tx40_impl(robot: Any, config: Tx40Config | None = None, rng: np.random.
     cond = float(np.linalg.cond(Wb))
     tau_raw = rec.tau_Nm[:: cfg.decimation][cfg.border_samples : cfg.border_samples + n]
     rms_raw = _rms(tau_raw.ravel() - Wb @ ols_all.beta)
-    # held-out: first train_fraction for the fit, the rest for the score
-    ntr = int(cfg.train_fraction * n)
-    if not 0 < ntr < n:
-        raise DataFileError(None, "identification.tx40.train_fraction", f"{cfg.train_fraction} leaves no data")
-    tr, te = slice(0, ntr * nq), slice(ntr * nq, None)
-    ols = est_mod.ols(Wb[tr], y[tr], nq)
-    wls = est_mod.wls(Wb[tr], y[tr], nq)
     p_nom = standard_parameters(robot.model, act.rotor_inertia_kgm2, act.viscous_Nms_rad, act.coulomb_Nm)
-    phys = est_mod.physical_fit(data.Y[tr], y[tr], nq, p_nom, wls.joint_sigma_Nm,
-                                regularization=cfg.regularization, max_iter=cfg.max_iter)
-    pred = {
-        "ols": (Wb[te] @ ols.beta).reshape(-1, nq),
-        "wls": (Wb[te] @ wls.beta).reshape(-1, nq),
-        "physical": (data.Y[te] @ phys.p).reshape(-1, nq),
-    }
-    tau_te = y[te].reshape(-1, nq)
-    held = {k: _rms(tau_te - v) for k, v in pred.items()}
-    held_j = {k: np.sqrt(np.mean((tau_te - v) ** 2, axis=0)).tolist() for k, v in pred.items()}
+    ho = heldout_validation(data, base, p_nom, nq, cfg.train_fraction, cfg.regularization, cfg.max_iter,
+                            "identification.tx40.train_fraction")
+    ols, wls, phys, ntr = ho.ols, ho.wls, ho.phys, ho.n_train
     # is the OLS fit physically consistent? (its base parameters have no standard realisation
     # check here; the README notes a negative rotor inertia of axis 6, a base parameter on its own)
     names = base.names
@@ -172,17 +207,17 @@ def _run_tx40_impl(robot: Any, config: Tx40Config | None = None, rng: np.random.
         condition_number=cond,
         rms_all_ols_Nm=ols_all.rms_Nm,
         rms_all_ols_raw_torque_Nm=rms_raw,
-        heldout_rms_Nm=held,
-        heldout_rms_per_joint_Nm=held_j,
+        heldout_rms_Nm=ho.rms_Nm,
+        heldout_rms_per_joint_Nm=ho.rms_per_joint_Nm,
         train_rms_Nm={"ols": ols.rms_Nm, "wls": wls.rms_Nm, "physical": phys.rms_Nm},
         physically_consistent=phys.consistent,
         ols_consistent=ols_consistent,
         physical_parameters=phys.p,
         ols_beta=ols.beta,
         base=base,
-        heldout_t_s=np.arange(ntr, n) * data.sample_time_s,
-        heldout_tau_Nm=tau_te,
-        heldout_pred_Nm=pred,
+        heldout_t_s=ho.t_s,
+        heldout_tau_Nm=ho.tau_Nm,
+        heldout_pred_Nm=ho.pred,
         details={
             "n_samples": n,
             "n_train": ntr,

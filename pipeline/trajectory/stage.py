@@ -168,4 +168,11 @@ def run(ctx: StageContext) -> StageResult:
                      f"{s['max_torque_ratio']:.4f}, {1e3 * s.get('tcp_error_max_m', float('nan')):.3f}"))
     report = "| quantity | value |\n|---|---|\n" + "\n".join(
         f"| {k} | {v:.4g} |" if isinstance(v, float) else f"| {k} | {v} |" for k, v in rows)
+    over = {name: s["max_torque_ratio"] for name, s in sims.items() if s["max_torque_ratio"] > 1.0}
+    if over:
+        listed = ", ".join(f"{name} {ratio:.3f}" for name, ratio in over.items())
+        report += (f"\n\n**Warning: not executable within the torque limits.** In the closed-loop simulation of the "
+                   f"real robot the drives ask for more than the torque limit ({listed} x the limit): the model "
+                   f"the plan was made with differs from the robot and the feedback adds torque. Raise "
+                   f"`trajectory.torque_reserve` (now {cfg.torque_reserve:g}) or improve the identified model.")
     return StageResult(summary=summary, arrays=arrays, data=data, figures=figures, report_md=report)

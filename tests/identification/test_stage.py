@@ -4,6 +4,7 @@ read the truth), and its handling of bad input."""
 from __future__ import annotations
 
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -91,8 +92,20 @@ def _write_csv(path, t, q, tau):
     np.savetxt(path, np.column_stack([t, q, tau]), delimiter=",", header=header, comments="")
 
 
-@pytest.mark.parametrize("problem", ["nan", "short_row", "too_few", "outside_limits"])
-def test_bad_data_files_raise_and_write_nothing(tmp_path, problem):
+#: problem -> words the error must contain (file lines: header = line 1, q[k] is on line k + 2)
+BAD_FILES = {
+    "nan": ("q3", "line 125"),
+    "short_row": ("line 101", "12 values, expected 13"),
+    "too_few": ("samples", "too few"),
+    "outside_limits": ("q1", "line 202"),
+    "not_a_number": ("line 52", "tau2", "'abc' is not a number"),
+    "header_only": ("no data rows",),
+    "missing_column": ("missing columns", "tau6"),
+    "time_not_increasing": ("t", "line 12"),
+}
+
+
+def _bad_record(tmp_path, problem):
     t = np.arange(400) * 0.01
     q = 0.1 * np.sin(np.outer(t, np.arange(1, 7)))
     tau = np.cos(np.outer(t, np.arange(1, 7)))
@@ -103,17 +116,43 @@ def test_bad_data_files_raise_and_write_nothing(tmp_path, problem):
         t, q, tau = t[:40], q[:40], tau[:40]
     if problem == "outside_limits":
         q[200, 0] = 4.0
+    if problem == "time_not_increasing":
+        t[10] = t[9]
     _write_csv(path, t, q, tau)
+    lines = path.read_text().splitlines()
     if problem == "short_row":
-        lines = path.read_text().splitlines()
         lines[100] = ",".join(lines[100].split(",")[:-1])
-        path.write_text("\n".join(lines) + "\n")
+    if problem == "not_a_number":
+        cells = lines[51].split(",")
+        cells[8] = "abc"  # t, q1..q6, tau1, tau2
+        lines[51] = ",".join(cells)
+    if problem == "header_only":
+        lines = lines[:1]
+    if problem == "missing_column":
+        lines = [",".join(ln.split(",")[:-1]) for ln in lines]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.mark.parametrize("problem", sorted(BAD_FILES))
+def test_bad_data_files_raise_and_write_nothing(tmp_path, problem):
+    path = _bad_record(tmp_path, problem)
     ctx, _ = quick_context(tmp_path / "run", overrides={
         "data_file": str(path), "run_tx40": False,
         "excitation": {"n_samples": 30, "n_starts": 1, "n_random": 2, "max_iter": 3}})
-    with pytest.raises(DataFileError) as info:
-        stage.run(ctx)
-    assert "record.csv" in str(info.value)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # e.g. numpy's "input contained no data"
+        with pytest.raises(DataFileError) as info:
+            stage.run(ctx)
+        message = str(info.value)
+        assert "record.csv" in message
+        for word in BAD_FILES[problem]:
+            assert word in message, (word, message)
+        assert "usecols" not in message
+        # the runner's early check gives the same error
+        with pytest.raises(DataFileError) as early:
+            stage.check(ctx.config, ctx.robot)
+    assert early.value.one_line() == message
     assert not any(ctx.out_dir.iterdir())
 
 
@@ -130,12 +169,19 @@ def test_bad_config_values(tmp_path):
         stage.run(ctx)
 
 
+class _NoHiddenRobot:
+    """Stands for ``ctx.real`` in user-data mode: any use of the hidden robot fails the test."""
+
+    def __getattr__(self, name):
+        raise AssertionError(f"the stage read ctx.real.{name} in user-data mode")
+
+
 def test_stage_runs_on_a_joint_csv_record(tmp_path):
-    """A user record (CSV, joint side) instead of the simulated experiment."""
+    """A user record (CSV, joint side) instead of the simulated experiment: no excitation is
+    designed, validation is on the record's held-out tail, the hidden robot is never used."""
     from pipeline.identification import fourier
 
-    ctx, real = quick_context(tmp_path / "run", overrides={
-        "run_tx40": False, "excitation": {"n_samples": 30, "n_starts": 1, "n_random": 3, "max_iter": 5}})
+    ctx, real = quick_context(tmp_path / "run", overrides={"run_tx40": False})
     robot = ctx.robot
     limits = fourier.ExcitationLimits.from_robot(robot, 0.95, 0.95, 0.95, 0.8, 0.05, 0.02)
     traj = fourier.random_feasible_trajectories(robot, limits, 5, 0.1, 1, np.random.default_rng(7))[0]
@@ -144,14 +190,41 @@ def test_stage_runs_on_a_joint_csv_record(tmp_path):
     path = tmp_path / "record.csv"
     _write_csv(path, t, meas.q_rad, meas.tau_Nm)
     ctx.config.data_file = str(path)
+    ctx.real = _NoHiddenRobot()
     res = stage.run(ctx)
-    assert res.summary["data_source"] == str(path)
-    assert res.summary["physically_consistent"]
+    s = res.summary
+    assert s["data_source"] == str(path)
+    assert s["physically_consistent"]
+    # no excitation design: no optimised/random condition numbers, no convergence figure
+    assert s["cond_optimized"] is None and s["cond_random_median"] is None
+    assert s["excitation"] == "from the user's record"
+    assert "from the user's record" in res.report_md and "optimised vs" not in res.report_md
+    assert "convergence" not in res.figures and "excitation_coefficients" not in res.arrays
+    # the condition number is the one of the user's data
+    assert 1 < s["cond_base_regressor_data_structural"] <= s["cond_base_regressor_data"]
+    # validation on the held-out tail of the record (30 %), not on the simulated ISO path
+    assert "held-out" in s["validation_trajectory"]
+    n_val = res.arrays["validation_tau_measured_Nm"].shape[0]
+    assert n_val == s["n_samples_fit"] - int(0.7 * s["n_samples_fit"])
+    t_val = res.arrays["validation_t_s"]
+    assert t_val[0] >= 0.69 * s["n_samples_fit"] * np.median(np.diff(t_val))  # the tail of the record
     sigma = np.asarray(meas.tau_sigma_Nm)
     # the fit residual of the low-passed torques is below the raw noise
-    assert res.summary["fit_rms_Nm_wls"] < np.sqrt(np.mean(sigma**2))
-    rms = np.asarray(res.summary["validation_torque_rms_Nm"])
+    assert s["fit_rms_Nm_wls"] < np.sqrt(np.mean(sigma**2))
+    rms = np.asarray(s["validation_torque_rms_Nm"])
     assert np.all(rms <= 1.5 * sigma)
+    # noise from the residuals (low-passed torques: well below the raw sensor sigma), and the
+    # held-out error at that level
+    noise = np.asarray(s["torque_noise_sigma_Nm"])
+    assert "residuals" in s["torque_noise_source"]
+    assert np.all(noise < sigma)
+    assert np.all(rms < 1.5 * noise)
+    # the viewer replays the user's (processed) trajectory: it lies on the recorded path
+    q_rep, t_rep = res.arrays["trajectory_excitation_q"], res.arrays["trajectory_excitation_t"]
+    assert q_rep.shape == (len(t_rep), 6) and t_rep[0] == 0 and t_rep[-1] > 0.8 * t[-1]
+    gap = [np.min(np.max(np.abs(meas.q_rad - qk), axis=1)) for qk in q_rep[::40]]
+    assert max(gap) < 0.01
+    assert np.ptp(q_rep, axis=0).min() > 0.05
 
 
 def test_motor_side_csv_is_converted_with_the_gear_matrix(tmp_path):
