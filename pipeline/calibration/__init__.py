@@ -5,6 +5,8 @@ Public entry points:
 - :func:`pipeline.calibration.stage.calibrate` (``robot, real, Config, rng``) -> ``CalibrationOutcome``
   (identifiability report, candidates, selection, measurements, estimate, validation, calibrated
   ``RobotModel``); the runner stage is :mod:`pipeline.calibration.stage` (``NAME = "calibration"``).
+  With ``measurements_csv`` the simulated robot is never used: validation only on ``validation_csv``
+  (else no held-out validation: null ``heldout_*`` keys), fit residuals and covariance prediction.
 - :mod:`~pipeline.calibration.error_model`: ``MeasurementModel`` (exact CasADi tracker model and
   Jacobian), ``identifiability`` (SVD + ordered QR + correlations), ``mdh_basis``.
 - :mod:`~pipeline.calibration.candidates`: grid / random candidates, batched filtering,

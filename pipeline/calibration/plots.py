@@ -1,4 +1,4 @@
-"""Figures of the calibration stage: held-out error histograms, index against iterations."""
+"""Figures of the calibration stage: held-out error histograms, fit residuals, index against iterations."""
 
 from __future__ import annotations
 
@@ -41,10 +41,29 @@ def index_history(history: list[tuple[int, float]], index_name: str, method: str
     return fig
 
 
+def fit_residual_histogram(residuals_m: np.ndarray, sigma_m: float | None = None):
+    """Histogram of the in-sample fit residuals |y - h| of the calibration measurements (µm)."""
+    fig, ax = plt.subplots(figsize=(6, 3.6))
+    ax.hist(1e6 * residuals_m, bins=min(40, max(5, len(residuals_m) // 2)), color="tab:gray", alpha=0.8)
+    if sigma_m is not None:
+        ax.axvline(3e6 * sigma_m, color="k", ls="--", label="3 σ tracker")
+        ax.legend()
+    ax.set_xlabel("|y - h| after the fit, calibration points [µm]")
+    ax.set_ylabel("configurations")
+    ax.set_title(f"fit residuals (in-sample): RMS {1e6 * np.sqrt(np.mean(residuals_m ** 2)):.1f} µm")
+    fig.tight_layout()
+    return fig
+
+
 def stage_figures(out) -> dict:
     v = out.validation
-    figs = {"heldout_errors": error_histograms(v["errors_before_m"], v["errors_after_m"],
-                                               v["tracker_noise_sigma_m"], v["predicted_rms_m"])}
+    figs = {}
+    if v is not None:
+        figs["heldout_errors"] = error_histograms(v["errors_before_m"], v["errors_after_m"],
+                                                  v["tracker_noise_sigma_m"], v["predicted_rms_m"])
+    if out.fit is not None:
+        sigma = float(np.sqrt(np.mean(out.measurements.sigma_m ** 2)))
+        figs["fit_residuals"] = fit_residual_histogram(out.fit["residuals_after_m"], sigma)
     if out.selection is not None and len(out.selection.history) > 1:
         figs["index_history"] = index_history(out.selection.history, out.selection.index_name, out.selection.method)
     return figs

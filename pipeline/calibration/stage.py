@@ -11,6 +11,11 @@ Pipeline (issue 3; papers 004 §3, 000, 002, 003):
 4. measurement with the (simulated) tracker, or a CSV file;
 5. registration + Levenberg-Marquardt, covariance from the noise model, calibrated RobotModel;
 6. validation on >= ``n_heldout`` held-out visible poses measured on the real robot (or a CSV).
+
+With ``measurements_csv`` (the user's own tracker data) steps 2-4 are skipped and the simulated
+robot is never touched: the design fields describe the user's configurations (their index, method
+"user file"), and the held-out validation uses only ``validation_csv``; without it there is no
+held-out validation (null summary keys), only the fit residuals and the covariance prediction.
 """
 
 from __future__ import annotations
@@ -111,11 +116,17 @@ class CalibrationOutcome:
     selection: ds.SelectionResult | None
     measurements: ms.Measurements
     estimate: Estimate
-    validation: dict
+    validation: dict | None         # None: no held-out validation (measurement file, no validation file)
     robot: Any
     timings_s: dict[str, float]
     gradient: Any = None
     working_Q: np.ndarray | None = None
+    #: index of the configurations actually measured (``method`` "user file" for a measurement file)
+    measured_design: dict | None = None
+    #: in-sample fit residuals (:func:`pipeline.calibration.validate.fit_residuals`)
+    fit: dict | None = None
+    #: covariance-predicted error over random visible poses (only when there is no held-out set)
+    prediction: dict | None = None
 
 
 def identify_parameter_set(robot, mm: em.MeasurementModel, cfg: Config, rng: np.random.Generator
@@ -180,8 +191,31 @@ def index_spec(cfg: Config, robot, mm: em.MeasurementModel, basis: np.ndarray, r
     return ix.IndexSpec(cfg.index_name, working_jacobian=Jw, n_working=len(Qw)), Qw
 
 
+def measured_design(robot, mm: em.MeasurementModel, basis: np.ndarray, Q: np.ndarray, spec: ix.IndexSpec,
+                    T_tb, method: str) -> dict:
+    """Observability index of the configurations ``Q`` actually measured (nominal model, whitened
+    by the tracker noise model, tracker pose ``T_tb``); same conventions as the selection."""
+    cs = cd.build_candidate_set(cd.chain_from_robot(robot), Q, basis, T_tb)
+    G = cs.G.reshape(-1, basis.shape[1])
+    value = ix.evaluate(spec, G.T @ G, len(Q), cs.Y if spec.needs_positions else None)
+    return {"method": method, "index_name": spec.name, "n_configurations": int(len(Q)), "index_value": float(value)}
+
+
+def predicted_on_random_poses(robot, mm: em.MeasurementModel, est: Estimate, cfg: Config,
+                              rng: np.random.Generator) -> dict:
+    """Covariance-predicted error over ``n_heldout`` random collision-free poses visible to the
+    identified tracker (nominal model only: nothing is measured)."""
+    chain = cd.chain_from_robot(robot, est.transform_tracker_to_base)
+    margins = cd.FilterMargins(cfg.margin_collision_m, math.radians(1.0), 0.005)
+    Q, _ = cd.random_candidates(chain, cfg.n_heldout, rng, margins)
+    sigma = ms.noise_model_sigma(robot, mm.predict(Q, est.x, est.registration))
+    return va.predicted_error(mm, est, Q, sigma)
+
+
 def calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None) -> CalibrationOutcome:
-    """Run the whole calibration (see the module docstring) and return its outcome."""
+    """Run the whole calibration (see the module docstring) and return its outcome.
+
+    ``real`` is only used without ``cfg.measurements_csv`` (may be None with a measurement file)."""
     with single_thread_blas():
         return _calibrate(robot, real, cfg, rng, progress)
 
@@ -201,6 +235,7 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None
     cs = None
     grad = None
     Qw = None
+    spec = None
     if user is None:
         if real is None:
             raise PipelineError(None, "calibration", "no measurement file and no simulated robot")
@@ -245,7 +280,7 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None
             raise InfeasibleError(None, "calibration.measurements",
                                   f"only {len(meas)} of {len(Q_sel)} configurations were visible to the tracker")
     else:
-        meas = user
+        meas = user  # the user's configurations: no candidates, no selection, no simulated robot
     t = time.perf_counter()
     est = estimate(mm, meas.Q, meas.Y, meas.sigma_m, basis, source=meas.source,
                    max_iterations=cfg.max_lm_iterations)
@@ -253,14 +288,23 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None
     t = time.perf_counter()
     if val_user is not None:
         held = val_user
+    elif user is not None:
+        held = None  # real tracker data: a simulated held-out set would be fiction
     else:
         if real is None:
             raise PipelineError(None, "calibration.validation_csv", "no validation file and no simulated robot")
         held = heldout_measurements(robot, real, est, cfg, rng)
-    validation = va.validate(mm, est, held)
+    validation = va.validate(mm, est, held) if held is not None else None
     timings["validate_s"] = time.perf_counter() - t
+    if spec is None:
+        spec, Qw = index_spec(cfg, robot, mm, basis, rng)
+    design = measured_design(robot, mm, basis, meas.Q, spec, est.transform_tracker_to_base,
+                             "user file" if user is not None else "measured subset")
+    fit = va.fit_residuals(mm, est, meas)
+    prediction = predicted_on_random_poses(robot, mm, est, cfg, rng) if validation is None else None
     new_robot = calibrated_robot(robot, mm, est.x)
-    return CalibrationOutcome(report, mm.names, cs, selection, meas, est, validation, new_robot, timings, grad, Qw)
+    return CalibrationOutcome(report, mm.names, cs, selection, meas, est, validation, new_robot, timings, grad, Qw,
+                              design, fit, prediction)
 
 
 def heldout_measurements(robot, real, est: Estimate, cfg: Config, rng: np.random.Generator) -> ms.Measurements:
@@ -296,35 +340,96 @@ def check(config: Config, robot) -> None:
             ms.read_csv(config.validation_csv, robot, min_rows=1)
 
 
+def from_file(out: CalibrationOutcome) -> bool:
+    """Whether the calibration measurements came from a file (no selection was measured)."""
+    return out.selection is None
+
+
+def n_not_visible(out: CalibrationOutcome) -> int | None:
+    """Commanded configurations the tracker could not see (None for a measurement file: unknown)."""
+    if from_file(out):
+        return None
+    return int(out.measurements.n_requested - len(out.measurements))
+
+
 def summary_of(out: CalibrationOutcome, cfg: Config) -> dict:
     v = out.validation
     sel = out.selection
+    user = from_file(out)
+    design = out.measured_design or {}
+    if v is not None:
+        predicted, sigma = v["predicted_rms_m"], v["tracker_noise_sigma_m"]
+    elif out.prediction is not None:
+        predicted, sigma = out.prediction["predicted_rms_m"], out.prediction["tracker_noise_sigma_m"]
+    else:
+        predicted = sigma = None
+    fit = out.fit or {}
     return {
         "n_configurations": int(len(out.measurements)),
-        "n_configurations_commanded": int(out.measurements.n_requested),
-        "selection_method": cfg.selection_method if out.selection is not None else "measurement file",
+        "n_configurations_commanded": None if user else int(out.measurements.n_requested),
+        "n_configurations_not_visible": n_not_visible(out),
+        "measurement_source": out.measurements.source,
+        "selection_method": "user file" if user else cfg.selection_method,
         "index_name": cfg.index_name,
-        "index_value": (float(out.gradient.index_value) if out.gradient is not None
-                        else float(sel.index_value) if sel is not None else None),
+        "index_value": (design.get("index_value") if user
+                        else float(out.gradient.index_value) if out.gradient is not None
+                        else float(sel.index_value)),
+        "index_value_measured": design.get("index_value"),
         "selection_time_s": float(sel.run_time_s) if sel is not None else None,
         "selection_evaluations": int(sel.evaluations) if sel is not None else None,
-        "n_candidates": int(len(out.candidates)) if out.candidates is not None else 0,
+        "n_candidates": int(len(out.candidates)) if out.candidates is not None else None,
         "n_parameters": len(out.names),
         "n_identifiable": int(out.estimate.theta.size),
-        "heldout_n_poses": v["n_poses"],
-        "heldout_rms_position_error_before_m": v["before"]["rms"],
-        "heldout_rms_position_error_after_m": v["after"]["rms"],
-        "heldout_mean_position_error_after_m": v["after"]["mean"],
-        "heldout_max_position_error_after_m": v["after"]["max"],
-        "heldout_max_position_error_before_m": v["before"]["max"],
-        "predicted_rms_position_error_m": v["predicted_rms_m"],
-        "actual_over_predicted": v["after"]["rms"] / v["predicted_rms_m"],
-        "tracker_noise_sigma_m": v["tracker_noise_sigma_m"],
-        "rms_after_over_sigma": v["after"]["rms"] / v["tracker_noise_sigma_m"],
+        "validation_source": v["source"] if v is not None else None,
+        "heldout_n_poses": v["n_poses"] if v is not None else None,
+        "heldout_rms_position_error_before_m": v["before"]["rms"] if v is not None else None,
+        "heldout_rms_position_error_after_m": v["after"]["rms"] if v is not None else None,
+        "heldout_mean_position_error_after_m": v["after"]["mean"] if v is not None else None,
+        "heldout_max_position_error_after_m": v["after"]["max"] if v is not None else None,
+        "heldout_max_position_error_before_m": v["before"]["max"] if v is not None else None,
+        "predicted_rms_position_error_m": predicted,
+        "actual_over_predicted": v["after"]["rms"] / v["predicted_rms_m"] if v is not None else None,
+        "tracker_noise_sigma_m": sigma,
+        "rms_after_over_sigma": v["after"]["rms"] / v["tracker_noise_sigma_m"] if v is not None else None,
+        "fit_rms_residual_before_m": fit.get("rms_residual_before_m"),
+        "fit_rms_residual_after_m": fit.get("rms_residual_after_m"),
         "chi2_per_dof": out.estimate.chi2_per_dof,
         "lm_iterations": out.estimate.iterations,
         "timings_s": {k: round(t, 3) for k, t in out.timings_s.items()},
     }
+
+
+def visibility_sentence(out: CalibrationOutcome, robot) -> str:
+    """How many commanded poses the tracker could not see (report.md)."""
+    m = out.measurements
+    if from_file(out):
+        return (f"Calibration measurements: {len(m)} configurations from the user file `{m.source}` "
+                "(poses the tracker could not see are not in the file).")
+    k = n_not_visible(out)
+    deg = math.degrees(robot.tracker.max_incidence_rad)
+    if k == 0:
+        return f"All {m.n_requested} selected poses were visible to the tracker."
+    return (f"{k} of {m.n_requested} selected poses were not visible to the tracker (beam blocked or "
+            f"incidence > {deg:.0f}°) and were dropped; the fit uses the {len(m)} measured ones.")
+
+
+def report_markdown(out: CalibrationOutcome, cfg: Config, robot) -> str:
+    md = ["### Identifiability", "", out.report.markdown(), "", "### Measurements", "",
+          visibility_sentence(out, robot), ""]
+    d = out.measured_design
+    if d is not None and from_file(out):
+        md += [f"Configurations chosen by the user (no selection was run): {d['index_name']} = "
+               f"{d['index_value']:.6g} for the {d['n_configurations']} measured configurations.", ""]
+    md += ["### Fit", "", va.fit_markdown(out.fit, out.prediction), ""]
+    if out.validation is None:
+        md += ["### Held-out validation", "",
+               "**no held-out validation: give calibration.validation_csv** (poses measured on the real "
+               "robot, not used in the fit). The figures above are in-sample fit residuals and a "
+               "covariance prediction, not a measured accuracy."]
+    else:
+        md += [f"### Held-out validation (paper 004 Table 2 layout; {out.validation['source']})", "",
+               va.table_markdown(out.validation)]
+    return "\n".join(md)
 
 
 def run(ctx) -> Any:
@@ -332,7 +437,9 @@ def run(ctx) -> Any:
 
     cfg: Config = ctx.config
     t0 = time.perf_counter()
-    out = calibrate(ctx.robot, ctx.real, cfg, ctx.rng, getattr(ctx, "progress", None))
+    # real tracker data: the simulated hidden robot must not be touched (not even ctx.real)
+    real = None if cfg.measurements_csv else ctx.real
+    out = calibrate(ctx.robot, real, cfg, ctx.rng, getattr(ctx, "progress", None))
     summary = summary_of(out, cfg)
     summary["stage_time_s"] = time.perf_counter() - t0
     est = out.estimate
@@ -340,22 +447,33 @@ def run(ctx) -> Any:
         "configurations_selected": out.measurements.Q,
         "tracker_readings_m": out.measurements.Y,
         "tracker_sigma_m": out.measurements.sigma_m,
+        "fit_residuals_m": out.fit["residuals_after_m"],
         "parameters_identified": est.theta,
         "parameters_std": est.std,
         "parameter_covariance": est.covariance,
-        "heldout_errors_before_m": out.validation["errors_before_m"],
-        "heldout_errors_after_m": out.validation["errors_after_m"],
-        "heldout_predicted_std_m": out.validation["predicted_std_m"],
         "transform_tracker_to_base": est.transform_tracker_to_base.homogeneous,
     }
+    if out.measurements.invisible is not None and len(out.measurements.invisible):
+        arrays["configurations_not_visible"] = out.measurements.invisible
+    if out.validation is not None:
+        arrays["heldout_errors_before_m"] = out.validation["errors_before_m"]
+        arrays["heldout_errors_after_m"] = out.validation["errors_after_m"]
+        arrays["heldout_predicted_std_m"] = out.validation["predicted_std_m"]
     if out.selection is not None:
         arrays["index_history"] = np.array(out.selection.history, float).reshape(-1, 2)
+
+    def scalars(d: dict | None) -> dict | None:
+        return None if d is None else {k: v for k, v in d.items() if not isinstance(v, np.ndarray)}
+
     data = {
         "identifiability": out.report.as_dict(),
         "identified": {n: [float(v), float(s)] for n, v, s in
                        zip(out.report.identifiable_names, est.theta, est.std, strict=True)},
-        "validation": {k: v for k, v in out.validation.items() if not isinstance(v, np.ndarray)},
+        "validation": scalars(out.validation),
+        "fit": scalars(out.fit),
+        "prediction": scalars(out.prediction),
         "selection": out.selection.as_dict() if out.selection is not None else None,
+        "measured_design": out.measured_design,
         "candidate_counts": out.candidates.counts if out.candidates is not None else None,
         "gradient_design": out.gradient.as_dict() if out.gradient is not None else None,
     }
@@ -364,8 +482,5 @@ def run(ctx) -> Any:
         from pipeline.calibration import plots
 
         figures = plots.stage_figures(out)
-    md = ["### Identifiability", "", out.report.markdown(), "", "### Held-out validation (paper 004 Table 2 layout)",
-          "", va.table_markdown(out.validation)]
     return StageResult(summary=summary, arrays=arrays, data=data, figures=figures, robot=out.robot,
-                       report_md="\n".join(md))
-
+                       report_md=report_markdown(out, cfg, ctx.robot))

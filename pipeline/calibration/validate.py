@@ -32,6 +32,46 @@ def _axis_stats(e: np.ndarray) -> dict[str, dict[str, float]]:
     return out
 
 
+def predicted_error(mm: MeasurementModel, est: Estimate, Q: np.ndarray, sigma_m: np.ndarray) -> dict:
+    """Covariance-predicted tracker-measured position error at configurations ``Q`` (no measurement
+    needed): ``E|e_k|^2 = trace(J_k C J_k^T) + 3 sigma_k^2`` (paper 000 eq. 16)."""
+    _, J = mm.jacobian(Q, est.x, est.registration, est.basis)
+    var_model = np.einsum("nip,pq,niq->n", J, est.covariance, J)
+    var_total = var_model + 3 * np.asarray(sigma_m, float) ** 2
+    return {"n_poses": int(len(Q)), "predicted_rms_m": float(np.sqrt(np.mean(var_total))),
+            "predicted_model_rms_m": float(np.sqrt(np.mean(var_model))),
+            "tracker_noise_sigma_m": float(np.sqrt(np.mean(np.asarray(sigma_m, float) ** 2))),
+            "predicted_std_m": np.sqrt(var_total)}
+
+
+def fit_residuals(mm: MeasurementModel, est: Estimate, meas: Measurements) -> dict:
+    """Residuals of the calibration measurements themselves (in-sample, not a validation):
+    ``|y_k - h(q_k, x, T_tb)|`` after the fit and with the nominal model + registration before."""
+    x0 = np.zeros(mm.n)
+    r_before = np.linalg.norm(meas.Y - mm.predict(meas.Q, x0, est.registration), axis=1)
+    r_after = np.linalg.norm(meas.Y - mm.predict(meas.Q, est.x, est.registration), axis=1)
+    return {"n_points": int(len(meas)), "source": meas.source,
+            "rms_residual_before_m": float(np.sqrt(np.mean(r_before ** 2))),
+            "rms_residual_after_m": float(np.sqrt(np.mean(r_after ** 2))),
+            "max_residual_after_m": float(r_after.max()),
+            "chi2_per_dof": float(est.chi2_per_dof),
+            "residuals_after_m": r_after}
+
+
+def fit_markdown(fit: dict, prediction: dict | None) -> str:
+    """Fit residuals (and the covariance prediction when there is no held-out set) in mm."""
+    lines = [f"Fit residuals on the {fit['n_points']} calibration measurements (in-sample, not a validation):",
+             "", "| ‖y − h‖ on the calibration points | RMS [mm] | max [mm] |", "|---|---|---|",
+             f"| before (nominal model, registered tracker) | {1e3 * fit['rms_residual_before_m']:.4f} | |",
+             f"| after the fit | {1e3 * fit['rms_residual_after_m']:.4f} | {1e3 * fit['max_residual_after_m']:.4f} |",
+             "", f"chi²/dof = {fit['chi2_per_dof']:.3f} (1 if the tracker noise model is right)."]
+    if prediction is not None:
+        lines += ["", f"Covariance-predicted RMS position error over {prediction['n_poses']} random visible poses "
+                  f"(parameter covariance + tracker noise): {1e3 * prediction['predicted_rms_m']:.4f} mm "
+                  f"(model part {1e3 * prediction['predicted_model_rms_m']:.4f} mm)."]
+    return "\n".join(lines)
+
+
 def validate(mm: MeasurementModel, est: Estimate, meas: Measurements) -> dict:
     """Held-out statistics before/after calibration and the covariance prediction."""
     Q, Y = meas.Q, meas.Y
@@ -39,20 +79,19 @@ def validate(mm: MeasurementModel, est: Estimate, meas: Measurements) -> dict:
     R_before = est.registration.rotation
     R_after = est.transform_tracker_to_base.rotation
     e_before = (Y - mm.predict(Q, x0, est.registration)) @ R_before.T
-    pred_after, J = mm.jacobian(Q, est.x, est.registration, est.basis)
-    e_after = (Y - pred_after) @ R_after.T
-    var_model = np.einsum("nip,pq,niq->n", J, est.covariance, J)
-    var_total = var_model + 3 * meas.sigma_m ** 2
+    e_after = (Y - mm.predict(Q, est.x, est.registration)) @ R_after.T
+    pred = predicted_error(mm, est, Q, meas.sigma_m)
     out = {
         "n_poses": int(len(Q)),
+        "source": meas.source,
         "before": _stats(e_before) | {"axes": _axis_stats(e_before)},
         "after": _stats(e_after) | {"axes": _axis_stats(e_after)},
-        "predicted_rms_m": float(np.sqrt(np.mean(var_total))),
-        "predicted_model_rms_m": float(np.sqrt(np.mean(var_model))),
-        "tracker_noise_sigma_m": float(np.sqrt(np.mean(meas.sigma_m ** 2))),
+        "predicted_rms_m": pred["predicted_rms_m"],
+        "predicted_model_rms_m": pred["predicted_model_rms_m"],
+        "tracker_noise_sigma_m": pred["tracker_noise_sigma_m"],
         "errors_before_m": np.linalg.norm(e_before, axis=1),
         "errors_after_m": np.linalg.norm(e_after, axis=1),
-        "predicted_std_m": np.sqrt(var_total),
+        "predicted_std_m": pred["predicted_std_m"],
     }
     if meas.rotvec is not None:
         _, R_refl = mm.base_positions(Q, est.x)
@@ -75,7 +114,7 @@ def table_markdown(v: dict) -> str:
         ba, aa = b["axes"][ax], a["axes"][ax]
         lines.append(f"| e{ax} | {1e3 * ba['max_abs']:.3f} | {1e3 * aa['max_abs']:.3f} | "
                      f"±{1e3 * ba['half_peak_to_peak']:.3f} | ±{1e3 * aa['half_peak_to_peak']:.3f} |")
-    lines += ["", "| |e| over held-out poses | mean [mm] | RMS [mm] | max [mm] |", "|---|---|---|---|"]
+    lines += ["", "| ‖e‖ over held-out poses | mean [mm] | RMS [mm] | max [mm] |", "|---|---|---|---|"]
     for key, s in (("before", b), ("after", a)):
         lines.append(f"| {key} | {1e3 * s['mean']:.4f} | {1e3 * s['rms']:.4f} | {1e3 * s['max']:.4f} |")
     lines.append(f"| predicted (covariance + noise) | | {1e3 * v['predicted_rms_m']:.4f} | |")

@@ -238,6 +238,10 @@ def test_quick_profile_stage_through_runner(tmp_path):
         assert key in s
     _check_targets(s)
     assert s["stage_time_s"] < 30
+    assert s["n_configurations_not_visible"] == s["n_configurations_commanded"] - s["n_configurations"] >= 0
+    assert s["selection_method"] != "user file" and s["validation_source"] == "simulated tracker (held-out)"
+    stage_report = (tmp_path / "calq" / "calibration" / "report.md").read_text()
+    assert "visible to the tracker" in stage_report and "no held-out validation" not in stage_report
     assert out.arrays["configurations_selected"].shape == (s["n_configurations"], 6)
     stage_dir = tmp_path / "calq" / "calibration"
     assert (stage_dir / "heldout_errors.png").exists() and (stage_dir / "index_history.png").exists()
@@ -285,3 +289,101 @@ def test_bad_config_values_name_the_field(key, value, problem):
 
     with pytest.raises(ConfigError, match=f"calibration.{problem}"):
         quick_config(**{f"calibration.{key}": value})
+
+
+# ------------------------------------------------------------------ user files: no simulated robot
+class _NoHiddenRobot:
+    """Stand-in for the RealRobot: any use of it fails the test."""
+
+    def __getattr__(self, name):
+        raise AssertionError(f"the hidden robot was used (attribute {name!r}) although the data come from files")
+
+
+class _Ctx:
+    """Stage context whose ``real`` must not even be read."""
+
+    def __init__(self, config, robot, seed):
+        self.config, self.robot, self.rng, self.progress = config, robot, np.random.default_rng(seed), None
+
+    @property
+    def real(self):
+        raise AssertionError("ctx.real was read although the data come from files")
+
+
+@pytest.fixture(scope="module")
+def tracker_files(robot, tmp_path_factory):
+    """Calibration and validation CSVs written from simulated measurements of one hidden robot."""
+    from pipeline.robot.truth import RealRobot
+
+    real = RealRobot.create(robot, 21)
+    rng = np.random.default_rng(21)
+    ch = cd.chain_from_robot(robot)
+    Q, _ = cd.random_candidates(ch, 45, rng)
+    meas = ms.measure_simulated(real, Q, rng)
+    Qv, _ = cd.random_candidates(ch, 150, rng)
+    held = ms.measure_simulated(real, Qv, rng)
+    d = tmp_path_factory.mktemp("tracker")
+    return ms.write_csv(d / "calibration.csv", meas), ms.write_csv(d / "validation.csv", held), len(meas), len(held)
+
+
+HELDOUT_KEYS = ("heldout_n_poses", "heldout_rms_position_error_before_m", "heldout_rms_position_error_after_m",
+                "heldout_mean_position_error_after_m", "heldout_max_position_error_after_m",
+                "heldout_max_position_error_before_m", "actual_over_predicted", "rms_after_over_sigma")
+
+
+def test_measurement_file_without_validation_file_has_no_heldout_validation(robot, tracker_files):
+    from pipeline.calibration import indices as ix
+
+    path, _, n_meas, _ = tracker_files
+    cfg = _cfg(measurements_csv=str(path), n_heldout=200, identifiability_samples=60)
+    res = st.run(_Ctx(cfg, robot, 5))
+    s = res.summary
+    assert all(s[k] is None for k in HELDOUT_KEYS)
+    assert s["validation_source"] is None
+    assert "no held-out validation: give calibration.validation_csv" in res.report_md
+    assert "Table 2" not in res.report_md
+    assert not any(k.startswith("heldout_") for k in res.arrays)
+    json.dumps(s)  # nulls, no NaN objects
+    # the design fields describe the user's own configurations
+    assert s["selection_method"] == "user file" and s["n_configurations"] == n_meas
+    assert s["n_candidates"] is None and s["selection_time_s"] is None and s["n_configurations_not_visible"] is None
+    back = ms.read_csv(path, robot)
+    _, basis = st.identify_parameter_set(robot, em.MeasurementModel(robot), cfg, np.random.default_rng(0))
+    T = pin.SE3(res.arrays["transform_tracker_to_base"])
+    G = cd.build_candidate_set(cd.chain_from_robot(robot), back.Q, basis, T).G.reshape(-1, basis.shape[1])
+    assert s["index_value"] == pytest.approx(ix.evaluate(ix.IndexSpec("O3"), G.T @ G, len(back.Q)), rel=1e-6)
+    assert s["index_value"] < ix.evaluate(ix.IndexSpec("O3"), 2 * G.T @ G, len(back.Q))  # not a constant
+    # fit residuals and the covariance prediction are still reported
+    sigma = float(np.sqrt(np.mean(back.sigma_m ** 2)))
+    assert s["fit_rms_residual_after_m"] < 3 * sigma < s["fit_rms_residual_before_m"]
+    assert 0.2 < s["chi2_per_dof"] < 5
+    assert sigma < s["predicted_rms_position_error_m"] < 5 * sigma
+
+
+def test_measurement_and_validation_files_validate_on_the_validation_file(robot, tracker_files):
+    path, vpath, n_meas, n_val = tracker_files
+    cfg = _cfg(measurements_csv=str(path), validation_csv=str(vpath), identifiability_samples=60)
+    out = st.calibrate(robot, _NoHiddenRobot(), cfg, np.random.default_rng(6))
+    s = st.summary_of(out, cfg)
+    assert s["heldout_n_poses"] == n_val and s["validation_source"] == str(vpath)
+    assert out.prediction is None and out.validation["source"] == str(vpath)
+    # the held-out errors are those of the file's poses: nominal model mm-level, calibrated at noise level
+    assert s["heldout_rms_position_error_before_m"] > 5e-4
+    assert s["heldout_rms_position_error_after_m"] <= 3 * s["tracker_noise_sigma_m"]
+    assert 1 / 1.5 <= s["actual_over_predicted"] <= 1.5
+    res = st.run(_Ctx(cfg, robot, 6))
+    assert "Held-out validation" in res.report_md and str(vpath) in res.report_md
+    assert "no held-out validation" not in res.report_md
+    assert len(res.arrays["heldout_errors_after_m"]) == n_val
+
+
+def test_report_says_how_many_selected_poses_were_not_visible(robot):
+    from types import SimpleNamespace
+
+    Q = np.zeros((50, 6))
+    meas = ms.Measurements(Q[:48], np.zeros((48, 3)), np.ones(48), "simulated tracker", None, 50, Q[48:])
+    out = SimpleNamespace(measurements=meas, selection=object())
+    text = st.visibility_sentence(out, robot)
+    deg = np.rad2deg(robot.tracker.max_incidence_rad)
+    assert f"2 of 50 selected poses were not visible to the tracker (beam blocked or incidence > {deg:.0f}°)" in text
+    assert st.n_not_visible(out) == 2
