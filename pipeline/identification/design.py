@@ -1,14 +1,7 @@
 """Optimal periodic excitation (paper ``004_abbe750b8bbcc3aa.txt`` §4.2, after Swevers et al. [14]).
 
-Each joint follows a finite Fourier series with base pulsation ``w_f = 2 pi f_f`` and ``L``
-harmonics (§4.2.1):
-
-    q_i(t) = q_i0 + sum_l a_il / (w_f l) sin(w_f l t) - b_il / (w_f l) cos(w_f l t)
-    v_i(t) = sum_l a_il cos(w_f l t) + b_il sin(w_f l t)
-    a_i(t) = sum_l -a_il w_f l sin(w_f l t) + b_il w_f l cos(w_f l t)
-
-Rest to rest (and periodic): ``v_i(0) = sum_l a_il = 0`` and ``a_i(0) = w_f sum_l l b_il = 0``,
-two linear equalities per joint.
+Each joint follows a rest-to-rest finite Fourier series (:mod:`pipeline.identification.fourier`,
+§4.2.1).
 
 The coefficients minimise the condition number of the base regressor stacked over ``N`` samples
 of one period, ``W = [Y_b(q(t_k), v(t_k), a(t_k))]_k`` (``cond(W)^2 = lambda_max / lambda_min`` of
