@@ -1,6 +1,13 @@
 """Stage 4 targets, measured in one run (issue 6, paper 004 §5).
 
-Run: ``.venv/bin/python benchmarks/bench_trajectory.py [robot] [cp_segment]`` (default profile).
+Run: ``.venv/bin/python benchmarks/bench_trajectory.py [robot] [cp_segment] [torque_reserve]``
+(default profile). ``robot`` is a built-in name (default ``rx130l``: NOMINAL dynamics) or a robot
+folder, e.g. the identified model handed on by stage 2
+(``<runs>/<name>/identification/robot``), which is what the pipeline's stage plans with; the
+identified RX130L of the default run is heavier than the nominal one (axis-2 gravity torque at the
+PtP goal 513 N m instead of 419 N m), so every duration there is longer. Every planner and
+baseline (CP, toppra, PtP, ruckig) gets the same dynamics and the same torque limits
+``(1 - torque_reserve) x limit`` (default reserve from ``TrajectoryConfig``, as in the stage).
 Prints, each as a ratio measured here:
 
 * CP: our duration with toppra's constraints / toppra's (target within 0.5 %), and the fine-grid
@@ -15,6 +22,7 @@ from __future__ import annotations
 
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -26,10 +34,17 @@ from pipeline.trajectory.solve import cp_joint_path, plan_cp, plan_ptp, ptp_prob
 from pipeline.trajectory.trajectories import check_trajectory
 
 
-def main(robot_name: str = "rx130l", segment: str = "circle_large") -> None:
+def main(robot_name: str = "rx130l", segment: str = "circle_large", torque_reserve: str | None = None) -> None:
     cfg = TrajectoryConfig(cp_segment=segment)
+    if torque_reserve is not None:
+        cfg.torque_reserve = float(torque_reserve)
     robot = RobotModel.load(robot_name)
     pm = PlanningModel.from_robot(robot, cfg.torque_reserve)
+    q_goal = np.radians(cfg.ptp_goal_deg)
+    print(f"dynamics: {robot_name} ({'robot folder' if Path(robot_name).is_dir() else 'built-in, nominal dynamics'}); "
+          f"static torques at the PtP goal {np.round(pm.rigid_torques(q_goal, 0 * q_goal, 0 * q_goal)[0], 1)} N m")
+    print(f"limits for every planner and baseline (CP, toppra, PtP, ruckig): torque (1 - {cfg.torque_reserve:g}) x "
+          f"limit = {np.round(pm.effort_Nm, 1)} N m, speed {np.round(pm.velocity_rad_s, 2)} rad/s")
     t0 = time.perf_counter()
     path, piece = cp_joint_path(robot, cfg)
     cp = plan_cp(pm, path, cfg)

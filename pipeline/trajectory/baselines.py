@@ -127,7 +127,8 @@ def _ruckig_sample(q0: np.ndarray, q1: np.ndarray, vmax: np.ndarray, amax: np.nd
 
 def ruckig_torque_feasible(pm: PlanningModel, q0: np.ndarray, q1: np.ndarray, check_dt_s: float = 5e-4,
                            jerk_ratios_1_s: tuple[float, ...] = (10.0, 25.0, 60.0),
-                           bisection_steps: int = 12, joint_rounds: int = 6, tol: float = 0.0) -> RuckigResult:
+                           bisection_steps: int = 12, joint_rounds: int = 6, tol: float = 0.0,
+                           refine_evaluations: int = 0, refine_dt_s: float = 2e-3) -> RuckigResult:
     """Fastest ruckig move whose full-model torques stay within limits (max ratio <= 1 + tol).
 
     The kinematic limits searched: per joint a maximum and a (separate) minimum acceleration
@@ -137,6 +138,13 @@ def ruckig_torque_feasible(pm: PlanningModel, q0: np.ndarray, q1: np.ndarray, ch
     that sets the duration (largest independent minimum duration) gets each of its two factors
     raised by bisection while the move stays torque-feasible. Repeated for several
     jerk/acceleration ratios; the shortest feasible move wins.
+
+    The joint-wise rounds stall when the joints are coupled (on a heavy arm the axis-2 torque
+    near the goal is gravity plus the centrifugal load of axis 1, so raising one factor violates
+    another joint). ``refine_evaluations > 0`` then continues with Nelder-Mead on the 2 nq
+    log-factors of the winner (its jerk ratio): each candidate direction is scaled by bisection
+    onto the torque boundary (checked every ``refine_dt_s``) and scored by its duration; the best
+    one is finally scaled down, by bisection, until it is feasible on the ``check_dt_s`` grid.
     """
     t0 = time.perf_counter()
     a_ref = pm.effort_Nm / np.maximum(pm.mass_diagonal(q0), 1e-9)
@@ -199,17 +207,88 @@ def ruckig_torque_feasible(pm: PlanningModel, q0: np.ndarray, q1: np.ndarray, ch
                 break
         tr, r = good
         if best is None or tr.duration_s < best.duration_s:
-            ap, am, jm = limits(alpha, ratio)
-            best = RuckigResult(tr, tr.duration_s, float(np.min(alpha)), ratio, r, 0.0, 0,
-                                info={"max_accel_rad_s2": ap.tolist(), "min_accel_rad_s2": (-am).tolist(),
-                                      "jerk_rad_s3": jm.tolist()})
+            best = _ruckig_result(tr, r, alpha, ratio, limits)
     if best is None:
         raise InfeasibleError(None, "ptp ruckig baseline", "no torque-feasible kinematic limits found "
                               "(the static torques may exceed the limits)")
+    if refine_evaluations > 0:
+        refined = _refine(best, limits, q0, q1, pm, check_dt_s, refine_dt_s, refine_evaluations, tol)
+        evals += refined[1]
+        if refined[0] is not None and refined[0].duration_s < best.duration_s:
+            best = refined[0]
+            best.info["refined"] = True
     best.search_time_s = time.perf_counter() - t0
     best.evaluations = evals
     best.trajectory.info.update({"jerk_ratio_1_s": best.jerk_ratio_1_s, **best.info})
     return best
+
+
+def _ruckig_result(tr: JointTrajectory, r: float, alpha: np.ndarray, ratio: float, limits) -> RuckigResult:
+    ap, am, jm = limits(alpha, ratio)
+    return RuckigResult(tr, tr.duration_s, float(np.min(alpha)), ratio, r, 0.0, 0,
+                        info={"max_accel_rad_s2": ap.tolist(), "min_accel_rad_s2": (-am).tolist(),
+                              "jerk_rad_s3": jm.tolist(), "alpha": alpha.tolist(), "refined": False})
+
+
+def _refine(start: RuckigResult, limits, q0: np.ndarray, q1: np.ndarray, pm: PlanningModel, check_dt_s: float,
+            search_dt_s: float, max_evaluations: int, tol: float) -> tuple[RuckigResult | None, int]:
+    """Nelder-Mead over log(alpha) (see :func:`ruckig_torque_feasible`); returns (result or None, evals)."""
+    from scipy.optimize import minimize
+
+    ratio = start.jerk_ratio_1_s
+    count = 0
+
+    def run(log_alpha: np.ndarray, dt_s: float):
+        nonlocal count
+        count += 1
+        ap, am, jm = limits(np.exp(log_alpha), ratio)
+        tr = _ruckig_sample(q0, q1, pm.velocity_rad_s, ap, jm, dt_s, amin=am)
+        if tr is None:
+            return None, np.inf
+        return tr, check_trajectory(pm, tr).max_torque_ratio
+
+    def onto_boundary(x: np.ndarray, dt_s: float, lo: float, hi: float, steps: int):
+        """Largest common log-shift in [lo, hi] keeping ``x`` feasible (None when lo is not)."""
+        tr, r = run(x + hi, dt_s)
+        if r <= 1.0 + tol:
+            return hi, tr, r
+        found = None
+        for _ in range(steps):
+            mid = 0.5 * (lo + hi)
+            tr, r = run(x + mid, dt_s)
+            if r <= 1.0 + tol:
+                lo, found = mid, (tr, r)
+            else:
+                hi = mid
+        if found is None:
+            tr, r = run(x + lo, dt_s)
+            if r > 1.0 + tol:
+                return None
+            found = (tr, r)
+        return lo, *found
+
+    best: dict = {"duration": np.inf, "x": None}
+
+    def objective(x: np.ndarray) -> float:
+        b = onto_boundary(x, search_dt_s, -0.4, 0.3, 6)
+        if b is None:
+            return 1e3
+        shift, tr, _ = b
+        if tr.duration_s < best["duration"]:
+            best.update(duration=tr.duration_s, x=x + shift)
+        return tr.duration_s
+
+    x0 = np.log(np.asarray(start.info["alpha"], float))
+    n_obj = max(1, max_evaluations // 8)
+    minimize(objective, x0, method="Nelder-Mead",
+             options={"maxfev": n_obj, "initial_simplex": x0 + np.vstack([np.zeros(x0.size), 0.3 * np.eye(x0.size)])})
+    if best["x"] is None:
+        return None, count
+    b = onto_boundary(best["x"], check_dt_s, -0.3, 0.0, 10)  # feasible on the required check grid
+    if b is None:
+        return None, count
+    shift, tr, r = b
+    return _ruckig_result(tr, r, np.exp(best["x"] + shift), ratio, limits), count
 
 
 def _independent_durations(q0, q1, vmax, amax, jmax, amin=None) -> np.ndarray:

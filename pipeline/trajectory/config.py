@@ -41,6 +41,8 @@ class TrajectoryConfig:
     ruckig_check_dt_s: float = 5e-4
     ruckig_jerk_ratios_1_s: list[float] = field(default_factory=lambda: [10.0, 25.0, 60.0])
     ruckig_joint_rounds: int = 6
+    # then Nelder-Mead on all acceleration factors (coupled joints), this many ruckig evaluations
+    ruckig_refine_evaluations: int = 800
     fine_dt_s: float = 2e-4                   # fine-grid torque re-check
     violation_tolerance: float = 0.005        # accepted fine-grid torque violation (0.5 %)
     max_tightening_rounds: int = 3            # re-solves with tightened limits when the fine grid exceeds it

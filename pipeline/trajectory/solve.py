@@ -226,7 +226,8 @@ def plan_ptp(pm: PlanningModel, problem: PtpProblem, q0: np.ndarray, q1: np.ndar
                        getattr(getattr(pm.robot, "actuation", None), "gear_ratio", None))
     res = solve_ptp_verified(pm, problem, q0, q1, cfg, cfg.ptp_k1, cfg.ptp_k2, w)
     rk = ruckig_torque_feasible(pm, q0, q1, cfg.ruckig_check_dt_s, tuple(cfg.ruckig_jerk_ratios_1_s),
-                                joint_rounds=cfg.ruckig_joint_rounds)
+                                joint_rounds=cfg.ruckig_joint_rounds,
+                                refine_evaluations=cfg.ruckig_refine_evaluations)
     fixed = solve_ptp_verified(pm, problem, q0, q1, cfg, 0.0, 1.0, w, duration_s=rk.duration_s)
     sweep: list[PtpResult] = []
     if pareto:

@@ -13,10 +13,16 @@ from pipeline.trajectory.trajectories import JointTrajectory, TorqueCheck
 
 
 def simulate_on_real(real: Any, robot: Any, traj: JointTrajectory, control_config: Any = None,
-                     rng: np.random.Generator | None = None) -> dict:
+                     rng: np.random.Generator | None = None, average_window_s: float = 4e-3) -> dict:
     """Run ``traj`` through ``pipeline.control.simulate.simulate_joint_trajectory`` (cascade with
     full-friction feedforward from ``robot``) and report duration, max torque ratio and the TCP
-    error of the (ideal-tracker) measured TCP against the planned TCP ``fk(q_d)``."""
+    error of the (ideal-tracker) measured TCP against the planned TCP ``fk(q_d)``.
+
+    Torque ratios are ``|tau| / tau_max`` with the FULL limits of ``robot`` (no reserve):
+    ``max_torque_ratio`` of the raw command (per servo sample), ``max_feedforward_ratio`` of the
+    feedforward alone, ``max_averaged_torque_ratio`` of the command averaged over
+    ``average_window_s``, and the feedback share ``(tau_cmd - tau_ff) / tau_max`` per joint
+    (standard deviation and maximum)."""
     from pipeline.control.config import ControlConfig
     from pipeline.control.simulate import simulate_joint_trajectory
 
@@ -25,9 +31,25 @@ def simulate_on_real(real: Any, robot: Any, traj: JointTrajectory, control_confi
         cfg = ControlConfig(**{**cfg.__dict__, "on_saturation": "clip"})
     res = simulate_joint_trajectory(real, robot, traj.t_s, traj.q, traj.v, traj.a, cfg,
                                     feedforward="full_friction", rng=rng)
+    # split the command into the feedforward (the plan's torques on the model) and the feedback:
+    # the feedback is mostly zero-mean noise (encoder noise through the velocity loop), so the
+    # command is also reported averaged over ``average_window_s`` (what a drive's current loop and
+    # thermal limit see) next to its raw per-sample maximum
+    limit = np.asarray(robot.limits.effort_Nm, float)
+    feedback = (np.asarray(res.tau_cmd) - np.asarray(res.tau_ff)) / limit
+    dt = float(res.t_s[1] - res.t_s[0]) if len(res.t_s) > 1 else 1.0
+    width = min(max(1, int(round(average_window_s / dt))), len(res.t_s))
+    kernel = np.ones(width) / width
+    averaged = np.stack([np.convolve(np.asarray(res.tau_cmd)[:, j], kernel, mode="valid")
+                         for j in range(limit.size)], axis=1) / limit
     out = {"duration_s": float(res.t_s[-1] - res.t_s[0]),
            "max_torque_ratio": float(np.max(res.max_torque_ratio)),
            "max_torque_ratio_per_joint": np.asarray(res.max_torque_ratio, float).tolist(),
+           "max_feedforward_ratio": float(np.max(np.abs(res.tau_ff) / limit)),
+           "max_averaged_torque_ratio": float(np.max(np.abs(averaged))),
+           "average_window_s": width * dt,
+           "feedback_std_ratio_per_joint": feedback.std(axis=0).tolist(),
+           "feedback_max_ratio_per_joint": np.abs(feedback).max(axis=0).tolist(),
            "lag_error_max_rad": float(np.max(np.abs(res.lag_error_rad))),
            "realtime_factor": float(res.realtime_factor)}
     if res.tcp_position_m is not None:

@@ -87,3 +87,15 @@ def test_ruckig_search_respects_torques(pm, big_move):
     assert np.diff(rk.trajectory.t_s).max() <= 5e-4 + 1e-12
 
 
+
+
+def test_ruckig_refinement_is_feasible_and_not_slower(pm, big_move):
+    """The Nelder-Mead refinement of the ruckig limits never returns a slower or an infeasible move
+    (checked on the 0.5 ms grid), and it is counted in the evaluations."""
+    q0, q1 = big_move
+    plain = ruckig_torque_feasible(pm, q0, q1, jerk_ratios_1_s=(25.0,), joint_rounds=2)
+    refined = ruckig_torque_feasible(pm, q0, q1, jerk_ratios_1_s=(25.0,), joint_rounds=2, refine_evaluations=200)
+    assert refined.duration_s <= plain.duration_s + 1e-9
+    assert refined.evaluations > plain.evaluations
+    assert np.diff(refined.trajectory.t_s).max() <= 5e-4 + 1e-12
+    assert check_trajectory(pm, refined.trajectory).max_torque_ratio <= 1.0 + 1e-9
