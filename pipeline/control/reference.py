@@ -21,7 +21,7 @@ import pinocchio as pin
 from ruckig import InputParameter, Result, Ruckig, Trajectory
 
 from pipeline.errors import InfeasibleError, SolverError
-from pipeline.robot.paths import CartesianPath, limiting_joint
+from pipeline.robot.paths import CartesianPath, check_within_limits, limiting_joint
 
 
 @dataclass
@@ -114,7 +114,7 @@ def track(robot, rotation: np.ndarray, P: np.ndarray, Pd: np.ndarray, Pdd: np.nd
     nq = model.nq
     N = len(P)
     q_out, v_out, a_out = np.empty((N, nq)), np.empty((N, nq)), np.empty((N, nq))
-    lo, hi, vlim = robot.limits.lower_rad, robot.limits.upper_rad, robot.limits.velocity_rad_s
+    vlim = robot.limits.velocity_rad_s
     zero = np.zeros(nq)
     q = np.array(q_start, float)
     v_prev = np.zeros(nq)
@@ -140,11 +140,7 @@ def track(robot, rotation: np.ndarray, P: np.ndarray, Pd: np.ndarray, Pdd: np.nd
         if err >= tolerance_m or not np.isfinite(cond) or cond > 1e6:
             raise InfeasibleError(None, "ik", f"{where()} not reached (error {err:.1e} m, cond(J) {cond:.1e}; "
                                   f"{limiting_joint(robot, q)})")
-        bad = np.nonzero((q < lo) | (q > hi))[0]
-        if len(bad):
-            j = int(bad[0])
-            raise InfeasibleError(None, "ik", f"{where()} needs joint {j + 1} = {np.degrees(q[j]):.1f} deg outside "
-                                  f"[{np.degrees(lo[j]):.1f}, {np.degrees(hi[j]):.1f}] deg")
+        check_within_limits(robot, q, where())
         v = np.linalg.solve(J, np.concatenate([Pd[k], np.zeros(3)]))
         pin.forwardKinematics(model, data, q, v, zero)
         drift = pin.getFrameClassicalAcceleration(model, data, fid, pin.LOCAL_WORLD_ALIGNED).vector

@@ -212,7 +212,6 @@ def ik_track(robot, poses: list[pin.SE3], q0: np.ndarray, frame: str = "tcp", to
     model = robot.model
     data = model.createData()
     fid = model.getFrameId(frame)
-    lo, hi = robot.limits.lower_rad, robot.limits.upper_rad
     q = np.array(q0, float)
     out = np.empty((len(poses), model.nq))
     lam2 = 1e-12
@@ -232,12 +231,7 @@ def ik_track(robot, poses: list[pin.SE3], q0: np.ndarray, frame: str = "tcp", to
         if err_n >= max(tolerance_m * 100, 1e-7):
             raise InfeasibleError(None, "ik", f"TCP point {p} m at {where} not reached (error {err_n:.2e} m; "
                                   f"{limiting_joint(robot, q)})")
-        bad = np.nonzero((q < lo) | (q > hi))[0]
-        if len(bad):
-            j = int(bad[0])
-            raise InfeasibleError(None, "ik", f"TCP point {p} m at {where} needs joint {j + 1} = "
-                                  f"{np.degrees(q[j]):.1f} deg outside [{np.degrees(lo[j]):.1f}, "
-                                  f"{np.degrees(hi[j]):.1f}] deg")
+        check_within_limits(robot, q, f"TCP point {p} m at {where}")
         out[k] = q
     return out
 
@@ -254,6 +248,16 @@ def limiting_joint(robot, q: np.ndarray) -> str:
     j = int(np.argmin(margin))
     return (f"joint {j + 1} at {np.degrees(q[j]):.1f} deg of [{np.degrees(lo[j]):.1f}, "
             f"{np.degrees(hi[j]):.1f}] deg")
+
+
+def check_within_limits(robot, q: np.ndarray, where: str) -> None:
+    """Raise InfeasibleError naming ``where`` (the path point) and the first joint outside its limits."""
+    lo, hi = robot.limits.lower_rad, robot.limits.upper_rad
+    bad = np.nonzero((q < lo) | (q > hi))[0]
+    if len(bad):
+        j = int(bad[0])
+        raise InfeasibleError(None, "ik", f"{where} needs joint {j + 1} = {np.degrees(q[j]):.1f} deg outside "
+                              f"[{np.degrees(lo[j]):.1f}, {np.degrees(hi[j]):.1f}] deg")
 
 
 def start_configuration(robot, pose: pin.SE3, seeds, frame: str = "tcp", tolerance_m: float = 1e-10,
