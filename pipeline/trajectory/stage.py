@@ -31,7 +31,7 @@ from pipeline.trajectory.validate import (
 )
 
 NAME = "trajectory"
-DEPENDS: tuple[str, ...] = ("model", "identification")
+DEPENDS: tuple[str, ...] = ("model", "identification", "control")  # plans are run in the servo simulation
 Config = TrajectoryConfig
 
 
