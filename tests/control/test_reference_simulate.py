@@ -98,13 +98,16 @@ def test_delays_hurt_unless_compensated(real, joint_traj):
 
 def test_saturation_is_an_error_naming_time_and_joint(real, joint_traj):
     t, q, v, a = joint_traj
-    cfg = ControlConfig(settle_time_s=0.1, saturation_ratio=0.3)  # pretend the drives are weaker
+    free = simulate_joint_trajectory(real, real.truth, t, q, v, a, ControlConfig(settle_time_s=0.1),
+                                     "full_friction", np.random.default_rng(0))
+    weaker = 0.5 * float(free.max_torque_ratio.max())  # pretend the drives are weaker than needed
+    cfg = ControlConfig(settle_time_s=0.1, saturation_ratio=weaker)
     with pytest.raises(InfeasibleError, match=r"saturation at t = \d+\.\d+ s on joint \d"):
         simulate_joint_trajectory(real, real.truth, t, q, v, a, cfg, "full_friction", np.random.default_rng(0))
     res = simulate_joint_trajectory(real, real.truth, t, q, v, a, ControlConfig(settle_time_s=0.1,
-                                    saturation_ratio=0.3, on_saturation="clip"), "full_friction",
+                                    saturation_ratio=weaker, on_saturation="clip"), "full_friction",
                                     np.random.default_rng(0))
-    assert res.max_torque_ratio.max() > 0.3
+    assert res.max_torque_ratio.max() > weaker
 
 
 def test_resampling_of_a_coarse_trajectory(real, joint_traj):
