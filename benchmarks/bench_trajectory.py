@@ -82,7 +82,8 @@ def main(robot_name: str = "rx130l", segment: str = "circle_large", torque_reser
           f"{again.iterations} IPOPT iterations; target <= 2 s)")
     for measure in ("torque", "normalised", "electrical"):
         w = energy_weights(pm, measure, cfg.motor_resistance_ohm, cfg.torque_constant_Nm_A, robot.actuation.gear_ratio)
-        fixed = solve_ptp_verified(pm, problem, q0, q1, cfg, 0.0, 1.0, w, duration_s=ptp.ruckig.duration_s)
+        fixed = solve_ptp_verified(pm, problem, q0, q1, cfg, 0.0, 1.0, w, duration_s=ptp.ruckig.duration_s,
+                                   coulomb_widths_rad_s=tuple(cfg.ptp_fixed_coulomb_widths_rad_s))
         e_nlp = check_trajectory(pm, fixed.sample(cfg.fine_dt_s), energy_weights=w).energy
         e_rk = check_trajectory(pm, ptp.ruckig.trajectory, energy_weights=w).energy
         print(f"  energy measure {measure:10s}: at ruckig's duration NLP / ruckig = {e_nlp / e_rk:.3f}")

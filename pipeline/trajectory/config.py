@@ -35,6 +35,12 @@ class TrajectoryConfig:
     ptp_jit: bool = True
     ptp_jit_flags: list[str] = field(default_factory=lambda: ["-O1"])   # gcc optimisation of the NLP code
     ptp_coulomb_widths_rad_s: list[float] = field(default_factory=lambda: [0.1])  # continuation, then the model's
+    # continuation of the fixed-duration energy solve (at ruckig's duration): on the issue-6 move it
+    # lands in a slightly better local optimum than [0.1] and needs fewer iterations (nominal RX130L
+    # ratio 0.7017 vs 0.7021 in 1.5 s vs 2.9 s; identified 0.735 vs 0.741 in 1.9 s vs 2.9 s); [0.3]
+    # alone is worse (0.761 identified). Multi-starts (time-optimal stretched, ruckig resampled, via a
+    # low-gravity pose, Pareto point) reach 0.70-0.78, none better by more than 0.005.
+    ptp_fixed_coulomb_widths_rad_s: list[float] = field(default_factory=lambda: [1.0, 0.3, 0.1])
     motor_resistance_ohm: list[float] = field(default_factory=lambda: [0.6, 0.6, 1.2, 2.5, 2.5, 3.0])
     torque_constant_Nm_A: list[float] = field(default_factory=lambda: [0.9, 0.9, 0.6, 0.35, 0.3, 0.3])
     # --- baselines and verification ----------------------------------------------------------

@@ -189,11 +189,16 @@ def ptp_problem(pm: PlanningModel, robot: Any, cfg: TrajectoryConfig) -> PtpProb
 def solve_ptp_verified(pm: PlanningModel, problem: PtpProblem, q0: np.ndarray, q1: np.ndarray,
                        cfg: TrajectoryConfig, k1: float, k2: float, weights: np.ndarray,
                        duration_s: float | None = None, x0: np.ndarray | None = None,
-                       torque_scale: np.ndarray | None = None) -> PtpResult:
+                       torque_scale: np.ndarray | None = None,
+                       coulomb_widths_rad_s: tuple[float, ...] | None = None) -> PtpResult:
     """Solve, re-check torques on the fine grid, and while a joint exceeds its limit by more than
     ``cfg.violation_tolerance`` tighten that joint's limit by the excess and re-solve (warm start).
-    The returned result records the rounds and total solve time."""
-    widths = tuple(cfg.ptp_coulomb_widths_rad_s) if x0 is None else ()
+    The returned result records the rounds and total solve time. ``coulomb_widths_rad_s``: the
+    Coulomb-width continuation of a cold start (default ``cfg.ptp_coulomb_widths_rad_s``; none
+    when warm-started)."""
+    if coulomb_widths_rad_s is None:
+        coulomb_widths_rad_s = tuple(cfg.ptp_coulomb_widths_rad_s)
+    widths = tuple(coulomb_widths_rad_s) if x0 is None else ()
     scale = np.ones(pm.nq) if torque_scale is None else np.asarray(torque_scale, float).copy()
     res = problem.solve(q0, q1, k1, k2, weights=weights, duration_s=duration_s, effort_Nm=pm.effort_Nm * scale,
                         x0=x0, coulomb_widths_rad_s=widths)
@@ -228,7 +233,8 @@ def plan_ptp(pm: PlanningModel, problem: PtpProblem, q0: np.ndarray, q1: np.ndar
     rk = ruckig_torque_feasible(pm, q0, q1, cfg.ruckig_check_dt_s, tuple(cfg.ruckig_jerk_ratios_1_s),
                                 joint_rounds=cfg.ruckig_joint_rounds,
                                 refine_evaluations=cfg.ruckig_refine_evaluations)
-    fixed = solve_ptp_verified(pm, problem, q0, q1, cfg, 0.0, 1.0, w, duration_s=rk.duration_s)
+    fixed = solve_ptp_verified(pm, problem, q0, q1, cfg, 0.0, 1.0, w, duration_s=rk.duration_s,
+                               coulomb_widths_rad_s=tuple(cfg.ptp_fixed_coulomb_widths_rad_s))
     sweep: list[PtpResult] = []
     if pareto:
         # continuation from the main solution outwards (k1 = 1), same verification as the main one
