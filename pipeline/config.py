@@ -18,8 +18,6 @@ from __future__ import annotations
 import dataclasses
 import importlib
 import inspect
-import types
-import typing
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,6 +26,7 @@ from typing import Any
 import yaml
 
 from pipeline.errors import ConfigError, PipelineError
+from pipeline.typed_config import build_dataclass, describe, one_line, with_source
 
 #: Stage registry, in run order: stage name -> module path (or a module-like object exposing
 #: ``NAME``, ``DEPENDS``, ``Config`` and ``run``; tests put fake stages here).
@@ -201,12 +200,8 @@ def parse_set(item: str) -> tuple[list[str], Any]:
     try:
         value = yaml.safe_load(text) if text.strip() else ""
     except yaml.YAMLError as exc:
-        raise ConfigError("--set", key, f"cannot parse value {text!r}: {_one_line(exc)}") from None
+        raise ConfigError("--set", key, f"cannot parse value {text!r}: {one_line(exc)}") from None
     return key.split("."), value
-
-
-def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split())
 
 
 def read_yaml(path: Path) -> dict[str, Any]:
@@ -222,145 +217,13 @@ def read_yaml(path: Path) -> dict[str, Any]:
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"line {mark.line + 1}" if mark is not None else None
-        problem = getattr(exc, "problem", None) or _one_line(exc)
+        problem = getattr(exc, "problem", None) or one_line(exc)
         raise ConfigError(path, where, f"invalid YAML: {problem}") from None
     if data is None:
         return {}
     if not isinstance(data, dict):
         raise ConfigError(path, None, f"top level must be a mapping, got {type(data).__name__}")
     return data
-
-
-def _type_name(tp: Any) -> str:
-    if isinstance(tp, type):
-        return tp.__name__
-    return str(tp).replace("typing.", "")
-
-
-def _describe(value: Any) -> str:
-    text = repr(value)
-    return text if len(text) <= 60 else text[:57] + "..."
-
-
-def coerce(value: Any, tp: Any, where: str, source: str) -> Any:
-    """Check ``value`` (from YAML) against type annotation ``tp`` and convert it.
-
-    Supported: bool, int, float (ints accepted), str, Path, None, X | None, Union, Literal,
-    list[X], tuple[X, ...], tuple[X, Y], dict[K, V], nested dataclasses, Any, and
-    ``np.ndarray`` (accepts nested lists). Unknown annotations accept the value as is.
-    """
-    def fail(expected: str) -> ConfigError:
-        return ConfigError(source, where, f"expected {expected}, got {_describe(value)}")
-
-    if tp is Any or tp is object:
-        return value
-    origin = typing.get_origin(tp)
-    args = typing.get_args(tp)
-    if origin is typing.Union or origin is types.UnionType:
-        if value is None and type(None) in args:
-            return None
-        errors = []
-        for arg in args:
-            if arg is type(None):
-                continue
-            try:
-                return coerce(value, arg, where, source)
-            except ConfigError as exc:
-                errors.append(exc)
-        raise fail(_type_name(tp))
-    if origin is typing.Literal:
-        if value in args:
-            return value
-        raise fail("one of " + ", ".join(repr(a) for a in args))
-    if tp is type(None) or tp is None:
-        if value is None:
-            return None
-        raise fail("null")
-    if dataclasses.is_dataclass(tp) and isinstance(tp, type):
-        if dataclasses.is_dataclass(value) and isinstance(value, tp):
-            return value
-        if not isinstance(value, Mapping):
-            raise fail(f"a mapping ({tp.__name__})")
-        return build_dataclass(tp, value, where, source)
-    if tp is bool:
-        if isinstance(value, bool):
-            return value
-        raise fail("true/false")
-    if tp is int:
-        if isinstance(value, int) and not isinstance(value, bool):
-            return value
-        raise fail("int")
-    if tp is float:
-        if isinstance(value, (int, float)) and not isinstance(value, bool):
-            return float(value)
-        raise fail("number")
-    if tp is str:
-        if isinstance(value, str):
-            return value
-        raise fail("string")
-    if tp is Path:
-        if isinstance(value, (str, Path)):
-            return Path(value)
-        raise fail("path string")
-    if origin in (list, Sequence, typing.Sequence) or tp is list:
-        if not isinstance(value, (list, tuple)):
-            raise fail("a list")
-        item_tp = args[0] if args else Any
-        return [coerce(v, item_tp, f"{where}[{i}]", source) for i, v in enumerate(value)]
-    if origin is tuple or tp is tuple:
-        if not isinstance(value, (list, tuple)):
-            raise fail("a list")
-        if not args or (len(args) == 2 and args[1] is Ellipsis):
-            item_tp = args[0] if args else Any
-            return tuple(coerce(v, item_tp, f"{where}[{i}]", source) for i, v in enumerate(value))
-        if len(value) != len(args):
-            raise fail(f"a list of {len(args)} items")
-        pairs = enumerate(zip(value, args, strict=True))
-        return tuple(coerce(v, a, f"{where}[{i}]", source) for i, (v, a) in pairs)
-    if origin in (dict, Mapping, typing.Mapping) or tp is dict:
-        if not isinstance(value, Mapping):
-            raise fail("a mapping")
-        k_tp, v_tp = args if args else (Any, Any)
-        return {coerce(k, k_tp, where, source): coerce(v, v_tp, f"{where}.{k}", source)
-                for k, v in value.items()}
-    if getattr(tp, "__name__", "") == "ndarray":
-        import numpy as np
-
-        try:
-            arr = np.asarray(value, dtype=float)
-        except (TypeError, ValueError):
-            raise fail("a numeric array") from None
-        return arr
-    return value
-
-
-def _hints(cls: type) -> dict[str, Any]:
-    try:
-        return typing.get_type_hints(cls)
-    except Exception:  # unresolved forward references: fall back to no checking
-        return {f.name: Any for f in dataclasses.fields(cls)}
-
-
-def build_dataclass(cls: type, values: Mapping[str, Any], where: str, source: str) -> Any:
-    """Instantiate dataclass ``cls`` from defaults overridden by ``values`` (validated)."""
-    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
-    hints = _hints(cls)
-    kwargs: dict[str, Any] = {}
-    for key, value in values.items():
-        dotted = f"{where}.{key}" if where else str(key)
-        if key not in fields:
-            known = ", ".join(fields) or "none"
-            raise ConfigError(source, dotted, f"unknown key (known keys: {known})")
-        kwargs[key] = coerce(value, hints.get(key, Any), dotted, source)
-    try:
-        instance = cls(**kwargs)
-    except ConfigError as exc:  # a dataclass's own __post_init__ check: name where the value came from
-        raise _with_source(exc, source) from None
-    except PipelineError:
-        raise
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(source, where, _one_line(exc)) from None
-    return instance
 
 
 def _merge(base: dict[str, Any], update: Mapping[str, Any]) -> dict[str, Any]:
@@ -380,7 +243,7 @@ def _parse_stages(value: Any, source: str) -> list[str]:
     elif isinstance(value, (list, tuple)) and all(isinstance(s, str) for s in value):
         items = list(value)
     else:
-        raise ConfigError(source, "stages", f"expected a list of stage names, got {_describe(value)}")
+        raise ConfigError(source, "stages", f"expected a list of stage names, got {describe(value)}")
     for s in items:
         if s not in STAGES:
             raise ConfigError(source, "stages", f"unknown stage {s!r} (known: {', '.join(STAGES)})")
@@ -441,7 +304,7 @@ def load_config(
                 if value is None:
                     value = {}
                 if not isinstance(value, Mapping):
-                    raise ConfigError(src, key, f"expected a mapping of settings, got {_describe(value)}")
+                    raise ConfigError(src, key, f"expected a mapping of settings, got {describe(value)}")
                 raw_sections[key].append((src, value))
 
     cfg = RunConfig(source=source, base_dir=base_dir)
@@ -449,23 +312,23 @@ def load_config(
         cfg.origins[key] = src
         if key == "name":
             if not isinstance(value, (str, int)) or isinstance(value, bool) or not str(value).strip():
-                raise ConfigError(src, "name", f"expected a non-empty string, got {_describe(value)}")
+                raise ConfigError(src, "name", f"expected a non-empty string, got {describe(value)}")
             value = str(value)
             if "/" in value or "\\" in value or value.startswith("."):
                 raise ConfigError(src, "name", f"must be a plain directory name, got {value!r}")
             cfg.name = value
         elif key == "seed":
             if not isinstance(value, int) or isinstance(value, bool) or value < 0:
-                raise ConfigError(src, "seed", f"expected a non-negative int, got {_describe(value)}")
+                raise ConfigError(src, "seed", f"expected a non-negative int, got {describe(value)}")
             cfg.seed = value
         elif key == "robot":
             if not isinstance(value, (str, Path)) or not str(value).strip():
-                raise ConfigError(src, "robot", f"expected a robot name or folder, got {_describe(value)}")
+                raise ConfigError(src, "robot", f"expected a robot name or folder, got {describe(value)}")
             cfg.robot = str(value)
         elif key == "profile":
             if value not in PROFILES:
                 raise ConfigError(src, "profile",
-                                  f"expected one of {', '.join(PROFILES)}, got {_describe(value)}")
+                                  f"expected one of {', '.join(PROFILES)}, got {describe(value)}")
             cfg.profile = value
         elif key == "stages":
             cfg.stages = _parse_stages(value, src)
@@ -525,14 +388,7 @@ def _semantic_check(instance: Any, source: str) -> None:
         else:
             validate()
     except ConfigError as exc:
-        raise _with_source(exc, source) from None
-
-
-def _with_source(exc: ConfigError, source: str) -> ConfigError:
-    """``exc`` naming ``source`` (the file or ``--set``) when it names no file itself."""
-    if exc.file is not None and exc.file not in ("None", "config"):
-        return exc
-    return ConfigError(source, exc.field, exc.problem)
+        raise with_source(exc, source) from None
 
 
 def quick_config(**overrides: Any) -> RunConfig:

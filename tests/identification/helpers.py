@@ -29,8 +29,9 @@ def calibrated_robot(nominal: RobotModel, real: RealRobot) -> RobotModel:
 def quick_context(tmp_path: Path, seed: int = 1, robot: str = "rx130l", overrides: dict | None = None,
                   calibrated: bool = True) -> tuple[StageContext, RealRobot]:
     """Quick-profile context of the identification stage (config from configs/quick.yaml)."""
-    from pipeline.config import build_dataclass, to_plain
+    from pipeline.config import to_plain
     from pipeline.identification import stage
+    from pipeline.typed_config import build_dataclass
 
     cfg = load_config(CONFIGS_DIR / "quick.yaml")
     section: dict[str, Any] = {}
