@@ -11,8 +11,6 @@ a wrong pose.
 from __future__ import annotations
 
 import copy as _copy
-import os
-import tempfile
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,10 +19,12 @@ import numpy as np
 import pinocchio as pin
 import yaml
 
+from pipeline.artefacts import write_text
 from pipeline.errors import RobotFileError
 from pipeline.robot.collision import CapsuleDistances, segment_distances
 from pipeline.robot.ik import IKResult, solve_ik
 from pipeline.robot.spec import Capsule, RobotSpec, load_robot_spec, robot_spec_to_yaml
+from pipeline.robot.urdf_export import export_urdf
 
 ROBOTS_DIR = Path(__file__).resolve().parents[2] / "robots"
 WORLD = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
@@ -434,75 +434,6 @@ class RobotModel:
         spec.tool.reflector_offset_m = self.reflector_offset_m
         spec.tool.reflector_axis = self.reflector_axis
         spec.limit_overrides = {}
-        _atomic_write(folder / urdf_name, export_urdf(self.model, self.urdf_text))
-        _atomic_write(folder / "robot.yaml", yaml.safe_dump(robot_spec_to_yaml(spec, urdf_name), sort_keys=False))
+        write_text(folder / urdf_name, export_urdf(self.model, self.urdf_text))
+        write_text(folder / "robot.yaml", yaml.safe_dump(robot_spec_to_yaml(spec, urdf_name), sort_keys=False))
         return folder
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    with os.fdopen(fd, "w") as handle:
-        handle.write(text)
-        handle.flush()
-        os.fsync(handle.fileno())
-    os.replace(tmp, path)
-
-
-def _fmt(values: np.ndarray) -> str:
-    return " ".join(f"{float(v):.17g}" for v in values)
-
-
-def export_urdf(model: pin.Model, template_urdf: str) -> str:
-    """URDF text of ``model``: the template with joint origins, limits and link inertials replaced.
-
-    Fixed child links are merged into their moving parent by Pinocchio, so their inertials are
-    removed here (the merged inertia is written on the moving link). The template's joint
-    tree must be the model's (same joint names).
-    """
-    root = ET.fromstring(template_urdf)
-    joints = {j.get("name"): j for j in root.findall("joint")}
-    links = {link.get("name"): link for link in root.findall("link")}
-    moving_children = set()
-    for j in range(1, model.njoints):
-        name = model.names[j]
-        element = joints.get(name)
-        if element is None:
-            raise RobotFileError(None, f"joint {name}", "not in the template URDF")
-        placement = model.jointPlacements[j]
-        parent_link = element.find("parent").get("link")
-        parent_joint = [jn for jn in joints.values() if jn.find("child").get("link") == parent_link]
-        if parent_joint and parent_joint[0].get("type") == "fixed":
-            raise RobotFileError(None, f"joint {name}", "export of a fixed joint between moving joints is not "
-                                 "supported")
-        origin = element.find("origin")
-        if origin is None:
-            origin = ET.SubElement(element, "origin")
-        origin.set("xyz", _fmt(placement.translation))
-        origin.set("rpy", _fmt(pin.rpy.matrixToRpy(placement.rotation)))
-        limit = element.find("limit")
-        if limit is not None:
-            limit.set("lower", f"{model.lowerPositionLimit[j - 1]:.17g}")
-            limit.set("upper", f"{model.upperPositionLimit[j - 1]:.17g}")
-            limit.set("velocity", f"{model.velocityLimit[j - 1]:.17g}")
-            limit.set("effort", f"{model.effortLimit[j - 1]:.17g}")
-        child = element.find("child").get("link")
-        moving_children.add(child)
-        link = links[child]
-        for old in link.findall("inertial"):
-            link.remove(old)
-        inertia = model.inertias[j]
-        inertial = ET.Element("inertial")
-        ET.SubElement(inertial, "origin", xyz=_fmt(inertia.lever), rpy="0 0 0")
-        ET.SubElement(inertial, "mass", value=f"{inertia.mass:.17g}")
-        i = inertia.inertia
-        ET.SubElement(inertial, "inertia", ixx=f"{i[0, 0]:.17g}", ixy=f"{i[0, 1]:.17g}", ixz=f"{i[0, 2]:.17g}",
-                      iyy=f"{i[1, 1]:.17g}", iyz=f"{i[1, 2]:.17g}", izz=f"{i[2, 2]:.17g}")
-        link.insert(0, inertial)
-    base_links = {model.frames[f].name for f in range(len(model.frames))
-                  if model.frames[f].parentJoint == 0}
-    for name, link in links.items():
-        if name not in moving_children and name not in base_links:
-            for old in link.findall("inertial"):
-                link.remove(old)
-    ET.indent(root)
-    return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"

@@ -1,0 +1,74 @@
+"""Write a Pinocchio model back as URDF text (calibrated joint placements, identified inertials).
+
+The source URDF is the template: joint origins, limits and link inertials are replaced by the
+model's values; visuals and everything else are kept.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pinocchio as pin
+
+from pipeline.errors import RobotFileError
+
+
+def _fmt(values: np.ndarray) -> str:
+    return " ".join(f"{float(v):.17g}" for v in values)
+
+
+def export_urdf(model: pin.Model, template_urdf: str) -> str:
+    """URDF text of ``model``: the template with joint origins, limits and link inertials replaced.
+
+    Fixed child links are merged into their moving parent by Pinocchio, so their inertials are
+    removed here (the merged inertia is written on the moving link). The template's joint
+    tree must be the model's (same joint names).
+    """
+    root = ET.fromstring(template_urdf)
+    joints = {j.get("name"): j for j in root.findall("joint")}
+    links = {link.get("name"): link for link in root.findall("link")}
+    moving_children = set()
+    for j in range(1, model.njoints):
+        name = model.names[j]
+        element = joints.get(name)
+        if element is None:
+            raise RobotFileError(None, f"joint {name}", "not in the template URDF")
+        placement = model.jointPlacements[j]
+        parent_link = element.find("parent").get("link")
+        parent_joint = [jn for jn in joints.values() if jn.find("child").get("link") == parent_link]
+        if parent_joint and parent_joint[0].get("type") == "fixed":
+            raise RobotFileError(None, f"joint {name}", "export of a fixed joint between moving joints is not "
+                                 "supported")
+        origin = element.find("origin")
+        if origin is None:
+            origin = ET.SubElement(element, "origin")
+        origin.set("xyz", _fmt(placement.translation))
+        origin.set("rpy", _fmt(pin.rpy.matrixToRpy(placement.rotation)))
+        limit = element.find("limit")
+        if limit is not None:
+            limit.set("lower", f"{model.lowerPositionLimit[j - 1]:.17g}")
+            limit.set("upper", f"{model.upperPositionLimit[j - 1]:.17g}")
+            limit.set("velocity", f"{model.velocityLimit[j - 1]:.17g}")
+            limit.set("effort", f"{model.effortLimit[j - 1]:.17g}")
+        child = element.find("child").get("link")
+        moving_children.add(child)
+        link = links[child]
+        for old in link.findall("inertial"):
+            link.remove(old)
+        inertia = model.inertias[j]
+        inertial = ET.Element("inertial")
+        ET.SubElement(inertial, "origin", xyz=_fmt(inertia.lever), rpy="0 0 0")
+        ET.SubElement(inertial, "mass", value=f"{inertia.mass:.17g}")
+        i = inertia.inertia
+        ET.SubElement(inertial, "inertia", ixx=f"{i[0, 0]:.17g}", ixy=f"{i[0, 1]:.17g}", ixz=f"{i[0, 2]:.17g}",
+                      iyy=f"{i[1, 1]:.17g}", iyz=f"{i[1, 2]:.17g}", izz=f"{i[2, 2]:.17g}")
+        link.insert(0, inertial)
+    base_links = {model.frames[f].name for f in range(len(model.frames))
+                  if model.frames[f].parentJoint == 0}
+    for name, link in links.items():
+        if name not in moving_children and name not in base_links:
+            for old in link.findall("inertial"):
+                link.remove(old)
+    ET.indent(root)
+    return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
