@@ -191,8 +191,9 @@ def solve_ptp_verified(pm: PlanningModel, problem: PtpProblem, q0: np.ndarray, q
                        duration_s: float | None = None, x0: np.ndarray | None = None,
                        torque_scale: np.ndarray | None = None,
                        coulomb_widths_rad_s: tuple[float, ...] | None = None) -> PtpResult:
-    """Solve, re-check torques on the fine grid, and while a joint exceeds its limit by more than
-    ``cfg.violation_tolerance`` tighten that joint's limit by the excess and re-solve (warm start).
+    """Solve, re-check torques and speeds on the fine grid, and while a joint exceeds its torque
+    or speed limit by more than ``cfg.violation_tolerance`` (between the transcription's check
+    points) tighten that joint's limit by the excess and re-solve (warm start).
     The returned result records the rounds and total solve time. ``coulomb_widths_rad_s``: the
     Coulomb-width continuation of a cold start (default ``cfg.ptp_coulomb_widths_rad_s``; none
     when warm-started)."""
@@ -200,6 +201,7 @@ def solve_ptp_verified(pm: PlanningModel, problem: PtpProblem, q0: np.ndarray, q
         coulomb_widths_rad_s = tuple(cfg.ptp_coulomb_widths_rad_s)
     widths = tuple(coulomb_widths_rad_s) if x0 is None else ()
     scale = np.ones(pm.nq) if torque_scale is None else np.asarray(torque_scale, float).copy()
+    v_scale = np.ones(pm.nq)
     res = problem.solve(q0, q1, k1, k2, weights=weights, duration_s=duration_s, effort_Nm=pm.effort_Nm * scale,
                         x0=x0, coulomb_widths_rad_s=widths)
     first = total = res.solve_time_s
@@ -208,17 +210,20 @@ def solve_ptp_verified(pm: PlanningModel, problem: PtpProblem, q0: np.ndarray, q
     for _ in range(cfg.max_tightening_rounds):
         chk = check_trajectory(pm, res.sample(cfg.fine_dt_s))
         ratio = chk.torque_ratio.max(axis=0)
+        v_ratio = chk.velocity_ratio.max(axis=0)
         bad = ratio > 1.0 + cfg.violation_tolerance
-        if not bad.any():
+        bad_v = v_ratio > 1.0 + cfg.violation_tolerance
+        if not (bad.any() or bad_v.any()):
             break
         rounds += 1
         scale[bad] = scale[bad] / ratio[bad] * (1.0 - 0.25 * cfg.violation_tolerance)
+        v_scale[bad_v] = v_scale[bad_v] / v_ratio[bad_v] * (1.0 - 0.25 * cfg.violation_tolerance)
         res = problem.solve(q0, q1, k1, k2, weights=weights, duration_s=duration_s, effort_Nm=pm.effort_Nm * scale,
-                            x0=res.info["x"], coulomb_widths_rad_s=())
+                            velocity_rad_s=pm.velocity_rad_s * v_scale, x0=res.info["x"], coulomb_widths_rad_s=())
         total += res.solve_time_s
         cpu += res.info["cpu_time_s"]
         iters += res.iterations
-    res.info.update({"tightening_rounds": rounds, "torque_scale": scale.tolist(),
+    res.info.update({"tightening_rounds": rounds, "torque_scale": scale.tolist(), "velocity_scale": v_scale.tolist(),
                      "first_solve_time_s": first, "cpu_time_s": cpu})
     res.solve_time_s, res.iterations = total, iters
     return res
