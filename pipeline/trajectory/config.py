@@ -11,7 +11,10 @@ class TrajectoryConfig:
     # the fine-grid checks use (1 - torque_reserve) * limit, the servo simulation the full limit
     torque_reserve: float = 0.1
     # --- continuous path (CP): one smooth piece of the EN ISO 9283 path (DESIGN.md) ---------
-    cp_segment: str = "circle_large"          # line | circle_large | circle_small
+    cp_segment: str = "circle_large"          # line | circle_large | circle_small | spline
+    # spline: a cubic spline through these TCP points (base frame, metres; >= 3), the tool
+    # orientation as on the ISO path (z axis down); the ISO fields below are then unused
+    cp_points_m: list[list[float]] = field(default_factory=list)
     cp_edge_m: float = 0.5                    # ISO cube edge L
     cp_centre_m: list[float] = field(default_factory=lambda: [0.9, 0.0, 0.3])
     cp_plane: str = "diagonal_x"

@@ -22,7 +22,7 @@ import numpy as np
 from pipeline.runner import StageContext, StageResult
 from pipeline.trajectory.config import TrajectoryConfig
 from pipeline.trajectory.dynamics import PlanningModel
-from pipeline.trajectory.solve import cp_joint_path, plan_cp, plan_ptp, ptp_problem
+from pipeline.trajectory.solve import CP_SEGMENTS, cp_joint_path, cp_spline_points, plan_cp, plan_ptp, ptp_problem
 from pipeline.trajectory.validate import (
     activity_figure,
     comparison_figure,
@@ -43,8 +43,10 @@ def check(config: TrajectoryConfig, robot) -> None:
         return ConfigError(None, f"trajectory.{field}", problem)
 
     nq = robot.nq
-    if config.cp_segment not in ("line", "circle_large", "circle_small"):
-        raise bad("cp_segment", f"{config.cp_segment!r}: expected line, circle_large or circle_small")
+    if config.cp_segment not in CP_SEGMENTS:
+        raise bad("cp_segment", f"{config.cp_segment!r}: expected one of {', '.join(CP_SEGMENTS)}")
+    if config.cp_segment == "spline":
+        cp_spline_points(config)
     if config.ptp_energy not in ("torque", "normalised", "electrical"):
         raise bad("ptp_energy", f"{config.ptp_energy!r}: expected torque, normalised or electrical")
     for field in ("ptp_start_deg", "ptp_goal_deg", "cp_ik_seed_deg", "motor_resistance_ohm", "torque_constant_Nm_A"):

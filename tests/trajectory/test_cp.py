@@ -77,3 +77,37 @@ def test_impossible_torque_limits_raise(pm, line_path):
     weak = dataclasses.replace(pm, effort_Nm=pm.effort_Nm * 0.05)   # cannot even hold against gravity
     with pytest.raises(InfeasibleError, match="joint 2 torque limit"):
         solve_cp_convex(weak, line_path, 60)
+
+
+SPLINE_POINTS_M = [[0.9, -0.3, 0.2], [1.0, -0.1, 0.35], [0.95, 0.15, 0.3], [0.85, 0.3, 0.45]]
+
+
+def test_spline_through_points_is_followed(rx130l, pm, quick_traj_config):
+    """cp_segment = spline: the joint path passes the given points (FK) and plans like the ISO pieces."""
+    import pinocchio as pin
+
+    cfg = dataclasses.replace(quick_traj_config, cp_segment="spline", cp_points_m=SPLINE_POINTS_M, cp_smooth=False)
+    path, piece = cp_joint_path(rx130l, cfg)
+    data = rx130l.model.createData()
+    fid = rx130l.model.getFrameId(rx130l.frame_tcp)
+    for s, p in ((0.0, SPLINE_POINTS_M[0]), (1.0, SPLINE_POINTS_M[-1])):
+        pin.framesForwardKinematics(rx130l.model, data, path(s))
+        assert np.allclose(data.oMf[fid].translation, p, atol=1e-6)
+    # an interior sample lies on the Cartesian spline
+    pin.framesForwardKinematics(rx130l.model, data, path(0.4))
+    assert np.min(np.linalg.norm(piece.position(np.linspace(0, piece.length_m, 4001)) - data.oMf[fid].translation,
+                                 axis=1)) < 1e-3
+    plan = plan_cp(pm, path, cfg)
+    assert plan.checks["cp"].violation <= cfg.violation_tolerance
+
+
+@pytest.mark.parametrize("points, field", [([[0.9, 0.0, 0.3], [1.0, 0.0, 0.3]], r"cp_points_m\b"),
+                                           ([[0.9, 0.0, 0.3], [1.0, 0.0], [1.0, 0.1, 0.3]], r"cp_points_m\[1\]"),
+                                           ([[0.9, 0.0, 0.3], [0.9, 0.0, 0.3], [1.0, 0.1, 0.3]],
+                                            r"cp_points_m\[1\]")])
+def test_bad_spline_points_are_named(rx130l, quick_traj_config, points, field):
+    from pipeline.errors import ConfigError
+
+    cfg = dataclasses.replace(quick_traj_config, cp_segment="spline", cp_points_m=points)
+    with pytest.raises(ConfigError, match=field):
+        cp_joint_path(rx130l, cfg)
