@@ -59,7 +59,8 @@ def main(robot_name: str = "rx130l", segment: str = "circle_large", torque_reser
           f"{100 * s['cp_toppra_fine_violation_full_friction']:.2f} % (target ours <= 0.5 %)")
     print(f"  smooth variant {s['cp_smooth_duration_s']:.5f} s: time cost {100 * s['cp_smooth_time_cost']:.1f} %, "
           f"violation {100 * s['cp_smooth_fine_violation']:.3f} %, solve {s['cp_smooth_solve_time_s']:.2f} s")
-    print(f"  share of time with a constraint >= 98 % active: {s['cp_active_fraction']:.3f}")
+    print(f"  constraint activity: lowest over the grid points {s['cp_grid_min_activity']:.5f} (1 = some limit "
+          f"active at every grid point), share of the fine time grid >= 98 % active {s['cp_active_fraction']:.3f}")
 
     t0 = time.perf_counter()
     problem = ptp_problem(pm, robot, cfg)

@@ -265,6 +265,39 @@ def cp_constraint_activity(pm: PlanningModel, path: JointPath, traj: JointTrajec
             "active_fraction": float(np.mean(level >= 0.98)), "min_activity": float(level.min())}
 
 
+def cp_grid_activity(pm: PlanningModel, path: JointPath, profile: CPProfile) -> np.ndarray:
+    """Per grid point, the largest constraint level of the intervals next to it.
+
+    Level = max over joints and over the interval's check points (start, midpoint, end) of
+    ``|tau| / tau_max`` (the limits the profile was solved with: ``torque_margin`` and
+    ``torque_scale`` from its info, full friction model) and ``|v| / v_max``. On a minimum-time
+    solution of the discretised problem every interior ``sdot_k`` is held down by a constraint
+    it enters (else raising it would shorten the motion), so the level is 1 at every grid point:
+    the grid form of paper 004 Fig. 8 ("at least one constraint is always active"). Between the
+    check points the fine time grid dips below 1 (``a`` is constant per interval, ``b`` is not).
+    """
+    s, x = profile.s, profile.sdot
+    N = len(s) - 1
+    ds = np.diff(s)
+    b = x**2
+    a = (b[1:] - b[:-1]) / (2 * ds)
+    pts = np.concatenate([s[:-1], 0.5 * (s[:-1] + s[1:]), s[1:]])
+    xs = np.concatenate([x[:-1], np.sqrt(0.5 * (b[:-1] + b[1:])), x[1:]])
+    q, dq, ddq = path.derivatives(pts)
+    aa = np.tile(a, 3)[:, None]
+    v = dq * xs[:, None]
+    tau = pm.torques(q, v, ddq * xs[:, None] ** 2 + dq * aa)
+    tau_max = pm.effort_Nm * (1.0 - float(profile.info.get("torque_margin") or 0.0))
+    if profile.info.get("torque_scale") is not None:
+        tau_max = tau_max * np.asarray(profile.info["torque_scale"], float)
+    level = np.maximum(np.abs(tau) / tau_max, np.abs(v) / pm.velocity_rad_s).max(axis=1)
+    per_interval = level.reshape(3, N).max(axis=0)
+    node = np.empty(N + 1)
+    node[0], node[-1] = per_interval[0], per_interval[-1]
+    node[1:-1] = np.maximum(per_interval[:-1], per_interval[1:])
+    return node
+
+
 @dataclass
 class SmoothCPResult:
     """Time-domain smooth CP solution: path states at K+1 nodes, snap per interval."""

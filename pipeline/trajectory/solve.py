@@ -20,6 +20,7 @@ from pipeline.trajectory.cp import (
     CPProfile,
     SmoothCPResult,
     cp_constraint_activity,
+    cp_grid_activity,
     solve_cp_convex,
     solve_cp_refined,
     solve_cp_smooth,
@@ -99,6 +100,7 @@ class CPPlan:
             "cp_toppra_fine_violation_full_friction": self.checks["cp_toppra"].violation,
             "cp_toppra_fine_violation_rigid_coulomb": self.checks["cp_toppra_rigid"].violation,
             "cp_active_fraction": self.activity.get("active_fraction"),
+            "cp_grid_min_activity": self.activity.get("grid_min_activity"),
             "cp_solve_time_s": self.timings_s.get("cp_convex", 0.0) + self.timings_s.get("cp_refined", 0.0),
             "cp_toppra_solve_time_s": self.toppra.solve_time_s,
         }
@@ -157,6 +159,8 @@ def plan_cp(pm: PlanningModel, path: JointPath, cfg: TrajectoryConfig) -> CPPlan
     checks["cp_toppra_rigid"] = TorqueCheck(tr.t_s, rigid, r, np.abs(tr.v) / pm.velocity_rad_s,
                                             float(r.max()), float(max(0.0, r.max() - 1.0)), 0.0, 0.0)
     act = cp_constraint_activity(pm, path, trajs["cp"], checks["cp"].tau_Nm)
+    act["grid_activity"] = cp_grid_activity(pm, path, opt)
+    act["grid_min_activity"] = float(act["grid_activity"].min())
     return CPPlan(path, tp, eq, cv, opt, sm, trajs, checks, act, tim)
 
 

@@ -165,6 +165,8 @@ def run(ctx: StageContext) -> StageResult:
         ("CP ours with toppra's constraints / toppra", summary["cp_equal_vs_toppra_ratio"]),
         ("CP fine-grid torque violation, ours / toppra (full friction)",
          f"{summary['cp_fine_violation']:.4f} / {summary['cp_toppra_fine_violation_full_friction']:.4f}"),
+        ("CP constraint activity: lowest at the grid points (1 = a limit active everywhere, Fig. 8) / share of "
+         "the fine time grid >= 98 %", f"{summary['cp_grid_min_activity']:.4f} / {summary['cp_active_fraction']:.3f}"),
         ("CP smooth duration [s] (time cost)",
          f"{summary.get('cp_smooth_duration_s', float('nan')):.4f} "
          f"({summary.get('cp_smooth_time_cost', 0) * 100:.1f} %)"),
