@@ -218,10 +218,12 @@ def solve_ptp_verified(pm: PlanningModel, problem: PtpProblem, q0: np.ndarray, q
                        cfg: TrajectoryConfig, k1: float, k2: float, weights: np.ndarray,
                        duration_s: float | None = None, x0: np.ndarray | None = None,
                        torque_scale: np.ndarray | None = None,
-                       coulomb_widths_rad_s: tuple[float, ...] | None = None) -> PtpResult:
+                       coulomb_widths_rad_s: tuple[float, ...] | None = None,
+                       multipliers: tuple[np.ndarray, np.ndarray] | None = None) -> PtpResult:
     """Solve, re-check torques and speeds on the fine grid, and while a joint exceeds its torque
     or speed limit by more than ``cfg.violation_tolerance`` (between the transcription's check
-    points) tighten that joint's limit by the excess and re-solve (warm start).
+    points) tighten that joint's limit by the excess and re-solve (warm start from the previous
+    solution and its multipliers).
     The returned result records the rounds and total solve time. ``coulomb_widths_rad_s``: the
     Coulomb-width continuation of a cold start (default ``cfg.ptp_coulomb_widths_rad_s``; none
     when warm-started)."""
@@ -231,7 +233,7 @@ def solve_ptp_verified(pm: PlanningModel, problem: PtpProblem, q0: np.ndarray, q
     scale = np.ones(pm.nq) if torque_scale is None else np.asarray(torque_scale, float).copy()
     v_scale = np.ones(pm.nq)
     res = problem.solve(q0, q1, k1, k2, weights=weights, duration_s=duration_s, effort_Nm=pm.effort_Nm * scale,
-                        x0=x0, coulomb_widths_rad_s=widths)
+                        x0=x0, coulomb_widths_rad_s=widths, multipliers=multipliers if x0 is not None else None)
     first = total = res.solve_time_s
     cpu = res.info["cpu_time_s"]
     iters, rounds = res.iterations, 0
@@ -247,7 +249,8 @@ def solve_ptp_verified(pm: PlanningModel, problem: PtpProblem, q0: np.ndarray, q
         scale[bad] = scale[bad] / ratio[bad] * (1.0 - 0.25 * cfg.violation_tolerance)
         v_scale[bad_v] = v_scale[bad_v] / v_ratio[bad_v] * (1.0 - 0.25 * cfg.violation_tolerance)
         res = problem.solve(q0, q1, k1, k2, weights=weights, duration_s=duration_s, effort_Nm=pm.effort_Nm * scale,
-                            velocity_rad_s=pm.velocity_rad_s * v_scale, x0=res.info["x"], coulomb_widths_rad_s=())
+                            velocity_rad_s=pm.velocity_rad_s * v_scale, x0=res.info["x"], coulomb_widths_rad_s=(),
+                            multipliers=res.info["multipliers"])
         total += res.solve_time_s
         cpu += res.info["cpu_time_s"]
         iters += res.iterations

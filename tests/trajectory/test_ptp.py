@@ -49,6 +49,17 @@ def test_pareto_trades_time_for_energy(plan):
     assert T[-1] >= T[0] - 1e-6 and E[-1] <= E[0] + 1e-6
 
 
+def test_warm_start_from_own_solution_stays_put(plan, ptp_problem, big_move):
+    """Primal + dual warm start at a solution: IPOPT confirms it in a few iterations, same motion."""
+    res = plan.result
+    again = ptp_problem.solve(*big_move, res.k1, res.k2, weights=plan.weights,
+                              effort_Nm=ptp_problem.pm.effort_Nm * np.asarray(res.info["torque_scale"]),
+                              velocity_rad_s=ptp_problem.pm.velocity_rad_s * np.asarray(res.info["velocity_scale"]),
+                              x0=res.info["x"], coulomb_widths_rad_s=(), multipliers=res.info["multipliers"])
+    assert again.iterations <= 10 < res.iterations
+    assert again.duration_s == pytest.approx(res.duration_s, rel=1e-5)
+
+
 def test_goal_outside_limits_is_named(ptp_problem, big_move):
     q0, _ = big_move
     bad = q0.copy()
