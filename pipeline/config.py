@@ -8,7 +8,9 @@ validated against a dataclass:
   ``pipeline.calibration.stage.Config``), imported lazily;
 * ``truth``: ``pipeline.robot.truth.TruthConfig``.
 
-Merging order (later wins): dataclass defaults < YAML file < ``--set`` overrides.
+Merging order (later wins): dataclass defaults < the robot's ``run_defaults`` (a section of its
+``robot.yaml``: where the test path sits and which moves fit that arm) < YAML file < ``--set``
+overrides.
 Every problem raises :class:`pipeline.errors.ConfigError` naming the file (or ``--set``) and the
 dotted field, e.g. ``configs/my.yaml: calibration.n_configurations: expected int, got 'abc'``.
 """
@@ -333,6 +335,17 @@ def load_config(
         elif key == "stages":
             cfg.stages = _parse_stages(value, src)
 
+    robot_layer = robot_run_defaults(cfg)
+    if robot_layer is not None:
+        src, defaults = robot_layer
+        for key, value in defaults.items():
+            if key not in raw_sections:
+                raise ConfigError(src, f"run_defaults.{key}",
+                                  f"not a section of the run configuration (sections: {', '.join(section_names())})")
+            if not isinstance(value, Mapping):
+                raise ConfigError(src, f"run_defaults.{key}", f"expected a mapping of settings, got {describe(value)}")
+            raw_sections[key].insert(0, (src, value))
+
     for section, items in raw_sections.items():
         cls = _section_class(section)
         if cls is None:
@@ -366,6 +379,44 @@ def load_config(
         _semantic_check(instance, culprit or src)
         cfg.sections[section] = instance
     return cfg
+
+
+def resolve_robot_dir(cfg: RunConfig) -> Path:
+    """The robot folder named by ``cfg.robot``: a path (absolute, relative to the config
+    file, or to the working directory) or a folder name under ``robots/``."""
+    value = cfg.robot
+    p = Path(value).expanduser()
+    candidates = [p] if p.is_absolute() else [cfg.base_dir / p, Path.cwd() / p, REPO_ROOT / "robots" / p]
+    for c in candidates:
+        if c.is_dir():
+            return c.resolve()
+    source = cfg.origins.get("robot", cfg.source)
+    robots = REPO_ROOT / "robots"
+    known = sorted(d.name for d in robots.iterdir() if d.is_dir()) if robots.is_dir() else []
+    hint = f" (built-in robots: {', '.join(known)})" if known else ""
+    raise ConfigError(source, "robot", f"no robot folder {value!r}{hint}")
+
+
+def robot_run_defaults(cfg: RunConfig) -> tuple[str, Mapping[str, Any]] | None:
+    """(source, sections) of the ``run_defaults`` mapping in the robot's ``robot.yaml``, or None
+    (no such section, or no robot folder yet: the runner reports a missing robot)."""
+    try:
+        robot_yaml = resolve_robot_dir(cfg) / "robot.yaml"
+    except ConfigError:
+        return None
+    if not robot_yaml.is_file():
+        return None
+    try:
+        data = yaml.safe_load(robot_yaml.read_text(encoding="utf-8"))
+    except (OSError, yaml.YAMLError):
+        return None                      # the robot loader reports a broken robot.yaml
+    if not isinstance(data, dict) or data.get("run_defaults") is None:
+        return None
+    defaults = data["run_defaults"]
+    src = f"{robot_yaml} (run_defaults)"
+    if not isinstance(defaults, Mapping):
+        raise ConfigError(src, "run_defaults", f"expected a mapping of sections, got {describe(defaults)}")
+    return src, defaults
 
 
 def _semantic_check(instance: Any, source: str) -> None:

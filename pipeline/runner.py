@@ -31,7 +31,7 @@ import pipeline
 from pipeline import artefacts
 from pipeline import config as config_mod
 from pipeline.artefacts import StageOutput, load_stage_output
-from pipeline.config import REPO_ROOT, RunConfig
+from pipeline.config import REPO_ROOT, RunConfig, resolve_robot_dir
 from pipeline.errors import ConfigError, PipelineError
 from pipeline.progress import Progress
 
@@ -93,22 +93,6 @@ def stable_stage_hash(name: str) -> int:
 def stage_rng(seed: int, stage: str) -> np.random.Generator:
     """``np.random.default_rng([seed, stable_stage_hash(stage)])``."""
     return np.random.default_rng([seed, stable_stage_hash(stage)])
-
-
-def resolve_robot_dir(cfg: RunConfig) -> Path:
-    """The robot folder named by ``cfg.robot``: a path (absolute, relative to the config
-    file, or to the working directory) or a folder name under ``robots/``."""
-    value = cfg.robot
-    p = Path(value).expanduser()
-    candidates = [p] if p.is_absolute() else [cfg.base_dir / p, Path.cwd() / p, REPO_ROOT / "robots" / p]
-    for c in candidates:
-        if c.is_dir():
-            return c.resolve()
-    source = cfg.origins.get("robot", cfg.source)
-    robots = REPO_ROOT / "robots"
-    known = sorted(d.name for d in robots.iterdir() if d.is_dir()) if robots.is_dir() else []
-    hint = f" (built-in robots: {', '.join(known)})" if known else ""
-    raise ConfigError(source, "robot", f"no robot folder {value!r}{hint}")
 
 
 def _load_robot(robot_dir: Path) -> Any:

@@ -160,3 +160,22 @@ def test_stage_check_names_the_source(tmp_path):
     out = tmp_path / "runs"
     proc = run_cli("run", "--set", "trajectory.cp_segment=zigzag", "--out", str(out))
     assert_one_line_error(proc, out, "--set", "trajectory.cp_segment")
+
+
+@pytest.mark.slow
+def test_second_robot_runs_every_stage(tmp_path):
+    """The TX40 through the whole quick pipeline: its robot.yaml run_defaults put the ISO cube in
+    its workspace; feedforward from its identified model beats feedback alone."""
+    import json
+
+    out = tmp_path / "runs"
+    proc = run_cli("run", "--config", "configs/quick.yaml", "--set", "robot=staubli_tx40", "--set", "name=tx40",
+                   "--out", str(out))
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    run = out / "tx40"
+    assert (run / "report.md").is_file()
+    control = json.loads((run / "control" / "summary.json").read_text())
+    errors = control["tcp_error_max_m"]
+    assert errors["full_friction"] < errors["none"]
+    trajectory = json.loads((run / "trajectory" / "summary.json").read_text())
+    assert trajectory["ptp_duration_s"] < trajectory["ptp_ruckig_duration_s"]

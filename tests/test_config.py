@@ -144,3 +144,36 @@ def test_quick_profile_loads(quick_config):
     assert quick_config.profile == "quick"
     assert quick_config.stages == [s for s in config.STAGES if s in quick_config.stages]
     assert set(quick_config.sections) >= {"truth", *config.STAGES}
+
+
+# ---------------------------------------------------------------- robot run_defaults layer
+def test_robot_run_defaults_sit_between_defaults_and_file(tmp_path):
+    from pipeline.control.config import IsoPathConfig
+
+    builtin = IsoPathConfig().centre_m
+    tx40 = load_config(values={"robot": "staubli_tx40"})
+    assert tx40.control.iso.centre_m == [0.35, 0.0, 0.2] != builtin
+    assert tx40.trajectory.cp_edge_m == 0.2
+    assert tx40.control.iso.segments == IsoPathConfig().segments        # untouched fields keep theirs
+    # the run config file and --set still win; another robot keeps the built-in defaults
+    p = write(tmp_path, "robot: staubli_tx40\ncontrol: {iso: {edge_m: 0.25}}\n")
+    cfg = load_config(p, ["trajectory.cp_edge_m=0.15"])
+    assert cfg.control.iso.edge_m == 0.25 and cfg.control.iso.centre_m == [0.35, 0.0, 0.2]
+    assert cfg.trajectory.cp_edge_m == 0.15
+    assert load_config().control.iso.centre_m == builtin
+
+
+@pytest.mark.parametrize("block, field_name", [("run_defaults:\n  nonsense: {a: 1}\n", "run_defaults.nonsense"),
+                                                ("run_defaults:\n  control: 3\n", "run_defaults.control"),
+                                                ("run_defaults:\n  control: {iso: {edge_m: abc}}\n",
+                                                 "control.iso.edge_m")])
+def test_bad_robot_run_defaults_name_robot_yaml(tmp_path, block, field_name):
+    import shutil
+
+    robot = tmp_path / "myrobot"
+    shutil.copytree(config.REPO_ROOT / "robots" / "staubli_tx40", robot)
+    text = (robot / "robot.yaml").read_text()
+    (robot / "robot.yaml").write_text(text[: text.index("run_defaults:")] + block)
+    with pytest.raises(ConfigError) as err:
+        load_config(values={"robot": str(robot)})
+    assert str(robot / "robot.yaml") in str(err.value) and field_name in str(err.value)

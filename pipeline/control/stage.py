@@ -41,7 +41,7 @@ from pipeline.control.validate import (
     run_metrics,
     tcp_figure,
 )
-from pipeline.errors import PipelineError
+from pipeline.errors import InfeasibleError, PipelineError
 from pipeline.robot.paths import start_configuration
 from pipeline.runner import StageContext, StageResult
 
@@ -89,9 +89,15 @@ def run(ctx: StageContext) -> StageResult:
                         iso.large_circle_fraction, iso.small_circle_fraction, tuple(iso.segments))
     seeds = np.radians(np.atleast_2d(np.asarray(cfg.ik_seeds_deg, float)))
     t0 = time.perf_counter()
-    q_start = start_configuration(robot, path.poses([0.0])[0], seeds, frame)
-    ref = cartesian_reference(robot, path, dt, iso.speed_m_s, iso.acceleration_m_s2, iso.jerk_m_s3, q_start,
-                              frame, cfg.ik_tolerance_m)
+    try:
+        q_start = start_configuration(robot, path.poses([0.0])[0], seeds, frame)
+        ref = cartesian_reference(robot, path, dt, iso.speed_m_s, iso.acceleration_m_s2, iso.jerk_m_s3, q_start,
+                                  frame, cfg.ik_tolerance_m)
+    except InfeasibleError as exc:
+        raise InfeasibleError(exc.file, "control.iso", f"{exc.field}: {exc.problem}; the ISO path (cube centre "
+                              f"{iso.centre_m} m, edge {iso.edge_m} m) must lie in this robot's workspace: set "
+                              "control.iso.centre_m / edge_m in the run config, or run_defaults in its robot.yaml"
+                              ) from None
     t_ref = time.perf_counter() - t0
 
     gains = servo_gains(robot, np.mean(ref.q_d, axis=0), cfg)

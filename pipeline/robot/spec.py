@@ -89,6 +89,9 @@ class RobotSpec:
 _TOP_KEYS = {
     "name", "urdf", "flange_frame", "payload_kg", "tool", "actuation", "limits", "tracker",
     "collision", "capsules",
+    # robot-specific defaults of the run configuration (test path placement, moves); read and
+    # checked by pipeline.config.load_config, which layers them under the config file
+    "run_defaults",
 }
 _REQUIRED_TOP = {"urdf", "flange_frame", "tool", "actuation", "limits", "tracker"}
 
@@ -180,6 +183,8 @@ def load_robot_spec(path: Path, nq: int | None = None) -> RobotSpec:
         raise RobotFileError(path, "top level", "expected a mapping")
     top = _Reader(path, data)
     top.check_keys(_TOP_KEYS, _REQUIRED_TOP)
+    if "run_defaults" in data and not isinstance(data["run_defaults"], dict):
+        raise top.error("run_defaults", "expected a mapping of run-configuration sections")
 
     tool = top.sub("tool")
     tool.check_keys({"transform_tcp_to_flange", "reflector_offset_m", "reflector_axis"},
