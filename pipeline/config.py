@@ -142,6 +142,9 @@ class RunConfig:
     source: str = "<defaults>"          # where it came from, for messages
     base_dir: Path = field(default_factory=Path.cwd)   # relative robot paths resolve here first
     origins: dict[str, str] = field(default_factory=dict)  # top-level key or section -> file or "--set" (last)
+    #: dotted field (``"model.pose_deg"``, ``"control.iso.edge_m"``) -> the layer that last set it
+    #: (file, ``"--set"`` or ``"<robot.yaml> (run_defaults)"``); not part of :meth:`to_dict`
+    field_origins: dict[str, str] = field(default_factory=dict, repr=False)
 
     def __getattr__(self, item: str) -> Any:
         # only called when normal lookup fails: expose sections as attributes
@@ -149,6 +152,18 @@ class RunConfig:
         if sections is not None and item in sections:
             return sections[item]
         raise AttributeError(item)
+
+    def source_of(self, dotted: str | None, default: str | None = None) -> str:
+        """Where the value of field ``dotted`` (e.g. ``"model.pose_deg[2]"``) came from: the
+        layer that last set it (or a part of it), else ``default``, else the section's last
+        layer (:attr:`origins`), else :attr:`source`."""
+        found = _lookup_origin(self.field_origins, dotted) if dotted else None
+        if found is not None:
+            return found
+        if default is not None:
+            return default
+        head = _field_path(dotted)[0] if dotted else ""
+        return self.origins.get(head, self.source)
 
     def section(self, name: str) -> Any:
         """The config of section ``name`` (dataclass instance)."""
@@ -171,6 +186,47 @@ class RunConfig:
 
     def to_yaml(self) -> str:
         return yaml.safe_dump(self.to_dict(), sort_keys=False)
+
+
+def _field_path(dotted: str) -> tuple[str, ...]:
+    """``"control.iso.centre_m[1]"`` -> ``("control", "iso", "centre_m")``."""
+    parts = []
+    for part in str(dotted).split("."):
+        part = part.split("[", 1)[0].strip()
+        if part:
+            parts.append(part)
+    return tuple(parts)
+
+
+def _leaf_paths(value: Mapping[str, Any], prefix: tuple[str, ...]) -> list[tuple[str, ...]]:
+    """Dotted paths of the values a layer sets (mappings are walked into; ``{}`` sets nothing)."""
+    out: list[tuple[str, ...]] = []
+    for key, item in value.items():
+        path = (*prefix, str(key))
+        if isinstance(item, Mapping) and item:
+            out.extend(_leaf_paths(item, path))
+        else:
+            out.append(path)
+    return out
+
+
+def _related(a: tuple[str, ...], b: tuple[str, ...]) -> bool:
+    """One path is the other or a part of it."""
+    n = min(len(a), len(b))
+    return n > 0 and a[:n] == b[:n]
+
+
+def _lookup_origin(origins: Mapping[str, str], dotted: str) -> str | None:
+    """The latest layer in ``origins`` (ordered by when the field was last set) that set
+    ``dotted``, a part of it, or a field inside it."""
+    target = _field_path(dotted)
+    if len(target) < 2:          # a whole section or a top-level key: not a field
+        return None
+    found = None
+    for key, src in origins.items():
+        if _related(_field_path(key), target):
+            found = src
+    return found
 
 
 def to_plain(value: Any) -> Any:
@@ -358,25 +414,33 @@ def load_config(
                     )
             cfg.sections[section] = {}
             continue
-        # validate each layer on its own (so errors name the right file), then merge
-        # a range problem of the merged section is blamed on the layer from which on it persists
-        # (a bad value in a file that a later --set repairs is no error)
+        # validate the merged section after each layer; a problem of the final section is blamed
+        # on the layer that introduced it (a bad value in a file that a later --set repairs is
+        # no error), see _blame
+        for src, value in items:
+            for path in _leaf_paths(value, (section,)):
+                key = ".".join(path)
+                cfg.field_origins.pop(key, None)       # keep the dict ordered by last setting
+                cfg.field_origins[key] = src
         merged: dict[str, Any] = {}
-        culprit: str | None = None
+        errors: list[ConfigError | None] = []
+        instance: Any = None
         for src, value in items:
             merged = _merge(merged, value)
             try:
-                _semantic_check(build_dataclass(cls, merged, section, src), src)
-            except ConfigError:
-                if culprit is None:
-                    culprit = src
+                instance = build_dataclass(cls, merged, section, src)
+                _semantic_check(instance, src)
+            except ConfigError as exc:
+                errors.append(exc)
             else:
-                culprit = None
-        src = items[-1][0] if items else source
+                errors.append(None)
         if items:
-            cfg.origins[section] = src
-        instance = build_dataclass(cls, merged, section, src)
-        _semantic_check(instance, culprit or src)
+            cfg.origins[section] = items[-1][0]
+        else:
+            instance = build_dataclass(cls, {}, section, source)
+            _semantic_check(instance, source)
+        if errors and errors[-1] is not None:
+            raise _blame(errors, items, section)
         cfg.sections[section] = instance
     return cfg
 
@@ -417,6 +481,31 @@ def robot_run_defaults(cfg: RunConfig) -> tuple[str, Mapping[str, Any]] | None:
     if not isinstance(defaults, Mapping):
         raise ConfigError(src, "run_defaults", f"expected a mapping of sections, got {describe(defaults)}")
     return src, defaults
+
+
+def _blame(errors: list[ConfigError | None], items: list[tuple[str, Any]], section: str) -> ConfigError:
+    """The final error of a section (``errors[-1]``, one entry per layer in ``items``) naming
+    the layer that introduced the bad value.
+
+    The culprit is the first layer from which on the section stays invalid; when a layer at or
+    after it set the field the error names (or a part of it), the last such layer is blamed
+    instead (two bad values from different layers: each error names its own layer).
+    """
+    final = errors[-1]
+    assert final is not None
+    sources = {src for src, _ in items}
+    if final.file not in sources:          # the check named a file of its own (a data file ...)
+        return final
+    k = len(errors) - 1
+    while k > 0 and errors[k - 1] is not None:
+        k -= 1
+    blame = items[k][0]
+    target = _field_path(final.field or "")
+    if len(target) >= 2 and target[0] == section:
+        for src, value in items[k:]:
+            if any(_related(path, target) for path in _leaf_paths(value, (section,))):
+                blame = src
+    return ConfigError(blame, final.field, final.problem)
 
 
 def _semantic_check(instance: Any, source: str) -> None:

@@ -19,7 +19,7 @@ from __future__ import annotations
 import hashlib
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -275,14 +275,34 @@ def summary_table(summary: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_report(run_dir: Path, cfg: RunConfig | None = None, current: Sequence[str] = ()) -> Path:
+def _one_line_error(exc: BaseException) -> str:
+    if isinstance(exc, PipelineError):
+        return exc.one_line()
+    if isinstance(exc, KeyboardInterrupt):
+        return "interrupted (Ctrl-C)"
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+def write_report(run_dir: Path, cfg: RunConfig | None = None, current: Sequence[str] = (),
+                 expected: Mapping[str, str] | None = None, failure: tuple[str, str] | None = None) -> Path:
     """Gather every finished stage directory of ``run_dir`` into ``report.md``.
 
     Figures are linked relatively (``<stage>/<name>.png``). Stage directories that were not part
-    of this run (``current``) are marked as coming from an earlier run.
+    of this run (``current``) are marked as coming from an earlier run, and so is every stage whose
+    saved ``inputs.sha256`` differs from ``expected[stage]`` (this run's inputs hash: the stage
+    failed or was not re-run after a failure). ``failure``: ``(stage, one-line error)`` of a
+    failed run, stated at the top.
     """
     run_dir = Path(run_dir)
+    expected = expected or {}
     lines = [f"# Run `{run_dir.name}`", ""]
+    if failure is not None:
+        stage, error = failure
+        where = f" in stage `{stage}`" if stage else ""
+        lines += [f"**FAILED{where}**: {' '.join(error.split())}", "",
+                  "`config.yaml` holds the configuration of this failed run; stages marked "
+                  "_stale_ below show results of an earlier run.", ""]
     if cfg is not None:
         lines += [f"robot `{cfg.robot}` · seed {cfg.seed} · profile `{cfg.profile}` · "
                   f"pipeline {pipeline.__version__} · config in `config.yaml`", ""]
@@ -296,6 +316,10 @@ def write_report(run_dir: Path, cfg: RunConfig | None = None, current: Sequence[
         lines += [f"## {name}", ""]
         if current and name not in current:
             lines += ["_from an earlier run: not part of this run, its inputs may differ_", ""]
+        elif failure is not None and name == failure[0]:
+            lines += ["_stale: this stage FAILED in this run; the results below are from an earlier run_", ""]
+        elif name in expected and artefacts.read_inputs_hash(d) != expected[name]:
+            lines += ["_stale: from an earlier run with different inputs (not re-run in this run)_", ""]
         if manifest.get("finished_utc"):
             lines += [f"finished {manifest['finished_utc']} in {manifest.get('duration_s', 0):.1f} s", ""]
         summary = artefacts.read_json(d / artefacts.SUMMARY) if (d / artefacts.SUMMARY).exists() else {}
@@ -358,10 +382,11 @@ def run_pipeline(
         if callable(check) and will_run:
             try:
                 check(plan.config, nominal)
-            except ConfigError as exc:  # name the file (or --set) the stage's section came from
+            except ConfigError as exc:  # name the file (or --set) the field's value came from
                 if exc.file is not None:
                     raise
-                raise ConfigError(cfg.origins.get(plan.name, cfg.source), exc.field, exc.problem) from None
+                source = cfg.source_of(exc.field, None) if exc.field else cfg.origins.get(plan.name, cfg.source)
+                raise ConfigError(source, exc.field, exc.problem) from None
 
     # ---- run --------------------------------------------------------------------------------
     try:
@@ -375,9 +400,12 @@ def run_pipeline(
     ran: list[str] = []
     reused: list[str] = []
     handed_robot: dict[str, Any] = {}       # stage -> robot it handed on
+    current: str | None = None
+    failure: tuple[str, str] | None = None  # (stage, one-line error) when a stage failed
     try:
         with prog:
             for plan in plans:
+                current = plan.name
                 stage_dir = run_dir / plan.name
                 if plan.name not in forced and artefacts.read_inputs_hash(stage_dir) == plan.inputs_sha256:
                     outputs[plan.name] = load_stage_output(stage_dir)
@@ -389,8 +417,13 @@ def run_pipeline(
                     ran.append(plan.name)
                 if outputs[plan.name].robot is not None:
                     handed_robot[plan.name] = outputs[plan.name].robot
+            current = None
+    except BaseException as exc:
+        failure = (current or "", _one_line_error(exc))
+        raise
     finally:
-        report = write_report(run_dir, cfg, [p.name for p in plans])
+        report = write_report(run_dir, cfg, [p.name for p in plans],
+                              expected={p.name: p.inputs_sha256 for p in plans}, failure=failure)
     say(f"report: {report}")
     return RunResult(run_dir, report, outputs, ran, reused)
 

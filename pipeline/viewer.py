@@ -246,6 +246,18 @@ def find_saved_motions(run_dir: str | Path) -> tuple[dict[str, np.ndarray], dict
     return configurations, trajectories
 
 
+def is_run_dir(path: str | Path) -> bool:
+    """``path`` holds a run: a ``config.yaml`` or a stage folder with a ``manifest.json``."""
+    from pipeline.artefacts import MANIFEST
+
+    path = Path(path)
+    if not path.is_dir():
+        return False
+    if (path / "config.yaml").is_file():
+        return True
+    return any(p.is_dir() and not p.name.startswith(".") and (p / MANIFEST).is_file() for p in path.iterdir())
+
+
 def latest_run_dir(runs_dir: str | Path | None = None) -> Path | None:
     from pipeline.runner import default_runs_dir
 
@@ -284,6 +296,9 @@ def view_run(run_dir: str | Path | None = None, *, robot: str | None = None, con
     path = Path(run_dir) if run_dir is not None else latest_run_dir()
     if run_dir is not None and not Path(run_dir).is_dir():
         raise PipelineError(run_dir, None, "run directory not found")
+    if run_dir is not None and not is_run_dir(run_dir):
+        raise PipelineError(run_dir, None, "not a run directory (no config.yaml and no stage folder with "
+                                           "manifest.json; make one with `python -m pipeline run`)")
     if robot is not None:
         model = RobotModel.load(resolve_robot_dir(RunConfig(robot=robot, source="--robot")))
     elif path is not None:

@@ -179,3 +179,46 @@ def test_second_robot_runs_every_stage(tmp_path):
     assert errors["full_friction"] < errors["none"]
     trajectory = json.loads((run / "trajectory" / "summary.json").read_text())
     assert trajectory["ptp_duration_s"] < trajectory["ptp_ruckig_duration_s"]
+
+
+def test_model_pose_checked_before_anything_is_written(tmp_path):
+    """The user's repro: a pose that does not fit the robot is named with its source (--set)
+    before the run directory is touched."""
+    out = tmp_path / "runs"
+    proc = run_cli("run", "--config", "configs/quick.yaml", "--stages", "model",
+                   "--set", "model.pose_deg=[0,0,0,0,200,0]", "--out", str(out))
+    assert_one_line_error(proc, out, "error: --set: model.pose_deg: ", "outside the joint limits")
+
+
+def test_check_error_names_the_layer_of_the_field(tmp_path, capsys):
+    cfg = tmp_path / "pose.yaml"
+    cfg.write_text("name: t\nstages: [model]\nmodel: {pose_deg: [0, 0, 0]}\n")
+    out = tmp_path / "runs"
+    # --set touches another field of the section: the pose still came from the file
+    assert cli.main(["run", "--config", str(cfg), "--set", "model.picture_size_in=4", "--out", str(out)]) == 2
+    assert capsys.readouterr().err == f"error: {cfg}: model.pose_deg: expected 6 angles (deg), one per joint, got 3\n"
+    assert cli.main(["run", "--config", str(cfg), "--set", "model.pose_deg=[0,0,0,0,0]", "--out", str(out)]) == 2
+    assert capsys.readouterr().err.startswith("error: --set: model.pose_deg: expected 6 angles")
+    assert not out.exists()
+
+
+def test_failed_run_report_says_failed_and_marks_stale_stages(fake_stages, tmp_path):
+    from pipeline.config import load_config
+    from pipeline.runner import run_pipeline
+
+    quiet = {"out_root": tmp_path, "log": lambda m: None}
+    run_pipeline(load_config(None, ["name=r"]), **quiet)
+    report = tmp_path / "r" / "report.md"
+    assert "FAILED" not in report.read_text() and "stale" not in report.read_text()
+    with pytest.raises(RuntimeError, match="failed halfway"):
+        run_pipeline(load_config(None, ["name=r", "b.fail=true", "b.n=5"]), **quiet)
+    text = report.read_text()
+    head = text.split("## ")[0]
+    assert "**FAILED in stage `b`**: RuntimeError: stage b failed halfway" in head
+    sections = {s.split("\n", 1)[0]: s for s in text.split("## ")[1:]}
+    assert "stale" not in sections["a"]                                     # reused: same inputs
+    assert "_stale: this stage FAILED in this run" in sections["b"]
+    assert "_stale: from an earlier run with different inputs" in sections["c"]
+    # a successful run afterwards: no marker left
+    run_pipeline(load_config(None, ["name=r"]), **quiet)
+    assert "FAILED" not in report.read_text() and "stale" not in report.read_text()

@@ -177,3 +177,53 @@ def test_bad_robot_run_defaults_name_robot_yaml(tmp_path, block, field_name):
     with pytest.raises(ConfigError) as err:
         load_config(values={"robot": str(robot)})
     assert str(robot / "robot.yaml") in str(err.value) and field_name in str(err.value)
+
+
+@pytest.mark.parametrize(
+    ("bad", "field_name", "problem"),
+    [
+        ("control:\n    iso: {centre: [0.35, 0.0, 0.2]}\n", "control.iso.centre", "unknown key"),
+        ("trajectory:\n    cp_edge_m: abc\n", "trajectory.cp_edge_m", "expected number"),
+        ("control:\n    iso: {centre_m: [0.35, 0]}\n", "control.iso.centre_m", "3 numbers"),
+    ],
+)
+def test_bad_run_defaults_blamed_when_a_later_layer_touches_the_section(tmp_path, bad, field_name, problem):
+    import shutil
+
+    robot = tmp_path / "myrobot"
+    shutil.copytree(config.REPO_ROOT / "robots" / "staubli_tx40", robot)
+    text = (robot / "robot.yaml").read_text()
+    (robot / "robot.yaml").write_text(text[: text.index("run_defaults:")] + "run_defaults:\n  " + bad)
+    # the config file and --set touch other fields of the same sections
+    p = write(tmp_path, f"robot: {robot}\ncontrol: {{iso: {{edge_m: 0.25}}}}\ntrajectory: {{cp_segment: line}}\n")
+    for overrides in ([], ["control.iso.segments=[line]", "trajectory.cp_ik_points=80"]):
+        with pytest.raises(ConfigError) as err:
+            load_config(p, overrides)
+        assert err.value.file == f"{robot / 'robot.yaml'} (run_defaults)", (overrides, str(err.value))
+        assert err.value.field == field_name and problem in err.value.problem
+    # a later layer that replaces the bad value repairs it; a bad value of its own is its own
+    fixed = {"control.iso.centre": None, "trajectory.cp_edge_m": "0.2", "control.iso.centre_m": "[0.35, 0, 0.2]"}
+    if field_name != "control.iso.centre":
+        load_config(p, [f"{field_name}={fixed[field_name]}"])
+    section = field_name.split(".")[0]
+    other = "control.iso.speed_m_s=fast" if section == "control" else "trajectory.fine_dt_s=fast"
+    with pytest.raises(ConfigError) as err:
+        load_config(p, [other])
+    assert err.value.file in ("--set", f"{robot / 'robot.yaml'} (run_defaults)")
+    assert (err.value.file == "--set") == (err.value.field == other.split("=")[0]), str(err.value)
+
+
+def test_field_origins_record_the_layer_of_each_field(tmp_path):
+    p = write(tmp_path, "robot: staubli_tx40\nmodel: {pose_deg: [0, 0, 0, 0, 0, 0]}\ncontrol: {iso: {edge_m: 0.25}}\n")
+    cfg = load_config(p, ["model.picture_size_in=4", "control.iso.edge_m=0.3"])
+    run_defaults = str(config.REPO_ROOT / "robots" / "staubli_tx40" / "robot.yaml") + " (run_defaults)"
+    assert cfg.field_origins["model.pose_deg"] == str(p)
+    assert cfg.field_origins["model.picture_size_in"] == "--set"
+    assert cfg.field_origins["control.iso.edge_m"] == "--set"
+    assert cfg.field_origins["control.iso.centre_m"] == run_defaults
+    assert cfg.origins["model"] == "--set"                          # the section's last layer
+    assert cfg.source_of("model.pose_deg") == str(p) and cfg.source_of("model.pose_deg[3]") == str(p)
+    assert cfg.source_of("control.iso.centre_m") == run_defaults
+    assert cfg.source_of("model.views_deg") == "--set"              # not set: the section's last layer
+    assert cfg.source_of("calibration.n_configurations") == str(p)  # untouched section: the file
+    assert "field_origins" not in cfg.to_dict() and "field_origins" not in cfg.to_yaml()

@@ -107,3 +107,20 @@ def test_view_command_on_a_run(fake_stages, tmp_path):
     bad = subprocess.run([sys.executable, "-m", "pipeline", "view", str(tmp_path / "nope")],
                          capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2 and "run directory not found" in bad.stderr and "Traceback" not in bad.stderr
+
+
+def test_view_refuses_a_folder_that_is_not_a_run(tmp_path, capsys):
+    from pipeline import cli
+    from pipeline.viewer import is_run_dir
+
+    folder = tmp_path / "some_folder"
+    (folder / "model").mkdir(parents=True)              # a sub-folder without manifest.json
+    assert not is_run_dir(folder)
+    assert cli.main(["view", str(folder), "--once"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {folder}: not a run directory") and err.count("\n") == 1
+    (folder / "model" / "manifest.json").write_text("{}")
+    assert is_run_dir(folder)
+    (folder / "model" / "manifest.json").unlink()
+    (folder / "config.yaml").write_text("name: x\n")
+    assert is_run_dir(folder)

@@ -7,9 +7,10 @@ CSV format (one row per configuration, comma separated, header recommended)::
 ``q*`` joint angles in rad (Pinocchio order), ``x, y, z`` the reflector position in the tracker
 frame in m, optional ``rx, ry, rz`` the rotation vector (axis * angle, rad) of the reflector frame
 in the tracker frame (a 6-D tracker probe); used by the validation only. Any problem (missing
-file, wrong column count, non-numeric or NaN/inf value, too few rows) raises
-:class:`pipeline.errors.DataFileError` naming the file, the row/column and the problem, before
-anything is written.
+file, wrong column count, non-numeric or NaN/inf value, too few rows, joint angles outside the
+limits, values in the wrong unit: positions in mm, angles in degrees) raises
+:class:`pipeline.errors.DataFileError` naming the file, the file line (1-based, as an editor shows
+it) and column and the problem, before anything is written.
 """
 
 from __future__ import annotations
@@ -53,64 +54,137 @@ def noise_model_sigma(robot, Y: np.ndarray) -> np.ndarray:
     return robot.tracker.noise_const_m + robot.tracker.noise_per_m * np.linalg.norm(Y, axis=1)
 
 
-def read_csv(path: str | Path, robot, min_rows: int = 1) -> Measurements:
-    """Read and validate a measurement CSV (format in the module docstring)."""
+def reflector_reach_m(robot) -> float:
+    """Upper bound of the reflector's distance from the robot base origin (m): the sum of the
+    joint placement offsets plus the reflector offset (revolute chain; exact bound, no sampling)."""
+    model = robot.model
+    reach = sum(float(np.linalg.norm(model.jointPlacements[j].translation)) for j in range(1, model.njoints))
+    frame = model.frames[model.getFrameId(robot.frame_reflector)]
+    return reach + float(np.linalg.norm(frame.placement.translation))
+
+
+def read_csv(path: str | Path, robot, min_rows: int = 1, min_rows_field: str | None = None) -> Measurements:
+    """Read and validate a measurement CSV (format in the module docstring).
+
+    Errors name the file, the 1-based file line (``line 51``) and the column. Values in the wrong
+    unit are caught up front: joint angles in degrees, tracker positions in millimetres (farther
+    from the tracker, or spread wider, than the robot's reach allows), rotation vectors in degrees.
+    ``min_rows_field``: the configuration field that sets ``min_rows`` (named in the message)."""
     path = Path(path)
     nq = robot.nq
     names = [f"q{i}" for i in range(1, nq + 1)] + ["x", "y", "z"]
     if not path.is_file():
-        raise DataFileError(path, "file", "does not exist")
+        raise DataFileError(path, "file", "does not exist" if not path.exists() else "is not a file")
+    rows: list[tuple[int, list[str]]] = []   # (file line, cells), blank lines skipped
     try:
-        with path.open(newline="") as fh:
-            rows = [r for r in csv.reader(fh) if r and any(c.strip() for c in r)]
+        with path.open(newline="", encoding="utf-8") as fh:
+            reader = csv.reader(fh)
+            first = 1
+            for r in reader:
+                if r and any(c.strip() for c in r):
+                    rows.append((first, r))
+                first = reader.line_num + 1
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise DataFileError(path, "file", f"cannot be read as CSV ({exc})") from None
     if not rows:
         raise DataFileError(path, "rows", "the file is empty")
-    header = [c.strip().lower() for c in rows[0]]
+    header_line, header_cells = rows[0]
+    header = [c.strip().lower() for c in header_cells]
     has_header = any(not _is_number(c) for c in header)
     if has_header:
         allowed = (names, names + ["rx", "ry", "rz"])
         if header not in allowed:
-            raise DataFileError(path, "header", f"expected columns {','.join(names)}[,rx,ry,rz], got "
-                                f"{','.join(header)}")
+            raise DataFileError(path, f"line {header_line}", f"expected columns {','.join(names)}[,rx,ry,rz], "
+                                f"got {','.join(header)}")
         ncol = len(header)
         data_rows = rows[1:]
-        first_line = 2
+        columns = header
     else:
-        ncol = len(rows[0])
+        ncol = len(header_cells)
         if ncol not in (nq + 3, nq + 6):
-            raise DataFileError(path, "row 1", f"expected {nq + 3} or {nq + 6} columns "
+            raise DataFileError(path, f"line {header_line}", f"expected {nq + 3} or {nq + 6} columns "
                                 f"({','.join(names)}[,rx,ry,rz]), got {ncol}")
         data_rows = rows
-        first_line = 1
+        columns = (names + ["rx", "ry", "rz"])[:ncol]
     values = np.empty((len(data_rows), ncol))
-    for k, r in enumerate(data_rows):
-        line = first_line + k
+    lines = np.array([ln for ln, _ in data_rows], dtype=int)
+    for k, (line, r) in enumerate(data_rows):
         if len(r) != ncol:
-            raise DataFileError(path, f"row {line}", f"expected {ncol} columns, got {len(r)}")
+            raise DataFileError(path, f"line {line}", f"expected {ncol} columns, got {len(r)}")
         for j, c in enumerate(r):
             try:
                 v = float(c)
             except ValueError:
-                col = header[j] if has_header else f"column {j + 1}"
-                raise DataFileError(path, f"row {line}, {col}", f"not a number: {c.strip()!r}") from None
+                raise DataFileError(path, f"line {line}, {columns[j]}", f"not a number: {c.strip()!r}") from None
             if not np.isfinite(v):
-                col = header[j] if has_header else f"column {j + 1}"
-                raise DataFileError(path, f"row {line}, {col}", f"NaN or infinite value {c.strip()!r}")
+                raise DataFileError(path, f"line {line}, {columns[j]}", f"NaN or infinite value {c.strip()!r}")
             values[k, j] = v
     if len(values) < min_rows:
-        raise DataFileError(path, "rows", f"{len(values)} measurement rows, need at least {min_rows} "
-                            "(one per identifiable parameter)")
+        who = f" ({min_rows_field})" if min_rows_field else ""
+        raise DataFileError(path, "rows", f"{len(values)} measurement rows, need at least {min_rows}{who}")
     Q = values[:, :nq]
-    lo, hi = robot.limits.lower_rad, robot.limits.upper_rad
-    bad = np.flatnonzero(np.any((Q < lo - 1e-9) | (Q > hi + 1e-9), axis=1))
-    if bad.size:
-        raise DataFileError(path, f"row {first_line + int(bad[0])}", "joint angles outside the robot's limits "
-                            "(angles must be in rad)")
+    _check_joint_angles(path, Q, robot, lines)
     Y = values[:, nq : nq + 3]
+    _check_tracker_positions(path, Y, robot, lines, has_header)
     rot = values[:, nq + 3 : nq + 6] if ncol == nq + 6 else None
+    if rot is not None:
+        norm = np.linalg.norm(rot, axis=1)
+        k = int(np.argmax(norm))
+        if norm[k] > np.pi + 1e-6:
+            cols = "rx,ry,rz" if has_header else f"columns {nq + 4}-{nq + 6}"
+            raise DataFileError(path, f"line {lines[k]}, {cols}",
+                                f"rotation vector of norm {norm[k]:.4g} > pi: a rotation vector (axis * angle) "
+                                "must be in rad" + (" (the values look like degrees)" if norm.max() <= 180 + 1e-6
+                                                    else ""))
     return Measurements(Q, Y, noise_model_sigma(robot, Y), str(path), rot, len(Q), np.zeros((0, nq)))
+
+
+def _check_joint_angles(path: Path, Q: np.ndarray, robot, lines: np.ndarray) -> None:
+    lo, hi = np.asarray(robot.limits.lower_rad, float), np.asarray(robot.limits.upper_rad, float)
+    out = (Q < lo - 1e-9) | (Q > hi + 1e-9)
+    if not out.any():
+        return
+    k, j = (int(i) for i in np.argwhere(out)[0])
+    Qr = np.radians(Q)
+    hint = (" (the values look like degrees)" if not np.any((Qr < lo - 1e-9) | (Qr > hi + 1e-9))
+            else "")
+    raise DataFileError(path, f"line {lines[k]}, q{j + 1}",
+                        f"{Q[k, j]:.6g} is outside the joint limits [{lo[j]:.4f}, {hi[j]:.4f}] rad: joint "
+                        f"angles must be in rad{hint}")
+
+
+def _check_tracker_positions(path: Path, Y: np.ndarray, robot, lines: np.ndarray, has_header: bool) -> None:
+    """Reflector positions must fit the robot: at most ``|tracker position| + reach`` from the
+    tracker (nominal pose of robot.yaml, with a factor 1.5 of slack for a moved tracker) and spread
+    over at most the reach sphere's diameter (independent of the tracker pose)."""
+    nq = robot.nq
+    cols = "x,y,z" if has_header else f"columns {nq + 1}-{nq + 3}"
+    reach = reflector_reach_m(robot)
+    tracker = float(np.linalg.norm(robot.tracker.transform_tracker_to_base.translation))
+    max_dist = 1.5 * (tracker + reach)
+    max_spread = 1.1 * 2.0 * reach
+    dist = np.linalg.norm(Y, axis=1)
+    # the centroid lies inside the reach sphere, so every reading is within its diameter of it
+    dev = np.linalg.norm(Y - Y.mean(axis=0), axis=1)
+    spread = float(dev.max())
+    facts = (f"the reflector of {robot.name} is at most about {tracker + reach:.2f} m from the tracker "
+             f"(tracker {tracker:.2f} m from the base in robot.yaml, reach {reach:.2f} m)")
+    if dist.max() > max_dist or spread > max_spread:
+        # all readings scaled by 1000 (not one bad row): millimetres
+        if np.median(dist) > max_dist and dist.max() / 1000 <= max_dist and spread / 1000 <= max_spread:
+            raise DataFileError(path, cols,
+                                f"values look like millimetres (largest distance from the tracker "
+                                f"{dist.max():.6g}, but {facts}); the file must be in metres")
+        if dist.max() > max_dist:
+            k = int(np.argmax(dist))
+            raise DataFileError(path, f"line {lines[k]}, {cols}",
+                                f"reflector {dist[k]:.6g} m from the tracker, but {facts}: positions must "
+                                "be in m in the tracker frame")
+        k = int(np.argmax(dev))
+        raise DataFileError(path, f"line {lines[k]}, {cols}",
+                            f"reading {spread:.6g} m from the mean of all readings, but the robot's reflector "
+                            f"stays within a sphere of {2 * reach:.2f} m diameter (reach {reach:.2f} m): "
+                            "positions must be in m, all in the same tracker frame")
 
 
 def write_csv(path: str | Path, meas: Measurements) -> Path:

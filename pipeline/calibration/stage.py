@@ -44,6 +44,11 @@ DEPENDS: tuple[str, ...] = ("model",)
 SELECTION_METHODS = ("remove_and_replace", "detmax", "bsaa", "random", "gradient")
 CANDIDATE_KINDS = ("grid", "random")
 ERROR_MODELS = ("se3", "mdh_hayati")
+#: indices the gradient design (IPOPT) can optimise
+GRADIENT_INDICES = ("A", "tcp_A", "tcp_A_mixed")
+#: largest candidate set (random candidates or grid points): beyond it the filtering and the
+#: whitened Jacobians of the feasible candidates take too much time and memory
+MAX_CANDIDATES = 20_000_000
 
 
 @dataclass
@@ -82,6 +87,7 @@ class Config:
     figures: bool = True
 
     def validate(self, source: str = "config") -> None:
+        """Robot-independent checks of every field (robot-dependent ones: :func:`check`)."""
         def bad(key: str, problem: str) -> ConfigError:
             return ConfigError(source, f"calibration.{key}", problem)
 
@@ -94,16 +100,48 @@ class Config:
         if self.error_model not in ERROR_MODELS:
             raise bad("error_model", f"must be one of {ERROR_MODELS}, got {self.error_model!r}")
         for key in ("grid_per_axis", "n_random_candidates", "n_configurations", "n_heldout",
-                    "identifiability_samples", "max_lm_iterations", "n_working_configurations"):
+                    "identifiability_samples", "max_lm_iterations", "n_working_configurations",
+                    "gradient_max_iterations"):
             if getattr(self, key) < 1:
-                raise bad(key, f"must be positive, got {getattr(self, key)}")
+                raise bad(key, f"must be >= 1, got {getattr(self, key)}")
         if self.grid_per_axis < 2:
-            raise bad("grid_per_axis", "needs at least 2 values per axis")
+            raise bad("grid_per_axis", f"needs at least 2 values per axis, got {self.grid_per_axis}")
+        if self.identifiability_samples > 100_000:
+            raise bad("identifiability_samples",
+                      f"at most 100000 (the default 200 suffice), got {self.identifiability_samples}")
+        if self.n_random_candidates > MAX_CANDIDATES:
+            raise bad("n_random_candidates", f"at most {MAX_CANDIDATES} (memory of the candidate Jacobians), "
+                      f"got {self.n_random_candidates}")
+        if (self.candidates == "random" and not self.measurements_csv
+                and self.n_random_candidates < self.n_configurations):
+            raise bad("n_random_candidates", f"{self.n_random_candidates} feasible random candidates cannot "
+                      f"give n_configurations = {self.n_configurations} distinct configurations; give at least "
+                      f"{self.n_configurations} (many more for a good selection; quick profile 1500)")
         if self.n_initial is not None and not 1 <= self.n_initial <= self.n_configurations:
-            raise bad("n_initial", f"must be in [1, n_configurations], got {self.n_initial}")
-        for key in ("margin_collision_m", "margin_incidence_deg", "margin_beam_m"):
-            if getattr(self, key) < 0:
-                raise bad(key, "must be >= 0")
+            raise bad("n_initial", f"must be in [1, n_configurations = {self.n_configurations}] or null "
+                      f"(2/3 of n_configurations), got {self.n_initial}")
+        if self.n_pilot < 0:
+            raise bad("n_pilot", f"must be >= 0 (0: no pilot measurements), got {self.n_pilot}")
+        if self.selection_method == "gradient":
+            if 0 < self.n_pilot < 3:
+                raise bad("n_pilot", f"must be 0 (nominal tracker pose) or >= 3 (registering the tracker "
+                          f"pose needs 3 points), got {self.n_pilot}")
+            if self.n_pilot >= self.n_configurations:
+                raise bad("n_pilot", f"the pilot measurements count towards n_configurations = "
+                          f"{self.n_configurations}: must be smaller, got {self.n_pilot}")
+        tol = self.identifiability_rel_tol
+        if not (math.isfinite(tol) and 0 < tol < 1):
+            raise bad("identifiability_rel_tol", f"must be in (0, 1) (relative singular value), got {tol}")
+        for key in ("margin_collision_m", "margin_beam_m"):
+            v = getattr(self, key)
+            if not (math.isfinite(v) and 0 <= v < 1):
+                raise bad(key, f"must be in [0, 1) m (a clearance in metres), got {v}")
+        v = self.margin_incidence_deg
+        if not (math.isfinite(v) and 0 <= v < 90):
+            raise bad("margin_incidence_deg", f"must be in [0, 90) degrees, got {v}")
+        if self.selection_method == "gradient" and self.index_name not in GRADIENT_INDICES:
+            raise bad("selection_method", f"gradient optimises an A-type index (calibration.index_name one of "
+                      f"{GRADIENT_INDICES}), but index_name is {self.index_name!r}")
 
 
 @dataclass
@@ -163,9 +201,24 @@ def build_candidates(robot, cfg: Config, basis: np.ndarray, rng: np.random.Gener
     else:
         Q, counts = cd.random_candidates(chain, cfg.n_random_candidates, rng, margins)
     if len(Q) == 0:
-        raise InfeasibleError(None, "calibration.candidates",
-                              f"no feasible candidate configuration ({counts})")
+        counts_text = ", ".join(f"{k} {v}" for k, v in counts.items() if k != "time_s")
+        key = "calibration.grid_per_axis" if cfg.candidates == "grid" else "calibration.candidates"
+        raise InfeasibleError(None, key,
+                              f"no feasible candidate configuration (joint limits, collisions, floor, tracker "
+                              f"visibility with the calibration.margin_* values; {counts_text})")
     return cd.build_candidate_set(chain, Q, basis, robot.tracker.transform_tracker_to_base, counts, grid_index)
+
+
+def too_few_candidates(cfg: Config, robot, n_feasible: int) -> str:
+    """Message for a candidate set smaller than ``n_configurations``, in the user's fields."""
+    rules = "joint limits, collisions, floor, tracker visibility with the calibration.margin_* values"
+    if cfg.candidates == "random":
+        return (f"only {n_feasible} feasible random configurations were found ({rules}; n_random_candidates = "
+                f"{cfg.n_random_candidates}), fewer than the {cfg.n_configurations} configurations asked for: "
+                "lower n_configurations or the margins, or check the robot's limits, capsules and tracker pose")
+    return (f"only {n_feasible} of the {cfg.grid_per_axis}^{robot.nq} grid configurations (grid_per_axis = "
+            f"{cfg.grid_per_axis}) are feasible ({rules}), fewer than the {cfg.n_configurations} configurations "
+            "asked for: raise grid_per_axis or lower n_configurations")
 
 
 def working_jacobian(robot, mm: em.MeasurementModel, Qw: np.ndarray, basis: np.ndarray) -> np.ndarray:
@@ -229,7 +282,8 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None
     p = basis.shape[1]
     user = None
     if cfg.measurements_csv:
-        user = ms.read_csv(cfg.measurements_csv, robot, min_rows=p)
+        user = ms.read_csv(cfg.measurements_csv, robot, min_rows=p,
+                           min_rows_field=f"one per identifiable parameter of {robot.name}")
     val_user = ms.read_csv(cfg.validation_csv, robot, min_rows=1) if cfg.validation_csv else None
     selection = None
     cs = None
@@ -242,6 +296,9 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None
         t = time.perf_counter()
         cs = build_candidates(robot, cfg, basis, rng)
         timings["candidates_s"] = time.perf_counter() - t
+        if len(cs) < cfg.n_configurations:
+            raise InfeasibleError(None, "calibration.grid_per_axis" if cfg.candidates == "grid"
+                                  else "calibration.n_configurations", too_few_candidates(cfg, robot, len(cs)))
         spec, Qw = index_spec(cfg, robot, mm, basis, rng)
         positions = cs.Y if spec.needs_positions else None
         pilot = None
@@ -277,8 +334,10 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None
                                    pilot.n_requested + meas.n_requested, np.vstack([pilot.invisible, meas.invisible]))
         timings["measure_s"] = time.perf_counter() - t
         if 3 * len(meas) < p:
-            raise InfeasibleError(None, "calibration.measurements",
-                                  f"only {len(meas)} of {len(Q_sel)} configurations were visible to the tracker")
+            raise InfeasibleError(None, "calibration.n_configurations",
+                                  f"only {len(meas)} of the {meas.n_requested} measured configurations were visible "
+                                  f"to the tracker; the {p} identifiable parameters need at least "
+                                  f"{min_configurations(p)}: raise n_configurations")
     else:
         meas = user  # the user's configurations: no candidates, no selection, no simulated robot
     t = time.perf_counter()
@@ -329,15 +388,57 @@ def heldout_measurements(robot, real, est: Estimate, cfg: Config, rng: np.random
     return ms.Measurements(Q, Y, s, "simulated tracker (held-out)", None, sum(p.n_requested for p in parts))
 
 
+def min_configurations(n_identifiable: int) -> int:
+    """Fewest configurations whose 3 tracker coordinates each can determine ``n_identifiable``
+    parameters (no redundancy: a few more are needed when the tracker cannot see some)."""
+    return -(-n_identifiable // 3)
+
+
 def check(config: Config, robot) -> None:
-    """Early check of the user files (before the runner creates any directory)."""
-    if config.measurements_csv or config.validation_csv:
-        mm = em.MeasurementModel(robot)
-        _, basis = identify_parameter_set(robot, mm, config, np.random.default_rng(0))
-        if config.measurements_csv:
-            ms.read_csv(config.measurements_csv, robot, min_rows=basis.shape[1])
-        if config.validation_csv:
-            ms.read_csv(config.validation_csv, robot, min_rows=1)
+    """Robot-dependent checks and the user files, before the runner creates any directory."""
+    cfg = config
+    mm = em.MeasurementModel(robot)
+    need_samples = -(-mm.n // 3)
+    if cfg.identifiability_samples < need_samples:
+        raise ConfigError(None, "calibration.identifiability_samples",
+                          f"{cfg.identifiability_samples} random configurations give {3 * cfg.identifiability_samples} "
+                          f"equations for the {mm.n} model parameters of {robot.name}; need at least {need_samples} "
+                          "(default 200)")
+    max_inc = math.degrees(robot.tracker.max_incidence_rad)
+    if cfg.margin_incidence_deg >= max_inc:
+        raise ConfigError(None, "calibration.margin_incidence_deg",
+                          f"{cfg.margin_incidence_deg} deg leaves no visible pose: the tracker's maximum incidence "
+                          f"angle of {robot.name} is {max_inc:g} deg; the margin must be smaller")
+    if not cfg.measurements_csv and cfg.candidates == "grid":
+        n_grid = cfg.grid_per_axis ** robot.nq
+        if n_grid > MAX_CANDIDATES:
+            raise ConfigError(None, "calibration.grid_per_axis",
+                              f"{cfg.grid_per_axis}^{robot.nq} = {n_grid:.3g} grid configurations, at most "
+                              f"{MAX_CANDIDATES:.3g} (time and memory); lower grid_per_axis or use candidates: random")
+    _, basis = identify_parameter_set(robot, mm, cfg, np.random.default_rng(0))
+    p = basis.shape[1]
+    n_min = min_configurations(p)
+    if not cfg.measurements_csv:   # the design fields are used only without a measurement file
+        why = (f"3 tracker coordinates per configuration for the {p} identifiable parameters of {robot.name}")
+        if cfg.n_configurations < n_min:
+            raise ConfigError(None, "calibration.n_configurations",
+                              f"need at least {n_min} ({why}; more for redundancy and for poses the "
+                              f"tracker cannot see), got {cfg.n_configurations}")
+        if cfg.selection_method == "gradient" and cfg.n_configurations - cfg.n_pilot < n_min:
+            raise ConfigError(None, "calibration.n_pilot",
+                              f"n_configurations - n_pilot = {cfg.n_configurations} - {cfg.n_pilot} designed "
+                              f"configurations, need at least {n_min} ({why}): lower n_pilot or raise "
+                              "n_configurations")
+        if (cfg.n_initial is not None and cfg.selection_method in ("remove_and_replace", "gradient")
+                and cfg.n_initial < n_min):
+            raise ConfigError(None, "calibration.n_initial",
+                              f"the start subset must be regular: need at least {n_min} ({why}) or null "
+                              f"(2/3 of n_configurations), got {cfg.n_initial}")
+    if cfg.measurements_csv:
+        ms.read_csv(cfg.measurements_csv, robot, min_rows=p,
+                    min_rows_field=f"one per identifiable parameter of {robot.name}")
+    if cfg.validation_csv:
+        ms.read_csv(cfg.validation_csv, robot, min_rows=1)
 
 
 def from_file(out: CalibrationOutcome) -> bool:

@@ -1,14 +1,88 @@
-"""Configuration of stage 3 (control). Units in the names; validated in ``__post_init__``."""
+"""Configuration of stage 3 (control). Units in the names.
+
+Range and length checks that do not need the robot are in ``validate(source)`` (called by
+:func:`pipeline.config.load_config` with the file or ``--set`` the section came from, and by
+``__post_init__`` for configs built in Python); the joint-vector lengths (``nq``) are checked by
+``pipeline.control.stage.check``. The ``check_*`` helpers are shared with the trajectory section.
+"""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
+from typing import Any
 
 from pipeline.errors import ConfigError
 
 FEEDFORWARD_VARIANTS = ("none", "gravity", "full", "full_friction")
+ISO_PLANES = ("diagonal_x", "diagonal_y", "horizontal")        # keys of pipeline.control.iso9283.PLANES
+ISO_SEGMENTS = ("line", "rectangle", "circle_large", "circle_small")
+ENGINES = ("compiled", "python")
+PATH_FRAMES = ("reflector", "tcp")
+ON_SATURATION = ("error", "clip")
 
 
+# --------------------------------------------------------------------------------------------
+# Checks shared by the control and trajectory sections (raise ConfigError naming the field)
+# --------------------------------------------------------------------------------------------
+def _bounds(gt: float | None, ge: float | None, lt: float | None, le: float | None) -> str:
+    lo = f"> {gt:g}" if gt is not None else f">= {ge:g}" if ge is not None else None
+    hi = f"< {lt:g}" if lt is not None else f"<= {le:g}" if le is not None else None
+    if lo and hi:
+        left = "(" if gt is not None else "["
+        right = ")" if lt is not None else "]"
+        low, high = (gt if gt is not None else ge), (lt if lt is not None else le)
+        return f"in {left}{low:g}, {high:g}{right}"
+    return lo or hi or "finite"
+
+
+def check_number(source: Any, name: str, value: Any, *, gt: float | None = None, ge: float | None = None,
+                 lt: float | None = None, le: float | None = None, unit: str = "", why: str = "") -> None:
+    """ConfigError unless ``value`` is a finite number within the bounds (``gt`` > , ``ge`` >=, ...)."""
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    if ok:
+        ok = ((gt is None or value > gt) and (ge is None or value >= ge)
+              and (lt is None or value < lt) and (le is None or value <= le))
+    if not ok:
+        what = "a finite number" if (gt, ge, lt, le) == (None, None, None, None) else _bounds(gt, ge, lt, le)
+        unit_text = f" {unit}" if unit else ""
+        raise ConfigError(source, name, f"expected {what}{unit_text}, got {value!r}{why}")
+
+
+def check_count(source: Any, name: str, value: Any, minimum: int, why: str = "") -> None:
+    """ConfigError unless ``value`` is an int >= ``minimum``."""
+    if not isinstance(value, int) or isinstance(value, bool) or value < minimum:
+        raise ConfigError(source, name, f"expected an integer >= {minimum}, got {value!r}{why}")
+
+
+def check_choice(source: Any, name: str, value: Any, allowed: tuple[str, ...]) -> None:
+    if value not in allowed:
+        raise ConfigError(source, name, f"expected one of {', '.join(allowed)}, got {value!r}")
+
+
+def check_vector(source: Any, name: str, values: Any, n: int | None = None, unit: str = "", *,
+                 gt: float | None = None, nonempty: bool = False) -> None:
+    """A list of finite numbers: ``n`` of them (if given), non-empty (if asked), each > ``gt`` (if given)."""
+    unit_text = f" ({unit})" if unit else ""
+    if not isinstance(values, (list, tuple)):
+        raise ConfigError(source, name, f"expected a list of numbers{unit_text}, got {values!r}")
+    if n is not None and len(values) != n:
+        raise ConfigError(source, name, f"expected {n} numbers{unit_text}, got {len(values)}: {list(values)!r}")
+    if nonempty and not values:
+        raise ConfigError(source, name, f"expected at least one number{unit_text}, got an empty list")
+    for i, v in enumerate(values):
+        check_number(source, f"{name}[{i}]", v, gt=gt, unit=unit)
+
+
+def check_unique(source: Any, name: str, values: list) -> None:
+    seen = set()
+    for v in values:
+        if v in seen:
+            raise ConfigError(source, name, f"{v!r} is listed twice in {list(values)!r}")
+        seen.add(v)
+
+
+# --------------------------------------------------------------------------------------------
 @dataclass
 class IsoPathConfig:
     """EN ISO 9283 test path (DESIGN.md): cube of edge L, centre, diagonal plane, speeds."""
@@ -21,22 +95,33 @@ class IsoPathConfig:
     acceleration_m_s2: float = 5.0
     jerk_m_s3: float = 50.0
     corner_fraction: float = 0.1       # P2..P5 at this fraction of the diagonal from the corners
-    large_circle_fraction: float = 0.8
+    large_circle_fraction: float = 0.8  # circle diameters as fractions of the edge (ISO: 80 % and 10 %)
     small_circle_fraction: float = 0.1
-    segments: list[str] = field(default_factory=lambda: ["line", "rectangle", "circle_large", "circle_small"])
+    segments: list[str] = field(default_factory=lambda: list(ISO_SEGMENTS))
 
     def __post_init__(self) -> None:
-        if self.edge_m <= 0 or self.speed_m_s <= 0 or self.acceleration_m_s2 <= 0 or self.jerk_m_s3 <= 0:
-            raise ConfigError(None, "control.iso", "edge, speed, acceleration and jerk must be > 0")
-        if len(self.centre_m) != 3:
-            raise ConfigError(None, "control.iso.centre_m", "needs 3 numbers (m)")
-        if self.plane not in ("diagonal_x", "diagonal_y", "horizontal"):
-            raise ConfigError(None, "control.iso.plane", f"unknown plane {self.plane!r}")
-        if not 0 < self.corner_fraction < 0.5:
-            raise ConfigError(None, "control.iso.corner_fraction", "must be in (0, 0.5)")
-        bad = set(self.segments) - {"line", "rectangle", "circle_large", "circle_small"}
-        if bad or not self.segments:
-            raise ConfigError(None, "control.iso.segments", f"unknown or empty segments {sorted(bad)}")
+        self.validate(None)
+
+    def validate(self, source: Any = None, where: str = "control.iso") -> None:
+        """Robot-independent checks; ConfigError naming ``<where>.<field>``."""
+        check_number(source, f"{where}.edge_m", self.edge_m, gt=0, unit="m")
+        check_vector(source, f"{where}.centre_m", self.centre_m, 3, "m")
+        check_choice(source, f"{where}.plane", self.plane, ISO_PLANES)
+        check_number(source, f"{where}.speed_m_s", self.speed_m_s, gt=0, unit="m/s")
+        check_number(source, f"{where}.acceleration_m_s2", self.acceleration_m_s2, gt=0, unit="m/s^2")
+        check_number(source, f"{where}.jerk_m_s3", self.jerk_m_s3, gt=0, unit="m/s^3")
+        check_number(source, f"{where}.corner_fraction", self.corner_fraction, gt=0, lt=0.5,
+                     why=" (P2..P5 lie this fraction of the diagonal in from the corners)")
+        # the circles are centred on P1 inside the L x L (or L x sqrt(2) L) rectangle of the plane
+        for name in ("large_circle_fraction", "small_circle_fraction"):
+            check_number(source, f"{where}.{name}", getattr(self, name), gt=0, le=1,
+                         why=" (circle diameter as a fraction of the cube edge)")
+        if not isinstance(self.segments, (list, tuple)) or not self.segments:
+            raise ConfigError(source, f"{where}.segments",
+                              f"expected a non-empty list of {', '.join(ISO_SEGMENTS)}, got {self.segments!r}")
+        for i, s in enumerate(self.segments):
+            check_choice(source, f"{where}.segments[{i}]", s, ISO_SEGMENTS)
+        check_unique(source, f"{where}.segments", self.segments)
 
 
 @dataclass
@@ -75,18 +160,49 @@ class ControlConfig:
     def __post_init__(self) -> None:
         if isinstance(self.iso, dict):
             self.iso = IsoPathConfig(**self.iso)
-        if self.sample_time_s <= 0 or self.velocity_samples_per_position_sample < 1:
-            raise ConfigError(None, "control.sample_time_s", "sample time > 0 and >= 1 velocity sample")
-        if self.setpoint_delay_samples < 0 or self.measurement_delay_samples < 0:
-            raise ConfigError(None, "control.delay_samples", "delays must be >= 0 samples")
-        if self.engine not in ("compiled", "python"):
-            raise ConfigError(None, "control.engine", f"unknown engine {self.engine!r} (compiled|python)")
-        if self.path_frame not in ("reflector", "tcp"):
-            raise ConfigError(None, "control.path_frame", f"{self.path_frame!r} is not reflector|tcp")
-        if self.on_saturation not in ("error", "clip"):
-            raise ConfigError(None, "control.on_saturation", f"{self.on_saturation!r} is not error|clip")
-        bad = set(self.variants) - set(FEEDFORWARD_VARIANTS)
-        if bad:
-            raise ConfigError(None, "control.variants", f"unknown feedforward variants {sorted(bad)}")
-        if min(self.position_bandwidth_hz, self.velocity_bandwidth_hz, self.velocity_filter_hz) <= 0:
-            raise ConfigError(None, "control.bandwidth", "bandwidths must be > 0 Hz")
+        self.validate(None)
+
+    def validate(self, source: Any = None) -> None:
+        """Robot-independent checks; ConfigError naming ``control.<field>`` (``nq``: stage ``check``)."""
+        s = source
+        check_number(s, "control.sample_time_s", self.sample_time_s, gt=0, unit="s")
+        check_count(s, "control.velocity_samples_per_position_sample", self.velocity_samples_per_position_sample, 1)
+        check_count(s, "control.setpoint_delay_samples", self.setpoint_delay_samples, 0)
+        check_count(s, "control.measurement_delay_samples", self.measurement_delay_samples, 0)
+        nyquist_hz = self.velocity_samples_per_position_sample / (2 * self.sample_time_s)
+        tv_us = 1e6 * self.sample_time_s / self.velocity_samples_per_position_sample
+        why = f" (the velocity loop samples every {tv_us:g} µs: Nyquist frequency {nyquist_hz:g} Hz)"
+        check_number(s, "control.velocity_bandwidth_hz", self.velocity_bandwidth_hz, gt=0, lt=nyquist_hz, unit="Hz",
+                     why=why)
+        check_number(s, "control.velocity_filter_hz", self.velocity_filter_hz, gt=0, lt=nyquist_hz, unit="Hz", why=why)
+        check_number(s, "control.position_bandwidth_hz", self.position_bandwidth_hz, gt=0,
+                     lt=self.velocity_bandwidth_hz, unit="Hz",
+                     why=" (the position loop of the cascade must be slower than control.velocity_bandwidth_hz)")
+        check_number(s, "control.pi_zero_ratio", self.pi_zero_ratio, gt=0,
+                     why=" (PI zero at velocity bandwidth / pi_zero_ratio)")
+        check_number(s, "control.settle_time_s", self.settle_time_s, ge=0, unit="s")
+        check_choice(s, "control.engine", self.engine, ENGINES)
+        check_count(s, "control.chunk_samples", self.chunk_samples, 1)
+        check_choice(s, "control.on_saturation", self.on_saturation, ON_SATURATION)
+        check_number(s, "control.saturation_ratio", self.saturation_ratio, gt=0,
+                     why=" (|tau_cmd| / tau_max above this counts as saturation)")
+        if not isinstance(self.variants, (list, tuple)) or not self.variants:
+            raise ConfigError(s, "control.variants", f"expected a non-empty list of feedforward variants "
+                              f"({', '.join(FEEDFORWARD_VARIANTS)}), got {self.variants!r}")
+        for i, v in enumerate(self.variants):
+            check_choice(s, f"control.variants[{i}]", v, FEEDFORWARD_VARIANTS)
+        check_unique(s, "control.variants", self.variants)
+        check_number(s, "control.ik_tolerance_m", self.ik_tolerance_m, gt=0, le=1e-4, unit="m",
+                     why=" (the IK error of the reference must stay far below the sub-mm errors being measured)")
+        if not isinstance(self.ik_seeds_deg, (list, tuple)) or not self.ik_seeds_deg:
+            raise ConfigError(s, "control.ik_seeds_deg",
+                              f"expected a non-empty list of joint vectors (deg), got {self.ik_seeds_deg!r}")
+        for i, seed in enumerate(self.ik_seeds_deg):
+            check_vector(s, f"control.ik_seeds_deg[{i}]", seed, unit="deg", nonempty=True)
+        check_choice(s, "control.path_frame", self.path_frame, PATH_FRAMES)
+        if isinstance(self.iso, IsoPathConfig):
+            self.iso.validate(s)
+        else:
+            raise ConfigError(s, "control.iso", f"expected a mapping of ISO path settings, got {self.iso!r}")
+        check_number(s, "control.benchmark_python_seconds", self.benchmark_python_seconds, ge=0, unit="s",
+                     why=" (0 skips the plain-Python benchmark)")

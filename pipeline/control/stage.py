@@ -41,13 +41,23 @@ from pipeline.control.validate import (
     run_metrics,
     tcp_figure,
 )
-from pipeline.errors import InfeasibleError, PipelineError
+from pipeline.errors import ConfigError, InfeasibleError, PipelineError
 from pipeline.robot.paths import start_configuration
 from pipeline.runner import StageContext, StageResult
 
 NAME = "control"
 DEPENDS: tuple[str, ...] = ("model", "calibration", "identification")
 Config = ControlConfig
+
+
+def check(config: ControlConfig, robot) -> None:
+    """Validate the section against the robot before anything runs (ConfigError naming the field)."""
+    config.validate(None)
+    nq = robot.nq
+    for i, seed in enumerate(config.ik_seeds_deg):
+        if len(seed) != nq:
+            raise ConfigError(None, f"control.ik_seeds_deg[{i}]", f"expected {nq} joint angles (deg) for robot "
+                              f"{robot.name}, got {len(seed)}: {list(seed)!r}")
 
 
 def _nominal_robot(ctx: StageContext):
@@ -127,15 +137,16 @@ def run(ctx: StageContext) -> StageResult:
         metrics[name]["realtime_factor_cpu"] = res.realtime_factor_cpu
         metrics[name]["saturation"] = first_saturation(res, cfg.saturation_ratio)
 
-    main = "full_friction" if "full_friction" in runs else list(runs)[-1]
+    # the variant the summary reports: full feedforward with friction, else the user's last variant
+    # (never the nominal-model comparison run)
+    main = "full_friction" if "full_friction" in cfg.variants else cfg.variants[-1]
     # kinematics: the same control with the reference from the nominal kinematics
     if calibrated:
         nom_kin = _with_dynamics_of(nominal, robot)
         q_start_n = start_configuration(nom_kin, path.poses([0.0])[0], np.vstack([q_start, seeds]), frame)
         ref_n = cartesian_reference(nom_kin, path, dt, iso.speed_m_s, iso.acceleration_m_s2, iso.jerk_m_s3,
                                     q_start_n, frame, cfg.ik_tolerance_m)
-        res_n = simulate(robot, ref_n.q_d, ref_n.v_d, ref_n.a_d, "full_friction" if "full_friction" in runs
-                         else main)
+        res_n = simulate(robot, ref_n.q_d, ref_n.v_d, ref_n.a_d, main)
         n = min(len(res_n.tcp_position_m), len(ref.tcp_d_m))
         rms_nominal_kin = float(np.sqrt(np.mean(np.sum((res_n.tcp_position_m[:n] - ref.tcp_d_m[:n]) ** 2, 1))))
         reg_nominal_kin = registered_error(res_n.tcp_position_m[:n], ref.tcp_d_m[:n])
@@ -155,8 +166,7 @@ def run(ctx: StageContext) -> StageResult:
         py_cfg = ControlConfig(**{**cfg.__dict__, "engine": "python", "settle_time_s": 0.0,
                                   "on_saturation": "clip"})
         res_py = simulate_joint_trajectory(ctx.real, robot, ref.t_s[:k], ref.q_d[:k], ref.v_d[:k], ref.a_d[:k],
-                                           py_cfg, feedforward=main if main in ("none", "gravity", "full",
-                                                                                 "full_friction") else "none",
+                                           py_cfg, feedforward=main,
                                            rng=np.random.default_rng(noise_seed), gains=gains, tcp_frame=frame)
         speed["python_loop_realtime_factor"] = res_py.realtime_factor
         speed["speedup_vs_python_loop"] = rtf / res_py.realtime_factor

@@ -22,6 +22,7 @@ and the real Stäubli TX40 record (paper ``004_abbe750b8bbcc3aa.txt`` §4; issue
 from __future__ import annotations
 
 import copy
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -42,7 +43,14 @@ from pipeline.identification.regressor import (
     base_parameters,
     standard_parameters,
 )
-from pipeline.identification.tx40 import Tx40Config, Tx40Result, heldout_validation, run_tx40
+from pipeline.identification.tx40 import (
+    TX40_SAMPLE_TIME_S,
+    Tx40Config,
+    Tx40Result,
+    check_tx40_config,
+    heldout_validation,
+    run_tx40,
+)
 from pipeline.runner import StageContext, StageResult
 
 NAME = "identification"
@@ -52,6 +60,10 @@ DEPENDS: tuple[str, ...] = ("model", "calibration")
 # --------------------------------------------------------------------------------- early checks
 #: processed samples dropped at each end of a data_file record (filter transients)
 DATA_BORDER_SAMPLES = 20
+#: longest plausible sample interval of a torque/encoder record (20 Hz); a longer one in a data
+#: file means its t column is not in seconds
+MAX_SAMPLE_TIME_S = 0.05
+TX40_NYQUIST_HZ = 0.5 / TX40_SAMPLE_TIME_S
 
 
 @dataclass
@@ -109,42 +121,58 @@ class Config:
 
     def validate(self, source: Any = None) -> None:
         """Range checks of values of the right type (called by ``pipeline.config`` at load time
-        with the file or ``--set`` that set them, and again by :func:`run`)."""
+        with the file or ``--set`` that set them, and again by :func:`run`); the robot-dependent
+        ones are in :func:`check`."""
         ex = self.excitation
+        tx = self.tx40
         p = "identification."
+
+        def fin(x: float) -> bool:
+            return math.isfinite(x)
+
         checks = [
             ("excitation.harmonics", ex.harmonics >= 1, "must be >= 1"),
-            ("excitation.base_frequency_hz", ex.base_frequency_hz > 0, "must be > 0"),
+            ("excitation.base_frequency_hz", fin(ex.base_frequency_hz) and ex.base_frequency_hz > 0, "must be > 0"),
             ("excitation.n_samples", ex.n_samples >= 10, "must be >= 10"),
+            ("excitation.n_samples", ex.n_samples > 2 * ex.harmonics,
+             f"must be > 2 x excitation.harmonics = {2 * ex.harmonics} (sampling of the highest harmonic)"),
             ("excitation.n_starts", ex.n_starts >= 1, "must be >= 1"),
             ("excitation.n_random", ex.n_random >= 1, "must be >= 1"),
             ("excitation.max_iter", ex.max_iter >= 0, "must be >= 0"),
             ("excitation.n_check", ex.n_check >= 2, "must be >= 2"),
             ("excitation.criterion", ex.criterion in ("cond", "logdet"), "must be cond or logdet"),
-            ("excitation.cond_softness", ex.cond_softness >= 0, "must be >= 0"),
-            ("excitation.floor_clearance_m", ex.floor_clearance_m >= 0, "must be >= 0"),
-            ("excitation.self_clearance_m", ex.self_clearance_m >= 0, "must be >= 0"),
+            ("excitation.cond_softness", fin(ex.cond_softness) and ex.cond_softness >= 0, "must be >= 0"),
+            ("excitation.floor_clearance_m", fin(ex.floor_clearance_m) and 0 <= ex.floor_clearance_m < 1,
+             "must be in [0, 1) m (a clearance in metres)"),
+            ("excitation.self_clearance_m", fin(ex.self_clearance_m) and 0 <= ex.self_clearance_m < 1,
+             "must be in [0, 1) m (a clearance in metres)"),
             ("periods", self.periods >= 1, "must be >= 1"),
-            ("sample_time_s", self.sample_time_s > 0, "must be > 0"),
-            ("state_cutoff_factor", self.state_cutoff_factor > 1, "must be > 1"),
+            ("sample_time_s", fin(self.sample_time_s) and 0 < self.sample_time_s <= MAX_SAMPLE_TIME_S,
+             f"must be in (0, {MAX_SAMPLE_TIME_S}] s (torque/encoder sampling)"),
+            ("state_cutoff_factor", fin(self.state_cutoff_factor) and self.state_cutoff_factor > 1, "must be > 1"),
             ("decimation", self.decimation >= 1, "must be >= 1"),
-            ("base_tolerance", self.base_tolerance > 0, "must be > 0"),
+            ("base_tolerance", fin(self.base_tolerance) and 0 < self.base_tolerance < 1, "must be in (0, 1)"),
             ("base_samples", self.base_samples >= 1, "must be >= 1"),
-            ("regularization", self.regularization >= 0, "must be >= 0"),
+            ("regularization", fin(self.regularization) and self.regularization >= 0, "must be >= 0"),
             ("physical_max_iter", self.physical_max_iter >= 1, "must be >= 1"),
             ("validation", self.validation in ("iso9283", "fourier"), "must be iso9283 or fourier"),
-            ("validation_sample_time_s", self.validation_sample_time_s > 0, "must be > 0"),
+            ("validation_sample_time_s", fin(self.validation_sample_time_s)
+             and 0 < self.validation_sample_time_s <= MAX_SAMPLE_TIME_S, f"must be in (0, {MAX_SAMPLE_TIME_S}] s"),
             ("data_side", self.data_side in ("joint", "motor"), "must be joint or motor"),
-            ("data_cutoff_hz", self.data_cutoff_hz > 0, "must be > 0"),
+            ("data_cutoff_hz", fin(self.data_cutoff_hz) and self.data_cutoff_hz > 0, "must be > 0"),
             ("data_decimation", self.data_decimation >= 1, "must be >= 1"),
             ("actuator_coupling", self.actuator_coupling in ("auto", "gear", "none"), "must be auto, gear or none"),
-            ("replay_rate_hz", self.replay_rate_hz > 0, "must be > 0"),
+            ("replay_rate_hz", fin(self.replay_rate_hz) and self.replay_rate_hz > 0, "must be > 0"),
             ("data_train_fraction", 0 < self.data_train_fraction < 1, "must be in (0, 1)"),
-            ("tx40.train_fraction", 0 < self.tx40.train_fraction < 1, "must be in (0, 1)"),
-            ("tx40.cutoff_hz", self.tx40.cutoff_hz > 0, "must be > 0"),
-            ("tx40.decimation", self.tx40.decimation >= 1, "must be >= 1"),
-            ("tx40.border_samples", self.tx40.border_samples >= 0, "must be >= 0"),
-            ("tx40.max_samples", self.tx40.max_samples >= 0, "must be >= 0"),
+            ("tx40.train_fraction", 0 < tx.train_fraction < 1, "must be in (0, 1)"),
+            ("tx40.cutoff_hz", fin(tx.cutoff_hz) and 0 < tx.cutoff_hz < TX40_NYQUIST_HZ,
+             f"must be in (0, {TX40_NYQUIST_HZ:g}) Hz (Nyquist frequency of the {1 / TX40_SAMPLE_TIME_S:g} Hz "
+             "TX40 record)"),
+            ("tx40.decimation", tx.decimation >= 1, "must be >= 1"),
+            ("tx40.border_samples", tx.border_samples >= 0, "must be >= 0"),
+            ("tx40.regularization", fin(tx.regularization) and tx.regularization >= 0, "must be >= 0"),
+            ("tx40.max_iter", tx.max_iter >= 1, "must be >= 1 (IPOPT iterations of the physical fit)"),
+            ("tx40.max_samples", tx.max_samples >= 0, "must be >= 0 (0: the whole record)"),
         ]
         for fld, ok, problem in checks:
             if not ok:
@@ -162,6 +190,13 @@ class Config:
             if abs(n - round(n)) > 1e-6:
                 raise ConfigError(source, p + "sample_time_s",
                                   f"{self.sample_time_s} s does not divide the period {per} s")
+            cutoff = self.state_cutoff_factor * ex.harmonics * ex.base_frequency_hz
+            nyquist = 0.5 / self.sample_time_s
+            if not cutoff < nyquist:
+                raise ConfigError(source, p + "state_cutoff_factor",
+                                  f"the position low-pass at {self.state_cutoff_factor:g} x the highest harmonic "
+                                  f"({ex.harmonics} x {ex.base_frequency_hz:g} Hz) = {cutoff:g} Hz is not below the "
+                                  f"Nyquist frequency {nyquist:g} Hz of sample_time_s = {self.sample_time_s:g} s")
 
 
 def _nominal_robot(ctx: StageContext) -> Any:
@@ -205,32 +240,62 @@ def _load_user_record(cfg: Config, robot: Any) -> meas_mod.JointRecord:
     file = cfg.data_file
     rec = meas_mod.load_joint_csv(file, robot, cfg.data_side)
     _check_record_limits(rec, robot, file)
-    fs = 1.0 / rec.sample_time_s
+    dt = rec.sample_time_s
+    fs = 1.0 / dt
+    if dt > MAX_SAMPLE_TIME_S:
+        hint = " (the values look like milliseconds)" if dt / 1000 <= MAX_SAMPLE_TIME_S else ""
+        raise DataFileError(file, "t", f"column t implies a sample interval of {dt:g} s ({fs:g} Hz sample rate), "
+                            f"implausible for a torque record (at most {MAX_SAMPLE_TIME_S:g} s, typically "
+                            f"0.1-10 ms): the t column must be in seconds{hint}")
     if not cfg.data_cutoff_hz < 0.5 * fs:
         raise ConfigError(None, "identification.data_cutoff_hz",
-                          f"{cfg.data_cutoff_hz} Hz is not below the Nyquist frequency {0.5 * fs:g} Hz of {file}")
+                          f"{cfg.data_cutoff_hz} Hz is not below the Nyquist frequency {0.5 * fs:g} Hz of {file} "
+                          f"(its column t implies a {fs:g} Hz sample rate; t must be in seconds)")
     n_raw = rec.q_rad.shape[0]
     n_proc = -(-n_raw // cfg.data_decimation) - 2 * DATA_BORDER_SAMPLES
     n_train = int(cfg.data_train_fraction * n_proc)
     n_params = 10 * (robot.model.njoints - 1) + 4 * robot.nq  # standard parameters >= base ones
-    if n_train * robot.nq <= n_params or n_proc - n_train < 1:
-        need_train = n_params // robot.nq + 1
+    # the physically consistent fit (standard regressor) needs more samples than parameters
+    if n_train <= n_params or n_proc - n_train < 1:
+        need_train = n_params + 1
         need_raw = (int(np.ceil(need_train / cfg.data_train_fraction)) + 1 + 2 * DATA_BORDER_SAMPLES) \
             * cfg.data_decimation
         raise DataFileError(
             file, "samples",
             f"{n_raw} samples are too few: the fit on the first {cfg.data_train_fraction:g} of the record "
             f"(after decimation by {cfg.data_decimation}, {DATA_BORDER_SAMPLES} samples dropped at each "
-            f"end) needs more than {n_params} torque values; record at least about {need_raw} samples")
+            f"end) needs more samples than the {n_params} standard parameters; record at least about {need_raw} "
+            "samples")
     return rec
 
 
 def check(config: Config, robot: Any) -> None:
-    """Called by the runner before any stage runs or anything is written: the configuration and
-    the user's record (``data_file``) if any, so a bad file is reported before calibration runs."""
-    config.validate(None)
-    if config.data_file:
-        _load_user_record(config, robot)
+    """Called by the runner before any stage runs or anything is written: the configuration
+    (robot-dependent ranges), the user's record (``data_file``) if any and the TX40 record's
+    folder, so a bad value or file is reported before calibration runs."""
+    cfg = config
+    cfg.validate(None)
+    n_params = 10 * (robot.model.njoints - 1) + 4 * robot.nq   # standard parameters (regressor columns)
+    nq = robot.nq
+    if cfg.base_samples * nq < n_params:
+        raise ConfigError(None, "identification.base_samples",
+                          f"{cfg.base_samples} random samples give {cfg.base_samples * nq} regressor rows for the "
+                          f"{n_params} standard parameters of {robot.name}; need at least {-(-n_params // nq)} "
+                          "(default 300)")
+    if cfg.data_file:
+        _load_user_record(cfg, robot)
+    else:
+        ex = cfg.excitation
+        n_per = int(round(1.0 / (ex.base_frequency_hz * cfg.sample_time_s)))
+        m = n_per // cfg.decimation
+        if m <= n_params:  # the fits need more samples than standard parameters
+            raise ConfigError(None, "identification.decimation",
+                              f"one period of {n_per} samples (1 / excitation.base_frequency_hz / sample_time_s) "
+                              f"decimated by {cfg.decimation} leaves {m} samples, not more than the {n_params} "
+                              f"standard parameters of {robot.name}; decimation must be at most "
+                              f"{max(n_per // (n_params + 1), 1)}")
+    if cfg.run_tx40:
+        check_tx40_config(cfg.tx40)
 
 
 # --------------------------------------------------------------------------------------- run
@@ -483,8 +548,11 @@ def _check_record_limits(rec: meas_mod.JointRecord, robot: Any, file: Any) -> No
     bad = np.argwhere((rec.q_rad < lo - 1e-6) | (rec.q_rad > hi + 1e-6))
     if bad.size:
         k, j = (int(i) for i in bad[0])
+        q_rad = np.radians(rec.q_rad)
+        hint = ("; q must be in rad (the values look like degrees)"
+                if not np.any((q_rad < lo - 1e-6) | (q_rad > hi + 1e-6)) else "")
         raise DataFileError(file, f"q{j + 1}", f"{rec.where(k)}: {rec.q_rad[k, j]:.4f} rad outside the joint "
-                            f"limits [{lo[j]:.4f}, {hi[j]:.4f}]")
+                            f"limits [{lo[j]:.4f}, {hi[j]:.4f}]{hint}")
 
 
 __all__ = ["NAME", "DEPENDS", "Config", "ExcitationConfig", "check", "run", "identified_robot"]

@@ -18,6 +18,7 @@ Steps (paper ``004_abbe750b8bbcc3aa.txt`` §4.1 on a real robot):
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -89,10 +90,52 @@ class Tx40Result:
         }
 
 
+TX40_FILES = ("pos_read_data.csv", "curr_data.csv")
+
+
+def check_tx40_config(cfg: Tx40Config, field: str = "identification.tx40") -> None:
+    """Cheap early check (no robot, no parsing of the numbers): the record's folder and its two
+    files exist, and the samples left after ``max_samples``, decimation and the border drop are
+    enough for the held-out fit of the standard parameters. Raises ConfigError / DataFileError."""
+    from pipeline.errors import ConfigError
+
+    d = Path(cfg.data_dir) if cfg.data_dir else TX40_DATA_DIR
+    if not d.is_dir():
+        what = "does not exist" if not d.exists() else "is not a folder"
+        raise ConfigError(None, f"{field}.data_dir", f"{str(d)!r} {what} (expected the folder of the TX40 record with "
+                          f"{' and '.join(TX40_FILES)}; empty: data/staubli_tx40)")
+    n_rows = []
+    for name in TX40_FILES:
+        path = d / name
+        if not path.is_file():
+            raise DataFileError(path, None, f"file not found (a TX40 record folder holds {' and '.join(TX40_FILES)}; "
+                                f"set by {field}.data_dir)")
+        try:
+            with path.open("rb") as fh:
+                n_rows.append(sum(1 for line in fh if line.strip()) - 1)   # minus the header line
+        except OSError as exc:
+            raise DataFileError(path, None, f"cannot read: {exc}") from None
+    n_raw = min(n_rows)
+    if cfg.max_samples > 0:
+        n_raw = min(n_raw, cfg.max_samples)
+    nq = len(TX40_JOINT_OFFSETS_RAD)
+    n_params = 14 * nq                      # 10 inertial + rotor, viscous, Coulomb, offset per joint
+    n_proc = -(-n_raw // cfg.decimation) - 2 * cfg.border_samples
+    n_train = int(cfg.train_fraction * n_proc)
+    if n_train <= n_params or n_proc - n_train < 1:   # the fits need more samples than parameters
+        need_train = n_params + 1
+        need = (math.ceil(need_train / cfg.train_fraction) + 1 + 2 * cfg.border_samples) * cfg.decimation
+        key = f"{field}.max_samples" if cfg.max_samples > 0 else f"{field}.data_dir"
+        raise ConfigError(None, key, f"{n_raw} raw samples of the TX40 record leave {max(n_train, 0)} for the fit "
+                          f"after decimation by {cfg.decimation}, {cfg.border_samples} dropped at each end and "
+                          f"train_fraction {cfg.train_fraction:g}: the fit needs more samples than the {n_params} "
+                          f"standard parameters, at least about {need} raw samples")
+
+
 def load_tx40_record(robot: Any, data_dir: str | Path | None = None, max_samples: int = 0) -> JointRecord:
     """The two CSV files (motor side) -> joint-side :class:`JointRecord`."""
     d = Path(data_dir) if data_dir else TX40_DATA_DIR
-    files = {"q": d / "pos_read_data.csv", "tau": d / "curr_data.csv"}
+    files = {"q": d / TX40_FILES[0], "tau": d / TX40_FILES[1]}
     arrays = {}
     for key, path in files.items():
         if not path.is_file():

@@ -28,6 +28,7 @@ from pipeline.robot.urdf_export import export_urdf
 
 ROBOTS_DIR = Path(__file__).resolve().parents[2] / "robots"
 WORLD = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+_JOINT_TYPES = {"revolute", "continuous", "prismatic", "fixed", "floating", "planar"}
 
 
 @dataclass
@@ -74,17 +75,27 @@ def _check_urdf_xml(urdf: Path) -> ET.Element:
             element = joint.find(tag)
             if element is None or element.get("link") not in links:
                 raise RobotFileError(urdf, f"joint {name}: <{tag}>", "missing or names an unknown link")
-        if kind in ("revolute", "prismatic"):
+        # the kinematic error model, the symbolic bridge and calibration assume revolute axes:
+        # every movable joint must be revolute (fixed joints only place frames)
+        if kind not in _JOINT_TYPES:
+            raise RobotFileError(urdf, f"joint {name}: type", f"{kind!r} is not a URDF joint type "
+                                 f"({', '.join(sorted(_JOINT_TYPES))})")
+        if kind not in ("revolute", "fixed"):
+            raise RobotFileError(urdf, f"joint {name}: type", f"'{kind}' joints are not supported; "
+                                 "only revolute joints move (and fixed joints place frames)")
+        if kind == "revolute":
             limit = joint.find("limit")
             missing = [a for a in ("lower", "upper", "velocity", "effort") if limit is None or limit.get(a) is None]
             if missing:
                 raise RobotFileError(urdf, f"joint {name}: <limit>", f"a {kind} joint needs {', '.join(missing)}")
             for attribute in ("lower", "upper", "velocity", "effort"):
                 try:
-                    float(limit.get(attribute))
+                    value = float(limit.get(attribute))
                 except ValueError:
+                    value = None
+                if value is None or not np.isfinite(value):
                     raise RobotFileError(urdf, f"joint {name}: <limit {attribute}>",
-                                         f"not a number: {limit.get(attribute)!r}") from None
+                                         f"not a finite number: {limit.get(attribute)!r}")
     return root
 
 
@@ -104,16 +115,43 @@ def _validate_inertials(urdf: Path, model: pin.Model) -> None:
                                  "violates the triangle inequality of principal moments")
 
 
-def _validate_joint_limits(urdf: Path, model: pin.Model, limits: JointLimits) -> None:
+def _validate_joint_limits(spec: RobotSpec, model: pin.Model, limits: JointLimits) -> None:
+    """Each joint must be able to move (lower < upper) and have positive velocity and effort limits.
+
+    A limit comes from the URDF unless ``robot.yaml`` overrides it (``limits.lower_rad`` ...); the
+    error names the file and field the offending value came from.
+    """
+    urdf, overrides = spec.urdf, spec.limit_overrides
     for i in range(model.nq):
         name = model.names[i + 1]
-        if limits.lower_rad[i] > limits.upper_rad[i]:
-            raise RobotFileError(urdf, f"joint {name}: limit", f"lower {limits.lower_rad[i]} is above "
-                                 f"upper {limits.upper_rad[i]}")
+        lower, upper = float(limits.lower_rad[i]), float(limits.upper_rad[i])
+        if not lower < upper:
+            _raise_limit_order(spec, urdf, overrides, f"joint {name}", i, lower, upper)
+        # robot.yaml velocity/effort overrides are checked positive by load_robot_spec
         if not limits.velocity_rad_s[i] > 0:
             raise RobotFileError(urdf, f"joint {name}: limit.velocity", "must be positive")
         if not limits.effort_Nm[i] > 0:
             raise RobotFileError(urdf, f"joint {name}: limit.effort", "must be positive")
+
+
+def _raise_limit_order(spec: RobotSpec, urdf: Path, overrides: dict, joint: str, i: int, lower: float,
+                       upper: float) -> None:
+    """Report ``lower >= upper`` against the file and field each of the two values came from."""
+    relation = "is above" if lower > upper else "equals"
+    stuck = "" if lower > upper else " (the joint could not move)"
+    entry = f"{joint} (entry {i})"
+    if "lower_rad" in overrides and "upper_rad" in overrides:
+        raise RobotFileError(spec.path, "limits.lower_rad", f"{entry}: {lower} {relation} limits.upper_rad "
+                             f"{upper}; the lower limit must be below the upper{stuck}")
+    if "lower_rad" in overrides:
+        raise RobotFileError(spec.path, "limits.lower_rad", f"{entry}: {lower} {relation} the upper limit "
+                             f"{upper} in {urdf.name}; the lower limit must be below it{stuck}")
+    if "upper_rad" in overrides:
+        below = "is below" if lower > upper else "equals"
+        raise RobotFileError(spec.path, "limits.upper_rad", f"{entry}: {upper} {below} the lower limit "
+                             f"{lower} in {urdf.name}; the upper limit must be above it{stuck}")
+    raise RobotFileError(urdf, f"{joint}: limit", f"lower {lower} {relation} upper {upper}; "
+                         f"the lower limit must be below the upper{stuck}")
 
 
 class RobotModel:
@@ -148,9 +186,10 @@ class RobotModel:
             model = pin.buildModelFromUrdf(str(urdf))
         except (RuntimeError, ValueError) as exc:
             raise RobotFileError(urdf, "urdf", f"Pinocchio could not build the model ({exc})") from None
-        if model.nq != model.nv or model.nq == 0:
-            raise RobotFileError(urdf, "joints", f"expected revolute/prismatic joints only (nq={model.nq}, "
-                                 f"nv={model.nv})")
+        if model.nq == 0:
+            raise RobotFileError(urdf, "joints", "no movable joint (expected a chain of revolute joints)")
+        if model.nq != model.nv:  # caught by _check_urdf_xml; kept as a guard
+            raise RobotFileError(urdf, "joints", f"expected revolute joints only (nq={model.nq}, nv={model.nv})")
         spec = load_robot_spec(yaml_file, nq=model.nq)
         _validate_inertials(urdf, model)
         spec.urdf = urdf
@@ -180,7 +219,7 @@ class RobotModel:
                 raise RobotFileError(spec.urdf, name, f"the URDF already has a frame '{name}'; the yaml defines it")
             model.addFrame(pin.Frame(name, joint, flange_id, placement * local, frame_type))
         robot = cls(spec, model, urdf_text)
-        _validate_joint_limits(spec.urdf, model, robot.limits)
+        _validate_joint_limits(spec, model, robot.limits)
         return robot
 
     def _check_frames(self) -> None:

@@ -96,6 +96,25 @@ _TOP_KEYS = {
 _REQUIRED_TOP = {"urdf", "flange_frame", "tool", "actuation", "limits", "tracker"}
 
 
+def _is_number(value: Any) -> bool:
+    """An int or float from YAML; ``true``/``false`` are not numbers (a bool is an int in Python)."""
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _optional_list(reader: _Reader, key: str, what: str) -> list:
+    """A list that may be absent or ``null`` (empty); anything else but a list is an error."""
+    value = reader.data.get(key)
+    if value is None:
+        return []
+    if not isinstance(value, list):
+        raise reader.error(key, f"expected {what}, got {value!r}")
+    return value
+
+
 class _Reader:
     """Typed access to a YAML mapping that reports ``file: field: problem``."""
 
@@ -126,13 +145,27 @@ class _Reader:
                 raise self.error(key, "missing")
             return float(default)
         value = self.data[key]
-        if isinstance(value, bool) or not isinstance(value, int | float) or not np.isfinite(value):
+        if not _is_number(value) or not np.isfinite(value):
             raise self.error(key, f"expected a finite number, got {value!r}")
         if positive and value <= 0:
             raise self.error(key, f"must be positive, got {value}")
         if nonnegative and value < 0:
             raise self.error(key, f"must not be negative, got {value}")
         return float(value)
+
+    def integer(self, key: str, *, minimum: int | None = None, maximum: int | None = None,
+                default: int | None = None) -> int:
+        if key not in self.data:
+            if default is None:
+                raise self.error(key, "missing")
+            return int(default)
+        value = self.data[key]
+        if not _is_int(value):
+            raise self.error(key, f"expected an integer, got {value!r}")
+        if (minimum is not None and value < minimum) or (maximum is not None and value > maximum):
+            bounds = f"{'' if minimum is None else minimum}..{'' if maximum is None else maximum}"
+            raise self.error(key, f"must be in {bounds}, got {value}")
+        return int(value)
 
     def vector(self, key: str, length: int | None, *, nonnegative: bool = False,
                positive: bool = False, default: Any = None) -> np.ndarray:
@@ -141,9 +174,7 @@ class _Reader:
                 raise self.error(key, "missing")
             return np.asarray(default, dtype=float)
         value = self.data[key]
-        if not isinstance(value, list) or not all(
-            isinstance(v, int | float) and not isinstance(v, bool) for v in value
-        ):
+        if not isinstance(value, list) or not all(_is_number(v) for v in value):
             raise self.error(key, f"expected a list of numbers, got {value!r}")
         array = np.asarray(value, dtype=float)
         if length is not None and array.shape != (length,):
@@ -204,15 +235,24 @@ def load_robot_spec(path: Path, nq: int | None = None) -> RobotSpec:
         raise act.error("gear_ratio", "a gear ratio must not be zero")
     n = len(gear_ratio)
     gear_matrix = np.diag(gear_ratio)
-    coupling = act.data.get("gear_coupling", []) or []
-    if not isinstance(coupling, list):
-        raise act.error("gear_coupling", "expected a list of [row, col, value]")
+    coupling = _optional_list(act, "gear_coupling", "a list of [row, col, value]")
+    seen: dict[tuple[int, int], int] = {}
     for k, entry in enumerate(coupling):
-        if (not isinstance(entry, list) or len(entry) != 3 or not all(isinstance(e, int | float) for e in entry)
-                or not (0 <= entry[0] < n and 0 <= entry[1] < n) or entry[0] == entry[1]):
-            raise act.error(f"gear_coupling[{k}]", f"expected [row, col, value] with 0-based off-diagonal "
-                            f"indices < {n}, got {entry!r}")
-        gear_matrix[int(entry[0]), int(entry[1])] = float(entry[2])
+        where = f"gear_coupling[{k}]"
+        if not isinstance(entry, list) or len(entry) != 3:
+            raise act.error(where, f"expected [row, col, value], got {entry!r}")
+        row, col, value = entry
+        for label, index in (("row", row), ("col", col)):
+            if not _is_int(index) or not 0 <= index < n:
+                raise act.error(where, f"{label} must be an integer joint index 0..{n - 1}, got {index!r}")
+        if row == col:
+            raise act.error(where, f"row and col must differ (the diagonal is gear_ratio), got [{row}, {col}]")
+        if not _is_number(value) or not np.isfinite(value):
+            raise act.error(where, f"value must be a finite number, got {value!r}")
+        if (row, col) in seen:
+            raise act.error(where, f"[{row}, {col}] is already set by gear_coupling[{seen[row, col]}]")
+        seen[row, col] = k
+        gear_matrix[row, col] = float(value)
     if abs(np.linalg.det(gear_matrix)) < 1e-12:
         raise act.error("gear_coupling", "the gear matrix is singular")
     actuation = ActuationSpec(
@@ -247,12 +287,10 @@ def load_robot_spec(path: Path, nq: int | None = None) -> RobotSpec:
         col = top.sub("collision")
         col.check_keys({"floor_z_m", "floor_check_from_joint"})
         collision = CollisionSpec(col.number("floor_z_m", default=0.0),
-                                  int(col.number("floor_check_from_joint", nonnegative=True, default=2)))
+                                  col.integer("floor_check_from_joint", minimum=0, maximum=nq, default=2))
 
     capsules = []
-    raw_capsules = data.get("capsules", []) or []
-    if not isinstance(raw_capsules, list):
-        raise top.error("capsules", "expected a list")
+    raw_capsules = _optional_list(top, "capsules", "a list of capsules")
     for k, raw in enumerate(raw_capsules):
         if not isinstance(raw, dict):
             raise top.error(f"capsules[{k}]", "expected a mapping")

@@ -8,6 +8,7 @@ the robot (kinematic chain and collision capsules) at the configured pose.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -17,6 +18,13 @@ from pipeline.runner import StageContext, StageResult
 
 NAME = "model"
 DEPENDS: tuple[str, ...] = ()
+
+
+#: bounds of ``model.picture_size_in`` (inches per view) and of the number of views
+PICTURE_SIZE_RANGE_IN = (1.0, 20.0)
+MAX_VIEWS = 6
+#: slack (rad) when comparing ``model.pose_deg`` with the joint limits (degree rounding)
+LIMIT_TOLERANCE_RAD = 1e-9
 
 
 @dataclass
@@ -30,6 +38,56 @@ class Config:
     pose_deg: tuple[float, ...] | None = None
     picture_size_in: float = 5.0
 
+    def validate(self, source: str) -> None:
+        """Robot-independent ranges (the pose's length and limits: :func:`check`)."""
+        if not 1 <= len(self.views_deg) <= MAX_VIEWS:
+            raise ConfigError(source, "model.views_deg",
+                              f"expected 1 to {MAX_VIEWS} [elevation, azimuth] pairs (deg), "
+                              f"got {len(self.views_deg)}")
+        for k, (elev, azim) in enumerate(self.views_deg):
+            if not (np.isfinite(elev) and -90.0 <= elev <= 90.0):
+                raise ConfigError(source, f"model.views_deg[{k}]",
+                                  f"expected an elevation in [-90, 90] deg, got {elev}")
+            if not (np.isfinite(azim) and -360.0 <= azim <= 360.0):
+                raise ConfigError(source, f"model.views_deg[{k}]",
+                                  f"expected an azimuth in [-360, 360] deg, got {azim}")
+        if self.pose_deg is not None:
+            if len(self.pose_deg) == 0:
+                raise ConfigError(source, "model.pose_deg",
+                                  "expected one angle (deg) per joint or null, got an empty list")
+            if not np.all(np.isfinite(self.pose_deg)):
+                raise ConfigError(source, "model.pose_deg",
+                                  f"expected finite angles (deg), got {list(self.pose_deg)}")
+        lo, hi = PICTURE_SIZE_RANGE_IN
+        if not (np.isfinite(self.picture_size_in) and lo <= self.picture_size_in <= hi):
+            raise ConfigError(source, "model.picture_size_in",
+                              f"expected a size in [{lo:g}, {hi:g}] inches, got {self.picture_size_in}")
+
+
+def _pose_problem(pose_deg: tuple[float, ...], robot: Any) -> str | None:
+    """Why ``pose_deg`` does not fit ``robot`` (length, joint limits), or None."""
+    if len(pose_deg) != robot.nq:
+        return f"expected {robot.nq} angles (deg), one per joint, got {len(pose_deg)}"
+    q = np.deg2rad(np.asarray(pose_deg, float))
+    lim = robot.limits
+    names = [str(n) for n in robot.model.names[1:]]
+    for i, qi in enumerate(q):
+        lower, upper = lim.lower_rad[i], lim.upper_rad[i]
+        if qi < lower - LIMIT_TOLERANCE_RAD or qi > upper + LIMIT_TOLERANCE_RAD:
+            name = names[i] if i < len(names) else f"q{i + 1}"
+            return (f"angle {i + 1} ({name}) is {pose_deg[i]:g} deg, outside the joint limits "
+                    f"[{np.rad2deg(lower):.1f}, {np.rad2deg(upper):.1f}] deg")
+    return None
+
+
+def check(config: Config, robot: Any) -> None:
+    """Robot-dependent checks, run before anything is written: ``pose_deg`` has one angle
+    per joint, each within the joint limits."""
+    if config.pose_deg is not None:
+        problem = _pose_problem(config.pose_deg, robot)
+        if problem:
+            raise ConfigError(None, "model.pose_deg", problem)
+
 
 def _pose(ctx: StageContext) -> np.ndarray:
     robot = ctx.robot
@@ -39,12 +97,11 @@ def _pose(ctx: StageContext) -> np.ndarray:
         if robot.nq >= 3:
             q[1], q[2] = np.deg2rad(30.0), np.deg2rad(60.0)
         return np.clip(q, lim.lower_rad, lim.upper_rad)
+    problem = _pose_problem(ctx.config.pose_deg, robot)      # check() ran already; a safety net
+    if problem:
+        raise ConfigError(ctx.run.source_of("model.pose_deg"), "model.pose_deg", problem)
     q = np.deg2rad(np.asarray(ctx.config.pose_deg, float))
-    if q.shape != (robot.nq,):
-        raise ConfigError(ctx.run.source, "model.pose_deg", f"expected {robot.nq} angles, got {q.size}")
-    if not robot.within_limits(q):
-        raise ConfigError(ctx.run.source, "model.pose_deg", "outside the joint limits")
-    return q
+    return np.clip(q, lim.lower_rad, lim.upper_rad)        # within the tolerance: onto the limit
 
 
 def run(ctx: StageContext) -> StageResult:

@@ -3,6 +3,21 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
+
+from pipeline.control.config import (
+    ISO_PLANES,
+    check_choice,
+    check_count,
+    check_number,
+    check_vector,
+)
+from pipeline.errors import ConfigError
+
+CP_SEGMENTS = ("line", "circle_large", "circle_small", "spline")   # = pipeline.trajectory.solve.CP_SEGMENTS
+PTP_ENERGIES = ("torque", "normalised", "electrical")
+MIN_GRID = 6                                                        # smallest grid / interval count
+MAX_CHECK_DT_S = 5e-4                                               # torques are checked at least this often
 
 
 @dataclass
@@ -59,3 +74,79 @@ class TrajectoryConfig:
     violation_tolerance: float = 0.005        # accepted fine-grid torque violation (0.5 %)
     max_tightening_rounds: int = 3            # re-solves with tightened limits when the fine grid exceeds it
     simulate: bool = True                     # run the trajectories in stage 3's servo simulation
+
+    def validate(self, source: Any = None) -> None:
+        """Robot-independent checks (ConfigError naming ``trajectory.<field>``); the joint-vector
+        lengths (``nq``) and joint limits are checked by ``pipeline.trajectory.stage.check``."""
+        s = source
+
+        def name(f: str) -> str:
+            return f"trajectory.{f}"
+
+        check_number(s, name("torque_reserve"), self.torque_reserve, ge=0, lt=1,
+                     why=" (share of each torque limit kept for the feedback controller)")
+        # --- CP
+        check_choice(s, name("cp_segment"), self.cp_segment, CP_SEGMENTS)
+        if not isinstance(self.cp_points_m, (list, tuple)):
+            raise ConfigError(s, name("cp_points_m"),
+                              f"expected a list of [x, y, z] points (m), got {self.cp_points_m!r}")
+        for i, p in enumerate(self.cp_points_m):
+            check_vector(s, name(f"cp_points_m[{i}]"), p, 3, "m")
+        if self.cp_segment == "spline":
+            if len(self.cp_points_m) < 3:
+                raise ConfigError(s, name("cp_points_m"), "cp_segment spline needs at least 3 points (m), "
+                                  f"got {len(self.cp_points_m)}")
+            for i in range(1, len(self.cp_points_m)):
+                a, b = self.cp_points_m[i - 1], self.cp_points_m[i]
+                if sum((x - y) ** 2 for x, y in zip(a, b, strict=True)) ** 0.5 < 1e-6:
+                    raise ConfigError(s, name(f"cp_points_m[{i}]"), f"coincides with point {i - 1} ({list(a)!r})")
+        check_number(s, name("cp_edge_m"), self.cp_edge_m, gt=0, unit="m")
+        check_vector(s, name("cp_centre_m"), self.cp_centre_m, 3, "m")
+        check_choice(s, name("cp_plane"), self.cp_plane, ISO_PLANES)
+        check_count(s, name("cp_ik_points"), self.cp_ik_points, MIN_GRID)
+        check_vector(s, name("cp_ik_seed_deg"), self.cp_ik_seed_deg, unit="deg", nonempty=True)
+        check_number(s, name("cp_max_ik_step_deg"), self.cp_max_ik_step_deg, gt=0, unit="deg")
+        check_count(s, name("cp_n_grid"), self.cp_n_grid, MIN_GRID)
+        check_number(s, name("cp_torque_margin"), self.cp_torque_margin, ge=0, lt=1,
+                     why=" (relative tightening of the torque limits)")
+        check_count(s, name("cp_smooth_intervals"), self.cp_smooth_intervals, MIN_GRID)
+        check_number(s, name("cp_smooth_jerk_rise_time_s"), self.cp_smooth_jerk_rise_time_s, gt=0, unit="s")
+        check_number(s, name("cp_smooth_torque_margin"), self.cp_smooth_torque_margin, ge=0, lt=1,
+                     why=" (relative tightening of the torque limits)")
+        # --- PtP
+        check_vector(s, name("ptp_start_deg"), self.ptp_start_deg, unit="deg", nonempty=True)
+        check_vector(s, name("ptp_goal_deg"), self.ptp_goal_deg, unit="deg", nonempty=True)
+        if len(self.ptp_start_deg) == len(self.ptp_goal_deg) and \
+                max(abs(a - b) for a, b in zip(self.ptp_start_deg, self.ptp_goal_deg, strict=True)) < 1e-6:
+            raise ConfigError(s, name("ptp_goal_deg"), f"equals trajectory.ptp_start_deg {list(self.ptp_start_deg)!r}: "
+                              "a point-to-point move needs two different poses")
+        check_count(s, name("ptp_n_intervals"), self.ptp_n_intervals, MIN_GRID)
+        check_number(s, name("ptp_k1"), self.ptp_k1, ge=0, why=" (weight of the duration)")
+        check_number(s, name("ptp_k2"), self.ptp_k2, gt=0, why=" (weight of the energy)")
+        check_choice(s, name("ptp_energy"), self.ptp_energy, PTP_ENERGIES)
+        check_vector(s, name("ptp_pareto_k2"), self.ptp_pareto_k2, gt=0)    # empty: no Pareto sweep
+        if not isinstance(self.ptp_jit_flags, (list, tuple)):
+            raise ConfigError(s, name("ptp_jit_flags"),
+                              f"expected a list of compiler flags, got {self.ptp_jit_flags!r}")
+        for i, flag in enumerate(self.ptp_jit_flags):
+            if not isinstance(flag, str) or not flag.startswith("-") or any(c.isspace() for c in flag):
+                raise ConfigError(s, name(f"ptp_jit_flags[{i}]"),
+                                  f"expected one compiler flag such as '-O1', got {flag!r}")
+        # continuations: widths wider than the model's are solved first; empty = the model's only
+        check_vector(s, name("ptp_coulomb_widths_rad_s"), self.ptp_coulomb_widths_rad_s, unit="rad/s", gt=0)
+        check_vector(s, name("ptp_fixed_coulomb_widths_rad_s"), self.ptp_fixed_coulomb_widths_rad_s,
+                     unit="rad/s", gt=0)
+        check_vector(s, name("motor_resistance_ohm"), self.motor_resistance_ohm, unit="ohm", gt=0, nonempty=True)
+        check_vector(s, name("torque_constant_Nm_A"), self.torque_constant_Nm_A, unit="N m/A", gt=0, nonempty=True)
+        # --- baselines and verification
+        check_number(s, name("ruckig_check_dt_s"), self.ruckig_check_dt_s, gt=0, le=MAX_CHECK_DT_S, unit="s",
+                     why=" (torques must be checked at least every 0.5 ms)")
+        check_vector(s, name("ruckig_jerk_ratios_1_s"), self.ruckig_jerk_ratios_1_s, unit="1/s", gt=0,
+                     nonempty=True)
+        check_count(s, name("ruckig_joint_rounds"), self.ruckig_joint_rounds, 0)
+        check_count(s, name("ruckig_refine_evaluations"), self.ruckig_refine_evaluations, 0)
+        check_number(s, name("fine_dt_s"), self.fine_dt_s, gt=0, le=MAX_CHECK_DT_S, unit="s",
+                     why=" (torques must be checked at least every 0.5 ms)")
+        check_number(s, name("violation_tolerance"), self.violation_tolerance, ge=0, lt=1,
+                     why=" (accepted relative torque excess on the fine grid)")
+        check_count(s, name("max_tightening_rounds"), self.max_tightening_rounds, 0)

@@ -19,10 +19,11 @@ import time
 
 import numpy as np
 
+from pipeline.errors import ConfigError
 from pipeline.runner import StageContext, StageResult
 from pipeline.trajectory.config import TrajectoryConfig
 from pipeline.trajectory.dynamics import PlanningModel
-from pipeline.trajectory.solve import CP_SEGMENTS, cp_joint_path, cp_spline_points, plan_cp, plan_ptp, ptp_problem
+from pipeline.trajectory.solve import cp_joint_path, plan_cp, plan_ptp, ptp_problem
 from pipeline.trajectory.validate import (
     activity_figure,
     comparison_figure,
@@ -36,32 +37,16 @@ Config = TrajectoryConfig
 
 
 def check(config: TrajectoryConfig, robot) -> None:
-    """Validate the section before anything runs (ConfigError naming the field)."""
-    from pipeline.errors import ConfigError
-
+    """Validate the section against the robot before anything runs (ConfigError naming the field)."""
     def bad(field: str, problem: str) -> ConfigError:
         return ConfigError(None, f"trajectory.{field}", problem)
 
+    config.validate(None)          # the robot-independent checks, also for configs built in Python
     nq = robot.nq
-    if config.cp_segment not in CP_SEGMENTS:
-        raise bad("cp_segment", f"{config.cp_segment!r}: expected one of {', '.join(CP_SEGMENTS)}")
-    if config.cp_segment == "spline":
-        cp_spline_points(config)
-    if config.ptp_energy not in ("torque", "normalised", "electrical"):
-        raise bad("ptp_energy", f"{config.ptp_energy!r}: expected torque, normalised or electrical")
     for field in ("ptp_start_deg", "ptp_goal_deg", "cp_ik_seed_deg", "motor_resistance_ohm", "torque_constant_Nm_A"):
         if len(getattr(config, field)) != nq:
-            raise bad(field, f"expected {nq} numbers, got {len(getattr(config, field))}")
-    for field in ("cp_n_grid", "cp_ik_points", "cp_smooth_intervals", "ptp_n_intervals"):
-        if getattr(config, field) < 6:
-            raise bad(field, f"must be >= 6, got {getattr(config, field)}")
-    for field in ("fine_dt_s", "ruckig_check_dt_s", "cp_edge_m", "cp_smooth_jerk_rise_time_s", "ptp_k1"):
-        if not getattr(config, field) > 0:
-            raise bad(field, f"must be positive, got {getattr(config, field)}")
-    if config.ruckig_check_dt_s > 5e-4:
-        raise bad("ruckig_check_dt_s", "torques must be checked at least every 0.5 ms")
-    if not 0.0 <= config.torque_reserve < 1.0:
-        raise bad("torque_reserve", f"must be in [0, 1), got {config.torque_reserve}")
+            raise bad(field, f"expected {nq} numbers for robot {robot.name}, got {len(getattr(config, field))}: "
+                      f"{list(getattr(config, field))!r}")
     lo, hi = np.degrees(robot.limits.lower_rad), np.degrees(robot.limits.upper_rad)
     for field in ("ptp_start_deg", "ptp_goal_deg"):
         q = np.asarray(getattr(config, field), float)

@@ -270,11 +270,16 @@ def test_targets_hold_for_other_robots_and_seeds(name, seed):
 
 def test_too_small_candidate_set_through_runner_writes_nothing(tmp_path):
     from pipeline.config import quick_config
+    from pipeline.errors import ConfigError
     from pipeline.runner import run_pipeline
 
+    # fewer random candidates than configurations: caught when the configuration is loaded
+    with pytest.raises(ConfigError, match="calibration.n_random_candidates: 5 feasible random candidates"):
+        quick_config(**{"stages": ["model", "calibration"], "calibration.n_random_candidates": 5})
+    # a grid with too few feasible points: found while running, before the stage writes anything
     cfg = quick_config(**{"stages": ["model", "calibration"], "name": "fewcand",
-                          "calibration.n_random_candidates": 5})
-    with pytest.raises(PipelineError, match="candidates"):
+                          "calibration.candidates": "grid", "calibration.grid_per_axis": 3})
+    with pytest.raises(PipelineError, match="calibration.grid_per_axis: only .* 40 configurations asked for"):
         run_pipeline(cfg, out_root=tmp_path / "runs", log=lambda m: None)
     assert not (tmp_path / "runs" / "fewcand" / "calibration").exists()
 

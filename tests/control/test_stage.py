@@ -72,3 +72,20 @@ def test_bad_config_is_a_config_error(kwargs):
 
     with pytest.raises(ConfigError, match="control"):
         ControlConfig(**kwargs)
+
+
+def test_nominal_comparison_without_full_friction_variant(quick_config, rx130l, real, tmp_path):
+    """compare_nominal_feedforward with variants [none]: the nominal-model run is an extra comparison,
+    never the reported main variant."""
+    import copy
+
+    run = copy.deepcopy(quick_config)
+    cfg = run.control
+    cfg.variants, cfg.compare_nominal_feedforward = ["none"], True
+    cfg.benchmark_python_seconds, cfg.iso.segments = 0.05, ["line"]
+    upstream = {"identification": StageOutput({}, {}, {}, rx130l.copy(), tmp_path)}
+    ctx = StageContext(run=run, config=cfg, robot=rx130l.copy(), real=real, upstream=upstream, out_dir=tmp_path,
+                       rng=stage_rng(run.seed, "control"), progress=Progress(enabled=False))
+    s = stage.run(ctx).summary
+    assert set(s["tcp_error_max_m"]) == {"none", "full_friction_nominal"}
+    assert s["feedforward_model"] == "identified"

@@ -182,9 +182,86 @@ def test_negative_mass_and_bad_inertia_and_limits(tmp_path: Path) -> None:
     with pytest.raises(RobotFileError, match="joint_3: link inertial.inertia: not positive definite"):
         RobotModel.load(folder)
     folder = _copy_robot(tmp_path / "c")
-    _edit_yaml(folder, lambda d: d["limits"].update(lower_rad=[1.0] * 6, upper_rad=[0.0] * 6))
-    with pytest.raises(RobotFileError, match="joint_1: limit: lower 1.0 is above upper 0.0"):
+    _edit_urdf(folder, 'lower="-2.79252680319"', 'lower="2.8"')
+    with pytest.raises(RobotFileError, match=r"rx130l\.urdf: joint joint_1: limit: lower 2.8 is above upper"):
         RobotModel.load(folder)
+
+
+# ------------------------------------------------------------------ joint limits: who said it
+def _load_error(folder: Path) -> RobotFileError:
+    with pytest.raises(RobotFileError) as info:
+        RobotModel.load(folder)
+    return info.value
+
+
+@pytest.mark.parametrize(
+    ("limits", "field", "problem"),
+    [
+        # the review's case: both bounds overridden in robot.yaml, lower above upper
+        ({"lower_rad": [1, 0, 0, 0, 0, 0], "upper_rad": [0, 1, 1, 1, 1, 1]}, "limits.lower_rad",
+         "joint joint_1 (entry 0): 1.0 is above limits.upper_rad 0.0"),
+        ({"lower_rad": [-1, -1, 0.5, -1, -1, -1], "upper_rad": [1, 1, 0.5, 1, 1, 1]}, "limits.lower_rad",
+         "joint joint_3 (entry 2): 0.5 equals limits.upper_rad 0.5"),
+        # one bound from robot.yaml, the other from the URDF (tx40 joint_1 is +-3.14)
+        ({"lower_rad": [5, -1, -1, -1, -1, -1]}, "limits.lower_rad",
+         "joint joint_1 (entry 0): 5.0 is above the upper limit 3.14 in tx40.urdf"),
+        ({"upper_rad": [-3.14, 1, 1, 1, 1, 1]}, "limits.upper_rad",
+         "joint joint_1 (entry 0): -3.14 equals the lower limit -3.14 in tx40.urdf"),
+    ],
+)
+def test_bad_limit_override_names_robot_yaml(tmp_path: Path, limits: dict, field: str, problem: str) -> None:
+    folder = _copy_robot(tmp_path, "staubli_tx40")
+    _edit_yaml(folder, lambda d: d["limits"].update(limits))
+    error = _load_error(folder)
+    assert Path(error.file).name == "robot.yaml"
+    assert error.field == field
+    assert problem in error.problem
+    assert "urdf" not in (error.field or "")
+
+
+def test_urdf_lower_equal_upper_is_an_error_naming_the_urdf(tmp_path: Path) -> None:
+    folder = _copy_robot(tmp_path, "staubli_tx40")
+    urdf = folder / "tx40.urdf"
+    old = '<limit effort="103.49" lower="-2.40" upper="2.40"'
+    assert old in urdf.read_text()
+    urdf.write_text(urdf.read_text().replace(old, '<limit effort="103.49" lower="0.3" upper="0.3"'))
+    error = _load_error(folder)
+    assert Path(error.file).name == "tx40.urdf"
+    assert error.field == "joint joint_3: limit"
+    assert "lower 0.3 equals upper 0.3" in error.problem and "could not move" in error.problem
+
+
+def test_robot_yaml_overrides_can_repair_urdf_limits(tmp_path: Path) -> None:
+    folder = _copy_robot(tmp_path, "staubli_tx40")
+    urdf = folder / "tx40.urdf"
+    old = '<limit effort="103.49" lower="-2.40" upper="2.40"'
+    urdf.write_text(urdf.read_text().replace(old, '<limit effort="103.49" lower="0.3" upper="0.3"'))
+    _edit_yaml(folder, lambda d: d["limits"].update(lower_rad=[-1.0] * 6, upper_rad=[1.0] * 6))
+    robot = RobotModel.load(folder)
+    assert np.array_equal(robot.limits.lower_rad, [-1.0] * 6)
+
+
+@pytest.mark.parametrize("kind", ["prismatic", "continuous", "planar", "floating", "revolut"])
+def test_non_revolute_movable_joint_is_rejected(tmp_path: Path, kind: str) -> None:
+    folder = _copy_robot(tmp_path, "staubli_tx40")
+    urdf = folder / "tx40.urdf"
+    old = '<joint name="joint_3" type="revolute">'
+    assert old in urdf.read_text()
+    urdf.write_text(urdf.read_text().replace(old, f'<joint name="joint_3" type="{kind}">'))
+    error = _load_error(folder)
+    assert Path(error.file).name == "tx40.urdf"
+    assert error.field == "joint joint_3: type"
+    assert f"'{kind}'" in error.problem
+    assert "\n" not in str(error)
+
+
+def test_urdf_limit_must_be_finite(tmp_path: Path) -> None:
+    folder = _copy_robot(tmp_path, "staubli_tx40")
+    urdf = folder / "tx40.urdf"
+    old = 'lower="-2.40"'
+    urdf.write_text(urdf.read_text().replace(old, 'lower="nan"'))
+    error = _load_error(folder)
+    assert Path(error.file).name == "tx40.urdf" and error.field == "joint joint_3: <limit lower>"
 
 
 def test_unknown_robot_name() -> None:
