@@ -85,6 +85,19 @@ class FakeStages:
         return SimpleNamespace(NAME=name, DEPENDS=depends, Config=FakeConfig, run=run, __file__=None)
 
 
+@pytest.fixture(scope="session")
+def shipped_configs(rx130l):
+    """(config, robot) pairs every shipped setting must pass: the defaults and configs/quick.yaml
+    on the RX130L, and both on the TX40 with its robot.yaml run_defaults."""
+    from pipeline.config import CONFIGS_DIR, load_config
+    from pipeline.robot.model import RobotModel
+
+    tx40 = RobotModel.load("staubli_tx40")
+    return [(load_config(path, values={"robot": name} if name != "rx130l" else None), robot)
+            for name, robot in (("rx130l", rx130l), ("staubli_tx40", tx40))
+            for path in (None, CONFIGS_DIR / "quick.yaml")]
+
+
 @pytest.fixture
 def fake_stages(monkeypatch):
     from pipeline import config

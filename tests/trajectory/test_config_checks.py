@@ -77,16 +77,9 @@ def test_bad_spline_points(points, field_name):
     assert err.value.field == T + field_name
 
 
-def test_good_configs_pass(rx130l):
-    from pipeline.robot.model import RobotModel
-
-    for cfg in (load_config(), load_config(CONFIGS_DIR / "quick.yaml")):
-        stage.check(cfg.trajectory, rx130l)
-    tx40 = RobotModel.load("staubli_tx40")
-    for path in (None, CONFIGS_DIR / "quick.yaml"):
-        cfg = load_config(path, values={"robot": "staubli_tx40"})      # its robot.yaml has run_defaults
-        assert cfg.trajectory.cp_edge_m == 0.2
-        stage.check(cfg.trajectory, tx40)
+def test_good_configs_pass(rx130l, shipped_configs):
+    for cfg, robot in shipped_configs:
+        stage.check(cfg.trajectory, robot)
     # allowed edge values: no Pareto sweep, no continuation, k1 = 0, no tightening, spline
     ok = load_config(values={T + "ptp_pareto_k2": [], T + "ptp_coulomb_widths_rad_s": [], T + "ptp_k1": 0.0,
                              T + "ptp_fixed_coulomb_widths_rad_s": [], T + "ptp_jit_flags": [],
