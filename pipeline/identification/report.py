@@ -80,7 +80,17 @@ def report_markdown(summary: dict, tx: Tx40Result | None) -> str:
     else:
         head = (f"Excitation: cond {summary['cond_optimized']:.1f} optimised vs median "
                 f"{summary['cond_random_median']:.1f} of random feasible Fourier trajectories "
-                f"({summary['cond_improvement']:.1f}x).")
+                f"({summary['cond_improvement']:.1f}x), for the {summary['n_base_parameters_structural']} "
+                "structural base parameters (the design criterion).")
+        extra = summary["n_base_parameters"] - summary["n_base_parameters_structural"]
+        if extra > 0:
+            head += (f" The fit estimates {summary['n_base_parameters']} base parameters: the calibrated "
+                     f"kinematics make {extra} more combination(s) weakly identifiable (leaving them out "
+                     "would bias the others), so the fitted regressor's condition number on the measured data "
+                     f"is {summary['cond_base_regressor_data']:.3g} "
+                     f"({summary['cond_base_regressor_data_structural']:.3g} for the structural set); the "
+                     "extra combination's estimate is correspondingly uncertain (error bars in the base-parameter "
+                     "figure).")
     lines = [
         head,
         "",
