@@ -7,11 +7,18 @@ Each stage is a module (registry :data:`pipeline.config.STAGES`) exposing::
     Config = CalibrationConfig     # dataclass with defaults
     def run(ctx: StageContext) -> StageResult
     def check(config, robot) -> None   # optional: raise PipelineError early (bad data file...)
+    CONFIG_READS = ("control.iso",)    # optional: settings of other sections run() reads
 
 :func:`run_pipeline` validates everything (stage modules, dependencies, the robot files, the
 hidden robot) *before* creating any directory, then for every needed stage either reuses
 ``<run>/<stage>/`` (stored ``inputs.sha256`` equal to the new hash) or calls ``run(ctx)`` with
 a staging directory that is renamed to ``<stage>/`` only when complete.
+
+A stage's inputs hash covers its own section, the seed, the robot name and the ``truth``
+section, every file of the robot folder, the values of its ``CONFIG_READS``, the hashes of its
+upstream stages, the package version and the source code: every ``.py`` file of the whole
+``pipeline`` package (any code change re-runs every stage: stages import each other's helpers,
+correctness beats reuse) plus the stage module's own folder when it lives outside the package.
 """
 
 from __future__ import annotations
@@ -26,6 +33,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 
 import pipeline
 from pipeline import artefacts
@@ -38,6 +46,7 @@ from pipeline.progress import Progress
 __all__ = [
     "StageContext", "StageResult", "StageOutput", "RunResult", "run_pipeline", "load_run",
     "load_stage_output", "default_runs_dir", "resolve_robot_dir", "stage_rng", "stable_stage_hash",
+    "stage_inputs_hashes", "package_code_hash", "config_reads",
 ]
 
 
@@ -117,17 +126,67 @@ def _make_real(nominal: Any, cfg: RunConfig) -> Any:
     return RealRobot.create(nominal, cfg.seed, truth_cfg)
 
 
-_ROBOT_PACKAGE = Path(__file__).resolve().parent / "robot"
+#: root of the source code every stage's inputs hash covers (tests point it at a copy)
+_PACKAGE_ROOT = Path(__file__).resolve().parent
 
 
-def _code_hash(module: Any) -> str:
-    """Hash of the .py files of the stage's package and of ``pipeline/robot`` (the model, the
-    hidden robot and its sensors every stage stands on); "" for objects without a file."""
+def package_code_hash() -> str:
+    """sha256 of every ``.py`` file of the ``pipeline`` package (``pipeline/robot`` included)."""
+    return artefacts.hash_tree(_PACKAGE_ROOT, suffixes=(".py",))
+
+
+def _code_hash(module: Any, package_sha256: str | None = None) -> str:
+    """Hash of the source code a stage stands on: every .py file of the ``pipeline`` package
+    (``package_sha256``, computed when None; a stage imports other subpackages' helpers, e.g.
+    identification validates on the control stage's ISO path) plus the .py files of the stage
+    module's own folder when that lies outside the package (a stage registered from elsewhere)."""
+    code = package_code_hash() if package_sha256 is None else package_sha256
     path = getattr(module, "__file__", None)
-    if not path:
-        return ""
-    folder = Path(path).parent
-    return artefacts.hash_tree(folder, suffixes=(".py",)) + artefacts.hash_tree(_ROBOT_PACKAGE, suffixes=(".py",))
+    if path:
+        folder = Path(path).resolve().parent
+        if not folder.is_relative_to(_PACKAGE_ROOT.resolve()):
+            code += artefacts.hash_tree(folder, suffixes=(".py",))
+    return code
+
+
+def config_reads(cfg: RunConfig, module: Any) -> dict[str, Any]:
+    """Plain values of the settings of other sections a stage declares it reads
+    (``CONFIG_READS = ("control.iso", ...)``): dotted path -> value (None when the section is not
+    validated (a plain dict) or has no such field: the stage then uses built-in defaults, which
+    the code hash covers)."""
+    out: dict[str, Any] = {}
+    for dotted in tuple(getattr(module, "CONFIG_READS", ()) or ()):
+        head, *rest = str(dotted).split(".")
+        value: Any = cfg.sections.get(head)
+        for part in rest:
+            if isinstance(value, Mapping):
+                value = value.get(part)
+            else:
+                value = getattr(value, part, None)
+        out[str(dotted)] = config_mod.to_plain(value)
+    return out
+
+
+def stage_inputs_hashes(cfg: RunConfig, plans: Sequence[_Plan], robot_dir: Path) -> dict[str, str]:
+    """Inputs hash of every planned stage (also stored in ``plan.inputs_sha256``)."""
+    robot_sha = artefacts.hash_tree(robot_dir)
+    code_sha = package_code_hash()
+    run_key = {
+        "seed": cfg.seed,
+        "robot": robot_dir.name,
+        "truth": config_mod.to_plain(cfg.sections.get("truth", {})),
+    }
+    by_name: dict[str, _Plan] = {}
+    for plan in plans:
+        reads = config_reads(cfg, plan.module)
+        key = {**run_key, "config_reads": reads} if reads else run_key
+        plan.inputs_sha256 = artefacts.inputs_hash(
+            plan.name, config_mod.to_plain(plan.config), key, robot_sha,
+            {d: by_name[d].inputs_sha256 for d in plan.closure}, pipeline.__version__,
+            _code_hash(plan.module, code_sha),
+        )
+        by_name[plan.name] = plan
+    return {name: plan.inputs_sha256 for name, plan in by_name.items()}
 
 
 def _copy_robot(robot: Any) -> Any:
@@ -152,6 +211,13 @@ def _check_stage_module(name: str, module: Any) -> None:
             raise PipelineError(where, attr, f"stage {name!r} does not define {attr}")
     if module.NAME != name:
         raise PipelineError(where, "NAME", f"is {module.NAME!r}, registered as {name!r}")
+    reads = getattr(module, "CONFIG_READS", ())
+    if not isinstance(reads, (tuple, list)) or not all(isinstance(r, str) and r for r in reads):
+        raise PipelineError(where, "CONFIG_READS", f"expected a tuple of dotted setting names, got {reads!r}")
+    for dotted in reads:
+        if dotted.split(".")[0] not in config_mod.section_names():
+            raise PipelineError(where, "CONFIG_READS", f"{dotted!r} is not in a section of the run "
+                                f"configuration (sections: {', '.join(config_mod.section_names())})")
 
 
 def plan_stages(cfg: RunConfig) -> list[_Plan]:
@@ -251,6 +317,8 @@ def _fmt(value: Any) -> str:
         if len(value) > 12:
             return "[" + ", ".join(_fmt(v) for v in value[:12]) + f", … ({len(value)} items)]"
         return "[" + ", ".join(_fmt(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{k}: {_fmt(v)}" for k, v in value.items()) + "}"
     return str(value).replace("|", "\\|").replace("\n", " ")
 
 
@@ -359,21 +427,8 @@ def run_pipeline(
     nominal = _load_robot(robot_dir)
     plans = plan_stages(cfg)
     real = _make_real(nominal, cfg)
-    robot_sha = artefacts.hash_tree(robot_dir)
-    run_key = {
-        "seed": cfg.seed,
-        "robot": robot_dir.name,
-        "truth": config_mod.to_plain(cfg.sections.get("truth", {})),
-    }
-    by_name: dict[str, _Plan] = {}
-    for plan in plans:
-        plan.inputs_sha256 = artefacts.inputs_hash(
-            plan.name, config_mod.to_plain(plan.config), run_key, robot_sha,
-            {d: by_name[d].inputs_sha256 for d in plan.closure}, pipeline.__version__,
-            _code_hash(plan.module),
-        )
-        by_name[plan.name] = plan
-    forced = set(by_name) if force is True else set(force or ())
+    hashes = stage_inputs_hashes(cfg, plans, robot_dir)
+    forced = set(hashes) if force is True else set(force or ())
     run_dir = Path(out_root) if out_root is not None else default_runs_dir()
     run_dir = run_dir / cfg.name
     for plan in plans:               # optional early checks (e.g. measurement files) of stages to run
@@ -395,7 +450,11 @@ def run_pipeline(
         raise ConfigError("--out" if out_root is not None else None, str(run_dir),
                           f"cannot create the run directory ({exc.strerror or exc})") from None
     artefacts.clean_leftovers(run_dir)
-    artefacts.write_text(run_dir / "config.yaml", cfg.to_yaml())
+    # the stages this run consists of: the selected ones and the upstream ones they need (run
+    # or reused), so that the config.yaml reproduces the run
+    written = cfg.to_dict()
+    written["stages"] = [p.name for p in plans]
+    artefacts.write_text(run_dir / "config.yaml", yaml.safe_dump(written, sort_keys=False))
     outputs: dict[str, StageOutput] = {}
     ran: list[str] = []
     reused: list[str] = []

@@ -175,3 +175,111 @@ def test_progress_passes_items_through_with_or_without_display():
                 handle.advance()
                 handle.update(completed=2)
     assert list(track([5, 6], "standalone")) == [5, 6]
+
+
+# ------------------------------------------------------------------ what the reuse hash covers
+def _package_copy(tmp_path, monkeypatch):
+    """A copy of the pipeline package's sources that the runner hashes instead of the real one."""
+    import shutil
+
+    from pipeline import runner
+
+    copy = tmp_path / "pkg" / "pipeline"
+    shutil.copytree(runner._PACKAGE_ROOT, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    monkeypatch.setattr(runner, "_PACKAGE_ROOT", copy)
+    return copy
+
+
+def test_code_change_in_any_subpackage_reruns_every_stage(fake_stages, tmp_path, monkeypatch):
+    copy = _package_copy(tmp_path, monkeypatch)
+    quiet = {"out_root": tmp_path / "runs", "log": lambda m: None}
+    run_pipeline(load_config(None, ["name=r"]), **quiet)
+    fake_stages.calls.clear()
+    assert run_pipeline(load_config(None, ["name=r"]), **quiet).reused == ["a", "b", "c"]
+    iso = copy / "control" / "iso9283.py"              # a module of another stage's subpackage
+    iso.write_text(iso.read_text() + "\n# edited\n")
+    again = run_pipeline(load_config(None, ["name=r"]), **quiet)
+    assert fake_stages.calls == ["a", "b", "c"] and again.reused == []
+
+
+def test_every_real_stage_hash_covers_the_whole_package(tmp_path, monkeypatch):
+    from pipeline.config import resolve_robot_dir
+    from pipeline.runner import plan_stages, stage_inputs_hashes
+
+    copy = _package_copy(tmp_path, monkeypatch)
+    cfg = load_config()
+    plans = plan_stages(cfg)
+    robot_dir = resolve_robot_dir(cfg)
+    before = stage_inputs_hashes(cfg, plans, robot_dir)
+    assert before == stage_inputs_hashes(cfg, plans, robot_dir)
+    for edited in (copy / "control" / "iso9283.py", copy / "trajectory" / "ptp.py", copy / "plotting.py"):
+        edited.write_text(edited.read_text() + "\n# edited\n")
+        after = stage_inputs_hashes(cfg, plans, robot_dir)
+        assert set(after) == {"model", "calibration", "identification", "control", "trajectory"}
+        assert all(after[s] != before[s] for s in after), edited
+        before = after
+
+
+def test_config_reads_enter_the_inputs_hash(fake_stages, tmp_path):
+    from pipeline import config
+
+    config.STAGES["a"].CONFIG_READS = ("c.label",)
+    quiet = {"out_root": tmp_path, "log": lambda m: None}
+    run_pipeline(load_config(None, ["name=r"]), **quiet)
+    fake_stages.calls.clear()
+    run_pipeline(load_config(None, ["name=r", "c.gain=2"]), **quiet)   # not read by a: only c
+    assert fake_stages.calls == ["c"]
+    fake_stages.calls.clear()
+    run_pipeline(load_config(None, ["name=r", "c.gain=2", "c.label=y"]), **quiet)   # read by a
+    assert fake_stages.calls == ["a", "b", "c"]
+
+
+def test_bad_config_reads_declaration_is_refused_before_writing(fake_stages, tmp_path):
+    from pipeline import config
+    from pipeline.errors import PipelineError
+
+    config.STAGES["b"].CONFIG_READS = ("nosuch.field",)
+    with pytest.raises(PipelineError, match="CONFIG_READS.*nosuch.field"):
+        run_pipeline(load_config(None, ["name=r"]), out_root=tmp_path, log=lambda m: None)
+    assert not any(tmp_path.iterdir())
+
+
+def test_config_yaml_lists_the_planned_stages(fake_stages, tmp_path):
+    import yaml
+
+    run_pipeline(load_config(None, ["name=r"]), out_root=tmp_path, log=lambda m: None)
+    res = run_pipeline(load_config(None, ["name=r"], stages="b"), out_root=tmp_path, log=lambda m: None)
+    assert res.reused == ["a", "b"]
+    written = yaml.safe_load((tmp_path / "r" / "config.yaml").read_text())
+    assert written["stages"] == ["a", "b"]          # the upstream stage a was part of the run
+    assert load_config(tmp_path / "r" / "config.yaml").stages == ["a", "b"]
+
+
+# ------------------------------------------------------------------------------------- docs
+def test_architecture_layout_lists_exactly_the_package_files():
+    import re
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[1]
+    text = (repo / "docs" / "ARCHITECTURE.md").read_text(encoding="utf-8")
+    block = text.split("## Layout\n```", 1)[1].split("```", 1)[0]
+    listed: dict[str, set[str]] = {}
+    pkg: str | None = None
+    for line in block.splitlines():
+        m = re.match(r"^  (\w+)/", line)
+        if m:
+            pkg, rest = m.group(1), line[m.end():]
+        elif re.match(r"^  \S", line):
+            pkg, rest = "", line
+        elif line.startswith("    ") and pkg is not None:
+            rest = line
+        else:
+            pkg = None
+            continue
+        listed.setdefault(pkg, set()).update(re.findall(r"\b(\w+\.py)\b", rest))
+    root = repo / "pipeline"
+    actual = {"": {f.name for f in root.glob("*.py")} - {"__init__.py"}}
+    for sub in root.iterdir():
+        if sub.is_dir() and (sub / "__init__.py").exists():
+            actual[sub.name] = {f.name for f in sub.glob("*.py")} - {"__init__.py"}
+    assert listed == actual

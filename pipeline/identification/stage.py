@@ -15,7 +15,9 @@ and the real Stäubli TX40 record (paper ``004_abbe750b8bbcc3aa.txt`` §4; issue
 4. Period averaging, zero-phase filtering, differentiation, block decimation (:mod:`.measure`).
 5. OLS, Gautier's WLS (covariance -> base parameter sigmas) and the physically consistent fit
    (log-Cholesky, IPOPT) whose standard parameters become the handed-on ``RobotModel``.
-6. Validation on the ISO 9283 path (measured vs predicted torques), or the held-out tail of a record.
+6. Validation on the run's ISO 9283 path (``control.iso``, measured vs predicted torques; a random
+   Fourier trajectory, stated in the report, when that path is out of reach), or the held-out tail
+   of a record.
 7. The TX40 record: base parameters, condition number, held-out RMS (:mod:`.tx40`).
 """
 
@@ -55,6 +57,9 @@ from pipeline.runner import StageContext, StageResult
 
 NAME = "identification"
 DEPENDS: tuple[str, ...] = ("model", "calibration")
+#: settings of other sections this stage reads (the runner adds them to its inputs hash): the
+#: validation path is the run's EN ISO 9283 path (robot ``run_defaults`` included)
+CONFIG_READS: tuple[str, ...] = ("control.iso",)
 
 
 # --------------------------------------------------------------------------------- early checks
@@ -402,12 +407,15 @@ def _run(ctx: StageContext) -> StageResult:
         # residual sigma per joint of the WLS fit on all samples (processed torques, like the RMS)
         noise_sigma: np.ndarray | None = np.asarray(wls.joint_sigma_Nm, float)
         noise_source = "residuals of the WLS fit (processed torques)"
+        validation_md = ""
     else:
         assert limits is not None
+        iso = val_mod.run_iso_config(ctx.run)
         vt = val_mod.validation_trajectory(
             robot, cfg.validation_sample_time_s,
             lambda: _fourier_validation(robot, limits, ex, cfg.validation_sample_time_s, ctx.rng),
-            use_iso=cfg.validation == "iso9283")
+            use_iso=cfg.validation == "iso9283", iso=iso)
+        validation_md = _validation_markdown(cfg, vt, iso, robot)
         noise_sigma = data.noise_sigma_Nm
         noise_source = "spread between excitation periods"
         meas_v = ctx.real.execute_joint_trajectory(vt.t_s, vt.q, vt.v, vt.a, ctx.rng)
@@ -432,7 +440,7 @@ def _run(ctx: StageContext) -> StageResult:
         t1 = time.perf_counter()
         from pipeline.robot.model import RobotModel
 
-        tx = run_tx40(RobotModel.load("staubli_tx40"), cfg.tx40, np.random.default_rng(ctx.rng.integers(2**32)))
+        tx = run_tx40(RobotModel.load("staubli_tx40"), cfg.tx40)   # its own fixed seed (tx40.base_seed)
         timings["tx40_s"] = time.perf_counter() - t1
     timings["total_s"] = time.perf_counter() - t0
 
@@ -540,7 +548,22 @@ def _run(ctx: StageContext) -> StageResult:
             tx.heldout_t_s, tx.heldout_tau_Nm, tx.heldout_pred_Nm["physical"],
             "TX40 held-out 30 %: measured vs physically consistent fit")
     return StageResult(summary=summary, arrays=arrays, data=data_out, figures=figures, robot=new_robot,
-                       report_md=report.report_markdown(summary, tx))
+                       report_md=validation_md + report.report_markdown(summary, tx))
+
+
+def _validation_markdown(cfg: Config, vt: val_mod.ValidationTrajectory, iso: Any, robot: Any) -> str:
+    """One paragraph for report.md: which trajectory validated the model; a visible warning
+    when the EN ISO 9283 path was asked for but could not be used."""
+    if vt.label == "iso9283":
+        return f"Validation on the EN ISO 9283 path of `control.iso` ({vt.note}).\n\n"
+    if cfg.validation != "iso9283":
+        return ("Validation on a random feasible Fourier trajectory "
+                f"(`identification.validation: {cfg.validation}`).\n\n")
+    why = vt.note.split("; ")[0] if vt.note else "not reachable"
+    return ("**Warning: validation fell back to a random Fourier trajectory.** The EN ISO 9283 path "
+            f"(`control.iso.centre_m` = {list(iso.centre_m)} m, `control.iso.edge_m` = {iso.edge_m} m) "
+            f"cannot be followed by {robot.name}: {why}. Set `control.iso.centre_m` and "
+            "`control.iso.edge_m` (or the robot's `run_defaults`) to a cube inside its workspace.\n\n")
 
 
 def _check_record_limits(rec: meas_mod.JointRecord, robot: Any, file: Any) -> None:

@@ -1,8 +1,9 @@
 """Validation of an identified model (paper ``004_abbe750b8bbcc3aa.txt`` §4.3, Fig. 5(b)).
 
 * Torque prediction on a trajectory that was not used for the fit: the EN ISO 9283 path
-  (DESIGN.md; built with stage 3's ``iso9283_path`` + ``cartesian_reference``) or, when that path
-  is out of reach of the robot, a different random Fourier trajectory (the label says which).
+  (DESIGN.md; built with stage 3's ``iso9283_path`` + ``cartesian_reference`` from the run's
+  ``control.iso`` section, robot ``run_defaults`` included) or, when that path is out of reach of
+  the robot, a different random Fourier trajectory (the label says which).
   The measured torque (sensor noise included) is compared with the model's prediction at the
   commanded states: per joint RMS error and relative error ``RMS / RMS(measured)``.
 * In simulation, each base parameter's error against the truth in units of its estimated
@@ -31,15 +32,29 @@ class ValidationTrajectory:
     note: str = ""
 
 
-def iso_validation_trajectory(robot: Any, sample_time_s: float) -> ValidationTrajectory:
-    """The ISO 9283 path of the control stage's default configuration, as joint reference."""
+def run_iso_config(run: Any) -> Any:
+    """The EN ISO 9283 path settings of the run (``control.iso`` of the :class:`RunConfig`,
+    with the robot's ``run_defaults`` merged in), or the built-in ``ControlConfig().iso`` when the
+    run has no validated control section (a plain dict: module missing, or a bare RunConfig)."""
+    from pipeline.control.config import ControlConfig, IsoPathConfig
+
+    sections = getattr(run, "sections", None) if run is not None else None
+    control = sections.get("control") if isinstance(sections, dict) else None
+    iso = getattr(control, "iso", None)
+    return iso if isinstance(iso, IsoPathConfig) else ControlConfig().iso
+
+
+def iso_validation_trajectory(robot: Any, sample_time_s: float, iso: Any = None) -> ValidationTrajectory:
+    """The ISO 9283 path of ``iso`` (the run's ``control.iso``, :func:`run_iso_config`; None: the
+    built-in defaults) as joint reference of the TCP. The IK seeds and tolerance are the control
+    section's built-in ones."""
     from pipeline.control.config import ControlConfig
     from pipeline.control.iso9283 import iso9283_path, tool_rotation
     from pipeline.control.reference import cartesian_reference
     from pipeline.robot.paths import start_configuration
 
     cfg = ControlConfig()
-    iso = cfg.iso
+    iso = cfg.iso if iso is None else iso
     rotation = tool_rotation(iso.plane, iso.tool_down)
     path = iso9283_path(robot, iso.edge_m, iso.centre_m, iso.plane, rotation, iso.corner_fraction,
                         iso.large_circle_fraction, iso.small_circle_fraction, tuple(iso.segments))
@@ -48,17 +63,18 @@ def iso_validation_trajectory(robot: Any, sample_time_s: float) -> ValidationTra
     ref = cartesian_reference(robot, path, sample_time_s, iso.speed_m_s, iso.acceleration_m_s2,
                               iso.jerk_m_s3, q_start, robot.frame_tcp, cfg.ik_tolerance_m)
     return ValidationTrajectory(ref.t_s, ref.q_d, ref.v_d, ref.a_d, "iso9283",
-                                f"edge {iso.edge_m} m, centre {iso.centre_m} m, {iso.speed_m_s} m/s")
+                                f"edge {iso.edge_m} m, centre {list(iso.centre_m)} m, {iso.speed_m_s} m/s")
 
 
 def validation_trajectory(
-    robot: Any, sample_time_s: float, fallback: Any, use_iso: bool = True
+    robot: Any, sample_time_s: float, fallback: Any, use_iso: bool = True, iso: Any = None
 ) -> ValidationTrajectory:
-    """ISO 9283 path if it can be built for ``robot`` (within limits), else ``fallback()``."""
+    """ISO 9283 path of ``iso`` (None: built-in defaults) if it can be built for ``robot``
+    (within limits), else ``fallback()`` with ``note`` saying why."""
     note = ""
     if use_iso:
         try:
-            vt = iso_validation_trajectory(robot, sample_time_s)
+            vt = iso_validation_trajectory(robot, sample_time_s, iso)
             ok = bool(np.all(vt.q >= robot.limits.lower_rad) and np.all(vt.q <= robot.limits.upper_rad))
             ok = ok and bool(np.all(np.abs(vt.v) <= robot.limits.velocity_rad_s * 1.0001))
             if ok:

@@ -8,6 +8,7 @@ Public entry points: :func:`cp_joint_path`, :func:`plan_cp`, :func:`plan_ptp`.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -179,6 +180,15 @@ class PTPPlan:
     build_time_s: float = 0.0
 
     def summary(self) -> dict:
+        """Headline figures. Every energy here (``ptp_energy``, ``ptp_energy_at_ruckig_duration``,
+        ``ptp_ruckig_energy`` and each ``ptp_pareto`` entry's ``energy``) is the fine-grid re-check
+        ``check_trajectory(pm, traj sampled every fine_dt_s, energy_weights=weights).energy``
+        (full friction model, trapezoid rule), never the optimiser's Simpson-rule value
+        ``PtpResult.energy``, so the same motion always reports the same energy. Violations are
+        fractions over the planning limit (0.005 = 0.5 %). ``ptp_pareto`` entries: ``k2``,
+        ``duration_s``, ``energy``, ``dominated`` (another point of the sweep is at least as short
+        and as economical: a poorer local optimum, kept after a cold-start re-solve did not beat it)
+        and ``cold_restart`` (the outcome of that re-solve, None when the point was not dominated)."""
         e_nlp = self.checks["ptp_energy_at_ruckig_duration"].energy
         e_rk = self.checks["ptp_ruckig"].energy
         return {
@@ -200,7 +210,9 @@ class PTPPlan:
             "ptp_iterations": self.result.iterations,
             "ptp_compile_time_s": self.compile_time_s,
             "ptp_ruckig_search_time_s": self.ruckig.search_time_s,
-            "ptp_pareto": [{"k2": r.k2, "duration_s": r.duration_s, "energy": r.energy} for r in self.pareto],
+            "ptp_pareto": [{"k2": r.k2, "duration_s": r.duration_s, "energy": r.info["fine_energy"],
+                            "dominated": bool(r.info.get("dominated", False)),
+                            "cold_restart": r.info.get("cold_restart")} for r in self.pareto],
         }
 
 
@@ -260,6 +272,58 @@ def solve_ptp_verified(pm: PlanningModel, problem: PtpProblem, q0: np.ndarray, q
     return res
 
 
+def settle_pareto(sweep: list[PtpResult], fine_energy: Callable[[PtpResult], float],
+                  cold_solve: Callable[[PtpResult], PtpResult],
+                  cold_started: tuple[PtpResult, ...] = ()) -> list[PtpResult]:
+    """The Pareto sweep with fine-grid energies (``info["fine_energy"] = fine_energy(r)``) and no
+    silently hidden local optima.
+
+    While a point is dominated by another (:func:`~pipeline.trajectory.validate.dominated_flags`
+    on duration and fine-grid energy) and has not been tried yet, ``cold_solve(r)`` re-solves its
+    ``k2`` once from a cold start and the one with the lower ``k1 T + k2 E`` (fine-grid energy)
+    stays (``info["cold_restart"]``: ``"kept"`` on the cold solution, ``"discarded"`` or
+    ``"failed: ..."`` on the continuation's). Results in ``cold_started`` are not re-solved
+    (``"is a cold start"``). Every result gets ``info["dominated"]`` of the final set."""
+    from pipeline.errors import InfeasibleError, SolverError
+    from pipeline.trajectory.validate import dominated_flags
+
+    def objective(r: PtpResult) -> float:
+        return r.k1 * r.duration_s + r.k2 * r.info["fine_energy"]
+
+    pts = list(sweep)
+    for r in pts:
+        r.info.setdefault("fine_energy", float(fine_energy(r)))
+    tried = {id(r) for r in cold_started}
+    while True:
+        flags = dominated_flags([(r.duration_s, r.info["fine_energy"]) for r in pts])
+        for r, f in zip(pts, flags, strict=True):
+            if f and id(r) in tried and "cold_restart" not in r.info:
+                r.info["cold_restart"] = "is a cold start"
+        todo = [i for i, f in enumerate(flags) if f and id(pts[i]) not in tried]
+        if not todo:
+            break
+        i = todo[0]
+        warm = pts[i]
+        tried.add(id(warm))
+        try:
+            cold = cold_solve(warm)
+        except (InfeasibleError, SolverError) as exc:
+            warm.info["cold_restart"] = f"failed: {exc.problem}"
+            continue
+        cold.info["fine_energy"] = float(fine_energy(cold))
+        tried.add(id(cold))
+        both = {"continuation": objective(warm), "cold": objective(cold)}
+        warm.info["cold_restart_objectives"] = cold.info["cold_restart_objectives"] = both
+        if both["cold"] < both["continuation"]:
+            cold.info["cold_restart"] = "kept"
+            pts[i] = cold
+        else:
+            warm.info["cold_restart"] = "discarded"
+    for r, f in zip(pts, flags, strict=True):
+        r.info["dominated"] = bool(f)
+    return pts
+
+
 def plan_ptp(pm: PlanningModel, problem: PtpProblem, q0: np.ndarray, q1: np.ndarray,
              cfg: TrajectoryConfig, pareto: bool = True) -> PTPPlan:
     """Time-optimal PtP (k1, k2), ruckig baseline, minimum energy at ruckig's duration, Pareto sweep."""
@@ -287,6 +351,13 @@ def plan_ptp(pm: PlanningModel, problem: PtpProblem, q0: np.ndarray, q1: np.ndar
         if cfg.ptp_k1 == 1.0 and any(np.isclose(k, cfg.ptp_k2) for k in ks):
             sweep.append(res)          # the main solution is a point of the front too
         sweep.sort(key=lambda r: r.k2)
+        # energies on the fine grid (as every other reported energy); a dominated point of the
+        # warm-started continuation is re-solved once from a cold start (the main solution
+        # already is one), the lower objective kept, a still dominated point flagged
+        sweep = settle_pareto(
+            sweep, lambda r: check_trajectory(pm, r.sample(cfg.fine_dt_s), energy_weights=w).energy,
+            lambda r: solve_ptp_verified(pm, problem, q0, q1, cfg, r.k1, r.k2, w, torque_scale=scale0),
+            cold_started=(res,))
     trajs = {"ptp": res.sample(cfg.fine_dt_s, "ptp"), "ptp_ruckig": rk.trajectory,
              "ptp_energy_at_ruckig_duration": fixed.sample(cfg.fine_dt_s, "ptp_energy_at_ruckig_duration")}
     checks = {k: check_trajectory(pm, v, energy_weights=w) for k, v in trajs.items()}

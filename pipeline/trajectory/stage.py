@@ -8,9 +8,14 @@ Paper ``004_abbe750b8bbcc3aa.txt`` §5 and DESIGN.md "Trajectories":
    as baseline;
 2. PtP: ``min k1 T + k2 int tau^T W tau dt`` with the full dynamics of the best model (identified
    after stage 2), compiled once; ruckig with the most aggressive torque-feasible kinematic limits
-   as baseline; the minimum-energy motion at ruckig's duration; a Pareto sweep over k2;
+   as baseline; the minimum-energy motion at ruckig's duration; a Pareto sweep over k2
+   (continuation from the main solution; a dominated point is re-solved once from a cold start, a
+   still dominated one is flagged and drawn hollow);
 3. every trajectory re-checked on a fine time grid with the full friction model and executed in
    stage 3's 400 µs servo simulation of the real robot.
+
+Every reported energy (summary, Pareto sweep, figure) is the fine-grid re-check with the weights of
+``ptp_energy``; violations are fractions in summary.json and percentages in the report.
 """
 
 from __future__ import annotations
@@ -54,6 +59,27 @@ def check(config: TrajectoryConfig, robot) -> None:
         if out.size:
             j = int(out[0])
             raise bad(field, f"joint {j + 1} = {q[j]:.1f} deg outside [{lo[j]:.1f}, {hi[j]:.1f}] deg")
+
+
+ENERGY_UNITS = {"torque": "N²·m²·s", "normalised": "s", "electrical": "J"}   # of int tau^T W tau dt
+
+
+def _pct(fraction: float) -> str:
+    """A fraction (summary.json) as a percentage for the report: 0.002758 -> '0.276 %'."""
+    return f"{100.0 * fraction:.3f} %"
+
+
+def pareto_table(entries: list[dict], energy_label: str) -> str:
+    """The Pareto sweep (summary ``ptp_pareto``) as a small markdown table."""
+    lines = ["PtP Pareto sweep over k2 (k1 = 1; energies on the fine grid):", "",
+             f"| k2 | duration [s] | {energy_label} | dominated |", "|---|---|---|---|"]
+    for e in entries:
+        if e.get("dominated"):
+            dom = "yes (local optimum; cold re-solve: " + str(e.get("cold_restart") or "-") + ")"
+        else:
+            dom = "no" + (f" (cold re-solve {e['cold_restart']})" if e.get("cold_restart") else "")
+        lines.append(f"| {e['k2']:g} | {e['duration_s']:.4f} | {e['energy']:.4g} | {dom} |")
+    return "\n".join(lines)
 
 
 def _control_config(ctx: StageContext):
@@ -125,6 +151,7 @@ def run(ctx: StageContext) -> StageResult:
     if cp.smooth is not None:
         arrays["trajectory_cp_smooth_t"] = cp.trajectories["cp_smooth"].t_s
         arrays["trajectory_cp_smooth_q"] = cp.trajectories["cp_smooth"].q
+    energy_label = f"energy ({cfg.ptp_energy}) [{ENERGY_UNITS.get(cfg.ptp_energy, '-')}]"
     figures = {
         "cp_normalised": activity_figure(pm, tr_cp, cp.checks["cp"],
                                          f"CP {cfg.cp_segment}: time-optimal with full friction "
@@ -136,9 +163,10 @@ def run(ctx: StageContext) -> StageResult:
                                           f"({ptp.result.duration_s:.4f} s)"),
         "ptp_vs_ruckig": comparison_figure(pm, [(k, ptp.trajectories[k], ptp.checks[k]) for k in ptp.trajectories],
                                            "PtP: torque ratio with the full friction model"),
-        "ptp_pareto": pareto_figure([(r.k2, r.duration_s, r.energy) for r in ptp.pareto],
+        "ptp_pareto": pareto_figure([(e["k2"], e["duration_s"], e["energy"]) for e in summary["ptp_pareto"]],
                                     (ptp.ruckig.duration_s, ptp.checks["ptp_ruckig"].energy),
-                                    f"energy ({cfg.ptp_energy})"),
+                                    f"energy ({cfg.ptp_energy}, fine grid) [{ENERGY_UNITS.get(cfg.ptp_energy, '-')}]",
+                                    dominated=[e["dominated"] for e in summary["ptp_pareto"]]),
     }
     data = {"simulation": sims, "ruckig": {"jerk_ratio_1_s": ptp.ruckig.jerk_ratio_1_s, **ptp.ruckig.info,
                                            "evaluations": ptp.ruckig.evaluations},
@@ -148,15 +176,20 @@ def run(ctx: StageContext) -> StageResult:
         ("CP duration [s] (full friction)", summary["cp_duration_s"]),
         ("CP toppra duration [s] (rigid body + Coulomb)", summary["cp_toppra_duration_s"]),
         ("CP ours with toppra's constraints / toppra", summary["cp_equal_vs_toppra_ratio"]),
-        ("CP fine-grid torque violation, ours / toppra (full friction)",
-         f"{summary['cp_fine_violation']:.4f} / {summary['cp_toppra_fine_violation_full_friction']:.4f}"),
+        ("CP fine-grid torque violation [% over the planning limit], ours / toppra (full friction; "
+         "summary.json: fractions)",
+         f"{_pct(summary['cp_fine_violation'])} / {_pct(summary['cp_toppra_fine_violation_full_friction'])}"),
         ("CP constraint activity: lowest at the grid points (1 = a limit active everywhere, Fig. 8) / share of "
          "the fine time grid >= 98 %", f"{summary['cp_grid_min_activity']:.4f} / {summary['cp_active_fraction']:.3f}"),
         ("CP smooth duration [s] (time cost)",
          f"{summary.get('cp_smooth_duration_s', float('nan')):.4f} "
          f"({summary.get('cp_smooth_time_cost', 0) * 100:.1f} %)"),
         ("PtP duration [s] / ruckig [s]", f"{summary['ptp_duration_s']:.4f} / {summary['ptp_ruckig_duration_s']:.4f}"),
-        ("PtP fine-grid torque violation", summary["ptp_fine_violation"]),
+        ("PtP fine-grid torque violation [% over the planning limit] (summary.json: a fraction)",
+         _pct(summary["ptp_fine_violation"])),
+        (f"PtP {energy_label} on the fine grid: ours / minimum at ruckig's duration / ruckig's",
+         f"{summary['ptp_energy']:.4g} / {summary['ptp_energy_at_ruckig_duration']:.4g} / "
+         f"{summary['ptp_ruckig_energy']:.4g}"),
         ("PtP energy at ruckig's duration / ruckig's", summary["ptp_energy_at_ruckig_duration_ratio"]),
         ("PtP solve time [s] (after compile)", summary["ptp_solve_time_s"]),
     ]
@@ -166,11 +199,15 @@ def run(ctx: StageContext) -> StageResult:
                      f"{s['max_torque_ratio']:.4f} / {s['max_averaged_torque_ratio']:.4f} / "
                      f"{s['max_feedforward_ratio']:.4f}; {max(s['feedback_std_ratio_per_joint']):.4f}, "
                      f"{1e3 * s.get('tcp_error_max_m', float('nan')):.3f}"))
+    limits = ", ".join(f"{x:.0f}" for x in summary["planning_torque_limits_Nm"])
     report = (f"Dynamics: {summary['dynamics_source']} model; every planner and baseline (CP, toppra, PtP, "
               f"ruckig) plans with the same limits, (1 - torque_reserve) = {1 - cfg.torque_reserve:g} x the "
-              "torque limits; the servo simulation is measured against the full limits.\n\n")
+              f"torque limits ({limits} N·m); the servo simulation is measured against the full limits. "
+              f"Energies are the fine-grid re-check ({cfg.fine_dt_s * 1e3:g} ms samples, full friction model).\n\n")
     report += "| quantity | value |\n|---|---|\n" + "\n".join(
         f"| {k} | {v:.4g} |" if isinstance(v, float) else f"| {k} | {v} |" for k, v in rows)
+    if summary["ptp_pareto"]:
+        report += "\n\n" + pareto_table(summary["ptp_pareto"], energy_label)
     over = {name: s for name, s in sims.items() if s["max_torque_ratio"] > 1.0}
     if over:
         listed = ", ".join(

@@ -88,14 +88,34 @@ def activity_figure(pm: PlanningModel, traj: JointTrajectory, check: TorqueCheck
     return fig
 
 
+def dominated_flags(points: list[tuple[float, float]], rtol: float = 1e-9) -> list[bool]:
+    """For each ``(duration, energy)`` point: is another point at least as good in both and
+    strictly better in one (beyond the relative tolerance ``rtol``)? Dominated points of a
+    Pareto sweep are poorer local optima of the NLP."""
+    def better(a: float, b: float) -> bool:       # a clearly below b
+        return a < b - rtol * max(abs(a), abs(b))
+
+    return [any(j != i and not better(t, tj) and not better(e, ej) and (better(tj, t) or better(ej, e))
+                for j, (tj, ej) in enumerate(points))
+            for i, (t, e) in enumerate(points)]
+
+
 def pareto_figure(points: list[tuple[float, float, float]], ruckig: tuple[float, float] | None,
-                  energy_label: str) -> Figure:
-    """Duration against energy for the k2 sweep (k2 annotated), ruckig's point for reference."""
+                  energy_label: str, dominated: list[bool] | None = None) -> Figure:
+    """Duration against energy for the k2 sweep ``(k2, duration, energy)`` (k2 annotated), ruckig's
+    point for reference. The front line joins the non-dominated points only; ``dominated`` points
+    (default: computed with :func:`dominated_flags`) are drawn hollow, labelled as local optima."""
     fig = Figure(figsize=(6, 4), constrained_layout=True)
     ax = fig.subplots()
-    T = [p[1] for p in points]
-    E = [p[2] for p in points]
-    ax.plot(T, E, "o-", label="PtP NLP (k1 = 1)")
+    if dominated is None:
+        dominated = dominated_flags([(p[1], p[2]) for p in points])
+    front = sorted((p for p, d in zip(points, dominated, strict=True) if not d), key=lambda p: p[1])
+    if front:
+        ax.plot([p[1] for p in front], [p[2] for p in front], "o-", color="tab:blue", label="PtP NLP (k1 = 1)")
+    off = [p for p, d in zip(points, dominated, strict=True) if d]
+    if off:
+        ax.plot([p[1] for p in off], [p[2] for p in off], "o", mfc="none", color="tab:blue",
+                label="dominated (local optimum)")
     for k2, t, e in points:
         ax.annotate(f"k2={k2:g}", (t, e), fontsize=7, textcoords="offset points", xytext=(4, 4))
     if ruckig is not None:

@@ -16,7 +16,9 @@ from pipeline.trajectory.trajectories import check_trajectory
 
 @pytest.fixture(scope="module")
 def plan(pm, ptp_problem, big_move, quick_traj_config):
-    cfg = dataclasses.replace(quick_traj_config, ptp_pareto_k2=[0.1, 1.0])
+    # 0.01 = the main solution's k2 (k1 = 1): reused as a point of the sweep, no extra solve
+    cfg = dataclasses.replace(quick_traj_config, ptp_pareto_k2=[0.01, 0.1, 1.0])
+    assert cfg.ptp_k1 == 1.0 and cfg.ptp_k2 == 0.01
     return plan_ptp(pm, ptp_problem, *big_move, cfg)
 
 
@@ -45,8 +47,110 @@ def test_energy_optimum_at_ruckig_duration(plan):
 
 def test_pareto_trades_time_for_energy(plan):
     T = [r.duration_s for r in plan.pareto]
-    E = [r.energy for r in plan.pareto]
+    E = [r.info["fine_energy"] for r in plan.pareto]
     assert T[-1] >= T[0] - 1e-6 and E[-1] <= E[0] + 1e-6
+
+
+def test_every_reported_energy_is_the_fine_grid_one(plan, pm, quick_traj_config):
+    """Summary and Pareto entries report the fine-grid re-check with the same weights, so the
+    main solution has one energy wherever it appears (not the optimiser's Simpson value)."""
+    s = plan.summary()
+    dt = quick_traj_config.fine_dt_s
+    assert [e["k2"] for e in s["ptp_pareto"]] == [0.01, 0.1, 1.0]
+    for e, r in zip(s["ptp_pareto"], plan.pareto, strict=True):
+        assert e["energy"] == check_trajectory(pm, r.sample(dt), energy_weights=plan.weights).energy
+    main = s["ptp_pareto"][0]
+    assert plan.pareto[0] is plan.result
+    assert main["energy"] == s["ptp_energy"] and main["duration_s"] == s["ptp_duration_s"]
+    assert plan.result.energy != s["ptp_energy"]          # the Simpson value differs: not reported
+    assert s["ptp_ruckig_energy"] == check_trajectory(pm, plan.ruckig.trajectory, energy_weights=plan.weights).energy
+
+
+def _really_dominated(i, pts):
+    t, e = pts[i]
+    return any(j != i and tj <= t and ej <= e and (tj < t or ej < e) for j, (tj, ej) in enumerate(pts))
+
+
+def test_pareto_front_monotone_and_flags_true(plan):
+    entries = plan.summary()["ptp_pareto"]
+    pts = [(e["duration_s"], e["energy"]) for e in entries]
+    assert all(isinstance(e["dominated"], bool) for e in entries)
+    for i, e in enumerate(entries):
+        if e["dominated"]:
+            assert _really_dominated(i, pts)
+    front = sorted((p for p, e in zip(pts, entries, strict=True) if not e["dominated"]), key=lambda p: p[0])
+    assert len(front) >= 2
+    for (t0, e0), (t1, e1) in zip(front[:-1], front[1:], strict=True):
+        assert t1 >= t0 and e1 <= e0          # duration increasing => energy decreasing
+
+
+def test_dominated_flags():
+    from pipeline.trajectory.validate import dominated_flags
+
+    # k2 = 0.003 of the review: 0.629 s / 1.760 is worse in both than 0.628 s / 1.416
+    pts = [(0.629, 1.760), (0.628, 1.416), (0.64, 1.3), (0.64, 1.3), (0.70, 1.35)]
+    assert dominated_flags(pts) == [True, False, False, False, True]   # equal points do not dominate
+    assert dominated_flags([(1.0, 1.0), (1.0 + 1e-12, 1.0)]) == [False, False]   # within the tolerance
+
+
+def _fake(k2, T, E, tag="warm"):
+    from pipeline.trajectory.ptp import PtpResult
+
+    z = np.zeros((2, 1))
+    return PtpResult(np.array([0.0, T]), z, z, z, T, -1.0, 0.0, 0.0, 0, 1.0, k2, info={"E": E, "tag": tag})
+
+
+def test_settle_pareto_resolves_dominated_points_cold():
+    """Re-solve each dominated point once from a cold start, keep the lower k1 T + k2 E (fine-grid
+    E), flag what stays dominated, never re-solve the main (cold-started) solution."""
+    from pipeline.trajectory.solve import settle_pareto
+
+    main = _fake(0.01, 0.628, 1.416, "main")
+    better = _fake(0.003, 0.627, 1.5, "cold")           # beats 0.629 / 1.760 and is not dominated
+    worse = _fake(0.1, 0.70, 1.6, "cold")              # still dominated, higher objective
+    sweep = [_fake(0.003, 0.629, 1.760), main, _fake(0.1, 0.65, 1.5), _fake(0.3, 0.66, 1.45),
+             _fake(1.0, 0.64, 1.3)]
+    cold = {0.003: better, 0.1: worse, 0.3: SolverError(None, "ptp", "IPOPT failed: Maximum_Iterations")}
+    asked = []
+
+    def cold_solve(r):
+        asked.append(r.k2)
+        out = cold[r.k2]
+        if isinstance(out, Exception):
+            raise out
+        return out
+
+    out = settle_pareto(sweep, lambda r: r.info["E"], cold_solve, cold_started=(main,))
+    assert sorted(asked) == [0.003, 0.1, 0.3]                 # each once; main and 1.0 not
+    assert out[0] is better and better.info["cold_restart"] == "kept" and not better.info["dominated"]
+    assert out[2] is sweep[2] and out[2].info["cold_restart"] == "discarded" and out[2].info["dominated"]
+    assert out[3].info["cold_restart"].startswith("failed: IPOPT failed") and out[3].info["dominated"]
+    assert out[1] is main and not main.info["dominated"] and out[4].info["dominated"] is False
+    assert [r.info["fine_energy"] for r in out] == [1.5, 1.416, 1.5, 1.45, 1.3]
+    pts = [(r.duration_s, r.info["fine_energy"]) for r in out]
+    assert [_really_dominated(i, pts) for i in range(len(pts))] == [r.info["dominated"] for r in out]
+
+
+def test_settle_pareto_flags_a_dominated_main_solution():
+    from pipeline.trajectory.solve import settle_pareto
+
+    main = _fake(0.01, 0.7, 2.0, "main")
+    out = settle_pareto([main, _fake(0.1, 0.6, 1.0)], lambda r: r.info["E"],
+                        lambda r: pytest.fail("the main solution is a cold start already"), cold_started=(main,))
+    assert main.info["dominated"] and main.info["cold_restart"] == "is a cold start"
+    assert not out[1].info["dominated"]
+
+
+def test_pareto_figure_marks_dominated_points():
+    from pipeline.trajectory.validate import pareto_figure
+
+    fig = pareto_figure([(0.003, 0.629, 1.76), (0.01, 0.628, 1.416), (0.1, 0.64, 1.3)], (0.9, 1.2), "energy [s]")
+    ax = fig.axes[0]
+    lines = {ln.get_label(): ln for ln in ax.get_lines()}
+    assert list(lines["PtP NLP (k1 = 1)"].get_xdata()) == [0.628, 0.64]        # the front only
+    hollow = lines["dominated (local optimum)"]
+    assert list(hollow.get_xdata()) == [0.629] and hollow.get_markerfacecolor() == "none"
+    assert "dominated (local optimum)" in [t.get_text() for t in ax.get_legend().get_texts()]
 
 
 def test_warm_start_from_own_solution_stays_put(plan, ptp_problem, big_move):

@@ -18,7 +18,8 @@ REQUIRED = ("cp_duration_s", "cp_toppra_duration_s", "cp_fine_violation", "cp_to
 
 
 def test_stage_quick(quick_config, rx130l, ptp_problem, tmp_path):
-    cfg = dataclasses.replace(quick_config.trajectory, ptp_pareto_k2=[0.1])
+    # 0.01 = the main solution's k2: reused as a Pareto point (no extra solve)
+    cfg = dataclasses.replace(quick_config.trajectory, ptp_pareto_k2=[0.01, 0.1])
     real = RealRobot.create(rx130l, quick_config.seed, TruthConfig())
     ctx = StageContext(run=quick_config, config=cfg, robot=rx130l.copy(), real=real, upstream={},
                        out_dir=tmp_path, rng=stage_rng(quick_config.seed, "trajectory"),
@@ -40,6 +41,40 @@ def test_stage_quick(quick_config, rx130l, ptp_problem, tmp_path):
         assert q.shape == (len(t), 6) and np.all(np.diff(t) > 0)
     assert {"cp_normalised", "ptp_normalised", "ptp_pareto"} <= set(res.figures)
     assert "toppra" in res.report_md
+    # one energy per motion: the fine-grid value in the summary and in the Pareto entry alike
+    main = next(e for e in s["ptp_pareto"] if e["k2"] == cfg.ptp_k2)
+    assert main["energy"] == s["ptp_energy"] and main["duration_s"] == s["ptp_duration_s"]
+    assert all(set(e) >= {"k2", "duration_s", "energy", "dominated"} for e in s["ptp_pareto"])
+    # the report: violations in %, the Pareto sweep as a table, torques in N·m
+    row = _report_row(res.report_md, "PtP fine-grid torque violation")
+    assert row.rstrip(" |").endswith("%") and "fraction" in row
+    assert f"{100 * s['ptp_fine_violation']:.3f} %" in row
+    cp_row = _report_row(res.report_md, "CP fine-grid torque violation")
+    assert cp_row.count("%") >= 3 and "fractions" in cp_row
+    assert "| k2 | duration [s] | energy (normalised) [s] | dominated |" in res.report_md
+    assert "N·m" in res.report_md
+
+
+def _report_row(report: str, label_start: str) -> str:
+    return next(line for line in report.splitlines() if line.startswith(f"| {label_start}"))
+
+
+def test_report_units_and_pareto_table():
+    """Violations as percentages (summary.json keeps fractions), the Pareto sweep as a small
+    rounded table with the dominated flag, N·m for torques (from a summary, no solver run)."""
+    summary = {"ptp_pareto": [
+        {"k2": 0.003, "duration_s": 0.6291234567891234, "energy": 1.7601234567891234, "dominated": True,
+         "cold_restart": "discarded"},
+        {"k2": 0.01, "duration_s": 0.6281234567891234, "energy": 1.4161234567891234, "dominated": False,
+         "cold_restart": None}]}
+    table = stage.pareto_table(summary["ptp_pareto"], "energy (normalised) [s]")
+    lines = table.splitlines()
+    assert "| k2 | duration [s] | energy (normalised) [s] | dominated |" in lines
+    assert "| 0.003 | 0.6291 | 1.76 | yes (local optimum; cold re-solve: discarded) |" in lines
+    assert "| 0.01 | 0.6281 | 1.416 | no |" in lines
+    assert "1234567" not in table
+    assert stage._pct(0.002758) == "0.276 %" and stage._pct(0.0) == "0.000 %"
+    assert stage.ENERGY_UNITS["torque"] == "N²·m²·s"
 
 
 def test_check_names_bad_fields(quick_config, rx130l):

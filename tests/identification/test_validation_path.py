@@ -1,0 +1,76 @@
+"""The validation path is the run's EN ISO 9283 path (``control.iso``, robot run_defaults
+included), its settings enter the identification inputs hash, and a fallback is reported."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.config import load_config, resolve_robot_dir
+from pipeline.control.config import ControlConfig
+from pipeline.identification import stage
+from pipeline.identification import validate as val_mod
+from pipeline.robot.model import RobotModel
+from pipeline.runner import RunConfig, plan_stages, stage_inputs_hashes
+
+
+def _identification_hash(values: dict | None = None) -> str:
+    cfg = load_config(values=values, stages="identification")
+    plans = plan_stages(cfg)
+    return stage_inputs_hashes(cfg, plans, resolve_robot_dir(cfg))["identification"]
+
+
+def test_stage_declares_that_it_reads_control_iso():
+    assert "control.iso" in stage.CONFIG_READS
+
+
+def test_inputs_hash_follows_control_iso_only():
+    base = _identification_hash()
+    assert _identification_hash() == base
+    assert _identification_hash({"control.iso.edge_m": 0.4}) != base
+    assert _identification_hash({"control.iso.centre_m": [1.0, 0.1, 0.6]}) != base
+    assert _identification_hash({"control.settle_time_s": 0.5}) == base       # not read by identification
+    assert _identification_hash({"control.variants": ["none", "full"]}) == base
+
+
+def _no_fallback():
+    raise AssertionError("fell back to the Fourier trajectory")
+
+
+@pytest.fixture(scope="module")
+def tx40():
+    return RobotModel.load("staubli_tx40")
+
+
+def test_tx40_validates_on_the_iso_path_of_its_run_defaults(tx40):
+    run = load_config(values={"robot": "staubli_tx40"})
+    iso = val_mod.run_iso_config(run)
+    assert iso is run.control.iso and iso.edge_m == pytest.approx(0.2)      # robot.yaml run_defaults
+    vt = val_mod.validation_trajectory(tx40, 4e-3, _no_fallback, iso=iso)
+    assert vt.label == "iso9283" and "edge 0.2 m" in vt.note
+    assert np.all(vt.q >= tx40.limits.lower_rad) and np.all(vt.q <= tx40.limits.upper_rad)
+
+
+def test_rx130l_sized_path_falls_back_on_the_tx40(tx40):
+    fallback = val_mod.ValidationTrajectory(np.zeros(2), np.zeros((2, 6)), np.zeros((2, 6)), np.zeros((2, 6)),
+                                            "fourier", "a random feasible Fourier trajectory")
+    vt = val_mod.validation_trajectory(tx40, 4e-3, lambda: fallback, iso=ControlConfig().iso)
+    assert vt.label == "fourier" and "ISO 9283 path" in vt.note
+    md = stage._validation_markdown(stage.Config(), vt, ControlConfig().iso, tx40)
+    assert "Warning" in md and "control.iso.centre_m" in md and "control.iso.edge_m" in md
+    assert "fell back" in md
+
+
+def test_iso_path_markdown_names_the_path(tx40):
+    run = load_config(values={"robot": "staubli_tx40"})
+    vt = val_mod.validation_trajectory(tx40, 4e-3, _no_fallback, iso=run.control.iso)
+    md = stage._validation_markdown(stage.Config(), vt, run.control.iso, tx40)
+    assert "EN ISO 9283 path" in md and "Warning" not in md
+
+
+def test_missing_control_section_uses_the_built_in_path():
+    bare = RunConfig(sections={"control": {}})
+    assert val_mod.run_iso_config(bare) == ControlConfig().iso
+    assert val_mod.run_iso_config(RunConfig()) == ControlConfig().iso
+    run = load_config(values={"control.iso.edge_m": 0.3})
+    assert val_mod.run_iso_config(run).edge_m == pytest.approx(0.3)
