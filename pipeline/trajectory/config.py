@@ -53,7 +53,7 @@ class TrajectoryConfig:
     ptp_jit: bool = True
     ptp_jit_flags: list[str] = field(default_factory=lambda: ["-O1"])   # gcc optimisation of the NLP code
     # Coulomb-width continuation of the time-optimal solve, then the model's width: [1.0, 0.1] needs
-    # fewer IPOPT iterations than [0.1] (issue-6 move: 88 vs 123, about 1.0 s vs 1.5 s; 9 random
+    # fewer IPOPT iterations than [0.1] (measured at IPOPT tol 1e-6: issue-6 move 88 vs 123; 9 random
     # moves on the nominal and the identified RX130L: 3-10 % fewer iterations in all)
     ptp_coulomb_widths_rad_s: list[float] = field(default_factory=lambda: [1.0, 0.1])
     # continuation of the fixed-duration energy solve (at ruckig's duration): on the issue-6 move it
