@@ -1,4 +1,5 @@
-"""The stage runner: run stages in order, reuse finished ones, write ``report.md``.
+"""The stage runner: run stages in order, reuse finished ones, write ``report.md``
+(:mod:`pipeline.report`).
 
 Each stage is a module (registry :data:`pipeline.config.STAGES`) exposing::
 
@@ -38,6 +39,7 @@ import yaml
 import pipeline
 from pipeline import artefacts
 from pipeline import config as config_mod
+from pipeline import report as report_mod
 from pipeline.artefacts import StageOutput, load_stage_output
 from pipeline.config import REPO_ROOT, RunConfig, resolve_robot_dir
 from pipeline.errors import ConfigError, PipelineError
@@ -306,105 +308,6 @@ def write_stage_result(stage_dir: Path, name: str, result: StageResult, inputs_s
 
 
 # --------------------------------------------------------------------------------------------
-# report.md
-# --------------------------------------------------------------------------------------------
-def _fmt(value: Any) -> str:
-    if isinstance(value, bool) or value is None:
-        return str(value)
-    if isinstance(value, float):
-        return f"{value:.6g}"
-    if isinstance(value, (list, tuple)):
-        if len(value) > 12:
-            return "[" + ", ".join(_fmt(v) for v in value[:12]) + f", … ({len(value)} items)]"
-        return "[" + ", ".join(_fmt(v) for v in value) + "]"
-    if isinstance(value, dict):
-        return "{" + ", ".join(f"{k}: {_fmt(v)}" for k, v in value.items()) + "}"
-    return str(value).replace("|", "\\|").replace("\n", " ")
-
-
-def _flatten(d: dict, prefix: str = "") -> list[tuple[str, Any]]:
-    rows: list[tuple[str, Any]] = []
-    for key, value in d.items():
-        name = f"{prefix}{key}"
-        if isinstance(value, dict):
-            rows.extend(_flatten(value, name + "."))
-        else:
-            rows.append((name, value))
-    return rows
-
-
-def summary_table(summary: dict) -> str:
-    """Markdown table ``| key | value |`` of a (nested) summary dict."""
-    rows = _flatten(summary)
-    if not rows:
-        return "_no summary figures_\n"
-    lines = ["| quantity | value |", "|---|---|"]
-    lines += [f"| {k} | {_fmt(v)} |" for k, v in rows]
-    return "\n".join(lines) + "\n"
-
-
-def _one_line_error(exc: BaseException) -> str:
-    if isinstance(exc, PipelineError):
-        return exc.one_line()
-    if isinstance(exc, KeyboardInterrupt):
-        return "interrupted (Ctrl-C)"
-    text = " ".join(str(exc).split())
-    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
-
-
-def write_report(run_dir: Path, cfg: RunConfig | None = None, current: Sequence[str] = (),
-                 expected: Mapping[str, str] | None = None, failure: tuple[str, str] | None = None) -> Path:
-    """Gather every finished stage directory of ``run_dir`` into ``report.md``.
-
-    Figures are linked relatively (``<stage>/<name>.png``). Stage directories that were not part
-    of this run (``current``) are marked as coming from an earlier run, and so is every stage whose
-    saved ``inputs.sha256`` differs from ``expected[stage]`` (this run's inputs hash: the stage
-    failed or was not re-run after a failure). ``failure``: ``(stage, one-line error)`` of a
-    failed run, stated at the top.
-    """
-    run_dir = Path(run_dir)
-    expected = expected or {}
-    lines = [f"# Run `{run_dir.name}`", ""]
-    if failure is not None:
-        stage, error = failure
-        where = f" in stage `{stage}`" if stage else ""
-        lines += [f"**FAILED{where}**: {' '.join(error.split())}", "",
-                  "`config.yaml` holds the configuration of this failed run; stages marked "
-                  "_stale_ below show results of an earlier run.", ""]
-    if cfg is not None:
-        lines += [f"robot `{cfg.robot}` · seed {cfg.seed} · profile `{cfg.profile}` · "
-                  f"pipeline {pipeline.__version__} · config in `config.yaml`", ""]
-    names = [s for s in config_mod.stage_names() if (run_dir / s / artefacts.INPUTS_HASH).exists()]
-    extra = sorted(p.name for p in run_dir.iterdir()
-                   if p.is_dir() and not p.name.startswith(".") and p.name not in names
-                   and (p / artefacts.INPUTS_HASH).exists())
-    for name in [*names, *extra]:
-        d = run_dir / name
-        manifest = artefacts.read_json(d / artefacts.MANIFEST) if (d / artefacts.MANIFEST).exists() else {}
-        lines += [f"## {name}", ""]
-        if current and name not in current:
-            lines += ["_from an earlier run: not part of this run, its inputs may differ_", ""]
-        elif failure is not None and name == failure[0]:
-            lines += ["_stale: this stage FAILED in this run; the results below are from an earlier run_", ""]
-        elif name in expected and artefacts.read_inputs_hash(d) != expected[name]:
-            lines += ["_stale: from an earlier run with different inputs (not re-run in this run)_", ""]
-        if manifest.get("finished_utc"):
-            lines += [f"finished {manifest['finished_utc']} in {manifest.get('duration_s', 0):.1f} s", ""]
-        summary = artefacts.read_json(d / artefacts.SUMMARY) if (d / artefacts.SUMMARY).exists() else {}
-        report_md = d / artefacts.REPORT_MD
-        stage_md = report_md.read_text(encoding="utf-8").rstrip() if report_md.exists() else ""
-        if stage_md:  # the stage's own tables first; every headline figure folded below them
-            lines += [stage_md, "", f"<details><summary>all figures of <code>{name}/summary.json</code></summary>",
-                      "", summary_table(summary), "</details>", ""]
-        else:
-            lines += [summary_table(summary)]
-        figures = manifest.get("figures") or sorted(p.name for p in d.glob("*.png"))
-        for fig in figures:
-            lines += [f"![{name}: {Path(fig).stem}]({name}/{fig})", ""]
-    return artefacts.write_text(run_dir / "report.md", "\n".join(lines).rstrip() + "\n")
-
-
-# --------------------------------------------------------------------------------------------
 # Running
 # --------------------------------------------------------------------------------------------
 def run_pipeline(
@@ -478,10 +381,10 @@ def run_pipeline(
                     handed_robot[plan.name] = outputs[plan.name].robot
             current = None
     except BaseException as exc:
-        failure = (current or "", _one_line_error(exc))
+        failure = (current or "", report_mod.one_line_error(exc))
         raise
     finally:
-        report = write_report(run_dir, cfg, [p.name for p in plans],
+        report = report_mod.write_report(run_dir, cfg, [p.name for p in plans],
                               expected={p.name: p.inputs_sha256 for p in plans}, failure=failure)
     say(f"report: {report}")
     return RunResult(run_dir, report, outputs, ran, reused)

@@ -3,15 +3,15 @@
 Range and length checks that do not need the robot are in ``validate(source)`` (called by
 :func:`pipeline.config.load_config` with the file or ``--set`` the section came from, and by
 ``__post_init__`` for configs built in Python); the joint-vector lengths (``nq``) are checked by
-``pipeline.control.stage.check``. The ``check_*`` helpers are shared with the trajectory section.
+``pipeline.control.stage.check``. Field checks: :mod:`pipeline.config_checks`.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
+from pipeline.config_checks import check_choice, check_count, check_number, check_unique, check_vector
 from pipeline.errors import ConfigError
 
 FEEDFORWARD_VARIANTS = ("none", "gravity", "full", "full_friction")
@@ -22,67 +22,6 @@ PATH_FRAMES = ("reflector", "tcp")
 ON_SATURATION = ("error", "clip")
 
 
-# --------------------------------------------------------------------------------------------
-# Checks shared by the control and trajectory sections (raise ConfigError naming the field)
-# --------------------------------------------------------------------------------------------
-def _bounds(gt: float | None, ge: float | None, lt: float | None, le: float | None) -> str:
-    lo = f"> {gt:g}" if gt is not None else f">= {ge:g}" if ge is not None else None
-    hi = f"< {lt:g}" if lt is not None else f"<= {le:g}" if le is not None else None
-    if lo and hi:
-        left = "(" if gt is not None else "["
-        right = ")" if lt is not None else "]"
-        low, high = (gt if gt is not None else ge), (lt if lt is not None else le)
-        return f"in {left}{low:g}, {high:g}{right}"
-    return lo or hi or "finite"
-
-
-def check_number(source: Any, name: str, value: Any, *, gt: float | None = None, ge: float | None = None,
-                 lt: float | None = None, le: float | None = None, unit: str = "", why: str = "") -> None:
-    """ConfigError unless ``value`` is a finite number within the bounds (``gt`` > , ``ge`` >=, ...)."""
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-    if ok:
-        ok = ((gt is None or value > gt) and (ge is None or value >= ge)
-              and (lt is None or value < lt) and (le is None or value <= le))
-    if not ok:
-        what = "a finite number" if (gt, ge, lt, le) == (None, None, None, None) else _bounds(gt, ge, lt, le)
-        unit_text = f" {unit}" if unit else ""
-        raise ConfigError(source, name, f"expected {what}{unit_text}, got {value!r}{why}")
-
-
-def check_count(source: Any, name: str, value: Any, minimum: int, why: str = "") -> None:
-    """ConfigError unless ``value`` is an int >= ``minimum``."""
-    if not isinstance(value, int) or isinstance(value, bool) or value < minimum:
-        raise ConfigError(source, name, f"expected an integer >= {minimum}, got {value!r}{why}")
-
-
-def check_choice(source: Any, name: str, value: Any, allowed: tuple[str, ...]) -> None:
-    if value not in allowed:
-        raise ConfigError(source, name, f"expected one of {', '.join(allowed)}, got {value!r}")
-
-
-def check_vector(source: Any, name: str, values: Any, n: int | None = None, unit: str = "", *,
-                 gt: float | None = None, nonempty: bool = False) -> None:
-    """A list of finite numbers: ``n`` of them (if given), non-empty (if asked), each > ``gt`` (if given)."""
-    unit_text = f" ({unit})" if unit else ""
-    if not isinstance(values, (list, tuple)):
-        raise ConfigError(source, name, f"expected a list of numbers{unit_text}, got {values!r}")
-    if n is not None and len(values) != n:
-        raise ConfigError(source, name, f"expected {n} numbers{unit_text}, got {len(values)}: {list(values)!r}")
-    if nonempty and not values:
-        raise ConfigError(source, name, f"expected at least one number{unit_text}, got an empty list")
-    for i, v in enumerate(values):
-        check_number(source, f"{name}[{i}]", v, gt=gt, unit=unit)
-
-
-def check_unique(source: Any, name: str, values: list) -> None:
-    seen = set()
-    for v in values:
-        if v in seen:
-            raise ConfigError(source, name, f"{v!r} is listed twice in {list(values)!r}")
-        seen.add(v)
-
-
-# --------------------------------------------------------------------------------------------
 @dataclass
 class IsoPathConfig:
     """EN ISO 9283 test path (DESIGN.md): cube of edge L, centre, diagonal plane, speeds."""

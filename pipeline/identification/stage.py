@@ -24,9 +24,7 @@ and the real Stäubli TX40 record (paper ``004_abbe750b8bbcc3aa.txt`` §4; issue
 from __future__ import annotations
 
 import copy
-import math
 import time
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -39,15 +37,18 @@ from pipeline.identification import estimate as est_mod
 from pipeline.identification import fourier, report
 from pipeline.identification import measure as meas_mod
 from pipeline.identification import validate as val_mod
+from pipeline.identification.config import (
+    DATA_BORDER_SAMPLES,
+    MAX_SAMPLE_TIME_S,
+    Config,
+    ExcitationConfig,
+)
 from pipeline.identification.regressor import (
-    BASE_QR_TOLERANCE,
     RegressorModel,
     base_parameters,
     standard_parameters,
 )
 from pipeline.identification.tx40 import (
-    TX40_SAMPLE_TIME_S,
-    Tx40Config,
     Tx40Result,
     check_tx40_config,
     heldout_validation,
@@ -60,148 +61,6 @@ DEPENDS: tuple[str, ...] = ("model", "calibration")
 #: settings of other sections this stage reads (the runner adds them to its inputs hash): the
 #: validation path is the run's EN ISO 9283 path (robot ``run_defaults`` included)
 CONFIG_READS: tuple[str, ...] = ("control.iso",)
-
-
-# --------------------------------------------------------------------------------- early checks
-#: processed samples dropped at each end of a data_file record (filter transients)
-DATA_BORDER_SAMPLES = 20
-#: longest plausible sample interval of a torque/encoder record (20 Hz); a longer one in a data
-#: file means its t column is not in seconds
-MAX_SAMPLE_TIME_S = 0.05
-TX40_NYQUIST_HZ = 0.5 / TX40_SAMPLE_TIME_S
-
-
-@dataclass
-class ExcitationConfig:
-    """Fourier excitation and its optimisation (``design.optimize_excitation``)."""
-
-    harmonics: int = 5
-    base_frequency_hz: float = 0.1
-    n_samples: int = 100  # samples of one period in the NLP (criterion and constraints)
-    n_starts: int = 3  # IPOPT runs from the best random feasible trajectories
-    n_random: int = 20  # random feasible trajectories for the baseline median
-    max_iter: int = 100
-    criterion: str = "cond"  # cond | logdet
-    # >0: IPOPT minimises a smooth surrogate of log cond, soft max - soft min of log(eigenvalues)
-    # of W^T W (log-sum-exp with this width); the reported condition number is the exact one
-    cond_softness: float = 0.2
-    position_margin: float = 0.95
-    velocity_margin: float = 0.95
-    acceleration_margin: float = 0.95
-    torque_margin: float = 0.8  # of the torque limit, for the nominal model (truth differs)
-    floor_clearance_m: float = 0.05
-    self_clearance_m: float = 0.02
-    n_check: int = 400  # fine grid of the final feasibility check
-
-
-@dataclass
-class Config:
-    """Settings of the ``identification`` stage."""
-
-    excitation: ExcitationConfig = field(default_factory=ExcitationConfig)
-    periods: int = 4
-    sample_time_s: float = 4e-4  # torque/encoder sampling (control loop)
-    state_cutoff_factor: float = 4.0  # position low-pass at this x the highest harmonic frequency
-    decimation: int = 25  # block means of this many samples (parallel decimation)
-    base_tolerance: float = BASE_QR_TOLERANCE
-    base_samples: int = 300
-    regularization: float = 1e-3  # pull of the physical fit towards the nominal model
-    physical_max_iter: int = 1000
-    validation: str = "iso9283"  # iso9283 | fourier
-    validation_sample_time_s: float = 4e-3
-    data_file: str = ""  # CSV record instead of the simulated experiment
-    data_side: str = "joint"  # joint | motor (columns of data_file)
-    data_cutoff_hz: float = 20.0  # position low-pass for a (non-periodic) data_file
-    data_decimation: int = 10
-    # actuator columns: "gear" = motor-side rotor/friction through the gear matrix (coupled axes,
-    # e.g. TX40 5/6), "none" = diagonal joint-side (RobotModel, SymbolicRobot and the hidden robot),
-    # "auto" = gear for a data_file (a real drive train), none for the simulated hidden robot
-    actuator_coupling: str = "auto"
-    run_tx40: bool = True
-    tx40: Tx40Config = field(default_factory=Tx40Config)
-    score_against_truth: bool = True  # simulated runs: z-scores of the final base estimate vs the truth
-    replay_rate_hz: float = 50.0
-    # data_file: validation fits on this first fraction of the record, scores on the rest
-    data_train_fraction: float = 0.7
-
-    def validate(self, source: Any = None) -> None:
-        """Range checks of values of the right type (called by ``pipeline.config`` at load time
-        with the file or ``--set`` that set them, and again by :func:`run`); the robot-dependent
-        ones are in :func:`check`."""
-        ex = self.excitation
-        tx = self.tx40
-        p = "identification."
-
-        def fin(x: float) -> bool:
-            return math.isfinite(x)
-
-        checks = [
-            ("excitation.harmonics", ex.harmonics >= 1, "must be >= 1"),
-            ("excitation.base_frequency_hz", fin(ex.base_frequency_hz) and ex.base_frequency_hz > 0, "must be > 0"),
-            ("excitation.n_samples", ex.n_samples >= 10, "must be >= 10"),
-            ("excitation.n_samples", ex.n_samples > 2 * ex.harmonics,
-             f"must be > 2 x excitation.harmonics = {2 * ex.harmonics} (sampling of the highest harmonic)"),
-            ("excitation.n_starts", ex.n_starts >= 1, "must be >= 1"),
-            ("excitation.n_random", ex.n_random >= 1, "must be >= 1"),
-            ("excitation.max_iter", ex.max_iter >= 0, "must be >= 0"),
-            ("excitation.n_check", ex.n_check >= 2, "must be >= 2"),
-            ("excitation.criterion", ex.criterion in ("cond", "logdet"), "must be cond or logdet"),
-            ("excitation.cond_softness", fin(ex.cond_softness) and ex.cond_softness >= 0, "must be >= 0"),
-            ("excitation.floor_clearance_m", fin(ex.floor_clearance_m) and 0 <= ex.floor_clearance_m < 1,
-             "must be in [0, 1) m (a clearance in metres)"),
-            ("excitation.self_clearance_m", fin(ex.self_clearance_m) and 0 <= ex.self_clearance_m < 1,
-             "must be in [0, 1) m (a clearance in metres)"),
-            ("periods", self.periods >= 1, "must be >= 1"),
-            ("sample_time_s", fin(self.sample_time_s) and 0 < self.sample_time_s <= MAX_SAMPLE_TIME_S,
-             f"must be in (0, {MAX_SAMPLE_TIME_S}] s (torque/encoder sampling)"),
-            ("state_cutoff_factor", fin(self.state_cutoff_factor) and self.state_cutoff_factor > 1, "must be > 1"),
-            ("decimation", self.decimation >= 1, "must be >= 1"),
-            ("base_tolerance", fin(self.base_tolerance) and 0 < self.base_tolerance < 1, "must be in (0, 1)"),
-            ("base_samples", self.base_samples >= 1, "must be >= 1"),
-            ("regularization", fin(self.regularization) and self.regularization >= 0, "must be >= 0"),
-            ("physical_max_iter", self.physical_max_iter >= 1, "must be >= 1"),
-            ("validation", self.validation in ("iso9283", "fourier"), "must be iso9283 or fourier"),
-            ("validation_sample_time_s", fin(self.validation_sample_time_s)
-             and 0 < self.validation_sample_time_s <= MAX_SAMPLE_TIME_S, f"must be in (0, {MAX_SAMPLE_TIME_S}] s"),
-            ("data_side", self.data_side in ("joint", "motor"), "must be joint or motor"),
-            ("data_cutoff_hz", fin(self.data_cutoff_hz) and self.data_cutoff_hz > 0, "must be > 0"),
-            ("data_decimation", self.data_decimation >= 1, "must be >= 1"),
-            ("actuator_coupling", self.actuator_coupling in ("auto", "gear", "none"), "must be auto, gear or none"),
-            ("replay_rate_hz", fin(self.replay_rate_hz) and self.replay_rate_hz > 0, "must be > 0"),
-            ("data_train_fraction", 0 < self.data_train_fraction < 1, "must be in (0, 1)"),
-            ("tx40.train_fraction", 0 < tx.train_fraction < 1, "must be in (0, 1)"),
-            ("tx40.cutoff_hz", fin(tx.cutoff_hz) and 0 < tx.cutoff_hz < TX40_NYQUIST_HZ,
-             f"must be in (0, {TX40_NYQUIST_HZ:g}) Hz (Nyquist frequency of the {1 / TX40_SAMPLE_TIME_S:g} Hz "
-             "TX40 record)"),
-            ("tx40.decimation", tx.decimation >= 1, "must be >= 1"),
-            ("tx40.border_samples", tx.border_samples >= 0, "must be >= 0"),
-            ("tx40.regularization", fin(tx.regularization) and tx.regularization >= 0, "must be >= 0"),
-            ("tx40.max_iter", tx.max_iter >= 1, "must be >= 1 (IPOPT iterations of the physical fit)"),
-            ("tx40.max_samples", tx.max_samples >= 0, "must be >= 0 (0: the whole record)"),
-        ]
-        for fld, ok, problem in checks:
-            if not ok:
-                value = self
-                for part in fld.split("."):
-                    value = getattr(value, part)
-                raise ConfigError(source, p + fld, f"{problem}, got {value!r}")
-        for name in ("position_margin", "velocity_margin", "acceleration_margin", "torque_margin"):
-            v = getattr(ex, name)
-            if not 0 < v <= 1:
-                raise ConfigError(source, f"{p}excitation.{name}", f"must be in (0, 1], got {v}")
-        if not self.data_file:  # the simulated experiment samples whole periods
-            per = 1.0 / ex.base_frequency_hz
-            n = per / self.sample_time_s
-            if abs(n - round(n)) > 1e-6:
-                raise ConfigError(source, p + "sample_time_s",
-                                  f"{self.sample_time_s} s does not divide the period {per} s")
-            cutoff = self.state_cutoff_factor * ex.harmonics * ex.base_frequency_hz
-            nyquist = 0.5 / self.sample_time_s
-            if not cutoff < nyquist:
-                raise ConfigError(source, p + "state_cutoff_factor",
-                                  f"the position low-pass at {self.state_cutoff_factor:g} x the highest harmonic "
-                                  f"({ex.harmonics} x {ex.base_frequency_hz:g} Hz) = {cutoff:g} Hz is not below the "
-                                  f"Nyquist frequency {nyquist:g} Hz of sample_time_s = {self.sample_time_s:g} s")
 
 
 def _nominal_robot(ctx: StageContext) -> Any:

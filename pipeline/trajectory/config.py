@@ -5,16 +5,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from pipeline.control.config import (
-    ISO_PLANES,
-    check_choice,
-    check_count,
-    check_number,
-    check_vector,
-)
+from pipeline.config_checks import check_choice, check_count, check_number, check_vector
+from pipeline.control.config import ISO_PLANES
 from pipeline.errors import ConfigError
 
-CP_SEGMENTS = ("line", "circle_large", "circle_small", "spline")   # = pipeline.trajectory.solve.CP_SEGMENTS
+CP_SEGMENTS = ("line", "circle_large", "circle_small", "spline")   # smooth pieces of the ISO path, or a spline
 PTP_ENERGIES = ("torque", "normalised", "electrical")
 MIN_GRID = 6                                                        # smallest grid / interval count
 MAX_CHECK_DT_S = 5e-4                                               # torques are checked at least this often

@@ -14,7 +14,6 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.errors import ConfigError
 from pipeline.trajectory.baselines import RuckigResult, ruckig_torque_feasible, toppra_cp
 from pipeline.trajectory.config import TrajectoryConfig
 from pipeline.trajectory.cp import (
@@ -31,25 +30,6 @@ from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.ptp import PtpProblem, PtpResult, energy_weights
 from pipeline.trajectory.trajectories import JointTrajectory, TorqueCheck, check_trajectory
 
-CP_SEGMENTS = ("line", "circle_large", "circle_small", "spline")
-
-
-def cp_spline_points(cfg: TrajectoryConfig) -> np.ndarray:
-    """``cp_points_m`` as an (M, 3) array; ConfigError naming the field and the bad point."""
-    pts = cfg.cp_points_m
-    if len(pts) < 3:
-        raise ConfigError(None, "trajectory.cp_points_m", f"a spline needs at least 3 points, got {len(pts)}")
-    for i, p in enumerate(pts):
-        if not isinstance(p, (list, tuple)) or len(p) != 3 or not all(isinstance(x, (int, float)) for x in p) \
-                or not np.all(np.isfinite(np.asarray(p, float))):
-            raise ConfigError(None, f"trajectory.cp_points_m[{i}]", f"expected 3 finite numbers (m), got {p!r}")
-    arr = np.asarray(pts, float)
-    gaps = np.linalg.norm(np.diff(arr, axis=0), axis=1)
-    if np.any(gaps < 1e-6):
-        i = int(np.argmin(gaps))
-        raise ConfigError(None, f"trajectory.cp_points_m[{i + 1}]", f"coincides with point {i}")
-    return arr
-
 
 def cp_joint_path(robot: Any, cfg: TrajectoryConfig) -> tuple[JointPath, Any]:
     """The configured Cartesian path and its joint path by IK: a smooth piece of the EN ISO 9283
@@ -61,11 +41,9 @@ def cp_joint_path(robot: Any, cfg: TrajectoryConfig) -> tuple[JointPath, Any]:
     from pipeline.control.iso9283 import iso9283_path, tool_rotation
     from pipeline.robot.paths import SplinePath
 
-    if cfg.cp_segment not in CP_SEGMENTS:
-        raise ConfigError(None, "trajectory.cp_segment",
-                          f"{cfg.cp_segment!r} is not a smooth path piece ({', '.join(CP_SEGMENTS)})")
+    cfg.validate()       # segment, spline points, centre: ConfigError naming the field
     if cfg.cp_segment == "spline":
-        piece = SplinePath(cp_spline_points(cfg), tool_rotation(cfg.cp_plane, True), label="spline")
+        piece = SplinePath(np.asarray(cfg.cp_points_m, float), tool_rotation(cfg.cp_plane, True), label="spline")
     else:
         iso = iso9283_path(robot, cfg.cp_edge_m, tuple(cfg.cp_centre_m), cfg.cp_plane,
                            tool_rotation(cfg.cp_plane, True), segments=(cfg.cp_segment,))
