@@ -47,7 +47,7 @@ def perturbed_starts(problem, q0: np.ndarray, q1: np.ndarray, duration_s: float,
         q = np.clip(q0 + (q1 - q0) * blend[0] + amp * bump[0], pm.lower_rad, pm.upper_rad)
         v = ((q1 - q0) * blend[1] + amp * bump[1]) / duration_s
         a = ((q1 - q0) * blend[2] + amp * bump[2]) / duration_s**2
-        yield problem._pack(duration_s, q, v, a)
+        yield problem.pack(duration_s, q, v, a)
 
 
 def main(robot_name: str = "rx130l", segment: str = "circle_large", torque_reserve: str | None = None,
@@ -132,7 +132,8 @@ def main(robot_name: str = "rx130l", segment: str = "circle_large", torque_reser
         print(f"  ({cfg.ptp_energy}) {len(ratios)} of {energy_starts} perturbed starts of the energy problem converged "
               f"within the limits: NLP / ruckig from {min(ratios):.3f} to {max(ratios):.3f}")
     print(f"  ruckig search {p['ptp_ruckig_search_time_s']:.1f} s; Pareto: " + ", ".join(
-        f"k2={r['k2']:g}: {r['duration_s']:.3f} s / {r['energy']:.3f}" for r in p["ptp_pareto"]))
+        f"k2={r['k2']:g}: {r['duration_s']:.4f} s / {r['energy']:.3f}{' (dominated)' if r.get('dominated') else ''}"
+        for r in p["ptp_pareto"]))
 
 
 if __name__ == "__main__":

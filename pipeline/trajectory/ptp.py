@@ -204,7 +204,8 @@ class PtpProblem:
         A = x[i:i + nq * (N + 1)].reshape(N + 1, nq) * self.a_scale
         return T, Q, V, A
 
-    def _pack(self, T: float, Q: np.ndarray, V: np.ndarray, A: np.ndarray) -> np.ndarray:
+    def pack(self, T: float, Q: np.ndarray, V: np.ndarray, A: np.ndarray) -> np.ndarray:
+        """Decision vector (initial guess) of a motion: duration, node positions, velocities, accelerations."""
         return np.concatenate([[T], Q.ravel(), (V / self.v_scale).ravel(), (A / self.a_scale).ravel()])
 
     def quintic_guess(self, q0: np.ndarray, q1: np.ndarray, duration_s: float | None = None) -> np.ndarray:
@@ -218,7 +219,7 @@ class PtpProblem:
         Q = q0 + (q1 - q0) * (10 * u**3 - 15 * u**4 + 6 * u**5)
         V = (q1 - q0) * (30 * u**2 - 60 * u**3 + 30 * u**4) / T
         A = (q1 - q0) * (60 * u - 180 * u**2 + 120 * u**3) / T**2
-        return self._pack(T, Q, V, A)
+        return self.pack(T, Q, V, A)
 
     def feasible_quintic_duration(self, q0: np.ndarray, q1: np.ndarray, p_dyn: np.ndarray,
                                   coulomb: np.ndarray, tmax: np.ndarray, vmax: np.ndarray) -> float:
