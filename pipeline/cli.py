@@ -31,6 +31,8 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--stages", metavar="A,B", help="stages to run (their upstream stages are added)")
     r.add_argument("--out", metavar="DIR", help="directory holding the runs (default data/runs)")
     r.add_argument("--force", action="store_true", help="re-run the stages even when reusable")
+    r.add_argument("--accept-poor", action="store_true",
+                   help="hand on results that fail a stage's quality gate (the report says so)")
 
     v = sub.add_parser("view", help="show the robot, saved configurations and trajectories in meshcat")
     v.add_argument("run_dir", nargs="?", metavar="RUN_DIR",
@@ -52,6 +54,7 @@ def _cmd_run(ns: argparse.Namespace) -> int:
     from pipeline.runner import run_pipeline
 
     cfg = load_config(ns.config, ns.overrides, ns.stages)
+    cfg.accept_poor = ns.accept_poor
     result = run_pipeline(cfg, out_root=ns.out, force=ns.force)
     print(result.report)
     return 0

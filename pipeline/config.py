@@ -145,6 +145,8 @@ class RunConfig:
     #: dotted field (``"model.pose_deg"``, ``"control.iso.edge_m"``) -> the layer that last set it
     #: (file, ``"--set"`` or ``"<robot.yaml> (run_defaults)"``); not part of :meth:`to_dict`
     field_origins: dict[str, str] = field(default_factory=dict, repr=False)
+    #: hand on results that failed a quality gate (``--accept-poor``); recorded in the report
+    accept_poor: bool = False
 
     def __getattr__(self, item: str) -> Any:
         # only called when normal lookup fails: expose sections as attributes

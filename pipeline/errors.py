@@ -40,3 +40,15 @@ class SolverError(PipelineError):
 
 class InfeasibleError(PipelineError):
     """A path point, pose or limit cannot be met."""
+
+
+class QualityGateError(PipelineError):
+    """A stage's result failed one of its quality gates (:mod:`pipeline.quality`).
+
+    ``result`` is the stage's unaccepted result (a ``StageResult``) when the stage had one, so
+    the runner can keep it aside for inspection without handing it on.
+    """
+
+    def __init__(self, file: str | Path | None, field: str | None, problem: str, result: object = None) -> None:
+        super().__init__(file, field, problem)
+        self.result = result
