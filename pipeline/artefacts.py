@@ -32,6 +32,8 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.stage_api import StageOutput as StageOutput  # re-exported (tests import it from here)
+
 SUMMARY = "summary.json"
 RESULTS_NPZ = "results.npz"
 RESULTS_JSON = "results.json"
@@ -203,40 +205,6 @@ def read_inputs_hash(stage_dir: str | Path) -> str | None:
         return p.read_text(encoding="utf-8").strip() or None
     except OSError:
         return None
-
-
-# --------------------------------------------------------------------------------------------
-# Loading a finished stage
-# --------------------------------------------------------------------------------------------
-@dataclasses.dataclass
-class StageOutput:
-    """What later stages get from a finished stage (``pipeline.runner.StageOutput``)."""
-
-    summary: dict
-    arrays: dict[str, np.ndarray]
-    data: dict
-    robot: Any            # RobotModel | None (from ``<stage>/robot/``)
-    path: Path
-
-
-def load_stage_output(stage_dir: str | Path, robot: Any = None) -> StageOutput:
-    """Load ``summary.json``, ``results.npz``, ``results.json`` and ``robot/`` of a stage.
-
-    ``robot``: an already loaded RobotModel to use instead of reading ``robot/`` again.
-    """
-    from pipeline.errors import PipelineError
-
-    d = Path(stage_dir)
-    if not (d / INPUTS_HASH).exists():
-        raise PipelineError(d, None, "not a finished stage directory (no inputs.sha256)")
-    summary = read_json(d / SUMMARY) if (d / SUMMARY).exists() else {}
-    arrays = read_npz(d / RESULTS_NPZ) if (d / RESULTS_NPZ).exists() else {}
-    data = read_json(d / RESULTS_JSON) if (d / RESULTS_JSON).exists() else {}
-    if robot is None and (d / ROBOT_DIR).is_dir():
-        from pipeline.robot.model import RobotModel
-
-        robot = RobotModel.load(d / ROBOT_DIR)
-    return StageOutput(summary=summary, arrays=arrays, data=data, robot=robot, path=d)
 
 
 # --------------------------------------------------------------------------------------------

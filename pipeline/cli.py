@@ -1,11 +1,15 @@
-"""Command line: ``python -m pipeline run | view | study``.
+"""Command line: ``python -m pipeline run | check | view | study``.
 
-* ``run [--config FILE] [--set key=value ...] [--stages a,b] [--out DIR] [--force]``
+* ``run [--config FILE] [--set key=value ...] [--stages a,b] [--out DIR] [--force] [--accept-poor]``
+* ``check`` (same options as ``run``): validate what ``run`` would validate, write nothing, and
+  print which stages would run or be reused
 * ``view [RUN_DIR] [--robot NAME] [--configurations NAME] [--trajectory NAME] [--open]``
 * ``study [NAME [ARGS...]]`` (no name: list the registered studies)
 
-A :class:`pipeline.errors.PipelineError` ends the program with one line on stderr and exit
-code 2 (no traceback).
+Exit codes: 0 done; 2 a :class:`pipeline.errors.PipelineError` (bad input, a fault writing
+files, the run directory locked by another run), one line on stderr, no traceback; 3 a stage
+failed its quality gate (one line naming the figure and the threshold; the result is kept in
+``<run>/<stage>.rejected/``); 130 interrupted (SIGINT or SIGTERM; nothing of the stage committed).
 """
 
 from __future__ import annotations
@@ -14,16 +18,19 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from pipeline.errors import PipelineError
+import pipeline
+from pipeline import config as config_mod
+from pipeline.errors import PipelineError, QualityGateError
+from pipeline.interrupts import handle_termination
+from pipeline.runner import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_QUALITY_GATE
 
 
-def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m pipeline", description=__doc__.split("\n\n")[0])
-    sub = p.add_subparsers(dest="command", required=True, metavar="{run,view,study}")
+def _built_in_robots() -> list[str]:
+    robots = config_mod.REPO_ROOT / "robots"
+    return sorted(d.name for d in robots.iterdir() if (d / "robot.yaml").is_file()) if robots.is_dir() else []
 
-    r = sub.add_parser("run", help="run the pipeline stages", description=(
-        "Run the stages into DIR/<name>/ (default data/runs/<name>/). A stage whose inputs are "
-        "unchanged since its last run is reused."))
+
+def _add_run_options(r: argparse.ArgumentParser) -> None:
     r.add_argument("--config", metavar="FILE", help="YAML run configuration (e.g. configs/quick.yaml)")
     r.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a setting, dotted keys, YAML values (repeatable): "
@@ -33,6 +40,26 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--force", action="store_true", help="re-run the stages even when reusable")
     r.add_argument("--accept-poor", action="store_true",
                    help="hand on results that fail a stage's quality gate (the report says so)")
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m pipeline", description=__doc__.split("\n\n")[0])
+    p.add_argument("--version", action="version", version=f"pipeline {pipeline.__version__}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="{run,check,view,study}")
+
+    stages_robots = (f"stages (in order): {', '.join(config_mod.stage_names())}; "
+                     f"built-in robots: {', '.join(_built_in_robots()) or 'none'}")
+    r = sub.add_parser("run", help="run the pipeline stages", epilog=stages_robots, description=(
+        "Run the stages into DIR/<name>/ (default data/runs/<name>/). A stage whose inputs are "
+        "unchanged since its last run (and whose files are intact) is reused. Exit codes: 0 done, "
+        "2 bad input or a fault writing files, 3 a quality gate failed, 130 interrupted."))
+    _add_run_options(r)
+    c = sub.add_parser("check", help="validate config, robot and data files; write nothing",
+                       epilog=stages_robots, description=(
+                           "Validate exactly what `run` validates before writing (configuration, robot, "
+                           "the data files of every stage that would run) and print which stages would "
+                           "run or be reused. Writes nothing."))
+    _add_run_options(c)
 
     v = sub.add_parser("view", help="show the robot, saved configurations and trajectories in meshcat")
     v.add_argument("run_dir", nargs="?", metavar="RUN_DIR",
@@ -60,6 +87,20 @@ def _cmd_run(ns: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_check(ns: argparse.Namespace) -> int:
+    from pipeline.config import load_config
+    from pipeline.runner import prepare_run
+
+    cfg = load_config(ns.config, ns.overrides, ns.stages)
+    cfg.accept_poor = ns.accept_poor
+    prep = prepare_run(cfg, out_root=ns.out, force=ns.force)
+    print(f"ok: {cfg.source}, robot {cfg.robot}, run directory {prep.run_dir}")
+    for plan in prep.plans:
+        reason = prep.reasons[plan.name]
+        print(f"  {plan.name}: " + ("reuse" if reason is None else f"run ({reason})"))
+    return 0
+
+
 def _cmd_view(ns: argparse.Namespace) -> int:
     from pipeline.viewer import view_run
 
@@ -80,14 +121,19 @@ def _cmd_study(ns: argparse.Namespace) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     ns = _parser().parse_args(argv)
+    commands = {"run": _cmd_run, "check": _cmd_check, "view": _cmd_view, "study": _cmd_study}
     try:
-        return {"run": _cmd_run, "view": _cmd_view, "study": _cmd_study}[ns.command](ns)
+        with handle_termination():
+            return commands[ns.command](ns)
+    except QualityGateError as exc:
+        print("quality gate failed: " + " ".join(exc.one_line().split()), file=sys.stderr)
+        return EXIT_QUALITY_GATE
     except PipelineError as exc:
         print("error: " + " ".join(exc.one_line().split()), file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
     except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
+        print("interrupted: nothing of the unfinished stage was kept; run again to resume", file=sys.stderr)
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

@@ -1,6 +1,7 @@
 """Errors that name the file, the field and the problem.
 
-The CLI prints a :class:`PipelineError` as one line and exits with code 2.
+The CLI prints a :class:`PipelineError` as one line and exits with code 2 (3 for a
+:class:`QualityGateError`).
 """
 
 from __future__ import annotations
@@ -40,6 +41,10 @@ class SolverError(PipelineError):
 
 class InfeasibleError(PipelineError):
     """A path point, pose or limit cannot be met."""
+
+
+class ArtefactWriteError(PipelineError):
+    """A file of the run could not be written (disk full, read-only, permissions)."""
 
 
 class QualityGateError(PipelineError):

@@ -24,13 +24,13 @@ correctness beats reuse) plus the stage module's own folder when it lives outsid
 
 from __future__ import annotations
 
+import errno
 import hashlib
-import sys
 import time
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
-from datetime import UTC, datetime
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -40,41 +40,36 @@ import pipeline
 from pipeline import artefacts
 from pipeline import config as config_mod
 from pipeline import report as report_mod
-from pipeline.artefacts import StageOutput, load_stage_output
 from pipeline.config import REPO_ROOT, RunConfig, resolve_robot_dir
-from pipeline.errors import ConfigError, PipelineError
+from pipeline.errors import ArtefactWriteError, ConfigError, PipelineError, QualityGateError
+from pipeline.interrupts import handle_termination
+from pipeline.locking import run_lock
 from pipeline.progress import Progress
+from pipeline.robot.model import RobotModel
+from pipeline.robot.truth import RealRobot, TruthConfig
+from pipeline.stage_api import StageContext, StageOutput, StageResult
+from pipeline.stage_io import (
+    REJECTED_SUFFIX,
+    load_run,
+    load_stage_output,
+    read_manifest,
+    run_key_sha256,
+    stage_problem,
+    write_rejected,
+    write_stage_result,
+)
 
 __all__ = [
     "StageContext", "StageResult", "StageOutput", "RunResult", "run_pipeline", "load_run",
     "load_stage_output", "default_runs_dir", "resolve_robot_dir", "stage_rng", "stable_stage_hash",
-    "stage_inputs_hashes", "package_code_hash", "config_reads",
+    "stage_inputs_hashes", "package_code_hash", "config_reads", "write_stage_result", "plan_stages",
+    "ArtefactWriteError", "EXIT_BAD_INPUT", "EXIT_QUALITY_GATE", "EXIT_INTERRUPTED",
 ]
 
-
-# --------------------------------------------------------------------------------------------
-# The contract (docs/ARCHITECTURE.md, "Stages and the runner")
-# --------------------------------------------------------------------------------------------
-@dataclass
-class StageContext:
-    run: RunConfig                        # name, seed, robot, profile (+ all sections)
-    config: Any                           # this stage's Config instance
-    robot: Any                            # RobotModel: best model so far (a private copy)
-    real: Any                             # RealRobot: sensors of the hidden robot (None if unavailable)
-    upstream: dict[str, StageOutput]      # loaded results of the earlier stages it depends on
-    out_dir: Path                         # staging directory (write extra files here)
-    rng: np.random.Generator              # seeded from (run seed, stage name)
-    progress: Progress                    # ctx.progress.track(iterable, "description")
-
-
-@dataclass
-class StageResult:
-    summary: dict                                           # -> summary.json (headline figures)
-    arrays: dict[str, np.ndarray] = field(default_factory=dict)   # -> results.npz
-    data: dict = field(default_factory=dict)                # -> results.json
-    figures: dict[str, Any] = field(default_factory=dict)   # matplotlib Figures -> <name>.png
-    robot: Any = None                                       # RobotModel handed on -> robot/
-    report_md: str = ""                                     # extra markdown for report.md
+#: exit codes of ``python -m pipeline`` (README, "Exit codes")
+EXIT_BAD_INPUT = 2          # a PipelineError: bad config/robot/data, a fault writing files, a locked run
+EXIT_QUALITY_GATE = 3       # a stage failed its quality gate (result kept in <run>/<stage>.rejected/)
+EXIT_INTERRUPTED = 130      # SIGINT / SIGTERM
 
 
 @dataclass
@@ -106,26 +101,16 @@ def stage_rng(seed: int, stage: str) -> np.random.Generator:
     return np.random.default_rng([seed, stable_stage_hash(stage)])
 
 
-def _load_robot(robot_dir: Path) -> Any:
-    from pipeline.robot.model import RobotModel
-
-    return RobotModel.load(robot_dir)
-
-
-def _make_real(nominal: Any, cfg: RunConfig) -> Any:
-    try:
-        from pipeline.robot.truth import RealRobot
-    except ModuleNotFoundError as exc:
-        if exc.name and "pipeline.robot.truth".startswith(exc.name):
-            print("warning: pipeline.robot.truth does not exist yet; ctx.real is None", file=sys.stderr)
-            return None
-        raise
+def _make_real(nominal: RobotModel, cfg: RunConfig) -> RealRobot:
     truth_cfg = cfg.sections.get("truth")
-    if isinstance(truth_cfg, dict) or truth_cfg is None:
-        from pipeline.robot.truth import TruthConfig
-
+    if not isinstance(truth_cfg, TruthConfig):
         truth_cfg = TruthConfig()
     return RealRobot.create(nominal, cfg.seed, truth_cfg)
+
+
+def run_key(cfg: RunConfig) -> str:
+    """Hash of the run-level settings shared by every stage (:func:`pipeline.stage_io.run_key_sha256`)."""
+    return run_key_sha256(cfg.seed, Path(cfg.robot).name or cfg.robot, cfg.sections.get("truth", {}))
 
 
 #: root of the source code every stage's inputs hash covers (tests point it at a copy)
@@ -137,7 +122,7 @@ def package_code_hash() -> str:
     return artefacts.hash_tree(_PACKAGE_ROOT, suffixes=(".py",))
 
 
-def _code_hash(module: Any, package_sha256: str | None = None) -> str:
+def _code_hash(module: ModuleType, package_sha256: str | None = None) -> str:
     """Hash of the source code a stage stands on: every .py file of the ``pipeline`` package
     (``package_sha256``, computed when None; a stage imports other subpackages' helpers, e.g.
     identification validates on the control stage's ISO path) plus the .py files of the stage
@@ -151,7 +136,7 @@ def _code_hash(module: Any, package_sha256: str | None = None) -> str:
     return code
 
 
-def config_reads(cfg: RunConfig, module: Any) -> dict[str, Any]:
+def config_reads(cfg: RunConfig, module: ModuleType) -> dict[str, Any]:
     """Plain values of the settings of other sections a stage declares it reads
     (``CONFIG_READS = ("control.iso", ...)``): dotted path -> value (None when the section is not
     validated (a plain dict) or has no such field: the stage then uses built-in defaults, which
@@ -191,7 +176,7 @@ def stage_inputs_hashes(cfg: RunConfig, plans: Sequence[_Plan], robot_dir: Path)
     return {name: plan.inputs_sha256 for name, plan in by_name.items()}
 
 
-def _copy_robot(robot: Any) -> Any:
+def _copy_robot(robot: RobotModel) -> RobotModel:
     copy = getattr(robot, "copy", None)
     return copy() if callable(copy) else robot
 
@@ -199,14 +184,14 @@ def _copy_robot(robot: Any) -> Any:
 @dataclass
 class _Plan:
     name: str
-    module: Any
-    config: Any
+    module: ModuleType
+    config: Any                   # the stage's Config dataclass instance
     depends: tuple[str, ...]
     closure: list[str]            # all upstream stages (transitive), in run order
     inputs_sha256: str = ""
 
 
-def _check_stage_module(name: str, module: Any) -> None:
+def _check_stage_module(name: str, module: ModuleType) -> None:
     where = str(getattr(module, "__file__", None) or f"stage {name}")
     for attr in ("NAME", "DEPENDS", "Config", "run"):
         if not hasattr(module, attr):
@@ -225,9 +210,9 @@ def _check_stage_module(name: str, module: Any) -> None:
 def plan_stages(cfg: RunConfig) -> list[_Plan]:
     """Needed stages (selected + their transitive dependencies) in registry order."""
     order = config_mod.stage_names()
-    modules: dict[str, Any] = {}
+    modules: dict[str, ModuleType] = {}
 
-    def module_of(name: str) -> Any:
+    def module_of(name: str) -> ModuleType:
         if name not in modules:
             modules[name] = config_mod.load_stage_module(name)
             _check_stage_module(name, modules[name])
@@ -269,7 +254,7 @@ def plan_stages(cfg: RunConfig) -> list[_Plan]:
     return list(plans.values())
 
 
-def _check_result(name: str, result: Any) -> StageResult:
+def _check_result(name: str, result: object) -> StageResult:
     where = f"stage {name}"
     if not isinstance(result, StageResult):
         raise TypeError(f"{where}: run() returned {type(result).__name__}, expected StageResult")
@@ -281,153 +266,228 @@ def _check_result(name: str, result: Any) -> StageResult:
     return result
 
 
-def write_stage_result(stage_dir: Path, name: str, result: StageResult, inputs_sha256: str,
-                       duration_s: float) -> None:
-    """Write a StageResult into a (staging) directory; ``inputs.sha256`` last."""
-    artefacts.write_json(stage_dir / artefacts.SUMMARY, result.summary)
-    artefacts.write_npz(stage_dir / artefacts.RESULTS_NPZ, result.arrays)
-    artefacts.write_json(stage_dir / artefacts.RESULTS_JSON, result.data)
-    figures = []
-    for key, fig in result.figures.items():
-        artefacts.save_figure(stage_dir / f"{key}.png", fig)
-        figures.append(f"{key}.png")
-    if result.report_md:
-        artefacts.write_text(stage_dir / artefacts.REPORT_MD, result.report_md.rstrip() + "\n")
-    if result.robot is not None:
-        result.robot.save(stage_dir / artefacts.ROBOT_DIR)
-    artefacts.write_json(stage_dir / artefacts.MANIFEST, {
-        "stage": name,
-        "inputs_sha256": inputs_sha256,
-        "figures": figures,
-        "has_robot": result.robot is not None,
-        "finished_utc": datetime.now(UTC).isoformat(timespec="seconds"),
-        "duration_s": round(duration_s, 3),
-        "package_version": pipeline.__version__,
-    })
-    artefacts.write_text(stage_dir / artefacts.INPUTS_HASH, inputs_sha256 + "\n")
-
-
 # --------------------------------------------------------------------------------------------
 # Running
 # --------------------------------------------------------------------------------------------
+def _why_not_reuse(plan: _Plan, stage_dir: Path, forced: set[str], cfg: RunConfig, verify: bool) -> str | None:
+    """Why stage ``plan`` must run (a short reason), or None when ``stage_dir`` can be reused."""
+    if plan.name in forced:
+        return "--force"
+    stored = artefacts.read_inputs_hash(stage_dir)
+    if stored is None:
+        return "not run yet"
+    if stored != plan.inputs_sha256:
+        return "inputs changed"
+    if not verify:
+        return None
+    problem = stage_problem(stage_dir)
+    if problem is not None:
+        return f"its files are damaged: {problem}"
+    if not cfg.accept_poor and read_manifest(stage_dir) and _accepted_poor(stage_dir):
+        return "it was accepted with --accept-poor and this run requires its quality gates"
+    return None
+
+
+def _accepted_poor(stage_dir: Path) -> bool:
+    try:
+        return bool(artefacts.read_json(stage_dir / artefacts.SUMMARY).get("accepted_poor"))
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
+def _run_checks(plans: Sequence[_Plan], cfg: RunConfig, nominal: RobotModel) -> None:
+    """The stages' optional ``check(config, robot)`` (bad data files ...), before any write."""
+    for plan in plans:
+        check = getattr(plan.module, "check", None)
+        if not callable(check):
+            continue
+        try:
+            check(plan.config, nominal)
+        except ConfigError as exc:  # name the file (or --set) the field's value came from
+            if exc.file is not None:
+                raise
+            source = cfg.source_of(exc.field, None) if exc.field else cfg.origins.get(plan.name, cfg.source)
+            raise ConfigError(source, exc.field, exc.problem) from None
+
+
+@dataclass
+class Prepared:
+    """A validated run: what :func:`run_pipeline` would do (also ``python -m pipeline check``)."""
+
+    cfg: RunConfig
+    plans: list[_Plan]
+    nominal: RobotModel
+    real: RealRobot
+    run_dir: Path
+    forced: set[str]
+    reasons: dict[str, str | None]    # stage -> why it runs (None: reused)
+
+
+def prepare_run(cfg: RunConfig, out_root: str | Path | None = None,
+                force: bool | Sequence[str] = False) -> Prepared:
+    """Validate everything a run needs (robot, stage modules, the hidden robot, every check()
+    of a stage that would run) without writing anything."""
+    robot_dir = resolve_robot_dir(cfg)         # user input first: the robot, then the stage modules
+    nominal = RobotModel.load(robot_dir)
+    plans = plan_stages(cfg)
+    real = _make_real(nominal, cfg)
+    hashes = stage_inputs_hashes(cfg, plans, robot_dir)
+    forced = set(hashes) if force is True else set(force or ())
+    run_dir = (Path(out_root) if out_root is not None else default_runs_dir()) / cfg.name
+    reasons = {p.name: _why_not_reuse(p, run_dir / p.name, forced, cfg, verify=True) for p in plans}
+    _run_checks([p for p in plans if reasons[p.name] is not None], cfg, nominal)
+    return Prepared(cfg, plans, nominal, real, run_dir, forced, reasons)
+
+
+def _write_error(exc: OSError, path: Path | str) -> ArtefactWriteError:
+    return ArtefactWriteError(getattr(exc, "filename", None) or path, None,
+                              f"cannot write ({exc.strerror or exc}); earlier results are intact")
+
+
 def run_pipeline(
     cfg: RunConfig,
     out_root: str | Path | None = None,
     force: bool | Sequence[str] = False,
     progress: Progress | None = None,
-    log: Any = None,
+    log: Callable[[str], None] | None = None,
 ) -> RunResult:
     """Run the stages of ``cfg`` into ``<out_root>/<cfg.name>/`` (default ``data/runs``).
 
     ``force``: True re-runs every needed stage, a list re-runs those stages (reuse otherwise).
     ``log``: callable(str) for one-line progress messages (default: stderr).
-    Raises :class:`PipelineError` (nothing written when it comes from validation).
+    Raises :class:`PipelineError` (nothing written when it comes from validation),
+    :class:`QualityGateError` (the result kept in ``<run>/<stage>.rejected/``) or
+    KeyboardInterrupt (SIGINT/SIGTERM: the stage being run is discarded).
     """
     prog = progress if progress is not None else Progress()
     say = log if log is not None else prog.log
-    # ---- validate everything before touching the disk --------------------------------------
-    robot_dir = resolve_robot_dir(cfg)         # user input first: the robot, then the stage modules
-    nominal = _load_robot(robot_dir)
-    plans = plan_stages(cfg)
-    real = _make_real(nominal, cfg)
-    hashes = stage_inputs_hashes(cfg, plans, robot_dir)
-    forced = set(hashes) if force is True else set(force or ())
-    run_dir = Path(out_root) if out_root is not None else default_runs_dir()
-    run_dir = run_dir / cfg.name
-    for plan in plans:               # optional early checks (e.g. measurement files) of stages to run
-        check = getattr(plan.module, "check", None)
-        will_run = plan.name in forced or artefacts.read_inputs_hash(run_dir / plan.name) != plan.inputs_sha256
-        if callable(check) and will_run:
-            try:
-                check(plan.config, nominal)
-            except ConfigError as exc:  # name the file (or --set) the field's value came from
-                if exc.file is not None:
-                    raise
-                source = cfg.source_of(exc.field, None) if exc.field else cfg.origins.get(plan.name, cfg.source)
-                raise ConfigError(source, exc.field, exc.problem) from None
+    with handle_termination():
+        prep = prepare_run(cfg, out_root, force)
+        run_dir = prep.run_dir
+        try:
+            run_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise ConfigError("--out" if out_root is not None else None, str(run_dir),
+                              f"cannot create the run directory ({exc.strerror or exc})") from None
+        with run_lock(run_dir) as lock:
+            if lock is None:
+                return _reuse_read_only(prep, say)
+            return _run_locked(prep, prog, say)
 
-    # ---- run --------------------------------------------------------------------------------
-    try:
-        run_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise ConfigError("--out" if out_root is not None else None, str(run_dir),
-                          f"cannot create the run directory ({exc.strerror or exc})") from None
+
+def _reuse_read_only(prep: Prepared, say: Callable[[str], None]) -> RunResult:
+    """A read-only run directory: fine when every stage can be reused (nothing is written)."""
+    todo = [(n, r) for n, r in prep.reasons.items() if r is not None]
+    if todo:
+        name, reason = todo[0]
+        raise ArtefactWriteError(prep.run_dir, None, f"the run directory is read-only and stage {name} "
+                                 f"must run ({reason}); make it writable or use another --out")
+    outputs = {p.name: load_stage_output(prep.run_dir / p.name) for p in prep.plans}
+    say(f"{prep.run_dir} is read-only: every stage reused, nothing written")
+    return RunResult(prep.run_dir, prep.run_dir / "report.md", outputs, [], list(outputs))
+
+
+def _run_locked(prep: Prepared, prog: Progress, say: Callable[[str], None]) -> RunResult:
+    cfg, run_dir = prep.cfg, prep.run_dir
     artefacts.clean_leftovers(run_dir)
+    # decide again under the lock (another run may have finished a stage meanwhile)
+    reasons = {p.name: _why_not_reuse(p, run_dir / p.name, prep.forced, cfg, verify=True) for p in prep.plans}
+    _run_checks([p for p in prep.plans if reasons[p.name] is not None and prep.reasons[p.name] is None],
+                cfg, prep.nominal)
     # the stages this run consists of: the selected ones and the upstream ones they need (run
     # or reused), so that the config.yaml reproduces the run
     written = cfg.to_dict()
-    written["stages"] = [p.name for p in plans]
-    artefacts.write_text(run_dir / "config.yaml", yaml.safe_dump(written, sort_keys=False))
+    written["stages"] = [p.name for p in prep.plans]
+    text = yaml.safe_dump(written, sort_keys=False)
+    config_path = run_dir / "config.yaml"
+    try:
+        if not config_path.is_file() or config_path.read_text(encoding="utf-8") != text:
+            artefacts.write_text(config_path, text)
+    except OSError as exc:
+        raise _write_error(exc, config_path) from None
     outputs: dict[str, StageOutput] = {}
     ran: list[str] = []
     reused: list[str] = []
-    handed_robot: dict[str, Any] = {}       # stage -> robot it handed on
+    handed_robot: dict[str, RobotModel] = {}       # stage -> robot it handed on
     current: str | None = None
     failure: tuple[str, str] | None = None  # (stage, one-line error) when a stage failed
+    key = run_key(cfg)
     try:
         with prog:
-            for plan in plans:
+            for plan in prep.plans:
                 current = plan.name
                 stage_dir = run_dir / plan.name
-                if plan.name not in forced and artefacts.read_inputs_hash(stage_dir) == plan.inputs_sha256:
+                reason = reasons[plan.name]
+                if reason is None:
                     outputs[plan.name] = load_stage_output(stage_dir)
                     reused.append(plan.name)
                     say(f"{plan.name}: reused ({stage_dir})")
                 else:
-                    outputs[plan.name] = _run_one(plan, cfg, nominal, real, outputs, handed_robot,
-                                                  run_dir, prog, say)
+                    if reason not in ("not run yet", "inputs changed", "--force"):
+                        say(f"{plan.name}: re-running because {reason}")
+                    outputs[plan.name] = _run_one(plan, prep, outputs, handed_robot, key, prog, say)
                     ran.append(plan.name)
-                if outputs[plan.name].robot is not None:
-                    handed_robot[plan.name] = outputs[plan.name].robot
+                robot = outputs[plan.name].robot
+                if robot is not None:
+                    handed_robot[plan.name] = robot
             current = None
     except BaseException as exc:
         failure = (current or "", report_mod.one_line_error(exc))
         raise
     finally:
-        report = report_mod.write_report(run_dir, cfg, [p.name for p in plans],
-                              expected={p.name: p.inputs_sha256 for p in plans}, failure=failure)
+        try:
+            report = report_mod.write_report(run_dir, cfg, [p.name for p in prep.plans],
+                                             expected={p.name: p.inputs_sha256 for p in prep.plans},
+                                             failure=failure)
+        except OSError as exc:
+            if failure is None:
+                raise _write_error(exc, run_dir / "report.md") from None
+            report = run_dir / "report.md"     # keep the stage's own error, not this one
     say(f"report: {report}")
     return RunResult(run_dir, report, outputs, ran, reused)
 
 
-def _run_one(plan: _Plan, cfg: RunConfig, nominal: Any, real: Any, outputs: dict[str, StageOutput],
-             handed_robot: dict[str, Any], run_dir: Path, prog: Progress, say: Any) -> StageOutput:
-    robot = nominal
+def _run_one(plan: _Plan, prep: Prepared, outputs: dict[str, StageOutput], handed_robot: dict[str, RobotModel],
+             key: str, prog: Progress, say: Callable[[str], None]) -> StageOutput:
+    cfg, run_dir = prep.cfg, prep.run_dir
+    robot = prep.nominal
     for up in plan.closure:                   # latest robot handed on upstream
         if up in handed_robot:
             robot = handed_robot[up]
-    staging = artefacts.new_stage_dir(run_dir, plan.name)
-    ctx = StageContext(
-        run=cfg,
-        config=plan.config,
-        robot=_copy_robot(robot),
-        real=real,
-        upstream={u: outputs[u] for u in plan.closure},
-        out_dir=staging,
-        rng=stage_rng(cfg.seed, plan.name),
-        progress=prog,
-    )
+    try:
+        staging = artefacts.new_stage_dir(run_dir, plan.name)
+    except OSError as exc:
+        raise _write_error(exc, run_dir) from None
+    ctx = StageContext(run=cfg, config=plan.config, robot=_copy_robot(robot), real=prep.real,
+                       upstream={u: outputs[u] for u in plan.closure}, out_dir=staging,
+                       rng=stage_rng(cfg.seed, plan.name), progress=prog)
     say(f"{plan.name}: running")
     t0 = time.perf_counter()
+    rejected = run_dir / f"{plan.name}{REJECTED_SUFFIX}"
     try:
         result = _check_result(plan.name, plan.module.run(ctx))
         duration = time.perf_counter() - t0
-        write_stage_result(staging, plan.name, result, plan.inputs_sha256, duration)
+        write_stage_result(staging, plan.name, result, plan.inputs_sha256, duration, key)
         final = artefacts.commit_stage_dir(staging, run_dir / plan.name)
+    except QualityGateError as exc:
+        if isinstance(exc.result, StageResult):
+            try:
+                write_rejected(staging, rejected, plan.name, exc.result, exc.one_line())
+                say(f"{plan.name}: quality gate failed; its result is kept for inspection in {rejected} "
+                    "(not handed on)")
+            except OSError:
+                artefacts.discard_stage_dir(staging)
+        else:
+            artefacts.discard_stage_dir(staging)
+        raise
+    except OSError as exc:
+        artefacts.discard_stage_dir(staging)
+        if exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.EFBIG):
+            raise _write_error(exc, staging) from None
+        raise
     except BaseException:
         artefacts.discard_stage_dir(staging)
         raise
+    artefacts.discard_stage_dir(rejected)       # an older rejected result is out of date now
     say(f"{plan.name}: done in {duration:.1f} s")
-    out = load_stage_output(final, robot=result.robot)
-    return out
-
-
-def load_run(run_dir: str | Path) -> dict[str, StageOutput]:
-    """Every finished stage of a run directory, in run order (unknown stage dirs last)."""
-    run_dir = Path(run_dir)
-    if not run_dir.is_dir():
-        raise PipelineError(run_dir, None, "run directory not found")
-    names = [s for s in config_mod.stage_names() if (run_dir / s / artefacts.INPUTS_HASH).exists()]
-    names += sorted(p.name for p in run_dir.iterdir() if p.is_dir() and not p.name.startswith(".")
-                    and p.name not in names and (p / artefacts.INPUTS_HASH).exists())
-    return {n: load_stage_output(run_dir / n) for n in names}
+    return load_stage_output(final, robot=result.robot, verify=False)

@@ -71,7 +71,7 @@ def test_run_writes_stage_dirs_and_report(fake_stages, tmp_path):
         assert {"summary.json", "results.npz", "results.json", "plot.png", "inputs.sha256", "manifest.json",
                 "report.md", "extra.txt"} <= names
         assert artefacts.read_npz(d / "results.npz")["x"].shape == (3,)
-    assert not [p for p in run_dir.iterdir() if p.name.startswith(".")]      # no staging leftovers
+    assert [p.name for p in run_dir.iterdir() if p.name.startswith(".")] == [".lock"]   # no staging leftovers
     report = (run_dir / "report.md").read_text()
     for s in "abc":
         assert f"## {s}" in report and f"]({s}/plot.png)" in report
@@ -88,7 +88,7 @@ def test_failing_stage_leaves_no_directory(fake_stages, tmp_path):
     with pytest.raises(RuntimeError, match="failed halfway"):
         run_pipeline(load_config(None, ["name=r", "b.fail=true", "b.n=5"]), out_root=tmp_path, log=lambda m: None)
     run_dir = tmp_path / "r"
-    assert not [p for p in run_dir.iterdir() if p.name.startswith(".")]      # staging removed
+    assert [p.name for p in run_dir.iterdir() if p.name.startswith(".")] == [".lock"]   # staging removed
     assert (run_dir / "b" / "inputs.sha256").read_text() == old_b          # old result untouched
     # a fresh run directory: the failing stage leaves no <stage>/ at all
     with pytest.raises(RuntimeError):
@@ -96,7 +96,7 @@ def test_failing_stage_leaves_no_directory(fake_stages, tmp_path):
     fresh = tmp_path / "fresh"
     assert (fresh / "a").is_dir()
     assert not (fresh / "b").exists() and not (fresh / "c").exists()
-    assert not [p for p in fresh.iterdir() if p.name.startswith(".")]
+    assert [p.name for p in fresh.iterdir() if p.name.startswith(".")] == [".lock"]
     assert "## a" in (fresh / "report.md").read_text()                     # report of what finished
 
 

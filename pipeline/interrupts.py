@@ -1,0 +1,64 @@
+"""Interrupts: Ctrl-C (SIGINT) and SIGTERM end a run promptly, and never as a result.
+
+* :func:`handle_termination` makes SIGTERM raise :class:`KeyboardInterrupt` like SIGINT does, so
+  both unwind through the runner (staging directory discarded, nothing committed, exit 130).
+* IPOPT inside CasADi does not raise on Ctrl-C: CasADi's interrupt check stops the solver and
+  ``solver.stats()["return_status"]`` is ``NonIpopt_Exception_Thrown`` or ``User_Requested_Stop``
+  (and the Python exception is swallowed). Stage code calls :func:`raise_if_interrupted` right
+  after every ``nlpsol`` call, before looking at the solution::
+
+      sol = solver(x0=..., lbg=..., ubg=...)
+      raise_if_interrupted(solver.stats())
+
+  It raises KeyboardInterrupt for those statuses, and whenever a SIGINT/SIGTERM arrived while
+  the solver ran (:func:`interrupted`), so a half-finished optimisation is never stored.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import threading
+from collections.abc import Iterator, Mapping
+from types import FrameType
+
+#: IPOPT/CasADi return statuses that mean "stopped by an interrupt", not "failed"
+INTERRUPT_STATUSES = frozenset({"NonIpopt_Exception_Thrown", "User_Requested_Stop", "User_Interrupt"})
+
+_received: list[int] = []
+
+
+def _on_signal(signum: int, frame: FrameType | None) -> None:
+    _received.append(signum)
+    raise KeyboardInterrupt(f"signal {signal.Signals(signum).name}")
+
+
+def interrupted() -> bool:
+    """A SIGINT/SIGTERM arrived while :func:`handle_termination` was active."""
+    return bool(_received)
+
+
+def raise_if_interrupted(stats: Mapping[str, object] | str | None) -> None:
+    """Raise KeyboardInterrupt when a solver was stopped by an interrupt.
+
+    ``stats``: ``solver.stats()`` of a CasADi ``nlpsol`` (or its ``return_status`` string).
+    """
+    status = stats.get("return_status") if isinstance(stats, Mapping) else stats
+    if status in INTERRUPT_STATUSES or interrupted():
+        raise KeyboardInterrupt(f"solver stopped: {status}")
+
+
+@contextlib.contextmanager
+def handle_termination() -> Iterator[None]:
+    """SIGINT and SIGTERM raise KeyboardInterrupt inside this block (main thread only)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    _received.clear()
+    old = {sig: signal.signal(sig, _on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+        _received.clear()

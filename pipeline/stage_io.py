@@ -1,0 +1,188 @@
+"""Stage directories on disk: writing a result, checking its integrity, loading it back.
+
+* :func:`write_stage_result` writes a :class:`~pipeline.stage_api.StageResult` into a staging
+  directory; ``manifest.json`` records the SHA-256 of every file the stage wrote (its extra
+  files too) and the hash of the run-level settings (:func:`run_key_sha256`); ``inputs.sha256``
+  comes last.
+* :func:`stage_problem` says why a finished stage directory cannot be trusted (a file missing,
+  truncated or edited, no manifest), or None; reuse and :func:`load_stage_output` both use it.
+* :func:`write_rejected` keeps a result that failed a quality gate in ``<run>/<stage>.rejected/``
+  for inspection: no ``inputs.sha256``, so it is never reused or loaded as a stage.
+* A handed-on robot is saved losslessly (:mod:`pipeline.robot.exact`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import zipfile
+from collections.abc import Mapping
+from datetime import UTC, datetime
+from pathlib import Path
+
+import yaml
+
+import pipeline
+from pipeline import artefacts
+from pipeline import config as config_mod
+from pipeline.config import to_plain
+from pipeline.errors import PipelineError
+from pipeline.robot.exact import load_exact_robot, save_exact_robot
+from pipeline.robot.model import RobotModel
+from pipeline.stage_api import StageOutput, StageResult
+
+#: files of a stage directory that are not covered by the manifest's SHA-256 list
+UNHASHED = (artefacts.MANIFEST, artefacts.INPUTS_HASH)
+REJECTED_SUFFIX = ".rejected"
+
+
+def file_sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def directory_hashes(folder: Path) -> dict[str, str]:
+    """Relative path -> SHA-256 of every file under ``folder`` except :data:`UNHASHED`."""
+    return {str(p.relative_to(folder)): file_sha256(p) for p in sorted(folder.rglob("*"))
+            if p.is_file() and str(p.relative_to(folder)) not in UNHASHED}
+
+
+def run_key_sha256(seed: int, robot: str, truth: object) -> str:
+    """Hash of the run-level settings every stage shares (seed, robot, ``truth`` section): stage
+    directories with different values come from different runs (:func:`pipeline.runner.load_run`)."""
+    payload = {"seed": seed, "robot": str(robot), "truth": to_plain(truth) or {}}
+    return hashlib.sha256(artefacts.stable_json(payload).encode()).hexdigest()
+
+
+def _write_payload(stage_dir: Path, result: StageResult) -> list[str]:
+    artefacts.write_json(stage_dir / artefacts.SUMMARY, result.summary)
+    artefacts.write_npz(stage_dir / artefacts.RESULTS_NPZ, result.arrays)
+    artefacts.write_json(stage_dir / artefacts.RESULTS_JSON, result.data)
+    figures = []
+    for key, fig in result.figures.items():
+        artefacts.save_figure(stage_dir / f"{key}.png", fig)
+        figures.append(f"{key}.png")
+    if result.report_md:
+        artefacts.write_text(stage_dir / artefacts.REPORT_MD, result.report_md.rstrip() + "\n")
+    if result.robot is not None:
+        save_exact_robot(result.robot, stage_dir / artefacts.ROBOT_DIR)
+    return figures
+
+
+def write_stage_result(stage_dir: Path, name: str, result: StageResult, inputs_sha256: str,
+                       duration_s: float, run_key: str = "") -> None:
+    """Write a StageResult into a (staging) directory; manifest with file hashes, ``inputs.sha256`` last."""
+    figures = _write_payload(stage_dir, result)
+    artefacts.write_json(stage_dir / artefacts.MANIFEST, {
+        "stage": name,
+        "inputs_sha256": inputs_sha256,
+        "run_key_sha256": run_key,
+        "figures": figures,
+        "has_robot": result.robot is not None,
+        "finished_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+        "duration_s": round(duration_s, 3),
+        "package_version": pipeline.__version__,
+        "files_sha256": directory_hashes(stage_dir),
+    })
+    artefacts.write_text(stage_dir / artefacts.INPUTS_HASH, inputs_sha256 + "\n")
+
+
+def write_rejected(staging: Path, final: Path, name: str, result: StageResult, reason: str) -> Path:
+    """Keep a result that failed its quality gate in ``final`` (``<run>/<stage>.rejected/``)."""
+    figures = _write_payload(staging, result)
+    artefacts.write_json(staging / artefacts.MANIFEST, {
+        "stage": name, "rejected": True, "reason": reason, "figures": figures,
+        "finished_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+        "package_version": pipeline.__version__, "files_sha256": directory_hashes(staging),
+    })
+    return artefacts.commit_stage_dir(staging, final)
+
+
+def read_manifest(stage_dir: Path) -> dict:
+    """``manifest.json`` of a stage directory ({} when absent or unreadable)."""
+    try:
+        data = json.loads((stage_dir / artefacts.MANIFEST).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
+def stage_problem(stage_dir: Path) -> str | None:
+    """Why the finished stage directory cannot be trusted, or None (all recorded files intact)."""
+    if artefacts.read_inputs_hash(stage_dir) is None:
+        return "not a finished stage directory (no inputs.sha256)"
+    manifest = read_manifest(stage_dir)
+    files = manifest.get("files_sha256")
+    if not isinstance(files, Mapping):
+        return "manifest.json is missing, unreadable or records no file checksums"
+    if manifest.get("inputs_sha256") != artefacts.read_inputs_hash(stage_dir):
+        return "inputs.sha256 differs from the manifest"
+    for rel, digest in files.items():
+        path = stage_dir / rel
+        if not path.is_file():
+            return f"{rel} is missing"
+        if file_sha256(path) != digest:
+            return f"{rel} was changed or truncated after the stage wrote it (SHA-256 differs)"
+    return None
+
+
+def load_stage_output(stage_dir: str | Path, robot: RobotModel | None = None, verify: bool = True) -> StageOutput:
+    """Load ``summary.json``, ``results.npz``, ``results.json`` and ``robot/`` of a stage.
+
+    ``robot``: an already loaded RobotModel to use instead of reading ``robot/`` again.
+    ``verify``: check the files against the manifest's SHA-256 first (:func:`stage_problem`);
+    a damaged stage raises :class:`PipelineError` naming the file.
+    """
+    d = Path(stage_dir)
+    problem = stage_problem(d) if verify else None
+    if problem is not None:
+        raise PipelineError(d, None, problem)
+    if not (d / artefacts.INPUTS_HASH).exists():
+        raise PipelineError(d, None, "not a finished stage directory (no inputs.sha256)")
+    try:
+        summary = artefacts.read_json(d / artefacts.SUMMARY) if (d / artefacts.SUMMARY).exists() else {}
+        arrays = artefacts.read_npz(d / artefacts.RESULTS_NPZ) if (d / artefacts.RESULTS_NPZ).exists() else {}
+        data = artefacts.read_json(d / artefacts.RESULTS_JSON) if (d / artefacts.RESULTS_JSON).exists() else {}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+        raise PipelineError(d, None, f"cannot read the stage's files ({' '.join(str(exc).split())})") from None
+    if robot is None and (d / artefacts.ROBOT_DIR).is_dir():
+        robot = load_exact_robot(d / artefacts.ROBOT_DIR)
+    return StageOutput(summary=summary, arrays=arrays, data=data, robot=robot, path=d)
+
+
+def load_run(run_dir: str | Path) -> dict[str, StageOutput]:
+    """Every finished stage of a run directory, in run order (unknown stage dirs last).
+
+    Each stage is verified against its manifest's SHA-256 list; a run whose stage directories
+    come from different run settings (seed, robot, truth: another ``config.yaml``) is refused.
+    """
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise PipelineError(run_dir, None, "run directory not found")
+    names = [s for s in config_mod.stage_names() if (run_dir / s / artefacts.INPUTS_HASH).exists()]
+    names += sorted(p.name for p in run_dir.iterdir() if p.is_dir() and not p.name.startswith(".")
+                    and p.name not in names and (p / artefacts.INPUTS_HASH).exists())
+    expected = _config_run_key(run_dir / "config.yaml")
+    for name in names:
+        recorded = read_manifest(run_dir / name).get("run_key_sha256")
+        if expected is not None and recorded != expected:
+            raise PipelineError(run_dir / name, None, "mixed run: this stage was made with other run settings "
+                                "(seed, robot or truth) than config.yaml; re-run it or use another run directory")
+    return {n: load_stage_output(run_dir / n) for n in names}
+
+
+def _config_run_key(path: Path) -> str | None:
+    """The run key of a run's ``config.yaml`` (None when there is none)."""
+    if not path.is_file():
+        return None
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise PipelineError(path, None, f"cannot read ({' '.join(str(exc).split())})") from None
+    if not isinstance(data, Mapping):
+        raise PipelineError(path, None, "not a run configuration")
+    robot = str(data.get("robot", ""))
+    return run_key_sha256(data.get("seed", 0), Path(robot).name or robot, data.get("truth") or {})
