@@ -265,13 +265,27 @@ def parse_set(item: str) -> tuple[list[str], Any]:
 
 
 def read_yaml(path: Path) -> dict[str, Any]:
-    """Read a YAML config file whose top level must be a mapping."""
+    """Read a YAML config file whose top level must be a mapping.
+
+    A file that is not UTF-8 text (binary, another encoding) and an empty file (or one holding
+    only comments) are errors: an empty ``--config`` would otherwise silently start the full
+    default profile; leave ``--config`` out to run the defaults.
+    """
     try:
-        text = path.read_text(encoding="utf-8")
+        raw = path.read_bytes()
     except FileNotFoundError:
         raise ConfigError(path, None, "config file not found") from None
+    except IsADirectoryError:
+        raise ConfigError(path, None, "is a directory, expected a YAML file") from None
     except OSError as exc:
         raise ConfigError(path, None, f"cannot read: {exc.strerror or exc}") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(path, None, f"not a UTF-8 text file (byte {exc.start}: {raw[exc.start]:#04x}); "
+                          "expected a YAML run configuration") from None
+    if "\0" in text:
+        raise ConfigError(path, None, "contains NUL bytes (a binary file?); expected a YAML run configuration")
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
@@ -280,7 +294,8 @@ def read_yaml(path: Path) -> dict[str, Any]:
         problem = getattr(exc, "problem", None) or one_line(exc)
         raise ConfigError(path, where, f"invalid YAML: {problem}") from None
     if data is None:
-        return {}
+        raise ConfigError(path, None, "the config file is empty; leave out --config to run the "
+                          "built-in defaults (full profile), or write e.g. 'profile: full'")
     if not isinstance(data, dict):
         raise ConfigError(path, None, f"top level must be a mapping, got {type(data).__name__}")
     return data

@@ -53,6 +53,14 @@ def summary_table(summary: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _failed_gates(summary: dict) -> str:
+    """The messages of the failed gates recorded by :class:`pipeline.quality.QualityGates`."""
+    gates = summary.get("quality_gates")
+    checks = gates.get("checks", []) if isinstance(gates, dict) else []
+    failed = [str(c.get("message", c.get("name"))) for c in checks if isinstance(c, dict) and not c.get("passed")]
+    return "; ".join(failed) or "see summary.json"
+
+
 def one_line_error(exc: BaseException) -> str:
     if isinstance(exc, PipelineError):
         return exc.one_line()
@@ -78,7 +86,11 @@ def write_report(run_dir: Path, cfg: RunConfig | None = None, current: Sequence[
     if failure is not None:
         stage, error = failure
         where = f" in stage `{stage}`" if stage else ""
-        lines += [f"**FAILED{where}**: {' '.join(error.split())}", "",
+        lines += [f"**FAILED{where}**: {' '.join(error.split())}", ""]
+        if stage and (run_dir / f"{stage}.rejected").is_dir():
+            lines += [f"The result that failed its quality gate is kept for inspection in `{stage}.rejected/` "
+                      "(not handed on to later stages).", ""]
+        lines += [
                   "`config.yaml` holds the configuration of this failed run; stages marked "
                   "_stale_ below show results of an earlier run.", ""]
     if cfg is not None:
@@ -101,6 +113,9 @@ def write_report(run_dir: Path, cfg: RunConfig | None = None, current: Sequence[
         if manifest.get("finished_utc"):
             lines += [f"finished {manifest['finished_utc']} in {manifest.get('duration_s', 0):.1f} s", ""]
         summary = artefacts.read_json(d / artefacts.SUMMARY) if (d / artefacts.SUMMARY).exists() else {}
+        if isinstance(summary, dict) and summary.get("accepted_poor"):
+            lines += [f"**ACCEPTED POOR (`--accept-poor`)**: failed quality gate(s): {_failed_gates(summary)}; "
+                      "handed on knowingly", ""]
         report_md = d / artefacts.REPORT_MD
         stage_md = report_md.read_text(encoding="utf-8").rstrip() if report_md.exists() else ""
         if stage_md:  # the stage's own tables first; every headline figure folded below them
