@@ -199,3 +199,25 @@ def test_unwritable_run_dir_is_one_line(gate_stages, tmp_path, monkeypatch):
     with pytest.raises(PipelineError, match="No space left on device"):
         run_pipeline(load_config(None, ["name=r", "c.n=5"]), out_root=tmp_path, **QUIET)
     assert (tmp_path / "r" / "c" / "summary.json").read_bytes() == before
+
+
+def test_read_only_run_dir_reuses_everything_or_says_why_not(gate_stages, tmp_path, monkeypatch):
+    import errno
+
+    from pipeline import locking
+    from pipeline.errors import ArtefactWriteError
+
+    run_pipeline(load_config(None, ["name=r"]), out_root=tmp_path, **QUIET)
+    real_open = os.open
+
+    def read_only(path, flags, *args):
+        if str(path).endswith(".lock"):
+            raise OSError(errno.EROFS, "Read-only file system", str(path))
+        return real_open(path, flags, *args)
+
+    monkeypatch.setattr(locking.os, "open", read_only)
+    messages: list[str] = []
+    result = run_pipeline(load_config(None, ["name=r"]), out_root=tmp_path, log=messages.append)
+    assert result.reused == ["a", "b", "c"] and "nothing written" in messages[-1]
+    with pytest.raises(ArtefactWriteError, match="read-only and stage c must run"):
+        run_pipeline(load_config(None, ["name=r", "c.n=7"]), out_root=tmp_path, **QUIET)

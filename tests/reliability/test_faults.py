@@ -1,0 +1,201 @@
+"""Faults from outside: SIGINT/SIGTERM/kill -9 in a stage, two runs at once, read-only and full
+disks, a damaged compiled-code cache. Each ends as one line with the right exit code, nothing
+half-written, and the next run resumes. Subprocess cases are fast (fake stages); the tmpfs
+disk-full case needs root and ``mount`` (skipped otherwise)."""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+
+SCRIPT = textwrap.dedent('''
+    import sys, time
+    from dataclasses import dataclass
+    from types import SimpleNamespace
+    import numpy as np
+    from pipeline import cli, config
+    from pipeline.stage_api import StageResult
+
+    @dataclass
+    class Config:
+        sleep_s: float = 0.0
+
+    def make(name, depends):
+        def run(ctx):
+            (ctx.out_dir / "part.txt").write_text("half")
+            if ctx.config.sleep_s:
+                marker = ctx.out_dir.parent / f"{name}.started"
+                marker.write_text("x")
+                deadline = time.monotonic() + ctx.config.sleep_s
+                while time.monotonic() < deadline:      # a Python loop, like a stage's work
+                    time.sleep(0.01)
+            return StageResult(summary={"seed": ctx.run.seed}, arrays={"x": np.arange(3.0)})
+        return SimpleNamespace(NAME=name, DEPENDS=depends, Config=Config, run=run, __file__=None)
+
+    config.STAGES = {"a": make("a", ()), "b": make("b", ("a",)), "c": make("c", ("b",))}
+    sys.exit(cli.main(sys.argv[1:]))
+''')
+
+
+def _start(tmp_path: Path, *args: str) -> subprocess.Popen:
+    script = tmp_path / "fake_cli.py"
+    script.write_text(SCRIPT)
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    return subprocess.Popen([sys.executable, str(script), "run", "--out", str(tmp_path / "runs"), *args],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
+
+
+def _wait_for(path: Path, proc: subprocess.Popen, timeout_s: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not path.exists():
+        if proc.poll() is not None or time.monotonic() > deadline:
+            out, err = proc.communicate()
+            pytest.fail(f"stage did not start: rc={proc.returncode} {err}")
+        time.sleep(0.05)
+
+
+def _committed(run_dir: Path) -> set[str]:
+    return {p.name for p in run_dir.iterdir() if (p / "inputs.sha256").exists()}
+
+
+def _leftovers(run_dir: Path) -> list[str]:
+    return [p.name for p in run_dir.iterdir() if ".partial-" in p.name or ".old-" in p.name]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_signal_in_a_stage_exits_130_and_commits_nothing(tmp_path, sig):
+    proc = _start(tmp_path, "--set", "name=r", "--set", "b.sleep_s=60")
+    run_dir = tmp_path / "runs" / "r"
+    _wait_for(run_dir / "b.started", proc)
+    t0 = time.monotonic()
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=30)
+    assert time.monotonic() - t0 < 10
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines()[-1].startswith("interrupted")
+    assert "Traceback" not in err
+    assert _committed(run_dir) == {"a"} and not _leftovers(run_dir)
+    resumed = _start(tmp_path, "--set", "name=r")
+    _, err = resumed.communicate(timeout=60)
+    assert resumed.returncode == 0, err
+    assert "a: reused" in err and _committed(run_dir) == {"a", "b", "c"}
+
+
+def test_kill_9_in_a_stage_leaves_no_half_stage(tmp_path):
+    proc = _start(tmp_path, "--set", "name=r", "--set", "b.sleep_s=60")
+    run_dir = tmp_path / "runs" / "r"
+    _wait_for(run_dir / "b.started", proc)
+    proc.kill()
+    proc.communicate(timeout=30)
+    assert _committed(run_dir) == {"a"}                     # the staging dir is not a stage
+    resumed = _start(tmp_path, "--set", "name=r")
+    _, err = resumed.communicate(timeout=60)
+    assert resumed.returncode == 0, err
+    assert _committed(run_dir) == {"a", "b", "c"} and not _leftovers(run_dir)
+
+
+def test_concurrent_run_is_refused_naming_the_pid(tmp_path):
+    first = _start(tmp_path, "--set", "name=r", "--set", "b.sleep_s=60")
+    run_dir = tmp_path / "runs" / "r"
+    _wait_for(run_dir / "b.started", first)
+    second = _start(tmp_path, "--set", "name=r", "--set", "seed=2")
+    _, err = second.communicate(timeout=60)
+    first.send_signal(signal.SIGTERM)
+    first.communicate(timeout=30)
+    assert second.returncode == 2
+    assert err.strip().splitlines() == [f"error: {run_dir}: process {first.pid} is running on this run "
+                                        "directory; wait for it to finish or choose another name/--out"]
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root ignores directory permissions")
+def test_read_only_run_dir_reuses_when_nothing_to_write(tmp_path):
+    done = _start(tmp_path, "--set", "name=r")
+    assert done.wait(timeout=60) == 0
+    run_dir = tmp_path / "runs" / "r"
+    run_dir.chmod(0o555)
+    try:
+        again = _start(tmp_path, "--set", "name=r")
+        _, err = again.communicate(timeout=60)
+        assert again.returncode == 0 and "read-only: every stage reused" in err
+        changed = _start(tmp_path, "--set", "name=r", "--set", "seed=3")
+        _, err = changed.communicate(timeout=60)
+        assert changed.returncode == 2 and err.strip().splitlines()[-1].startswith("error: ")
+    finally:
+        run_dir.chmod(0o755)
+
+
+def _tmpfs(path: Path, size: str) -> bool:
+    if os.geteuid() != 0 or shutil.which("mount") is None:
+        return False
+    path.mkdir()
+    return subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(path)],
+                          capture_output=True, check=False).returncode == 0
+
+
+@pytest.mark.slow
+def test_disk_full_is_one_line_and_keeps_older_artefacts(tmp_path):
+    disk = tmp_path / "disk"
+    if not _tmpfs(disk, "1m"):
+        pytest.skip("needs root and a working tmpfs mount")
+    try:
+        out = disk / "runs"
+        script = tmp_path / "fake_cli.py"
+        big_arrays = 'arrays={"x": np.random.default_rng(1).random(ctx.run.seed ** 2 * 20000)}'
+        script.write_text(SCRIPT.replace('arrays={"x": np.arange(3.0)}', big_arrays))
+        env = {**os.environ, "PYTHONPATH": str(REPO)}
+        small = subprocess.run([sys.executable, str(script), "run", "--out", str(out), "--set", "name=r",
+                                "--set", "seed=1"], capture_output=True, text=True, env=env, check=False)
+        assert small.returncode == 0, small.stderr
+        before = (out / "r" / "a" / "results.npz").read_bytes()
+        big = subprocess.run([sys.executable, str(script), "run", "--out", str(out), "--set", "name=r",
+                              "--set", "seed=3"], capture_output=True, text=True, env=env, check=False)
+        assert big.returncode == 2 and "No space left on device" in big.stderr.strip().splitlines()[-1]
+        assert "Traceback" not in big.stderr
+        assert (out / "r" / "a" / "results.npz").read_bytes() == before
+    finally:
+        subprocess.run(["umount", str(disk)], check=False)
+
+
+# ------------------------------------------------------------------------------ compiled code cache
+def _tiny_function():
+    import casadi as ca
+
+    x = ca.SX.sym("x", 2)
+    return ca.Function("tiny_fault_test", [x], [ca.sin(x) * 2.0])
+
+
+def test_truncated_library_is_rebuilt(tmp_path):
+    from pipeline import codegen
+
+    library = codegen.build_library("tiny", [_tiny_function()], cache_dir=tmp_path)
+    data = library.read_bytes()
+    library.write_bytes(data[: len(data) // 3])                 # dlopen of this would SIGBUS
+    again = codegen.build_library("tiny", [_tiny_function()], cache_dir=tmp_path)
+    assert again == library and library.read_bytes() == data
+    value = float(codegen.compile_function(_tiny_function(), cache_dir=tmp_path)([1.0, 2.0])[0])
+    assert value == pytest.approx(2.0 * math.sin(1.0))
+
+
+def test_cache_honours_xdg_and_falls_back_when_unwritable(tmp_path, monkeypatch, capsys):
+    from pipeline import codegen
+
+    monkeypatch.delenv("PIPELINE_CACHE_DIR", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert codegen.cache_root() == tmp_path / "xdg" / "pipeline"
+    blocker = tmp_path / "not_a_dir"
+    blocker.write_text("a file where the cache folder should be")
+    monkeypatch.setattr(codegen, "_FALLBACK", [])
+    library = codegen.build_library("tiny", [_tiny_function()], cache_dir=blocker / "cache")
+    assert library.exists() and not library.is_relative_to(blocker)
+    assert "not writable" in capsys.readouterr().err
