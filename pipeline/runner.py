@@ -458,7 +458,9 @@ def _run_one(plan: _Plan, prep: Prepared, outputs: dict[str, StageOutput], hande
         staging = artefacts.new_stage_dir(run_dir, plan.name)
     except OSError as exc:
         raise _write_error(exc, run_dir) from None
-    ctx = StageContext(run=cfg, config=plan.config, robot=_copy_robot(robot), real=prep.real,
+    # a fresh hidden robot per stage: its sensors draw noise from generators seeded by the run, so a
+    # stage measures the same whether the earlier stages ran in this process or were reused
+    ctx = StageContext(run=cfg, config=plan.config, robot=_copy_robot(robot), real=_make_real(prep.nominal, cfg),
                        upstream={u: outputs[u] for u in plan.closure}, out_dir=staging,
                        rng=stage_rng(cfg.seed, plan.name), progress=prog)
     say(f"{plan.name}: running")
@@ -490,4 +492,6 @@ def _run_one(plan: _Plan, prep: Prepared, outputs: dict[str, StageOutput], hande
         raise
     artefacts.discard_stage_dir(rejected)       # an older rejected result is out of date now
     say(f"{plan.name}: done in {duration:.1f} s")
-    return load_stage_output(final, robot=result.robot, verify=False)
+    # hand on what is on disk (the robot read back exactly): later stages then see the same
+    # inputs whether this stage ran in this process or is reused in another one
+    return load_stage_output(final, verify=False)
