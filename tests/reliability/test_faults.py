@@ -199,3 +199,39 @@ def test_cache_honours_xdg_and_falls_back_when_unwritable(tmp_path, monkeypatch,
     library = codegen.build_library("tiny", [_tiny_function()], cache_dir=blocker / "cache")
     assert library.exists() and not library.is_relative_to(blocker)
     assert "not writable" in capsys.readouterr().err
+
+
+IPOPT_SCRIPT = textwrap.dedent('''
+    import sys
+    import casadi as ca
+    from pipeline.interrupts import handle_termination, raise_if_interrupted
+    n = 2000
+    x = ca.MX.sym("x", n)
+    f = ca.sum1(100 * (x[1:] - x[:-1] ** 2) ** 2 + (1 - x[:-1]) ** 2) + ca.sum1(ca.sin(x) ** 4)
+    solver = ca.nlpsol("s", "ipopt", {"x": x, "f": f}, {"ipopt.max_iter": 100000, "ipopt.print_level": 0,
+                       "print_time": 0, "ipopt.tol": 1e-30, "ipopt.hessian_approximation": "limited-memory"})
+    print("ready", flush=True)
+    try:
+        with handle_termination():
+            solver(x0=[-1.2] * n)
+            raise_if_interrupted(solver.stats())
+    except KeyboardInterrupt as exc:
+        print("interrupted:", exc, flush=True)
+        sys.exit(130)
+    print("finished:", solver.stats()["return_status"], flush=True)
+''')
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_signal_inside_ipopt_becomes_an_interrupt(tmp_path, sig):
+    script = tmp_path / "ipopt.py"
+    script.write_text(IPOPT_SCRIPT)
+    proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert proc.stdout.readline().strip() == "ready"
+    time.sleep(1.0)
+    t0 = time.monotonic()
+    proc.send_signal(sig)
+    out, _ = proc.communicate(timeout=30)
+    assert time.monotonic() - t0 < 10
+    assert proc.returncode == 130 and "interrupted: solver stopped: NonIpopt_Exception_Thrown" in out
