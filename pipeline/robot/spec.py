@@ -230,7 +230,9 @@ def load_robot_spec(path: Path, nq: int | None = None) -> RobotSpec:
          "coulomb_smoothing_rad_s"},
         {"gear_ratio", "rotor_inertia_kgm2", "viscous_Nms_rad", "coulomb_Nm"},
     )
-    gear_ratio = act.vector("gear_ratio", nq)
+    per_joint = [len(v) for k in ("gear_ratio", "rotor_inertia_kgm2", "viscous_Nms_rad", "coulomb_Nm")
+                 if isinstance(v := act.data.get(k), list)]      # nq unknown: blame the odd list out
+    gear_ratio = act.vector("gear_ratio", nq if nq is not None else max(set(per_joint), key=per_joint.count))
     if np.any(gear_ratio == 0):
         raise act.error("gear_ratio", "a gear ratio must not be zero")
     n = len(gear_ratio)

@@ -105,3 +105,16 @@ def test_binary_config_file_is_one_line(tmp_path):
     path.write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00")
     with pytest.raises(ConfigError, match="not a UTF-8 text file"):
         load_config(path)
+
+
+@pytest.mark.parametrize("field", ["gear_ratio", "rotor_inertia_kgm2", "viscous_Nms_rad", "coulomb_Nm"])
+def test_per_joint_list_of_wrong_length_is_reported_under_its_own_field(tmp_path, field):
+    from pipeline.robot.model import RobotModel
+
+    folder = tmp_path / "robot"
+    shutil.copytree(ROBOT_YAML.parent, folder)
+    data = yaml.safe_load(ROBOT_YAML.read_text())
+    data["actuation"][field] = data["actuation"][field][:-1]
+    (folder / "robot.yaml").write_text(yaml.safe_dump(data))
+    with pytest.raises(RobotFileError, match=rf"robot.yaml: actuation.{field}: expected 6 numbers, got 5"):
+        RobotModel.load(folder)
