@@ -221,3 +221,14 @@ def test_read_only_run_dir_reuses_everything_or_says_why_not(gate_stages, tmp_pa
     assert result.reused == ["a", "b", "c"] and "nothing written" in messages[-1]
     with pytest.raises(ArtefactWriteError, match="read-only and stage c must run"):
         run_pipeline(load_config(None, ["name=r", "c.n=7"]), out_root=tmp_path, **QUIET)
+
+
+def test_check_validates_the_data_files_of_real_stages_and_writes_nothing(tmp_path, capsys):
+    from pipeline.config import CONFIGS_DIR
+
+    missing = tmp_path / "missing.csv"
+    out = tmp_path / "runs"
+    code = cli.main(["check", "--config", str(CONFIGS_DIR / "quick.yaml"), "--set",
+                     f"identification.data_file={missing}", "--out", str(out)])
+    assert code == 2 and capsys.readouterr().err.strip() == f"error: {missing}: file not found"
+    assert not out.exists()
