@@ -53,6 +53,15 @@ def summary_table(summary: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _summary(stage_dir: Path) -> dict:
+    path = stage_dir / artefacts.SUMMARY
+    try:
+        data = artefacts.read_json(path) if path.exists() else {}
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
 def _failed_gates(summary: dict) -> str:
     """The messages of the failed gates recorded by :class:`pipeline.quality.QualityGates`."""
     gates = summary.get("quality_gates")
@@ -97,6 +106,10 @@ def write_report(run_dir: Path, cfg: RunConfig | None = None, current: Sequence[
         lines += [f"robot `{cfg.robot}` · seed {cfg.seed} · profile `{cfg.profile}` · "
                   f"pipeline {pipeline.__version__} · config in `config.yaml`", ""]
     names = [s for s in config_mod.stage_names() if (run_dir / s / artefacts.INPUTS_HASH).exists()]
+    poor = [s for s in names if _summary(run_dir / s).get("accepted_poor")]
+    if poor:
+        lines += [f"**Results accepted with `--accept-poor`** (failed quality gates, handed on knowingly): "
+                  f"{', '.join(f'`{s}`' for s in poor)}", ""]
     extra = sorted(p.name for p in run_dir.iterdir()
                    if p.is_dir() and not p.name.startswith(".") and p.name not in names
                    and (p / artefacts.INPUTS_HASH).exists())

@@ -52,7 +52,6 @@ from pipeline.stage_io import (
     REJECTED_SUFFIX,
     load_run,
     load_stage_output,
-    read_manifest,
     run_key_sha256,
     stage_problem,
     write_rejected,
@@ -283,7 +282,7 @@ def _why_not_reuse(plan: _Plan, stage_dir: Path, forced: set[str], cfg: RunConfi
     problem = stage_problem(stage_dir)
     if problem is not None:
         return f"its files are damaged: {problem}"
-    if not cfg.accept_poor and read_manifest(stage_dir) and _accepted_poor(stage_dir):
+    if not cfg.accept_poor and _accepted_poor(stage_dir):
         return "it was accepted with --accept-poor and this run requires its quality gates"
     return None
 
