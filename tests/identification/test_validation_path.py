@@ -46,7 +46,7 @@ def test_tx40_validates_on_the_iso_path_of_its_run_defaults(tx40):
     run = load_config(values={"robot": "staubli_tx40"})
     iso = val_mod.run_iso_config(run)
     assert iso is run.control.iso and iso.edge_m == pytest.approx(0.2)      # robot.yaml run_defaults
-    vt = val_mod.validation_trajectory(tx40, 4e-3, _no_fallback, iso=iso)
+    vt = val_mod.validation_trajectory(tx40, 4e-3, _no_fallback, control=run.control)
     assert vt.label == "iso9283" and "edge 0.2 m" in vt.note
     assert np.all(vt.q >= tx40.limits.lower_rad) and np.all(vt.q <= tx40.limits.upper_rad)
 
@@ -54,7 +54,7 @@ def test_tx40_validates_on_the_iso_path_of_its_run_defaults(tx40):
 def test_rx130l_sized_path_falls_back_on_the_tx40(tx40):
     fallback = val_mod.ValidationTrajectory(np.zeros(2), np.zeros((2, 6)), np.zeros((2, 6)), np.zeros((2, 6)),
                                             "fourier", "a random feasible Fourier trajectory")
-    vt = val_mod.validation_trajectory(tx40, 4e-3, lambda: fallback, iso=ControlConfig().iso)
+    vt = val_mod.validation_trajectory(tx40, 4e-3, lambda: fallback, control=ControlConfig())
     assert vt.label == "fourier" and "ISO 9283 path" in vt.note
     md = stage._validation_markdown(stage.Config(), vt, ControlConfig().iso, tx40)
     assert "Warning" in md and "control.iso.centre_m" in md and "control.iso.edge_m" in md
@@ -63,7 +63,7 @@ def test_rx130l_sized_path_falls_back_on_the_tx40(tx40):
 
 def test_iso_path_markdown_names_the_path(tx40):
     run = load_config(values={"robot": "staubli_tx40"})
-    vt = val_mod.validation_trajectory(tx40, 4e-3, _no_fallback, iso=run.control.iso)
+    vt = val_mod.validation_trajectory(tx40, 4e-3, _no_fallback, control=run.control)
     md = stage._validation_markdown(stage.Config(), vt, run.control.iso, tx40)
     assert "EN ISO 9283 path" in md and "Warning" not in md
 
