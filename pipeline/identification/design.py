@@ -413,7 +413,9 @@ def _optimize_excitation_impl(
     )
     # the baseline is scored on the same sample grid as the optimum
     cond_random = [condition_number(crit.matrix(tr.coefficients.ravel())) for tr in randoms]
-    order = np.argsort(cond_random)
+    score_random = (np.log(cond_random) if criterion == "cond" else
+                    [crit.value_and_gradient(tr.coefficients.ravel(), gradient=False)[0] for tr in randoms])
+    order = np.argsort(score_random)
     starts = [randoms[i] for i in order[:n_starts]]
 
     inner = limits.tightened(NLP_LIMIT_FACTOR, NLP_EXTRA_CLEARANCE_M)
@@ -458,15 +460,14 @@ def _optimize_excitation_impl(
             best = (condk, traj, feas, score)
     # never worse than the best random feasible trajectory (quality gate, issue 13)
     i0 = int(order[0])
-    score0 = (np.log(cond_random[i0]) if criterion == "cond"
-              else crit.value_and_gradient(randoms[i0].coefficients.ravel(), gradient=False)[0])
+    score0 = float(score_random[i0])
     source, reason = "optimised", ""
     if best is None:
         reason = ("no IPOPT start ended with Solve_Succeeded/Solved_To_Acceptable_Level on a feasible "
                   f"trajectory (statuses: {', '.join(r['status'] for r in start_results) or 'none'})")
     elif best[3] >= score0:
-        reason = (f"the optimised trajectory (cond {best[0]:.4g}) is not better than the best random "
-                  f"feasible one (cond {cond_random[i0]:.4g})")
+        reason = (f"the optimised trajectory ({criterion} criterion {best[3]:.4g}, cond {best[0]:.4g}) is not better "
+                  f"than the best random feasible one ({score0:.4g}, cond {cond_random[i0]:.4g})")
     if reason:
         source = "best random"
         best = (cond_random[i0], randoms[i0], check_trajectory(robot, randoms[i0], limits, n_check), score0)
