@@ -29,6 +29,7 @@ def test_inputs_hash_follows_control_iso_only():
     assert _identification_hash() == base
     assert _identification_hash({"control.iso.edge_m": 0.4}) != base
     assert _identification_hash({"control.iso.centre_m": [1.0, 0.1, 0.6]}) != base
+    assert _identification_hash({"control.ik_seeds_deg": [[0, 20, 80, 0, 70, 0]]}) != base   # the IK seeds
     assert _identification_hash({"control.settle_time_s": 0.5}) == base       # not read by identification
     assert _identification_hash({"control.variants": ["none", "full"]}) == base
 
@@ -74,3 +75,32 @@ def test_missing_control_section_uses_the_built_in_path():
     assert val_mod.run_iso_config(RunConfig()) == ControlConfig().iso
     run = load_config(values={"control.iso.edge_m": 0.3})
     assert val_mod.run_iso_config(run).edge_m == pytest.approx(0.3)
+
+
+def test_ik_seeds_come_from_the_run(tx40, monkeypatch):
+    """The ISO path starts from the run's control.ik_seeds_deg, not the built-in ControlConfig()."""
+    from pipeline.robot import paths
+
+    seen = []
+    original = paths.start_configuration
+
+    def spy(robot, pose, seeds, *args, **kwargs):
+        seen.append(np.array(seeds))
+        return original(robot, pose, seeds, *args, **kwargs)
+
+    monkeypatch.setattr(paths, "start_configuration", spy)
+    run = load_config(values={"robot": "staubli_tx40", "control.ik_seeds_deg": [[5, 10, 90, 0, 60, 0]]})
+    control = val_mod.run_control_config(run)
+    assert control is run.control
+    val_mod.validation_trajectory(tx40, 4e-3, _no_fallback, control=control)
+    np.testing.assert_allclose(seen[0], np.radians([[5, 10, 90, 0, 60, 0]]))
+
+
+def test_wrong_seed_length_is_the_stated_reason(tx40):
+    fallback = val_mod.ValidationTrajectory(np.zeros(2), np.zeros((2, 6)), np.zeros((2, 6)), np.zeros((2, 6)),
+                                            "fourier", "a random feasible Fourier trajectory")
+    control = ControlConfig(ik_seeds_deg=[[0.0] * 7])
+    vt = val_mod.validation_trajectory(tx40, 4e-3, lambda: fallback, control=control)
+    assert vt.label == "fourier" and "control.ik_seeds_deg[0]" in vt.note and "7 values" in vt.note
+    md = stage._validation_markdown(stage.Config(), vt, control.iso, tx40)
+    assert "control.ik_seeds_deg" in md and "7 values, the robot has 6 joints" in md
