@@ -1,24 +1,31 @@
 """Stage ``identification``: optimal Fourier excitation, measurement, estimation, validation,
 and the real Stäubli TX40 record (paper ``004_abbe750b8bbcc3aa.txt`` §4; issue 4).
 
-1. Regressor of the current model (calibrated kinematics when the run has a calibration) and its
-   base parameters (structure from the nominal robot, pivoted QR; :mod:`.regressor`).
+1. Regressor of the current model (calibrated kinematics when the run has a calibration) and the
+   structural base set, decided on the nominal robot and kept for the current one
+   (:mod:`.base_set`).
 2. Excitation: Fourier trajectory minimising the condition number of the base regressor under
    limits, torques, floor and self-collision (CasADi/IPOPT, random starts; :mod:`.design`),
-   against the median of 20 random feasible trajectories.
+   against the median of 20 random feasible trajectories; never worse than the best of them
+   (fallback, stated in summary and report).
 3. Data: the hidden robot follows ``periods`` periods (ideal tracking, sensor noise), or the
    user's CSV record (``data_file``): then no excitation is designed, the condition number is the
    one of the record's base regressor, validation is on the record's held-out tail (fit on the
    first ``data_train_fraction``, :func:`.tx40.heldout_validation`), the noise sigma comes from
    the WLS residuals and the hidden robot (``ctx.real``) is never used. :func:`check` reads and
    checks the record before any stage runs.
-4. Period averaging, zero-phase filtering, differentiation, block decimation (:mod:`.measure`).
+4. Period averaging, zero-phase filtering, differentiation, block decimation (:mod:`.measure`);
+   the data must excite the model (motion per joint, rank and condition; :mod:`.gates`).
 5. OLS, Gautier's WLS (covariance -> base parameter sigmas) and the physically consistent fit
    (log-Cholesky, IPOPT) whose standard parameters become the handed-on ``RobotModel``.
-6. Validation on the run's ISO 9283 path (``control.iso``, measured vs predicted torques; a random
-   Fourier trajectory, stated in the report, when that path is out of reach), or the held-out tail
-   of a record.
-7. The TX40 record: base parameters, condition number, held-out RMS (:mod:`.tx40`).
+6. Validation on the run's ISO 9283 path (``control.iso`` from the run's ``control.ik_seeds_deg``,
+   measured vs predicted torques; a random Fourier trajectory, with the real reason in the report,
+   when that path cannot be used), or the held-out tail of a record.
+7. The TX40 record, only for the TX40 or when asked (:func:`tx40_wanted`): base parameters,
+   condition number, held-out RMS (:mod:`.tx40`).
+8. Quality gates (:func:`.gates.add_result_gates`): condition number vs design, validation RMS vs
+   noise, predicted torques vs limits -> :class:`~pipeline.errors.QualityGateError` unless
+   ``--accept-poor``.
 """
 
 from __future__ import annotations
