@@ -5,7 +5,8 @@
   have full column rank (numerical rank, ``s_min > n eps s_max``) with a condition number below
   ``max_cond_base_regressor_data``. A record in which the robot never moves fails here with a
   message instead of an "identification" with cond 1e50.
-* :func:`add_result_gates`: the fitted base regressor's condition number within
+* :func:`add_result_gates`: the physically consistent fit's IPOPT status is a success, the fitted
+  base regressor's condition number within
   ``max_cond_data_over_design`` x the design criterion's (when an excitation was designed),
   the validation RMS per joint at most ``max_validation_rms_over_noise`` x the noise estimate,
   and the model's predicted torques on the validation path at most
@@ -19,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.errors import DataFileError, PipelineError
+from pipeline.identification.solver_status import is_success
 from pipeline.quality import QualityGates
 
 
@@ -51,9 +53,12 @@ def check_data_excites(
 
 def add_result_gates(
     gates: QualityGates, cfg: Any, cond_data: float, cond_design: float | None, rms_over_noise: np.ndarray,
-    predicted_Nm: np.ndarray, effort_limit_Nm: np.ndarray,
+    predicted_Nm: np.ndarray, effort_limit_Nm: np.ndarray, physical_status: str = "Solve_Succeeded",
 ) -> None:
     """The result gates (see module doc) with the thresholds of ``cfg`` (stage Config)."""
+    gates.require("physical_fit_status", is_success(physical_status),
+                  f"IPOPT returned {physical_status} for the physically consistent fit (identification."
+                  "physical_max_iter)")
     if cond_design is not None:
         gates.check("cond_data_over_design", cond_data / cond_design, "<=", cfg.max_cond_data_over_design,
                     "fitted base regressor on the data vs the design criterion (identification."

@@ -384,7 +384,7 @@ def _run(ctx: StageContext) -> StageResult:
             "TX40 held-out 30 %: measured vs physically consistent fit")
     gates = QualityGates(NAME, accept_poor=bool(getattr(ctx.run, "accept_poor", False)))
     add_result_gates(gates, cfg, cond_data, None if exc is None else exc.cond_optimized, ratio, pred_phys,
-                     robot.limits.effort_Nm)
+                     robot.limits.effort_Nm, phys.status)
     fallback_md = "" if exc is None or not exc.fallback_reason else (
         f"**Excitation: the best random feasible trajectory is used** ({exc.fallback_reason}).\n\n")
     return gates.finish(StageResult(summary=summary, arrays=arrays, data=data_out, figures=figures, robot=new_robot,

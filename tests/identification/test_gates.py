@@ -84,6 +84,10 @@ def test_result_gates_name_the_figure_and_threshold():
     assert [c.name for c in cond.failed] == ["cond_data_over_design"]
     nan = _gates([np.nan, 1.0], [[1.0, 1.0]])
     assert [c.name for c in nan.failed] == ["validation_rms_over_noise"]
+    gates = QualityGates("identification")
+    add_result_gates(gates, stage.Config(), 100.0, 60.0, np.ones(2), np.ones((1, 2)), np.ones(2),
+                     "Maximum_Iterations_Exceeded")
+    assert [c.name for c in gates.failed] == ["physical_fit_status"]
 
 
 def test_failed_gate_raises_unless_accept_poor(tmp_path):
