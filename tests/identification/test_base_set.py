@@ -10,6 +10,9 @@ import pytest
 from pipeline.identification.base_set import structural_base_parameters
 from pipeline.identification.regressor import RegressorModel, base_parameters
 from pipeline.robot.model import RobotModel
+from pipeline.robot.truth import RealRobot
+
+from .helpers import calibrated_robot
 
 
 def _perturbed(model: pin.Model, size_m: float, rng: np.random.Generator) -> pin.Model:
@@ -75,3 +78,16 @@ def test_seven_joints():
     assert b_nom.set_names == b_cur.set_names
     assert 7 * 4 < b_nom.n_base < 7 * 14                      # actuator columns + some link parameters
     assert all(name.startswith(("j", "universe")) for name in b_nom.set_names)
+
+
+def test_calibrated_and_reloaded_robot_keep_the_nominal_set(rx130l, tmp_path):
+    """The robot a calibration hands on, and the same robot reloaded from its files (URDF text
+    round trip), give the nominal model's base set."""
+    cal = calibrated_robot(rx130l, RealRobot.create(rx130l, 1))
+    back = RobotModel.load(cal.save(tmp_path / "robot"))
+    lo, hi = rx130l.limits.lower_rad, rx130l.limits.upper_rad
+    w = rx130l.actuation.coulomb_smoothing_rad_s
+    nominal = RegressorModel(rx130l.model, np.eye(6), w)
+    sets = [structural_base_parameters(nominal, RegressorModel(r.model, np.eye(6), w), np.random.default_rng(5),
+                                       300, lower=lo, upper=hi)[1].set_names for r in (rx130l, cal, back)]
+    assert sets[0] == sets[1] == sets[2]
