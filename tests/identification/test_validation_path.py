@@ -10,6 +10,7 @@ from pipeline.config import load_config, resolve_robot_dir
 from pipeline.control.config import ControlConfig
 from pipeline.identification import stage
 from pipeline.identification import validate as val_mod
+from pipeline.robot import paths
 from pipeline.robot.model import RobotModel
 from pipeline.runner import RunConfig, plan_stages, stage_inputs_hashes
 
@@ -79,8 +80,6 @@ def test_missing_control_section_uses_the_built_in_path():
 
 def test_ik_seeds_come_from_the_run(tx40, monkeypatch):
     """The ISO path starts from the run's control.ik_seeds_deg, not the built-in ControlConfig()."""
-    from pipeline.robot import paths
-
     seen = []
     original = paths.start_configuration
 
