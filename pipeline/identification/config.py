@@ -12,6 +12,7 @@ from typing import Any
 
 from pipeline.errors import ConfigError
 from pipeline.identification.base_set import STRUCTURAL_BASE_TOLERANCE
+from pipeline.identification.friction import FRICTION_MODELS
 from pipeline.identification.tx40 import TX40_SAMPLE_TIME_S, Tx40Config
 
 #: processed samples dropped at each end of a data_file record (filter transients)
@@ -62,6 +63,9 @@ class Config:
     base_samples: int = 300
     regularization: float = 1e-3  # pull of the physical fit towards the nominal model
     physical_max_iter: int = 1000
+    # viscous_coulomb (linear, handed on) | stribeck: also fit a Stribeck term (IPOPT) and report
+    # both friction models' held-out errors (friction.py)
+    friction_model: str = "viscous_coulomb"
     validation: str = "iso9283"  # iso9283 | fourier
     validation_sample_time_s: float = 4e-3
     data_file: str = ""  # CSV record instead of the simulated experiment
@@ -130,6 +134,7 @@ class Config:
             ("base_samples", self.base_samples >= 1, "must be >= 1"),
             ("regularization", fin(self.regularization) and self.regularization >= 0, "must be >= 0"),
             ("physical_max_iter", self.physical_max_iter >= 1, "must be >= 1"),
+            ("friction_model", self.friction_model in FRICTION_MODELS, f"must be one of {', '.join(FRICTION_MODELS)}"),
             ("validation", self.validation in ("iso9283", "fourier"), "must be iso9283 or fourier"),
             ("validation_sample_time_s", fin(self.validation_sample_time_s)
              and 0 < self.validation_sample_time_s <= MAX_SAMPLE_TIME_S, f"must be in (0, {MAX_SAMPLE_TIME_S}] s"),

@@ -46,6 +46,7 @@ from pipeline.identification import measure as meas_mod
 from pipeline.identification import validate as val_mod
 from pipeline.identification.base_set import structural_base_parameters
 from pipeline.identification.config import DATA_BORDER_SAMPLES, Config, ExcitationConfig
+from pipeline.identification.friction import compare_friction_models
 from pipeline.identification.gates import add_result_gates, check_data_excites
 from pipeline.identification.record import load_user_record
 from pipeline.identification.regressor import RegressorModel, standard_parameters
@@ -261,6 +262,15 @@ def _run(ctx: StageContext) -> StageResult:
         if noise_sigma is None or not np.all(np.isfinite(noise_sigma)):
             noise_sigma = np.asarray(meas_v.tau_sigma_Nm, float)
             noise_source = "torque sensor of the simulation"
+    friction: dict[str, Any] = {}
+    if cfg.friction_model == "stribeck":  # both friction models scored on held-out samples
+        if rec is not None:
+            k, n_rows = ho.n_train, ho.n_train * nq
+            friction = compare_friction_models(Wb[:n_rows], data.tau[:k], data.v[:k], wls.joint_sigma_Nm,
+                                               reg.coulomb_width_rad_s, Wb[n_rows:], data.tau[k:], data.v[k:])
+        else:
+            friction = compare_friction_models(Wb, data.tau, data.v, wls.joint_sigma_Nm, reg.coulomb_width_rad_s,
+                                               base.base_regressor(Yv), tau_v, vt.v)
     timings["validation_s"] = time.perf_counter() - t1
 
     truth = None
@@ -304,6 +314,8 @@ def _run(ctx: StageContext) -> StageResult:
         "data_source": data_source,
         "actuator_coupling": "gear matrix" if coupled else "diagonal (joint side)",
         "n_samples_fit": data.n_samples,
+        "friction_model": cfg.friction_model,
+        **friction,
         "runtime_s": timings["total_s"],
     }
     if tx is not None:
