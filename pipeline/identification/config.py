@@ -11,7 +11,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from pipeline.errors import ConfigError
-from pipeline.identification.regressor import BASE_QR_TOLERANCE
+from pipeline.identification.base_set import STRUCTURAL_BASE_TOLERANCE
+from pipeline.identification.friction import FRICTION_MODELS
 from pipeline.identification.tx40 import TX40_SAMPLE_TIME_S, Tx40Config
 
 #: processed samples dropped at each end of a data_file record (filter transients)
@@ -31,7 +32,7 @@ class ExcitationConfig:
     n_samples: int = 100  # samples of one period in the NLP (criterion and constraints)
     n_starts: int = 3  # IPOPT runs from the best random feasible trajectories
     n_random: int = 20  # random feasible trajectories for the baseline median
-    max_iter: int = 100
+    max_iter: int = 150  # IPOPT stops earlier when the objective stalls (objective_change_tol)
     criterion: str = "cond"  # cond | logdet
     # >0: IPOPT minimises a smooth surrogate of log cond, soft max - soft min of log(eigenvalues)
     # of W^T W (log-sum-exp with this width); the reported condition number is the exact one
@@ -43,6 +44,8 @@ class ExcitationConfig:
     floor_clearance_m: float = 0.05
     self_clearance_m: float = 0.02
     n_check: int = 400  # fine grid of the final feasibility check
+    # IPOPT "acceptable" stop: feasible and the objective changing by less than this (relative)
+    objective_change_tol: float = 1e-2
 
 
 @dataclass
@@ -54,10 +57,15 @@ class Config:
     sample_time_s: float = 4e-4  # torque/encoder sampling (control loop)
     state_cutoff_factor: float = 4.0  # position low-pass at this x the highest harmonic frequency
     decimation: int = 25  # block means of this many samples (parallel decimation)
-    base_tolerance: float = BASE_QR_TOLERANCE
+    # relative |R_kk| of the pivoted QR on the NOMINAL model below which a direction is not
+    # identifiable (structural base set, :mod:`.base_set`)
+    base_tolerance: float = STRUCTURAL_BASE_TOLERANCE
     base_samples: int = 300
     regularization: float = 1e-3  # pull of the physical fit towards the nominal model
     physical_max_iter: int = 1000
+    # viscous_coulomb (linear, handed on) | stribeck: also fit a Stribeck term (IPOPT) and report
+    # both friction models' held-out errors (friction.py)
+    friction_model: str = "viscous_coulomb"
     validation: str = "iso9283"  # iso9283 | fourier
     validation_sample_time_s: float = 4e-3
     data_file: str = ""  # CSV record instead of the simulated experiment
@@ -68,7 +76,15 @@ class Config:
     # e.g. TX40 5/6), "none" = diagonal joint-side (RobotModel, SymbolicRobot and the hidden robot),
     # "auto" = gear for a data_file (a real drive train), none for the simulated hidden robot
     actuator_coupling: str = "auto"
-    run_tx40: bool = True
+    # quality gates (pipeline.quality; issue 13): data must excite the model (hard error) ...
+    min_joint_motion_rad: float = 0.05  # peak to peak, every joint
+    max_cond_base_regressor_data: float = 1e6
+    # ... and the result must vouch for itself (QualityGateError unless --accept-poor)
+    max_cond_data_over_design: float = 2.0  # cond of the fitted base regressor / design criterion
+    max_validation_rms_over_noise: float = 2.0  # per joint, validation RMS / noise sigma
+    max_predicted_torque_over_limit: float = 1.5  # max |tau| predicted on the validation path / limit
+    # the Stäubli TX40 record: None = only when the robot is the TX40 (or tx40.data_dir is set)
+    run_tx40: bool | None = None
     tx40: Tx40Config = field(default_factory=Tx40Config)
     score_against_truth: bool = True  # simulated runs: z-scores of the final base estimate vs the truth
     replay_rate_hz: float = 50.0
@@ -97,6 +113,13 @@ class Config:
             ("excitation.max_iter", ex.max_iter >= 0, "must be >= 0"),
             ("excitation.n_check", ex.n_check >= 2, "must be >= 2"),
             ("excitation.criterion", ex.criterion in ("cond", "logdet"), "must be cond or logdet"),
+            ("excitation.objective_change_tol", fin(ex.objective_change_tol) and ex.objective_change_tol > 0,
+             "must be > 0"),
+            ("min_joint_motion_rad", fin(self.min_joint_motion_rad) and self.min_joint_motion_rad >= 0, "must be >= 0"),
+            ("max_cond_base_regressor_data", self.max_cond_base_regressor_data > 1, "must be > 1"),
+            ("max_cond_data_over_design", self.max_cond_data_over_design >= 1, "must be >= 1"),
+            ("max_validation_rms_over_noise", self.max_validation_rms_over_noise > 0, "must be > 0"),
+            ("max_predicted_torque_over_limit", self.max_predicted_torque_over_limit > 0, "must be > 0"),
             ("excitation.cond_softness", fin(ex.cond_softness) and ex.cond_softness >= 0, "must be >= 0"),
             ("excitation.floor_clearance_m", fin(ex.floor_clearance_m) and 0 <= ex.floor_clearance_m < 1,
              "must be in [0, 1) m (a clearance in metres)"),
@@ -111,6 +134,7 @@ class Config:
             ("base_samples", self.base_samples >= 1, "must be >= 1"),
             ("regularization", fin(self.regularization) and self.regularization >= 0, "must be >= 0"),
             ("physical_max_iter", self.physical_max_iter >= 1, "must be >= 1"),
+            ("friction_model", self.friction_model in FRICTION_MODELS, f"must be one of {', '.join(FRICTION_MODELS)}"),
             ("validation", self.validation in ("iso9283", "fourier"), "must be iso9283 or fourier"),
             ("validation_sample_time_s", fin(self.validation_sample_time_s)
              and 0 < self.validation_sample_time_s <= MAX_SAMPLE_TIME_S, f"must be in (0, {MAX_SAMPLE_TIME_S}] s"),

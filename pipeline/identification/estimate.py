@@ -29,6 +29,7 @@ import numpy as np
 
 from pipeline.blas import single_thread_blas
 from pipeline.errors import DataFileError, SolverError
+from pipeline.identification.solver_status import raise_if_interrupted
 
 #: lower bound of rotor inertia (kg m^2) and friction (N m s/rad, N m) in the physical fit
 POSITIVE_LOWER_BOUND = 1e-6
@@ -314,6 +315,7 @@ def _physical_fit(Y, y, nv, p_nominal, joint_sigma_Nm, regularization, max_iter,
     x0 = np.clip(x0, lbx + 1e-3, ubx)
     sol = solver(x0=x0, lbx=lbx, ubx=ubx)
     stats = solver.stats()
+    raise_if_interrupted(stats["return_status"], "physical fit")
     if not stats["success"] and stats["return_status"] not in (
         "Maximum_Iterations_Exceeded",
         "Solved_To_Acceptable_Level",

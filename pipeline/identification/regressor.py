@@ -227,6 +227,11 @@ class BaseParameters:
         return Y[:, self.independent]
 
     @property
+    def set_names(self) -> list[str]:
+        """Standard names of the independent columns: the identity of the base set."""
+        return [self.standard_names[i] for i in self.independent]
+
+    @property
     def names(self) -> list[str]:
         out = []
         for b, i in enumerate(self.independent):

@@ -59,7 +59,8 @@ def convergence_figure(res: design_mod.ExcitationResult) -> Figure:
         if h:
             ax.semilogy(np.arange(len(h)), h, label=f"start {i + 1}")
     ax.axhline(res.cond_random_median, color="k", ls="--", lw=0.8, label="median of random feasible")
-    ax.axhline(res.cond_optimized, color="g", ls=":", lw=0.8, label="optimised (fine-grid feasible)")
+    ax.axhline(res.cond_optimized, color="g", ls=":", lw=0.8,
+               label="optimised (fine-grid feasible)" if res.source == "optimised" else "best random (fallback)")
     ax.set_xlabel("IPOPT iteration")
     ax.set_ylabel("cond(W_base)")
     ax.set_title("excitation optimisation")
@@ -78,19 +79,13 @@ def report_markdown(summary: dict, tx: Tx40Result | None) -> str:
                 f"the excitation criterion). Validation on the "
                 f"{summary['validation_trajectory']}; noise sigma from the {summary['torque_noise_source']}.")
     else:
-        head = (f"Excitation: cond {summary['cond_optimized']:.1f} optimised vs median "
+        which = "optimised" if summary["excitation"].startswith("optimised") else "best random (fallback)"
+        head = (f"Excitation: cond {summary['cond_optimized']:.1f} {which} vs median "
                 f"{summary['cond_random_median']:.1f} of random feasible Fourier trajectories "
                 f"({summary['cond_improvement']:.1f}x), for the {summary['n_base_parameters_structural']} "
-                "structural base parameters (the design criterion).")
-        extra = summary["n_base_parameters"] - summary["n_base_parameters_structural"]
-        if extra > 0:
-            head += (f" The fit estimates {summary['n_base_parameters']} base parameters: the calibrated "
-                     f"kinematics make {extra} more combination(s) weakly identifiable (leaving them out "
-                     "would bias the others), so the fitted regressor's condition number on the measured data "
-                     f"is {summary['cond_base_regressor_data']:.3g} "
-                     f"({summary['cond_base_regressor_data_structural']:.3g} for the structural set); the "
-                     "extra combination's estimate is correspondingly uncertain (error bars in the base-parameter "
-                     "figure).")
+                "structural base parameters (decided on the nominal model, the same set is fitted). "
+                f"Condition number of the fitted base regressor on the measured data: "
+                f"{summary['cond_base_regressor_data']:.3g}.")
     lines = [
         head,
         "",

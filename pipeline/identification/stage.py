@@ -1,24 +1,31 @@
 """Stage ``identification``: optimal Fourier excitation, measurement, estimation, validation,
 and the real Stäubli TX40 record (paper ``004_abbe750b8bbcc3aa.txt`` §4; issue 4).
 
-1. Regressor of the current model (calibrated kinematics when the run has a calibration) and its
-   base parameters (structure from the nominal robot, pivoted QR; :mod:`.regressor`).
+1. Regressor of the current model (calibrated kinematics when the run has a calibration) and the
+   structural base set, decided on the nominal robot and kept for the current one
+   (:mod:`.base_set`).
 2. Excitation: Fourier trajectory minimising the condition number of the base regressor under
    limits, torques, floor and self-collision (CasADi/IPOPT, random starts; :mod:`.design`),
-   against the median of 20 random feasible trajectories.
+   against the median of 20 random feasible trajectories; never worse than the best of them
+   (fallback, stated in summary and report).
 3. Data: the hidden robot follows ``periods`` periods (ideal tracking, sensor noise), or the
    user's CSV record (``data_file``): then no excitation is designed, the condition number is the
    one of the record's base regressor, validation is on the record's held-out tail (fit on the
    first ``data_train_fraction``, :func:`.tx40.heldout_validation`), the noise sigma comes from
    the WLS residuals and the hidden robot (``ctx.real``) is never used. :func:`check` reads and
    checks the record before any stage runs.
-4. Period averaging, zero-phase filtering, differentiation, block decimation (:mod:`.measure`).
+4. Period averaging, zero-phase filtering, differentiation, block decimation (:mod:`.measure`);
+   the data must excite the model (motion per joint, rank and condition; :mod:`.gates`).
 5. OLS, Gautier's WLS (covariance -> base parameter sigmas) and the physically consistent fit
    (log-Cholesky, IPOPT) whose standard parameters become the handed-on ``RobotModel``.
-6. Validation on the run's ISO 9283 path (``control.iso``, measured vs predicted torques; a random
-   Fourier trajectory, stated in the report, when that path is out of reach), or the held-out tail
-   of a record.
-7. The TX40 record: base parameters, condition number, held-out RMS (:mod:`.tx40`).
+6. Validation on the run's ISO 9283 path (``control.iso`` from the run's ``control.ik_seeds_deg``,
+   measured vs predicted torques; a random Fourier trajectory, with the real reason in the report,
+   when that path cannot be used), or the held-out tail of a record.
+7. The TX40 record, only for the TX40 or when asked (:func:`tx40_wanted`): base parameters,
+   condition number, held-out RMS (:mod:`.tx40`).
+8. Quality gates (:func:`.gates.add_result_gates`): condition number vs design, validation RMS vs
+   noise, predicted torques vs limits -> :class:`~pipeline.errors.QualityGateError` unless
+   ``--accept-poor``.
 """
 
 from __future__ import annotations
@@ -31,36 +38,41 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from pipeline.blas import single_thread_blas
-from pipeline.errors import ConfigError, DataFileError, InfeasibleError, PipelineError
+from pipeline.errors import ConfigError, InfeasibleError, PipelineError
 from pipeline.identification import design as design_mod
 from pipeline.identification import estimate as est_mod
 from pipeline.identification import fourier, report
 from pipeline.identification import measure as meas_mod
 from pipeline.identification import validate as val_mod
-from pipeline.identification.config import (
-    DATA_BORDER_SAMPLES,
-    MAX_SAMPLE_TIME_S,
-    Config,
-    ExcitationConfig,
-)
-from pipeline.identification.regressor import (
-    RegressorModel,
-    base_parameters,
-    standard_parameters,
-)
+from pipeline.identification.base_set import structural_base_parameters
+from pipeline.identification.config import DATA_BORDER_SAMPLES, Config, ExcitationConfig
+from pipeline.identification.friction import compare_friction_models
+from pipeline.identification.gates import add_result_gates, check_data_excites
+from pipeline.identification.record import load_user_record
+from pipeline.identification.regressor import RegressorModel, standard_parameters
 from pipeline.identification.tx40 import (
     Tx40Result,
     check_tx40_config,
     heldout_validation,
     run_tx40,
 )
+from pipeline.quality import QualityGates
 from pipeline.runner import StageContext, StageResult
 
 NAME = "identification"
 DEPENDS: tuple[str, ...] = ("model", "calibration")
 #: settings of other sections this stage reads (the runner adds them to its inputs hash): the
 #: validation path is the run's EN ISO 9283 path (robot ``run_defaults`` included)
-CONFIG_READS: tuple[str, ...] = ("control.iso",)
+CONFIG_READS: tuple[str, ...] = ("control.iso", "control.ik_seeds_deg", "control.ik_tolerance_m")
+TX40_ROBOT_NAME = "staubli_tx40"
+
+
+def tx40_wanted(cfg: Config, robot: Any) -> bool:
+    """Fit the Stäubli TX40 record? ``run_tx40`` when set, else only when the robot is the TX40
+    or ``tx40.data_dir`` points to a record."""
+    if cfg.run_tx40 is not None:
+        return bool(cfg.run_tx40)
+    return getattr(robot, "name", "") == TX40_ROBOT_NAME or bool(cfg.tx40.data_dir)
 
 
 def _nominal_robot(ctx: StageContext) -> Any:
@@ -97,42 +109,6 @@ def _fourier_validation(robot: Any, limits: fourier.ExcitationLimits, ex: Excita
     return val_mod.ValidationTrajectory(t, q, v, a, "fourier", "a random feasible Fourier trajectory")
 
 
-# ----------------------------------------------------------------------------------- figures
-def _load_user_record(cfg: Config, robot: Any) -> meas_mod.JointRecord:
-    """Read and check ``cfg.data_file``: format, columns, NaN, time stamps, joint limits, enough
-    samples for the held-out fit, and a position cut-off below the Nyquist frequency."""
-    file = cfg.data_file
-    rec = meas_mod.load_joint_csv(file, robot, cfg.data_side)
-    _check_record_limits(rec, robot, file)
-    dt = rec.sample_time_s
-    fs = 1.0 / dt
-    if dt > MAX_SAMPLE_TIME_S:
-        hint = " (the values look like milliseconds)" if dt / 1000 <= MAX_SAMPLE_TIME_S else ""
-        raise DataFileError(file, "t", f"column t implies a sample interval of {dt:g} s ({fs:g} Hz sample rate), "
-                            f"implausible for a torque record (at most {MAX_SAMPLE_TIME_S:g} s, typically "
-                            f"0.1-10 ms): the t column must be in seconds{hint}")
-    if not cfg.data_cutoff_hz < 0.5 * fs:
-        raise ConfigError(None, "identification.data_cutoff_hz",
-                          f"{cfg.data_cutoff_hz} Hz is not below the Nyquist frequency {0.5 * fs:g} Hz of {file} "
-                          f"(its column t implies a {fs:g} Hz sample rate; t must be in seconds)")
-    n_raw = rec.q_rad.shape[0]
-    n_proc = -(-n_raw // cfg.data_decimation) - 2 * DATA_BORDER_SAMPLES
-    n_train = int(cfg.data_train_fraction * n_proc)
-    n_params = 10 * (robot.model.njoints - 1) + 4 * robot.nq  # standard parameters >= base ones
-    # the physically consistent fit (standard regressor) needs more samples than parameters
-    if n_train <= n_params or n_proc - n_train < 1:
-        need_train = n_params + 1
-        need_raw = (int(np.ceil(need_train / cfg.data_train_fraction)) + 1 + 2 * DATA_BORDER_SAMPLES) \
-            * cfg.data_decimation
-        raise DataFileError(
-            file, "samples",
-            f"{n_raw} samples are too few: the fit on the first {cfg.data_train_fraction:g} of the record "
-            f"(after decimation by {cfg.data_decimation}, {DATA_BORDER_SAMPLES} samples dropped at each "
-            f"end) needs more samples than the {n_params} standard parameters; record at least about {need_raw} "
-            "samples")
-    return rec
-
-
 def check(config: Config, robot: Any) -> None:
     """Called by the runner before any stage runs or anything is written: the configuration
     (robot-dependent ranges), the user's record (``data_file``) if any and the TX40 record's
@@ -147,7 +123,7 @@ def check(config: Config, robot: Any) -> None:
                           f"{n_params} standard parameters of {robot.name}; need at least {-(-n_params // nq)} "
                           "(default 300)")
     if cfg.data_file:
-        _load_user_record(cfg, robot)
+        load_user_record(cfg, robot)
     else:
         ex = cfg.excitation
         n_per = int(round(1.0 / (ex.base_frequency_hz * cfg.sample_time_s)))
@@ -158,7 +134,7 @@ def check(config: Config, robot: Any) -> None:
                               f"decimated by {cfg.decimation} leaves {m} samples, not more than the {n_params} "
                               f"standard parameters of {robot.name}; decimation must be at most "
                               f"{max(n_per // (n_params + 1), 1)}")
-    if cfg.run_tx40:
+    if tx40_wanted(cfg, robot):
         check_tx40_config(cfg.tx40)
 
 
@@ -192,16 +168,13 @@ def _run(ctx: StageContext) -> StageResult:
     coupled = cfg.actuator_coupling == "gear" or (cfg.actuator_coupling == "auto" and user_data)
     K = act.gear_matrix if coupled else np.eye(nq)
     reg = RegressorModel(robot.model, K, act.coulomb_smoothing_rad_s)
-    rec = _load_user_record(cfg, robot) if user_data else None  # before any long computation
+    rec = load_user_record(cfg, robot) if user_data else None  # before any long computation
     nominal = _nominal_robot(ctx)
     reg_nominal = RegressorModel(nominal.model, K, act.coulomb_smoothing_rad_s)
-    # Base parameters of the nominal structure (exact zeros: the design criterion) and of the
-    # current model (calibrated kinematics: small placement errors make a few more parameters
-    # weakly identifiable; leaving them out would bias the estimate of the others).
-    base_design = base_parameters(reg_nominal, ctx.rng, cfg.base_samples, cfg.base_tolerance,
-                                  robot.limits.lower_rad, robot.limits.upper_rad)
-    base = base_parameters(reg, ctx.rng, cfg.base_samples, cfg.base_tolerance,
-                           robot.limits.lower_rad, robot.limits.upper_rad)
+    # Structural base set, decided on the nominal model (the design criterion's set); the current
+    # (calibrated) model keeps the same set with its own combinations (:mod:`.base_set`)
+    base_design, base = structural_base_parameters(reg_nominal, reg, ctx.rng, cfg.base_samples, cfg.base_tolerance,
+                                                   robot.limits.lower_rad, robot.limits.upper_rad)
     timings["base_parameters_s"] = time.perf_counter() - t0
 
     # ---------------------------------------------------------------- excitation and data
@@ -222,7 +195,7 @@ def _run(ctx: StageContext) -> StageResult:
             robot, sym, reg, base_design, limits, ctx.rng, harmonics=ex.harmonics,
             base_frequency_hz=ex.base_frequency_hz, n_samples=ex.n_samples, n_starts=ex.n_starts,
             n_random=ex.n_random, max_iter=ex.max_iter, criterion=ex.criterion, n_check=ex.n_check,
-            progress=ctx.progress, softness=ex.cond_softness)
+            progress=ctx.progress, softness=ex.cond_softness, objective_change_tol=ex.objective_change_tol)
         timings["excitation_s"] = time.perf_counter() - t1
         traj = exc.trajectory
         if not exc.feasibility.feasible:
@@ -240,7 +213,8 @@ def _run(ctx: StageContext) -> StageResult:
     t1 = time.perf_counter()
     Wb = base.base_regressor(data.Y)
     y = data.y
-    cond_data = float(np.linalg.cond(Wb))  # of the base set estimated below
+    cond_data = check_data_excites(data.q, Wb, [f"q{j + 1}" for j in range(nq)], cfg.min_joint_motion_rad,
+                                   cfg.max_cond_base_regressor_data, str(cfg.data_file) if user_data else None)
     cond_data_structural = float(np.linalg.cond(base_design.base_regressor(data.Y)))  # design criterion's set
     ols = est_mod.ols(Wb, y, nq)
     wls = est_mod.wls(Wb, y, nq)
@@ -269,11 +243,12 @@ def _run(ctx: StageContext) -> StageResult:
         validation_md = ""
     else:
         assert limits is not None
-        iso = val_mod.run_iso_config(ctx.run)
+        control = val_mod.run_control_config(ctx.run)
+        iso = control.iso
         vt = val_mod.validation_trajectory(
             robot, cfg.validation_sample_time_s,
             lambda: _fourier_validation(robot, limits, ex, cfg.validation_sample_time_s, ctx.rng),
-            use_iso=cfg.validation == "iso9283", iso=iso)
+            use_iso=cfg.validation == "iso9283", control=control)
         validation_md = _validation_markdown(cfg, vt, iso, robot)
         noise_sigma = data.noise_sigma_Nm
         noise_source = "spread between excitation periods"
@@ -287,6 +262,15 @@ def _run(ctx: StageContext) -> StageResult:
         if noise_sigma is None or not np.all(np.isfinite(noise_sigma)):
             noise_sigma = np.asarray(meas_v.tau_sigma_Nm, float)
             noise_source = "torque sensor of the simulation"
+    friction: dict[str, Any] = {}
+    if cfg.friction_model == "stribeck":  # both friction models scored on held-out samples
+        if rec is not None:
+            k, n_rows = ho.n_train, ho.n_train * nq
+            friction = compare_friction_models(Wb[:n_rows], data.tau[:k], data.v[:k], wls.joint_sigma_Nm,
+                                               reg.coulomb_width_rad_s, Wb[n_rows:], data.tau[k:], data.v[k:])
+        else:
+            friction = compare_friction_models(Wb, data.tau, data.v, wls.joint_sigma_Nm, reg.coulomb_width_rad_s,
+                                               base.base_regressor(Yv), tau_v, vt.v)
     timings["validation_s"] = time.perf_counter() - t1
 
     truth = None
@@ -295,7 +279,7 @@ def _run(ctx: StageContext) -> StageResult:
 
     # ---------------------------------------------------------------- TX40 record
     tx: Tx40Result | None = None
-    if cfg.run_tx40:
+    if tx40_wanted(cfg, robot):
         t1 = time.perf_counter()
         from pipeline.robot.model import RobotModel
 
@@ -308,7 +292,9 @@ def _run(ctx: StageContext) -> StageResult:
     summary: dict[str, Any] = {
         "n_base_parameters": base.n_base,
         "n_base_parameters_structural": base_design.n_base,
-        "excitation": "from the user's record" if exc is None else f"optimised Fourier trajectory ({ex.criterion})",
+        "excitation": _excitation_label(exc, ex.criterion),
+        "excitation_fallback_reason": None if exc is None else (exc.fallback_reason or None),
+        "base_parameter_set": base.set_names,
         "cond_optimized": None if exc is None else exc.cond_optimized,
         "cond_random_median": None if exc is None else exc.cond_random_median,
         "cond_improvement": None if exc is None else exc.cond_random_median / exc.cond_optimized,
@@ -328,6 +314,8 @@ def _run(ctx: StageContext) -> StageResult:
         "data_source": data_source,
         "actuator_coupling": "gear matrix" if coupled else "diagonal (joint side)",
         "n_samples_fit": data.n_samples,
+        "friction_model": cfg.friction_model,
+        **friction,
         "runtime_s": timings["total_s"],
     }
     if tx is not None:
@@ -406,8 +394,21 @@ def _run(ctx: StageContext) -> StageResult:
         figures["tx40_heldout"] = report.torques_figure(
             tx.heldout_t_s, tx.heldout_tau_Nm, tx.heldout_pred_Nm["physical"],
             "TX40 held-out 30 %: measured vs physically consistent fit")
-    return StageResult(summary=summary, arrays=arrays, data=data_out, figures=figures, robot=new_robot,
-                       report_md=validation_md + report.report_markdown(summary, tx))
+    gates = QualityGates(NAME, accept_poor=bool(getattr(ctx.run, "accept_poor", False)))
+    add_result_gates(gates, cfg, cond_data, None if exc is None else exc.cond_optimized, ratio, pred_phys,
+                     robot.limits.effort_Nm, phys.status)
+    fallback_md = "" if exc is None or not exc.fallback_reason else (
+        f"**Excitation: the best random feasible trajectory is used** ({exc.fallback_reason}).\n\n")
+    return gates.finish(StageResult(summary=summary, arrays=arrays, data=data_out, figures=figures, robot=new_robot,
+                                    report_md=fallback_md + validation_md + report.report_markdown(summary, tx)))
+
+
+def _excitation_label(exc: design_mod.ExcitationResult | None, criterion: str) -> str:
+    if exc is None:
+        return "from the user's record"
+    if exc.source != "optimised":
+        return f"best random feasible Fourier trajectory ({exc.fallback_reason})"
+    return f"optimised Fourier trajectory ({criterion})"
 
 
 def _validation_markdown(cfg: Config, vt: val_mod.ValidationTrajectory, iso: Any, robot: Any) -> str:
@@ -419,22 +420,13 @@ def _validation_markdown(cfg: Config, vt: val_mod.ValidationTrajectory, iso: Any
         return ("Validation on a random feasible Fourier trajectory "
                 f"(`identification.validation: {cfg.validation}`).\n\n")
     why = vt.note.split("; ")[0] if vt.note else "not reachable"
+    fix = ("Set `control.ik_seeds_deg` to a configuration near the path (or the robot's `run_defaults`)"
+           if "ik_seeds" in why or "IK" in why else
+           "Set `control.iso.centre_m` and `control.iso.edge_m` (or the robot's `run_defaults`) to a cube inside "
+           "its workspace")
     return ("**Warning: validation fell back to a random Fourier trajectory.** The EN ISO 9283 path "
             f"(`control.iso.centre_m` = {list(iso.centre_m)} m, `control.iso.edge_m` = {iso.edge_m} m) "
-            f"cannot be followed by {robot.name}: {why}. Set `control.iso.centre_m` and "
-            "`control.iso.edge_m` (or the robot's `run_defaults`) to a cube inside its workspace.\n\n")
-
-
-def _check_record_limits(rec: meas_mod.JointRecord, robot: Any, file: Any) -> None:
-    lo, hi = robot.limits.lower_rad, robot.limits.upper_rad
-    bad = np.argwhere((rec.q_rad < lo - 1e-6) | (rec.q_rad > hi + 1e-6))
-    if bad.size:
-        k, j = (int(i) for i in bad[0])
-        q_rad = np.radians(rec.q_rad)
-        hint = ("; q must be in rad (the values look like degrees)"
-                if not np.any((q_rad < lo - 1e-6) | (q_rad > hi + 1e-6)) else "")
-        raise DataFileError(file, f"q{j + 1}", f"{rec.where(k)}: {rec.q_rad[k, j]:.4f} rad outside the joint "
-                            f"limits [{lo[j]:.4f}, {hi[j]:.4f}]{hint}")
+            f"cannot be followed by {robot.name}: {why}. {fix}.\n\n")
 
 
 __all__ = ["NAME", "DEPENDS", "Config", "ExcitationConfig", "check", "run", "identified_robot"]

@@ -32,33 +32,51 @@ class ValidationTrajectory:
     note: str = ""
 
 
-def run_iso_config(run: Any) -> Any:
-    """The EN ISO 9283 path settings of the run (``control.iso`` of the :class:`RunConfig`,
-    with the robot's ``run_defaults`` merged in), or the built-in ``ControlConfig().iso`` when the
-    run has no validated control section (a plain dict: module missing, or a bare RunConfig)."""
-    from pipeline.control.config import ControlConfig, IsoPathConfig
+def run_control_config(run: Any) -> Any:
+    """The run's validated ``control`` section (robot ``run_defaults`` merged in; read through the
+    stage's ``CONFIG_READS``), or the built-in ``ControlConfig()`` when the run has none (a plain
+    dict: module missing, or a bare RunConfig)."""
+    from pipeline.control.config import ControlConfig
 
     sections = getattr(run, "sections", None) if run is not None else None
     control = sections.get("control") if isinstance(sections, dict) else None
-    iso = getattr(control, "iso", None)
-    return iso if isinstance(iso, IsoPathConfig) else ControlConfig().iso
+    return control if isinstance(control, ControlConfig) else ControlConfig()
 
 
-def iso_validation_trajectory(robot: Any, sample_time_s: float, iso: Any = None) -> ValidationTrajectory:
-    """The ISO 9283 path of ``iso`` (the run's ``control.iso``, :func:`run_iso_config`; None: the
-    built-in defaults) as joint reference of the TCP. The IK seeds and tolerance are the control
-    section's built-in ones."""
+def run_iso_config(run: Any) -> Any:
+    """The EN ISO 9283 path settings of the run (``control.iso``, :func:`run_control_config`)."""
+    return run_control_config(run).iso
+
+
+def ik_seeds_rad(control: Any, nq: int) -> np.ndarray:
+    """The run's ``control.ik_seeds_deg`` as (k, nq) rad; none given -> (0, nq) (the IK's own
+    random starts). A seed of the wrong length raises :class:`PipelineError` naming the field."""
+    seeds = getattr(control, "ik_seeds_deg", None)
+    if seeds is None or len(seeds) == 0:
+        return np.empty((0, nq))
+    arr = [np.asarray(s, float).ravel() for s in seeds]
+    bad = [i for i, s in enumerate(arr) if s.size != nq]
+    if bad:
+        raise PipelineError(None, f"control.ik_seeds_deg[{bad[0]}]",
+                            f"{arr[bad[0]].size} values, the robot has {nq} joints")
+    return np.radians(np.vstack(arr))
+
+
+def iso_validation_trajectory(robot: Any, sample_time_s: float, control: Any = None) -> ValidationTrajectory:
+    """The ISO 9283 path of the run's ``control.iso`` as joint reference of the TCP, started by IK
+    from the run's ``control.ik_seeds_deg`` with its ``control.ik_tolerance_m`` (``control`` from
+    :func:`run_control_config`; None: the built-in control defaults)."""
     from pipeline.control.config import ControlConfig
     from pipeline.control.iso9283 import iso9283_path, tool_rotation
     from pipeline.control.reference import cartesian_reference
     from pipeline.robot.paths import start_configuration
 
-    cfg = ControlConfig()
-    iso = cfg.iso if iso is None else iso
+    cfg = ControlConfig() if control is None else control
+    iso = cfg.iso
     rotation = tool_rotation(iso.plane, iso.tool_down)
     path = iso9283_path(robot, iso.edge_m, iso.centre_m, iso.plane, rotation, iso.corner_fraction,
                         iso.large_circle_fraction, iso.small_circle_fraction, tuple(iso.segments))
-    seeds = np.radians(np.atleast_2d(np.asarray(cfg.ik_seeds_deg, float)))
+    seeds = ik_seeds_rad(cfg, robot.nq)
     q_start = start_configuration(robot, path.poses([0.0])[0], seeds, robot.frame_tcp)
     ref = cartesian_reference(robot, path, sample_time_s, iso.speed_m_s, iso.acceleration_m_s2,
                               iso.jerk_m_s3, q_start, robot.frame_tcp, cfg.ik_tolerance_m)
@@ -67,21 +85,24 @@ def iso_validation_trajectory(robot: Any, sample_time_s: float, iso: Any = None)
 
 
 def validation_trajectory(
-    robot: Any, sample_time_s: float, fallback: Any, use_iso: bool = True, iso: Any = None
+    robot: Any, sample_time_s: float, fallback: Any, use_iso: bool = True, control: Any = None
 ) -> ValidationTrajectory:
-    """ISO 9283 path of ``iso`` (None: built-in defaults) if it can be built for ``robot``
-    (within limits), else ``fallback()`` with ``note`` saying why."""
+    """ISO 9283 path of the run's control section (None: built-in defaults) if it can be built for
+    ``robot`` (within limits), else ``fallback()`` with ``note`` saying the real reason."""
     note = ""
     if use_iso:
         try:
-            vt = iso_validation_trajectory(robot, sample_time_s, iso)
-            ok = bool(np.all(vt.q >= robot.limits.lower_rad) and np.all(vt.q <= robot.limits.upper_rad))
-            ok = ok and bool(np.all(np.abs(vt.v) <= robot.limits.velocity_rad_s * 1.0001))
-            if ok:
+            vt = iso_validation_trajectory(robot, sample_time_s, control)
+            lo, hi = robot.limits.lower_rad, robot.limits.upper_rad
+            out_q = np.flatnonzero(np.any((vt.q < lo) | (vt.q > hi), axis=0))
+            out_v = np.flatnonzero(np.any(np.abs(vt.v) > robot.limits.velocity_rad_s * 1.0001, axis=0))
+            if not out_q.size and not out_v.size:
                 return vt
-            note = "ISO 9283 path exceeds the joint limits of this robot"
+            note = "the ISO 9283 path from the IK seeds of control.ik_seeds_deg leaves " + "; ".join(
+                [f"the position limits of joint(s) {', '.join(str(j + 1) for j in out_q)}"] * bool(out_q.size)
+                + [f"the velocity limits of joint(s) {', '.join(str(j + 1) for j in out_v)}"] * bool(out_v.size))
         except (PipelineError, ImportError) as exc:
-            note = f"ISO 9283 path unavailable ({exc})"
+            note = f"ISO 9283 path unavailable: {exc}"
     vt = fallback()
     vt.note = (note + "; " if note else "") + vt.note
     return vt

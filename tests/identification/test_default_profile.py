@@ -14,7 +14,7 @@ from .helpers import quick_context, true_base
 @pytest.mark.parametrize("seed", [1, 2])
 def test_default_profile_meets_the_targets(tmp_path, seed):
     ctx, real = quick_context(tmp_path, seed=seed)
-    ctx.config = stage.Config()  # the default profile
+    ctx.config = stage.Config(run_tx40=True)  # the default profile (+ the TX40 record)
     res = stage.run(ctx)
     s = res.summary
     assert s["cond_random_median"] >= 5 * s["cond_optimized"]

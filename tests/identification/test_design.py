@@ -8,6 +8,7 @@ import pytest
 from pipeline.identification import design as D
 from pipeline.identification import fourier as F
 from pipeline.identification.regressor import RegressorModel, base_parameters
+from pipeline.identification.solver_status import SUCCESS_STATUSES
 from pipeline.robot.symbolic import SymbolicRobot
 
 
@@ -95,4 +96,41 @@ def test_logdet_option_runs_and_improves_the_determinant(rx130l, setup):
     start = [t for t in F.random_feasible_trajectories(rx130l, limits, 5, 0.1, 3, np.random.default_rng(7))]
     f_best_start = min(crit.value_and_gradient(t.coefficients.ravel(), False)[0] for t in start)
     f_opt, _ = crit.value_and_gradient(res.trajectory.coefficients.ravel(), False)
-    assert f_opt < f_best_start
+    assert f_opt <= f_best_start + 1e-12          # never worse than the best random start
+    if res.source == "optimised":
+        assert f_opt < f_best_start
+    else:  # 10 iterations: IPOPT did not converge, the best random start is used and said so
+        assert res.fallback_reason and res.start_results[0]["status"] not in SUCCESS_STATUSES
+
+
+def test_diverged_excitation_falls_back_to_the_best_random(rx130l, setup):
+    """IPOPT stopped before convergence (max_iter=1): never stored as "optimised"."""
+    reg, base, limits, sym = setup
+    res = D.optimize_excitation(rx130l, sym, reg, base, limits, np.random.default_rng(11), n_samples=40,
+                                n_starts=2, n_random=4, max_iter=1)
+    assert res.source == "best random" and "Maximum_Iterations_Exceeded" in res.fallback_reason
+    assert res.cond_optimized == pytest.approx(min(res.cond_random))
+    assert res.feasibility.feasible
+
+
+def test_optimum_worse_than_random_is_not_used(rx130l, setup, monkeypatch):
+    """A (forced) converged optimum worse than the best random start: the best random is used."""
+    reg, base, limits, sym = setup
+    worst: dict = {}
+
+    def bad_shrink(robot, traj, lim, n_check):
+        randoms = F.random_feasible_trajectories(rx130l, limits, 5, 0.1, 4, np.random.default_rng(12),
+                                                 n_check=n_check // 2)
+        crit_c = [D.condition_number(D.ExcitationCriterion(D.regressor_casadi(sym, reg, base),
+                                                           F.fourier_basis(np.arange(40) * 0.25, 0.1, 5),
+                                                           rx130l.nq).matrix(t.coefficients.ravel()))
+                  for t in randoms]
+        worst["traj"] = randoms[int(np.argmax(crit_c))]
+        return worst["traj"], F.check_trajectory(rx130l, worst["traj"], lim, n_check)
+
+    monkeypatch.setattr(D, "shrink_to_feasible", bad_shrink)
+    monkeypatch.setattr(D, "is_success", lambda status: True)
+    res = D.optimize_excitation(rx130l, sym, reg, base, limits, np.random.default_rng(12), n_samples=40,
+                                n_starts=1, n_random=4, max_iter=1)
+    assert res.source == "best random" and "not better" in res.fallback_reason
+    assert res.cond_optimized == pytest.approx(min(res.cond_random))

@@ -65,7 +65,7 @@ def test_quick_and_full_defaults_pass_the_checks(robot):
 @pytest.mark.parametrize(("overrides", "field", "words"), [
     ({"base_samples": 5}, "identification.base_samples", ("at least 14",)),
     ({"decimation": 2000}, "identification.decimation", ("at most",)),
-    ({"tx40": Tx40Config(max_samples=200)}, "identification.tx40.max_samples", ("200 raw samples",)),
+    ({"run_tx40": True, "tx40": Tx40Config(max_samples=200)}, "identification.tx40.max_samples", ("200 raw samples",)),
     ({"tx40": Tx40Config(data_dir="/nonexistent/tx40")}, "identification.tx40.data_dir", ("does not exist",)),
 ])
 def test_robot_dependent_checks_name_the_field(robot, overrides, field, words):
