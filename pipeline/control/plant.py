@@ -108,6 +108,12 @@ class Plant:
         Leica LTD600)."""
         return self._model.positions(np.atleast_2d(Q), frame=frame)
 
+    def measure_tcp_pose(self, Q: np.ndarray, frame: str = "tcp") -> tuple[np.ndarray, np.ndarray]:
+        """Positions (N, 3) and rotations (N, 3, 3) of ``frame`` at link positions ``Q`` (ideal 6-D
+        measurement, for the settling time of :func:`pipeline.control.validate.settling_time`)."""
+        poses = [self._model.fk(q, frame=frame) for q in np.atleast_2d(Q)]
+        return np.array([p.translation for p in poses]), np.array([p.rotation for p in poses])
+
     def read_encoders(self, q_true: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         noisy = q_true + self.encoder_noise_rad * rng.standard_normal(np.shape(q_true))
         return np.floor(noisy / self.encoder_resolution_rad + 0.5) * self.encoder_resolution_rad

@@ -171,7 +171,8 @@ def simulate_joint_trajectory(real, model, t_s, q_d, v_d, a_d, config: ControlCo
     for j in range(nv):
         V_sub.append(_interp_rows(tt + j * Tv - v_delay, tt, V_set))
         T_sub.append(_interp_rows(tt + (j + 0.5) * Tv, tt, tau_ff))  # torque held over the sub-sample
-    q_fb, v_ff, tau_drive = drive_inputs(Q_set, np.hstack(V_sub), np.hstack(T_sub), d_s, d_m, config.advance_feedforward)
+    q_fb, v_ff, tau_drive = drive_inputs(Q_set, np.hstack(V_sub), np.hstack(T_sub), d_s, d_m,
+                                         config.advance_feedforward)
     plant = real.plant
     rec = plant.run_servo(gains.as_dict(), dt, nv, d_m, alpha,
                           q_fb, v_ff, tau_drive, Q[0], rng, engine=config.engine,

@@ -108,7 +108,8 @@ def create_transmission(truth, seed: int, stiffness_Nm_rad: np.ndarray, damping_
     d = np.where(np.isfinite(k), 2.0 * damping_ratio * np.sqrt(np.where(np.isfinite(k), k, 0.0) * j_red), 0.0)
     return Transmission(
         stiffness_Nm_rad=k, damping_Nms_rad=d, motor_inertia_kgm2=jm,
-        viscous_Nms_rad=np.asarray(act.viscous_Nms_rad, float).copy(), coulomb_Nm=np.asarray(act.coulomb_Nm, float).copy(),
+        viscous_Nms_rad=np.asarray(act.viscous_Nms_rad, float).copy(),
+        coulomb_Nm=np.asarray(act.coulomb_Nm, float).copy(),
         static_excess_Nm=stribeck_excess_relative * spread[0] * act.coulomb_Nm,
         stribeck_velocity_rad_s=stribeck_velocity_rad_s * spread[1] if stribeck_velocity_rad_s > 0 else np.ones(nq),
         coulomb_load_coefficient=coulomb_load_coefficient * spread[2],
