@@ -54,7 +54,7 @@ class TruthConfig:
     # --- transmission block (pipeline/robot/transmission.py): Stribeck friction, load-dependent
     # Coulomb friction and the damping of the elastic joints; every value 0 -> today's friction
     stribeck_excess_relative: float = 0.4   # static friction = Coulomb (1 + x) (Armstrong-Helouvry 1994: 1.2-2)
-    stribeck_velocity_rad_s: float = 0.02   # joint side (a few rad/s on the motor through a gear of 50-100)
+    stribeck_velocity_rad_s: float = 0.05   # joint side (a few rad/s on the motor through a gear of 50-100)
     coulomb_load_coefficient: float = 0.1   # Coulomb grows by this fraction at rated load (Bittencourt 2012)
     joint_damping_ratio: float = 0.05       # of the motor-link resonance (structural damping of gears: a few %)
 
@@ -62,6 +62,14 @@ class TruthConfig:
         for name, value in vars(self).items():
             if not isinstance(value, int | float) or not np.isfinite(value) or value < 0:
                 raise ConfigError(source, f"truth.{name}", f"must be a non-negative number, got {value!r}")
+
+
+def rigid_truth_config(**overrides: float) -> TruthConfig:
+    """The truth of the rigid, viscous + Coulomb robot (transmission block 0, joint compliance 0)."""
+    config = TruthConfig(**{"stribeck_excess_relative": 0.0, "coulomb_load_coefficient": 0.0, **overrides})
+    if "joint_compliance_scale" not in overrides:
+        config.joint_compliance_scale = 0.0  # the field of the calibration's stiffness block
+    return config
 
 
 @dataclass
