@@ -20,7 +20,7 @@ desired path in the base frame), ``tcp_error_registered_*`` (after a best-fit ri
 ``on_saturation = clip``), ``realtime_factor`` (wall) and ``realtime_factor_cpu``, the speed-up
 against the plain Python loop, ``tcp_error_rms_{nominal,calibrated}_kinematics_m`` (and registered),
 ``improvement`` (none / full_friction ratios), ``elastic_improvement`` (with an elastic variant:
-max TCP error of none and of rigid full_friction over the best elastic variant's).
+max TCP tracking error of none and of rigid full_friction over the best elastic variant's).
 """
 
 from __future__ import annotations
@@ -234,10 +234,11 @@ def _summary(cfg, ref, metrics, main, speed, rms_nominal_kin, calibrated, identi
         }
     elastic = [k for k in ("elastic_flat", "elastic_static") if k in metrics]
     if elastic:
-        best = min(elastic, key=lambda k: metrics[k]["tcp_error_max_m"])
-        e = metrics[best]["tcp_error_max_m"]
+        key = "tcp_tracking_error_max_m"  # the control's part of the error (not the kinematic model's)
+        best = min(elastic, key=lambda k: metrics[k][key])
         s["elastic_improvement"] = {"variant": best, **{
-            f"{k}_over_elastic": metrics[k]["tcp_error_max_m"] / e for k in ("none", "full_friction") if k in metrics}}
+            f"{k}_over_elastic": metrics[k][key] / metrics[best][key] for k in ("none", "full_friction")
+            if k in metrics}}
     return s
 
 
