@@ -10,7 +10,7 @@ without rotor inertia; paper ``004_abbe750b8bbcc3aa.txt`` §2.3, §5 "gear elast
 with ``f`` the Stribeck friction of :mod:`pipeline.robot.transmission`. One semi-implicit
 (symplectic) Euler substep of length ``h`` updates the velocities first and the positions with the
 new velocities; it is stable for ``h omega_n < 2`` on the undamped resonances ``omega_n`` (the plant
-picks ``h`` for ``h omega_max <= 0.5``, :meth:`pipeline.control.plant.Plant.substeps_for`).
+picks ``h`` for ``h omega_max <= 1``, :meth:`pipeline.control.plant.Plant.substeps_for`).
 Transmission numbers per joint in the loop parameter vector: ``(J_m, k, d, F_s - F_c, w_s, mu)``.
 """
 
