@@ -4,8 +4,10 @@ Run: ``.venv/bin/python benchmarks/bench_control.py [robot] [python_seconds]``.
 Prints the real-time factor of the compiled loop (simulated duration / wall time, and / CPU
 time of the loop thread, which excludes other processes on a shared box), the same for the plain
 Python loop (``pin.aba`` at every substep) on the first ``python_seconds`` of the path, and the
-speed-up between them, all measured in this run. The torque limits are not enforced here
-(``on_saturation = clip``): only the speed is measured.
+speed-up between them, all measured in this run, for the default hidden robot (elastic joints,
+Stribeck friction: the two-mass plant with motor-side encoders) and for the rigid one
+(``rigid_truth_config``). The torque limits are not enforced here (``on_saturation = clip``): only
+the speed is measured.
 """
 
 from __future__ import annotations
@@ -16,19 +18,17 @@ import time
 import numpy as np
 import pinocchio as pin
 
-from pipeline.control import dynamics, loop
 from pipeline.control.config import ControlConfig
 from pipeline.control.iso9283 import iso9283_path
 from pipeline.control.reference import cartesian_reference
 from pipeline.control.simulate import simulate_joint_trajectory
 from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import start_configuration
-from pipeline.robot.truth import RealRobot, TruthConfig
+from pipeline.robot.truth import RealRobot, TruthConfig, rigid_truth_config
 
 
 def main(robot_name: str = "rx130l", python_seconds: float = 1.0) -> None:
     robot = RobotModel.load(robot_name)
-    real = RealRobot.create(robot, 1, TruthConfig())
     cfg = ControlConfig(on_saturation="clip")
     iso = cfg.iso
     path = iso9283_path(robot, iso.edge_m, iso.centre_m, iso.plane, pin.utils.rotate("x", np.pi))
@@ -38,11 +38,19 @@ def main(robot_name: str = "rx130l", python_seconds: float = 1.0) -> None:
     t_ref = time.perf_counter() - t0
     print(f"ISO 9283 path: {path.length_m:.3f} m, {ref.t_s[-1]:.2f} s, {len(ref.t_s)} samples of "
           f"{cfg.sample_time_s * 1e6:.0f} us; reference (ruckig + IK every sample) {t_ref:.2f} s")
+    for label, truth_config in (("elastic joints + Stribeck friction", TruthConfig()),
+                                ("rigid joints, viscous + Coulomb", rigid_truth_config())):
+        real = RealRobot.create(robot, 1, truth_config)
+        print(f"--- hidden robot: {label} (elastic plant: {real.plant.elastic}, "
+              f"{real.plant.substeps_for(cfg.sample_time_s / 2)} substeps per 200 us)")
+        _measure(real, robot, ref, cfg, python_seconds)
+
+
+def _measure(real, robot, ref, cfg, python_seconds: float) -> None:
     t0 = time.perf_counter()
-    loop.compiled_rollout(loop.LoopStructure(
-        dynamics.chain_structure(robot.model),
-        cfg.velocity_samples_per_position_sample, real.plant.substeps_for(cfg.sample_time_s / 2),
-        cfg.measurement_delay_samples, cfg.chunk_samples))
+    k_warm = min(len(ref.t_s), 50)
+    simulate_joint_trajectory(real, robot, ref.t_s[:k_warm], ref.q_d[:k_warm], ref.v_d[:k_warm], ref.a_d[:k_warm],
+                              cfg, "full_friction", np.random.default_rng(0))
     print(f"compiled rollout ready in {time.perf_counter() - t0:.2f} s (gcc on first use, then cached on disk)")
     results = []
     for _ in range(3):

@@ -14,7 +14,7 @@ from typing import Any
 from pipeline.config_checks import check_choice, check_count, check_number, check_unique, check_vector
 from pipeline.errors import ConfigError
 
-FEEDFORWARD_VARIANTS = ("none", "gravity", "full", "full_friction")
+FEEDFORWARD_VARIANTS = ("none", "gravity", "full", "full_friction", "elastic_static", "elastic_flat")
 ISO_PLANES = ("diagonal_x", "diagonal_y", "horizontal")        # keys of pipeline.control.iso9283.PLANES
 ISO_SEGMENTS = ("line", "rectangle", "circle_large", "circle_small")
 ENGINES = ("compiled", "python")

@@ -11,6 +11,8 @@ One call of ``step`` covers one position-loop sample ``T_p`` (paper 004 §2.3: 4
                   |tau_cmd| > tau_max and e_v pushes further (conditional-integration anti-windup)
         tau_cmd = tau_ff[j] + Kv e_v + I                          ideal current loop
     plant: n_sub semi-implicit Euler substeps of  qdd = ABA(q, v, sat(tau_cmd) - friction(v))
+           (``stribeck``: the truth's Stribeck + load-dependent friction; ``elastic``: the two-mass
+           model of :mod:`pipeline.control.elastic_dynamics`, the encoders on the motor side)
 
 ``q_d_fb`` is the setpoint aligned with the delayed measurement (the drive keeps the setpoint
 history), so the measurement delay only acts on the feedback, not as a lag.
@@ -23,6 +25,7 @@ from __future__ import annotations
 
 import hashlib
 import platform
+import sys
 import threading
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,8 +35,9 @@ import numpy as np
 import pinocchio as pin
 
 from pipeline import codegen
-from pipeline.control import dynamics
+from pipeline.control import dynamics, elastic_dynamics
 from pipeline.control.dynamics import ChainStructure
+from pipeline.control.elastic_dynamics import TRANSMISSION_PARAMS_PER_JOINT
 
 
 @dataclass(frozen=True)
@@ -45,14 +49,21 @@ class LoopStructure:
     substeps_per_velocity_sample: int = 4
     measurement_delay_samples: int = 1
     chunk_samples: int = 250
+    elastic: bool = False        # two-mass joints: state + (theta, omega), encoders on theta
+    stribeck: bool = False       # the truth's Stribeck / load-dependent friction (rigid joints)
 
     @property
     def nq(self) -> int:
         return self.chain.nq
 
     @property
+    def transmission(self) -> bool:
+        """Whether the loop takes the transmission numbers (after the loop parameters)."""
+        return self.elastic or self.stribeck
+
+    @property
     def n_state(self) -> int:
-        return self.nq * (5 + self.measurement_delay_samples)
+        return self.nq * (5 + self.measurement_delay_samples + (2 if self.elastic else 0))
 
     @property
     def n_input(self) -> int:
@@ -60,22 +71,30 @@ class LoopStructure:
 
     @property
     def n_output(self) -> int:
-        return self.nq * 5
+        return self.nq * (6 if self.elastic else 5)
 
     @property
     def n_loop_params(self) -> int:
-        return self.chain.n_params + 3 * self.nq + 3
+        extra = TRANSMISSION_PARAMS_PER_JOINT * self.nq if self.transmission else 0
+        return self.chain.n_params + 3 * self.nq + 3 + extra
 
     def key(self) -> str:
-        src = Path(__file__).read_bytes() + Path(dynamics.__file__).read_bytes()
+        src = b"".join(Path(m.__file__).read_bytes() for m in (loop_module(), dynamics, elastic_dynamics))
         text = repr(self) + ca.__version__ + hashlib.sha256(src).hexdigest() + " ".join(GCC_FLAGS) + platform.node()
         return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 
+def loop_module():  # noqa: ANN201 - this module (its source is part of the cache key)
+    return sys.modules[__name__]
+
+
 def loop_parameters(p_dyn: np.ndarray, kp: np.ndarray, kv: np.ndarray, ki: np.ndarray, alpha: float,
-                    encoder_resolution_rad: float, sample_time_s: float) -> np.ndarray:
-    """Parameter vector of the step: plant numbers, gains, filter, encoder resolution, T_p."""
-    return np.concatenate([p_dyn, kp, kv, ki, [alpha, encoder_resolution_rad, sample_time_s]])
+                    encoder_resolution_rad: float, sample_time_s: float,
+                    transmission: np.ndarray | None = None) -> np.ndarray:
+    """Parameter vector of the step: plant numbers, gains, filter, encoder resolution, T_p and, for an
+    elastic or Stribeck plant, the transmission numbers (``Transmission.loop_vector``)."""
+    extra = [] if transmission is None else [np.asarray(transmission, float)]
+    return np.concatenate([p_dyn, kp, kv, ki, [alpha, encoder_resolution_rad, sample_time_s], *extra])
 
 
 def build_step(ls: LoopStructure) -> ca.Function:
@@ -90,6 +109,7 @@ def build_step(ls: LoopStructure) -> ca.Function:
     p_dyn = P[:npd]
     kp, kv, ki = P[npd:npd + n], P[npd + n:npd + 2 * n], P[npd + 2 * n:npd + 3 * n]
     alpha, res, Tp = P[npd + 3 * n], P[npd + 3 * n + 1], P[npd + 3 * n + 2]
+    ptr = P[npd + 3 * n + 3:]
     Tv = Tp / nv_
     h = Tv / ns
     psym = ca.SX.sym("p", npd)
@@ -97,6 +117,12 @@ def build_step(ls: LoopStructure) -> ca.Function:
 
     q, v, integ, q_prev, v_hat = (x[i * n:(i + 1) * n] for i in range(5))
     buf = [x[(5 + i) * n:(6 + i) * n] for i in range(dm)]  # buf[0] oldest
+    th = w = None
+    if ls.elastic:
+        th, w = x[(5 + dm) * n:(6 + dm) * n], x[(6 + dm) * n:(7 + dm) * n]
+        sub = elastic_dynamics.elastic_substep_function(ls.chain)
+    elif ls.stribeck:
+        sub = elastic_dynamics.rigid_stribeck_substep_function(ls.chain)
     q_d_fb = u[:n]
     v_ff = [u[(1 + j) * n:(2 + j) * n] for j in range(nv_)]
     tau_ff = [u[(1 + nv_ + j) * n:(2 + nv_ + j) * n] for j in range(nv_)]
@@ -105,13 +131,14 @@ def build_step(ls: LoopStructure) -> ca.Function:
     def encoder(qq, nn):
         return ca.floor((qq + nn) / res + 0.5) * res
 
-    q_enc0 = encoder(q, noise[0])
+    q_link0 = q
+    q_enc0 = encoder(th if ls.elastic else q, noise[0])
     q_fb = buf[0] if dm > 0 else q_enc0
     e_p = kp * (q_d_fb - q_fb)
     tau_sum = ca.MX.zeros(n)
     ratio = ca.MX.zeros(n)
     for j in range(nv_):
-        q_enc = q_enc0 if j == 0 else encoder(q, noise[j])
+        q_enc = q_enc0 if j == 0 else encoder(th if ls.elastic else q, noise[j])
         v_hat = v_hat + alpha * ((q_enc - q_prev) / Tv - v_hat)
         q_prev = q_enc
         e_v = v_ff[j] + e_p - v_hat
@@ -125,19 +152,28 @@ def build_step(ls: LoopStructure) -> ca.Function:
         tau_sum = tau_sum + tau_cmd
         ratio = ca.fmax(ratio, ca.fabs(tau_cmd) / effort)
         for _ in range(ns):
-            a = fd(q, v, tau_cmd, p_dyn)
-            v = v + h * a
-            q = q + h * v
+            if ls.elastic:
+                q, v, th, w = sub(q, v, th, w, tau_cmd, p_dyn, ptr, h)
+            elif ls.stribeck:
+                q, v = sub(q, v, tau_cmd, p_dyn, ptr, h)
+            else:
+                a = fd(q, v, tau_cmd, p_dyn)
+                v = v + h * a
+                q = q + h * v
     new_buf = [*buf[1:], q_enc0] if dm > 0 else []
-    x_next = ca.vertcat(q, v, integ, q_prev, v_hat, *new_buf)
-    y = ca.vertcat(q_enc0, v_hat, tau_sum / nv_, ratio, x[:n])
+    motor = [th, w] if ls.elastic else []
+    x_next = ca.vertcat(q, v, integ, q_prev, v_hat, *new_buf, *motor)
+    y = ca.vertcat(q_enc0, v_hat, tau_sum / nv_, ratio, q_link0, *([x[(5 + dm) * n:(6 + dm) * n]] if ls.elastic
+                                                                  else []))
     return ca.Function("step", [x, u, P], [x_next, y], ["x", "u", "P"], ["x_next", "y"])
 
 
 def unpack_output(Y: np.ndarray, n: int) -> dict[str, np.ndarray]:
-    """Rows of the stacked outputs (samples x 5n) -> named arrays (samples x n)."""
-    names = ("q_meas", "v_est", "tau_cmd", "torque_ratio", "q_true")
-    return {k: Y[:, i * n:(i + 1) * n] for i, k in enumerate(names)}
+    """Rows of the stacked outputs (samples x 5n, elastic 6n) -> named arrays (samples x n).
+
+    ``q_true`` is the link position at the start of the sample, ``q_motor_true`` (elastic) the motor's."""
+    names = ("q_meas", "v_est", "tau_cmd", "torque_ratio", "q_true", "q_motor_true")
+    return {k: Y[:, i * n:(i + 1) * n] for i, k in enumerate(names) if (i + 1) * n <= Y.shape[1]}
 
 
 GCC_FLAGS = ("-O3", "-march=native")  # the .so is built for this machine (host name in the cache key)
@@ -165,7 +201,8 @@ def python_rollout(ls: LoopStructure, model: pin.Model, p_dyn: np.ndarray, x0: n
                    P: np.ndarray, friction) -> tuple[np.ndarray, np.ndarray]:
     """The same loop as a plain Python loop with ``pin.aba`` (baseline for the speed-up and tests).
 
-    ``friction(v)`` is the plant's friction torque; ``U`` is (samples x n_input).
+    ``friction(v, load)`` is the plant's friction torque; ``U`` is (samples x n_input). For an elastic
+    loop ``model`` is the link chain without rotor inertia and ``P`` ends with the transmission numbers.
     """
     n, nv_, ns, dm = ls.nq, ls.velocity_samples_per_position_sample, ls.substeps_per_velocity_sample, \
         ls.measurement_delay_samples
@@ -179,17 +216,19 @@ def python_rollout(ls: LoopStructure, model: pin.Model, p_dyn: np.ndarray, x0: n
     x = np.array(x0, float)
     q, v, integ, q_prev, v_hat = (x[i * n:(i + 1) * n].copy() for i in range(5))
     buf = [x[(5 + i) * n:(6 + i) * n].copy() for i in range(dm)]
+    th, w = (x[(5 + dm + i) * n:(6 + dm + i) * n].copy() for i in range(2)) if ls.elastic else (q, v)
+    tr = P[npd + 3 * n + 3:].reshape(n, TRANSMISSION_PARAMS_PER_JOINT) if ls.transmission else None
     Y = np.empty((len(U), ls.n_output))
     for k, u in enumerate(U):
-        q_start = q.copy()
+        q_start, th_start = q.copy(), th.copy()
         noise = [u[(1 + 2 * nv_ + j) * n:(2 + 2 * nv_ + j) * n] for j in range(nv_)]
-        q_enc0 = np.floor((q + noise[0]) / res + 0.5) * res
+        q_enc0 = np.floor(((th if ls.elastic else q) + noise[0]) / res + 0.5) * res
         q_fb = buf[0] if dm > 0 else q_enc0
         e_p = kp * (u[:n] - q_fb)
         tau_sum = np.zeros(n)
         ratio = np.zeros(n)
         for j in range(nv_):
-            q_enc = q_enc0 if j == 0 else np.floor((q + noise[j]) / res + 0.5) * res
+            q_enc = q_enc0 if j == 0 else np.floor(((th if ls.elastic else q) + noise[j]) / res + 0.5) * res
             v_hat = v_hat + alpha * ((q_enc - q_prev) / Tv - v_hat)
             q_prev = q_enc
             e_v = u[(1 + j) * n:(2 + j) * n] + e_p - v_hat
@@ -203,10 +242,18 @@ def python_rollout(ls: LoopStructure, model: pin.Model, p_dyn: np.ndarray, x0: n
             ratio = np.maximum(ratio, np.abs(tau_cmd) / effort)
             tau_sat = np.clip(tau_cmd, -effort, effort)
             for _ in range(ns):
-                a = pin.aba(model, data, q, v, tau_sat - friction(v))
-                v = v + h * a
-                q = q + h * v
+                if ls.elastic:
+                    tau_s = tr[:, 1] * (th - q) + tr[:, 2] * (w - v)
+                    a = pin.aba(model, data, q, v, tau_s)
+                    w = w + h * (tau_sat - tau_s - friction(w, tau_s)) / tr[:, 0]
+                    v = v + h * a
+                    th = th + h * w
+                    q = q + h * v
+                else:
+                    a = pin.aba(model, data, q, v, tau_sat - friction(v, tau_sat))
+                    v = v + h * a
+                    q = q + h * v
         if dm > 0:
             buf = [*buf[1:], q_enc0]
-        Y[k] = np.concatenate([q_enc0, v_hat, tau_sum / nv_, ratio, q_start])
-    return np.concatenate([q, v, integ, q_prev, v_hat, *buf]), Y
+        Y[k] = np.concatenate([q_enc0, v_hat, tau_sum / nv_, ratio, q_start, *([th_start] if ls.elastic else [])])
+    return np.concatenate([q, v, integ, q_prev, v_hat, *buf, *([th, w] if ls.elastic else [])]), Y

@@ -8,7 +8,15 @@ laser tracker registered in the base frame would record). Stage code passes gain
 points in and gets sensor records out; it never sees the model inside.
 
 Dynamics (paper 004 §2.3, DESIGN.md "Control"): ``qdd = ABA(q, v, sat(tau) - friction(v))`` with
-rotor inertia in ``model.armature``, integrated by semi-implicit Euler substeps.
+rotor inertia in ``model.armature``, integrated by semi-implicit Euler substeps. With a
+:class:`~pipeline.robot.transmission.Transmission` of finite stiffness the joints are two-mass
+systems (:mod:`pipeline.control.elastic_dynamics`): the rotor (armature) drives the link through a
+spring and damper, friction acts on the rotor, the encoders read the rotor and the tracker sees the
+links. The substep is chosen so that ``h omega_max <= 1`` for the fastest joint resonance
+``omega_max^2 = k (1/J_m + 1/(J_l/2))`` (``J_l = M_ii(0)`` of the link chain, halved for the poses
+where it is smaller): semi-implicit Euler is stable up to 2 and its frequency error is
+``(h omega)^2 / 24`` (<= 4 % on that fastest mode, far above the servo bandwidth). On the RX130L
+(axis 6: about 1 kHz with the bare flange) this is 2 substeps per 200 µs, the 10 kHz minimum rate.
 """
 
 from __future__ import annotations
@@ -21,6 +29,7 @@ import pinocchio as pin
 
 from pipeline.control import dynamics, loop
 from pipeline.errors import ConfigError
+from pipeline.robot.transmission import Transmission, link_inertia_kgm2
 
 
 @dataclass
@@ -36,13 +45,15 @@ class ServoRecord:
     wall_time_s: float
     cpu_time_s: float = 0.0
     extra: dict = field(default_factory=dict)
+    q_link: np.ndarray | None = None     # (N, nq) true link positions (tests, TCP)
+    q_motor: np.ndarray | None = None    # (N, nq) true motor positions (joint side; elastic plant)
 
 
 class Plant:
     """Hidden-robot dynamics + encoders. ``model`` is a RobotModel (the truth, when built by RealRobot)."""
 
     def __init__(self, model, encoder_noise_rad: float = 2e-6, encoder_resolution_rad: float = 2 * np.pi / 2**26,
-                 integration_rate_hz: float = 10000.0) -> None:
+                 integration_rate_hz: float = 10000.0, transmission: Transmission | None = None) -> None:
         if encoder_resolution_rad <= 0 or encoder_noise_rad < 0:
             raise ConfigError(None, "plant.encoder", "resolution must be > 0 and noise >= 0")
         if integration_rate_hz < 10000.0:
@@ -55,21 +66,40 @@ class Plant:
         self.encoder_resolution_rad = float(encoder_resolution_rad)
         self.integration_rate_hz = float(integration_rate_hz)
         self.nq = model.model.nq
+        self.transmission = transmission
+        k = None if transmission is None else np.asarray(transmission.stiffness_Nm_rad, float)
+        if k is not None and np.any(np.isfinite(k)) and not np.all(np.isfinite(k)):
+            raise ConfigError(None, "truth.joint_stiffness", "either every joint is elastic or none (inf)")
+        self.elastic = transmission is not None and transmission.elastic
+        self.stribeck = transmission is not None and not self.elastic and transmission.nonlinear_friction
+        self._link_model = model.model
+        if self.elastic:
+            self._link_model = model.model.copy()
+            self._link_model.armature = np.zeros(self.nq)
+            self._p = self._p.copy()
+            self._p[22:self.nq * dynamics.PARAMS_PER_JOINT:dynamics.PARAMS_PER_JOINT] = 0.0  # armature -> motor mass
+            self._data = self._link_model.createData()
 
     # --- open-loop interface of the contract -------------------------------------------------
-    def _friction(self, v: np.ndarray) -> np.ndarray:
+    def _friction(self, v: np.ndarray, load_Nm: np.ndarray | float = 0.0) -> np.ndarray:
+        if self.transmission is not None:
+            return self.transmission.friction_torque(v, load_Nm)
         a = self._model.actuation
         return a.viscous_Nms_rad * v + a.coulomb_Nm * np.tanh(v / a.coulomb_smoothing_rad_s)
 
     def integrate(self, q: np.ndarray, v: np.ndarray, tau_cmd: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        """Hold ``tau_cmd`` (saturated) for ``dt`` seconds; semi-implicit Euler at >= the integration rate."""
+        """Hold ``tau_cmd`` (saturated) for ``dt`` seconds; semi-implicit Euler at >= the integration rate.
+
+        Rigid joints only (the contract's open-loop step); an elastic plant is run by :meth:`run_servo`."""
+        if self.elastic:
+            raise ConfigError(None, "plant.integrate", "the elastic plant has motor states: use run_servo")
         n_sub = max(1, int(np.ceil(dt * self.integration_rate_hz - 1e-9)))
         h = dt / n_sub
         eff = self._model.limits.effort_Nm
         tau = np.clip(tau_cmd, -eff, eff)
         q, v = np.array(q, float), np.array(v, float)
         for _ in range(n_sub):
-            a = pin.aba(self._model.model, self._data, q, v, tau - self._friction(v))
+            a = pin.aba(self._model.model, self._data, q, v, tau - self._friction(v, tau))
             v = v + h * a
             q = q + h * v
         return q, v
@@ -79,6 +109,12 @@ class Plant:
         tracker registered to the base frame reads them (paper 004 §2.3.3 measures the TCP with a
         Leica LTD600)."""
         return self._model.positions(np.atleast_2d(Q), frame=frame)
+
+    def measure_tcp_pose(self, Q: np.ndarray, frame: str = "tcp") -> tuple[np.ndarray, np.ndarray]:
+        """Positions (N, 3) and rotations (N, 3, 3) of ``frame`` at link positions ``Q`` (ideal 6-D
+        measurement, for the settling time of :func:`pipeline.control.validate.settling_time`)."""
+        poses = [self._model.fk(q, frame=frame) for q in np.atleast_2d(Q)]
+        return np.array([p.translation for p in poses]), np.array([p.rotation for p in poses])
 
     def read_encoders(self, q_true: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         noisy = q_true + self.encoder_noise_rad * rng.standard_normal(np.shape(q_true))
@@ -92,6 +128,16 @@ class Plant:
                        + a.viscous_Nms_rad / np.maximum(self._model.model.armature, 1e-3))
         n_rate = int(np.ceil(velocity_sample_time_s * self.integration_rate_hz - 1e-9))
         n_stab = int(np.ceil(velocity_sample_time_s * slope / 0.5))
+        tr = self.transmission
+        if tr is not None and (self.elastic or self.stribeck):
+            jm = np.maximum(tr.motor_inertia_kgm2, 1e-3)
+            slope_s = np.max((tr.coulomb_Nm * (1 + tr.coulomb_load_coefficient) + tr.static_excess_Nm)
+                             / tr.smoothing_rad_s / jm + tr.viscous_Nms_rad / jm)
+            n_stab = max(n_stab, int(np.ceil(velocity_sample_time_s * slope_s / 0.5)))
+        if self.elastic:
+            jl = 0.5 * link_inertia_kgm2(self._model)
+            w_max = np.max(np.sqrt(tr.stiffness_Nm_rad * (1 / tr.motor_inertia_kgm2 + 1 / jl)))
+            n_stab = max(n_stab, int(np.ceil(velocity_sample_time_s * w_max / 1.0)))
         return max(n_rate, n_stab, 1)
 
     # --- closed loop ------------------------------------------------------------------------
@@ -99,29 +145,39 @@ class Plant:
                   measurement_delay_samples: int, velocity_filter_alpha: float,
                   q_d_fb: np.ndarray, v_ff: np.ndarray, tau_ff: np.ndarray, q0: np.ndarray,
                   rng: np.random.Generator, engine: str = "compiled", chunk_samples: int = 250,
-                  measure_tcp: bool = True, tcp_frame: str = "tcp", v0: np.ndarray | None = None) -> ServoRecord:
+                  measure_tcp: bool = True, tcp_frame: str = "tcp", v0: np.ndarray | None = None,
+                  motor_offset0: np.ndarray | None = None) -> ServoRecord:
         """Close the drives' loops around the robot for ``len(q_d_fb)`` position samples.
 
         ``q_d_fb`` (N, nq): set point aligned with the delayed measurement; ``v_ff``, ``tau_ff``
         (N, velocity_samples * nq): velocity and torque feedforward for each velocity-loop sub-sample
         as they reach the drive. Starts at ``q0`` with velocity ``v0`` (default: at rest).
         ``engine``: "compiled" (CasADi/gcc, cached) or "python" (plain loop with pin.aba).
+        Elastic plant: the links start at ``q0``, the motors at ``q0 + motor_offset0`` (default: the
+        static deflection under gravity, ``g(q0) / k``), both with velocity ``v0``; ``q0`` is the link side.
         """
         n, N = self.nq, len(q_d_fb)
         ls = loop.LoopStructure(self._chain, velocity_samples, self.substeps_for(sample_time_s / velocity_samples),
-                                measurement_delay_samples, chunk_samples)
+                                measurement_delay_samples, chunk_samples, self.elastic, self.stribeck)
+        tr_vec = self.transmission.loop_vector() if ls.transmission else None
         P = loop.loop_parameters(self._p, gains["kp"], gains["kv"], gains["ki"], velocity_filter_alpha,
-                                 self.encoder_resolution_rad, sample_time_s)
+                                 self.encoder_resolution_rad, sample_time_s, tr_vec)
         noise = self.encoder_noise_rad * rng.standard_normal((N, velocity_samples * n))
         U = np.hstack([q_d_fb, v_ff, tau_ff, noise])
-        q_enc0 = np.floor(q0 / self.encoder_resolution_rad + 0.5) * self.encoder_resolution_rad
         v0 = np.zeros(n) if v0 is None else np.asarray(v0, float)
+        th0 = q0
+        if self.elastic:
+            off = (self._model.gravity_torque(q0) / self.transmission.stiffness_Nm_rad if motor_offset0 is None
+                   else np.asarray(motor_offset0, float))
+            th0 = q0 + off
         res = self.encoder_resolution_rad
-        q_prev = np.floor((q0 - v0 * sample_time_s / velocity_samples) / res + 0.5) * res  # consistent v_hat
-        x0 = np.concatenate([q0, v0, np.zeros(n), q_prev, v0, np.tile(q_enc0, measurement_delay_samples)])
+        q_enc0 = np.floor(th0 / res + 0.5) * res
+        q_prev = np.floor((th0 - v0 * sample_time_s / velocity_samples) / res + 0.5) * res  # consistent v_hat
+        x0 = np.concatenate([q0, v0, np.zeros(n), q_prev, v0, np.tile(q_enc0, measurement_delay_samples),
+                             *([th0, v0] if self.elastic else [])])
         t0, c0 = time.perf_counter(), time.thread_time()
         if engine == "python":
-            _, Y = loop.python_rollout(ls, self._model.model, self._p, x0, U, P, self._friction)
+            _, Y = loop.python_rollout(ls, self._link_model, self._p, x0, U, P, self._friction)
         elif engine == "compiled":
             roll = loop.compiled_rollout(ls)
             t0, c0 = time.perf_counter(), time.thread_time()  # compile/cache load is not loop time
@@ -143,4 +199,5 @@ class Plant:
         out = loop.unpack_output(Y, n)
         tcp = self._model.positions(out["q_true"], frame=tcp_frame) if measure_tcp else None
         return ServoRecord(out["q_meas"], out["v_est"], out["tau_cmd"], out["torque_ratio"], tcp, wall, cpu,
-                           {"substeps_per_velocity_sample": ls.substeps_per_velocity_sample})
+                           {"substeps_per_velocity_sample": ls.substeps_per_velocity_sample},
+                           out["q_true"], out.get("q_motor_true"))

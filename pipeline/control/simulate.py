@@ -8,6 +8,8 @@ the current set value::
     gravity        tau_ff = g(q_d)
     full           tau_ff = M(q_d) a_d + h(q_d, v_d)            (rotor inertia included)
     full_friction  tau_ff = M(q_d) a_d + h(q_d, v_d) + viscous v_d + coulomb tanh(v_d / width)
+    elastic_static / elastic_flat   motor set points leading the link by the joint deflection
+                   (:mod:`pipeline.control.elastic_feedforward`)
 
 Set points reach the drives ``setpoint_delay_samples`` late; with ``advance_feedforward`` they are
 sent that many samples early so they arrive on time. The drive aligns its set point with the
@@ -27,6 +29,7 @@ import pinocchio as pin
 
 from pipeline.control.config import FEEDFORWARD_VARIANTS, ControlConfig
 from pipeline.control.design import ServoGains, design_gains, filter_alpha, reflected_inertia
+from pipeline.control.elastic_feedforward import ELASTIC_VARIANTS, elastic_feedforward
 from pipeline.errors import ConfigError, InfeasibleError
 
 
@@ -42,6 +45,9 @@ class ClosedLoopResult:
     max_torque_ratio: np.ndarray  # (nq,) max |tau_cmd| / tau_max
     realtime_factor: float      # simulated time / wall time of the loop
     tcp_position_m: np.ndarray | None = None   # (N, 3) measured TCP (ideal tracker, base frame)
+    q_link: np.ndarray | None = None           # (N, nq) true link positions (tests / hidden-robot studies)
+    q_motor: np.ndarray | None = None          # (N, nq) true motor positions, joint side (elastic plant)
+    q_set: np.ndarray | None = None            # (N, nq) the drive's position set point (motor side)
     wall_time_s: float = 0.0
     gains: ServoGains | None = None
     torque_ratio: np.ndarray | None = None     # (N, nq) per-sample max |tau_cmd| / tau_max
@@ -63,7 +69,7 @@ def feedforward_torque(model, q_d: np.ndarray, v_d: np.ndarray, a_d: np.ndarray,
             out[k] = pin.rnea(model.model, data, q_d[k], zero, zero)
         else:
             out[k] = pin.rnea(model.model, data, q_d[k], v_d[k], a_d[k])
-    if variant == "full_friction":
+    if variant in ("full_friction", *ELASTIC_VARIANTS):
         out += model.friction_torque(v_d)
     return out
 
@@ -114,15 +120,18 @@ def servo_gains(model, q_ref: np.ndarray, config: ControlConfig) -> ServoGains:
 
 def simulate_joint_trajectory(real, model, t_s, q_d, v_d, a_d, config: ControlConfig | None = None,
                               feedforward: str = "full_friction", rng: np.random.Generator | None = None,
-                              gains: ServoGains | None = None, tcp_frame: str = "tcp") -> ClosedLoopResult:
+                              gains: ServoGains | None = None, tcp_frame: str = "tcp",
+                              hold_end_s: float = 0.0) -> ClosedLoopResult:
     """Run the trajectory (t_s (N,), q_d/v_d/a_d (N, nq)) on ``real.plant`` and return the record.
 
     ``model`` (RobotModel) gives the feedforward and the servo design (reflected inertia at the
     mean of ``q_d``). The trajectory is resampled to the control grid if needed. A trajectory that
     starts at rest is preceded by ``config.settle_time_s`` of holding ``q_d[0]`` (not part of the
     result); one that starts moving starts with the plant on ``(q_d[0], v_d[0])``.
-    Raises InfeasibleError naming time and joint if the torque command saturates
-    (``config.on_saturation == "error"``).
+    ``hold_end_s`` > 0 appends that long a hold of the last set point (residual vibration after a
+    move; the result then covers it). The lag error is the drive's: set point (motor side for the
+    elastic variants) minus encoder. Raises InfeasibleError naming time and joint if the torque
+    command saturates (``config.on_saturation == "error"``).
     """
     config = config or ControlConfig()
     rng = rng if rng is not None else np.random.default_rng(0)
@@ -132,6 +141,11 @@ def simulate_joint_trajectory(real, model, t_s, q_d, v_d, a_d, config: ControlCo
                           f"t_s ({len(t_s)},) and nq = {model.model.nq}")
     dt = config.sample_time_s
     t, q_d, v_d, a_d = resample(np.asarray(t_s, float), q_d, v_d, a_d, dt)
+    n_hold = int(round(hold_end_s / dt))
+    if n_hold > 0:
+        t = np.concatenate([t, t[-1] + dt * np.arange(1, n_hold + 1)])
+        q_d = np.vstack([q_d, np.repeat(q_d[-1:], n_hold, 0)])
+        v_d, a_d = (np.vstack([x, np.zeros((n_hold, x.shape[1]))]) for x in (v_d, a_d))
     moving = bool(np.abs(v_d[0]).max() > 1e-9)
     # a trajectory that starts at rest is preceded by a hold (integrators settle on gravity); one that
     # starts moving starts on its state directly
@@ -140,6 +154,9 @@ def simulate_joint_trajectory(real, model, t_s, q_d, v_d, a_d, config: ControlCo
     zero = np.zeros_like(q_d[0])
     Q, V, A = pad(q_d, q_d[0]), pad(v_d, zero), pad(a_d, zero)
     tau_ff = feedforward_torque(model, Q, V, A, feedforward)
+    Q_set, V_set = Q, V
+    if feedforward in ELASTIC_VARIANTS:
+        Q_set, V_set, tau_ff = elastic_feedforward(model, dt, Q, V, A, feedforward, tau_ff)
     if gains is None:
         gains = servo_gains(model, np.mean(q_d, axis=0), config)
     d_s, d_m = config.setpoint_delay_samples, config.measurement_delay_samples
@@ -152,9 +169,10 @@ def simulate_joint_trajectory(real, model, t_s, q_d, v_d, a_d, config: ControlCo
     v_delay = Tv / 2 + (1 - alpha) / alpha * Tv if config.compensate_velocity_estimate_delay else 0.0
     V_sub, T_sub = [], []
     for j in range(nv):
-        V_sub.append(_interp_rows(tt + j * Tv - v_delay, tt, V))
+        V_sub.append(_interp_rows(tt + j * Tv - v_delay, tt, V_set))
         T_sub.append(_interp_rows(tt + (j + 0.5) * Tv, tt, tau_ff))  # torque held over the sub-sample
-    q_fb, v_ff, tau_drive = drive_inputs(Q, np.hstack(V_sub), np.hstack(T_sub), d_s, d_m, config.advance_feedforward)
+    q_fb, v_ff, tau_drive = drive_inputs(Q_set, np.hstack(V_sub), np.hstack(T_sub), d_s, d_m,
+                                         config.advance_feedforward)
     plant = real.plant
     rec = plant.run_servo(gains.as_dict(), dt, nv, d_m, alpha,
                           q_fb, v_ff, tau_drive, Q[0], rng, engine=config.engine,
@@ -164,11 +182,13 @@ def simulate_joint_trajectory(real, model, t_s, q_d, v_d, a_d, config: ControlCo
     ratio = rec.torque_ratio[s]
     result = ClosedLoopResult(
         t_s=t, q=q_meas, v=rec.v_est[s], q_d=q_d, tau_cmd=rec.tau_cmd[s], tau_ff=tau_ff[s],
-        lag_error_rad=q_d - q_meas, max_torque_ratio=ratio.max(axis=0),
+        lag_error_rad=Q_set[s] - q_meas, max_torque_ratio=ratio.max(axis=0),
         realtime_factor=float(len(Q) * dt / max(rec.wall_time_s, 1e-12)),
         tcp_position_m=None if rec.tcp_position_m is None else rec.tcp_position_m[s],
         wall_time_s=rec.wall_time_s, gains=gains, torque_ratio=ratio,
-        realtime_factor_cpu=float(len(Q) * dt / max(rec.cpu_time_s, 1e-12)))
+        realtime_factor_cpu=float(len(Q) * dt / max(rec.cpu_time_s, 1e-12)),
+        q_link=None if rec.q_link is None else rec.q_link[s], q_motor=None if rec.q_motor is None else rec.q_motor[s],
+        q_set=Q_set[s])
     check_saturation(result, config)
     return result
 

@@ -19,7 +19,8 @@ desired path in the base frame), ``tcp_error_registered_*`` (after a best-fit ri
 ``_rms_rad`` (axes 1-3), ``max_torque_ratio``, ``saturation`` (first time and joint, with
 ``on_saturation = clip``), ``realtime_factor`` (wall) and ``realtime_factor_cpu``, the speed-up
 against the plain Python loop, ``tcp_error_rms_{nominal,calibrated}_kinematics_m`` (and registered),
-``improvement`` (none / full_friction ratios).
+``improvement`` (none / full_friction ratios), ``elastic_improvement`` (with an elastic variant:
+max TCP tracking error of none and of rigid full_friction over the best elastic variant's).
 """
 
 from __future__ import annotations
@@ -231,11 +232,18 @@ def _summary(cfg, ref, metrics, main, speed, rms_nominal_kin, calibrated, identi
             "lag_error_max_axes_1_3": [x / y for x, y in zip(a["lag_error_max_rad"][:3], b["lag_error_max_rad"][:3],
                                                              strict=True)],
         }
+    elastic = [k for k in ("elastic_flat", "elastic_static") if k in metrics]
+    if elastic:
+        key = "tcp_tracking_error_max_m"  # the control's part of the error (not the kinematic model's)
+        best = min(elastic, key=lambda k: metrics[k][key])
+        s["elastic_improvement"] = {"variant": best, **{
+            f"{k}_over_elastic": metrics[k][key] / metrics[best][key] for k in ("none", "full_friction")
+            if k in metrics}}
     return s
 
 
 def _figures(ref, runs, path, tcp_at_ref, servo_models) -> dict:
-    show = [k for k in ("none", "full_friction") if k in runs] or list(runs)
+    show = [k for k in ("none", "full_friction", "elastic_flat") if k in runs] or list(runs)
     lag = {k: runs[k].lag_error_rad for k in runs}
     tcp = {k: np.linalg.norm(runs[k].tcp_position_m - tcp_at_ref, axis=1) for k in runs}
     tcp_abs = {k: np.linalg.norm(runs[k].tcp_position_m - ref.tcp_d_m, axis=1) for k in runs}

@@ -8,12 +8,41 @@
   compared, paper 004 §2.3.3; removes the robot's placement, which a tracker calibration cannot
   separate from the tracker pose, and a constant TCP offset); and the tracking part
   ``|p_meas(t) - p(q_d(t))|`` against the real robot standing at the reference joints.
+* Settling time after a move (residual vibration of elastic joints, paper 004 §5): the time after
+  the end of the plan from which the TCP stays within 50 µm of the goal position and 0.1 mrad of
+  the goal orientation (:func:`settling_time`).
 """
 
 from __future__ import annotations
 
 import numpy as np
+import pinocchio as pin
 from matplotlib.figure import Figure
+
+SETTLING_POSITION_TOLERANCE_M = 50e-6
+SETTLING_ROTATION_TOLERANCE_RAD = 0.1e-3
+
+
+def settling_time(t_s: np.ndarray, position_m: np.ndarray, goal_position_m: np.ndarray, t_end_s: float,
+                  rotation: np.ndarray | None = None, goal_rotation: np.ndarray | None = None,
+                  position_tolerance_m: float = SETTLING_POSITION_TOLERANCE_M,
+                  rotation_tolerance_rad: float = SETTLING_ROTATION_TOLERANCE_RAD) -> float:
+    """Seconds after ``t_end_s`` (end of the plan) from which every later sample is within tolerance.
+
+    ``position_m`` (N, 3) measured TCP, ``rotation`` (N, 3, 3) its orientation (optional; error
+    ``|log3(R_goal^T R)|``). Returns 0 if already settled at ``t_end_s`` and ``inf`` if the record ends
+    outside the tolerance (hold longer: ``simulate_joint_trajectory(..., hold_end_s=...)``)."""
+    t_s = np.asarray(t_s, float)
+    ok = np.linalg.norm(np.asarray(position_m) - np.asarray(goal_position_m), axis=1) <= position_tolerance_m
+    if rotation is not None:
+        goal = np.asarray(goal_rotation, float)
+        ang = np.array([np.linalg.norm(pin.log3(goal.T @ R)) for R in np.asarray(rotation)])
+        ok &= ang <= rotation_tolerance_rad
+    if not ok[-1]:
+        return float("inf")
+    bad = np.nonzero(~ok)[0]
+    t_settle = t_s[bad[-1] + 1] if len(bad) else t_s[0]
+    return float(max(0.0, t_settle - t_end_s))
 
 
 def error_stats(err: np.ndarray) -> dict[str, float]:
@@ -51,7 +80,9 @@ def registered_error(measured_m: np.ndarray, desired_m: np.ndarray) -> np.ndarra
 
 VARIANT_STYLE = {"none": ("tab:red", "no feedforward"), "gravity": ("tab:orange", "gravity"),
                  "full": ("tab:green", "rigid body"), "full_friction": ("tab:blue", "rigid body + friction"),
-                 "full_friction_nominal": ("tab:purple", "rigid body + friction (nominal model)")}
+                 "full_friction_nominal": ("tab:purple", "rigid body + friction (nominal model)"),
+                 "elastic_static": ("tab:olive", "elastic: static deflection"),
+                 "elastic_flat": ("tab:cyan", "elastic: two-mass inverse (flatness)")}
 
 
 def lag_figure(t_s: np.ndarray, lag: dict[str, np.ndarray], axes: tuple[int, ...] = (0, 1, 2)) -> Figure:

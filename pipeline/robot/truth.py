@@ -27,6 +27,7 @@ from pipeline.errors import ConfigError
 from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import KinematicLayout, apply_kinematic_errors, joint_infos
 from pipeline.robot.sensors import Encoders, LaserTracker, TorqueSensor
+from pipeline.robot.transmission import Transmission, create_transmission, nominal_joint_stiffness_Nm_rad
 
 #: fixed salt so the truth stream is independent of every stage's stream
 _TRUTH_SALT = 0x74727574
@@ -50,11 +51,25 @@ class TruthConfig:
     friction_relative_sigma: float = 0.2
     encoder_noise_rad: float = 2.0e-6
     torque_noise_fraction_of_limit: float = 0.01
+    # --- transmission block (pipeline/robot/transmission.py): Stribeck friction, load-dependent
+    # Coulomb friction and the damping of the elastic joints; every value 0 -> today's friction
+    stribeck_excess_relative: float = 0.4   # static friction = Coulomb (1 + x) (Armstrong-Helouvry 1994: 1.2-2)
+    stribeck_velocity_rad_s: float = 0.05   # joint side (a few rad/s on the motor through a gear of 50-100)
+    coulomb_load_coefficient: float = 0.1   # Coulomb grows by this fraction at rated load (Bittencourt 2012)
+    joint_damping_ratio: float = 0.05       # of the motor-link resonance (structural damping of gears: a few %)
 
     def validate(self, source: str = "truth") -> None:
         for name, value in vars(self).items():
             if not isinstance(value, int | float) or not np.isfinite(value) or value < 0:
                 raise ConfigError(source, f"truth.{name}", f"must be a non-negative number, got {value!r}")
+
+
+def rigid_truth_config(**overrides: float) -> TruthConfig:
+    """The truth of the rigid, viscous + Coulomb robot (transmission block 0, joint compliance 0)."""
+    config = TruthConfig(**{"stribeck_excess_relative": 0.0, "coulomb_load_coefficient": 0.0, **overrides})
+    if "joint_compliance_scale" not in overrides:
+        config.joint_compliance_scale = 0.0  # the field of the calibration's stiffness block
+    return config
 
 
 @dataclass
@@ -108,7 +123,8 @@ class RealRobot:
     """A perturbed copy of the nominal robot with its sensors (see the module docstring)."""
 
     def __init__(self, truth: RobotModel, kinematic_errors: np.ndarray, transform_tracker_to_base: pin.SE3,
-                 config: TruthConfig) -> None:
+                 config: TruthConfig, seed: int = 0) -> None:
+        self._seed = int(seed)
         self._truth = truth
         self._kinematic_errors = kinematic_errors
         self._transform_tracker_to_base = transform_tracker_to_base
@@ -117,6 +133,7 @@ class RealRobot:
         self.encoders = Encoders(config.encoder_noise_rad)
         self.torque_sensor = TorqueSensor(config.torque_noise_fraction_of_limit * truth.limits.effort_Nm)
         self._plant = None
+        self._transmission: Transmission | None = None
 
     @classmethod
     def create(cls, nominal: RobotModel, seed: int, config: TruthConfig | None = None) -> RealRobot:
@@ -157,7 +174,7 @@ class RealRobot:
         tracker_error = np.concatenate([config.tracker_translation_sigma_m * rng.standard_normal(3),
                                         config.tracker_rotation_sigma_rad * rng.standard_normal(3)])
         tracker_pose = nominal.tracker.transform_tracker_to_base * pin.exp6(tracker_error)
-        return cls(truth, errors, tracker_pose, config)
+        return cls(truth, errors, tracker_pose, config, seed)
 
     # ------------------------------------------------------------ stage-facing
     def execute_joint_trajectory(self, t_s: np.ndarray, q: np.ndarray, v: np.ndarray, a: np.ndarray,
@@ -180,8 +197,31 @@ class RealRobot:
         if self._plant is None:
             from pipeline.control.plant import Plant
 
-            self._plant = Plant(self._truth, encoder_noise_rad=self.config.encoder_noise_rad)
+            self._plant = Plant(self._truth, encoder_noise_rad=self.config.encoder_noise_rad,
+                                transmission=self.transmission)
         return self._plant
+
+    # ------------------------------------------------- transmission block (tests + the plant only)
+    def _plant_stiffness_Nm_rad(self) -> np.ndarray:
+        """The truth's joint stiffness (np.inf when rigid): ``joint_stiffness_Nm_rad`` where the truth
+        has it, else the nominal rule scaled by ``joint_compliance_scale`` (default 1)."""
+        own = getattr(self, "joint_stiffness_Nm_rad", None)
+        if own is not None:
+            return np.asarray(own, float)
+        scale = float(getattr(self.config, "joint_compliance_scale", 1.0))
+        k = nominal_joint_stiffness_Nm_rad(self._truth)
+        return k / scale if scale > 0 else np.full(self._truth.nq, np.inf)
+
+    @property
+    def transmission(self) -> Transmission:
+        """Tests and the plant only: stiffness, damping and friction of the hidden joints."""
+        if self._transmission is None:
+            c = self.config
+            self._transmission = create_transmission(
+                self._truth, self._seed, self._plant_stiffness_Nm_rad(), c.joint_damping_ratio,
+                c.stribeck_excess_relative, c.stribeck_velocity_rad_s, c.coulomb_load_coefficient,
+                c.friction_relative_sigma)
+        return self._transmission
 
     # -------------------------------------------------------------- tests only
     @property

@@ -53,7 +53,7 @@ def test_stage_with_calibrated_kinematics(quick_config, rx130l, real, tmp_path):
     calibrated = stage._with_dynamics_of(real.truth, rx130l)
     upstream = {"calibration": StageOutput({}, {}, {}, calibrated, tmp_path)}
     cfg = quick_config.control
-    cfg.variants = ["full_friction"]
+    cfg.variants = ["elastic_flat"]  # the elastic truth: rigid feedforward leaves the mm-level joint deflection
     cfg.benchmark_python_seconds = 0.0
     cfg.iso.segments = ["line"]
     res = stage.run(_ctx(quick_config, calibrated.copy(), real, upstream, tmp_path))
