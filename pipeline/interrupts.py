@@ -38,14 +38,15 @@ def interrupted() -> bool:
     return bool(_received)
 
 
-def raise_if_interrupted(stats: Mapping[str, object] | str | None) -> None:
+def raise_if_interrupted(stats: Mapping[str, object] | str | None, what: str = "solver") -> None:
     """Raise KeyboardInterrupt when a solver was stopped by an interrupt.
 
-    ``stats``: ``solver.stats()`` of a CasADi ``nlpsol`` (or its ``return_status`` string).
+    ``stats``: ``solver.stats()`` of a CasADi ``nlpsol`` (or its ``return_status`` string);
+    ``what`` names the solve in the message.
     """
     status = stats.get("return_status") if isinstance(stats, Mapping) else stats
     if status in INTERRUPT_STATUSES or interrupted():
-        raise KeyboardInterrupt(f"solver stopped: {status}")
+        raise KeyboardInterrupt(f"{what} stopped: {status}")
 
 
 @contextlib.contextmanager

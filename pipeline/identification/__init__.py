@@ -7,8 +7,7 @@ Public entry points:
   ``base_parameters`` (pivoted QR, readable combinations), ``standard_parameters``.
 - :mod:`~pipeline.identification.base_set`: ``structural_base_parameters`` (the base set of the
   nominal model, kept for a calibrated/reloaded one).
-- :mod:`~pipeline.identification.gates`: the stage's quality gates; :mod:`~.solver_status`: IPOPT
-  success and interrupt statuses.
+- :mod:`~pipeline.identification.gates`: the stage's quality gates.
 - :mod:`~pipeline.identification.design`: ``FourierTrajectory`` (Swevers, rest to rest),
   ``optimize_excitation`` (CasADi/IPOPT, exact gradient of cond or log det, limits, torques,
   floor and capsule self-collision at every sample), ``random_feasible_trajectories``,

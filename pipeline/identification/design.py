@@ -58,8 +58,9 @@ from pipeline.identification.fourier import (
     rest_constraint_matrix,
 )
 from pipeline.identification.regressor import BaseParameters, RegressorModel
-from pipeline.identification.solver_status import is_success, raise_if_interrupted
+from pipeline.interrupts import raise_if_interrupted
 from pipeline.robot.collision_sx import capsule_clearance_function
+from pipeline.solver_status import is_success
 
 
 def regressor_casadi(sym: Any, reg: RegressorModel, base: BaseParameters) -> ca.Function:

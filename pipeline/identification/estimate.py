@@ -29,7 +29,7 @@ import numpy as np
 
 from pipeline.blas import single_thread_blas
 from pipeline.errors import DataFileError, SolverError
-from pipeline.identification.solver_status import raise_if_interrupted
+from pipeline.interrupts import raise_if_interrupted
 
 #: lower bound of rotor inertia (kg m^2) and friction (N m s/rad, N m) in the physical fit
 POSITIVE_LOWER_BOUND = 1e-6

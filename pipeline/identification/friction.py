@@ -23,7 +23,8 @@ import casadi as ca
 import numpy as np
 
 from pipeline.errors import SolverError
-from pipeline.identification.solver_status import is_success, raise_if_interrupted
+from pipeline.interrupts import raise_if_interrupted
+from pipeline.solver_status import is_success
 
 FRICTION_MODELS = ("viscous_coulomb", "stribeck")
 #: bounds of the Stribeck velocity [rad/s] (joint side)

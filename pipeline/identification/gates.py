@@ -20,8 +20,8 @@ from typing import Any
 import numpy as np
 
 from pipeline.errors import DataFileError, PipelineError
-from pipeline.identification.solver_status import is_success
 from pipeline.quality import QualityGates
+from pipeline.solver_status import is_success
 
 
 def check_data_excites(

@@ -8,8 +8,8 @@ import pytest
 from pipeline.identification import design as D
 from pipeline.identification import fourier as F
 from pipeline.identification.regressor import RegressorModel, base_parameters
-from pipeline.identification.solver_status import SUCCESS_STATUSES
 from pipeline.robot.symbolic import SymbolicRobot
+from pipeline.solver_status import SUCCESS_STATUSES
 
 
 @pytest.fixture(scope="module")

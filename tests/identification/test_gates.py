@@ -15,7 +15,7 @@ from pipeline.identification import fourier as F
 from pipeline.identification import stage
 from pipeline.identification.gates import add_result_gates, check_data_excites
 from pipeline.identification.regressor import RegressorModel, base_parameters
-from pipeline.identification.solver_status import raise_if_interrupted
+from pipeline.interrupts import raise_if_interrupted
 from pipeline.quality import QualityGates
 from pipeline.robot.model import RobotModel
 from pipeline.robot.symbolic import SymbolicRobot
