@@ -170,7 +170,7 @@ def run(ctx: StageContext) -> StageResult:
     }
     data = {"simulation": sims, "ruckig": {"jerk_ratio_1_s": ptp.ruckig.jerk_ratio_1_s, **ptp.ruckig.info,
                                            "evaluations": ptp.ruckig.evaluations},
-            "cp_info": {"convex": cp.convex.info, "refined": cp.optimal.info,
+            "cp_info": {"convex": cp.convex.info if cp.convex else None, "refined": cp.optimal.info,
                         "smooth": cp.smooth.info if cp.smooth else None, "toppra": cp.toppra.info}}
     rows = [
         ("CP duration [s] (full friction)", summary["cp_duration_s"]),
