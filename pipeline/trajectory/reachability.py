@@ -37,7 +37,9 @@ fine-grid re-check catches such (rare) cases.
 from __future__ import annotations
 
 import time
+from functools import lru_cache
 
+import casadi as ca
 import numpy as np
 
 from pipeline.errors import InfeasibleError, SolverError
@@ -119,7 +121,7 @@ def _stage_lines(rows: dict, ds: float, fr: dict) -> tuple[np.ndarray, ...]:
     return np.hstack(ps), np.hstack(ss), np.hstack(us), np.hstack(ts)
 
 
-def _argmax_concave(p: np.ndarray, sl: np.ndarray, hi: np.ndarray, iters: int = 45) -> np.ndarray:
+def _argmax_concave(p: np.ndarray, sl: np.ndarray, hi: np.ndarray, iters: int = 30) -> np.ndarray:
     """Maximiser in [0, hi] of H(y) = min_r (p_r + s_r y) for every stage (bisection on the slope)."""
     lo = np.zeros(p.shape[0])
     hi = hi.copy()
@@ -133,27 +135,54 @@ def _argmax_concave(p: np.ndarray, sl: np.ndarray, hi: np.ndarray, iters: int = 
     return 0.5 * (lo + hi)
 
 
+@lru_cache(maxsize=16)
+def _passes(n_rows: int, n_stages: int) -> tuple[ca.Function, ca.Function]:
+    """The backward and forward recursions as CasADi folds (``mapaccum``: one C loop over stages).
+
+    backward:  kmax_k = max(0, min_r (p_r + s_r min(kmax_{k+1}, y*_k)))
+    forward:   b_{k+1} = max(0, min(kmax_{k+1}, min_r (u_r + t_r b_k)))
+    """
+    x = ca.SX.sym("x")
+    p, s, u, t = (ca.SX.sym(n, n_rows) for n in "pslt")
+    y_star, k_next = ca.SX.sym("y_star"), ca.SX.sym("k_next")
+    back = ca.Function("cp_backward", [x, ca.vertcat(p, s, y_star)],
+                       [ca.fmax(0.0, ca.mmin(p + s * ca.fmin(x, y_star)))])
+    fwd = ca.Function("cp_forward", [x, ca.vertcat(u, t, k_next)],
+                      [ca.fmax(0.0, ca.fmin(k_next, ca.mmin(u + t * x)))])
+    # expanded into one SX function: the virtual machine runs the unrolled loop without call overhead
+    return (back.mapaccum("cp_backward_pass", n_stages).expand(),
+            fwd.mapaccum("cp_forward_pass", n_stages).expand())
+
+
 def _topp_ra(p: np.ndarray, sl: np.ndarray, u: np.ndarray, t: np.ndarray,
              y_star: np.ndarray) -> np.ndarray:
     """Exact TOPP-RA for frozen-friction (linear) stage constraints: b at the N+1 grid points."""
-    N = p.shape[0]
+    N, R = p.shape
+    back, fwd = _passes(R, N)
     K = np.zeros(N + 1)                      # rest at s = 1
-    ys = y_star.tolist()
-    kk = 0.0
-    for k in range(N - 1, -1, -1):
-        kk = max(0.0, float((p[k] + sl[k] * min(kk, ys[k])).min()))
-        K[k] = kk
+    K[:-1] = _call(back, np.hstack([p, sl, y_star[:, None]])[::-1], N)[::-1]
     b = np.zeros(N + 1)                      # rest at s = 0
-    bk = 0.0
-    for k in range(N):
-        bk = max(0.0, min(K[k + 1], float((u[k] + t[k] * bk).min())))
-        b[k + 1] = bk
+    b[1:] = _call(fwd, np.hstack([u, t, K[1:, None]]), N)
     return b
+
+
+def _call(fold: ca.Function, stages: np.ndarray, n: int) -> np.ndarray:
+    """Evaluate a fold from rest (x0 = 0) on per-stage rows ``stages`` (n, m), through CasADi's
+    buffer interface (numpy memory passed as is: converting 3e4 numbers to a DM costs ~8 ms)."""
+    buf, evaluate = fold.buffer()
+    x0 = np.zeros(1)
+    data = np.ascontiguousarray(stages).ravel()          # row k = stage k: column-major (m, n)
+    out = np.zeros(n)
+    buf.set_arg(0, memoryview(x0))
+    buf.set_arg(1, memoryview(data))
+    buf.set_res(0, memoryview(out))
+    evaluate()
+    return out
 
 
 def solve_cp_reachability(pm: PlanningModel, path: JointPath, n_grid: int = 400, name: str = "cp",
                           torque_margin: float = 0.0, torque_scale: np.ndarray | None = None,
-                          acceleration_limits: bool = True, tol: float = 1e-9,
+                          acceleration_limits: bool = True, tol: float = 1e-5,
                           max_rounds: int = 30) -> CPProfile:
     """Time-optimal profile with viscous + smooth Coulomb friction (module docstring).
 
