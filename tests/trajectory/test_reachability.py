@@ -4,13 +4,18 @@ limits in every planner; IPOPT interrupt statuses."""
 from __future__ import annotations
 
 import dataclasses
+import sys
+from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 import pytest
 
 from pipeline.errors import InfeasibleError
 from pipeline.trajectory.baselines import ruckig_torque_feasible, toppra_cp
 from pipeline.trajectory.cp import solve_cp_convex, solve_cp_refined
+from pipeline.trajectory.design import JointPath
+from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.reachability import solve_cp_reachability
 from pipeline.trajectory.solve import plan_cp, solve_ptp_verified
 from pipeline.trajectory.status import INTERRUPT_STATUSES, raise_if_interrupted
@@ -78,3 +83,34 @@ def test_interrupt_statuses_are_interrupts(status):
     with pytest.raises(KeyboardInterrupt):
         raise_if_interrupted(status, "cp")
     raise_if_interrupted("Solve_Succeeded", "cp")              # no exception
+
+
+def _panda_arm() -> PlanningModel:
+    """The 7-axis Franka Panda of example-robot-data (fingers locked), with stated friction."""
+    urdf = Path(sys.prefix) / "lib" / f"python{sys.version_info.major}.{sys.version_info.minor}" / "site-packages" \
+        / "cmeel.prefix" / "share" / "example-robot-data" / "robots" / "panda_description" / "urdf" / "panda.urdf"
+    if not urdf.is_file():
+        pytest.skip("example-robot-data not installed")
+    full = pin.buildModelFromUrdf(str(urdf))
+    fingers = [full.getJointId(n) for n in full.names if "finger" in n]
+    model = pin.buildReducedModel(full, fingers, pin.neutral(full))
+    n = model.nq
+    return PlanningModel(model, model.lowerPositionLimit.copy(), model.upperPositionLimit.copy(),
+                         model.velocityLimit.copy(), model.effortLimit.copy(), np.full(n, 0.5), np.full(n, 1.0),
+                         0.01, np.full(n, 10.0))
+
+
+def test_seven_axes_match_the_nlp():
+    """n axes: the same solver on a 7-axis arm and a joint-space path, against the NLP reference."""
+    pm7 = _panda_arm()
+    assert pm7.nq == 7
+    s = np.linspace(0.0, 1.0, 40)
+    q0 = np.array([0.0, -0.5, 0.0, -2.0, 0.0, 1.6, 0.8])
+    q1 = np.array([1.2, 0.3, -0.6, -1.2, 0.7, 2.4, -0.4])
+    q = q0 + np.outer(s, q1 - q0) + 0.2 * np.sin(np.pi * s)[:, None]
+    path = JointPath(s, q, name="panda move")
+    for acc in (False, True):
+        ra = solve_cp_reachability(pm7, path, 60, acceleration_limits=acc)
+        nlp = solve_cp_refined(pm7, path, solve_cp_convex(pm7, path, 60, acceleration_limits=acc),
+                               acceleration_limits=acc)
+        assert abs(ra.duration_s / nlp.duration_s - 1.0) <= 1e-3
