@@ -75,7 +75,8 @@ def main(robot_name: str = "rx130l", segment: str = "circle_large", torque_reser
     print(f"  toppra {s['cp_toppra_duration_s']:.5f} s ({1e3 * s['cp_toppra_solve_time_s']:.0f} ms); ours with "
           f"toppra's constraints {s['cp_equal_constraints_duration_s']:.5f} s -> ratio "
           f"{s['cp_equal_vs_toppra_ratio']:.6f} (target |ratio - 1| <= 0.005)")
-    print(f"  full friction: ours {s['cp_duration_s']:.5f} s ({s['cp_solve_time_s']:.2f} s), fine-grid violation "
+    print(f"  full friction ({s['cp_method']}): ours {s['cp_duration_s']:.5f} s ({s['cp_solve_time_s']:.2f} s), "
+          "fine-grid violation "
           f"ours {100 * s['cp_fine_violation']:.3f} % vs toppra "
           f"{100 * s['cp_toppra_fine_violation_full_friction']:.2f} % (target ours <= 0.5 %)")
     print(f"  smooth variant {s['cp_smooth_duration_s']:.5f} s: time cost {100 * s['cp_smooth_time_cost']:.1f} %, "

@@ -5,7 +5,7 @@ on reachability analysis", IEEE T-RO 34(3), sections III-IV): a backward pass co
 *controllable* sets ``K_k = [0, kmax_k]`` of ``b = sdot^2`` (from which the rest at ``s = 1`` can
 still be reached), a forward pass takes at every stage the largest ``b_{k+1}`` reachable from
 ``b_k`` inside ``K_{k+1}``; for stage-wise constraints linear in ``(b_k, b_{k+1})`` this greedy
-profile is the time-optimal one of the discretised problem (ibid., Theorem 2).
+profile is the time-optimal one of the discretised problem (ibid., section IV).
 
 Discretisation: the same as the NLP reference (:mod:`pipeline.trajectory.cp`, Verscheure 2009):
 ``a_k = (b_{k+1} - b_k) / (2 ds)`` constant per interval, torques
@@ -31,7 +31,10 @@ largest controllable ``b`` is the maximum of the concave piecewise-linear ``H_k(
 unconstrained maximiser ``y*_k`` found for all stages at once (vectorised bisection on the slope
 of the active line); the forward step is the minimum of the rows' upper bounds on ``y``.
 Lower bounds (rows that would demand a minimum speed) are not propagated; the caller's
-fine-grid re-check catches such (rare) cases.
+fine-grid re-check catches such (rare) cases. The two sequential passes run as expanded CasADi
+folds (one unrolled SX function per grid size, cached), so a round costs about a millisecond at
+N = 400 and the whole solve is linear in N; ``benchmarks/bench_cp.py`` measures it against
+toppra and against the NLP reference (same durations to ~1e-5 relative).
 """
 
 from __future__ import annotations
