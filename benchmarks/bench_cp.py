@@ -1,6 +1,7 @@
 """CP with the full friction model: reachability solver vs toppra vs the NLP reference, and scaling.
 
-Run: ``.venv/bin/python benchmarks/bench_cp.py [robot ...]`` (default ``rx130l staubli_tx40``).
+Run: ``.venv/bin/python benchmarks/bench_cp.py [robot ...]`` (default ``rx130l staubli_tx40 ur5``;
+``ur5``: the example-robot-data URDF alone on a joint-space move, see :func:`ur5_joint_move`).
 For each robot and CP piece (its default profile's ISO circle and line, torque and speed limits
 only, N = 400, planning limits ``(1 - torque_reserve) x limit``), measured in this process:
 
@@ -18,14 +19,17 @@ from __future__ import annotations
 
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 
 from pipeline.config import load_config
 from pipeline.errors import PipelineError
 from pipeline.robot.model import RobotModel
 from pipeline.trajectory.baselines import toppra_cp
 from pipeline.trajectory.cp import solve_cp_convex, solve_cp_refined
+from pipeline.trajectory.design import JointPath
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.reachability import solve_cp_reachability
 from pipeline.trajectory.solve import cp_joint_path
@@ -71,6 +75,34 @@ def compare(robot: RobotModel, name: str, segment: str) -> None:
           f"ratio {chk.max_acceleration_ratio:.4f}")
 
 
+def ur5_joint_move() -> None:
+    """The UR5 of example-robot-data from its URDF alone (no robot.yaml: friction assumed, viscous
+    2 N m s/rad and Coulomb 3 N m per joint, acceleration limits 15 rad/s^2, 10 % torque reserve)
+    on a joint-space move with a detour (no ISO path: that needs the robot's IK setup)."""
+    urdf = (Path(sys.prefix) / "lib" / f"python{sys.version_info.major}.{sys.version_info.minor}" / "site-packages"
+            / "cmeel.prefix" / "share" / "example-robot-data" / "robots" / "ur_description" / "urdf" / "ur5_robot.urdf")
+    if not urdf.is_file():
+        print("ur5: example-robot-data not installed; skipped")
+        return
+    model = pin.buildModelFromUrdf(str(urdf))
+    n = model.nq
+    pm = PlanningModel(model, model.lowerPositionLimit.copy(), model.upperPositionLimit.copy(),
+                       model.velocityLimit.copy(), 0.9 * model.effortLimit.copy(), np.full(n, 2.0), np.full(n, 3.0),
+                       0.01, np.full(n, 15.0))
+    s = np.linspace(0.0, 1.0, 60)
+    q0 = np.array([0.0, -1.2, 1.0, -1.4, -1.57, 0.0])
+    q1 = np.array([2.0, -0.3, 2.2, -2.4, -0.6, 1.5])
+    path = JointPath(s, q0 + np.outer(s, q1 - q0) + 0.3 * np.sin(np.pi * s)[:, None], name="ur5 joint move")
+    t_tp, tp = best_time(lambda: toppra_cp(pm, path, N_GRID))
+    t_ra, ra = best_time(lambda: solve_cp_reachability(pm, path, N_GRID, acceleration_limits=False))
+    nlp = solve_cp_refined(pm, path, solve_cp_convex(pm, path, N_GRID))
+    chk = check_trajectory(pm, ra.sample(path, 2e-4))
+    print(f"ur5 (URDF only, joint move): toppra {1e3 * t_tp:.1f} ms ({tp.duration_s:.5f} s), reachability "
+          f"{1e3 * t_ra:.1f} ms ({ra.duration_s:.5f} s); time ours / toppra = {t_ra / t_tp:.2f}; duration ours / NLP "
+          f"- 1 = {ra.duration_s / nlp.duration_s - 1:+.2e}; fine-grid violation {100 * chk.violation:.3f} %; max "
+          f"torque ratio {chk.max_torque_ratio:.3f}, speed ratio {chk.max_velocity_ratio:.3f}")
+
+
 def scaling(robot: RobotModel, name: str) -> None:
     values = None if name == "rx130l" else {"robot": name}
     cfg = load_config(None, values=values).trajectory
@@ -91,8 +123,11 @@ def scaling(robot: RobotModel, name: str) -> None:
 
 
 def main(*robots: str) -> None:
-    names = list(robots) or ["rx130l", "staubli_tx40"]
+    names = list(robots) or ["rx130l", "staubli_tx40", "ur5"]
     for name in names:
+        if name == "ur5":
+            ur5_joint_move()
+            continue
         try:
             robot = RobotModel.load(name)
         except PipelineError as exc:
@@ -101,7 +136,10 @@ def main(*robots: str) -> None:
         cfg = load_config(None, values=None if name == "rx130l" else {"robot": name}).trajectory
         for segment in dict.fromkeys((cfg.cp_segment, "line")):
             compare(robot, name, segment)
-    first = names[0]
+    built_in = [n for n in names if n != "ur5"]
+    if not built_in:
+        return
+    first = built_in[0]
     segment = load_config(None, values=None if first == "rx130l" else {"robot": first}).trajectory.cp_segment
     print(f"scaling on {first} ({segment}):")
     scaling(RobotModel.load(first), first)
