@@ -15,7 +15,11 @@ Prints, each as a ratio measured here:
   <= 0.5 % where toppra's exceeds it);
 * PtP on (-45, 20, 30, 0, 40, 0) deg -> (45, 60, -20, 30, 50, 60) deg: duration / ruckig's
   torque-feasible duration (target <= 0.87), fine-grid violation (<= 0.5 %), energy at ruckig's
-  duration / ruckig's (target <= 0.6), solve time after the one-time compile (target <= 2 s).
+  duration / ruckig's (target <= 0.75, and within 2 % of the minimum with the torque limits removed),
+  solve time after the one-time compile (target <= 2 s).
+
+Torque and speed limits only (``acceleration_limits = False``: the torque-limited study of paper 004
+section 5); ``benchmarks/bench_cp.py`` measures the CP solvers with and without acceleration limits.
 """
 
 from __future__ import annotations
@@ -52,7 +56,7 @@ def perturbed_starts(problem, q0: np.ndarray, q1: np.ndarray, duration_s: float,
 
 def main(robot_name: str = "rx130l", segment: str = "circle_large", torque_reserve: str | None = None,
          energy_starts: str = "8") -> None:
-    cfg = TrajectoryConfig(cp_segment=segment)
+    cfg = TrajectoryConfig(cp_segment=segment, acceleration_limits=False)
     if torque_reserve is not None:
         cfg.torque_reserve = float(torque_reserve)
     robot = RobotModel.load(robot_name)
@@ -71,7 +75,8 @@ def main(robot_name: str = "rx130l", segment: str = "circle_large", torque_reser
     print(f"  toppra {s['cp_toppra_duration_s']:.5f} s ({1e3 * s['cp_toppra_solve_time_s']:.0f} ms); ours with "
           f"toppra's constraints {s['cp_equal_constraints_duration_s']:.5f} s -> ratio "
           f"{s['cp_equal_vs_toppra_ratio']:.6f} (target |ratio - 1| <= 0.005)")
-    print(f"  full friction: ours {s['cp_duration_s']:.5f} s ({s['cp_solve_time_s']:.2f} s), fine-grid violation "
+    print(f"  full friction ({s['cp_method']}): ours {s['cp_duration_s']:.5f} s ({s['cp_solve_time_s']:.2f} s), "
+          "fine-grid violation "
           f"ours {100 * s['cp_fine_violation']:.3f} % vs toppra "
           f"{100 * s['cp_toppra_fine_violation_full_friction']:.2f} % (target ours <= 0.5 %)")
     print(f"  smooth variant {s['cp_smooth_duration_s']:.5f} s: time cost {100 * s['cp_smooth_time_cost']:.1f} %, "
@@ -93,7 +98,7 @@ def main(robot_name: str = "rx130l", segment: str = "circle_large", torque_reser
     print(f"  fine-grid violation {100 * p['ptp_fine_violation']:.3f} % (target <= 0.5 %), ruckig "
           f"{100 * p['ptp_ruckig_fine_violation']:.3f} %")
     print(f"  energy ({cfg.ptp_energy}) at ruckig's duration / ruckig's: "
-          f"{p['ptp_energy_at_ruckig_duration_ratio']:.3f} (target <= 0.6)")
+          f"{p['ptp_energy_at_ruckig_duration_ratio']:.3f} (target <= 0.75)")
     print(f"  solve time after compile {again.solve_time_s:.2f} s wall, {again.info['cpu_time_s']:.2f} s CPU "
           "(CPU time excludes the other processes on a shared box) (first solve "
           f"{again.info['first_solve_time_s']:.2f} s, {again.info['tightening_rounds']} tightening re-solves, "
@@ -116,6 +121,8 @@ def main(robot_name: str = "rx130l", segment: str = "circle_large", torque_reser
     e_free = check_trajectory(pm, free.sample(cfg.fine_dt_s), energy_weights=ptp.weights).energy
     hold = pm.rigid_torques(rk.q, 0 * rk.v, 0 * rk.a)
     e_hold = float(np.trapezoid((hold**2) @ ptp.weights, rk.t_s))
+    print(f"  energy at ruckig's duration / the minimum without torque limits = "
+          f"{p['ptp_energy_at_ruckig_duration'] / e_free:.4f} (target <= 1.02)")
     print(f"  ({cfg.ptp_energy}) without any torque limit the minimum at ruckig's duration is {e_free / e_rk:.3f} x "
           f"ruckig's; holding against gravity along ruckig's path alone is {e_hold / e_rk:.3f} x ruckig's energy")
     ratios = []

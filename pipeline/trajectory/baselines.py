@@ -46,8 +46,9 @@ def _toppra_path(path: JointPath):
 
 
 def toppra_cp(pm: PlanningModel, path: JointPath, n_grid: int = 400, coulomb: bool = True,
-              name: str = "cp_toppra") -> CPProfile:
-    """toppra time-optimal profile on the same grid (collocation), velocity + torque limits."""
+              name: str = "cp_toppra", acceleration_limits: bool = False) -> CPProfile:
+    """toppra time-optimal profile on the same grid (collocation), velocity + torque limits
+    (+ ``JointAccelerationConstraint`` at ``pm.acceleration_rad_s2`` with ``acceleration_limits``)."""
     import pinocchio as pin
     import toppra
     import toppra.algorithm as algo
@@ -66,6 +67,10 @@ def toppra_cp(pm: PlanningModel, path: JointPath, n_grid: int = 400, coulomb: bo
     cons = [constraint.JointVelocityConstraint(vlim),
             constraint.JointTorqueConstraint(inv_dyn, tlim, fs,
                                              discretization_scheme=constraint.DiscretizationType.Collocation)]
+    if acceleration_limits:
+        alim = np.stack([-pm.acceleration_rad_s2, pm.acceleration_rad_s2], axis=1)
+        cons.append(constraint.JointAccelerationConstraint(
+            alim, discretization_scheme=constraint.DiscretizationType.Collocation))
     grid = np.linspace(0.0, 1.0, n_grid + 1)
     inst = algo.TOPPRA(cons, _toppra_path(path), gridpoints=grid, solver_wrapper="seidel")
     _, sd_vec, _ = inst.compute_parameterization(0.0, 0.0)
@@ -76,7 +81,8 @@ def toppra_cp(pm: PlanningModel, path: JointPath, n_grid: int = 400, coulomb: bo
     dur = float(np.sum(2 * ds / np.maximum(sd[:-1] + sd[1:], 1e-300)))
     sdd = np.diff(sd**2) / (2 * ds)
     return CPProfile(name, grid, sd, sdd, dur, time.perf_counter() - t0,
-                     info={"n_grid": n_grid, "coulomb": coulomb, "method": "toppra seidel collocation"})
+                     info={"n_grid": n_grid, "coulomb": coulomb, "method": "toppra seidel collocation",
+                           "acceleration_limits": acceleration_limits})
 
 
 @dataclass
@@ -128,8 +134,12 @@ def _ruckig_sample(q0: np.ndarray, q1: np.ndarray, vmax: np.ndarray, amax: np.nd
 def ruckig_torque_feasible(pm: PlanningModel, q0: np.ndarray, q1: np.ndarray, check_dt_s: float = 5e-4,
                            jerk_ratios_1_s: tuple[float, ...] = (10.0, 25.0, 60.0),
                            bisection_steps: int = 12, joint_rounds: int = 6, tol: float = 0.0,
-                           refine_evaluations: int = 0, refine_dt_s: float = 2e-3) -> RuckigResult:
+                           refine_evaluations: int = 0, refine_dt_s: float = 2e-3,
+                           acceleration_limits: bool = False) -> RuckigResult:
     """Fastest ruckig move whose full-model torques stay within limits (max ratio <= 1 + tol).
+
+    ``acceleration_limits``: every searched acceleration limit is capped at
+    ``pm.acceleration_rad_s2`` (ruckig then never exceeds it).
 
     The kinematic limits searched: per joint a maximum and a (separate) minimum acceleration
     ``alpha_i^± a_ref_i`` (``a_ref_i = tau_max_i / M_ii(q0)``; separate signs let the
@@ -151,8 +161,10 @@ def ruckig_torque_feasible(pm: PlanningModel, q0: np.ndarray, q1: np.ndarray, ch
     best: RuckigResult | None = None
     evals = 0
 
+    a_cap = np.asarray(pm.acceleration_rad_s2, float) if acceleration_limits else np.full(pm.nq, np.inf)
+
     def limits(al: np.ndarray, ratio: float):
-        ap, am = al[: pm.nq] * a_ref, al[pm.nq:] * a_ref
+        ap, am = np.minimum(al[: pm.nq] * a_ref, a_cap), np.minimum(al[pm.nq:] * a_ref, a_cap)
         return ap, am, ratio * np.maximum(ap, am)
 
     def run(al: np.ndarray, ratio: float):

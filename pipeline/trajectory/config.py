@@ -11,6 +11,7 @@ from pipeline.errors import ConfigError
 
 CP_SEGMENTS = ("line", "circle_large", "circle_small", "spline")   # smooth pieces of the ISO path, or a spline
 PTP_ENERGIES = ("torque", "normalised", "electrical")
+CP_METHODS = ("reachability", "nlp")
 MIN_GRID = 6                                                        # smallest grid / interval count
 MAX_CHECK_DT_S = 5e-4                                               # torques are checked at least this often
 
@@ -20,6 +21,9 @@ class TrajectoryConfig:
     # share of each torque limit left to the feedback controller (model errors); the planners and
     # the fine-grid checks use (1 - torque_reserve) * limit, the servo simulation the full limit
     torque_reserve: float = 0.1
+    # honour robot.limits.acceleration_rad_s2 in every planner and baseline (CP, toppra, PtP, ruckig);
+    # false: torque and speed limits only (the time-optimal studies of paper 004 section 5)
+    acceleration_limits: bool = True
     # --- continuous path (CP): one smooth piece of the EN ISO 9283 path (DESIGN.md) ---------
     cp_segment: str = "circle_large"          # line | circle_large | circle_small | spline
     # spline: a cubic spline through these TCP points (base frame, metres; >= 3), the tool
@@ -32,6 +36,9 @@ class TrajectoryConfig:
     cp_ik_seed_deg: list[float] = field(default_factory=lambda: [0.0, 17.0, 86.0, 0.0, 75.0, 0.0])
     cp_max_ik_step_deg: float = 15.0          # larger jumps between IK samples = branch change
     cp_n_grid: int = 400                      # path grid (toppra uses the same grid)
+    # reachability: TOPP-RA with the full friction model (pipeline/trajectory/reachability.py, fast);
+    # nlp: the convex problem + IPOPT refinement (pipeline/trajectory/cp.py, the reference)
+    cp_method: str = "reachability"
     cp_torque_margin: float = 0.0             # relative tightening of torque limits in the refinement
     cp_smooth: bool = True
     cp_smooth_intervals: int = 120
@@ -68,6 +75,9 @@ class TrajectoryConfig:
     fine_dt_s: float = 2e-4                   # fine-grid torque re-check
     violation_tolerance: float = 0.005        # accepted fine-grid torque violation (0.5 %)
     max_tightening_rounds: int = 3            # re-solves with tightened limits when the fine grid exceeds it
+    # quality gate on the servo simulation: the command averaged over 4 ms (feedback noise removed)
+    # must stay within this multiple of the full torque limits
+    max_sim_averaged_torque_ratio: float = 1.0
     simulate: bool = True                     # run the trajectories in stage 3's servo simulation
 
     def validate(self, source: Any = None) -> None:
@@ -102,6 +112,7 @@ class TrajectoryConfig:
         check_vector(s, name("cp_ik_seed_deg"), self.cp_ik_seed_deg, unit="deg", nonempty=True)
         check_number(s, name("cp_max_ik_step_deg"), self.cp_max_ik_step_deg, gt=0, unit="deg")
         check_count(s, name("cp_n_grid"), self.cp_n_grid, MIN_GRID)
+        check_choice(s, name("cp_method"), self.cp_method, CP_METHODS)
         check_number(s, name("cp_torque_margin"), self.cp_torque_margin, ge=0, lt=1,
                      why=" (relative tightening of the torque limits)")
         check_count(s, name("cp_smooth_intervals"), self.cp_smooth_intervals, MIN_GRID)
@@ -145,3 +156,8 @@ class TrajectoryConfig:
         check_number(s, name("violation_tolerance"), self.violation_tolerance, ge=0, lt=1,
                      why=" (accepted relative torque excess on the fine grid)")
         check_count(s, name("max_tightening_rounds"), self.max_tightening_rounds, 0)
+        check_number(s, name("max_sim_averaged_torque_ratio"), self.max_sim_averaged_torque_ratio, gt=0,
+                     why=" (simulated torque over the full limit)")
+        if not isinstance(self.acceleration_limits, bool):
+            raise ConfigError(s, name("acceleration_limits"),
+                              f"expected true or false, got {self.acceleration_limits!r}")

@@ -34,6 +34,7 @@ import numpy as np
 from pipeline.errors import InfeasibleError, SolverError
 from pipeline.trajectory.design import JointPath
 from pipeline.trajectory.dynamics import PlanningModel, path_coefficients
+from pipeline.trajectory.status import raise_if_interrupted
 from pipeline.trajectory.trajectories import JointTrajectory
 
 _IPOPT = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
@@ -77,6 +78,7 @@ def _check_solver(solver: ca.Function, what: str) -> dict:
     stats = solver.stats()
     if not stats.get("success", False):
         status = stats.get("return_status", "unknown")
+        raise_if_interrupted(status, what)
         if status in ("Infeasible_Problem_Detected", "Local_Infeasibility"):
             raise InfeasibleError(None, what, f"IPOPT reports the limits cannot be met ({status})")
         raise SolverError(None, what, f"IPOPT failed: {status}")
@@ -110,10 +112,11 @@ def _velocity_bound_b(pm: PlanningModel, dq: np.ndarray) -> np.ndarray:
 
 def solve_cp_convex(pm: PlanningModel, path: JointPath, n_grid: int = 400, midpoints: bool = True,
                     coulomb: bool = True, name: str = "cp_convex",
-                    torque_scale: float = 1.0) -> CPProfile:
+                    torque_scale: float = 1.0, acceleration_limits: bool = False) -> CPProfile:
     """Convex minimum-time problem (rigid body + sharp Coulomb), SOC objective, IPOPT.
 
-    ``torque_scale`` shrinks the torque limits (used to leave margin for unmodelled terms).
+    ``torque_scale`` shrinks the torque limits (used to leave margin for unmodelled terms);
+    ``acceleration_limits`` adds ``|q'' b + q' a| <= pm.acceleration_rad_s2`` at the same points.
     """
     t0 = time.perf_counter()
     N = int(n_grid)
@@ -148,6 +151,11 @@ def solve_cp_convex(pm: PlanningModel, path: JointPath, n_grid: int = 400, midpo
     g_list = [g_dyn, ca.vec(tau_scaled), g_soc1, g_soc2]
     lbg = [np.zeros(N), -np.ones(n_p * pm.nq), np.zeros(N + 1), np.ones(N)]
     ubg = [np.zeros(N), np.ones(n_p * pm.nq), np.full(N + 1, np.inf), np.full(N, np.inf)]
+    if acceleration_limits:
+        acc = (ddq * B_p + dq * A_p) / np.tile(pm.acceleration_rad_s2, (n_p, 1))
+        g_list.append(ca.vec(acc))
+        lbg.append(-np.ones(n_p * pm.nq))
+        ubg.append(np.ones(n_p * pm.nq))
     # velocity limits: grid points as simple bounds, midpoints as linear constraints
     ub_b = np.full(N + 1, np.inf)
     ub_b[:-1] = np.minimum(ub_b[:-1], vb[:N])
@@ -181,7 +189,8 @@ def solve_cp_convex(pm: PlanningModel, path: JointPath, n_grid: int = 400, midpo
     dur = float(np.sum(2 * ds / np.maximum(sd[:-1] + sd[1:], 1e-300)))
     return CPProfile(name, s, sd, sdd, dur, time.perf_counter() - t0,
                      info={"iterations": int(stats["iter_count"]), "objective_s": float(sol["f"]),
-                           "midpoints": midpoints, "coulomb": coulomb, "n_grid": N})
+                           "midpoints": midpoints, "coulomb": coulomb, "n_grid": N, "method": "nlp",
+                           "solver_status": stats["return_status"], "acceleration_limits": acceleration_limits})
 
 
 def _fric_sx(pm: PlanningModel, dq: np.ndarray, x: ca.SX) -> ca.SX:
@@ -195,12 +204,12 @@ def _fric_sx(pm: PlanningModel, dq: np.ndarray, x: ca.SX) -> ca.SX:
 
 def solve_cp_refined(pm: PlanningModel, path: JointPath, warm: CPProfile, midpoints: bool = True,
                      name: str = "cp", torque_margin: float = 0.0,
-                     torque_scale: np.ndarray | None = None) -> CPProfile:
+                     torque_scale: np.ndarray | None = None, acceleration_limits: bool = False) -> CPProfile:
     """Non-convex refinement in ``x = sdot`` with viscous + smooth Coulomb friction.
 
     Warm-started from ``warm`` (same grid). ``torque_margin`` (e.g. 0.002) or the per-joint
     ``torque_scale`` tighten the torque limits to keep the fine-grid violation below tolerance
-    between the checked points.
+    between the checked points; ``acceleration_limits`` adds the joint acceleration rows.
     """
     t0 = time.perf_counter()
     s = warm.s
@@ -228,6 +237,12 @@ def solve_cp_refined(pm: PlanningModel, path: JointPath, warm: CPProfile, midpoi
     g_list = [ca.vec(tau_scaled)]
     lbg = [-np.ones(n_p * pm.nq)]
     ubg = [np.ones(n_p * pm.nq)]
+    if acceleration_limits:
+        acc = (ddq * ca.repmat(b_p, 1, pm.nq) + dq * ca.repmat(a_p, 1, pm.nq)) / np.tile(pm.acceleration_rad_s2,
+                                                                                         (n_p, 1))
+        g_list.append(ca.vec(acc))
+        lbg.append(-np.ones(n_p * pm.nq))
+        ubg.append(np.ones(n_p * pm.nq))
     ubx = np.full(N + 1, np.inf)
     ubx[:-1] = np.minimum(ubx[:-1], vb[:N])
     if midpoints:
@@ -245,7 +260,8 @@ def solve_cp_refined(pm: PlanningModel, path: JointPath, warm: CPProfile, midpoi
     sdd = np.diff(sd**2) / (2 * ds)
     dur = float(np.sum(2 * ds / np.maximum(sd[:-1] + sd[1:], 1e-300)))
     return CPProfile(name, s, sd, sdd, dur, time.perf_counter() - t0,
-                     info={"iterations": int(stats["iter_count"]), "midpoints": midpoints,
+                     info={"iterations": int(stats["iter_count"]), "midpoints": midpoints, "method": "nlp",
+                           "solver_status": stats["return_status"], "acceleration_limits": acceleration_limits,
                            "friction": "viscous+tanh coulomb", "n_grid": N,
                            "torque_margin": torque_margin,
                            "torque_scale": None if torque_scale is None else np.asarray(torque_scale).tolist()})
@@ -342,7 +358,7 @@ def _propagate(x: ca.SX, u: ca.SX, h: ca.SX) -> ca.SX:
 
 def solve_cp_smooth(pm: PlanningModel, path: JointPath, warm: CPProfile, n_intervals: int = 120,
                     jerk_rise_time_s: float = 0.05, n_table: int = 801, name: str = "cp_smooth",
-                    torque_margin: float = 0.0) -> SmoothCPResult:
+                    torque_margin: float = 0.0, acceleration_limits: bool = False) -> SmoothCPResult:
     """Minimum time with continuous joint velocity, acceleration and jerk (paper 004 section 5).
 
     ``s(t)`` is driven by piecewise-constant snap through four integrators (K intervals of
@@ -351,7 +367,9 @@ def solve_cp_smooth(pm: PlanningModel, path: JointPath, warm: CPProfile, n_inter
     ``q_dddot = q''' sdot^3 + 3 q'' sdot sddot + q' sdddot`` are continuous. Constraints: full
     friction torques at nodes and midpoints, joint speeds at nodes, and joint jerks at nodes
     bounded by ``|q_ddot|_max / jerk_rise_time_s`` (the peak acceleration of the non-smooth
-    optimum ``warm`` reached in that rise time). Path functions are cubic B-spline tables.
+    optimum ``warm`` reached in that rise time); with ``acceleration_limits`` joint accelerations at
+    nodes and midpoints within ``(1 - torque_margin) * pm.acceleration_rad_s2``. Path functions
+    are cubic B-spline tables.
     """
     t0 = time.perf_counter()
     K = int(n_intervals)
@@ -373,8 +391,12 @@ def solve_cp_smooth(pm: PlanningModel, path: JointPath, warm: CPProfile, n_inter
     X = ca.SX.sym("X", 4, K + 1)
     U = ca.SX.sym("U", K)
     h = T / K
-    g_dyn, g_tau, g_v, g_j = [], [], [], []
+    g_dyn, g_tau, g_v, g_j, g_a = [], [], [], [], []
     tau_max = pm.effort_Nm * (1.0 - torque_margin)
+    acc_max = pm.acceleration_rad_s2 * (1.0 - torque_margin)
+
+    def joint_acc(x: ca.SX) -> ca.SX:
+        return (f_ddq(x[0]) * x[1] ** 2 + f_dq(x[0]) * x[2]) / acc_max
 
     def torque(x: ca.SX) -> ca.SX:
         s = x[0]
@@ -387,13 +409,19 @@ def solve_cp_smooth(pm: PlanningModel, path: JointPath, warm: CPProfile, n_inter
         g_tau.append(torque(x))
         g_v.append(f_dq(x[0]) * x[1] / pm.velocity_rad_s)
         g_j.append((f_d3q(x[0]) * x[1] ** 3 + 3 * f_ddq(x[0]) * x[1] * x[2] + f_dq(x[0]) * x[3]) / jmax)
+        if acceleration_limits:
+            g_a.append(joint_acc(x))
         if k < K:
             g_dyn.append(X[:, k + 1] - _propagate(x, U[k], h))
             g_tau.append(torque(_propagate(x, U[k], h / 2)))
-    g = ca.vertcat(*g_dyn, *g_tau, *g_v, *g_j)
-    n_dyn, n_tau, n_v, n_j = 4 * K, 6 * (2 * K + 1), 6 * (K + 1), 6 * (K + 1)
-    lbg = np.concatenate([np.zeros(n_dyn), -np.ones(n_tau + n_v + n_j)])
-    ubg = np.concatenate([np.zeros(n_dyn), np.ones(n_tau + n_v + n_j)])
+            if acceleration_limits:
+                g_a.append(joint_acc(_propagate(x, U[k], h / 2)))
+    g = ca.vertcat(*g_dyn, *g_tau, *g_v, *g_j, *g_a)
+    nq = pm.nq
+    n_dyn, n_tau, n_v, n_j = 4 * K, nq * (2 * K + 1), nq * (K + 1), nq * (K + 1)
+    n_a = nq * (2 * K + 1) if acceleration_limits else 0
+    lbg = np.concatenate([np.zeros(n_dyn), -np.ones(n_tau + n_v + n_j + n_a)])
+    ubg = np.concatenate([np.zeros(n_dyn), np.ones(n_tau + n_v + n_j + n_a)])
     x_all = ca.vertcat(T, ca.vec(X), U)
     solver = ca.nlpsol(name, "ipopt", {"x": x_all, "f": T, "g": g},
                        {**_IPOPT, "ipopt.tol": 1e-7, "ipopt.max_iter": 2000})
@@ -425,4 +453,5 @@ def solve_cp_smooth(pm: PlanningModel, path: JointPath, warm: CPProfile, n_inter
     Un = xs[1 + 4 * (K + 1):]
     return SmoothCPResult(name, Tn, np.linspace(0.0, Tn, K + 1), Xn, Un, jmax, time.perf_counter() - t0,
                           info={"iterations": int(stats["iter_count"]), "n_intervals": K,
+                                "solver_status": stats["return_status"], "acceleration_limits": acceleration_limits,
                                 "jerk_rise_time_s": jerk_rise_time_s})

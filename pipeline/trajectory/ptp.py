@@ -39,6 +39,7 @@ import numpy as np
 from pipeline import codegen
 from pipeline.errors import InfeasibleError, PipelineError, SolverError
 from pipeline.trajectory.dynamics import PlanningModel
+from pipeline.trajectory.status import raise_if_interrupted
 from pipeline.trajectory.trajectories import JointTrajectory
 
 JIT_FLAGS = ("-O1",)
@@ -256,13 +257,15 @@ class PtpProblem:
               effort_Nm: np.ndarray | None = None, x0: np.ndarray | None = None,
               max_duration_s: float = 60.0, zero_end_acceleration: bool = True,
               coulomb_widths_rad_s: tuple[float, ...] | None = None,
-              multipliers: tuple[np.ndarray, np.ndarray] | None = None) -> PtpResult:
+              multipliers: tuple[np.ndarray, np.ndarray] | None = None,
+              acceleration_rad_s2: np.ndarray | None = None) -> PtpResult:
         """Solve one move; raises InfeasibleError / SolverError instead of returning a failure.
 
         ``coulomb_widths_rad_s``: continuation of the tanh smoothing width (wide first, each solve
         warm-starting the next); the model's width is always solved last. ``multipliers``
         ``(lam_x, lam_g)`` of a nearby solution (``info["multipliers"]``, with its ``x0``) warm-start
-        the dual variables as well.
+        the dual variables as well. ``acceleration_rad_s2`` bounds the joint accelerations (exact:
+        they are linear within an interval).
         """
         pm, nq, N = self.pm, self.nq, self.N
         q0, q1 = np.asarray(q0, float), np.asarray(q1, float)
@@ -301,8 +304,10 @@ class PtpProblem:
         lbV = np.tile(-vb, (N + 1, 1))
         ubV = np.tile(vb, (N + 1, 1))
         lbV[0] = ubV[0] = lbV[-1] = ubV[-1] = 0.0
-        lbA = np.full((N + 1, nq), -np.inf)
-        ubA = np.full((N + 1, nq), np.inf)
+        # joint accelerations are linear within an interval: bounds at the nodes hold everywhere
+        ab = np.inf if acceleration_rad_s2 is None else np.asarray(acceleration_rad_s2, float) / self.a_scale
+        lbA = np.tile(-ab * np.ones(nq), (N + 1, 1))
+        ubA = np.tile(ab * np.ones(nq), (N + 1, 1))
         if zero_end_acceleration:
             lbA[0] = ubA[0] = lbA[-1] = ubA[-1] = 0.0
         lbx = np.concatenate([[lbT], lbQ.ravel(), lbV.ravel(), lbA.ravel()])
@@ -330,11 +335,13 @@ class PtpProblem:
             iters += int(stats["iter_count"])
             if not stats.get("success", False):
                 status = stats.get("return_status", "unknown")
+                raise_if_interrupted(status, what)
                 if status in ("Infeasible_Problem_Detected", "Local_Infeasibility"):
                     cons = "torque limits" if duration_s is None else f"duration {duration_s:.4f} s with torque limits"
                     raise InfeasibleError(None, what, f"the {cons} cannot be met (IPOPT: {status})")
                 raise SolverError(None, what, f"IPOPT failed: {status}")
             x0 = np.asarray(sol["x"]).ravel()
+            status = stats.get("return_status", "unknown")
         xs = x0
         T, Q, V, A = self._unpack(xs)
         energy, _ = self._energy_fn(xs, p)
@@ -343,7 +350,9 @@ class PtpProblem:
                          info={"x": xs, "multipliers": (np.asarray(sol["lam_x"]).ravel(),
                                                         np.asarray(sol["lam_g"]).ravel()),
                                "jit": self.jit, "fixed_duration": duration_s is not None,
-                               "cpu_time_s": cpu_time, "coulomb_widths_rad_s": list(widths)})
+                               "cpu_time_s": cpu_time, "coulomb_widths_rad_s": list(widths),
+                               "solver_status": status,
+                               "acceleration_limits": acceleration_rad_s2 is not None})
 
     def pareto(self, q0: np.ndarray, q1: np.ndarray, k2_values: list[float], weights: np.ndarray,
                **kw: Any) -> list[PtpResult]:

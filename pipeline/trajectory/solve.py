@@ -28,6 +28,7 @@ from pipeline.trajectory.cp import (
 from pipeline.trajectory.design import JointPath, joint_path_from_cartesian
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.ptp import PtpProblem, PtpResult, energy_weights
+from pipeline.trajectory.reachability import solve_cp_reachability
 from pipeline.trajectory.trajectories import JointTrajectory, TorqueCheck, check_trajectory
 
 
@@ -59,7 +60,7 @@ class CPPlan:
     path: JointPath
     toppra: CPProfile                 # baseline: rigid body + Coulomb, grid points
     equal: CPProfile                  # our convex problem with toppra's constraints
-    convex: CPProfile                 # rigid body + Coulomb at grid points and midpoints
+    convex: CPProfile | None          # rigid body + Coulomb at grid points and midpoints (cp_method nlp)
     optimal: CPProfile                # + viscous and smooth Coulomb (the result)
     smooth: SmoothCPResult | None
     trajectories: dict[str, JointTrajectory] = field(default_factory=dict)
@@ -73,7 +74,11 @@ class CPPlan:
             "cp_toppra_duration_s": self.toppra.duration_s,
             "cp_equal_constraints_duration_s": self.equal.duration_s,
             "cp_equal_vs_toppra_ratio": self.equal.duration_s / self.toppra.duration_s,
-            "cp_convex_duration_s": self.convex.duration_s,
+            "cp_convex_duration_s": None if self.convex is None else self.convex.duration_s,
+            "cp_method": self.optimal.info.get("method"),
+            "cp_solver_status": self.optimal.info.get("solver_status"),
+            "cp_fine_max_acceleration_ratio": self.checks["cp"].max_acceleration_ratio,
+            "cp_acceleration_limits": bool(self.optimal.info.get("acceleration_limits")),
             "cp_fine_violation": self.checks["cp"].violation,
             "cp_fine_max_velocity_ratio": self.checks["cp"].max_velocity_ratio,
             "cp_toppra_fine_violation_full_friction": self.checks["cp_toppra"].violation,
@@ -96,14 +101,25 @@ def plan_cp(pm: PlanningModel, path: JointPath, cfg: TrajectoryConfig) -> CPPlan
     constraints (equal-constraints comparison), convex + midpoints, friction refinement,
     smooth variant; all re-checked on a ``cfg.fine_dt_s`` grid with the full friction model."""
     N = cfg.cp_n_grid
+    acc = bool(cfg.acceleration_limits)
     tim = {}
-    tp = toppra_cp(pm, path, N)
-    eq = solve_cp_convex(pm, path, N, midpoints=False, name="cp_equal")
+    tp = toppra_cp(pm, path, N, acceleration_limits=acc)
+    eq = solve_cp_convex(pm, path, N, midpoints=False, name="cp_equal", acceleration_limits=acc)
+    cv = None
+
+    def solve(scale: np.ndarray | None, warm: CPProfile | None) -> CPProfile:
+        if cfg.cp_method == "reachability":
+            return solve_cp_reachability(pm, path, N, name="cp", torque_margin=cfg.cp_torque_margin,
+                                         torque_scale=scale, acceleration_limits=acc)
+        return solve_cp_refined(pm, path, warm, midpoints=True, name="cp", torque_margin=cfg.cp_torque_margin,
+                                torque_scale=scale, acceleration_limits=acc)
+
+    if cfg.cp_method == "nlp":
+        t0 = time.perf_counter()
+        cv = solve_cp_convex(pm, path, N, midpoints=True, name="cp_convex", acceleration_limits=acc)
+        tim["cp_convex"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    cv = solve_cp_convex(pm, path, N, midpoints=True, name="cp_convex")
-    tim["cp_convex"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    opt = solve_cp_refined(pm, path, cv, midpoints=True, name="cp", torque_margin=cfg.cp_torque_margin)
+    opt = solve(None, cv)
     # verify on the fine grid; tighten the limits of joints that exceed the tolerance and re-solve
     scale = np.ones(pm.nq)
     for _ in range(cfg.max_tightening_rounds):
@@ -113,16 +129,16 @@ def plan_cp(pm: PlanningModel, path: JointPath, cfg: TrajectoryConfig) -> CPPlan
         if not bad.any():
             break
         scale[bad] = scale[bad] / ratio[bad] * (1.0 - 0.25 * cfg.violation_tolerance)
-        opt = solve_cp_refined(pm, path, opt, midpoints=True, name="cp", torque_margin=cfg.cp_torque_margin,
-                               torque_scale=scale)
+        opt = solve(scale, opt)
     tim["cp_refined"] = time.perf_counter() - t0
     sm = None
     if cfg.cp_smooth:
         margin = cfg.cp_smooth_torque_margin
         for _ in range(cfg.max_tightening_rounds + 1):
             sm = solve_cp_smooth(pm, path, opt, cfg.cp_smooth_intervals, cfg.cp_smooth_jerk_rise_time_s,
-                                 torque_margin=margin)
-            over = check_trajectory(pm, sm.sample(path, cfg.fine_dt_s)).max_torque_ratio - 1.0
+                                 torque_margin=margin, acceleration_limits=acc)
+            chk = check_trajectory(pm, sm.sample(path, cfg.fine_dt_s))
+            over = max(chk.max_torque_ratio, chk.max_acceleration_ratio if acc else 0.0) - 1.0
             if over <= cfg.violation_tolerance:
                 break
             margin = 1.0 - (1.0 - margin) / (1.0 + over) * (1.0 - 0.25 * cfg.violation_tolerance)
@@ -182,6 +198,11 @@ class PTPPlan:
             "ptp_energy_at_ruckig_duration_ratio": e_nlp / e_rk,
             "ptp_energy_at_ruckig_duration_fine_violation": self.checks["ptp_energy_at_ruckig_duration"].violation,
             "ptp_solve_time_s": self.result.solve_time_s,
+            "ptp_solver_status": self.result.info.get("solver_status"),
+            "ptp_energy_at_ruckig_duration_solver_status": self.at_ruckig_duration.info.get("solver_status"),
+            "ptp_fine_max_acceleration_ratio": self.checks["ptp"].max_acceleration_ratio,
+            "ptp_ruckig_fine_max_acceleration_ratio": self.checks["ptp_ruckig"].max_acceleration_ratio,
+            "ptp_acceleration_limits": bool(self.result.info.get("acceleration_limits")),
             "ptp_solve_cpu_time_s": self.result.info.get("cpu_time_s"),
             "ptp_first_solve_time_s": self.result.info.get("first_solve_time_s"),
             "ptp_tightening_rounds": self.result.info.get("tightening_rounds"),
@@ -226,8 +247,10 @@ def solve_ptp_verified(pm: PlanningModel, problem: PtpProblem, q0: np.ndarray, q
     widths = tuple(coulomb_widths_rad_s) if x0 is None else ()
     scale = np.ones(pm.nq) if torque_scale is None else np.asarray(torque_scale, float).copy()
     v_scale = np.ones(pm.nq)
+    acc = pm.acceleration_rad_s2 if cfg.acceleration_limits else None
     res = problem.solve(q0, q1, k1, k2, weights=weights, duration_s=duration_s, effort_Nm=pm.effort_Nm * scale,
-                        x0=x0, coulomb_widths_rad_s=widths, multipliers=multipliers if x0 is not None else None)
+                        x0=x0, coulomb_widths_rad_s=widths, multipliers=multipliers if x0 is not None else None,
+                        acceleration_rad_s2=acc)
     first = total = res.solve_time_s
     cpu = res.info["cpu_time_s"]
     iters, rounds = res.iterations, 0
@@ -244,7 +267,7 @@ def solve_ptp_verified(pm: PlanningModel, problem: PtpProblem, q0: np.ndarray, q
         v_scale[bad_v] = v_scale[bad_v] / v_ratio[bad_v] * (1.0 - 0.25 * cfg.violation_tolerance)
         res = problem.solve(q0, q1, k1, k2, weights=weights, duration_s=duration_s, effort_Nm=pm.effort_Nm * scale,
                             velocity_rad_s=pm.velocity_rad_s * v_scale, x0=res.info["x"], coulomb_widths_rad_s=(),
-                            multipliers=res.info["multipliers"])
+                            multipliers=res.info["multipliers"], acceleration_rad_s2=acc)
         total += res.solve_time_s
         cpu += res.info["cpu_time_s"]
         iters += res.iterations
@@ -314,7 +337,8 @@ def plan_ptp(pm: PlanningModel, problem: PtpProblem, q0: np.ndarray, q1: np.ndar
     res = solve_ptp_verified(pm, problem, q0, q1, cfg, cfg.ptp_k1, cfg.ptp_k2, w)
     rk = ruckig_torque_feasible(pm, q0, q1, cfg.ruckig_check_dt_s, tuple(cfg.ruckig_jerk_ratios_1_s),
                                 joint_rounds=cfg.ruckig_joint_rounds,
-                                refine_evaluations=cfg.ruckig_refine_evaluations)
+                                refine_evaluations=cfg.ruckig_refine_evaluations,
+                                acceleration_limits=cfg.acceleration_limits)
     fixed = solve_ptp_verified(pm, problem, q0, q1, cfg, 0.0, 1.0, w, duration_s=rk.duration_s,
                                coulomb_widths_rad_s=tuple(cfg.ptp_fixed_coulomb_widths_rad_s))
     sweep: list[PtpResult] = []

@@ -25,10 +25,12 @@ import time
 import numpy as np
 
 from pipeline.errors import ConfigError
+from pipeline.quality import QualityGates
 from pipeline.runner import StageContext, StageResult
 from pipeline.trajectory.config import TrajectoryConfig
 from pipeline.trajectory.dynamics import PlanningModel
-from pipeline.trajectory.solve import cp_joint_path, plan_cp, plan_ptp, ptp_problem
+from pipeline.trajectory.solve import CPPlan, PTPPlan, cp_joint_path, plan_cp, plan_ptp, ptp_problem
+from pipeline.trajectory.status import SUCCESS_STATUSES
 from pipeline.trajectory.validate import (
     activity_figure,
     comparison_figure,
@@ -90,6 +92,39 @@ def _control_config(ctx: StageContext):
     return ControlConfig(**{**cfg.__dict__, "on_saturation": "clip", "benchmark_python_seconds": 0.0})
 
 
+def quality_gates(cfg: TrajectoryConfig, cp: CPPlan, ptp: PTPPlan, sims: dict[str, dict],
+                  accept_poor: bool = False) -> QualityGates:
+    """The stage's gates: every plan within its limits on the fine grid (torque excess, speed and,
+    with ``acceleration_limits``, acceleration ratios <= 1 + ``violation_tolerance``), every IPOPT
+    solve of a stored plan ``Solve_Succeeded`` (or acceptable), and in the servo simulation the
+    command averaged over 4 ms within ``max_sim_averaged_torque_ratio`` x the full torque limits."""
+    gates = QualityGates(NAME, accept_poor=accept_poor)
+    tol = cfg.violation_tolerance
+    plans = {**cp.checks, **ptp.checks}
+    for name in ("cp", "cp_smooth", "ptp", "ptp_energy_at_ruckig_duration"):
+        if name not in plans:
+            continue
+        chk = plans[name]
+        gates.check(f"{name}_fine_violation", chk.violation, "<=", tol, "torque excess on the fine grid")
+        gates.check(f"{name}_fine_max_velocity_ratio", chk.max_velocity_ratio, "<=", 1.0 + tol)
+        if cfg.acceleration_limits:
+            gates.check(f"{name}_fine_max_acceleration_ratio", chk.max_acceleration_ratio, "<=", 1.0 + tol)
+    statuses = {"ptp_solver_status": ptp.result.info.get("solver_status"),
+                "ptp_energy_at_ruckig_duration_solver_status": ptp.at_ruckig_duration.info.get("solver_status")}
+    if cp.optimal.info.get("method") == "nlp":          # the reachability solver has no IPOPT status
+        statuses["cp_solver_status"] = cp.optimal.info.get("solver_status")
+    if cp.smooth is not None:
+        statuses["cp_smooth_solver_status"] = cp.smooth.info.get("solver_status")
+    for name, status in statuses.items():
+        gates.require(name, status in SUCCESS_STATUSES, f"IPOPT returned {status}")
+    for name, s in sims.items():
+        if name == "ptp_ruckig":
+            continue                 # the baseline is reported, not vouched for
+        gates.check(f"{name}_sim_max_averaged_torque_ratio", s["max_averaged_torque_ratio"], "<=",
+                    cfg.max_sim_averaged_torque_ratio, "servo simulation, 4 ms mean over the full limits")
+    return gates
+
+
 def run(ctx: StageContext) -> StageResult:
     cfg: TrajectoryConfig = ctx.config
     robot = ctx.robot
@@ -138,6 +173,9 @@ def run(ctx: StageContext) -> StageResult:
             summary[f"{name}_sim_feedback_std_ratio"] = float(max(sims[name]["feedback_std_ratio_per_joint"]))
         timings["simulation_s"] = time.perf_counter() - t0
     summary["timings_s"] = timings
+    if cp.smooth is not None:
+        summary["cp_smooth_solver_status"] = cp.smooth.info.get("solver_status")
+    gates = quality_gates(cfg, cp, ptp, sims, bool(getattr(ctx.run, "accept_poor", False)))
 
     tr_cp = cp.trajectories["cp"]
     tr_ptp = ptp.trajectories["ptp"]
@@ -170,7 +208,12 @@ def run(ctx: StageContext) -> StageResult:
     }
     data = {"simulation": sims, "ruckig": {"jerk_ratio_1_s": ptp.ruckig.jerk_ratio_1_s, **ptp.ruckig.info,
                                            "evaluations": ptp.ruckig.evaluations},
-            "cp_info": {"convex": cp.convex.info, "refined": cp.optimal.info,
+            "solver_status": {"cp": cp.optimal.info.get("solver_status", "reachability (no IPOPT)"),
+                              "cp_smooth": cp.smooth.info.get("solver_status") if cp.smooth else None,
+                              "ptp": ptp.result.info.get("solver_status"),
+                              "ptp_energy_at_ruckig_duration": ptp.at_ruckig_duration.info.get("solver_status"),
+                              "cp_equal": cp.equal.info.get("solver_status")},
+            "cp_info": {"convex": cp.convex.info if cp.convex else None, "refined": cp.optimal.info,
                         "smooth": cp.smooth.info if cp.smooth else None, "toppra": cp.toppra.info}}
     rows = [
         ("CP duration [s] (full friction)", summary["cp_duration_s"]),
@@ -221,4 +264,4 @@ def run(ctx: StageContext) -> StageResult:
                    "(encoder noise through the velocity estimate), a lasting excess is model error. Raise "
                    f"`trajectory.torque_reserve` (now {cfg.torque_reserve:g}) above the feedback peaks, or lower "
                    "the velocity-loop noise (control stage), or improve the identified model.")
-    return StageResult(summary=summary, arrays=arrays, data=data, figures=figures, report_md=report)
+    return gates.finish(StageResult(summary=summary, arrays=arrays, data=data, figures=figures, report_md=report))

@@ -37,10 +37,12 @@ class TorqueCheck:
     violation: float
     max_velocity_ratio: float
     energy: float  # int sum(w_i tau_i^2) dt with the given weights (trapezoid)
+    max_acceleration_ratio: float = 0.0   # max |a| / robot.limits.acceleration_rad_s2
 
     def summary(self) -> dict:
         return {"max_torque_ratio": self.max_torque_ratio, "violation": self.violation,
-                "max_velocity_ratio": self.max_velocity_ratio, "energy": self.energy}
+                "max_velocity_ratio": self.max_velocity_ratio, "energy": self.energy,
+                "max_acceleration_ratio": self.max_acceleration_ratio}
 
 
 def check_trajectory(pm: PlanningModel, traj: JointTrajectory, friction: bool = True,
@@ -51,5 +53,6 @@ def check_trajectory(pm: PlanningModel, traj: JointTrajectory, friction: bool = 
     vratio = np.abs(traj.v) / pm.velocity_rad_s
     w = np.ones(pm.nq) if energy_weights is None else np.asarray(energy_weights, float)
     energy = float(np.trapezoid((tau**2) @ w, traj.t_s))
+    aratio = float((np.abs(traj.a) / pm.acceleration_rad_s2).max())
     return TorqueCheck(traj.t_s, tau, ratio, vratio, float(ratio.max()), max_violation(ratio),
-                       float(vratio.max()), energy)
+                       float(vratio.max()), energy, aratio)

@@ -25,8 +25,11 @@ def test_convex_with_toppra_constraints_matches_toppra(pm, line_path):
     assert np.all(np.abs(dq) * eq.sdot[:, None] <= pm.velocity_rad_s * (1 + 1e-6))
 
 
-def test_refined_respects_full_friction_where_toppra_does_not(pm, line_path, quick_traj_config):
-    plan = plan_cp(pm, line_path, dataclasses.replace(quick_traj_config, cp_smooth=False))
+@pytest.mark.parametrize("method", ["reachability", "nlp"])
+def test_refined_respects_full_friction_where_toppra_does_not(pm, line_path, quick_traj_config, method):
+    # torque-limited (no acceleration limits): the case where toppra's missing viscous term shows
+    plan = plan_cp(pm, line_path, dataclasses.replace(quick_traj_config, cp_smooth=False, cp_method=method,
+                                                      acceleration_limits=False))
     tol = quick_traj_config.violation_tolerance
     assert plan.checks["cp"].violation <= tol
     assert plan.checks["cp_toppra"].violation > tol          # viscous friction is not in toppra

@@ -26,7 +26,7 @@ def test_rest_to_rest_within_limits(plan, pm, big_move, quick_traj_config):
     tr = plan.trajectories["ptp"]
     q0, q1 = big_move
     assert np.allclose(tr.q[0], q0) and np.allclose(tr.q[-1], q1, atol=1e-8)
-    assert np.abs(tr.v[0]).max() < 1e-9 and np.abs(tr.v[-1]).max() < 1e-6
+    assert np.abs(tr.v[0]).max() < 1e-9 and np.abs(tr.v[-1]).max() < 1e-5   # constr_viol_tol 1e-6 (scaled)
     assert np.abs(tr.a[0]).max() < 1e-6 and np.abs(tr.a[-1]).max() < 1e-6   # continuous acceleration
     chk = plan.checks["ptp"]
     assert chk.violation <= quick_traj_config.violation_tolerance
@@ -159,7 +159,9 @@ def test_warm_start_from_own_solution_stays_put(plan, ptp_problem, big_move):
     again = ptp_problem.solve(*big_move, res.k1, res.k2, weights=plan.weights,
                               effort_Nm=ptp_problem.pm.effort_Nm * np.asarray(res.info["torque_scale"]),
                               velocity_rad_s=ptp_problem.pm.velocity_rad_s * np.asarray(res.info["velocity_scale"]),
-                              x0=res.info["x"], coulomb_widths_rad_s=(), multipliers=res.info["multipliers"])
+                              x0=res.info["x"], coulomb_widths_rad_s=(), multipliers=res.info["multipliers"],
+                              acceleration_rad_s2=ptp_problem.pm.acceleration_rad_s2 if res.info["acceleration_limits"]
+                              else None)
     assert again.iterations <= 10 < res.iterations
     # same optimum to the solver's tolerance (tol 1e-4: the re-solve may polish it a little)
     assert again.duration_s == pytest.approx(res.duration_s, rel=1e-3)

@@ -21,16 +21,26 @@ def test_stage_quick(quick_config, rx130l, ptp_problem, tmp_path):
     # 0.01 = the main solution's k2: reused as a Pareto point (no extra solve)
     cfg = dataclasses.replace(quick_config.trajectory, ptp_pareto_k2=[0.01, 0.1])
     real = RealRobot.create(rx130l, quick_config.seed, TruthConfig())
-    ctx = StageContext(run=quick_config, config=cfg, robot=rx130l.copy(), real=real, upstream={},
+    # planned on the NOMINAL model (no identification upstream), run on the hidden robot: the servo
+    # simulation may exceed the limits; accept_poor records the gates instead of stopping
+    run_cfg = dataclasses.replace(quick_config, accept_poor=True)
+    ctx = StageContext(run=run_cfg, config=cfg, robot=rx130l.copy(), real=real, upstream={},
                        out_dir=tmp_path, rng=stage_rng(quick_config.seed, "trajectory"),
                        progress=Progress(enabled=False))
     res = stage.run(ctx)
     s = res.summary
+    gates = {c["name"]: c for c in s["quality_gates"]["checks"]}
+    # the plans themselves vouch for their limits on the fine grid and their solver statuses
+    assert all(c["passed"] for n, c in gates.items() if "_sim_" not in n), gates
+    assert {"cp_fine_violation", "ptp_fine_violation", "ptp_solver_status", "cp_smooth_solver_status",
+            "cp_fine_max_acceleration_ratio"} <= set(gates)
+    assert s["accepted_poor"] == (not s["quality_gates"]["passed"])
+    assert res.data["solver_status"]["ptp"] == "Solve_Succeeded"
     for key in REQUIRED:
         assert key in s and s[key] is not None, key
     tol = cfg.violation_tolerance
     assert s["cp_fine_violation"] <= tol and s["ptp_fine_violation"] <= tol
-    assert s["cp_toppra_fine_violation_full_friction"] > s["cp_fine_violation"]
+    assert s["cp_toppra_fine_violation_full_friction"] >= s["cp_fine_violation"]
     assert s["ptp_duration_s"] < s["ptp_ruckig_duration_s"]
     assert s["cp_smooth_duration_s"] >= s["cp_duration_s"] * (1 - 1e-6)
     # the simulation executed each trajectory for its planned duration

@@ -1,0 +1,68 @@
+"""Quality gates of the trajectory stage: limits on the fine grid and in the simulation, IPOPT status."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from pipeline.errors import QualityGateError
+from pipeline.runner import StageResult
+from pipeline.trajectory.config import TrajectoryConfig
+from pipeline.trajectory.stage import quality_gates
+from pipeline.trajectory.trajectories import TorqueCheck
+
+
+def _check(violation: float = 0.0, v: float = 0.9, a: float = 0.9) -> TorqueCheck:
+    z = np.zeros((2, 6))
+    return TorqueCheck(np.zeros(2), z, z, z, 1.0 + violation, violation, v, 0.0, a)
+
+
+def _plans(cp_check: TorqueCheck | None = None, ptp_status: str = "Solve_Succeeded"):
+    ok = {"solver_status": "Solve_Succeeded"}
+    cp = SimpleNamespace(checks={"cp": cp_check or _check()}, smooth=None,
+                         optimal=SimpleNamespace(info={"method": "reachability"}))
+    ptp = SimpleNamespace(checks={"ptp": _check(), "ptp_energy_at_ruckig_duration": _check()},
+                          result=SimpleNamespace(info={"solver_status": ptp_status}),
+                          at_ruckig_duration=SimpleNamespace(info=ok))
+    return cp, ptp
+
+
+def _finish(gates):
+    return gates.finish(StageResult(summary={}))
+
+
+def test_good_plans_pass():
+    cp, ptp = _plans()
+    res = _finish(quality_gates(TrajectoryConfig(), cp, ptp, {"cp": {"max_averaged_torque_ratio": 0.95}}))
+    assert res.summary["quality_gates"]["passed"]
+
+
+@pytest.mark.parametrize("case, figure", [
+    ({"cp_check": _check(violation=0.02)}, "cp_fine_violation"),
+    ({"cp_check": _check(a=1.2)}, "cp_fine_max_acceleration_ratio"),
+    ({"cp_check": _check(v=1.1)}, "cp_fine_max_velocity_ratio"),
+    ({"ptp_status": "Maximum_Iterations_Exceeded"}, "ptp_solver_status"),
+])
+def test_a_violated_limit_or_failed_solve_fails_the_stage(case, figure):
+    cp, ptp = _plans(**case)
+    with pytest.raises(QualityGateError, match=figure):
+        _finish(quality_gates(TrajectoryConfig(), cp, ptp, {}))
+    # --accept-poor: handed on, recorded
+    res = _finish(quality_gates(TrajectoryConfig(), cp, ptp, {}, accept_poor=True))
+    assert res.summary["accepted_poor"] and not res.summary["quality_gates"]["passed"]
+
+
+def test_simulation_over_the_limit_fails():
+    cp, ptp = _plans()
+    sims = {"cp": {"max_averaged_torque_ratio": 1.2}, "ptp_ruckig": {"max_averaged_torque_ratio": 5.0}}
+    with pytest.raises(QualityGateError, match="cp_sim_max_averaged_torque_ratio") as err:
+        _finish(quality_gates(TrajectoryConfig(), cp, ptp, sims))
+    assert "ptp_ruckig" not in str(err.value)          # the baseline is not gated
+
+
+def test_acceleration_gate_follows_the_switch():
+    cp, ptp = _plans(cp_check=_check(a=1.5))
+    res = _finish(quality_gates(TrajectoryConfig(acceleration_limits=False), cp, ptp, {}))
+    assert res.summary["quality_gates"]["passed"]

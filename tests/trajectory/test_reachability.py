@@ -1,0 +1,116 @@
+"""Reachability CP (TOPP-RA with the full friction model) against the NLP reference; acceleration
+limits in every planner; IPOPT interrupt statuses."""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from pipeline.errors import InfeasibleError
+from pipeline.trajectory.baselines import ruckig_torque_feasible, toppra_cp
+from pipeline.trajectory.cp import solve_cp_convex, solve_cp_refined
+from pipeline.trajectory.design import JointPath
+from pipeline.trajectory.dynamics import PlanningModel
+from pipeline.trajectory.reachability import solve_cp_reachability
+from pipeline.trajectory.solve import plan_cp, solve_ptp_verified
+from pipeline.trajectory.status import INTERRUPT_STATUSES, raise_if_interrupted
+from pipeline.trajectory.trajectories import check_trajectory
+
+N_SMALL = 80
+
+
+@pytest.mark.parametrize("acc", [False, True])
+def test_duration_matches_the_nlp(pm, line_path, acc):
+    """Same discretisation, same constraints: the greedy reachability profile is the NLP's optimum."""
+    ra = solve_cp_reachability(pm, line_path, N_SMALL, acceleration_limits=acc)
+    nlp = solve_cp_refined(pm, line_path, solve_cp_convex(pm, line_path, N_SMALL, acceleration_limits=acc),
+                           acceleration_limits=acc)
+    assert abs(ra.duration_s / nlp.duration_s - 1.0) <= 1e-3
+    assert ra.sdot[0] == 0.0 and ra.sdot[-1] == 0.0 and np.all(ra.sdot[1:-1] > 0)
+
+
+def test_slower_than_toppra_with_viscous_friction(pm, line_path):
+    """Viscous friction only removes torque headroom: never faster than toppra (Coulomb only)."""
+    ra = solve_cp_reachability(pm, line_path, N_SMALL, acceleration_limits=False)
+    tp = toppra_cp(pm, line_path, N_SMALL)
+    assert ra.duration_s > tp.duration_s
+
+
+def test_limits_hold_on_the_fine_grid(pm, line_path, quick_traj_config):
+    cfg = dataclasses.replace(quick_traj_config, cp_smooth=False, cp_method="reachability", acceleration_limits=True)
+    plan = plan_cp(pm, line_path, cfg)
+    chk = plan.checks["cp"]
+    tol = cfg.violation_tolerance
+    assert chk.violation <= tol
+    assert chk.max_velocity_ratio <= 1.0 + tol
+    assert chk.max_acceleration_ratio <= 1.0 + tol
+    # the acceleration limits bind on this path (without them the motion is faster and exceeds them)
+    free = solve_cp_reachability(pm, line_path, cfg.cp_n_grid, acceleration_limits=False)
+    assert check_trajectory(pm, free.sample(line_path, cfg.fine_dt_s)).max_acceleration_ratio > 1.0 + tol
+    assert plan.optimal.duration_s > free.duration_s
+    # the toppra baseline gets the same acceleration limits, at its collocation points (grid points)
+    tp = plan.toppra
+    _, dq, ddq = line_path.derivatives(tp.s[:-1])
+    acc = ddq * (tp.sdot[:-1] ** 2)[:, None] + dq * tp.sddot[:, None]
+    assert np.max(np.abs(acc) / pm.acceleration_rad_s2) <= 1.0 + 1e-6
+
+
+def test_unholdable_path_raises(pm, line_path):
+    weak = dataclasses.replace(pm, effort_Nm=pm.effort_Nm * 0.05)
+    with pytest.raises(InfeasibleError, match="torque limit"):
+        solve_cp_reachability(weak, line_path, 40)
+
+
+def test_ptp_and_ruckig_respect_acceleration_limits(pm, ptp_problem, big_move, quick_traj_config):
+    cfg = dataclasses.replace(quick_traj_config, acceleration_limits=True)
+    res = solve_ptp_verified(pm, ptp_problem, *big_move, cfg, 1.0, 0.01, np.ones(pm.nq))
+    assert res.info["solver_status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+    chk = check_trajectory(pm, res.sample(cfg.fine_dt_s))
+    assert chk.max_acceleration_ratio <= 1.0 + 1e-6          # linear between nodes: node bounds are exact
+    assert chk.violation <= cfg.violation_tolerance
+    rk = ruckig_torque_feasible(pm, *big_move, cfg.ruckig_check_dt_s, (25.0,), joint_rounds=1,
+                                acceleration_limits=True)
+    assert check_trajectory(pm, rk.trajectory).max_acceleration_ratio <= 1.0 + 1e-6
+
+
+@pytest.mark.parametrize("status", INTERRUPT_STATUSES)
+def test_interrupt_statuses_are_interrupts(status):
+    with pytest.raises(KeyboardInterrupt):
+        raise_if_interrupted(status, "cp")
+    raise_if_interrupted("Solve_Succeeded", "cp")              # no exception
+
+
+def _panda_arm() -> PlanningModel:
+    """The 7-axis Franka Panda of example-robot-data (fingers locked), with stated friction."""
+    urdf = Path(sys.prefix) / "lib" / f"python{sys.version_info.major}.{sys.version_info.minor}" / "site-packages" \
+        / "cmeel.prefix" / "share" / "example-robot-data" / "robots" / "panda_description" / "urdf" / "panda.urdf"
+    if not urdf.is_file():
+        pytest.skip("example-robot-data not installed")
+    full = pin.buildModelFromUrdf(str(urdf))
+    fingers = [full.getJointId(n) for n in full.names if "finger" in n]
+    model = pin.buildReducedModel(full, fingers, pin.neutral(full))
+    n = model.nq
+    return PlanningModel(model, model.lowerPositionLimit.copy(), model.upperPositionLimit.copy(),
+                         model.velocityLimit.copy(), model.effortLimit.copy(), np.full(n, 0.5), np.full(n, 1.0),
+                         0.01, np.full(n, 10.0))
+
+
+def test_seven_axes_match_the_nlp():
+    """n axes: the same solver on a 7-axis arm and a joint-space path, against the NLP reference."""
+    pm7 = _panda_arm()
+    assert pm7.nq == 7
+    s = np.linspace(0.0, 1.0, 40)
+    q0 = np.array([0.0, -0.5, 0.0, -2.0, 0.0, 1.6, 0.8])
+    q1 = np.array([1.2, 0.3, -0.6, -1.2, 0.7, 2.4, -0.4])
+    q = q0 + np.outer(s, q1 - q0) + 0.2 * np.sin(np.pi * s)[:, None]
+    path = JointPath(s, q, name="panda move")
+    for acc in (False, True):
+        ra = solve_cp_reachability(pm7, path, 60, acceleration_limits=acc)
+        nlp = solve_cp_refined(pm7, path, solve_cp_convex(pm7, path, 60, acceleration_limits=acc),
+                               acceleration_limits=acc)
+        assert abs(ra.duration_s / nlp.duration_s - 1.0) <= 1e-3
