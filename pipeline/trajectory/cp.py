@@ -32,9 +32,9 @@ import casadi as ca
 import numpy as np
 
 from pipeline.errors import InfeasibleError, SolverError
+from pipeline.interrupts import raise_if_interrupted
 from pipeline.trajectory.design import JointPath
 from pipeline.trajectory.dynamics import PlanningModel, path_coefficients
-from pipeline.trajectory.status import raise_if_interrupted
 from pipeline.trajectory.trajectories import JointTrajectory
 
 _IPOPT = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",

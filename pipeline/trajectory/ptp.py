@@ -38,8 +38,8 @@ import numpy as np
 
 from pipeline import codegen
 from pipeline.errors import InfeasibleError, PipelineError, SolverError
+from pipeline.interrupts import raise_if_interrupted
 from pipeline.trajectory.dynamics import PlanningModel
-from pipeline.trajectory.status import raise_if_interrupted
 from pipeline.trajectory.trajectories import JointTrajectory
 
 JIT_FLAGS = ("-O1",)

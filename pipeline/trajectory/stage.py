@@ -27,10 +27,10 @@ import numpy as np
 from pipeline.errors import ConfigError
 from pipeline.quality import QualityGates
 from pipeline.runner import StageContext, StageResult
+from pipeline.solver_status import SUCCESS_STATUSES
 from pipeline.trajectory.config import TrajectoryConfig
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.solve import CPPlan, PTPPlan, cp_joint_path, plan_cp, plan_ptp, ptp_problem
-from pipeline.trajectory.status import SUCCESS_STATUSES
 from pipeline.trajectory.validate import (
     activity_figure,
     comparison_figure,
