@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.errors import DataFileError
+from pipeline.robot.payload import Payload
 
 
 @dataclass
@@ -35,18 +36,38 @@ class Measurements:
     rotvec: np.ndarray | None = None   # (N, 3) optional orientation
     n_requested: int = 0          # configurations commanded (simulated), before visibility
     invisible: np.ndarray | None = None  # commanded configurations the tracker could not see
+    #: (N,) bool: read with the known payload mounted (None: never)
+    payload_mounted: np.ndarray | None = None
+    #: (N,) file line of each row (CSV data), None for simulated readings
+    lines: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.Q)
 
 
-def measure_simulated(real, Q: np.ndarray, rng: np.random.Generator) -> Measurements:
-    """Command ``Q`` on the real robot and read the tracker; invisible rows are dropped."""
+def measure_simulated(real, Q: np.ndarray, rng: np.random.Generator, payload: Payload | None = None
+                      ) -> Measurements:
+    """Command ``Q`` on the real robot (``payload`` mounted) and read the tracker; invisible rows are dropped."""
     Q = np.atleast_2d(np.asarray(Q, float))
-    reading = real.tracker.measure(Q, rng)
+    reading = real.tracker.measure(Q, rng, payload) if payload is not None else real.tracker.measure(Q, rng)
     vis = np.asarray(reading.visible, bool)
+    mounted = np.full(int(vis.sum()), True) if payload is not None else None
     return Measurements(Q[vis], np.asarray(reading.position_m)[vis], np.asarray(reading.sigma_m)[vis],
-                        "simulated tracker", None, len(Q), Q[~vis])
+                        "simulated tracker", None, len(Q), Q[~vis], mounted)
+
+
+def concatenate(parts: list[Measurements], source: str) -> Measurements:
+    """One record of several (payload flags filled with False where a part has none)."""
+    mounted = None
+    if any(p.payload_mounted is not None for p in parts):
+        mounted = np.concatenate([p.payload_mounted if p.payload_mounted is not None else np.zeros(len(p), bool)
+                                  for p in parts])
+    nq = parts[0].Q.shape[1]
+    invisible = np.vstack([p.invisible if p.invisible is not None else np.zeros((0, nq)) for p in parts])
+    rot = None if any(p.rotvec is None for p in parts) else np.vstack([p.rotvec for p in parts])
+    return Measurements(np.vstack([p.Q for p in parts]), np.vstack([p.Y for p in parts]),
+                        np.concatenate([p.sigma_m for p in parts]), source, rot,
+                        sum(p.n_requested for p in parts), invisible, mounted)
 
 
 def noise_model_sigma(robot, Y: np.ndarray) -> np.ndarray:
@@ -136,7 +157,7 @@ def read_csv(path: str | Path, robot, min_rows: int = 1, min_rows_field: str | N
                                 f"rotation vector of norm {norm[k]:.4g} > pi: a rotation vector (axis * angle) "
                                 "must be in rad" + (" (the values look like degrees)" if norm.max() <= 180 + 1e-6
                                                     else ""))
-    return Measurements(Q, Y, noise_model_sigma(robot, Y), str(path), rot, len(Q), np.zeros((0, nq)))
+    return Measurements(Q, Y, noise_model_sigma(robot, Y), str(path), rot, len(Q), np.zeros((0, nq)), None, lines)
 
 
 def _check_joint_angles(path: Path, Q: np.ndarray, robot, lines: np.ndarray) -> None:

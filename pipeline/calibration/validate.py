@@ -44,13 +44,20 @@ def predicted_error(mm: MeasurementModel, est: Estimate, Q: np.ndarray, sigma_m:
             "predicted_std_m": np.sqrt(var_total)}
 
 
-def fit_residuals(mm: MeasurementModel, est: Estimate, meas: Measurements) -> dict:
+def fit_residuals(mm: MeasurementModel, est: Estimate, meas: Measurements,
+                  rejected: np.ndarray | None = None) -> dict:
     """Residuals of the calibration measurements themselves (in-sample, not a validation):
-    ``|y_k - h(q_k, x, T_tb)|`` after the fit and with the nominal model + registration before."""
+    ``|y_k - h(q_k, x, T_tb)|`` after the fit and with the nominal model + registration before,
+    over the readings kept by the outlier test (``rejected``: row indices left out)."""
     x0 = np.zeros(mm.n)
-    r_before = np.linalg.norm(meas.Y - mm.predict(meas.Q, x0, est.registration), axis=1)
-    r_after = np.linalg.norm(meas.Y - mm.predict(meas.Q, est.x, est.registration), axis=1)
-    return {"n_points": int(len(meas)), "source": meas.source,
+    keep = np.ones(len(meas), bool)
+    if rejected is not None:
+        keep[np.asarray(rejected, int)] = False
+    Q, Y = meas.Q[keep], meas.Y[keep]
+    mounted = None if meas.payload_mounted is None else meas.payload_mounted[keep]
+    r_before = np.linalg.norm(Y - mm.predict(Q, x0, est.registration, mounted), axis=1)
+    r_after = np.linalg.norm(Y - mm.predict(Q, est.x, est.registration, mounted), axis=1)
+    return {"n_points": int(keep.sum()), "source": meas.source,
             "rms_residual_before_m": float(np.sqrt(np.mean(r_before ** 2))),
             "rms_residual_after_m": float(np.sqrt(np.mean(r_after ** 2))),
             "max_residual_after_m": float(r_after.max()),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from types import SimpleNamespace
 
 import numpy as np
 import pinocchio as pin
@@ -310,6 +311,7 @@ class _Ctx:
 
     def __init__(self, config, robot, seed):
         self.config, self.robot, self.rng, self.progress = config, robot, np.random.default_rng(seed), None
+        self.run = SimpleNamespace(accept_poor=False)
 
     @property
     def real(self):
