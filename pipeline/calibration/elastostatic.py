@@ -27,9 +27,11 @@ from pipeline.robot.model import RobotModel
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 
 
-def measurement_model(robot, cfg: Config) -> em.MeasurementModel:
-    """The error model the parameter subset needs (elastostatic when it has compliances)."""
-    return em.MeasurementModel(robot, compliance=subsets.wants_compliance(cfg.parameters), payload=cfg.payload())
+def measurement_model(robot, cfg: Config, marker_points: bool = False) -> em.MeasurementModel:
+    """The error model the parameter subset needs (elastostatic when it has compliances; marker
+    points when the readings are 6-D, :func:`pipeline.calibration.measure.expand_orientation`)."""
+    return em.MeasurementModel(robot, compliance=subsets.wants_compliance(cfg.parameters), payload=cfg.payload(),
+                               marker_points=marker_points)
 
 
 def load_gravity_model(cfg: Config, robot) -> RobotModel | None:
@@ -59,13 +61,14 @@ def gravity_pass(mm: em.MeasurementModel, meas: ms.Measurements, basis: np.ndarr
     keep = np.ones(len(meas), bool)
     keep[rejected] = False
     mounted = None if meas.payload_mounted is None else meas.payload_mounted[keep]
+    offsets = None if meas.offset_m is None else meas.offset_m[keep]
     try:
         # compliances of joints the nominal gravity model does not load cannot be fitted with it
         tau = np.abs(mm.static_torques(meas.Q[keep], mounted)).max(axis=0)
         dead = np.flatnonzero(tau <= 1e-9 * tau.max())
         cols = ~np.any(basis[mm.sl_compliance][dead] != 0, axis=0)
         first = estimate(mm, meas.Q[keep], meas.Y[keep], meas.sigma_m[keep], basis[:, cols], "nominal gravity",
-                         cfg.max_lm_iterations, mounted)
+                         cfg.max_lm_iterations, mounted, offsets)
     finally:
         mm.set_gravity_model(gravity)
     names = [mm.names[i] for i in range(mm.n)]

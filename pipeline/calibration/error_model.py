@@ -67,12 +67,14 @@ class MeasurementModel:
     """
 
     def __init__(self, robot, sym: SymbolicRobot | None = None, chunk: int = 4096, compliance: bool = False,
-                 payload: Payload | None = None) -> None:
+                 payload: Payload | None = None, marker_points: bool = False) -> None:
         self.robot = robot
         self.sym = sym if sym is not None else SymbolicRobot(robot)
         self.nq = self.sym.nq
         self.n_kin = self.sym.n_kin
         self.compliance = bool(compliance)
+        #: rows may be points at an offset ``o`` in the reflector frame (6-D readings, measure.py)
+        self.marker_points = bool(marker_points)
         self.payload = payload
         self.names: list[str] = list(self.sym.kinematic_parameter_names) + TRACKER_NAMES + REFLECTOR_NAMES
         if self.compliance:
@@ -88,10 +90,12 @@ class MeasurementModel:
         x = ca.SX.sym("x", self.n)
         t0 = ca.SX.sym("T0", 12)
         tau = ca.SX.sym("tau", self.nq)
-        extra = [tau] if self.compliance else []
+        offset = ca.SX.sym("o", 3)
+        extra = ([tau] if self.compliance else []) + ([offset] if self.marker_points else [])
         q_link = q - x[self.sl_compliance] * tau if self.compliance else q
         pos, rot = self.sym.fk_expression(self.robot.frame_reflector, q_link, x[self.sl_kin])
-        p_base = pos + ca.mtimes(rot, x[self.sl_reflector])
+        marker = x[self.sl_reflector] + offset if self.marker_points else x[self.sl_reflector]
+        p_base = pos + ca.mtimes(rot, marker)
         R0 = ca.reshape(t0[:9], 3, 3).T  # row-major
         Rx, px = sx.exp6(x[self.sl_tracker])
         R = ca.mtimes(R0, Rx)
@@ -124,8 +128,11 @@ class MeasurementModel:
             tau[m] = gravity_torques_Nm(self._payload_model, Q[m])
         return tau
 
-    def _extra(self, Q: np.ndarray, mounted: np.ndarray | None) -> list[np.ndarray]:
-        return [self.static_torques(Q, mounted).T] if self.compliance else []
+    def _extra(self, Q: np.ndarray, mounted: np.ndarray | None, offsets: np.ndarray | None) -> list[np.ndarray]:
+        out = [self.static_torques(Q, mounted).T] if self.compliance else []
+        if self.marker_points:
+            out.append(np.zeros((3, len(Q))) if offsets is None else np.asarray(offsets, float).T)
+        return out
 
     def _mapped(self, name: str, n: int) -> ca.Function:
         key = (name, n)
@@ -134,7 +141,8 @@ class MeasurementModel:
             self._maps[key] = f.map(n)
         return self._maps[key]
 
-    def predict(self, Q: np.ndarray, x: np.ndarray, T0: pin.SE3, mounted: np.ndarray | None = None) -> np.ndarray:
+    def predict(self, Q: np.ndarray, x: np.ndarray, T0: pin.SE3, mounted: np.ndarray | None = None,
+                offsets: np.ndarray | None = None) -> np.ndarray:
         """Predicted tracker-frame positions ``(N, 3)`` (``mounted``: rows measured with the payload)."""
         Q = np.atleast_2d(np.asarray(Q, float))
         t0 = se3_to_vector(T0)
@@ -143,12 +151,13 @@ class MeasurementModel:
             Qc = Q[s : s + self.chunk]
             f = self._mapped("h", len(Qc))
             mc = None if mounted is None else mounted[s : s + self.chunk]
-            out[s : s + len(Qc)] = np.asarray(f(Qc.T, x, t0, *self._extra(Qc, mc))).T
+            oc = None if offsets is None else offsets[s : s + self.chunk]
+            out[s : s + len(Qc)] = np.asarray(f(Qc.T, x, t0, *self._extra(Qc, mc, oc))).T
         return out
 
     def jacobian(self, Q: np.ndarray, x: np.ndarray, T0: pin.SE3,
-                 basis: np.ndarray | None = None, mounted: np.ndarray | None = None
-                 ) -> tuple[np.ndarray, np.ndarray]:
+                 basis: np.ndarray | None = None, mounted: np.ndarray | None = None,
+                 offsets: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Predictions ``(N, 3)`` and Jacobian blocks ``(N, 3, p)`` wrt ``theta`` where
         ``x = x_current + basis @ theta`` (``basis`` (n, p); None: all parameters)."""
         Q = np.atleast_2d(np.asarray(Q, float))
@@ -160,14 +169,15 @@ class MeasurementModel:
             Qc = Q[s : s + self.chunk]
             n = len(Qc)
             mc = None if mounted is None else mounted[s : s + self.chunk]
-            y, jac = self._mapped("hj", n)(Qc.T, x, t0, *self._extra(Qc, mc))
+            oc = None if offsets is None else offsets[s : s + self.chunk]
+            y, jac = self._mapped("hj", n)(Qc.T, x, t0, *self._extra(Qc, mc, oc))
             Y[s : s + n] = np.asarray(y).T
             jac = np.asarray(jac).reshape(3, n, self.n).transpose(1, 0, 2)  # hcat of (3 x n_x) blocks
             J[s : s + n] = jac @ P
         return Y, J
 
-    def base_positions(self, Q: np.ndarray, x: np.ndarray, mounted: np.ndarray | None = None
-                       ) -> tuple[np.ndarray, np.ndarray]:
+    def base_positions(self, Q: np.ndarray, x: np.ndarray, mounted: np.ndarray | None = None,
+                       offsets: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Reflector positions ``(N, 3)`` and rotations ``(N, 3, 3)`` in the robot base frame."""
         Q = np.atleast_2d(np.asarray(Q, float))
         P = np.empty((len(Q), 3))
@@ -176,7 +186,8 @@ class MeasurementModel:
             Qc = Q[s : s + self.chunk]
             n = len(Qc)
             mc = None if mounted is None else mounted[s : s + self.chunk]
-            p, r = self._mapped("pb", n)(Qc.T, x, *self._extra(Qc, mc))
+            oc = None if offsets is None else offsets[s : s + self.chunk]
+            p, r = self._mapped("pb", n)(Qc.T, x, *self._extra(Qc, mc, oc))
             P[s : s + n] = np.asarray(p).T
             R[s : s + n] = np.asarray(r).reshape(3, n, 3).transpose(1, 0, 2)
         return P, R

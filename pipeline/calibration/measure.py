@@ -4,9 +4,12 @@ CSV format (one row per configuration, comma separated, header recommended)::
 
     q1,q2,q3,q4,q5,q6,x,y,z[,rx,ry,rz]
 
-``q*`` joint angles in rad (Pinocchio order), ``x, y, z`` the reflector position in the tracker
-frame in m, optional ``rx, ry, rz`` the rotation vector (axis * angle, rad) of the reflector frame
-in the tracker frame (a 6-D tracker probe); used by the validation only. Any problem (missing
+``q*`` joint angles in rad (Pinocchio order), ``x, y, z`` the reflector (marker) position in the
+tracker frame in m, optional ``rx, ry, rz`` the rotation vector (axis * angle, rad; ``R = exp(r^)``,
+scipy ``Rotation.from_rotvec``) of the marker frame in the tracker frame: ``R`` maps marker-frame
+axes to tracker-frame axes, the marker frame being the reflector frame of robot.yaml (flange
+orientation, at the reflector offset). Such 6-D readings (6-DOF tracker probe, motion capture)
+enter the fit (:func:`expand_orientation`) and the validation reports orientation errors. Any problem (missing
 file, wrong column count, non-numeric or NaN/inf value, too few rows, joint angles outside the
 limits, values in the wrong unit: positions in mm, angles in degrees) raises
 :class:`pipeline.errors.DataFileError` naming the file, the file line (1-based, as an editor shows
@@ -20,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from pipeline.errors import DataFileError
 from pipeline.robot.payload import Payload
@@ -40,6 +44,10 @@ class Measurements:
     payload_mounted: np.ndarray | None = None
     #: (N,) file line of each row (CSV data), None for simulated readings
     lines: np.ndarray | None = None
+    #: (N, 3) marker-point offset of each row in the reflector frame (6-D readings, expand_orientation)
+    offset_m: np.ndarray | None = None
+    #: (N,) row of the original record each row comes from (6-D readings), None: the identity
+    pose_index: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.Q)
@@ -68,6 +76,32 @@ def concatenate(parts: list[Measurements], source: str) -> Measurements:
     return Measurements(np.vstack([p.Q for p in parts]), np.vstack([p.Y for p in parts]),
                         np.concatenate([p.sigma_m for p in parts]), source, rot,
                         sum(p.n_requested for p in parts), invisible, mounted)
+
+
+#: lever of the virtual marker points of a 6-D reading (m)
+MARKER_LEVER_M = 1.0
+
+
+def expand_orientation(meas: Measurements, orientation_sigma_rad: float,
+                       lever_m: float = MARKER_LEVER_M) -> Measurements:
+    """A 6-D record as three point readings per pose: the marker origin and two virtual points
+    ``lever_m`` along the measured marker x and y axes, ``y + L R_meas e_k`` (tracker frame), whose
+    model is the reflector frame's point ``dr + L e_k``. Their sigma is ``sqrt(sigma_p^2 + (L
+    sigma_rot)^2)`` (the position noise they share with the origin is small against ``L sigma_rot``
+    for a mocap-like 0.1 mm / 1 mrad: its correlation is neglected). Two axes fix the orientation,
+    so a pose gives 6 independent equations; registration and fit see position and orientation."""
+    if meas.rotvec is None:
+        return meas
+    n = len(meas)
+    R = Rotation.from_rotvec(meas.rotvec).as_matrix()
+    offsets = np.concatenate([np.zeros((n, 3)), np.tile([lever_m, 0.0, 0.0], (n, 1)),
+                              np.tile([0.0, lever_m, 0.0], (n, 1))])
+    Y = np.concatenate([meas.Y, meas.Y + lever_m * R[:, :, 0], meas.Y + lever_m * R[:, :, 1]])
+    s_virtual = np.sqrt(meas.sigma_m ** 2 + (lever_m * orientation_sigma_rad) ** 2)
+    rep = lambda a: None if a is None else np.concatenate([a, a, a])  # noqa: E731
+    return Measurements(np.concatenate([meas.Q] * 3), Y, np.concatenate([meas.sigma_m, s_virtual, s_virtual]),
+                        meas.source, None, meas.n_requested, meas.invisible, rep(meas.payload_mounted),
+                        rep(meas.lines), offsets, np.concatenate([np.arange(n)] * 3))
 
 
 def noise_model_sigma(robot, Y: np.ndarray) -> np.ndarray:

@@ -84,8 +84,10 @@ def rejected_readings(out: CalibrationOutcome) -> list[dict]:
     rej = out.rejection
     if rej is None:
         return []
-    lines = out.measurements.lines
-    return [{"pose_index": int(i), "csv_line": None if lines is None else int(lines[i]),
+    rec = out.notes.get("fit_record", out.measurements)   # 6-D: three fitted rows per pose
+    lines = rec.lines
+    pose = rec.pose_index if rec.pose_index is not None else np.arange(len(rec))
+    return [{"pose_index": int(pose[i]), "csv_line": None if lines is None else int(lines[i]),
              "whitened_residual": float(rej.whitened_norm[i])} for i in rej.rejected]
 
 

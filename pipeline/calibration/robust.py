@@ -56,22 +56,23 @@ class Rejection:
 
 
 def _whitened_norm(mm: MeasurementModel, est: Estimate, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarray,
-                   mounted: np.ndarray | None) -> np.ndarray:
-    pred = mm.predict(Q, est.x, est.registration, mounted)
+                   mounted: np.ndarray | None, offsets: np.ndarray | None) -> np.ndarray:
+    pred = mm.predict(Q, est.x, est.registration, mounted, offsets)
     return np.linalg.norm(Y - pred, axis=1) / sigma
 
 
 def _robust_refit(mm: MeasurementModel, est: Estimate, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarray,
-                  mounted: np.ndarray | None, loss: str, max_iterations: int) -> Estimate:
+                  mounted: np.ndarray | None, loss: str, max_iterations: int,
+                  offsets: np.ndarray | None) -> Estimate:
     """``least_squares`` with the robust loss from the plain fit (same registration and basis)."""
     P = est.basis
     w = 1.0 / sigma
 
     def fun(th: np.ndarray) -> np.ndarray:
-        return ((Y - mm.predict(Q, P @ th, est.registration, mounted)) * w[:, None]).reshape(-1)
+        return ((Y - mm.predict(Q, P @ th, est.registration, mounted, offsets)) * w[:, None]).reshape(-1)
 
     def jac(th: np.ndarray) -> np.ndarray:
-        _, J = mm.jacobian(Q, P @ th, est.registration, P, mounted)
+        _, J = mm.jacobian(Q, P @ th, est.registration, P, mounted, offsets)
         return -(J * w[:, None, None]).reshape(-1, P.shape[1])
 
     sol = least_squares(fun, est.theta, jac=jac, loss=loss, f_scale=ROBUST_SCALE, method="trf",
@@ -82,8 +83,8 @@ def _robust_refit(mm: MeasurementModel, est: Estimate, Q: np.ndarray, Y: np.ndar
 
 def robust_estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarray, basis: np.ndarray,
                     source: str = "measurements", max_iterations: int = 50, mounted: np.ndarray | None = None,
-                    loss: str = "huber", confidence: float = 0.999, max_fraction: float = 0.1
-                    ) -> tuple[Estimate, Rejection]:
+                    loss: str = "huber", confidence: float = 0.999, max_fraction: float = 0.1,
+                    offsets: np.ndarray | None = None) -> tuple[Estimate, Rejection]:
     """Steps 1-4 of the module docstring. ``loss`` "linear": no robust refit (outlier test only)."""
     Q, Y, sigma = np.asarray(Q, float), np.asarray(Y, float), np.asarray(sigma, float)
     n = len(Q)
@@ -91,12 +92,12 @@ def robust_estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: n
     median_3 = float(chi2.ppf(0.5, 3))
     threshold = base_threshold
     max_rejected = int(np.floor(max_fraction * n))
-    est = estimate(mm, Q, Y, sigma, basis, source, max_iterations, mounted)
-    probe = est if loss == "linear" else _robust_refit(mm, est, Q, Y, sigma, mounted, loss, max_iterations)
+    est = estimate(mm, Q, Y, sigma, basis, source, max_iterations, mounted, offsets)
+    probe = est if loss == "linear" else _robust_refit(mm, est, Q, Y, sigma, mounted, loss, max_iterations, offsets)
     kept = np.ones(n, bool)
     capped = False
     for _ in range(MAX_ROUNDS):
-        norm = _whitened_norm(mm, probe, Q, Y, sigma, mounted)
+        norm = _whitened_norm(mm, probe, Q, Y, sigma, mounted, offsets)
         threshold = base_threshold * max(1.0, float(np.sqrt(np.median(norm ** 2) / median_3)))
         bad = np.flatnonzero(norm > threshold)
         capped = len(bad) > max_rejected
@@ -107,7 +108,8 @@ def robust_estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: n
             break
         kept = new_kept
         m = None if mounted is None else mounted[kept]
-        est = estimate(mm, Q[kept], Y[kept], sigma[kept], basis, source, max_iterations, m)
+        o = None if offsets is None else offsets[kept]
+        est = estimate(mm, Q[kept], Y[kept], sigma[kept], basis, source, max_iterations, m, o)
         probe = est
-    norm = _whitened_norm(mm, est, Q, Y, sigma, mounted)
+    norm = _whitened_norm(mm, est, Q, Y, sigma, mounted, offsets)
     return est, Rejection(np.flatnonzero(~kept), norm, threshold, confidence, loss, capped)

@@ -52,7 +52,7 @@ from pipeline.calibration.report import (  # noqa: F401 - re-exported (tests, no
     visibility_sentence,
 )
 from pipeline.calibration.robust import robust_estimate
-from pipeline.errors import ConfigError, InfeasibleError, PipelineError
+from pipeline.errors import ConfigError, DataFileError, InfeasibleError, PipelineError
 from pipeline.progress import task
 from pipeline.quality import QualityGates
 
@@ -68,7 +68,12 @@ def identify_parameter_set(robot, mm: em.MeasurementModel, cfg: Config, rng: np.
     the identifiable parameters, ``x = P theta``.
     """
     Q = em.random_configurations(robot, cfg.identifiability_samples, rng)
-    if mm.compliance:   # the elastostatic columns need the gravity torques: the CasADi model
+    if mm.marker_points:   # 6-D readings: the marker origin and the two virtual axis points
+        n = len(Q)
+        offsets = np.repeat(ms.MARKER_LEVER_M * np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]), n, 0)
+        _, J = mm.jacobian(np.concatenate([Q] * 3), np.zeros(mm.n), robot.tracker.transform_tracker_to_base,
+                           offsets=offsets)
+    elif mm.compliance:   # the elastostatic columns need the gravity torques: the CasADi model
         _, J = mm.jacobian(Q, np.zeros(mm.n), robot.tracker.transform_tracker_to_base)
     else:
         _, J = cd.nominal_jacobian(cd.chain_from_robot(robot), Q, robot.tracker.transform_tracker_to_base)
@@ -171,7 +176,14 @@ def calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None)
 def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None) -> CalibrationOutcome:
     timings: dict[str, float] = {}
     t = time.perf_counter()
-    mm = measurement_model(robot, cfg)
+    user = ms.read_csv(cfg.measurements_csv, robot, min_rows=1) if cfg.measurements_csv else None
+    val_user = ms.read_csv(cfg.validation_csv, robot, min_rows=1) if cfg.validation_csv else None
+    if cfg.position_sigma_m is not None:
+        for m in (user, val_user):
+            if m is not None:
+                m.sigma_m = np.full(len(m), float(cfg.position_sigma_m))
+    six_d = user is not None and user.rotvec is not None and cfg.use_orientation
+    mm = measurement_model(robot, cfg, marker_points=six_d)
     upstream_gravity = load_gravity_model(cfg, robot)
     if upstream_gravity is not None:
         mm.set_gravity_model(upstream_gravity.model)
@@ -179,11 +191,8 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None
     dbasis = design_basis(mm, basis)
     timings["identifiability_s"] = time.perf_counter() - t
     p = basis.shape[1]
-    user = None
-    if cfg.measurements_csv:
-        user = ms.read_csv(cfg.measurements_csv, robot, min_rows=min_configurations(p),
-                           min_rows_field=f"3 coordinates per row for the {p} identifiable parameters of {robot.name}")
-    val_user = ms.read_csv(cfg.validation_csv, robot, min_rows=1) if cfg.validation_csv else None
+    if user is not None:
+        check_rows(cfg, user, p, robot)
     selection = None
     cs = None
     grad = None
@@ -240,12 +249,13 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None
     else:
         meas = user  # the user's configurations: no candidates, no selection, no simulated robot
     t = time.perf_counter()
-    est, rejection = robust_estimate(mm, meas.Q, meas.Y, meas.sigma_m, basis, meas.source, cfg.max_lm_iterations,
-                                     meas.payload_mounted, cfg.robust_loss, cfg.outlier_confidence,
-                                     cfg.max_outlier_fraction)
-    notes = {}
+    rec = ms.expand_orientation(meas, cfg.orientation_sigma_rad) if six_d else meas   # the fitted rows
+    est, rejection = robust_estimate(mm, rec.Q, rec.Y, rec.sigma_m, basis, rec.source, cfg.max_lm_iterations,
+                                     rec.payload_mounted, cfg.robust_loss, cfg.outlier_confidence,
+                                     cfg.max_outlier_fraction, rec.offset_m)
+    notes: dict = {"fit_record": rec} if six_d else {}
     if upstream_gravity is not None:
-        notes["gravity_pass"] = gravity_pass(mm, meas, basis, est, rejection.rejected, cfg, str(cfg.gravity_model))
+        notes["gravity_pass"] = gravity_pass(mm, rec, basis, est, rejection.rejected, cfg, str(cfg.gravity_model))
     timings["estimate_s"] = time.perf_counter() - t
     t = time.perf_counter()
     if val_user is not None:
@@ -262,7 +272,7 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None
         spec, Qw = index_spec(cfg, robot, mm, dbasis, rng)
     design = measured_design(robot, mm, dbasis, meas.Q, spec, est.transform_tracker_to_base,
                              "user file" if user is not None else "measured subset")
-    fit = va.fit_residuals(mm, est, meas, rejection.rejected)
+    fit = va.fit_residuals(mm, est, rec, rejection.rejected)
     prediction = predicted_on_random_poses(robot, mm, est, cfg, rng) if validation is None else None
     new_robot = calibrated_robot(robot, mm, est.x, basis)
     return CalibrationOutcome(report, mm.names, cs, selection, meas, est, validation, new_robot, timings, grad, Qw,
@@ -297,10 +307,23 @@ def min_configurations(n_identifiable: int) -> int:
     return -(-n_identifiable // 3)
 
 
+def check_rows(cfg: Config, user: ms.Measurements, p: int, robot) -> None:
+    """Enough independent equations (3 per position row, 6 per 6-D row) for the ``p`` parameters."""
+    per_row = 6 if user.rotvec is not None and cfg.use_orientation else 3
+    need = -(-p // per_row)
+    if len(user) < need:
+        kind = "position + orientation" if per_row == 6 else "position"
+        raise DataFileError(user.source, "rows", f"{len(user)} measurement rows, need at least {need} ({per_row} "
+                            f"equations per {kind} row for the {p} identifiable parameters of {robot.name}; "
+                            "calibration.parameters selects fewer)")
+
+
 def check(config: Config, robot) -> None:
     """Robot-dependent checks and the user files, before the runner creates any directory."""
     cfg = config
-    mm = measurement_model(robot, cfg)
+    user = ms.read_csv(cfg.measurements_csv, robot, min_rows=1) if cfg.measurements_csv else None
+    mm = measurement_model(robot, cfg, marker_points=user is not None and user.rotvec is not None
+                           and cfg.use_orientation)
     load_gravity_model(cfg, robot)
     need_samples = -(-mm.n // 3)
     if cfg.identifiability_samples < need_samples:
@@ -339,8 +362,7 @@ def check(config: Config, robot) -> None:
                               f"the start subset must be regular: need at least {n_min} ({why}) or null "
                               f"(2/3 of n_configurations), got {cfg.n_initial}")
     if cfg.measurements_csv:
-        ms.read_csv(cfg.measurements_csv, robot, min_rows=n_min,
-                    min_rows_field=f"3 coordinates per row for the {p} identifiable parameters of {robot.name}")
+        check_rows(cfg, user, p, robot)
     if cfg.validation_csv:
         ms.read_csv(cfg.validation_csv, robot, min_rows=1)
 

@@ -55,8 +55,9 @@ def fit_residuals(mm: MeasurementModel, est: Estimate, meas: Measurements,
         keep[np.asarray(rejected, int)] = False
     Q, Y = meas.Q[keep], meas.Y[keep]
     mounted = None if meas.payload_mounted is None else meas.payload_mounted[keep]
-    r_before = np.linalg.norm(Y - mm.predict(Q, x0, est.registration, mounted), axis=1)
-    r_after = np.linalg.norm(Y - mm.predict(Q, est.x, est.registration, mounted), axis=1)
+    offsets = None if meas.offset_m is None else meas.offset_m[keep]
+    r_before = np.linalg.norm(Y - mm.predict(Q, x0, est.registration, mounted, offsets), axis=1)
+    r_after = np.linalg.norm(Y - mm.predict(Q, est.x, est.registration, mounted, offsets), axis=1)
     return {"n_points": int(keep.sum()), "source": meas.source,
             "rms_residual_before_m": float(np.sqrt(np.mean(r_before ** 2))),
             "rms_residual_after_m": float(np.sqrt(np.mean(r_after ** 2))),

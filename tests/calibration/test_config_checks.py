@@ -204,5 +204,5 @@ def test_errors_give_the_file_line_counting_blank_lines(robot, measured, tmp_pat
 def test_too_few_rows_names_the_reason(robot, measured, tmp_path):
     path = ms.write_csv(tmp_path / "few.csv", _copy(measured, Q=measured.Q[:5], Y=measured.Y[:5]))
     cfg = _load(f"calibration.measurements_csv={path}").calibration
-    with pytest.raises(DataFileError, match="5 measurement rows, need at least 11 .3 coordinates per row for the 31"):
+    with pytest.raises(DataFileError, match="5 measurement rows, need at least 11 .3 equations per position row"):
         st.check(cfg, robot)

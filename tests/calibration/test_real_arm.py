@@ -6,6 +6,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import error_model as em
@@ -14,7 +15,7 @@ from pipeline.calibration import stage as st
 from pipeline.calibration import validate as va
 from pipeline.calibration.estimate import estimate
 from pipeline.calibration.robust import robust_estimate
-from pipeline.errors import ConfigError, QualityGateError
+from pipeline.errors import ConfigError, DataFileError, QualityGateError
 from pipeline.robot.model import RobotModel
 from pipeline.robot.truth import RealRobot, TruthConfig
 
@@ -44,7 +45,7 @@ def test_geometric_only_calibration_of_an_elastic_arm_fails_its_chi2_gate(robot)
         st.run(_ctx(_cfg(parameters="geometric"), robot, real, 4))
     assert "chi2_per_dof" in str(info.value) and "elasticity" in str(info.value)
     s = info.value.result.summary
-    assert s["chi2_per_dof"] > 10 * 3.0 and s["rms_after_over_sigma"] > 5
+    assert s["chi2_per_dof"] > 3 * 10.0 and s["rms_after_over_sigma"] > 5
     assert s["quality_gates"]["passed"] is False
 
 
@@ -164,3 +165,55 @@ def test_parameter_subsets(robot):
     with pytest.raises(ConfigError, match="31 identifiable"):
         st.check(_cfg(n_configurations=5), robot)
     st.check(_cfg(parameters="joint_offsets", n_configurations=5), robot)   # 15 equations >= 6 + 3 + 6
+
+
+# ------------------------------------------------------------------ 6-D readings
+def _six_d_record(robot, real, Q, rng, sigma_m=1e-4, sigma_rad=1e-3) -> ms.Measurements:
+    """Mocap-like 6-D readings of the marker (= reflector) frame of the deflected arm, tracker frame."""
+    P, R = real.truth.poses(real.link_angles(Q), "reflector")
+    T = real.transform_tracker_to_base.inverse()
+    Y = P @ T.rotation.T + T.translation + sigma_m * rng.standard_normal(P.shape)
+    noise = Rotation.from_rotvec(sigma_rad * rng.standard_normal((len(Q), 3)))
+    rot = (Rotation.from_matrix(np.einsum("ij,njk->nik", T.rotation, R)) * noise).as_rotvec()
+    return ms.Measurements(Q, Y, np.full(len(Q), sigma_m), "mocap", rot, len(Q))
+
+
+def test_23_six_d_poses_calibrate_all_parameters(robot, tmp_path):
+    real = RealRobot.create(robot, 8)
+    rng = np.random.default_rng(8)
+    chain = cd.chain_from_robot(robot)
+    fit = ms.write_csv(tmp_path / "fit.csv", _six_d_record(robot, real, cd.random_candidates(
+        chain, 23, rng, visibility=False)[0], rng))
+    # noise-free validation poses: the nominal orientation error (a few mrad) is only a few times the
+    # 1 mrad mocap noise, so a 5x gain is measured against the true poses
+    val = ms.write_csv(tmp_path / "val.csv", _six_d_record(robot, real, cd.random_candidates(
+        chain, 200, rng, visibility=False)[0], rng, sigma_m=0.0, sigma_rad=0.0))
+    cfg = _cfg(measurements_csv=str(fit), validation_csv=str(val), position_sigma_m=1e-4,
+               orientation_sigma_rad=1e-3)
+    st.check(cfg, robot)   # 23 rows x 6 equations >= the identifiable parameters
+    out = st.calibrate(robot, None, cfg, np.random.default_rng(0))
+    names = out.report.identifiable_names
+    assert len(names) > 27 and any(n.startswith("tool.r") for n in names)   # tool orientation identifiable
+    v = out.validation
+    assert v["after"]["rms"] * 5 <= v["before"]["rms"]
+    # orientation: 23 poses at 1 mrad leave ~0.5 mrad of estimation noise against a ~2.5 mrad nominal
+    # error (the 5x of the position is not reachable here: noise-limited)
+    assert v["after"]["orientation_rad"]["rms"] * 3 <= v["before"]["orientation_rad"]["rms"]
+    # 6 independent equations per 6-D row: 7 rows carry the 34 parameters as 6-D data, not as positions
+    few = ms.read_csv(fit, robot)
+    few = ms.write_csv(tmp_path / "few.csv", ms.Measurements(few.Q[:7], few.Y[:7], few.sigma_m[:7], "few",
+                                                               few.rotvec[:7], 7))
+    st.check(_cfg(measurements_csv=str(few)), robot)
+    with pytest.raises(DataFileError, match="3 equations per position row"):
+        st.check(_cfg(measurements_csv=str(few), use_orientation=False), robot)
+
+
+def test_rotation_columns_in_degrees_are_rejected(robot, tmp_path):
+    rng = np.random.default_rng(1)
+    real = RealRobot.create(robot, 1)
+    Q = cd.random_candidates(cd.chain_from_robot(robot), 30, rng, visibility=False)[0]
+    rec = _six_d_record(robot, real, Q, rng)
+    rec.rotvec = np.degrees(rec.rotvec) + 200.0
+    path = ms.write_csv(tmp_path / "deg.csv", rec)
+    with pytest.raises(DataFileError, match="rotation vector"):
+        st.check(_cfg(measurements_csv=str(path)), robot)
