@@ -77,6 +77,8 @@ class Config:
     payload_com_m: list[float] | None = None
     #: fraction of the selected configurations measured a second time with the payload mounted
     payload_fraction: float = 0.0
+    #: k-fold cross-validation on a measurement file (0: none; e.g. 5), pipeline.calibration.crossval
+    cross_validation_folds: int = 0
     #: 1-sigma of a measurement file's positions (m); None: the tracker noise model of robot.yaml
     position_sigma_m: float | None = None
     #: 6-D readings (CSV rx, ry, rz): fit the orientation too, with this 1-sigma per axis (rad)
@@ -147,6 +149,8 @@ class Config:
         if not (math.isfinite(self.max_chi2_per_dof) and self.max_chi2_per_dof > 1):
             raise bad("max_chi2_per_dof", f"must be > 1 (chi²/dof is 1 for a right model), got {self.max_chi2_per_dof}")
         self._validate_payload(bad)
+        if self.cross_validation_folds != 0 and not 2 <= self.cross_validation_folds <= 50:
+            raise bad("cross_validation_folds", f"must be 0 (none) or in [2, 50], got {self.cross_validation_folds}")
         if self.position_sigma_m is not None and not (math.isfinite(self.position_sigma_m)
                                                       and 0 < self.position_sigma_m < 0.01):
             raise bad("position_sigma_m", f"must be in (0, 0.01) m or null, got {self.position_sigma_m}")

@@ -71,6 +71,7 @@ def summary_of(out: CalibrationOutcome, cfg: Config) -> dict:
         "n_payload_readings": (int(np.sum(out.measurements.payload_mounted))
                                if out.measurements.payload_mounted is not None else 0),
         "gravity_pass": out.notes.get("gravity_pass"),
+        "cross_validation": out.notes.get("cross_validation"),
         "joint_stiffness_Nm_rad": (None if out.robot.spec.actuation.joint_stiffness_Nm_rad is None
                                    else [float(v) for v in out.robot.spec.actuation.joint_stiffness_Nm_rad]),
         "lm_iterations": out.estimate.iterations,
@@ -133,6 +134,11 @@ def report_markdown(out: CalibrationOutcome, cfg: Config, robot) -> str:
         md += [f"Configurations chosen by the user (no selection was run): {d['index_name']} = "
                f"{d['index_value']:.6g} for the {d['n_configurations']} measured configurations.", ""]
     md += ["### Fit", "", va.fit_markdown(out.fit, out.prediction), "", outlier_markdown(out), ""]
+    cv = out.notes.get("cross_validation")
+    if cv is not None and cv["rms_position_error_m"] is not None:
+        md += [f"{cv['folds']}-fold cross-validation on the measurement file: RMS position error of the left-out "
+               f"poses {1e3 * cv['rms_position_error_m']:.4f} mm over {cv['n_poses']} poses "
+               f"({cv['n_folds_not_regular']} fold(s) too small to fit).", ""]
     g = out.notes.get("gravity_pass")
     if g is not None:
         md += [f"Second calibration pass: gravity torques of the elastostatic model from `{g['gravity_model']}` "

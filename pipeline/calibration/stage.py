@@ -35,6 +35,7 @@ from pipeline.calibration import measure as ms
 from pipeline.calibration import subsets
 from pipeline.calibration import validate as va
 from pipeline.calibration.config import MAX_CANDIDATES, Config
+from pipeline.calibration.crossval import cross_validate
 from pipeline.calibration.elastostatic import (
     design_basis,
     gravity_pass,
@@ -254,6 +255,9 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None
                                      rec.payload_mounted, cfg.robust_loss, cfg.outlier_confidence,
                                      cfg.max_outlier_fraction, rec.offset_m)
     notes: dict = {"fit_record": rec} if six_d else {}
+    if user is not None and cfg.cross_validation_folds:
+        notes["cross_validation"] = cross_validate(mm, rec, basis, rejection.rejected, cfg.cross_validation_folds,
+                                                   cfg.max_lm_iterations)
     if upstream_gravity is not None:
         notes["gravity_pass"] = gravity_pass(mm, rec, basis, est, rejection.rejected, cfg, str(cfg.gravity_model))
     timings["estimate_s"] = time.perf_counter() - t

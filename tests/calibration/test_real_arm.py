@@ -189,13 +189,18 @@ def test_23_six_d_poses_calibrate_all_parameters(robot, tmp_path):
     val = ms.write_csv(tmp_path / "val.csv", _six_d_record(robot, real, cd.random_candidates(
         chain, 200, rng, visibility=False)[0], rng, sigma_m=0.0, sigma_rad=0.0))
     cfg = _cfg(measurements_csv=str(fit), validation_csv=str(val), position_sigma_m=1e-4,
-               orientation_sigma_rad=1e-3)
+               orientation_sigma_rad=1e-3, cross_validation_folds=5)
     st.check(cfg, robot)   # 23 rows x 6 equations >= the identifiable parameters
     out = st.calibrate(robot, None, cfg, np.random.default_rng(0))
     names = out.report.identifiable_names
     assert len(names) > 27 and any(n.startswith("tool.r") for n in names)   # tool orientation identifiable
     v = out.validation
     assert v["after"]["rms"] * 5 <= v["before"]["rms"]
+    cv = st.summary_of(out, cfg)["cross_validation"]
+    assert cv["folds"] == 5 and cv["n_poses"] + out.rejection.n_rejected >= 20
+    # out-of-sample: above the 0.1 mm noise of a reading, well below the nominal model's error
+    assert 1e-4 < cv["rms_position_error_m"] < 0.5 * v["before"]["rms"]
+    assert "5-fold cross-validation" in st.report_markdown(out, cfg, robot)
     # orientation: 23 poses at 1 mrad leave ~0.5 mrad of estimation noise against a ~2.5 mrad nominal
     # error (the 5x of the position is not reachable here: noise-limited)
     assert v["after"]["orientation_rad"]["rms"] * 3 <= v["before"]["orientation_rad"]["rms"]
