@@ -98,10 +98,13 @@ def expand_orientation(meas: Measurements, orientation_sigma_rad: float,
                               np.tile([0.0, lever_m, 0.0], (n, 1))])
     Y = np.concatenate([meas.Y, meas.Y + lever_m * R[:, :, 0], meas.Y + lever_m * R[:, :, 1]])
     s_virtual = np.sqrt(meas.sigma_m ** 2 + (lever_m * orientation_sigma_rad) ** 2)
-    rep = lambda a: None if a is None else np.concatenate([a, a, a])  # noqa: E731
     return Measurements(np.concatenate([meas.Q] * 3), Y, np.concatenate([meas.sigma_m, s_virtual, s_virtual]),
-                        meas.source, None, meas.n_requested, meas.invisible, rep(meas.payload_mounted),
-                        rep(meas.lines), offsets, np.concatenate([np.arange(n)] * 3))
+                        meas.source, None, meas.n_requested, meas.invisible, _thrice(meas.payload_mounted),
+                        _thrice(meas.lines), offsets, np.concatenate([np.arange(n)] * 3))
+
+
+def _thrice(a: np.ndarray | None) -> np.ndarray | None:
+    return None if a is None else np.concatenate([a, a, a])
 
 
 def noise_model_sigma(robot, Y: np.ndarray) -> np.ndarray:

@@ -392,6 +392,8 @@ def run(ctx) -> Any:
         "parameter_covariance": est.covariance,
         "transform_tracker_to_base": est.transform_tracker_to_base.homogeneous,
     }
+    if out.rejection is not None and out.rejection.n_rejected:
+        arrays["outliers_rejected_rows"] = np.asarray(out.rejection.rejected, int)
     if out.measurements.invisible is not None and len(out.measurements.invisible):
         arrays["configurations_not_visible"] = out.measurements.invisible
     if out.validation is not None:
