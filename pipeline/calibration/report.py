@@ -150,6 +150,12 @@ def report_markdown(out: CalibrationOutcome, cfg: Config, robot) -> str:
                for r in g["compliances"]]
         md.append("")
     k = out.robot.spec.actuation.joint_stiffness_Nm_rad
+    if (any(n.endswith(".c") for n in out.report.identifiable_names) and g is None
+            and out.estimate.chi2_per_dof > 1.5):
+        md += [f"chi²/dof = {out.estimate.chi2_per_dof:.2f} with the elastostatic model: the gravity torques come "
+               "from this run's (nominal) inertias, whose errors bias the compliances. Run a second calibration "
+               "pass with `calibration.gravity_model: <runs>/<name>/identification/robot` once the "
+               "identification stage has run.", ""]
     if any(n.endswith(".c") for n in out.report.identifiable_names) and k is not None:
         md += ["Joint stiffness carried by the calibrated model (1 / identified compliance; nominal where "
                "not identified) [N·m/rad]: " + ", ".join(f"{v:.4g}" for v in k), ""]
