@@ -53,6 +53,7 @@ def summary_of(out: CalibrationOutcome, cfg: Config) -> dict:
         "n_identifiable": int(out.estimate.theta.size),
         "validation_source": v["source"] if v is not None else None,
         "heldout_n_poses": v["n_poses"] if v is not None else None,
+        "heldout_n_rejected": v["n_rejected"] if v is not None else None,
         "heldout_rms_position_error_before_m": v["before"]["rms"] if v is not None else None,
         "heldout_rms_position_error_after_m": v["after"]["rms"] if v is not None else None,
         "heldout_mean_position_error_after_m": v["after"]["mean"] if v is not None else None,
