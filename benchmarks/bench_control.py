@@ -6,7 +6,7 @@ time of the loop thread, which excludes other processes on a shared box), the sa
 Python loop (``pin.aba`` at every substep) on the first ``python_seconds`` of the path, and the
 speed-up between them, all measured in this run, for the default hidden robot (elastic joints,
 Stribeck friction: the two-mass plant with motor-side encoders) and for the rigid one
-(``rigid_truth_config``). The torque limits are not enforced here (``on_saturation = clip``): only
+(``TruthConfig.ideal()``). The torque limits are not enforced here (``on_saturation = clip``): only
 the speed is measured.
 """
 
@@ -24,7 +24,7 @@ from pipeline.control.reference import cartesian_reference
 from pipeline.control.simulate import simulate_joint_trajectory
 from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import start_configuration
-from pipeline.robot.truth import RealRobot, TruthConfig, rigid_truth_config
+from pipeline.robot.truth import RealRobot, TruthConfig
 
 
 def main(robot_name: str = "rx130l", python_seconds: float = 1.0) -> None:
@@ -39,7 +39,7 @@ def main(robot_name: str = "rx130l", python_seconds: float = 1.0) -> None:
     print(f"ISO 9283 path: {path.length_m:.3f} m, {ref.t_s[-1]:.2f} s, {len(ref.t_s)} samples of "
           f"{cfg.sample_time_s * 1e6:.0f} us; reference (ruckig + IK every sample) {t_ref:.2f} s")
     for label, truth_config in (("elastic joints + Stribeck friction", TruthConfig()),
-                                ("rigid joints, viscous + Coulomb", rigid_truth_config())):
+                                ("rigid joints, viscous + Coulomb", TruthConfig.ideal())):
         real = RealRobot.create(robot, 1, truth_config)
         print(f"--- hidden robot: {label} (elastic plant: {real.plant.elastic}, "
               f"{real.plant.substeps_for(cfg.sample_time_s / 2)} substeps per 200 us)")

@@ -11,7 +11,10 @@ import math
 from dataclasses import dataclass
 
 from pipeline.calibration import indices as ix
+from pipeline.calibration.robust import LOSSES
+from pipeline.calibration.subsets import check_parameters
 from pipeline.errors import ConfigError
+from pipeline.robot.payload import Payload
 
 SELECTION_METHODS = ("remove_and_replace", "detmax", "bsaa", "random", "gradient")
 CANDIDATE_KINDS = ("grid", "random")
@@ -57,6 +60,41 @@ class Config:
     measurements_csv: str | None = None
     validation_csv: str | None = None
     figures: bool = True
+    #: all | geometric | joint_offsets | joint_offsets+compliance | [names] (pipeline.calibration.subsets)
+    parameters: str | list[str] = "all"
+    #: robust loss before the outlier test: huber | cauchy | linear (pipeline.calibration.robust)
+    robust_loss: str = "huber"
+    #: per-reading confidence of the chi-square outlier test on whitened residuals
+    outlier_confidence: float = 0.999
+    #: at most this fraction of the readings is rejected (more failing the test: model inadequate)
+    max_outlier_fraction: float = 0.1
+    #: quality gate: chi²/dof of the final fit must not exceed this (1 = the tracker noise model).
+    #: A rigid model of an elastic arm gives hundreds; the elastostatic model with the nominal
+    #: (unidentified) gravity model 1-5 (its inertia errors; the second pass with gravity_model brings it to 1)
+    max_chi2_per_dof: float = 10.0
+    #: known payload mounted on the flange for some measurements: mass (kg), COM in the flange frame (m)
+    payload_mass_kg: float | None = None
+    payload_com_m: list[float] | None = None
+    #: fraction of the selected configurations measured a second time with the payload mounted
+    payload_fraction: float = 0.0
+    #: k-fold cross-validation on a measurement file (0: none; e.g. 5), pipeline.calibration.crossval
+    cross_validation_folds: int = 0
+    #: 1-sigma of a measurement file's positions (m); None: the tracker noise model of robot.yaml
+    position_sigma_m: float | None = None
+    #: 6-D readings (CSV rx, ry, rz): fit the orientation too, with this 1-sigma per axis (rad)
+    use_orientation: bool = True
+    orientation_sigma_rad: float = 1.0e-3
+    #: robot folder whose inertias give the gravity torques of the elastostatic model (second pass
+    #: after identification: ``<runs>/<name>/identification/robot`` of a previous run); None: this
+    #: run's model (nominal)
+    gravity_model: str | None = None
+
+    def payload(self) -> Payload | None:
+        """The known payload (None when no mass is given)."""
+        if self.payload_mass_kg is None:
+            return None
+        com = tuple(float(v) for v in (self.payload_com_m or (0.0, 0.0, 0.0)))
+        return Payload(float(self.payload_mass_kg), com)
 
     def validate(self, source: str = "config") -> None:
         """Robot-independent checks of every field (robot-dependent ones: :func:`check`)."""
@@ -101,6 +139,23 @@ class Config:
             if self.n_pilot >= self.n_configurations:
                 raise bad("n_pilot", f"the pilot measurements count towards n_configurations = "
                           f"{self.n_configurations}: must be smaller, got {self.n_pilot}")
+        check_parameters(self.parameters, source)
+        if self.robust_loss not in LOSSES:
+            raise bad("robust_loss", f"must be one of {LOSSES}, got {self.robust_loss!r}")
+        if not (math.isfinite(self.outlier_confidence) and 0.5 < self.outlier_confidence < 1):
+            raise bad("outlier_confidence", f"must be in (0.5, 1), got {self.outlier_confidence}")
+        if not (math.isfinite(self.max_outlier_fraction) and 0 <= self.max_outlier_fraction < 0.5):
+            raise bad("max_outlier_fraction", f"must be in [0, 0.5), got {self.max_outlier_fraction}")
+        if not (math.isfinite(self.max_chi2_per_dof) and self.max_chi2_per_dof > 1):
+            raise bad("max_chi2_per_dof", f"must be > 1 (chi²/dof is 1 for a right model), got {self.max_chi2_per_dof}")
+        self._validate_payload(bad)
+        if self.cross_validation_folds != 0 and not 2 <= self.cross_validation_folds <= 50:
+            raise bad("cross_validation_folds", f"must be 0 (none) or in [2, 50], got {self.cross_validation_folds}")
+        if self.position_sigma_m is not None and not (math.isfinite(self.position_sigma_m)
+                                                      and 0 < self.position_sigma_m < 0.01):
+            raise bad("position_sigma_m", f"must be in (0, 0.01) m or null, got {self.position_sigma_m}")
+        if not (math.isfinite(self.orientation_sigma_rad) and 0 < self.orientation_sigma_rad < 0.1):
+            raise bad("orientation_sigma_rad", f"must be in (0, 0.1) rad, got {self.orientation_sigma_rad}")
         tol = self.identifiability_rel_tol
         if not (math.isfinite(tol) and 0 < tol < 1):
             raise bad("identifiability_rel_tol", f"must be in (0, 1) (relative singular value), got {tol}")
@@ -114,3 +169,22 @@ class Config:
         if self.selection_method == "gradient" and self.index_name not in GRADIENT_INDICES:
             raise bad("selection_method", f"gradient optimises an A-type index (calibration.index_name one of "
                       f"{GRADIENT_INDICES}), but index_name is {self.index_name!r}")
+
+    def _validate_payload(self, bad) -> None:  # noqa: ANN001 - the local error factory of validate
+        mass = self.payload_mass_kg
+        if mass is None:
+            if self.payload_com_m is not None or self.payload_fraction > 0:
+                raise bad("payload_mass_kg", "a payload (payload_com_m or payload_fraction > 0) needs its mass in kg")
+            return
+        if isinstance(mass, bool) or not isinstance(mass, int | float) or not math.isfinite(mass) or mass <= 0:
+            raise bad("payload_mass_kg", f"must be a positive mass in kg, got {mass!r}")
+        com = self.payload_com_m
+        finite = isinstance(com, list) and all(isinstance(v, int | float) and math.isfinite(v) and abs(v) < 2
+                                               for v in com)
+        if com is not None and (not finite or len(com) != 3):
+            raise bad("payload_com_m", f"must be 3 numbers in m (flange frame, |v| < 2), got {com!r}")
+        if not (math.isfinite(self.payload_fraction) and 0 <= self.payload_fraction <= 1):
+            raise bad("payload_fraction", f"must be in [0, 1], got {self.payload_fraction}")
+        if self.payload_fraction == 0 and not self.measurements_csv:
+            raise bad("payload_fraction", "a payload is given but no configuration is measured with it: "
+                      "set payload_fraction in (0, 1]")

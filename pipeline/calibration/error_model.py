@@ -8,9 +8,15 @@ Parameters ``x`` (all zero = nominal):
   axes (``error_model="mdh_hayati"``, a linear basis ``p_kin = B x_mdh``, see :func:`mdh_basis`);
 - ``tracker.dx..rz``: the tracker pose ``T_tb = T_tb0 exp6(xi)`` (``p_base = T_tb p_tracker``), with
   ``T_tb0`` the current estimate (nominal, then the registration result);
-- ``reflector.dx dy dz``: reflector offset error in the reflector (= flange-aligned) frame.
+- ``reflector.dx dy dz``: reflector offset error in the reflector (= flange-aligned) frame;
+- with ``compliance=True`` (elastostatic model, paper 000 Outlook): ``j{i}.c`` the torsional
+  compliance of joint i (rad/(N m)); the link-side angles of a static pose are
+  ``q_link = q - c * g(q)`` with ``g`` the gravity torques of the current dynamic model (the
+  RobotModel's inertias: nominal, or identified) with the known payload when it is mounted.
+  ``g`` is evaluated at the commanded angles (first order in ``c``; the second order is
+  ``|c g'| ~ 1e-3`` of the deflection).
 
-Measurement (tracker frame): ``y(q, x) = T_tb^-1 (p_refl(q, p_kin) + R_refl(q, p_kin) dr)``.
+Measurement (tracker frame): ``y(q, x) = T_tb^-1 (p_refl(q_link, p_kin) + R_refl(q_link, p_kin) dr)``.
 The identification Jacobian ``dy/dx`` is exact (CasADi AD of the SX model; paper 002 eq. 10-12,
 paper 003 eq. 15).
 
@@ -34,10 +40,17 @@ import pinocchio as pin
 
 from pipeline.robot import spatial_sx as sx
 from pipeline.robot.parameters import KINEMATIC_COMPONENTS
+from pipeline.robot.payload import Payload, gravity_torques_Nm, with_payload
 from pipeline.robot.symbolic import SymbolicRobot
 
 TRACKER_NAMES = [f"tracker.{c}" for c in KINEMATIC_COMPONENTS]
 REFLECTOR_NAMES = ["reflector.dx", "reflector.dy", "reflector.dz"]
+#: suffix of the joint compliance parameters ``j{i}.c`` (rad/(N m))
+COMPLIANCE_SUFFIX = ".c"
+
+
+def is_compliance(name: str) -> bool:
+    return name.startswith("j") and name.endswith(COMPLIANCE_SUFFIX)
 
 
 def se3_to_vector(T: pin.SE3) -> np.ndarray:
@@ -53,32 +66,73 @@ class MeasurementModel:
     ``Function.map`` in chunks.
     """
 
-    def __init__(self, robot, sym: SymbolicRobot | None = None, chunk: int = 4096) -> None:
+    def __init__(self, robot, sym: SymbolicRobot | None = None, chunk: int = 4096, compliance: bool = False,
+                 payload: Payload | None = None, marker_points: bool = False) -> None:
         self.robot = robot
         self.sym = sym if sym is not None else SymbolicRobot(robot)
         self.nq = self.sym.nq
         self.n_kin = self.sym.n_kin
+        self.compliance = bool(compliance)
+        #: rows may be points at an offset ``o`` in the reflector frame (6-D readings, measure.py)
+        self.marker_points = bool(marker_points)
+        self.payload = payload
         self.names: list[str] = list(self.sym.kinematic_parameter_names) + TRACKER_NAMES + REFLECTOR_NAMES
+        if self.compliance:
+            self.names += [f"j{i}{COMPLIANCE_SUFFIX}" for i in range(1, self.nq + 1)]
         self.n = len(self.names)
         self.sl_kin = slice(0, self.n_kin)
         self.sl_tracker = slice(self.n_kin, self.n_kin + 6)
         self.sl_reflector = slice(self.n_kin + 6, self.n_kin + 9)
+        self.sl_compliance = slice(self.n_kin + 9, self.n)
         self.chunk = chunk
+        self.set_gravity_model(robot.model)
         q = ca.SX.sym("q", self.nq)
         x = ca.SX.sym("x", self.n)
         t0 = ca.SX.sym("T0", 12)
-        pos, rot = self.sym.fk_expression(self.robot.frame_reflector, q, x[self.sl_kin])
-        p_base = pos + ca.mtimes(rot, x[self.sl_reflector])
+        tau = ca.SX.sym("tau", self.nq)
+        offset = ca.SX.sym("o", 3)
+        extra = ([tau] if self.compliance else []) + ([offset] if self.marker_points else [])
+        q_link = q - x[self.sl_compliance] * tau if self.compliance else q
+        pos, rot = self.sym.fk_expression(self.robot.frame_reflector, q_link, x[self.sl_kin])
+        marker = x[self.sl_reflector] + offset if self.marker_points else x[self.sl_reflector]
+        p_base = pos + ca.mtimes(rot, marker)
         R0 = ca.reshape(t0[:9], 3, 3).T  # row-major
         Rx, px = sx.exp6(x[self.sl_tracker])
         R = ca.mtimes(R0, Rx)
         p = ca.mtimes(R0, px) + t0[9:12]
         y = ca.mtimes(R.T, p_base - p)
-        self.h = ca.Function("h", [q, x, t0], [y])
-        self.hj = ca.Function("hj", [q, x, t0], [y, ca.jacobian(y, x)])
+        self.h = ca.Function("h", [q, x, t0, *extra], [y])
+        self.hj = ca.Function("hj", [q, x, t0, *extra], [y, ca.jacobian(y, x)])
         # base-frame reflector position and its configuration Jacobian (for predictions)
-        self.base_pos = ca.Function("pb", [q, x], [p_base, rot])
+        self.base_pos = ca.Function("pb", [q, x, *extra], [p_base, rot])
         self._maps: dict[tuple[str, int], ca.Function] = {}
+
+    @property
+    def gravity_model(self) -> pin.Model:
+        """The model whose inertias give the gravity torques (the robot's own, or an upstream one)."""
+        return self._gravity_model
+
+    def set_gravity_model(self, model: pin.Model) -> None:
+        """Take the gravity torques from ``model``'s inertias (e.g. an identified model)."""
+        self._gravity_model = model
+        self._payload_model = with_payload(model, self.robot.frame_flange, self.payload)
+
+    def static_torques(self, Q: np.ndarray, mounted: np.ndarray | None = None) -> np.ndarray:
+        """``(N, nq)`` gravity torques of the current dynamic model, with the payload where ``mounted``."""
+        Q = np.atleast_2d(np.asarray(Q, float))
+        tau = gravity_torques_Nm(self._gravity_model, Q)
+        if mounted is not None and np.any(mounted):
+            if self.payload is None:
+                raise ValueError("payload readings but the measurement model has no payload")
+            m = np.asarray(mounted, bool)
+            tau[m] = gravity_torques_Nm(self._payload_model, Q[m])
+        return tau
+
+    def _extra(self, Q: np.ndarray, mounted: np.ndarray | None, offsets: np.ndarray | None) -> list[np.ndarray]:
+        out = [self.static_torques(Q, mounted).T] if self.compliance else []
+        if self.marker_points:
+            out.append(np.zeros((3, len(Q))) if offsets is None else np.asarray(offsets, float).T)
+        return out
 
     def _mapped(self, name: str, n: int) -> ca.Function:
         key = (name, n)
@@ -87,19 +141,23 @@ class MeasurementModel:
             self._maps[key] = f.map(n)
         return self._maps[key]
 
-    def predict(self, Q: np.ndarray, x: np.ndarray, T0: pin.SE3) -> np.ndarray:
-        """Predicted tracker-frame positions ``(N, 3)``."""
+    def predict(self, Q: np.ndarray, x: np.ndarray, T0: pin.SE3, mounted: np.ndarray | None = None,
+                offsets: np.ndarray | None = None) -> np.ndarray:
+        """Predicted tracker-frame positions ``(N, 3)`` (``mounted``: rows measured with the payload)."""
         Q = np.atleast_2d(np.asarray(Q, float))
         t0 = se3_to_vector(T0)
         out = np.empty((len(Q), 3))
         for s in range(0, len(Q), self.chunk):
             Qc = Q[s : s + self.chunk]
             f = self._mapped("h", len(Qc))
-            out[s : s + len(Qc)] = np.asarray(f(Qc.T, x, t0)).T
+            mc = None if mounted is None else mounted[s : s + self.chunk]
+            oc = None if offsets is None else offsets[s : s + self.chunk]
+            out[s : s + len(Qc)] = np.asarray(f(Qc.T, x, t0, *self._extra(Qc, mc, oc))).T
         return out
 
     def jacobian(self, Q: np.ndarray, x: np.ndarray, T0: pin.SE3,
-                 basis: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                 basis: np.ndarray | None = None, mounted: np.ndarray | None = None,
+                 offsets: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Predictions ``(N, 3)`` and Jacobian blocks ``(N, 3, p)`` wrt ``theta`` where
         ``x = x_current + basis @ theta`` (``basis`` (n, p); None: all parameters)."""
         Q = np.atleast_2d(np.asarray(Q, float))
@@ -110,13 +168,16 @@ class MeasurementModel:
         for s in range(0, len(Q), self.chunk):
             Qc = Q[s : s + self.chunk]
             n = len(Qc)
-            y, jac = self._mapped("hj", n)(Qc.T, x, t0)
+            mc = None if mounted is None else mounted[s : s + self.chunk]
+            oc = None if offsets is None else offsets[s : s + self.chunk]
+            y, jac = self._mapped("hj", n)(Qc.T, x, t0, *self._extra(Qc, mc, oc))
             Y[s : s + n] = np.asarray(y).T
             jac = np.asarray(jac).reshape(3, n, self.n).transpose(1, 0, 2)  # hcat of (3 x n_x) blocks
             J[s : s + n] = jac @ P
         return Y, J
 
-    def base_positions(self, Q: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def base_positions(self, Q: np.ndarray, x: np.ndarray, mounted: np.ndarray | None = None,
+                       offsets: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Reflector positions ``(N, 3)`` and rotations ``(N, 3, 3)`` in the robot base frame."""
         Q = np.atleast_2d(np.asarray(Q, float))
         P = np.empty((len(Q), 3))
@@ -124,7 +185,9 @@ class MeasurementModel:
         for s in range(0, len(Q), self.chunk):
             Qc = Q[s : s + self.chunk]
             n = len(Qc)
-            p, r = self._mapped("pb", n)(Qc.T, x)
+            mc = None if mounted is None else mounted[s : s + self.chunk]
+            oc = None if offsets is None else offsets[s : s + self.chunk]
+            p, r = self._mapped("pb", n)(Qc.T, x, *self._extra(Qc, mc, oc))
             P[s : s + n] = np.asarray(p).T
             R[s : s + n] = np.asarray(r).reshape(3, n, 3).transpose(1, 0, 2)
         return P, R
@@ -132,13 +195,14 @@ class MeasurementModel:
 
 def priority_order(names: list[str]) -> list[int]:
     """Columns in the order the base set is built: tracker, reflector, joint zero offsets,
-    joint placements, base, tool (sensor set-up first; robot base frame and tool kept nominal
-    when they cannot be told apart from the set-up)."""
+    joint compliances, joint placements, base, tool (sensor set-up first; robot base frame and
+    tool kept nominal when they cannot be told apart from the set-up)."""
     groups = [
         [i for i, n in enumerate(names) if n.startswith("tracker.")],
         [i for i, n in enumerate(names) if n.startswith("reflector.")],
         [i for i, n in enumerate(names) if n.startswith("j") and n.endswith(".dq")],
-        [i for i, n in enumerate(names) if n.startswith("j") and not n.endswith(".dq")],
+        [i for i, n in enumerate(names) if is_compliance(n)],
+        [i for i, n in enumerate(names) if n.startswith("j") and not n.endswith(".dq") and not is_compliance(n)],
         [i for i, n in enumerate(names) if n.startswith("base.")],
         [i for i, n in enumerate(names) if n.startswith("tool.")],
     ]

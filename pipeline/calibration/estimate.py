@@ -23,6 +23,7 @@ from scipy.spatial.transform import Rotation
 from pipeline.calibration.error_model import MeasurementModel
 from pipeline.errors import SolverError
 from pipeline.robot.parameters import apply_kinematic_errors
+from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 
 
 def register_points(tracker_points: np.ndarray, base_points: np.ndarray) -> pin.SE3:
@@ -60,14 +61,16 @@ class Estimate:
 
 def levenberg_marquardt(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarray,
                         basis: np.ndarray, T0: pin.SE3, max_iterations: int = 50,
-                        tol: float = 1e-10) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, bool, list[float]]:
+                        tol: float = 1e-10, mounted: np.ndarray | None = None,
+                        offsets: np.ndarray | None = None
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, bool, list[float]]:
     """Minimise ``sum |(Y - h(Q, basis @ theta, T0)) / sigma|^2`` over ``theta``."""
     P = np.asarray(basis, float)
     theta = np.zeros(P.shape[1])
     w = 1.0 / np.asarray(sigma, float)
 
     def resid_jac(th: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        pred, J = mm.jacobian(Q, P @ th, T0, P)
+        pred, J = mm.jacobian(Q, P @ th, T0, P, mounted, offsets)
         r = ((Y - pred) * w[:, None]).reshape(-1)
         Jw = (J * w[:, None, None]).reshape(-1, P.shape[1])
         return r, Jw
@@ -110,8 +113,9 @@ def levenberg_marquardt(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigm
 
 
 def estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarray, basis: np.ndarray,
-             source: str = "measurements", max_iterations: int = 50) -> Estimate:
-    """Registration + LM + covariance (see module docstring)."""
+             source: str = "measurements", max_iterations: int = 50, mounted: np.ndarray | None = None,
+             offsets: np.ndarray | None = None) -> Estimate:
+    """Registration + LM + covariance (see module docstring); ``mounted``: rows read with the payload."""
     Q = np.asarray(Q, float)
     Y = np.asarray(Y, float)
     P = np.asarray(basis, float)
@@ -119,29 +123,30 @@ def estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarr
     if 3 * len(Q) < p:
         raise SolverError(source, "measurements",
                           f"{len(Q)} points give {3 * len(Q)} equations for {p} identifiable parameters")
-    P_nom, _ = mm.base_positions(Q, np.zeros(mm.n))
+    P_nom, _ = mm.base_positions(Q, np.zeros(mm.n), mounted, offsets)
     T_reg = register_points(Y, P_nom)
     # regularity of the information matrix before iterating
-    _, J0 = mm.jacobian(Q, np.zeros(mm.n), T_reg, P)
+    _, J0 = mm.jacobian(Q, np.zeros(mm.n), T_reg, P, mounted, offsets)
     J0 = (J0 / np.asarray(sigma, float)[:, None, None]).reshape(-1, p)
     ev = np.linalg.eigvalsh(J0.T @ J0)
     if not ev[0] > 1e-12 * ev[-1]:
         raise SolverError(source, "information matrix",
                           f"singular (smallest/largest eigenvalue {max(ev[0], 0.0) / ev[-1]:.3g}): "
                           f"the configurations do not excite all {p} identifiable parameters")
-    theta, x, J, it, conv, hist = levenberg_marquardt(mm, Q, Y, sigma, P, T_reg, max_iterations)
+    theta, x, J, it, conv, hist = levenberg_marquardt(mm, Q, Y, sigma, P, T_reg, max_iterations, mounted=mounted,
+                                                      offsets=offsets)
     A = J.T @ J
     C = np.linalg.inv(A)
     C = 0.5 * (C + C.T)
     dof = max(J.shape[0] - p, 1)
     chi2 = hist[-1] / dof
-    pred = mm.predict(Q, x, T_reg)
+    pred = mm.predict(Q, x, T_reg, mounted, offsets)
     res = np.linalg.norm(Y - pred, axis=1)
     T_id = T_reg * pin.exp6(x[mm.sl_tracker])
     return Estimate(x, theta, P, C, T_id, T_reg, it, float(chi2), float(np.sqrt(np.mean(res ** 2))), conv, hist)
 
 
-def calibrated_robot(robot, mm: MeasurementModel, x: np.ndarray):
+def calibrated_robot(robot, mm: MeasurementModel, x: np.ndarray, basis: np.ndarray | None = None):
     """``RobotModel`` with the identified kinematic errors (lead's conventions, docs/requests/calibration.md).
 
     - Joint placements and zero offsets: the identified ``j{i}.*`` errors (``apply_kinematic_errors``).
@@ -149,7 +154,12 @@ def calibrated_robot(robot, mm: MeasurementModel, x: np.ndarray):
       readings (they are the unknown tracker pose) and stay zero.
     - Rigid tool: the identified reflector-offset correction ``dr`` (reflector frame) is applied as a
       tool *translation* ``tool.dx,dy,dz = R_flange_reflector dr`` in the flange frame, so the TCP moves
-      with the reflector. Tool rotations are unobservable with one reflector and stay nominal.
+      with the reflector. Tool rotations are unobservable from positions of one reflector and stay
+      nominal; 6-D readings (marker orientation) identify them (``tool.rx..rz``, applied with the rest).
+    - Joint compliances (elastostatic model): ``actuation.joint_stiffness_Nm_rad = 1 / c_i`` for each
+      identified positive compliance; a joint whose compliance was not identified (no gravity
+      load, or not in the parameter subset) or came out non-positive keeps the nominal stiffness
+      (:func:`pipeline.robot.stiffness.nominal_joint_stiffness_Nm_rad`).
     The robot.yaml facts (TCP and reflector in the flange frame) are updated to match, so
     ``save``/``load`` reproduce the model.
     """
@@ -168,4 +178,11 @@ def calibrated_robot(robot, mm: MeasurementModel, x: np.ndarray):
     rfl = fl.inverse() * model.frames[model.getFrameId(robot.frame_reflector)].placement
     new.spec.tool.transform_tcp_to_flange = pin.SE3(tcp.rotation.copy(), tcp.translation.copy())
     new.spec.tool.reflector_offset_m = np.asarray(rfl.translation, float).copy()
+    if mm.compliance:
+        c = x[mm.sl_compliance]
+        rows = np.ones(mm.n, bool) if basis is None else np.any(np.asarray(basis)[:, :] != 0, axis=1)
+        known = rows[mm.sl_compliance] & (c > 0)
+        k = nominal_joint_stiffness_Nm_rad(robot)
+        k[known] = 1.0 / c[known]
+        new.spec.actuation.joint_stiffness_Nm_rad = k
     return new

@@ -4,9 +4,12 @@ CSV format (one row per configuration, comma separated, header recommended)::
 
     q1,q2,q3,q4,q5,q6,x,y,z[,rx,ry,rz]
 
-``q*`` joint angles in rad (Pinocchio order), ``x, y, z`` the reflector position in the tracker
-frame in m, optional ``rx, ry, rz`` the rotation vector (axis * angle, rad) of the reflector frame
-in the tracker frame (a 6-D tracker probe); used by the validation only. Any problem (missing
+``q*`` joint angles in rad (Pinocchio order), ``x, y, z`` the reflector (marker) position in the
+tracker frame in m, optional ``rx, ry, rz`` the rotation vector (axis * angle, rad; ``R = exp(r^)``,
+scipy ``Rotation.from_rotvec``) of the marker frame in the tracker frame: ``R`` maps marker-frame
+axes to tracker-frame axes, the marker frame being the reflector frame of robot.yaml (flange
+orientation, at the reflector offset). Such 6-D readings (6-DOF tracker probe, motion capture)
+enter the fit (:func:`expand_orientation`) and the validation reports orientation errors. Any problem (missing
 file, wrong column count, non-numeric or NaN/inf value, too few rows, joint angles outside the
 limits, values in the wrong unit: positions in mm, angles in degrees) raises
 :class:`pipeline.errors.DataFileError` naming the file, the file line (1-based, as an editor shows
@@ -20,8 +23,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from pipeline.errors import DataFileError
+from pipeline.robot.payload import Payload
 
 
 @dataclass
@@ -35,18 +40,71 @@ class Measurements:
     rotvec: np.ndarray | None = None   # (N, 3) optional orientation
     n_requested: int = 0          # configurations commanded (simulated), before visibility
     invisible: np.ndarray | None = None  # commanded configurations the tracker could not see
+    #: (N,) bool: read with the known payload mounted (None: never)
+    payload_mounted: np.ndarray | None = None
+    #: (N,) file line of each row (CSV data), None for simulated readings
+    lines: np.ndarray | None = None
+    #: (N, 3) marker-point offset of each row in the reflector frame (6-D readings, expand_orientation)
+    offset_m: np.ndarray | None = None
+    #: (N,) row of the original record each row comes from (6-D readings), None: the identity
+    pose_index: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.Q)
 
 
-def measure_simulated(real, Q: np.ndarray, rng: np.random.Generator) -> Measurements:
-    """Command ``Q`` on the real robot and read the tracker; invisible rows are dropped."""
+def measure_simulated(real, Q: np.ndarray, rng: np.random.Generator, payload: Payload | None = None
+                      ) -> Measurements:
+    """Command ``Q`` on the real robot (``payload`` mounted) and read the tracker; invisible rows are dropped."""
     Q = np.atleast_2d(np.asarray(Q, float))
-    reading = real.tracker.measure(Q, rng)
+    reading = real.tracker.measure(Q, rng, payload) if payload is not None else real.tracker.measure(Q, rng)
     vis = np.asarray(reading.visible, bool)
+    mounted = np.full(int(vis.sum()), True) if payload is not None else None
     return Measurements(Q[vis], np.asarray(reading.position_m)[vis], np.asarray(reading.sigma_m)[vis],
-                        "simulated tracker", None, len(Q), Q[~vis])
+                        "simulated tracker", None, len(Q), Q[~vis], mounted)
+
+
+def concatenate(parts: list[Measurements], source: str) -> Measurements:
+    """One record of several (payload flags filled with False where a part has none)."""
+    mounted = None
+    if any(p.payload_mounted is not None for p in parts):
+        mounted = np.concatenate([p.payload_mounted if p.payload_mounted is not None else np.zeros(len(p), bool)
+                                  for p in parts])
+    nq = parts[0].Q.shape[1]
+    invisible = np.vstack([p.invisible if p.invisible is not None else np.zeros((0, nq)) for p in parts])
+    rot = None if any(p.rotvec is None for p in parts) else np.vstack([p.rotvec for p in parts])
+    return Measurements(np.vstack([p.Q for p in parts]), np.vstack([p.Y for p in parts]),
+                        np.concatenate([p.sigma_m for p in parts]), source, rot,
+                        sum(p.n_requested for p in parts), invisible, mounted)
+
+
+#: lever of the virtual marker points of a 6-D reading (m)
+MARKER_LEVER_M = 1.0
+
+
+def expand_orientation(meas: Measurements, orientation_sigma_rad: float,
+                       lever_m: float = MARKER_LEVER_M) -> Measurements:
+    """A 6-D record as three point readings per pose: the marker origin and two virtual points
+    ``lever_m`` along the measured marker x and y axes, ``y + L R_meas e_k`` (tracker frame), whose
+    model is the reflector frame's point ``dr + L e_k``. Their sigma is ``sqrt(sigma_p^2 + (L
+    sigma_rot)^2)`` (the position noise they share with the origin is small against ``L sigma_rot``
+    for a mocap-like 0.1 mm / 1 mrad: its correlation is neglected). Two axes fix the orientation,
+    so a pose gives 6 independent equations; registration and fit see position and orientation."""
+    if meas.rotvec is None:
+        return meas
+    n = len(meas)
+    R = Rotation.from_rotvec(meas.rotvec).as_matrix()
+    offsets = np.concatenate([np.zeros((n, 3)), np.tile([lever_m, 0.0, 0.0], (n, 1)),
+                              np.tile([0.0, lever_m, 0.0], (n, 1))])
+    Y = np.concatenate([meas.Y, meas.Y + lever_m * R[:, :, 0], meas.Y + lever_m * R[:, :, 1]])
+    s_virtual = np.sqrt(meas.sigma_m ** 2 + (lever_m * orientation_sigma_rad) ** 2)
+    return Measurements(np.concatenate([meas.Q] * 3), Y, np.concatenate([meas.sigma_m, s_virtual, s_virtual]),
+                        meas.source, None, meas.n_requested, meas.invisible, _thrice(meas.payload_mounted),
+                        _thrice(meas.lines), offsets, np.concatenate([np.arange(n)] * 3))
+
+
+def _thrice(a: np.ndarray | None) -> np.ndarray | None:
+    return None if a is None else np.concatenate([a, a, a])
 
 
 def noise_model_sigma(robot, Y: np.ndarray) -> np.ndarray:
@@ -136,7 +194,7 @@ def read_csv(path: str | Path, robot, min_rows: int = 1, min_rows_field: str | N
                                 f"rotation vector of norm {norm[k]:.4g} > pi: a rotation vector (axis * angle) "
                                 "must be in rad" + (" (the values look like degrees)" if norm.max() <= 180 + 1e-6
                                                     else ""))
-    return Measurements(Q, Y, noise_model_sigma(robot, Y), str(path), rot, len(Q), np.zeros((0, nq)))
+    return Measurements(Q, Y, noise_model_sigma(robot, Y), str(path), rot, len(Q), np.zeros((0, nq)), None, lines)
 
 
 def _check_joint_angles(path: Path, Q: np.ndarray, robot, lines: np.ndarray) -> None:

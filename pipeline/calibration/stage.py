@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -33,59 +32,63 @@ from pipeline.calibration import design as ds
 from pipeline.calibration import error_model as em
 from pipeline.calibration import indices as ix
 from pipeline.calibration import measure as ms
+from pipeline.calibration import subsets
 from pipeline.calibration import validate as va
 from pipeline.calibration.config import MAX_CANDIDATES, Config
-from pipeline.calibration.estimate import Estimate, calibrated_robot, estimate
-from pipeline.errors import ConfigError, InfeasibleError, PipelineError
+from pipeline.calibration.crossval import cross_validate
+from pipeline.calibration.elastostatic import (
+    design_basis,
+    gravity_pass,
+    load_gravity_model,
+    measure_with_payload,
+    measurement_model,
+)
+from pipeline.calibration.estimate import Estimate, calibrated_robot
+from pipeline.calibration.outcome import CalibrationOutcome
+from pipeline.calibration.report import (  # noqa: F401 - re-exported (tests, notebook)
+    from_file,
+    n_not_visible,
+    report_markdown,
+    summary_of,
+    visibility_sentence,
+)
+from pipeline.calibration.robust import robust_estimate
+from pipeline.errors import ConfigError, DataFileError, InfeasibleError, PipelineError
 from pipeline.progress import task
+from pipeline.quality import QualityGates
 
 NAME = "calibration"
 DEPENDS: tuple[str, ...] = ("model",)
 
-@dataclass
-class CalibrationOutcome:
-    """Everything the stage computed (also used by studies and the notebook)."""
-
-    report: em.IdentifiabilityReport
-    names: list[str]
-    candidates: cd.CandidateSet | None
-    selection: ds.SelectionResult | None
-    measurements: ms.Measurements
-    estimate: Estimate
-    validation: dict | None         # None: no held-out validation (measurement file, no validation file)
-    robot: Any
-    timings_s: dict[str, float]
-    gradient: Any = None
-    working_Q: np.ndarray | None = None
-    #: index of the configurations actually measured (``method`` "user file" for a measurement file)
-    measured_design: dict | None = None
-    #: in-sample fit residuals (:func:`pipeline.calibration.validate.fit_residuals`)
-    fit: dict | None = None
-    #: covariance-predicted error over random visible poses (only when there is no held-out set)
-    prediction: dict | None = None
-
-
 def identify_parameter_set(robot, mm: em.MeasurementModel, cfg: Config, rng: np.random.Generator
                            ) -> tuple[em.IdentifiabilityReport, np.ndarray]:
-    """Identifiability analysis on random configurations (paper 002 SVD, paper 003 correlations).
+    """Identifiability analysis on random configurations (paper 002 SVD, paper 003 correlations)
+    of the parameters in ``calibration.parameters`` (:mod:`pipeline.calibration.subsets`).
 
     Returns the report (in the error model's own parameters) and the basis ``P`` (n_full, p) of
     the identifiable parameters, ``x = P theta``.
     """
     Q = em.random_configurations(robot, cfg.identifiability_samples, rng)
-    chain = cd.chain_from_robot(robot)
-    _, J = cd.nominal_jacobian(chain, Q, robot.tracker.transform_tracker_to_base)
+    if mm.marker_points:   # 6-D readings: the marker origin and the two virtual axis points
+        n = len(Q)
+        offsets = np.repeat(ms.MARKER_LEVER_M * np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]), n, 0)
+        _, J = mm.jacobian(np.concatenate([Q] * 3), np.zeros(mm.n), robot.tracker.transform_tracker_to_base,
+                           offsets=offsets)
+    elif mm.compliance:   # the elastostatic columns need the gravity torques: the CasADi model
+        _, J = mm.jacobian(Q, np.zeros(mm.n), robot.tracker.transform_tracker_to_base)
+    else:
+        _, J = cd.nominal_jacobian(cd.chain_from_robot(robot), Q, robot.tracker.transform_tracker_to_base)
     J = J.reshape(-1, mm.n)
     if cfg.error_model == "se3":
-        B, names = None, mm.names
+        B, names = np.eye(mm.n), mm.names
     else:
         try:
             B, names = em.mdh_basis(robot, mm.names)
         except ValueError as exc:
             raise ConfigError(None, "calibration.error_model", f"mdh_hayati: {exc}") from None
-    Jm = J if B is None else J @ B
-    rep = em.identifiability(Jm, names, cfg.identifiability_rel_tol)
-    return rep, em.parameter_basis(rep, mm.n, B)
+    cols = subsets.select(cfg.parameters, names)
+    rep = em.identifiability((J @ B)[:, cols], [names[i] for i in cols], cfg.identifiability_rel_tol)
+    return rep, em.parameter_basis(rep, mm.n, B[:, cols])
 
 
 def build_candidates(robot, cfg: Config, basis: np.ndarray, rng: np.random.Generator) -> cd.CandidateSet:
@@ -125,7 +128,7 @@ def working_jacobian(robot, mm: em.MeasurementModel, Qw: np.ndarray, basis: np.n
     f = mm.sym.fk_position_jacobian(robot.frame_tcp)
     rows = []
     for q in Qw:
-        full = np.zeros((3, mm.n))
+        full = np.zeros((3, basis.shape[0]))
         full[:, mm.sl_kin] = np.asarray(f(q, np.zeros(mm.n_kin))[0])
         rows.append(full @ basis)
     return np.vstack(rows)
@@ -174,15 +177,23 @@ def calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None)
 def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None) -> CalibrationOutcome:
     timings: dict[str, float] = {}
     t = time.perf_counter()
-    mm = em.MeasurementModel(robot)
+    user = ms.read_csv(cfg.measurements_csv, robot, min_rows=1) if cfg.measurements_csv else None
+    val_user = ms.read_csv(cfg.validation_csv, robot, min_rows=1) if cfg.validation_csv else None
+    if cfg.position_sigma_m is not None:
+        for m in (user, val_user):
+            if m is not None:
+                m.sigma_m = np.full(len(m), float(cfg.position_sigma_m))
+    six_d = user is not None and user.rotvec is not None and cfg.use_orientation
+    mm = measurement_model(robot, cfg, marker_points=six_d)
+    upstream_gravity = load_gravity_model(cfg, robot)
+    if upstream_gravity is not None:
+        mm.set_gravity_model(upstream_gravity.model)
     report, basis = identify_parameter_set(robot, mm, cfg, rng)
+    dbasis = design_basis(mm, basis)
     timings["identifiability_s"] = time.perf_counter() - t
     p = basis.shape[1]
-    user = None
-    if cfg.measurements_csv:
-        user = ms.read_csv(cfg.measurements_csv, robot, min_rows=p,
-                           min_rows_field=f"one per identifiable parameter of {robot.name}")
-    val_user = ms.read_csv(cfg.validation_csv, robot, min_rows=1) if cfg.validation_csv else None
+    if user is not None:
+        check_rows(cfg, user, p, robot)
     selection = None
     cs = None
     grad = None
@@ -192,12 +203,12 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None
         if real is None:
             raise PipelineError(None, "calibration", "no measurement file and no simulated robot")
         t = time.perf_counter()
-        cs = build_candidates(robot, cfg, basis, rng)
+        cs = build_candidates(robot, cfg, dbasis, rng)
         timings["candidates_s"] = time.perf_counter() - t
         if len(cs) < cfg.n_configurations:
             raise InfeasibleError(None, "calibration.grid_per_axis" if cfg.candidates == "grid"
                                   else "calibration.n_configurations", too_few_candidates(cfg, robot, len(cs)))
-        spec, Qw = index_spec(cfg, robot, mm, basis, rng)
+        spec, Qw = index_spec(cfg, robot, mm, dbasis, rng)
         positions = cs.Y if spec.needs_positions else None
         pilot = None
         n_design = cfg.n_configurations
@@ -220,16 +231,16 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None
             t = time.perf_counter()
             T_pilot = register_points(pilot.Y, mm.base_positions(pilot.Q, np.zeros(mm.n))[0]) \
                 if len(pilot) >= 3 else None
-            grad = gradient_design(robot, mm, basis, Q_sel, spec, GradientDesignConfig(
+            mm_geo = em.MeasurementModel(robot, mm.sym) if mm.compliance else mm
+            grad = gradient_design(robot, mm_geo, dbasis, Q_sel, spec, GradientDesignConfig(
                 max_iterations=cfg.gradient_max_iterations), transform_tracker_to_base=T_pilot)
             timings["gradient_s"] = time.perf_counter() - t
             Q_sel = grad.Q
         t = time.perf_counter()
         meas = ms.measure_simulated(real, Q_sel, rng)
         if pilot is not None:
-            meas = ms.Measurements(np.vstack([pilot.Q, meas.Q]), np.vstack([pilot.Y, meas.Y]),
-                                   np.concatenate([pilot.sigma_m, meas.sigma_m]), meas.source, None,
-                                   pilot.n_requested + meas.n_requested, np.vstack([pilot.invisible, meas.invisible]))
+            meas = ms.concatenate([pilot, meas], meas.source)
+        meas = measure_with_payload(mm, real, meas, cfg, rng)
         timings["measure_s"] = time.perf_counter() - t
         if 3 * len(meas) < p:
             raise InfeasibleError(None, "calibration.n_configurations",
@@ -239,8 +250,16 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None
     else:
         meas = user  # the user's configurations: no candidates, no selection, no simulated robot
     t = time.perf_counter()
-    est = estimate(mm, meas.Q, meas.Y, meas.sigma_m, basis, source=meas.source,
-                   max_iterations=cfg.max_lm_iterations)
+    rec = ms.expand_orientation(meas, cfg.orientation_sigma_rad) if six_d else meas   # the fitted rows
+    est, rejection = robust_estimate(mm, rec.Q, rec.Y, rec.sigma_m, basis, rec.source, cfg.max_lm_iterations,
+                                     rec.payload_mounted, cfg.robust_loss, cfg.outlier_confidence,
+                                     cfg.max_outlier_fraction, rec.offset_m)
+    notes: dict = {"fit_record": rec} if six_d else {}
+    if user is not None and cfg.cross_validation_folds:
+        notes["cross_validation"] = cross_validate(mm, rec, basis, rejection.rejected, cfg.cross_validation_folds,
+                                                   cfg.max_lm_iterations)
+    if upstream_gravity is not None:
+        notes["gravity_pass"] = gravity_pass(mm, rec, basis, est, rejection.rejected, cfg, str(cfg.gravity_model))
     timings["estimate_s"] = time.perf_counter() - t
     t = time.perf_counter()
     if val_user is not None:
@@ -251,17 +270,17 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None
         if real is None:
             raise PipelineError(None, "calibration.validation_csv", "no validation file and no simulated robot")
         held = heldout_measurements(robot, real, est, cfg, rng)
-    validation = va.validate(mm, est, held) if held is not None else None
+    validation = va.validate(mm, est, held, cfg.outlier_confidence) if held is not None else None
     timings["validate_s"] = time.perf_counter() - t
     if spec is None:
-        spec, Qw = index_spec(cfg, robot, mm, basis, rng)
-    design = measured_design(robot, mm, basis, meas.Q, spec, est.transform_tracker_to_base,
+        spec, Qw = index_spec(cfg, robot, mm, dbasis, rng)
+    design = measured_design(robot, mm, dbasis, meas.Q, spec, est.transform_tracker_to_base,
                              "user file" if user is not None else "measured subset")
-    fit = va.fit_residuals(mm, est, meas)
+    fit = va.fit_residuals(mm, est, rec, rejection.rejected)
     prediction = predicted_on_random_poses(robot, mm, est, cfg, rng) if validation is None else None
-    new_robot = calibrated_robot(robot, mm, est.x)
+    new_robot = calibrated_robot(robot, mm, est.x, basis)
     return CalibrationOutcome(report, mm.names, cs, selection, meas, est, validation, new_robot, timings, grad, Qw,
-                              design, fit, prediction)
+                              design, fit, prediction, rejection, notes)
 
 
 def heldout_measurements(robot, real, est: Estimate, cfg: Config, rng: np.random.Generator) -> ms.Measurements:
@@ -292,10 +311,24 @@ def min_configurations(n_identifiable: int) -> int:
     return -(-n_identifiable // 3)
 
 
+def check_rows(cfg: Config, user: ms.Measurements, p: int, robot) -> None:
+    """Enough independent equations (3 per position row, 6 per 6-D row) for the ``p`` parameters."""
+    per_row = 6 if user.rotvec is not None and cfg.use_orientation else 3
+    need = -(-p // per_row)
+    if len(user) < need:
+        kind = "position + orientation" if per_row == 6 else "position"
+        raise DataFileError(user.source, "rows", f"{len(user)} measurement rows, need at least {need} ({per_row} "
+                            f"equations per {kind} row for the {p} identifiable parameters of {robot.name}; "
+                            "calibration.parameters selects fewer)")
+
+
 def check(config: Config, robot) -> None:
     """Robot-dependent checks and the user files, before the runner creates any directory."""
     cfg = config
-    mm = em.MeasurementModel(robot)
+    user = ms.read_csv(cfg.measurements_csv, robot, min_rows=1) if cfg.measurements_csv else None
+    mm = measurement_model(robot, cfg, marker_points=user is not None and user.rotvec is not None
+                           and cfg.use_orientation)
+    load_gravity_model(cfg, robot)
     need_samples = -(-mm.n // 3)
     if cfg.identifiability_samples < need_samples:
         raise ConfigError(None, "calibration.identifiability_samples",
@@ -333,102 +366,9 @@ def check(config: Config, robot) -> None:
                               f"the start subset must be regular: need at least {n_min} ({why}) or null "
                               f"(2/3 of n_configurations), got {cfg.n_initial}")
     if cfg.measurements_csv:
-        ms.read_csv(cfg.measurements_csv, robot, min_rows=p,
-                    min_rows_field=f"one per identifiable parameter of {robot.name}")
+        check_rows(cfg, user, p, robot)
     if cfg.validation_csv:
         ms.read_csv(cfg.validation_csv, robot, min_rows=1)
-
-
-def from_file(out: CalibrationOutcome) -> bool:
-    """Whether the calibration measurements came from a file (no selection was measured)."""
-    return out.selection is None
-
-
-def n_not_visible(out: CalibrationOutcome) -> int | None:
-    """Commanded configurations the tracker could not see (None for a measurement file: unknown)."""
-    if from_file(out):
-        return None
-    return int(out.measurements.n_requested - len(out.measurements))
-
-
-def summary_of(out: CalibrationOutcome, cfg: Config) -> dict:
-    v = out.validation
-    sel = out.selection
-    user = from_file(out)
-    design = out.measured_design or {}
-    if v is not None:
-        predicted, sigma = v["predicted_rms_m"], v["tracker_noise_sigma_m"]
-    elif out.prediction is not None:
-        predicted, sigma = out.prediction["predicted_rms_m"], out.prediction["tracker_noise_sigma_m"]
-    else:
-        predicted = sigma = None
-    fit = out.fit or {}
-    return {
-        "n_configurations": int(len(out.measurements)),
-        "n_configurations_commanded": None if user else int(out.measurements.n_requested),
-        "n_configurations_not_visible": n_not_visible(out),
-        "measurement_source": out.measurements.source,
-        "selection_method": "user file" if user else cfg.selection_method,
-        "index_name": cfg.index_name,
-        "index_value": (design.get("index_value") if user
-                        else float(out.gradient.index_value) if out.gradient is not None
-                        else float(sel.index_value)),
-        "index_value_measured": design.get("index_value"),
-        "selection_time_s": float(sel.run_time_s) if sel is not None else None,
-        "selection_evaluations": int(sel.evaluations) if sel is not None else None,
-        "n_candidates": int(len(out.candidates)) if out.candidates is not None else None,
-        "n_parameters": len(out.names),
-        "n_identifiable": int(out.estimate.theta.size),
-        "validation_source": v["source"] if v is not None else None,
-        "heldout_n_poses": v["n_poses"] if v is not None else None,
-        "heldout_rms_position_error_before_m": v["before"]["rms"] if v is not None else None,
-        "heldout_rms_position_error_after_m": v["after"]["rms"] if v is not None else None,
-        "heldout_mean_position_error_after_m": v["after"]["mean"] if v is not None else None,
-        "heldout_max_position_error_after_m": v["after"]["max"] if v is not None else None,
-        "heldout_max_position_error_before_m": v["before"]["max"] if v is not None else None,
-        "predicted_rms_position_error_m": predicted,
-        "actual_over_predicted": v["after"]["rms"] / v["predicted_rms_m"] if v is not None else None,
-        "tracker_noise_sigma_m": sigma,
-        "rms_after_over_sigma": v["after"]["rms"] / v["tracker_noise_sigma_m"] if v is not None else None,
-        "fit_rms_residual_before_m": fit.get("rms_residual_before_m"),
-        "fit_rms_residual_after_m": fit.get("rms_residual_after_m"),
-        "chi2_per_dof": out.estimate.chi2_per_dof,
-        "lm_iterations": out.estimate.iterations,
-        "timings_s": {k: round(t, 3) for k, t in out.timings_s.items()},
-    }
-
-
-def visibility_sentence(out: CalibrationOutcome, robot) -> str:
-    """How many commanded poses the tracker could not see (report.md)."""
-    m = out.measurements
-    if from_file(out):
-        return (f"Calibration measurements: {len(m)} configurations from the user file `{m.source}` "
-                "(poses the tracker could not see are not in the file).")
-    k = n_not_visible(out)
-    deg = math.degrees(robot.tracker.max_incidence_rad)
-    if k == 0:
-        return f"All {m.n_requested} selected poses were visible to the tracker."
-    return (f"{k} of {m.n_requested} selected poses were not visible to the tracker (beam blocked or "
-            f"incidence > {deg:.0f}°) and were dropped; the fit uses the {len(m)} measured ones.")
-
-
-def report_markdown(out: CalibrationOutcome, cfg: Config, robot) -> str:
-    md = ["### Identifiability", "", out.report.markdown(), "", "### Measurements", "",
-          visibility_sentence(out, robot), ""]
-    d = out.measured_design
-    if d is not None and from_file(out):
-        md += [f"Configurations chosen by the user (no selection was run): {d['index_name']} = "
-               f"{d['index_value']:.6g} for the {d['n_configurations']} measured configurations.", ""]
-    md += ["### Fit", "", va.fit_markdown(out.fit, out.prediction), ""]
-    if out.validation is None:
-        md += ["### Held-out validation", "",
-               "**no held-out validation: give calibration.validation_csv** (poses measured on the real "
-               "robot, not used in the fit). The figures above are in-sample fit residuals and a "
-               "covariance prediction, not a measured accuracy."]
-    else:
-        md += [f"### Held-out validation (paper 004 Table 2 layout; {out.validation['source']})", "",
-               va.table_markdown(out.validation)]
-    return "\n".join(md)
 
 
 def run(ctx) -> Any:
@@ -452,6 +392,8 @@ def run(ctx) -> Any:
         "parameter_covariance": est.covariance,
         "transform_tracker_to_base": est.transform_tracker_to_base.homogeneous,
     }
+    if out.rejection is not None and out.rejection.n_rejected:
+        arrays["outliers_rejected_rows"] = np.asarray(out.rejection.rejected, int)
     if out.measurements.invisible is not None and len(out.measurements.invisible):
         arrays["configurations_not_visible"] = out.measurements.invisible
     if out.validation is not None:
@@ -481,5 +423,10 @@ def run(ctx) -> Any:
         from pipeline.calibration import plots
 
         figures = plots.stage_figures(out)
-    return StageResult(summary=summary, arrays=arrays, data=data, figures=figures, robot=out.robot,
-                       report_md=report_markdown(out, cfg, ctx.robot))
+    result = StageResult(summary=summary, arrays=arrays, data=data, figures=figures, robot=out.robot,
+                         report_md=report_markdown(out, cfg, ctx.robot))
+    gates = QualityGates(NAME, accept_poor=ctx.run.accept_poor)
+    gates.check("chi2_per_dof", est.chi2_per_dof, "<=", cfg.max_chi2_per_dof,
+                "whitened fit residuals after the outlier test; far above 1: the error model does not explain "
+                "the readings (unmodelled elasticity? calibration.parameters) or the tracker noise is larger")
+    return gates.finish(result)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.spatial.transform import Rotation
+from scipy.stats import chi2
 
 from pipeline.calibration.error_model import MeasurementModel
 from pipeline.calibration.estimate import Estimate
@@ -44,13 +45,21 @@ def predicted_error(mm: MeasurementModel, est: Estimate, Q: np.ndarray, sigma_m:
             "predicted_std_m": np.sqrt(var_total)}
 
 
-def fit_residuals(mm: MeasurementModel, est: Estimate, meas: Measurements) -> dict:
+def fit_residuals(mm: MeasurementModel, est: Estimate, meas: Measurements,
+                  rejected: np.ndarray | None = None) -> dict:
     """Residuals of the calibration measurements themselves (in-sample, not a validation):
-    ``|y_k - h(q_k, x, T_tb)|`` after the fit and with the nominal model + registration before."""
+    ``|y_k - h(q_k, x, T_tb)|`` after the fit and with the nominal model + registration before,
+    over the readings kept by the outlier test (``rejected``: row indices left out)."""
     x0 = np.zeros(mm.n)
-    r_before = np.linalg.norm(meas.Y - mm.predict(meas.Q, x0, est.registration), axis=1)
-    r_after = np.linalg.norm(meas.Y - mm.predict(meas.Q, est.x, est.registration), axis=1)
-    return {"n_points": int(len(meas)), "source": meas.source,
+    keep = np.ones(len(meas), bool)
+    if rejected is not None:
+        keep[np.asarray(rejected, int)] = False
+    Q, Y = meas.Q[keep], meas.Y[keep]
+    mounted = None if meas.payload_mounted is None else meas.payload_mounted[keep]
+    offsets = None if meas.offset_m is None else meas.offset_m[keep]
+    r_before = np.linalg.norm(Y - mm.predict(Q, x0, est.registration, mounted, offsets), axis=1)
+    r_after = np.linalg.norm(Y - mm.predict(Q, est.x, est.registration, mounted, offsets), axis=1)
+    return {"n_points": int(keep.sum()), "source": meas.source,
             "rms_residual_before_m": float(np.sqrt(np.mean(r_before ** 2))),
             "rms_residual_after_m": float(np.sqrt(np.mean(r_after ** 2))),
             "max_residual_after_m": float(r_after.max()),
@@ -72,8 +81,29 @@ def fit_markdown(fit: dict, prediction: dict | None) -> str:
     return "\n".join(lines)
 
 
-def validate(mm: MeasurementModel, est: Estimate, meas: Measurements) -> dict:
-    """Held-out statistics before/after calibration and the covariance prediction."""
+def gross_error_rows(mm: MeasurementModel, est: Estimate, meas: Measurements, confidence: float) -> np.ndarray:
+    """Held-out readings that fail the calibration's outlier test (:mod:`pipeline.calibration.robust`:
+    chi-square, 3 dof, at ``confidence``, scaled by the robust residual scale) under the identified
+    model: a gross tracker error says nothing about the calibration's accuracy."""
+    w = np.linalg.norm(meas.Y - mm.predict(meas.Q, est.x, est.registration), axis=1) / meas.sigma_m
+    scale = max(1.0, float(np.sqrt(np.median(w ** 2) / chi2.ppf(0.5, 3))))
+    return np.flatnonzero(w > np.sqrt(chi2.ppf(confidence, 3)) * scale)
+
+
+def validate(mm: MeasurementModel, est: Estimate, meas: Measurements, outlier_confidence: float | None = None
+             ) -> dict:
+    """Held-out statistics before/after calibration and the covariance prediction; with
+    ``outlier_confidence`` the held-out readings failing the outlier test are left out and counted
+    (``n_rejected``, ``rejected_rows``)."""
+    rejected = np.zeros(0, int)
+    n_measured = len(meas)
+    if outlier_confidence is not None:
+        rejected = gross_error_rows(mm, est, meas, outlier_confidence)
+        if len(rejected):
+            keep = np.ones(len(meas), bool)
+            keep[rejected] = False
+            meas = Measurements(meas.Q[keep], meas.Y[keep], meas.sigma_m[keep], meas.source,
+                                None if meas.rotvec is None else meas.rotvec[keep], meas.n_requested)
     Q, Y = meas.Q, meas.Y
     x0 = np.zeros(mm.n)
     R_before = est.registration.rotation
@@ -82,7 +112,7 @@ def validate(mm: MeasurementModel, est: Estimate, meas: Measurements) -> dict:
     e_after = (Y - mm.predict(Q, est.x, est.registration)) @ R_after.T
     pred = predicted_error(mm, est, Q, meas.sigma_m)
     out = {
-        "n_poses": int(len(Q)),
+        "n_poses": int(n_measured),
         "source": meas.source,
         "before": _stats(e_before) | {"axes": _axis_stats(e_before)},
         "after": _stats(e_after) | {"axes": _axis_stats(e_after)},
@@ -92,6 +122,8 @@ def validate(mm: MeasurementModel, est: Estimate, meas: Measurements) -> dict:
         "errors_before_m": np.linalg.norm(e_before, axis=1),
         "errors_after_m": np.linalg.norm(e_after, axis=1),
         "predicted_std_m": pred["predicted_std_m"],
+        "n_rejected": int(len(rejected)),
+        "rejected_rows": [int(i) for i in rejected],
     }
     if meas.rotvec is not None:
         _, R_refl = mm.base_positions(Q, est.x)
@@ -118,6 +150,9 @@ def table_markdown(v: dict) -> str:
     for key, s in (("before", b), ("after", a)):
         lines.append(f"| {key} | {1e3 * s['mean']:.4f} | {1e3 * s['rms']:.4f} | {1e3 * s['max']:.4f} |")
     lines.append(f"| predicted (covariance + noise) | | {1e3 * v['predicted_rms_m']:.4f} | |")
+    if v.get("n_rejected"):
+        lines.append(f"\n{v['n_rejected']} held-out reading(s) failed the outlier test (gross tracker errors) and are "
+                     "left out of these statistics.")
     if "orientation_rad" in a:
         lines += ["", "| orientation error | mean [deg] | RMS [deg] | max [deg] |", "|---|---|---|---|"]
         for key, s in (("before", b), ("after", a)):

@@ -17,7 +17,7 @@ Spong, "Modeling and control of elastic joint robots", J. Dyn. Sys. Meas. Contro
 taken from the sampled ``tau_l`` by Savitzky-Golay differentiation (cubic, ``window_s`` long): a
 jerk-limited reference has a piecewise constant jerk, so its snap is impulsive and the smoothed
 derivative is what a finite-bandwidth motor can follow. The stiffness is the model's
-(:func:`pipeline.robot.transmission.nominal_joint_stiffness_Nm_rad`: robot.yaml or the rated-torque
+(:func:`pipeline.robot.stiffness.nominal_joint_stiffness_Nm_rad`: robot.yaml or the rated-torque
 rule); damping is neglected in the inverse (it only delays the deflection by ``d/k`` ~ 0.3 ms).
 """
 
@@ -27,7 +27,7 @@ import numpy as np
 import pinocchio as pin
 from scipy.signal import savgol_filter
 
-from pipeline.robot.transmission import nominal_joint_stiffness_Nm_rad
+from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 
 ELASTIC_VARIANTS = ("elastic_static", "elastic_flat")
 

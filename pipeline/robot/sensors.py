@@ -5,7 +5,13 @@ Noise facts (DESIGN.md, "Sensors"):
   if the incidence angle between the reflector axis and the beam is <= 30 deg and no link
   capsule blocks the beam (paper 000 §2, tracker and incidence constraint);
 - encoders: sigma about 2 µrad joint side;
-- motor torque from current: sigma about 1 % of the torque limit.
+- motor torque from current: sigma about 1 % of the torque limit;
+- gross tracker errors (:class:`GrossErrors`, all 0 by default here): a rate of readings off by
+  millimetres in a random direction, and a rate of stale readings repeating the previous one.
+
+The tracker sees the link-side pose: ``link_angles(Q, payload)`` maps the commanded (encoder)
+angles to the deflected arm's angles (joint elasticity, transmission error; the identity for the
+ideal robot).
 
 The visibility test is a function of a robot model and a tracker placement, so planners use
 it with the nominal model and the estimated tracker pose, and the real tracker with the truth.
@@ -13,6 +19,7 @@ it with the nominal model and the estimated tracker pose, and the real tracker w
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,6 +27,7 @@ import pinocchio as pin
 
 from pipeline.robot.collision import segment_distances
 from pipeline.robot.model import RobotModel
+from pipeline.robot.payload import Payload
 
 #: the beam is checked for blockage up to this distance before the reflector (its holder)
 BEAM_END_CLEARANCE_M = 0.02
@@ -32,6 +40,41 @@ class TrackerReading:
     position_m: np.ndarray  # (N, 3)
     visible: np.ndarray  # (N,) bool
     sigma_m: np.ndarray  # (N,) isotropic 1-sigma noise of each reading
+    #: tests only: readings given a gross error (outlier or stale); None when none can occur
+    corrupted: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class GrossErrors:
+    """Gross tracker errors: outlier rate and magnitude (m), stale-reading rate (0 -> none)."""
+
+    outlier_rate: float = 0.0
+    outlier_magnitude_m: float = 0.0
+    stale_rate: float = 0.0
+
+    def apply(self, positions: np.ndarray, visible: np.ndarray, rng: np.random.Generator) -> np.ndarray | None:
+        """Corrupt ``positions`` in place; returns the corrupted mask (None if both rates are 0).
+
+        Outliers: ``y + magnitude * u`` with ``u`` a random unit vector. Stale: the previous visible
+        reading repeated (the tracker kept its last value after the beam was blocked)."""
+        if self.outlier_rate == 0.0 and self.stale_rate == 0.0:
+            return None
+        n = len(positions)
+        outlier = (rng.random(n) < self.outlier_rate) & visible
+        u = rng.standard_normal((n, 3))
+        u /= np.linalg.norm(u, axis=1, keepdims=True)
+        positions[outlier] += self.outlier_magnitude_m * u[outlier]
+        stale = (rng.random(n) < self.stale_rate) & visible
+        previous = -1
+        for k in range(n):
+            if not visible[k]:
+                continue
+            if stale[k] and previous >= 0:
+                positions[k] = positions[previous]
+            else:
+                stale[k] = False
+            previous = k
+        return outlier | stale
 
 
 @dataclass
@@ -75,32 +118,43 @@ def tracker_visibility(robot: RobotModel, transform_tracker_to_base: pin.SE3, Q:
 class LaserTracker:
     """A laser tracker at a fixed (unknown to the stages) pose, measuring the reflector."""
 
-    def __init__(self, robot: RobotModel, transform_tracker_to_base: pin.SE3) -> None:
+    def __init__(self, robot: RobotModel, transform_tracker_to_base: pin.SE3,
+                 link_angles: Callable[[np.ndarray, Payload | None], np.ndarray] | None = None,
+                 gross: GrossErrors | None = None) -> None:
         self._robot = robot
         self._transform_tracker_to_base = transform_tracker_to_base
+        self._link_angles = link_angles
+        self._gross = gross if gross is not None else GrossErrors()
         self.noise_const_m = robot.tracker.noise_const_m
         self.noise_per_m = robot.tracker.noise_per_m
         self.max_incidence_rad = robot.tracker.max_incidence_rad
 
-    def visible(self, Q: np.ndarray) -> np.ndarray:
-        """Whether each configuration can be measured (incidence and beam blockage)."""
-        return tracker_visibility(self._robot, self._transform_tracker_to_base, Q).visible
+    def _link(self, Q: np.ndarray, payload: Payload | None) -> np.ndarray:
+        Q = np.atleast_2d(np.asarray(Q, float))
+        return Q if self._link_angles is None else self._link_angles(Q, payload)
 
-    def measure(self, Q: np.ndarray, rng: np.random.Generator) -> TrackerReading:
+    def visible(self, Q: np.ndarray, payload: Payload | None = None) -> np.ndarray:
+        """Whether each configuration can be measured (incidence and beam blockage)."""
+        return tracker_visibility(self._robot, self._transform_tracker_to_base, self._link(Q, payload)).visible
+
+    def measure(self, Q: np.ndarray, rng: np.random.Generator, payload: Payload | None = None) -> TrackerReading:
         """Reflector positions in the tracker frame with range-dependent isotropic noise.
 
+        ``Q`` are the commanded (encoder) angles, ``payload`` what is mounted on the flange.
         Invisible configurations give NaN rows. Noise is drawn for every row (visible or not)
-        so the noise of a configuration does not depend on which others are visible.
+        so the noise of a configuration does not depend on which others are visible; gross
+        errors (:class:`GrossErrors`) are drawn after it.
         """
-        Q = np.atleast_2d(np.asarray(Q, float))
+        Q = self._link(Q, payload)
         vis = tracker_visibility(self._robot, self._transform_tracker_to_base, Q)
         positions_base = self._robot.positions(Q, self._robot.frame_reflector)
         base_to_tracker = self._transform_tracker_to_base.inverse()
         positions = positions_base @ base_to_tracker.rotation.T + base_to_tracker.translation
         sigma = self.noise_const_m + self.noise_per_m * vis.range_m
         positions = positions + sigma[:, None] * rng.standard_normal(positions.shape)
+        corrupted = self._gross.apply(positions, vis.visible, rng)
         positions[~vis.visible] = np.nan
-        return TrackerReading(positions, vis.visible, sigma)
+        return TrackerReading(positions, vis.visible, sigma, corrupted)
 
 
 class Encoders:

@@ -46,6 +46,8 @@ class ActuationSpec:
     viscous_Nms_rad: np.ndarray
     coulomb_Nm: np.ndarray
     coulomb_smoothing_rad_s: float
+    #: torsional joint stiffness (joint side, N m/rad); None: derived (pipeline.robot.stiffness)
+    joint_stiffness_Nm_rad: np.ndarray | None = None
 
 
 @dataclass
@@ -227,7 +229,7 @@ def load_robot_spec(path: Path, nq: int | None = None) -> RobotSpec:
     act = top.sub("actuation")
     act.check_keys(
         {"gear_ratio", "gear_coupling", "rotor_inertia_kgm2", "viscous_Nms_rad", "coulomb_Nm",
-         "coulomb_smoothing_rad_s"},
+         "coulomb_smoothing_rad_s", "joint_stiffness_Nm_rad"},
         {"gear_ratio", "rotor_inertia_kgm2", "viscous_Nms_rad", "coulomb_Nm"},
     )
     per_joint = [len(v) for k in ("gear_ratio", "rotor_inertia_kgm2", "viscous_Nms_rad", "coulomb_Nm")
@@ -264,6 +266,8 @@ def load_robot_spec(path: Path, nq: int | None = None) -> RobotSpec:
         viscous_Nms_rad=act.vector("viscous_Nms_rad", n, nonnegative=True),
         coulomb_Nm=act.vector("coulomb_Nm", n, nonnegative=True),
         coulomb_smoothing_rad_s=act.number("coulomb_smoothing_rad_s", positive=True, default=0.01),
+        joint_stiffness_Nm_rad=(act.vector("joint_stiffness_Nm_rad", n, positive=True)
+                                if "joint_stiffness_Nm_rad" in act.data else None),
     )
 
     lim = top.sub("limits")
@@ -345,7 +349,8 @@ def robot_spec_to_yaml(spec: RobotSpec, urdf_name: str) -> dict:
             "viscous_Nms_rad": [float(v) for v in act.viscous_Nms_rad],
             "coulomb_Nm": [float(v) for v in act.coulomb_Nm],
             "coulomb_smoothing_rad_s": float(act.coulomb_smoothing_rad_s),
-        },
+        } | ({} if act.joint_stiffness_Nm_rad is None
+             else {"joint_stiffness_Nm_rad": [float(v) for v in act.joint_stiffness_Nm_rad]}),
         "limits": {"acceleration_rad_s2": [float(v) for v in spec.acceleration_rad_s2]}
         | {k: [float(x) for x in v] for k, v in spec.limit_overrides.items()},
         "tracker": {

@@ -18,10 +18,7 @@ Per joint ``i`` (joint side, rotor reflected through the gear):
   robot joint - modeling and identification of load and temperature effects", J. Dyn. Sys. Meas.
   Control 134(5), 2012). Every value is 0 -> the viscous + Coulomb model of the nominal robot.
 
-Stiffness until ``pipeline/robot/stiffness.py`` is present: :func:`nominal_joint_stiffness_Nm_rad`
-takes rated torque over 2 mrad of torsion, the order of the torsional rigidity of the reducers such
-arms use (Harmonic Drive CSF/CSG catalogue: torsion at rated torque about 1.5-3 mrad; Nabtesco RV
-catalogue: about 1 mrad at rated torque).
+Stiffness: :func:`pipeline.robot.stiffness.nominal_joint_stiffness_Nm_rad` (robot.yaml or a cited rule).
 """
 
 from __future__ import annotations
@@ -31,20 +28,9 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-#: torsion of a joint at its rated (limit) torque, for the fallback stiffness rule (see the docstring)
-RATED_TORSION_RAD = 2.0e-3
 #: fixed salt of the transmission's random stream (independent of the truth's main stream)
 _TRANSMISSION_SALT = 0x7472616E
 
-
-def nominal_joint_stiffness_Nm_rad(robot) -> np.ndarray:
-    """Joint stiffness (nq,) [N m/rad]: ``actuation.joint_stiffness_Nm_rad`` when the robot spec gives it,
-    else rated torque / :data:`RATED_TORSION_RAD` (same signature as
-    ``pipeline.robot.stiffness.nominal_joint_stiffness_Nm_rad``)."""
-    given = getattr(robot.actuation, "joint_stiffness_Nm_rad", None)
-    if given is not None:
-        return np.asarray(given, float).copy()
-    return np.asarray(robot.limits.effort_Nm, float) / RATED_TORSION_RAD
 
 
 @dataclass

@@ -9,6 +9,23 @@ degrees away from its nominal pose; inertial parameters 10–20 % (mass log-norm
 mass shifted, second moments scaled and rotated so every link stays physically consistent),
 rotor inertia and friction 20 %.
 
+Beyond the calibrated parameters (issue "calibration for real arms"; paper 000 Outlook), each
+settable to 0 to get the ideal robot back bit for bit:
+
+- joint elasticity: per-joint torsional stiffness ``k_i = k_nom_i exp(s z_i) / scale``
+  (``k_nom`` from :func:`pipeline.robot.stiffness.nominal_joint_stiffness_Nm_rad`, log-normal
+  spread ``s = joint_stiffness_relative_sigma`` = 30 %, ``scale = joint_compliance_scale``); for
+  a static tracker pose the link-side angle is ``q_link = q - g(q_link) / k`` with ``g`` the
+  true gravity torque of arm + mounted payload (fixed point, 3 iterations);
+- a cyclic gear transmission error ``A sin(n_i q_i + phi_i)`` (``A`` a few µrad, ``n_i`` 2..6
+  cycles per joint revolution, random phase): an unmodelled remainder no calibration reaches;
+- tracker gross errors: a rate of readings off by ``tracker_outlier_magnitude_m`` in a random
+  direction (a beam that hit the wrong surface) and a rate of stale readings (the previous
+  reading repeated after a blocked beam).
+
+These draws come from a second stream (salt + 1) so the first stream, and therefore every
+geometric and inertial deviation, is the same as for the ideal robot.
+
 Stage code may use only :attr:`RealRobot.tracker`, :attr:`RealRobot.encoders`,
 :attr:`RealRobot.torque_sensor`, :meth:`RealRobot.execute_joint_trajectory` and
 :attr:`RealRobot.plant`. The attributes documented "tests only" open the truth.
@@ -26,8 +43,10 @@ from scipy.linalg import expm
 from pipeline.errors import ConfigError
 from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import KinematicLayout, apply_kinematic_errors, joint_infos
-from pipeline.robot.sensors import Encoders, LaserTracker, TorqueSensor
-from pipeline.robot.transmission import Transmission, create_transmission, nominal_joint_stiffness_Nm_rad
+from pipeline.robot.payload import Payload, gravity_torques_Nm, with_payload
+from pipeline.robot.sensors import Encoders, GrossErrors, LaserTracker, TorqueSensor
+from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
+from pipeline.robot.transmission import Transmission, create_transmission
 
 #: fixed salt so the truth stream is independent of every stage's stream
 _TRUTH_SALT = 0x74727574
@@ -51,6 +70,19 @@ class TruthConfig:
     friction_relative_sigma: float = 0.2
     encoder_noise_rad: float = 2.0e-6
     torque_noise_fraction_of_limit: float = 0.01
+    # -- beyond the geometric model (module docstring); 0 -> the ideal robot
+    #: multiplies the nominal joint compliance 1/k (0: rigid joints)
+    joint_compliance_scale: float = 1.0
+    #: log-normal spread of each joint's stiffness around the nominal value (per seed)
+    joint_stiffness_relative_sigma: float = 0.3
+    #: amplitude of the cyclic gear transmission error (rad, joint side)
+    transmission_error_amplitude_rad: float = 3.0e-6
+    #: fraction of tracker readings off by tracker_outlier_magnitude_m (random direction)
+    tracker_outlier_rate: float = 0.0
+    tracker_outlier_magnitude_m: float = 2.0e-3
+    #: fraction of tracker readings that repeat the previous reading (blocked beam)
+    tracker_stale_rate: float = 0.0
+
     # --- transmission block (pipeline/robot/transmission.py): Stribeck friction, load-dependent
     # Coulomb friction and the damping of the elastic joints; every value 0 -> today's friction
     stribeck_excess_relative: float = 0.4   # static friction = Coulomb (1 + x) (Armstrong-Helouvry 1994: 1.2-2)
@@ -58,18 +90,23 @@ class TruthConfig:
     coulomb_load_coefficient: float = 0.1   # Coulomb grows by this fraction at rated load (Bittencourt 2012)
     joint_damping_ratio: float = 0.05       # of the motor-link resonance (structural damping of gears: a few %)
 
+    @classmethod
+    def ideal(cls, **overrides: float) -> TruthConfig:
+        """The ideal robot of the geometric and rigid-body models: rigid joints, no transmission error,
+        no gross tracker errors, viscous + Coulomb friction only (no Stribeck, no load dependence)."""
+        fields = dict(joint_compliance_scale=0.0, transmission_error_amplitude_rad=0.0,
+                      tracker_outlier_rate=0.0, tracker_stale_rate=0.0,
+                      stribeck_excess_relative=0.0, coulomb_load_coefficient=0.0)
+        return cls(**(fields | overrides))
+
     def validate(self, source: str = "truth") -> None:
         for name, value in vars(self).items():
             if not isinstance(value, int | float) or not np.isfinite(value) or value < 0:
                 raise ConfigError(source, f"truth.{name}", f"must be a non-negative number, got {value!r}")
+        for name in ("tracker_outlier_rate", "tracker_stale_rate"):
+            if getattr(self, name) > 0.5:
+                raise ConfigError(source, f"truth.{name}", f"a rate in [0, 0.5], got {getattr(self, name)!r}")
 
-
-def rigid_truth_config(**overrides: float) -> TruthConfig:
-    """The truth of the rigid, viscous + Coulomb robot (transmission block 0, joint compliance 0)."""
-    config = TruthConfig(**{"stribeck_excess_relative": 0.0, "coulomb_load_coefficient": 0.0, **overrides})
-    if "joint_compliance_scale" not in overrides:
-        config.joint_compliance_scale = 0.0  # the field of the calibration's stiffness block
-    return config
 
 
 @dataclass
@@ -123,13 +160,21 @@ class RealRobot:
     """A perturbed copy of the nominal robot with its sensors (see the module docstring)."""
 
     def __init__(self, truth: RobotModel, kinematic_errors: np.ndarray, transform_tracker_to_base: pin.SE3,
-                 config: TruthConfig, seed: int = 0) -> None:
+                 config: TruthConfig, joint_stiffness_Nm_rad: np.ndarray | None = None,
+                 transmission_cycles: np.ndarray | None = None, transmission_phase_rad: np.ndarray | None = None,
+                 seed: int = 0) -> None:
         self._seed = int(seed)
         self._truth = truth
         self._kinematic_errors = kinematic_errors
         self._transform_tracker_to_base = transform_tracker_to_base
         self.config = config
-        self.tracker = LaserTracker(truth, transform_tracker_to_base)
+        nq = truth.nq
+        self._stiffness = (np.full(nq, np.inf) if joint_stiffness_Nm_rad is None
+                           else np.asarray(joint_stiffness_Nm_rad, float))
+        self._cycles = np.zeros(nq) if transmission_cycles is None else np.asarray(transmission_cycles, float)
+        self._phase = np.zeros(nq) if transmission_phase_rad is None else np.asarray(transmission_phase_rad, float)
+        gross = GrossErrors(config.tracker_outlier_rate, config.tracker_outlier_magnitude_m, config.tracker_stale_rate)
+        self.tracker = LaserTracker(truth, transform_tracker_to_base, self.link_angles, gross)
         self.encoders = Encoders(config.encoder_noise_rad)
         self.torque_sensor = TorqueSensor(config.torque_noise_fraction_of_limit * truth.limits.effort_Nm)
         self._plant = None
@@ -174,7 +219,13 @@ class RealRobot:
         tracker_error = np.concatenate([config.tracker_translation_sigma_m * rng.standard_normal(3),
                                         config.tracker_rotation_sigma_rad * rng.standard_normal(3)])
         tracker_pose = nominal.tracker.transform_tracker_to_base * pin.exp6(tracker_error)
-        return cls(truth, errors, tracker_pose, config, seed)
+        rng2 = np.random.default_rng([int(seed), _TRUTH_SALT + 1])
+        spread = np.exp(config.joint_stiffness_relative_sigma * rng2.standard_normal(nq))
+        cycles = rng2.integers(2, 7, nq).astype(float)
+        phase = rng2.uniform(0.0, 2.0 * np.pi, nq)
+        stiffness = (nominal_joint_stiffness_Nm_rad(nominal) * spread / config.joint_compliance_scale
+                     if config.joint_compliance_scale > 0 else np.full(nq, np.inf))
+        return cls(truth, errors, tracker_pose, config, stiffness, cycles, phase, seed)
 
     # ------------------------------------------------------------ stage-facing
     def execute_joint_trajectory(self, t_s: np.ndarray, q: np.ndarray, v: np.ndarray, a: np.ndarray,
@@ -201,16 +252,26 @@ class RealRobot:
                                 transmission=self.transmission)
         return self._plant
 
-    # ------------------------------------------------- transmission block (tests + the plant only)
-    def _plant_stiffness_Nm_rad(self) -> np.ndarray:
-        """The truth's joint stiffness (np.inf when rigid): ``joint_stiffness_Nm_rad`` where the truth
-        has it, else the nominal rule scaled by ``joint_compliance_scale`` (default 1)."""
-        own = getattr(self, "joint_stiffness_Nm_rad", None)
-        if own is not None:
-            return np.asarray(own, float)
-        scale = float(getattr(self.config, "joint_compliance_scale", 1.0))
-        k = nominal_joint_stiffness_Nm_rad(self._truth)
-        return k / scale if scale > 0 else np.full(self._truth.nq, np.inf)
+    def link_angles(self, Q: np.ndarray, payload: Payload | None = None) -> np.ndarray:
+        """Link-side joint angles of static poses commanded at encoder angles ``Q`` (module docstring):
+        ``q_link = q - g(q_link) / k + A sin(n q + phi)``; ``Q`` itself for the ideal robot."""
+        Q = np.atleast_2d(np.asarray(Q, float))
+        amplitude = self.config.transmission_error_amplitude_rad
+        rigid = not np.any(np.isfinite(self._stiffness))
+        if rigid and amplitude == 0.0:
+            return Q
+        Q_link = Q + amplitude * np.sin(self._cycles * Q + self._phase) if amplitude > 0 else Q.copy()
+        if not rigid:
+            model = with_payload(self._truth.model, self._truth.frame_flange, payload)
+            base = Q_link.copy()
+            for _ in range(3):
+                Q_link = base - gravity_torques_Nm(model, Q_link) / self._stiffness
+        return Q_link
+
+    @property
+    def joint_stiffness_Nm_rad(self) -> np.ndarray:
+        """Tests and the plant only: the true torsional joint stiffness (np.inf: rigid)."""
+        return self._stiffness.copy()
 
     @property
     def transmission(self) -> Transmission:
@@ -218,7 +279,7 @@ class RealRobot:
         if self._transmission is None:
             c = self.config
             self._transmission = create_transmission(
-                self._truth, self._seed, self._plant_stiffness_Nm_rad(), c.joint_damping_ratio,
+                self._truth, self._seed, self._stiffness, c.joint_damping_ratio,
                 c.stribeck_excess_relative, c.stribeck_velocity_rad_s, c.coulomb_load_coefficient,
                 c.friction_relative_sigma)
         return self._transmission

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from types import SimpleNamespace
 
 import numpy as np
 import pinocchio as pin
@@ -225,10 +226,11 @@ def _truth_gap(robot_a, robot_b, Q, frame="reflector"):
 def test_quick_profile_stage_through_runner(tmp_path):
     from pipeline.config import quick_config
     from pipeline.robot.model import RobotModel
-    from pipeline.robot.truth import RealRobot
+    from pipeline.robot.truth import RealRobot, TruthConfig
     from pipeline.runner import run_pipeline
 
     cfg = quick_config(**{"stages": ["model", "calibration"], "name": "calq"})
+    cfg.sections["truth"] = TruthConfig.ideal()   # last turn's geometric-only acceptance
     res = run_pipeline(cfg, out_root=tmp_path, log=lambda m: None)
     out = res.outputs["calibration"]
     s = out.summary
@@ -249,7 +251,7 @@ def test_quick_profile_stage_through_runner(tmp_path):
     # the saved calibrated robot is much closer to the truth than the nominal one
     nominal = RobotModel.load("rx130l")
     calibrated = RobotModel.load(stage_dir / "robot")
-    truth = RealRobot.create(nominal, cfg.seed).truth
+    truth = RealRobot.create(nominal, cfg.seed, TruthConfig.ideal()).truth
     Q = em.random_configurations(nominal, 300, np.random.default_rng(0))
     assert _truth_gap(calibrated, truth, Q) < 0.1 * _truth_gap(nominal, truth, Q)
     # rigid tool: the TCP moved with the identified reflector offset (tool rotations stay unobservable)
@@ -259,10 +261,10 @@ def test_quick_profile_stage_through_runner(tmp_path):
 @pytest.mark.parametrize("name,seed", [("staubli_tx40", 3), ("rx130l", 4)])
 def test_targets_hold_for_other_robots_and_seeds(name, seed):
     from pipeline.robot.model import RobotModel
-    from pipeline.robot.truth import RealRobot
+    from pipeline.robot.truth import RealRobot, TruthConfig
 
     robot = RobotModel.load(name)
-    real = RealRobot.create(robot, seed)
+    real = RealRobot.create(robot, seed, TruthConfig.ideal())
     cfg = _cfg()
     out = st.calibrate(robot, real, cfg, np.random.default_rng(seed))
     _check_targets(st.summary_of(out, cfg))
@@ -309,6 +311,7 @@ class _Ctx:
 
     def __init__(self, config, robot, seed):
         self.config, self.robot, self.rng, self.progress = config, robot, np.random.default_rng(seed), None
+        self.run = SimpleNamespace(accept_poor=False)
 
     @property
     def real(self):
@@ -318,9 +321,9 @@ class _Ctx:
 @pytest.fixture(scope="module")
 def tracker_files(robot, tmp_path_factory):
     """Calibration and validation CSVs written from simulated measurements of one hidden robot."""
-    from pipeline.robot.truth import RealRobot
+    from pipeline.robot.truth import RealRobot, TruthConfig
 
-    real = RealRobot.create(robot, 21)
+    real = RealRobot.create(robot, 21, TruthConfig.ideal())
     rng = np.random.default_rng(21)
     ch = cd.chain_from_robot(robot)
     Q, _ = cd.random_candidates(ch, 45, rng)

@@ -79,11 +79,14 @@ def test_user_file_skips_the_design_checks(robot, tmp_path):
 
 # ------------------------------------------------------------------ check() (robot-dependent)
 @pytest.mark.parametrize(("values", "field", "words"), [
-    (["calibration.n_configurations=5"], "n_configurations", ("at least 9", "27 identifiable", "got 5")),
-    (["calibration.n_initial=4"], "n_initial", ("at least 9", "got 4")),
-    ([*GRADIENT, "calibration.n_pilot=35"], "n_pilot", ("40 - 35", "at least 9")),
+    # default parameters "all": 27 geometric + 4 compliances (joints 2-5; joint 1 and 6 carry no gravity load)
+    (["calibration.n_configurations=5"], "n_configurations", ("at least 11", "31 identifiable", "got 5")),
+    (["calibration.n_initial=4"], "n_initial", ("at least 11", "got 4")),
+    ([*GRADIENT, "calibration.n_pilot=35"], "n_pilot", ("40 - 35", "at least 11")),
+    (["calibration.parameters=geometric", "calibration.n_configurations=5"], "n_configurations",
+     ("at least 9", "27 identifiable")),
     (["calibration.margin_incidence_deg=40"], "margin_incidence_deg", ("30 deg",)),
-    (["calibration.identifiability_samples=10"], "identifiability_samples", ("at least 21",)),
+    (["calibration.identifiability_samples=10"], "identifiability_samples", ("at least 23",)),
     (["calibration.candidates=grid", "calibration.grid_per_axis=30"], "grid_per_axis", ("30^6",)),
 ])
 def test_robot_dependent_checks_name_the_field(robot, values, field, words):
@@ -100,7 +103,7 @@ def test_cli_too_few_configurations_is_reported_before_anything_is_written(tmp_p
                  "--set", "calibration.n_configurations=5"])
     err = capsys.readouterr().err
     assert code == 2
-    assert "--set: calibration.n_configurations: need at least 9" in err
+    assert "--set: calibration.n_configurations: need at least 11" in err
     assert "Traceback" not in err
     assert not (tmp_path / "runs").exists()
 
@@ -201,5 +204,5 @@ def test_errors_give_the_file_line_counting_blank_lines(robot, measured, tmp_pat
 def test_too_few_rows_names_the_reason(robot, measured, tmp_path):
     path = ms.write_csv(tmp_path / "few.csv", _copy(measured, Q=measured.Q[:5], Y=measured.Y[:5]))
     cfg = _load(f"calibration.measurements_csv={path}").calibration
-    with pytest.raises(DataFileError, match="5 measurement rows, need at least 27 .one per identifiable"):
+    with pytest.raises(DataFileError, match="5 measurement rows, need at least 11 .3 equations per position row"):
         st.check(cfg, robot)

@@ -17,7 +17,7 @@ from pipeline.control.simulate import feedforward_torque, simulate_joint_traject
 from pipeline.control.validate import settling_time
 from pipeline.robot.paths import start_configuration
 from pipeline.robot.transmission import nominal_joint_stiffness_Nm_rad
-from pipeline.robot.truth import RealRobot, TruthConfig, rigid_truth_config
+from pipeline.robot.truth import RealRobot, TruthConfig
 
 DOWN = pin.utils.rotate("x", np.pi)
 Q0 = np.array([0.1, 0.3, 1.5, 0.2, 1.0, -0.3])
@@ -43,7 +43,7 @@ def test_stribeck_friction_seeded_and_zero_is_viscous_coulomb(rx130l, real):
     w_fast = 20 * tr.stribeck_velocity_rad_s
     np.testing.assert_allclose(tr.friction_torque(w_fast) - tr.viscous_Nms_rad * w_fast, tr.coulomb_Nm, rtol=1e-6)
     assert np.all(tr.friction_torque(w_fast, tr.effort_Nm) > tr.friction_torque(w_fast))  # load grows Coulomb
-    rigid = RealRobot.create(rx130l, 2, rigid_truth_config())
+    rigid = RealRobot.create(rx130l, 2, TruthConfig.ideal())
     assert not rigid.plant.elastic and not rigid.plant.stribeck
     v = np.linspace(-1, 1, 6)
     np.testing.assert_allclose(rigid.transmission.friction_torque(v, 100.0), rigid.truth.friction_torque(v), atol=1e-12)
@@ -85,7 +85,7 @@ def test_stiff_joints_approach_the_rigid_plant(rx130l, real):
     A = np.array([0.1, 0.05, -0.05, 0.1, 0.1, 0.1])
     q, v, a = Q0 + A * s[:, None], A * sd[:, None], A * sdd[:, None]
     cfg = ControlConfig(settle_time_s=0.1, engine="python")
-    rigid_real = RealRobot.create(rx130l, 2, rigid_truth_config())
+    rigid_real = RealRobot.create(rx130l, 2, TruthConfig.ideal())
 
     def tcp(real_robot, scale=None):
         if scale is not None:

@@ -12,7 +12,7 @@ from pipeline.control.reference import cartesian_reference
 from pipeline.control.simulate import simulate_joint_trajectory
 from pipeline.errors import InfeasibleError
 from pipeline.robot.paths import CirclePath, LinePath, start_configuration
-from pipeline.robot.truth import RealRobot, rigid_truth_config
+from pipeline.robot.truth import RealRobot, TruthConfig
 
 DOWN = pin.utils.rotate("x", np.pi)
 SEEDS = np.radians([[0.0, 17.0, 86.0, 0.0, 75.0, 0.0]])
@@ -20,7 +20,7 @@ SEEDS = np.radians([[0.0, 17.0, 86.0, 0.0, 75.0, 0.0]])
 
 @pytest.fixture(scope="module")
 def real(rx130l):
-    return RealRobot.create(rx130l, 5, rigid_truth_config())  # the rigid-arm figures
+    return RealRobot.create(rx130l, 5, TruthConfig.ideal())  # the rigid-arm figures
 
 
 @pytest.fixture(scope="module")

@@ -9,8 +9,13 @@ import pytest
 from pipeline.errors import ConfigError
 from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import KinematicLayout, dynamic_parameter_problems
-from pipeline.robot.sensors import tracker_visibility
+from pipeline.robot.payload import Payload, gravity_torques_Nm, with_payload
+from pipeline.robot.sensors import LaserTracker, tracker_visibility
+from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 from pipeline.robot.truth import RealRobot, TruthConfig
+
+IDEAL = dict(joint_compliance_scale=0.0, transmission_error_amplitude_rad=0.0, tracker_outlier_rate=0.0,
+             tracker_stale_rate=0.0)
 
 
 @pytest.fixture(scope="module")
@@ -57,7 +62,7 @@ def test_truth_deviates_by_the_stated_magnitudes(rx130l: RobotModel, real: RealR
 
 def test_tracker_noise_matches_its_model(rx130l: RobotModel, real: RealRobot) -> None:
     Q = _visible_configurations(real, rx130l, 40)
-    exact = real.truth.positions(Q, "reflector")
+    exact = real.truth.positions(real.link_angles(Q), "reflector")  # the deflected arm
     to_tracker = real.transform_tracker_to_base.inverse()
     exact_tracker = exact @ to_tracker.rotation.T + to_tracker.translation
     rng = np.random.default_rng(2)
@@ -114,3 +119,63 @@ def test_joint_measurements_carry_the_stated_noise(rx130l: RobotModel, real: Rea
 def test_truth_config_rejects_negative_sigma(rx130l: RobotModel) -> None:
     with pytest.raises(ConfigError, match="truth.mass_relative_sigma"):
         RealRobot.create(rx130l, 0, TruthConfig(mass_relative_sigma=-1.0))
+
+
+def test_ideal_truth_gives_back_the_rigid_robot_bit_for_bit(rx130l: RobotModel) -> None:
+    ideal, real = RealRobot.create(rx130l, 5, TruthConfig(**IDEAL)), RealRobot.create(rx130l, 5)
+    # the extra effects use their own stream: the geometric and inertial truth is unchanged
+    assert np.array_equal(ideal.kinematic_errors, real.kinematic_errors)
+    assert np.array_equal(ideal.dynamic_parameters, real.dynamic_parameters)
+    assert np.all(np.isinf(ideal.joint_stiffness_Nm_rad))
+    Q = _visible_configurations(ideal, rx130l, 20)
+    assert ideal.link_angles(Q) is not None and np.array_equal(ideal.link_angles(Q), Q)
+    rigid = LaserTracker(ideal.truth, ideal.transform_tracker_to_base)   # the sensor without any deflection
+    a, b = ideal.tracker.measure(Q, np.random.default_rng(3)), rigid.measure(Q, np.random.default_rng(3))
+    assert np.array_equal(a.position_m, b.position_m) and a.corrupted is None
+
+
+def test_joints_deflect_under_gravity_and_payload(rx130l: RobotModel) -> None:
+    real = RealRobot.create(rx130l, 7, TruthConfig(transmission_error_amplitude_rad=0.0))
+    k = real.joint_stiffness_Nm_rad
+    ratio = k / nominal_joint_stiffness_Nm_rad(rx130l)
+    assert np.all((ratio > np.exp(-4 * 0.3)) & (ratio < np.exp(4 * 0.3))) and not np.allclose(ratio, 1.0)
+    Q = _visible_configurations(real, rx130l, 20)
+    deflection = real.link_angles(Q) - Q
+    expected = -gravity_torques_Nm(real.truth.model, Q) / k
+    assert np.allclose(deflection, expected, atol=1e-2 * np.abs(expected).max())   # first order in 1/k
+    assert 1e-4 < np.abs(deflection[:, 1]).max() < 5e-3     # a fraction of a milliradian to milliradians
+    load = Payload(10.0, (0.0, 0.0, 0.1))
+    heavy = with_payload(real.truth.model, rx130l.frame_flange, load)
+    loaded = real.link_angles(Q, load) - Q
+    assert np.allclose(loaded, -gravity_torques_Nm(heavy, Q) / k, atol=1e-2 * np.abs(loaded).max())
+    assert np.abs(loaded[:, 1]).sum() > np.abs(deflection[:, 1]).sum()
+    # doubling the compliance doubles the deflection (seeded: same spread)
+    soft = RealRobot.create(rx130l, 7, TruthConfig(joint_compliance_scale=2.0, transmission_error_amplitude_rad=0.0))
+    assert np.allclose(soft.link_angles(Q) - Q, 2 * deflection, atol=0.02 * np.abs(deflection).max())
+
+
+def test_transmission_error_is_a_bounded_remainder(rx130l: RobotModel) -> None:
+    real = RealRobot.create(rx130l, 7, TruthConfig(joint_compliance_scale=0.0, transmission_error_amplitude_rad=5e-6))
+    Q = _visible_configurations(real, rx130l, 200)
+    d = real.link_angles(Q) - Q
+    assert np.abs(d).max() <= 5e-6 + 1e-15 and np.abs(d).max() > 3e-6
+
+
+def test_gross_tracker_errors_are_injected_at_the_stated_rate(rx130l: RobotModel) -> None:
+    cfg = TruthConfig(**(IDEAL | dict(tracker_outlier_rate=0.1, tracker_outlier_magnitude_m=2e-3,
+                                      tracker_stale_rate=0.05)))
+    real = RealRobot.create(rx130l, 3, cfg)
+    Q = _visible_configurations(real, rx130l, 400)
+    reading = real.tracker.measure(Q, np.random.default_rng(1))
+    exact = LaserTracker(real.truth, real.transform_tracker_to_base).measure(Q, np.random.default_rng(1))
+    off = np.linalg.norm(reading.position_m - exact.position_m, axis=1)
+    bad = reading.corrupted
+    assert 0.08 < bad.mean() < 0.22
+    assert np.all(off[~bad] == 0.0) and np.all(off[bad] > 1e-4)
+    stale = np.all(reading.position_m[1:] == reading.position_m[:-1], axis=1)
+    assert stale.sum() >= 5 and np.all(bad[1:][stale])
+
+
+def test_truth_config_rejects_a_rate_above_one_half(rx130l: RobotModel) -> None:
+    with pytest.raises(ConfigError, match="truth.tracker_outlier_rate"):
+        RealRobot.create(rx130l, 0, TruthConfig(tracker_outlier_rate=0.9))

@@ -1,0 +1,105 @@
+"""Stage pieces of the elastostatic calibration: the error model a parameter subset needs, the
+known payload, and the second pass with an upstream (identified) gravity model.
+
+Data flow stays one-way: a calibration run uses the dynamic model it is given (``ctx.robot``:
+nominal) for the gravity torques of ``q_link = q - c g(q)``; the identification stage runs after
+it. A *second calibration pass* is a new run whose ``calibration.gravity_model`` names the robot
+folder an identification stage wrote (``<runs>/<name>/identification/robot``): its inertias give
+the gravity torques, and the report shows how much each compliance moved against the fit with the
+run's own (nominal) gravity model. Gravity-model errors scale the compliance estimates (a 15 %
+mass error gives a ~15 % compliance error), so this pass is what makes the stiffness estimate
+trustworthy.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from pipeline.calibration import error_model as em
+from pipeline.calibration import measure as ms
+from pipeline.calibration import subsets
+from pipeline.calibration.config import Config
+from pipeline.calibration.estimate import Estimate, estimate
+from pipeline.errors import ConfigError, PipelineError
+from pipeline.robot.model import RobotModel
+from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
+
+
+def measurement_model(robot, cfg: Config, marker_points: bool = False) -> em.MeasurementModel:
+    """The error model the parameter subset needs (elastostatic when it has compliances; marker
+    points when the readings are 6-D, :func:`pipeline.calibration.measure.expand_orientation`)."""
+    return em.MeasurementModel(robot, compliance=subsets.wants_compliance(cfg.parameters), payload=cfg.payload(),
+                               marker_points=marker_points)
+
+
+def load_gravity_model(cfg: Config, robot) -> RobotModel | None:
+    """The robot of ``calibration.gravity_model`` (same joints as ``robot``), or None."""
+    if cfg.gravity_model is None:
+        return None
+    try:
+        other = RobotModel.load(cfg.gravity_model)
+    except PipelineError as exc:
+        raise ConfigError(None, "calibration.gravity_model", f"cannot load {cfg.gravity_model}: {exc}") from None
+    if other.nq != robot.nq:
+        raise ConfigError(None, "calibration.gravity_model",
+                          f"{cfg.gravity_model} has {other.nq} joints, {robot.name} has {robot.nq}")
+    if not subsets.wants_compliance(cfg.parameters):
+        raise ConfigError(None, "calibration.gravity_model",
+                          f"only used by the elastostatic model, but calibration.parameters = {cfg.parameters!r} "
+                          "has no compliance")
+    return other
+
+
+def gravity_pass(mm: em.MeasurementModel, meas: ms.Measurements, basis: np.ndarray, est: Estimate,
+                 rejected: np.ndarray, cfg: Config, source: str) -> dict:
+    """Second pass: how much the stiffness moved against the fit with this run's (nominal) gravity
+    model. ``mm`` holds the upstream gravity model on return."""
+    gravity = mm.gravity_model
+    mm.set_gravity_model(mm.robot.model)
+    keep = np.ones(len(meas), bool)
+    keep[rejected] = False
+    mounted = None if meas.payload_mounted is None else meas.payload_mounted[keep]
+    offsets = None if meas.offset_m is None else meas.offset_m[keep]
+    try:
+        # compliances of joints the nominal gravity model does not load cannot be fitted with it
+        tau = np.abs(mm.static_torques(meas.Q[keep], mounted)).max(axis=0)
+        dead = np.flatnonzero(tau <= 1e-9 * tau.max())
+        cols = ~np.any(basis[mm.sl_compliance][dead] != 0, axis=0)
+        first = estimate(mm, meas.Q[keep], meas.Y[keep], meas.sigma_m[keep], basis[:, cols], "nominal gravity",
+                         cfg.max_lm_iterations, mounted, offsets)
+    finally:
+        mm.set_gravity_model(gravity)
+    names = [mm.names[i] for i in range(mm.n)]
+    c_first, c_second = first.x[mm.sl_compliance], est.x[mm.sl_compliance]
+    rows = [{"parameter": names[mm.sl_compliance][j], "compliance_nominal_gravity": float(c_first[j]),
+             "compliance_upstream_gravity": float(c_second[j]),
+             "relative_change": float((c_second[j] - c_first[j]) / c_first[j]) if c_first[j] != 0 else None}
+            for j in range(len(c_first)) if np.any(basis[mm.sl_compliance][j] != 0)]
+    return {"gravity_model": source, "chi2_per_dof_nominal_gravity": float(first.chi2_per_dof),
+            "chi2_per_dof_upstream_gravity": float(est.chi2_per_dof), "compliances": rows}
+
+
+def design_basis(mm: em.MeasurementModel, basis: np.ndarray) -> np.ndarray:
+    """The geometric part of ``basis`` for the pose design (candidate Jacobians are geometric; the
+    compliance columns are left out of the observability index: the design does not yet cover them)."""
+    n_geo = mm.n_kin + 9
+    rows = np.asarray(basis)[:n_geo]
+    return rows[:, np.any(rows != 0, axis=0)]
+
+
+def measure_with_payload(mm: em.MeasurementModel, real, meas: ms.Measurements, cfg: Config,
+                         rng: np.random.Generator) -> ms.Measurements:
+    """Measure ``payload_fraction`` of the measured configurations again with the payload mounted:
+    those whose payload torque deflects the joints most (``|Delta tau / k_nom|``); the same pose
+    under two loads separates the compliances from the geometry."""
+    payload = cfg.payload()
+    if payload is None or cfg.payload_fraction == 0 or len(meas) == 0:
+        return meas
+    k = int(math.ceil(cfg.payload_fraction * len(meas)))
+    loaded = mm.static_torques(meas.Q, np.ones(len(meas), bool))
+    extra = np.abs(loaded - mm.static_torques(meas.Q)) / nominal_joint_stiffness_Nm_rad(mm.robot)
+    idx = np.sort(np.argsort(-extra.sum(axis=1))[:k])
+    with_load = ms.measure_simulated(real, meas.Q[idx], rng, payload)
+    return ms.concatenate([meas, with_load], meas.source)

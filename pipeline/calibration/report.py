@@ -1,0 +1,171 @@
+"""Summary (``summary.json``) and report (``report.md``) of the calibration stage."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from pipeline.calibration import validate as va
+from pipeline.calibration.config import Config
+from pipeline.calibration.outcome import CalibrationOutcome
+
+
+def from_file(out: CalibrationOutcome) -> bool:
+    """Whether the calibration measurements came from a file (no selection was measured)."""
+    return out.selection is None
+
+
+def n_not_visible(out: CalibrationOutcome) -> int | None:
+    """Commanded configurations the tracker could not see (None for a measurement file: unknown)."""
+    if from_file(out):
+        return None
+    return int(out.measurements.n_requested - len(out.measurements))
+
+
+def summary_of(out: CalibrationOutcome, cfg: Config) -> dict:
+    v = out.validation
+    sel = out.selection
+    user = from_file(out)
+    design = out.measured_design or {}
+    if v is not None:
+        predicted, sigma = v["predicted_rms_m"], v["tracker_noise_sigma_m"]
+    elif out.prediction is not None:
+        predicted, sigma = out.prediction["predicted_rms_m"], out.prediction["tracker_noise_sigma_m"]
+    else:
+        predicted = sigma = None
+    fit = out.fit or {}
+    return {
+        "n_configurations": int(len(out.measurements)),
+        "n_configurations_commanded": None if user else int(out.measurements.n_requested),
+        "n_configurations_not_visible": n_not_visible(out),
+        "measurement_source": out.measurements.source,
+        "selection_method": "user file" if user else cfg.selection_method,
+        "index_name": cfg.index_name,
+        "index_value": (design.get("index_value") if user
+                        else float(out.gradient.index_value) if out.gradient is not None
+                        else float(sel.index_value)),
+        "index_value_measured": design.get("index_value"),
+        "selection_time_s": float(sel.run_time_s) if sel is not None else None,
+        "selection_evaluations": int(sel.evaluations) if sel is not None else None,
+        "n_candidates": int(len(out.candidates)) if out.candidates is not None else None,
+        "n_parameters": len(out.names),
+        "n_identifiable": int(out.estimate.theta.size),
+        "validation_source": v["source"] if v is not None else None,
+        "heldout_n_poses": v["n_poses"] if v is not None else None,
+        "heldout_n_rejected": v["n_rejected"] if v is not None else None,
+        "heldout_rms_position_error_before_m": v["before"]["rms"] if v is not None else None,
+        "heldout_rms_position_error_after_m": v["after"]["rms"] if v is not None else None,
+        "heldout_mean_position_error_after_m": v["after"]["mean"] if v is not None else None,
+        "heldout_max_position_error_after_m": v["after"]["max"] if v is not None else None,
+        "heldout_max_position_error_before_m": v["before"]["max"] if v is not None else None,
+        "predicted_rms_position_error_m": predicted,
+        "actual_over_predicted": v["after"]["rms"] / v["predicted_rms_m"] if v is not None else None,
+        "tracker_noise_sigma_m": sigma,
+        "rms_after_over_sigma": v["after"]["rms"] / v["tracker_noise_sigma_m"] if v is not None else None,
+        "fit_rms_residual_before_m": fit.get("rms_residual_before_m"),
+        "fit_rms_residual_after_m": fit.get("rms_residual_after_m"),
+        "chi2_per_dof": out.estimate.chi2_per_dof,
+        "parameters": cfg.parameters,
+        "n_outliers_rejected": out.rejection.n_rejected if out.rejection is not None else 0,
+        "outliers_rejected": rejected_readings(out),
+        "n_payload_readings": (int(np.sum(out.measurements.payload_mounted))
+                               if out.measurements.payload_mounted is not None else 0),
+        "gravity_pass": out.notes.get("gravity_pass"),
+        "cross_validation": out.notes.get("cross_validation"),
+        "joint_stiffness_Nm_rad": (None if out.robot.spec.actuation.joint_stiffness_Nm_rad is None
+                                   else [float(v) for v in out.robot.spec.actuation.joint_stiffness_Nm_rad]),
+        "lm_iterations": out.estimate.iterations,
+        "timings_s": {k: round(t, 3) for k, t in out.timings_s.items()},
+    }
+
+
+def rejected_readings(out: CalibrationOutcome) -> list[dict]:
+    """Readings the outlier test rejected: pose index (0-based row of the record), CSV line (user
+    file), whitened residual ``|r / sigma|`` under the final fit."""
+    rej = out.rejection
+    if rej is None:
+        return []
+    rec = out.notes.get("fit_record", out.measurements)   # 6-D: three fitted rows per pose
+    lines = rec.lines
+    pose = rec.pose_index if rec.pose_index is not None else np.arange(len(rec))
+    return [{"pose_index": int(pose[i]), "csv_line": None if lines is None else int(lines[i]),
+             "whitened_residual": float(rej.whitened_norm[i])} for i in rej.rejected]
+
+
+def outlier_markdown(out: CalibrationOutcome) -> str:
+    """The outlier test and the rejected readings (report.md)."""
+    rej = out.rejection
+    if rej is None:
+        return ""
+    head = (f"Outlier test (robust loss `{rej.loss}`, then chi-square with 3 dof on the whitened residual "
+            f"at {100 * rej.confidence:.2f} % confidence per reading: reject |r/σ| > {rej.threshold:.2f}): "
+            f"**{rej.n_rejected} reading(s) rejected** of {len(rej.whitened_norm)}.")
+    if rej.capped:
+        head += (" More readings failed the test than calibration.max_outlier_fraction allows: the model does "
+                 "not explain the data (see chi²/dof).")
+    rows = rejected_readings(out)
+    if not rows:
+        return head
+    table = ["", "| pose index | CSV line | |r/σ| |", "|---|---|---|"]
+    table += [f"| {r['pose_index']} | {r['csv_line'] if r['csv_line'] is not None else '—'} | "
+              f"{r['whitened_residual']:.1f} |" for r in rows]
+    return head + "\n" + "\n".join(table)
+
+
+def visibility_sentence(out: CalibrationOutcome, robot) -> str:
+    """How many commanded poses the tracker could not see (report.md)."""
+    m = out.measurements
+    if from_file(out):
+        return (f"Calibration measurements: {len(m)} configurations from the user file `{m.source}` "
+                "(poses the tracker could not see are not in the file).")
+    k = n_not_visible(out)
+    deg = math.degrees(robot.tracker.max_incidence_rad)
+    if k == 0:
+        return f"All {m.n_requested} selected poses were visible to the tracker."
+    return (f"{k} of {m.n_requested} selected poses were not visible to the tracker (beam blocked or "
+            f"incidence > {deg:.0f}°) and were dropped; the fit uses the {len(m)} measured ones.")
+
+
+def report_markdown(out: CalibrationOutcome, cfg: Config, robot) -> str:
+    md = ["### Identifiability", "", out.report.markdown(), "", "### Measurements", "",
+          visibility_sentence(out, robot), ""]
+    d = out.measured_design
+    if d is not None and from_file(out):
+        md += [f"Configurations chosen by the user (no selection was run): {d['index_name']} = "
+               f"{d['index_value']:.6g} for the {d['n_configurations']} measured configurations.", ""]
+    md += ["### Fit", "", va.fit_markdown(out.fit, out.prediction), "", outlier_markdown(out), ""]
+    cv = out.notes.get("cross_validation")
+    if cv is not None and cv["rms_position_error_m"] is not None:
+        md += [f"{cv['folds']}-fold cross-validation on the measurement file: RMS position error of the left-out "
+               f"poses {1e3 * cv['rms_position_error_m']:.4f} mm over {cv['n_poses']} poses "
+               f"({cv['n_folds_not_regular']} fold(s) too small to fit).", ""]
+    g = out.notes.get("gravity_pass")
+    if g is not None:
+        md += [f"Second calibration pass: gravity torques of the elastostatic model from `{g['gravity_model']}` "
+               f"(identified inertias) instead of this run's model; chi²/dof {g['chi2_per_dof_nominal_gravity']:.3f} "
+               f"-> {g['chi2_per_dof_upstream_gravity']:.3f}.", "",
+               "| compliance | nominal gravity [rad/(N·m)] | identified gravity | change |", "|---|---|---|---|"]
+        md += [f"| {r['parameter']} | {r['compliance_nominal_gravity']:.4g} | {r['compliance_upstream_gravity']:.4g} | "
+               + (f"{100 * r['relative_change']:+.1f} % |" if r["relative_change"] is not None else "— |")
+               for r in g["compliances"]]
+        md.append("")
+    k = out.robot.spec.actuation.joint_stiffness_Nm_rad
+    if (any(n.endswith(".c") for n in out.report.identifiable_names) and g is None
+            and out.estimate.chi2_per_dof > 1.5):
+        md += [f"chi²/dof = {out.estimate.chi2_per_dof:.2f} with the elastostatic model: the gravity torques come "
+               "from this run's (nominal) inertias, whose errors bias the compliances. Run a second calibration "
+               "pass with `calibration.gravity_model: <runs>/<name>/identification/robot` once the "
+               "identification stage has run.", ""]
+    if any(n.endswith(".c") for n in out.report.identifiable_names) and k is not None:
+        md += ["Joint stiffness carried by the calibrated model (1 / identified compliance; nominal where "
+               "not identified) [N·m/rad]: " + ", ".join(f"{v:.4g}" for v in k), ""]
+    if out.validation is None:
+        md += ["### Held-out validation", "",
+               "**no held-out validation: give calibration.validation_csv** (poses measured on the real "
+               "robot, not used in the fit). The figures above are in-sample fit residuals and a "
+               "covariance prediction, not a measured accuracy."]
+    else:
+        md += [f"### Held-out validation (paper 004 Table 2 layout; {out.validation['source']})", "",
+               va.table_markdown(out.validation)]
+    return "\n".join(md)

@@ -1,0 +1,115 @@
+"""Robust estimation: a robust-loss fit, an outlier test on whitened residuals, a final LS fit.
+
+Tracker records contain gross errors (a beam that hit the wrong surface: millimetres off; a
+stale reading repeated after a blocked beam). One of them moves a least-squares fit far off, so:
+
+1. plain least squares (:func:`pipeline.calibration.estimate.estimate`, registration + LM);
+2. with ``loss`` "huber" or "cauchy": ``scipy.optimize.least_squares`` from that solution with the
+   robust loss on the whitened residual components (``f_scale`` = :data:`ROBUST_SCALE` sigma);
+3. outlier test: the whitened residual of a reading ``s_k = |r_k / sigma_k|^2`` is chi-square with
+   3 degrees of freedom when the reading is good; readings with
+   ``s_k > u^2 chi2.ppf(confidence, 3)`` are rejected (at most ``max_fraction`` of them, largest
+   first), ``u = max(1, sqrt(median(s_k) / chi2.ppf(0.5, 3)))`` a robust scale of the residuals:
+   a model that leaves a small systematic remainder (chi²/dof a little above 1, which the
+   quality gate judges) does not make good readings look like gross errors;
+4. the least-squares fit (step 1) on the kept readings; steps 3-4 repeat on the new fit (a
+   rejected reading that fits again comes back) until the set is stable (at most
+   :data:`MAX_ROUNDS`).
+
+The final estimate, its covariance and chi²/dof are those of plain least squares on the kept
+readings, so with no gross error nothing changes against the plain fit. The test is per reading
+at the stated confidence: with the default 0.999 a good reading is rejected with probability
+0.1 %.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.stats import chi2
+
+from pipeline.calibration.error_model import MeasurementModel
+from pipeline.calibration.estimate import Estimate, estimate
+
+#: scale of the robust loss in whitened units (readings within 2 sigma count quadratically)
+ROBUST_SCALE = 2.0
+MAX_ROUNDS = 5
+LOSSES = ("linear", "huber", "cauchy")
+
+
+@dataclass
+class Rejection:
+    """Readings rejected by the outlier test (indices into the fitted rows)."""
+
+    rejected: np.ndarray          # (k,) row indices
+    whitened_norm: np.ndarray     # (N,) |r_k / sigma_k| of every reading under the final fit
+    threshold: float              # rejection threshold of |r_k / sigma_k|
+    confidence: float
+    loss: str
+    capped: bool                  # more readings failed the test than max_fraction allows
+
+    @property
+    def n_rejected(self) -> int:
+        return int(len(self.rejected))
+
+
+def _whitened_norm(mm: MeasurementModel, est: Estimate, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarray,
+                   mounted: np.ndarray | None, offsets: np.ndarray | None) -> np.ndarray:
+    pred = mm.predict(Q, est.x, est.registration, mounted, offsets)
+    return np.linalg.norm(Y - pred, axis=1) / sigma
+
+
+def _robust_refit(mm: MeasurementModel, est: Estimate, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarray,
+                  mounted: np.ndarray | None, loss: str, max_iterations: int,
+                  offsets: np.ndarray | None) -> Estimate:
+    """``least_squares`` with the robust loss from the plain fit (same registration and basis)."""
+    P = est.basis
+    w = 1.0 / sigma
+
+    def fun(th: np.ndarray) -> np.ndarray:
+        return ((Y - mm.predict(Q, P @ th, est.registration, mounted, offsets)) * w[:, None]).reshape(-1)
+
+    def jac(th: np.ndarray) -> np.ndarray:
+        _, J = mm.jacobian(Q, P @ th, est.registration, P, mounted, offsets)
+        return -(J * w[:, None, None]).reshape(-1, P.shape[1])
+
+    sol = least_squares(fun, est.theta, jac=jac, loss=loss, f_scale=ROBUST_SCALE, method="trf",
+                        max_nfev=max(4 * max_iterations, 20), x_scale="jac")
+    return Estimate(P @ sol.x, sol.x, P, est.covariance, est.transform_tracker_to_base, est.registration,
+                    int(sol.nfev), est.chi2_per_dof, est.residual_rms_m, bool(sol.success), est.cost_history)
+
+
+def robust_estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarray, basis: np.ndarray,
+                    source: str = "measurements", max_iterations: int = 50, mounted: np.ndarray | None = None,
+                    loss: str = "huber", confidence: float = 0.999, max_fraction: float = 0.1,
+                    offsets: np.ndarray | None = None) -> tuple[Estimate, Rejection]:
+    """Steps 1-4 of the module docstring. ``loss`` "linear": no robust refit (outlier test only)."""
+    Q, Y, sigma = np.asarray(Q, float), np.asarray(Y, float), np.asarray(sigma, float)
+    n = len(Q)
+    base_threshold = float(np.sqrt(chi2.ppf(confidence, 3)))
+    median_3 = float(chi2.ppf(0.5, 3))
+    threshold = base_threshold
+    max_rejected = int(np.floor(max_fraction * n))
+    est = estimate(mm, Q, Y, sigma, basis, source, max_iterations, mounted, offsets)
+    probe = est if loss == "linear" else _robust_refit(mm, est, Q, Y, sigma, mounted, loss, max_iterations, offsets)
+    kept = np.ones(n, bool)
+    capped = False
+    for _ in range(MAX_ROUNDS):
+        norm = _whitened_norm(mm, probe, Q, Y, sigma, mounted, offsets)
+        threshold = base_threshold * max(1.0, float(np.sqrt(np.median(norm ** 2) / median_3)))
+        bad = np.flatnonzero(norm > threshold)
+        capped = len(bad) > max_rejected
+        bad = bad[np.argsort(-norm[bad])][:max_rejected]
+        new_kept = np.ones(n, bool)
+        new_kept[bad] = False
+        if np.array_equal(new_kept, kept):
+            break
+        kept = new_kept
+        m = None if mounted is None else mounted[kept]
+        o = None if offsets is None else offsets[kept]
+        est = estimate(mm, Q[kept], Y[kept], sigma[kept], basis, source, max_iterations, m, o)
+        probe = est
+    norm = _whitened_norm(mm, est, Q, Y, sigma, mounted, offsets)
+    return est, Rejection(np.flatnonzero(~kept), norm, threshold, confidence, loss, capped)
