@@ -16,7 +16,7 @@ from pipeline.control.reference import cartesian_reference
 from pipeline.control.simulate import feedforward_torque, simulate_joint_trajectory
 from pipeline.control.validate import settling_time
 from pipeline.robot.paths import start_configuration
-from pipeline.robot.transmission import nominal_joint_stiffness_Nm_rad
+from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 from pipeline.robot.truth import RealRobot, TruthConfig
 
 DOWN = pin.utils.rotate("x", np.pi)
