@@ -3,6 +3,7 @@
 * ``run [--config FILE] [--set key=value ...] [--stages a,b] [--out DIR] [--force]``
 * ``view [RUN_DIR] [--robot NAME] [--configurations NAME] [--trajectory NAME] [--open]``
 * ``study [NAME [ARGS...]]`` (no name: list the registered studies)
+* ``sweep [--seeds 0-19] [--robots A,B] [--config FILE] [--set k=v] [--vary k=[a,b]] [--scheduler ADDR]``
 
 A :class:`pipeline.errors.PipelineError` ends the program with one line on stderr and exit
 code 2 (no traceback).
@@ -14,12 +15,13 @@ import argparse
 import sys
 from collections.abc import Sequence
 
+from pipeline import sweep
 from pipeline.errors import PipelineError
 
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m pipeline", description=__doc__.split("\n\n")[0])
-    sub = p.add_subparsers(dest="command", required=True, metavar="{run,view,study}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="{run,view,study,sweep}")
 
     r = sub.add_parser("run", help="run the pipeline stages", description=(
         "Run the stages into DIR/<name>/ (default data/runs/<name>/). A stage whose inputs are "
@@ -46,6 +48,8 @@ def _parser() -> argparse.ArgumentParser:
     s = sub.add_parser("study", help="run a registered study (no name: list them)")
     s.add_argument("name", nargs="?")
     s.add_argument("args", nargs=argparse.REMAINDER, help="arguments passed to the study")
+
+    sweep.add_arguments(sub.add_parser("sweep", help="run a grid of runs (seeds x robots x settings), one table"))
     return p
 
 
@@ -81,7 +85,7 @@ def _cmd_study(ns: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     ns = _parser().parse_args(argv)
     try:
-        return {"run": _cmd_run, "view": _cmd_view, "study": _cmd_study}[ns.command](ns)
+        return {"run": _cmd_run, "view": _cmd_view, "study": _cmd_study, "sweep": sweep.main}[ns.command](ns)
     except PipelineError as exc:
         print("error: " + " ".join(exc.one_line().split()), file=sys.stderr)
         return 2
