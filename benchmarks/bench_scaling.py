@@ -70,15 +70,23 @@ def design_curves(robot: RobotModel, quick: bool, progress: Progress) -> None:
     G = cd.build_candidate_set(chain, Q, basis, robot.tracker.transform_tracker_to_base).G
     spec = ix.IndexSpec(cfg.index_name)
 
+    evaluations: list[int] = []
+
     def rr(n_candidates: float, n_configurations: int = 40) -> float:
         sub = G[: int(n_candidates)]
-        return _timed(lambda: ds.remove_and_replace(sub, spec, n_configurations, np.random.default_rng(1)))
+        t0 = time.perf_counter()
+        result = ds.remove_and_replace(sub, spec, n_configurations, np.random.default_rng(1))
+        evaluations.append(result.evaluations)
+        return time.perf_counter() - t0
 
     sizes = [1e3, 3e3, 1e4] if quick else [1e3, 3e3, 1e4, 3e4, 1e5]
     curve(f"remove-and-replace ({spec.name}, 40 configurations) vs candidates", "candidates", sizes, rr, progress)
+    print(f"  (index evaluations: {', '.join(str(e) for e in evaluations)})")
+    evaluations.clear()
     n_conf = [10, 20, 40] if quick else [10, 20, 40, 80, 160]
     curve("remove-and-replace (10^4 candidates) vs configurations", "configurations", n_conf,
           lambda n: rr(min(1e4, n_max), int(n)), progress)
+    print(f"  (index evaluations: {', '.join(str(e) for e in evaluations)})")
 
 
 def identification_curve(robot: RobotModel, quick: bool, progress: Progress) -> None:
@@ -96,13 +104,20 @@ def identification_curve(robot: RobotModel, quick: bool, progress: Progress) -> 
         rows = slice(0, int(n) * nq)
         return _timed(lambda: (E.ols(Y[rows], y[rows], nq), E.wls(Y[rows], y[rows], nq)))
 
+    iterations: list[int] = []
+
     def physical(n: float) -> float:
         rows = slice(0, int(n) * nq)
-        return _timed(lambda: E.physical_fit(Y[rows], y[rows], nq, p, regularization=1e-3))
+        t0 = time.perf_counter()
+        fit = E.physical_fit(Y[rows], y[rows], nq, p, regularization=1e-3)
+        iterations.append(max(1, int(fit.iterations)))
+        return (time.perf_counter() - t0) / iterations[-1]
 
     sizes = [250, 500, 1000, 2000] if quick else [500, 1000, 2000, 4000, 8000]
     curve("identification OLS + WLS (standard regressor) vs samples", "samples", sizes, least_squares, progress)
-    curve("identification physically consistent fit (IPOPT) vs samples", "samples", sizes, physical, progress)
+    curve("identification physically consistent fit (IPOPT), time per iteration, vs samples", "samples", sizes,
+          physical, progress)
+    print(f"  (IPOPT iterations: {', '.join(str(i) for i in iterations)})")
 
 
 def control_curve(robot: RobotModel, quick: bool, progress: Progress) -> None:
