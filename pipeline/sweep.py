@@ -45,7 +45,7 @@ except ModuleNotFoundError:  # pragma: no cover - depends on the environment
     as_completed = None  # type: ignore[assignment]
 
 __all__ = ["SweepPoint", "SweepSpec", "parse_seeds", "parse_vary", "grid", "run_point", "run_sweep",
-           "add_arguments", "main"]
+           "add_arguments", "main", "varied_column"]
 
 
 @dataclass(frozen=True)
@@ -121,8 +121,9 @@ def grid(spec: SweepSpec) -> list[SweepPoint]:
                 base = [*spec.overrides, f"seed={seed}"] + ([f"robot={robot}"] if robot else [])
                 base += [f"{key}={_yaml_value(v)}" for key, v in varied]
                 cfg = load_config(config_path, base, spec.stages)      # validates (PipelineError)
-                name = _point_name(str(cfg.robot), seed, k if spec.vary else None)
-                points.append(SweepPoint(name=name, robot=str(cfg.robot), seed=seed, varied=varied,
+                robot_name = Path(str(cfg.robot)).name
+                name = _point_name(robot_name, seed, k if spec.vary else None)
+                points.append(SweepPoint(name=name, robot=robot_name, seed=seed, varied=varied,
                                          config_path=config_path, overrides=(*base, f"name={name}"),
                                          stages=spec.stages, runs_dir=str(spec.out_dir / "runs")))
     names = [p.name for p in points]
@@ -133,7 +134,8 @@ def grid(spec: SweepSpec) -> list[SweepPoint]:
 
 def run_point(point: SweepPoint) -> Row:
     """Run one grid point (in a worker) and return its row of the table."""
-    row: Row = {"run": point.name, "robot": point.robot, "seed": point.seed, **dict(point.varied)}
+    row: Row = {"run": point.name, "robot": point.robot, "seed": point.seed,
+                **{varied_column(k): v for k, v in point.varied}}
     try:
         cfg = load_config(point.config_path, point.overrides, point.stages)
         result = run_pipeline(cfg, out_root=point.runs_dir, progress=Progress(enabled=False), log=_quiet)
@@ -144,6 +146,11 @@ def run_point(point: SweepPoint) -> Row:
     for stage, output in result.outputs.items():
         flatten_summary(stage, output.summary, row)
     return row
+
+
+def varied_column(key: str) -> str:
+    """Table column of a varied setting (``set.<key>``: apart from the summaries' own figures)."""
+    return f"set.{key}"
 
 
 def _quiet(_message: str) -> None:
@@ -192,7 +199,7 @@ def run_sweep(spec: SweepSpec, jobs: int = 1, scheduler: object = None,
     prog = progress if progress is not None else Progress()
     with prog:
         rows = _run_dask(points, scheduler, prog) if scheduler is not None else _run_local(points, jobs, prog)
-    return rows, write_outputs(spec.out_dir, rows, list(spec.vary), metrics)
+    return rows, write_outputs(spec.out_dir, rows, [varied_column(k) for k in spec.vary], metrics)
 
 
 # --------------------------------------------------------------------------------------------

@@ -115,10 +115,12 @@ def spread(values: np.ndarray) -> dict[str, float]:
             "p95": float(np.percentile(values, 95.0)), "max": float(values.max())}
 
 
-def _groups(rows: Sequence[Row]) -> dict[str, list[Row]]:
+def _groups(rows: Sequence[Row], varied: Sequence[str] = ()) -> dict[str, list[Row]]:
+    """Rows by robot and varied settings (the runs that differ only by their seed)."""
     groups: dict[str, list[Row]] = {}
     for row in rows:
-        groups.setdefault(str(row.get("robot")), []).append(row)
+        key = " ".join([str(row.get("robot"))] + [f"{c.removeprefix('set.')}={row.get(c)}" for c in varied])
+        groups.setdefault(key, []).append(row)
     return groups
 
 
@@ -126,9 +128,9 @@ def to_markdown(rows: Sequence[Row], metrics: Sequence[str], varied: Sequence[st
     """Spread per robot and metric, then one line per run with the metrics."""
     lines = ["# Sweep", "", f"{len(rows)} runs, {sum(r.get('status') == 'ok' for r in rows)} ok.", ""]
     if metrics:
-        lines += ["## Spread", "", "| robot | figure | n | median | 95th percentile | max |",
+        lines += ["## Spread over the seeds", "", "| robot (settings) | figure | n | median | 95th percentile | max |",
                   "|---|---|---|---|---|---|"]
-        for robot, group in _groups(rows).items():
+        for robot, group in _groups(rows, varied).items():
             for m in metrics:
                 s = spread(numeric_values(group, m))
                 lines.append(f"| {robot} | {m} | {int(s['n'])} | {s['median']:.6g} | {s['p95']:.6g} | "
@@ -145,9 +147,10 @@ def to_markdown(rows: Sequence[Row], metrics: Sequence[str], varied: Sequence[st
     return "\n".join(lines) + "\n"
 
 
-def spread_figure(rows: Sequence[Row], metrics: Sequence[str]) -> Figure:
-    """One panel per metric: every run's value per robot (dots), median and 95th percentile."""
-    groups = _groups(rows)
+def spread_figure(rows: Sequence[Row], metrics: Sequence[str], varied: Sequence[str] = ()) -> Figure:
+    """One panel per metric: every run's value per robot and settings (dots), median and 95th
+    percentile over the seeds."""
+    groups = _groups(rows, varied)
     fig = Figure(figsize=(max(4.0, 1.6 * len(groups) + 2.0), 3.0 * max(1, len(metrics))))
     for i, m in enumerate(metrics or [""]):
         ax = fig.add_subplot(max(1, len(metrics)), 1, i + 1)
@@ -161,7 +164,7 @@ def spread_figure(rows: Sequence[Row], metrics: Sequence[str]) -> Figure:
             ax.hlines(s["median"], j - 0.3, j + 0.3, color="k", label="median" if j == 0 else None)
             ax.hlines(s["p95"], j - 0.3, j + 0.3, color="tab:red", linestyles="--",
                       label="95th percentile" if j == 0 else None)
-        ax.set_xticks(range(len(groups)), list(groups))
+        ax.set_xticks(range(len(groups)), list(groups), fontsize=7)
         ax.set_ylabel(m, fontsize=7)
         ax.legend(fontsize=7)
     fig.tight_layout()
@@ -175,5 +178,5 @@ def write_outputs(out_dir: Path, rows: Sequence[Row], varied: Sequence[str],
     chosen = pick_metrics(rows, metrics)
     paths = {"csv": artefacts.write_text(out_dir / "sweep.csv", to_csv(rows, columns)),
              "markdown": artefacts.write_text(out_dir / "sweep.md", to_markdown(rows, chosen, varied))}
-    paths["plot"] = artefacts.save_figure(out_dir / "sweep.png", spread_figure(rows, chosen))
+    paths["plot"] = artefacts.save_figure(out_dir / "sweep.png", spread_figure(rows, chosen, varied))
     return paths

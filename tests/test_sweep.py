@@ -58,6 +58,9 @@ def test_grid_is_validated_before_anything_is_written(tmp_path: Path) -> None:
                      overrides=list(TINY), vary={"calibration.n_configurations": [20, 30]}, stages="calibration")
     points = grid(spec)
     assert len(points) == 8 and len({p.name for p in points}) == 8
+    assert {p.robot for p in points} == {"rx130l", "staubli_tx40"}
+    assert sorted({p.varied for p in points}) == [(("calibration.n_configurations", 20),),
+                                                  (("calibration.n_configurations", 30),)]
     bad = SweepSpec(seeds=[0], robots=["rx130l"], out_dir=tmp_path / "bad", config_path=QUICK,
                     overrides=["calibration.n_configurations=oops"], stages="calibration")
     with pytest.raises(ConfigError):
