@@ -1,10 +1,11 @@
-"""Command line: ``python -m pipeline run | check | view | study``.
+"""Command line: ``python -m pipeline run | check | view | study | sweep``.
 
 * ``run [--config FILE] [--set key=value ...] [--stages a,b] [--out DIR] [--force] [--accept-poor]``
 * ``check`` (same options as ``run``): validate what ``run`` would validate, write nothing, and
   print which stages would run or be reused
 * ``view [RUN_DIR] [--robot NAME] [--configurations NAME] [--trajectory NAME] [--open]``
 * ``study [NAME [ARGS...]]`` (no name: list the registered studies)
+* ``sweep [--seeds 0-19] [--robots A,B] [--config FILE] [--set k=v] [--vary k=[a,b]] [--scheduler ADDR]``
 
 Exit codes: 0 done; 2 a :class:`pipeline.errors.PipelineError` (bad input, a fault writing
 files, the run directory locked by another run), one line on stderr, no traceback; 3 a stage
@@ -20,6 +21,7 @@ from collections.abc import Sequence
 
 import pipeline
 from pipeline import config as config_mod
+from pipeline import sweep
 from pipeline.errors import PipelineError, QualityGateError
 from pipeline.interrupts import handle_termination
 from pipeline.runner import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_QUALITY_GATE
@@ -45,7 +47,7 @@ def _add_run_options(r: argparse.ArgumentParser) -> None:
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m pipeline", description=__doc__.split("\n\n")[0])
     p.add_argument("--version", action="version", version=f"pipeline {pipeline.__version__}")
-    sub = p.add_subparsers(dest="command", required=True, metavar="{run,check,view,study}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="{run,check,view,study,sweep}")
 
     stages_robots = (f"stages (in order): {', '.join(config_mod.stage_names())}; "
                      f"built-in robots: {', '.join(_built_in_robots()) or 'none'}")
@@ -73,6 +75,8 @@ def _parser() -> argparse.ArgumentParser:
     s = sub.add_parser("study", help="run a registered study (no name: list them)")
     s.add_argument("name", nargs="?")
     s.add_argument("args", nargs=argparse.REMAINDER, help="arguments passed to the study")
+
+    sweep.add_arguments(sub.add_parser("sweep", help="run a grid of runs (seeds x robots x settings), one table"))
     return p
 
 
@@ -121,7 +125,8 @@ def _cmd_study(ns: argparse.Namespace) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     ns = _parser().parse_args(argv)
-    commands = {"run": _cmd_run, "check": _cmd_check, "view": _cmd_view, "study": _cmd_study}
+    commands = {"run": _cmd_run, "check": _cmd_check, "view": _cmd_view, "study": _cmd_study,
+                "sweep": sweep.main}
     try:
         with handle_termination():
             return commands[ns.command](ns)

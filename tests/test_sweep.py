@@ -1,0 +1,96 @@
+"""Sweeps: grid parsing, table flattening, and the same table from joblib and a Dask LocalCluster."""
+
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline import cli
+from pipeline.config import REPO_ROOT
+from pipeline.errors import ConfigError
+from pipeline.sweep import SweepSpec, grid, parse_seeds, parse_vary, run_sweep
+from pipeline.sweep_table import flatten_summary, is_timing_column, spread
+
+QUICK = str(REPO_ROOT / "configs" / "quick.yaml")
+#: a calibration small enough for a few seconds per run
+TINY = ["calibration.n_random_candidates=300", "calibration.n_configurations=20", "calibration.n_heldout=100"]
+
+
+def test_parse_seeds_ranges_lists_and_errors() -> None:
+    assert parse_seeds("0-3,10,2") == [0, 1, 2, 3, 10]
+    assert parse_seeds("7") == [7]
+    for bad in ("3-1", "a", "", "1,,2", "-4"):
+        with pytest.raises(ConfigError):
+            parse_seeds(bad)
+
+
+def test_parse_vary_lists_and_scalars() -> None:
+    assert parse_vary(["calibration.n_configurations=[20, 40]", "seedless=3"]) == {
+        "calibration.n_configurations": [20, 40], "seedless": [3]}
+    with pytest.raises(ConfigError):
+        parse_vary(["a=[]"])
+
+
+def test_flatten_summary_keeps_scalars_short_numeric_lists_and_nested_dicts() -> None:
+    row: dict = {}
+    flatten_summary("s", {"a": 1.5, "b": {"c": "x", "d": None}, "e": [1, 2], "names": ["j1", "j2"],
+                          "long": list(range(50)), "flag": True}, row)
+    assert row == {"s.a": 1.5, "s.b.c": "x", "s.b.d": None, "s.e[0]": 1.0, "s.e[1]": 2.0, "s.flag": True}
+    assert is_timing_column("calibration.timings_s.measure_s")
+    assert is_timing_column("calibration.stage_time_s")
+    assert not is_timing_column("calibration.heldout_rms_position_error_after_m")
+
+
+def test_spread_median_and_95th_percentile_bound_the_values() -> None:
+    values = np.random.default_rng(0).lognormal(size=200)
+    s = spread(values)
+    assert values.min() <= s["median"] <= s["p95"] <= s["max"] == values.max()
+    assert np.mean(values <= s["p95"]) >= 0.95
+    assert np.isnan(spread(np.zeros(0))["median"])
+
+
+def test_grid_is_validated_before_anything_is_written(tmp_path: Path) -> None:
+    spec = SweepSpec(seeds=[0, 1], robots=["rx130l", "staubli_tx40"], out_dir=tmp_path / "s", config_path=QUICK,
+                     overrides=list(TINY), vary={"calibration.n_configurations": [20, 30]}, stages="calibration")
+    points = grid(spec)
+    assert len(points) == 8 and len({p.name for p in points}) == 8
+    assert {p.robot for p in points} == {"rx130l", "staubli_tx40"}
+    assert sorted({p.varied for p in points}) == [(("calibration.n_configurations", 20),),
+                                                  (("calibration.n_configurations", 30),)]
+    bad = SweepSpec(seeds=[0], robots=["rx130l"], out_dir=tmp_path / "bad", config_path=QUICK,
+                    overrides=["calibration.n_configurations=oops"], stages="calibration")
+    with pytest.raises(ConfigError):
+        run_sweep(bad)
+    assert not (tmp_path / "bad").exists()
+
+
+def _table(path: Path) -> list[dict[str, str]]:
+    rows = list(csv.DictReader(io.StringIO(path.read_text())))
+    return [{k: v for k, v in r.items() if not is_timing_column(k)} for r in rows]
+
+
+def test_local_and_dask_sweeps_give_the_same_table(tmp_path: Path) -> None:
+    distributed = pytest.importorskip("distributed")
+    args = ["sweep", "--config", QUICK, "--seeds", "0-2", "--stages", "calibration", "--out", str(tmp_path / "local")]
+    for item in TINY:
+        args += ["--set", item]
+    assert cli.main(args) == 0
+    local = _table(tmp_path / "local" / "sweep.csv")
+    assert [r["seed"] for r in local] == ["0", "1", "2"] and all(r["status"] == "ok" for r in local)
+    figure = "calibration.heldout_rms_position_error_after_m"
+    assert len({r[figure] for r in local}) == 3          # three hidden robots, three results
+    assert (tmp_path / "local" / "sweep.png").stat().st_size > 0
+    assert figure in (tmp_path / "local" / "sweep.md").read_text()
+
+    spec = SweepSpec(seeds=[0, 1, 2], robots=[None], out_dir=tmp_path / "dask", config_path=QUICK,
+                     overrides=list(TINY), stages="calibration")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+        rows, paths = run_sweep(spec, scheduler=client)
+    assert (tmp_path / "dask" / "runs" / "rx130l-seed0" / "calibration" / "summary.json").exists()
+    assert _table(paths["csv"]) == local
+    assert [r["run"] for r in rows] == [r["run"] for r in local]
