@@ -118,7 +118,7 @@ def gradient_design(robot, mm: MeasurementModel, basis: np.ndarray, Q_start: np.
     p = P.shape[1]
     T0 = transform_tracker_to_base if transform_tracker_to_base is not None else \
         robot.tracker.transform_tracker_to_base
-    if spec.name in ("A", "tcp_A", "tcp_A_mixed"):
+    if spec.name in ix.TRACE_INDICES:
         W = spec.weight_matrix(p)
     else:
         raise ValueError(f"gradient design supports the A-type indices, not {spec.name}")
