@@ -54,6 +54,8 @@ class GradientDesignConfig:
     obstacles: list = field(default_factory=list)
     tol: float = 1e-6
     print_level: int = 0
+    #: IPOPT Hessian: "exact" (CasADi AD) or "limited-memory" (L-BFGS)
+    hessian: str = "limited-memory"
 
 
 @dataclass
@@ -189,7 +191,7 @@ def gradient_design(robot, mm: MeasurementModel, basis: np.ndarray, Q_start: np.
     G_all = ca.reshape(cons.map(n, "serial")(X), -1, 1)
     nlp = {"x": ca.reshape(X, -1, 1), "f": scale * phi, "g": G_all}
     opts = {"ipopt.max_iter": cfg.max_iterations, "ipopt.tol": cfg.tol, "ipopt.print_level": cfg.print_level,
-            "ipopt.hessian_approximation": "limited-memory", "print_time": False,
+            "ipopt.hessian_approximation": cfg.hessian, "print_time": False,
             "ipopt.acceptable_tol": 1e-4, "ipopt.acceptable_iter": 5, "ipopt.mu_strategy": "adaptive"}
     solver = ca.nlpsol("oed", "ipopt", nlp, opts)
     lbx = np.tile(lower, n)

@@ -449,7 +449,7 @@ def run(ctx) -> Any:
     t0 = time.perf_counter()
     # real tracker data: the simulated hidden robot must not be touched (not even ctx.real)
     real = None if cfg.measurements_csv else ctx.real
-    region = ts.region_of_run(ctx.run, cfg, ctx.robot)
+    region = ts.region_of_run(getattr(ctx, "run", None), cfg, ctx.robot)
     out = calibrate(ctx.robot, real, cfg, ctx.rng, getattr(ctx, "progress", None), region)
     summary = summary_of(out, cfg)
     summary["design_table"] = dtab.summary(out.design_table)
