@@ -125,7 +125,7 @@ def sample_region(robot, region: WorkingRegion, n: int, rng: np.random.Generator
         return Q[:n] if len(Q) > n else Q
     out, have = [], 0
     for _ in range(max_batches):
-        Q = rng.uniform(chain.lower, chain.upper, size=(batch, chain.nq))
+        Q = _draw_near_region(chain, robot, region, batch, rng)
         p = tcp_positions(chain, robot, Q)
         Q = Q[np.all((p >= region.lower_m) & (p <= region.upper_m), axis=1)]
         if len(Q):
@@ -140,6 +140,26 @@ def sample_region(robot, region: WorkingRegion, n: int, rng: np.random.Generator
         raise InfeasibleError(None, "calibration.working_region",
                               f"no collision-free configuration {what}with the TCP in the {region.describe()}")
     return np.concatenate(out)[:n]
+
+
+def _draw_near_region(chain: cd.Chain, robot, region: WorkingRegion, batch: int, rng: np.random.Generator,
+                      per_prefix: int = 16) -> np.ndarray:
+    """Uniform joint configurations, drawn so that most have the TCP near the region: prefixes
+    ``q_1..q_k`` (k = min(3, nq - 1)) are kept when the origin of joint k+1 is within the reach of the
+    rest of the chain (sum of the remaining placement offsets, flange and TCP) of the box, then
+    ``per_prefix`` uniform suffixes are drawn for each kept prefix. The kept prefixes are a superset
+    of those that can reach the box, so the result is still uniform over the configurations whose
+    TCP lies in it (rejection sampling with a necessary condition first)."""
+    k = min(3, chain.nq - 1)
+    reach = (sum(np.linalg.norm(chain.p_place[i]) for i in range(k + 1, chain.nq)) + np.linalg.norm(chain.flange_p)
+             + np.linalg.norm(np.asarray(robot.transform_tcp_to_flange.translation, float)))
+    pre = rng.uniform(chain.lower, chain.upper, size=(batch // per_prefix, chain.nq))
+    o = cd.kinematics(chain, pre).opre[:, k]
+    gap = np.maximum(np.maximum(region.lower_m - o, o - region.upper_m), 0.0)
+    pre = pre[np.linalg.norm(gap, axis=1) <= reach + 1e-9]
+    Q = np.repeat(pre, per_prefix, axis=0)
+    Q[:, k:] = rng.uniform(chain.lower[k:], chain.upper[k:], size=(len(Q), chain.nq - k))
+    return Q
 
 
 def tcp_jacobian(mm: MeasurementModel, Q: np.ndarray, basis: np.ndarray, frame: str | None = None) -> np.ndarray:
