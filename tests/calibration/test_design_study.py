@@ -26,5 +26,7 @@ def test_quick_calib_design_study_compares_every_index(tmp_path, monkeypatch, ca
         assert 0 < row["actual_rms_m"] < 1e-3 and 0 < row["predicted_rms_m"] < 1e-3
     for key in ("every_kth/-/24", "random/-/24", "remove_and_replace/V/20", "every_kth/-/20"):
         assert key in table
-    assert res["winner"] in table
-    assert all(math.isfinite(g) for g in res["gain_vs_every_kth"] + res["gain_vs_O3"])
+    for head in res["headlines"].values():
+        assert head["winner"] in table
+        assert all(math.isfinite(g) for g in head["gain_vs_every_kth"] + head["gain_vs_O3"])
+    assert all(0 < table[k]["tcp_aligned_rms_m"] < 1e-3 for k in table)
