@@ -26,6 +26,7 @@ STUDIES: dict[str, str] = {
     "calib-000": "pipeline.calibration.studies:study_000",
     "calib-002": "pipeline.calibration.studies:study_002",
     "calib-003": "pipeline.calibration.studies:study_003",
+    "calib-design": "pipeline.calibration.design_study:study_design",
     # identification
     # control
     # trajectory

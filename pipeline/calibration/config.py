@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pipeline.calibration import indices as ix
 from pipeline.calibration.robust import LOSSES
 from pipeline.calibration.subsets import check_parameters
+from pipeline.calibration.task_space import check_task_fields
 from pipeline.errors import ConfigError
 from pipeline.robot.payload import Payload
 
@@ -20,7 +21,7 @@ SELECTION_METHODS = ("remove_and_replace", "detmax", "bsaa", "random", "gradient
 CANDIDATE_KINDS = ("grid", "random")
 ERROR_MODELS = ("se3", "mdh_hayati")
 #: indices the gradient design (IPOPT) can optimise
-GRADIENT_INDICES = ("A", "tcp_A", "tcp_A_mixed")
+GRADIENT_INDICES = ix.TRACE_INDICES
 #: largest candidate set (random candidates or grid points): beyond it the filtering and the
 #: whitened Jacobians of the feasible candidates take too much time and memory
 MAX_CANDIDATES = 20_000_000
@@ -36,8 +37,9 @@ class Config:
     n_random_candidates: int = 20000
     #: remove_and_replace | detmax | bsaa | random | gradient (remove-and-replace + IPOPT refinement)
     selection_method: str = "remove_and_replace"
-    #: O1..O5, D, A, E, Od, Oc, tcp_A, tcp_A_mixed (see pipeline.calibration.indices)
-    index_name: str = "O3"
+    #: O1..O5, D, A, E, Od, Oc, tcp_A, tcp_A_mixed, V (see pipeline.calibration.indices); V: the
+    #: predicted TCP variance over the working region (pipeline.calibration.task_space)
+    index_name: str = "V"
     n_configurations: int = 50
     #: initial subset size of remove-and-replace (None: 2/3 of n_configurations)
     n_initial: int | None = None
@@ -88,6 +90,18 @@ class Config:
     #: after identification: ``<runs>/<name>/identification/robot`` of a previous run); None: this
     #: run's model (nominal)
     gravity_model: str | None = None
+
+    # -- task-space criterion and design table (pipeline.calibration.task_space, design_table) --
+    #: iso_cube (control.iso) | box (working_box_m) | csv (working_csv: columns q1..qn, rad)
+    working_region: str = "iso_cube"
+    working_box_m: list[list[float]] | None = None
+    working_csv: str | None = None
+    #: working configurations sampled in the region (W of the V criterion)
+    n_region_configurations: int = 300
+    #: compare the design with baselines of the same size in the report (predicted TCP RMS; in
+    #: simulation also measured on design_table_heldout visible poses of the working region)
+    design_table: bool = True
+    design_table_heldout: int = 300
 
     def payload(self) -> Payload | None:
         """The known payload (None when no mass is given)."""
@@ -166,6 +180,7 @@ class Config:
         v = self.margin_incidence_deg
         if not (math.isfinite(v) and 0 <= v < 90):
             raise bad("margin_incidence_deg", f"must be in [0, 90) degrees, got {v}")
+        check_task_fields(self, source)
         if self.selection_method == "gradient" and self.index_name not in GRADIENT_INDICES:
             raise bad("selection_method", f"gradient optimises an A-type index (calibration.index_name one of "
                       f"{GRADIENT_INDICES}), but index_name is {self.index_name!r}")

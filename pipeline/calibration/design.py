@@ -8,7 +8,7 @@ Jacobian (except a periodic refresh against round-off).
 
 Fast candidate searches (exhaustive, exact):
 
-- A, tcp_A, tcp_A_mixed: Sherman-Morrison-Woodbury, ``trace(W (M + G^T G)^-1) = trace(W M^-1)
+- A, tcp_A, tcp_A_mixed, V: Sherman-Morrison-Woodbury, ``trace(W (M + G^T G)^-1) = trace(W M^-1)
   - trace(S^-1 H W H^T)`` with ``H = G M^-1``, ``S = I + H G^T`` (O(p^2) per candidate).
 - D, O1: ``log det(M + G^T G) = log det M + log det S``.
 - O3, E (paper 004's ``B = sigma_min(Lambda)``): Cauchy interlacing / Rayleigh bound
@@ -142,7 +142,7 @@ class _State:
         name = self.spec.name
         ev = np.linalg.eigvalsh(self.M)
         regular = ev[0] > 1e-12 * max(ev[-1], 1e-300)
-        if regular and name in ("A", "tcp_A", "tcp_A_mixed", "D", "O1"):
+        if regular and name in ix.TRACE_INDICES + ("D", "O1"):
             sc = self._smw_scores(cand)
         elif regular and name in ("O3", "E"):
             return self._bound_and_prune(cand)

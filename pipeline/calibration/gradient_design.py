@@ -52,8 +52,15 @@ class GradientDesignConfig:
     margin_beam_m: float = 0.01
     #: obstacle capsules in the base frame: (p0 (3,), p1 (3,), radius_m)
     obstacles: list = field(default_factory=list)
-    tol: float = 1e-6
+    #: IPOPT tolerance of the scaled problem (objective / its start value): the first-order optimality
+    #: error 1e-3 is a slope of 0.1 % of the index per radian of joint motion
+    tol: float = 1e-3
+    #: trust region: each joint moves at most this far from the warm start (rad); keeps the local
+    #: linearisation of the constraints valid and the L-BFGS problem well conditioned
+    max_step_rad: float = 0.3
     print_level: int = 0
+    #: IPOPT Hessian: "exact" (CasADi AD) or "limited-memory" (L-BFGS)
+    hessian: str = "limited-memory"
 
 
 @dataclass
@@ -68,9 +75,14 @@ class GradientDesignResult:
     evaluations: int
     status: str
     reverted: int
+    #: why a configuration of the IPOPT end point was replaced by its warm start (one entry each)
+    reverted_reasons: list[str] = field(default_factory=list)
+    #: set when the IPOPT result was not used (a non-success status): the warm start is the design
+    fallback: str | None = None
 
     def as_dict(self) -> dict:
-        return {"method": "gradient (IPOPT)", "index_name": self.index_name,
+        return {"method": "gradient (IPOPT)", "index_name": self.index_name, "fallback": self.fallback,
+                "reverted_reasons": self.reverted_reasons,
                 "index_value_start": self.index_value_start, "index_value": self.index_value,
                 "run_time_s": self.run_time_s, "iterations": self.iterations, "evaluations": self.evaluations,
                 "status": self.status, "reverted_configurations": self.reverted,
@@ -118,7 +130,7 @@ def gradient_design(robot, mm: MeasurementModel, basis: np.ndarray, Q_start: np.
     p = P.shape[1]
     T0 = transform_tracker_to_base if transform_tracker_to_base is not None else \
         robot.tracker.transform_tracker_to_base
-    if spec.name in ("A", "tcp_A", "tcp_A_mixed"):
+    if spec.name in ix.TRACE_INDICES:
         W = spec.weight_matrix(p)
     else:
         raise ValueError(f"gradient design supports the A-type indices, not {spec.name}")
@@ -189,23 +201,48 @@ def gradient_design(robot, mm: MeasurementModel, basis: np.ndarray, Q_start: np.
     G_all = ca.reshape(cons.map(n, "serial")(X), -1, 1)
     nlp = {"x": ca.reshape(X, -1, 1), "f": scale * phi, "g": G_all}
     opts = {"ipopt.max_iter": cfg.max_iterations, "ipopt.tol": cfg.tol, "ipopt.print_level": cfg.print_level,
-            "ipopt.hessian_approximation": "limited-memory", "print_time": False,
-            "ipopt.acceptable_tol": 1e-4, "ipopt.acceptable_iter": 5, "ipopt.mu_strategy": "adaptive"}
+            "ipopt.hessian_approximation": cfg.hessian, "print_time": False,
+            "ipopt.acceptable_iter": 0, "ipopt.mu_strategy": "adaptive"}
     solver = ca.nlpsol("oed", "ipopt", nlp, opts)
-    lbx = np.tile(lower, n)
-    ubx = np.tile(upper, n)
-    x0 = np.clip(Q_start.reshape(-1), lbx, ubx)
+    x0 = np.clip(Q_start.reshape(-1), np.tile(lower, n), np.tile(upper, n))
+    lbx = np.maximum(np.tile(lower, n), x0 - cfg.max_step_rad)
+    ubx = np.minimum(np.tile(upper, n), x0 + cfg.max_step_rad)
     sol = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=np.tile(lb, n), ubg=np.full(n * n_g, np.inf))
     stats = solver.stats()
+    status = str(stats.get("return_status", ""))
     Q = np.asarray(sol["x"]).reshape(n, nq)
+    fallback = None
+    if not stats.get("success", False):   # a non-success status is never the design
+        Q = Q_start.copy()
+        fallback = f"IPOPT ended with {status}: the remove-and-replace design is kept"
     # re-check every configuration with the numeric rules (no margins) and revert failures
     mask = feasible_configurations(robot, Q, T0, obstacles)
-    reverted = int((~mask).sum())
+    reasons = [f"configuration {k}: {why}" for k, why in infeasibility_reasons(robot, Q, T0, obstacles, ~mask)]
     Q[~mask] = Q_start[~mask]
     phi_end = float(phi_f(Q.T))
     if not phi_end <= phi0:   # never worse than the warm start
         Q, phi_end = Q_start.copy(), phi0
+        fallback = fallback or "after reverting infeasible configurations the index was worse than the warm start's"
     return GradientDesignResult(Q, Q_start, spec.name, phi0, phi_end, time.perf_counter() - t0,
                                 int(stats.get("iter_count", -1)),
                                 int(stats.get("n_call_nlp_grad_f", 0) + stats.get("n_call_nlp_f", 0)),
-                                str(stats.get("return_status", "")), reverted)
+                                status, int((~mask).sum()), reasons, fallback)
+
+
+def infeasibility_reasons(robot, Q: np.ndarray, transform_tracker_to_base, obstacles, which: np.ndarray
+                          ) -> list[tuple[int, str]]:
+    """(row, rule) for the rows ``which`` of ``Q``: the first numeric rule each one breaks."""
+    out = []
+    for k in np.flatnonzero(which):
+        q = Q[k : k + 1]
+        if not np.all((q >= robot.limits.lower_rad) & (q <= robot.limits.upper_rad)):
+            out.append((int(k), "outside the joint limits"))
+            continue
+        pair, floor = robot.capsule_clearances(robot.capsule_segments(q))
+        if not (np.all(pair >= 0) and np.all(floor >= 0)):
+            out.append((int(k), "capsule collision or below the floor"))
+        elif not tracker_visibility(robot, transform_tracker_to_base, q).visible[0]:
+            out.append((int(k), "not visible to the tracker (incidence or beam blocked)"))
+        else:
+            out.append((int(k), "an obstacle capsule"))
+    return out

@@ -21,6 +21,12 @@ Indices (singular values ``s_1 >= ... >= s_p`` of J, ``s_i = sqrt(eig_i(M))``):
   of the TCP position over working configurations (J_w: TCP-position Jacobian rows of the working
   configurations wrt the same parameters), minimised; ``tcp_A_mixed`` adds
   ``mix_weight * trace(C) / p`` (the parameter-covariance A-criterion, paper 000 eq. 25).
+- ``V`` (task-space V-/I-optimality, Atkinson, Donev & Tobias, *Optimum Experimental Designs, with
+  SAS*, 2007, §10.6; the continuous form of paper 000's KPI): ``trace(W C)`` with
+  ``W = sum_w J_w^T J_w / n_w`` over *many* working configurations of the working region (the
+  ISO 9283 cube, a box or the user's poses; :mod:`pipeline.calibration.task_space`), i.e. the
+  predicted TCP position variance averaged over where the arm works, minimised. Same algebra as
+  ``tcp_A`` (rank-one / Sherman-Morrison updates), different working set.
 
 Every index has a *score* (larger is better) used by the selection algorithms:
 ``score = value`` for maximised indices and ``-value`` for minimised ones.
@@ -33,7 +39,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 MAXIMISED = ("O1", "O2", "O3", "O4", "O5", "D", "E", "Od", "Oc")
-MINIMISED = ("A", "tcp_A", "tcp_A_mixed")
+MINIMISED = ("A", "tcp_A", "tcp_A_mixed", "V")
+#: indices of the form trace(W M^-1) with W from TCP Jacobians at working configurations
+TASK_INDICES = ("tcp_A", "tcp_A_mixed", "V")
+#: indices of the form trace(W M^-1) (Sherman-Morrison updates, gradient design)
+TRACE_INDICES = ("A",) + TASK_INDICES
 INDEX_NAMES = MAXIMISED + MINIMISED
 
 _REL_EIG_TOL = 1e-12
@@ -66,7 +76,7 @@ class IndexSpec:
     def __post_init__(self) -> None:
         if self.name not in INDEX_NAMES:
             raise ValueError(f"unknown observability index {self.name!r}; choose from {INDEX_NAMES}")
-        if self.name.startswith("tcp_A"):
+        if self.name in TASK_INDICES:
             if self.working_jacobian is None:
                 raise ValueError(f"index {self.name} needs working_jacobian")
 
@@ -217,7 +227,7 @@ def scores_of_matrices(spec: IndexSpec, Ms: np.ndarray, n: int,
             o3 = _values_from_eigs("O3", ev, n)
             od = np.array([od_index(P, spec.knn) for P in positions_sets[e]])
             out[e] = oc_combine(spec, o1, o3, od)
-        elif spec.name in ("tcp_A", "tcp_A_mixed") or (spec.name == "A" and spec.parameter_weights is not None):
+        elif spec.name in TASK_INDICES or (spec.name == "A" and spec.parameter_weights is not None):
             W = spec.weight_matrix(Ms.shape[1])
             reg = ev[:, 0] > _REL_EIG_TOL * np.maximum(ev[:, -1], 1e-300)
             v = np.full(ev.shape[0], np.inf)
@@ -245,7 +255,7 @@ def all_indices(M: np.ndarray, n: int, positions: np.ndarray | None = None,
     for name in INDEX_NAMES:
         if name in ("Od", "Oc") and positions is None:
             continue
-        if name.startswith("tcp_A") and working_jacobian is None:
+        if name in TASK_INDICES and working_jacobian is None:
             continue
         spec = IndexSpec(name, working_jacobian=working_jacobian, n_working=n_working, knn=knn)
         out[name] = evaluate(spec, M, n, positions)

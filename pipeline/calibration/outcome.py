@@ -40,3 +40,5 @@ class CalibrationOutcome:
     rejection: Rejection | None = None
     #: extra report sections (e.g. the comparison with the geometric-only fit)
     notes: dict = field(default_factory=dict)
+    #: the chosen design against baselines of the same size (pipeline.calibration.design_table)
+    design_table: dict | None = None

@@ -29,10 +29,12 @@ import numpy as np
 from pipeline.blas import single_thread_blas
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import design as ds
+from pipeline.calibration import design_table as dtab
 from pipeline.calibration import error_model as em
 from pipeline.calibration import indices as ix
 from pipeline.calibration import measure as ms
 from pipeline.calibration import subsets
+from pipeline.calibration import task_space as ts
 from pipeline.calibration import validate as va
 from pipeline.calibration.config import MAX_CANDIDATES, Config
 from pipeline.calibration.crossval import cross_validate
@@ -59,6 +61,7 @@ from pipeline.quality import QualityGates
 
 NAME = "calibration"
 DEPENDS: tuple[str, ...] = ("model",)
+CONFIG_READS: tuple[str, ...] = ("control.iso",)
 
 def identify_parameter_set(robot, mm: em.MeasurementModel, cfg: Config, rng: np.random.Generator
                            ) -> tuple[em.IdentifiabilityReport, np.ndarray]:
@@ -134,9 +137,13 @@ def working_jacobian(robot, mm: em.MeasurementModel, Qw: np.ndarray, basis: np.n
     return np.vstack(rows)
 
 
-def index_spec(cfg: Config, robot, mm: em.MeasurementModel, basis: np.ndarray, rng: np.random.Generator
-               ) -> tuple[ix.IndexSpec, np.ndarray | None]:
-    """The observability index; for the TCP criteria random collision-free working poses."""
+def index_spec(cfg: Config, robot, mm: em.MeasurementModel, basis: np.ndarray, rng: np.random.Generator,
+               region: ts.WorkingRegion | None = None) -> tuple[ix.IndexSpec, np.ndarray | None]:
+    """The observability index; for the TCP criteria random collision-free working poses (``V``: in
+    the working region, :mod:`pipeline.calibration.task_space`)."""
+    if cfg.index_name == "V":
+        Qw = ts.sample_region(robot, region or ts.default_region(robot), cfg.n_region_configurations, rng)
+        return ts.task_space_spec(mm, Qw, basis), Qw
     if not cfg.index_name.startswith("tcp_A"):
         return ix.IndexSpec(cfg.index_name), None
     chain = cd.chain_from_robot(robot)
@@ -166,15 +173,17 @@ def predicted_on_random_poses(robot, mm: em.MeasurementModel, est: Estimate, cfg
     return va.predicted_error(mm, est, Q, sigma)
 
 
-def calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None) -> CalibrationOutcome:
+def calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None,
+              region: ts.WorkingRegion | None = None) -> CalibrationOutcome:
     """Run the whole calibration (see the module docstring) and return its outcome.
 
-    ``real`` is only used without ``cfg.measurements_csv`` (may be None with a measurement file)."""
+    ``real`` is only used without ``cfg.measurements_csv`` (may be None with a measurement file);
+    ``region``: working region of V and the design table (None: :func:`ts.default_region`)."""
     with single_thread_blas():
-        return _calibrate(robot, real, cfg, rng, progress)
+        return _calibrate(robot, real, cfg, rng, progress, region or ts.default_region(robot))
 
 
-def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None) -> CalibrationOutcome:
+def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress, region) -> CalibrationOutcome:
     timings: dict[str, float] = {}
     t = time.perf_counter()
     user = ms.read_csv(cfg.measurements_csv, robot, min_rows=1) if cfg.measurements_csv else None
@@ -208,7 +217,7 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None
         if len(cs) < cfg.n_configurations:
             raise InfeasibleError(None, "calibration.grid_per_axis" if cfg.candidates == "grid"
                                   else "calibration.n_configurations", too_few_candidates(cfg, robot, len(cs)))
-        spec, Qw = index_spec(cfg, robot, mm, dbasis, rng)
+        spec, Qw = index_spec(cfg, robot, mm, dbasis, rng, region)
         positions = cs.Y if spec.needs_positions else None
         pilot = None
         n_design = cfg.n_configurations
@@ -273,14 +282,16 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None
     validation = va.validate(mm, est, held, cfg.outlier_confidence) if held is not None else None
     timings["validate_s"] = time.perf_counter() - t
     if spec is None:
-        spec, Qw = index_spec(cfg, robot, mm, dbasis, rng)
+        spec, Qw = index_spec(cfg, robot, mm, dbasis, rng, region)
     design = measured_design(robot, mm, dbasis, meas.Q, spec, est.transform_tracker_to_base,
                              "user file" if user is not None else "measured subset")
     fit = va.fit_residuals(mm, est, rec, rejection.rejected)
     prediction = predicted_on_random_poses(robot, mm, est, cfg, rng) if validation is None else None
     new_robot = calibrated_robot(robot, mm, est.x, basis)
+    table = dtab.for_run(cfg, robot, real if user is None else None, mm, basis, spec, meas.Q, est, cs, region, rng,
+                         dbasis)
     return CalibrationOutcome(report, mm.names, cs, selection, meas, est, validation, new_robot, timings, grad, Qw,
-                              design, fit, prediction, rejection, notes)
+                              design, fit, prediction, rejection, notes, table)
 
 
 def heldout_measurements(robot, real, est: Estimate, cfg: Config, rng: np.random.Generator) -> ms.Measurements:
@@ -378,8 +389,10 @@ def run(ctx) -> Any:
     t0 = time.perf_counter()
     # real tracker data: the simulated hidden robot must not be touched (not even ctx.real)
     real = None if cfg.measurements_csv else ctx.real
-    out = calibrate(ctx.robot, real, cfg, ctx.rng, getattr(ctx, "progress", None))
+    region = ts.region_of_run(getattr(ctx, "run", None), cfg, ctx.robot)
+    out = calibrate(ctx.robot, real, cfg, ctx.rng, getattr(ctx, "progress", None), region)
     summary = summary_of(out, cfg)
+    summary["design_table"] = dtab.summary(out.design_table)
     summary["stage_time_s"] = time.perf_counter() - t0
     est = out.estimate
     arrays = {
@@ -423,8 +436,9 @@ def run(ctx) -> Any:
         from pipeline.calibration import plots
 
         figures = plots.stage_figures(out)
+    data["design_table"] = out.design_table
     result = StageResult(summary=summary, arrays=arrays, data=data, figures=figures, robot=out.robot,
-                         report_md=report_markdown(out, cfg, ctx.robot))
+                         report_md=report_markdown(out, cfg, ctx.robot) + dtab.markdown_section(out.design_table))
     gates = QualityGates(NAME, accept_poor=ctx.run.accept_poor)
     gates.check("chi2_per_dof", est.chi2_per_dof, "<=", cfg.max_chi2_per_dof,
                 "whitened fit residuals after the outlier test; far above 1: the error model does not explain "

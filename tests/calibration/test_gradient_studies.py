@@ -39,8 +39,14 @@ def test_gradient_design_improves_and_stays_feasible():
     cs = st.build_candidates(robot, cfg, basis, rng)
     spec, _ = st.index_spec(cfg, robot, mm, basis, rng)
     start = ds.remove_and_replace(cs.G, spec, 20, rng, n_initial=20)
-    res = gradient_design(robot, mm, basis, cs.Q[start.selected], spec, GradientDesignConfig(max_iterations=15))
+    res = gradient_design(robot, mm, basis, cs.Q[start.selected], spec, GradientDesignConfig(max_iterations=300))
+    assert res.status == "Solve_Succeeded" and res.fallback is None
+    assert res.reverted == len(res.reverted_reasons)
     assert res.index_value < res.index_value_start
+    # a non-success status is never the design: the warm start is kept and the result says why
+    stop = gradient_design(robot, mm, basis, cs.Q[start.selected], spec, GradientDesignConfig(max_iterations=1))
+    assert stop.status != "Solve_Succeeded" and stop.status in stop.fallback
+    assert np.array_equal(stop.Q, cs.Q[start.selected]) and stop.index_value == stop.index_value_start
     assert res.index_value_start == pytest.approx(start.index_value, rel=1e-6)
     chain = cd.chain_from_robot(robot)
     mask, _ = cd.filter_configurations(chain, res.Q, cd.FilterMargins(0.0, 0.0, 0.0))

@@ -1,0 +1,140 @@
+"""Task-space V criterion, working regions and the design table."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.calibration import candidates as cd
+from pipeline.calibration import design as ds
+from pipeline.calibration import design_table as dtab
+from pipeline.calibration import error_model as em
+from pipeline.calibration import indices as ix
+from pipeline.calibration import stage as st
+from pipeline.calibration import task_space as ts
+from pipeline.errors import ConfigError, DataFileError
+from pipeline.robot.model import RobotModel
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return RobotModel.load("rx130l")
+
+
+@pytest.fixture(scope="module")
+def setup(robot):
+    mm = em.MeasurementModel(robot)
+    rng = np.random.default_rng(3)
+    cfg = st.Config(candidates="random", n_random_candidates=400, identifiability_samples=60)
+    _, basis = st.identify_parameter_set(robot, mm, cfg, rng)
+    cs = st.build_candidates(robot, cfg, basis, rng)
+    region = ts.default_region(robot)
+    Qw = ts.sample_region(robot, region, 60, rng)
+    return mm, basis, cs, region, Qw
+
+
+def test_region_samples_are_collision_free_with_the_tcp_inside(robot, setup):
+    _, _, _, region, Qw = setup
+    assert len(Qw) == 60
+    p = robot.positions(Qw, robot.frame_tcp)
+    assert np.all(p >= region.lower_m - 1e-12) and np.all(p <= region.upper_m + 1e-12)
+    assert np.allclose(ts.tcp_positions(cd.chain_from_robot(robot), robot, Qw), p, atol=1e-12)
+    assert not any(robot.in_collision(q) for q in Qw[:10])
+    # orientations vary: not one IK solution repeated
+    assert np.ptp(Qw[:, 3:], axis=0).min() > 0.5
+
+
+def test_v_is_the_mean_predicted_tcp_variance(robot, setup):
+    mm, basis, cs, _, Qw = setup
+    spec = ts.task_space_spec(mm, Qw, basis)
+    sel = ds.random_design(cs.G, spec, 30, np.random.default_rng(0)).selected
+    M = dtab.information(cs.G[sel])
+    C = np.linalg.inv(M)
+    J = ts.tcp_jacobian(mm, Qw, basis).reshape(len(Qw), 3, -1)
+    mean_var = np.mean([np.trace(Jk @ C @ Jk.T) for Jk in J])
+    assert ix.evaluate(spec, M, 30) == pytest.approx(mean_var, rel=1e-9)
+    assert ts.predicted_tcp_rms_m(spec, M) == pytest.approx(np.sqrt(mean_var), rel=1e-9)
+    # TCP Jacobian = finite difference of the symbolic TCP position in the identifiable parameters
+    fk = mm.sym.fk(robot.frame_tcp)
+    th = np.zeros(basis.shape[1])
+    k = 5
+    th[k] = 1e-6
+    dp = (np.asarray(fk(Qw[0], basis[mm.sl_kin] @ th)[0]).ravel()
+          - np.asarray(fk(Qw[0], np.zeros(mm.n_kin))[0]).ravel()) / 1e-6
+    assert np.allclose(dp, J[0][:, k], atol=1e-5)
+
+
+def test_rank_one_search_on_v_matches_brute_force(setup):
+    mm, basis, cs, _, Qw = setup
+    spec = ts.task_space_spec(mm, Qw, basis)
+    state = ds._State(cs.G, spec, None, np.arange(20))
+    j, score = state.best_add()
+    brute = [ix.score(spec, state.M + cs.G[c].T @ cs.G[c], 21) if c >= 20 else -np.inf for c in range(len(cs))]
+    assert j == int(np.argmax(brute)) and score == pytest.approx(max(brute), rel=1e-8)
+
+
+@pytest.mark.parametrize("method", ["remove_and_replace", "detmax", "bsaa"])
+def test_selectors_improve_v_over_random(setup, method):
+    mm, basis, cs, _, Qw = setup
+    spec = ts.task_space_spec(mm, Qw, basis)
+    rnd = ds.random_design(cs.G, spec, 25, np.random.default_rng(1))
+    kw = {"t_initial": 1e-8, "t_final": 1e-16, "cooling": 0.9} if method == "bsaa" else {}
+    sel = ds.select(method, cs.G, spec, 25, np.random.default_rng(1), **kw)
+    assert sel.index_name == "V" and len(sel.selected) == 25
+    assert sel.index_value < rnd.index_value
+
+
+def test_design_table_rows_and_user_mode(robot, setup):
+    from pipeline.robot.truth import RealRobot
+
+    mm, basis, cs, region, Qw = setup
+    spec = ts.task_space_spec(mm, Qw, basis)
+    rng = np.random.default_rng(2)
+    sel = ds.remove_and_replace(cs.G, spec, 24, rng)
+    real = RealRobot.create(robot, 2)
+    from pipeline.calibration import measure as ms
+    from pipeline.calibration.estimate import estimate
+
+    meas = ms.measure_simulated(real, cs.Q[sel.selected], rng)
+    est = estimate(mm, meas.Q, meas.Y, meas.sigma_m, basis)
+    table = dtab.design_table(robot, real, mm, basis, spec, "chosen", meas.Q, est, cs, region, rng, n_heldout=80)
+    rows = {r["design"]: r for r in table["rows"]}
+    assert set(rows) == {"chosen", "every (N/n)-th feasible candidate", "random", "O3 remove-and-replace"}
+    assert all(r["n_configurations"] == len(meas.Q) for r in rows.values())
+    # V remove-and-replace minimises the predicted TCP RMS: no baseline of the same size beats it
+    assert all(rows["chosen"]["predicted_tcp_rms_m"] <= r["predicted_tcp_rms_m"] for r in rows.values())
+    assert table["n_heldout_region"] >= 3
+    for r in rows.values():
+        assert r["actual_model_rms_m"] is not None and 0 < r["predicted_model_rms_m"] < 1e-3
+    text = dtab.markdown(table)
+    assert "O3 remove-and-replace" in text and "predicted TCP RMS" in text
+    # user data: predicted figure of the user's configurations only, nothing measured
+    user = dtab.design_table(robot, None, mm, basis, spec, "user file", meas.Q, est, None, region, rng)
+    assert [r["design"] for r in user["rows"]] == ["user file"]
+    assert user["rows"][0]["actual_model_rms_m"] is None and user["n_heldout_region"] is None
+    assert user["rows"][0]["predicted_tcp_rms_m"] == pytest.approx(rows["chosen"]["predicted_tcp_rms_m"])
+    assert "predicted figures only" in dtab.markdown(user)
+
+
+def test_region_config_fields(robot, tmp_path):
+    with pytest.raises(ConfigError, match="working_region"):
+        st.Config(working_region="sphere").validate()
+    with pytest.raises(ConfigError, match="working_box_m"):
+        st.Config(working_region="box", working_box_m=[[0, 0, 0], [1, -1, 1]]).validate()
+    with pytest.raises(ConfigError, match="working_csv"):
+        st.Config(working_region="csv").validate()
+    box = st.Config(working_region="box", working_box_m=[[0.8, -0.2, 0.4], [1.1, 0.2, 0.7]])
+    box.validate()
+    reg = ts.region_from_config(box, None, None, robot)
+    assert np.allclose(reg.lower_m, [0.8, -0.2, 0.4])
+    Q = np.zeros((3, 6))
+    Q[:, 1] = [-0.5, 0.0, 0.5]
+    path = tmp_path / "work.csv"
+    path.write_text("q1,q2,q3,q4,q5,q6\n" + "\n".join(",".join(map(str, q)) for q in Q))
+    csv = st.Config(working_region="csv", working_csv=str(path))
+    assert np.allclose(ts.region_from_config(csv, None, None, robot).configurations, Q)
+    path.write_text("q1,q2,q3,q4,q5,q6\n0,9,0,0,0,0\n")
+    with pytest.raises(DataFileError, match="row 2"):
+        ts.read_working_csv(str(path), robot)
+    with pytest.raises(ConfigError, match="control.iso"):
+        ts.region_from_config(st.Config(), None, None, robot)
