@@ -12,7 +12,7 @@ kinematics and capsules with a fixed-seed search (same robot -> same defaults).
 * ``iso_cube``: EN ISO 9283 (DESIGN.md): the largest cube, with its diagonal plane, whose whole path
   (sampled) is reachable from one IK branch with ``cond(J) <= MAX_CONDITION`` (away from
   singularities), every joint at least ``LIMIT_MARGIN_RAD`` inside its limits and the joint speeds
-  for ``speed_m_s`` at most ``VELOCITY_SHARE`` of their limits; searched over centres in front of
+  for ``speed_m_s`` along the path tangent at most ``VELOCITY_SHARE`` of their limits; searched over centres in front of
   the base at fractions of the reach, edges from large to small. Capsule self-collision is not part
   of this search (fitted capsules are conservative); the stages check it where they need it.
 """
@@ -29,7 +29,7 @@ from pipeline.errors import InfeasibleError
 
 MAX_CONDITION = 300.0
 LIMIT_MARGIN_RAD = np.deg2rad(5.0)
-VELOCITY_SHARE = 0.7
+VELOCITY_SHARE = 0.9
 N_SAMPLES = 3000
 
 
@@ -40,6 +40,7 @@ class IsoCube:
     centre_m: np.ndarray
     edge_m: float
     plane: str
+    speed_m_s: float
     note: str
 
 
@@ -99,16 +100,21 @@ def ptp_move_rad(robot, fractions: tuple[float, ...] = (0.4, 0.3, 0.2, 0.1)) -> 
                           "trajectory.ptp_start_deg and ptp_goal_deg")
 
 
-def _path_ok(robot, path, seeds: np.ndarray, frame: str, speed_m_s: float, n: int = 48) -> bool:
-    """Is the sampled ``path`` followed from one IK branch within the margins of the module docstring?"""
+def _speed_ratio(robot, path, seeds: np.ndarray, frame: str, speed_m_s: float, n: int = 48) -> float:
+    """Smallest over the seeds' IK branches of the largest ``|v_joint| / (VELOCITY_SHARE v_max)`` along the
+    sampled ``path`` at ``speed_m_s``; ``inf`` when no branch reaches it within the margins."""
     model, data = robot.model, robot.new_data()
     fid = robot.frame_id(frame)
     lo, hi = robot.limits.lower_rad + LIMIT_MARGIN_RAD, robot.limits.upper_rad - LIMIT_MARGIN_RAD
     vmax = VELOCITY_SHARE * robot.limits.velocity_rad_s
     poses = path.sample(n)
+    points = np.array([T.translation for T in poses])
+    tangents = np.gradient(points, axis=0)
+    tangents /= np.maximum(np.linalg.norm(tangents, axis=1, keepdims=True), 1e-12)
+    best = np.inf
     for seed in seeds:
-        q, good = seed.copy(), True
-        for T in poses:
+        q, worst = seed.copy(), 0.0
+        for T, tangent in zip(poses, tangents, strict=True):
             for _ in range(60):
                 pin.framesForwardKinematics(model, data, q)
                 cur = data.oMf[fid]
@@ -120,23 +126,28 @@ def _path_ok(robot, path, seeds: np.ndarray, frame: str, speed_m_s: float, n: in
                 q = q + dq * min(1.0, 0.3 / max(np.abs(dq).max(), 1e-12))
             J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
             if (np.linalg.norm(e) > 1e-6 or np.any(q < lo) or np.any(q > hi)
-                    or np.linalg.cond(J) > MAX_CONDITION
-                    or np.any(np.abs(J.T @ np.linalg.solve(J @ J.T, np.r_[speed_m_s, 0, 0, 0, 0, 0])) > vmax)):
-                good = False
+                    or np.linalg.cond(J) > MAX_CONDITION):
+                worst = np.inf
                 break
-        if good:
-            return True
-    return False
+            v = J.T @ np.linalg.solve(J @ J.T, np.r_[speed_m_s * tangent, 0, 0, 0])
+            worst = max(worst, float(np.max(np.abs(v) / vmax)))
+        best = min(best, worst)
+    return best
 
 
 def iso_cube(robot, plane: str = "diagonal_x", tool_down: bool = True, speed_m_s: float = 1.0,
              frame: str | None = None) -> IsoCube:
-    """The largest ISO 9283 cube whose whole path is feasible (module docstring), found by a search."""
+    """The largest ISO 9283 cube whose whole path is feasible (module docstring), found by a search.
+
+    If no cube is feasible at ``speed_m_s`` (a small arm's joint speeds), the cube of at least 0.2
+    reaches with the lowest speed demand is returned with ``speed_m_s`` lowered to what its joints allow.
+    """
     frame = frame or robot.frame_reflector
     reach = float(robot.summary()["reach_m"])
     base = robot.model.jointPlacements[1].translation
     rotation = tool_rotation(plane, tool_down)
     seeds = ik_seeds_rad(robot, 6)
+    fallback: tuple[float, np.ndarray, float] | None = None
     for edge_fraction in (0.4, 0.33, 0.27, 0.22, 0.18, 0.14, 0.1):
         edge = edge_fraction * reach
         for radial in (0.55, 0.45, 0.65, 0.35):
@@ -145,9 +156,17 @@ def iso_cube(robot, plane: str = "diagonal_x", tool_down: bool = True, speed_m_s
                 if centre[2] - 0.5 * edge * np.sqrt(2) < robot.spec.collision.floor_z_m + 0.05 * reach:
                     continue
                 path = iso9283_path(robot, edge, centre, plane, rotation)
-                if _path_ok(robot, path, seeds, frame, speed_m_s):
-                    return IsoCube(centre, edge, plane, f"largest feasible cube found by search: edge {edge:.3f} m "
-                                   f"({edge_fraction:g} x reach {reach:.3f} m), centre "
+                ratio = _speed_ratio(robot, path, seeds, frame, speed_m_s)
+                if ratio <= 1.0:
+                    return IsoCube(centre, edge, plane, speed_m_s, f"largest feasible cube found by search: edge "
+                                   f"{edge:.3f} m ({edge_fraction:g} x reach {reach:.3f} m), centre "
                                    f"{np.round(centre, 3).tolist()} m")
+                if np.isfinite(ratio) and edge_fraction >= 0.2 and (fallback is None or ratio < fallback[0]):
+                    fallback = (ratio, centre, edge)
+    if fallback is not None:
+        ratio, centre, edge = fallback
+        slower = float(np.floor(100 * speed_m_s / ratio) / 100)
+        return IsoCube(centre, edge, plane, slower, f"no cube is feasible at {speed_m_s:g} m/s (joint speeds): "
+                       f"edge {edge:.3f} m, centre {np.round(centre, 3).tolist()} m at {slower:g} m/s")
     raise InfeasibleError(None, "control.iso", f"no ISO 9283 cube of edge >= {0.1 * reach:.3f} m is feasible for "
                           f"{robot.name}: set control.iso.centre_m and edge_m")

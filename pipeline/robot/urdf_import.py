@@ -10,7 +10,8 @@ What a URDF lacks is assumed from rules stated here (each becomes a line of
   Coulomb friction ``4 % of the effort limit`` (RX130L: 20 N m s/rad at 550 N m and 3.5 rad/s,
   25 N m at 550 N m);
 * acceleration limits ``5 x velocity limit`` per second (full speed in 0.2 s);
-* TCP at the flange (the tip link), reflector 30 mm along the flange z axis, opening along z;
+* TCP at the flange (the tip link), reflector on the flange z axis 10 mm beyond the last link's
+  capsule (at least 30 mm), opening along z;
 * a laser tracker 1.5 reaches in front of the base (x), 0.2 reaches up (DESIGN.md: 2.5 m from an
   arm of 1.66 m reach), with DESIGN.md's noise model;
 * one capsule per moving link fitted to its collision geometry (principal axis of the points,
@@ -193,6 +194,17 @@ def fit_capsules(model: pin.Model, urdf: Path, flange: str, reach_m: float) -> t
     return capsules, how
 
 
+def _reflector_offset_m(model: pin.Model, flange: str, capsules: list[Capsule]) -> float:
+    """Distance along the flange z axis just beyond the last link's capsule (at least REFLECTOR_OFFSET_M)."""
+    flange_frame = model.frames[model.getFrameId(flange)]
+    offset = REFLECTOR_OFFSET_M
+    for capsule in capsules:
+        if capsule.frame == str(model.names[flange_frame.parentJoint]):
+            ends = [flange_frame.placement.actInv(p) for p in (capsule.p0, capsule.p1)]
+            offset = max(offset, max(e[2] for e in ends) + capsule.radius_m + 0.01)
+    return float(offset)
+
+
 def _reach_m(model: pin.Model, flange: str) -> float:
     data = model.createData()
     fid = model.getFrameId(flange)
@@ -220,9 +232,10 @@ def assumed_spec(urdf: Path, root: ET.Element, model: pin.Model, tip_link: str) 
     reach = _reach_m(model, tip_link)
     capsules, how = fit_capsules(model, urdf, tip_link, reach)
     tracker = assumed_tracker(reach)
+    reflector_m = _reflector_offset_m(model, tip_link, capsules)
     spec = RobotSpec(
         path=urdf, name=root.get("name") or urdf.stem, urdf=urdf, flange_frame=tip_link, payload_kg=0.0,
-        tool=ToolSpec(pin.SE3.Identity(), np.array([0.0, 0.0, REFLECTOR_OFFSET_M]), np.array([0.0, 0.0, 1.0])),
+        tool=ToolSpec(pin.SE3.Identity(), np.array([0.0, 0.0, reflector_m]), np.array([0.0, 0.0, 1.0])),
         actuation=ActuationSpec(gear, np.diag(gear), ROTOR_INERTIA_PER_EFFORT_S2 * effort,
                                 VISCOUS_FRACTION * effort / velocity, COULOMB_FRACTION * effort, 0.01),
         acceleration_rad_s2=ACCELERATION_PER_VELOCITY_1_S * velocity, limit_overrides={}, tracker=tracker,
@@ -230,8 +243,8 @@ def assumed_spec(urdf: Path, root: ET.Element, model: pin.Model, tip_link: str) 
     t = tracker.transform_tracker_to_base.translation
     assumptions = [
         f"no robot.yaml: the facts a URDF lacks are assumed (write one to edit: python -m pipeline robot init {urdf})",
-        f"flange = tip link '{tip_link}', TCP at the flange, payload 0 kg, reflector {REFLECTOR_OFFSET_M * 1e3:g} mm "
-        "along the flange z axis",
+        f"flange = tip link '{tip_link}', TCP at the flange, payload 0 kg, reflector {reflector_m * 1e3:.0f} mm "
+        "along the flange z axis (beyond the last link's capsule, so the beam can reach it)",
         f"gear ratios {ARM_GEAR_RATIO:g} (axes 1-3) and {WRIST_GEAR_RATIO:g} (wrist), no coupling",
         f"rotor inertia {ROTOR_INERTIA_PER_EFFORT_S2:g} s² x effort limit, viscous friction {VISCOUS_FRACTION:g} x "
         f"effort/velocity limit, Coulomb friction {COULOMB_FRACTION:.0%} of the effort limit",
