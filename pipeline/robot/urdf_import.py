@@ -205,6 +205,26 @@ def _reflector_offset_m(model: pin.Model, flange: str, capsules: list[Capsule]) 
     return float(offset)
 
 
+def _floor_check_from_joint(model: pin.Model, capsules: list[Capsule], clearance_m: float = 0.06) -> int:
+    """First joint (>= 2) whose capsule can leave the floor's neighbourhood: a link turning about an
+    axis that stays within its capsule radius + ``clearance_m`` of the floor (a UR shoulder) is bolted
+    near the floor and not checked against it."""
+    data = model.createData()
+    Q = np.random.default_rng(0).uniform(model.lowerPositionLimit, model.upperPositionLimit, (100, model.nq))
+    heights = np.empty((len(Q), model.njoints))
+    for n, q in enumerate(Q):
+        pin.forwardKinematics(model, data, q)
+        heights[n] = [data.oMi[j].translation[2] for j in range(model.njoints)]
+    radius = {str(model.names[j]): 0.0 for j in range(model.njoints)}
+    for capsule in capsules:
+        radius[capsule.frame] = max(radius.get(capsule.frame, 0.0), capsule.radius_m)
+    k = 2
+    while (k < model.nq and np.ptp(heights[:, k]) < 1e-9
+           and heights[0, k] < radius[str(model.names[k])] + clearance_m):
+        k += 1
+    return min(k, model.nq)
+
+
 def _reach_m(model: pin.Model, flange: str) -> float:
     data = model.createData()
     fid = model.getFrameId(flange)
@@ -239,7 +259,7 @@ def assumed_spec(urdf: Path, root: ET.Element, model: pin.Model, tip_link: str) 
         actuation=ActuationSpec(gear, np.diag(gear), ROTOR_INERTIA_PER_EFFORT_S2 * effort,
                                 VISCOUS_FRACTION * effort / velocity, COULOMB_FRACTION * effort, 0.01),
         acceleration_rad_s2=ACCELERATION_PER_VELOCITY_1_S * velocity, limit_overrides={}, tracker=tracker,
-        collision=CollisionSpec(0.0, min(2, nq)), capsules=capsules)
+        collision=CollisionSpec(0.0, _floor_check_from_joint(model, capsules)), capsules=capsules)
     t = tracker.transform_tracker_to_base.translation
     assumptions = [
         f"no robot.yaml: the facts a URDF lacks are assumed (write one to edit: python -m pipeline robot init {urdf})",
@@ -251,6 +271,7 @@ def assumed_spec(urdf: Path, root: ET.Element, model: pin.Model, tip_link: str) 
         f"acceleration limits {ACCELERATION_PER_VELOCITY_1_S:g}/s x velocity limit",
         f"laser tracker at {np.round(t, 3).tolist()} m in the base frame (1.5 reaches in front), "
         "8 µm + 3 µm/m, incidence <= 30°",
-        f"collision capsules {how}; floor at z = 0, checked from joint {min(2, nq)}",
+        f"collision capsules {how}; floor at z = 0, checked from joint {spec.collision.floor_check_from_joint} "
+        "(links whose axis stays within their capsule radius + 6 cm of the floor are not checked)",
     ]
     return spec, assumptions
