@@ -20,6 +20,7 @@ import numpy as np
 
 from pipeline.errors import PipelineError
 from pipeline.identification.regressor import BaseParameters
+from pipeline.robot.defaults import ik_seeds_or_derived_rad, iso_or_derived
 
 
 @dataclass
@@ -54,11 +55,11 @@ def iso_validation_trajectory(robot: Any, sample_time_s: float, iso: Any = None)
     from pipeline.robot.paths import start_configuration
 
     cfg = ControlConfig()
-    iso = cfg.iso if iso is None else iso
+    iso = iso_or_derived(robot, cfg.iso if iso is None else iso)
     rotation = tool_rotation(iso.plane, iso.tool_down)
     path = iso9283_path(robot, iso.edge_m, iso.centre_m, iso.plane, rotation, iso.corner_fraction,
                         iso.large_circle_fraction, iso.small_circle_fraction, tuple(iso.segments))
-    seeds = np.radians(np.atleast_2d(np.asarray(cfg.ik_seeds_deg, float)))
+    seeds = ik_seeds_or_derived_rad(robot, cfg.ik_seeds_deg)
     q_start = start_configuration(robot, path.poses([0.0])[0], seeds, robot.frame_tcp)
     ref = cartesian_reference(robot, path, sample_time_s, iso.speed_m_s, iso.acceleration_m_s2,
                               iso.jerk_m_s3, q_start, robot.frame_tcp, cfg.ik_tolerance_m)

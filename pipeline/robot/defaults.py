@@ -19,6 +19,7 @@ kinematics and capsules with a fixed-seed search (same robot -> same defaults).
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 
 import numpy as np
@@ -170,3 +171,24 @@ def iso_cube(robot, plane: str = "diagonal_x", tool_down: bool = True, speed_m_s
                        f"edge {edge:.3f} m, centre {np.round(centre, 3).tolist()} m at {slower:g} m/s")
     raise InfeasibleError(None, "control.iso", f"no ISO 9283 cube of edge >= {0.1 * reach:.3f} m is feasible for "
                           f"{robot.name}: set control.iso.centre_m and edge_m")
+
+
+def ik_seeds_or_derived_rad(robot, seeds_deg: list | None) -> np.ndarray:
+    """``(k, nq)`` IK seeds: the configured ones (deg) or, when ``None``, :func:`ik_seeds_rad`."""
+    if seeds_deg is None:
+        return ik_seeds_rad(robot)
+    return np.radians(np.atleast_2d(np.asarray(seeds_deg, float)))
+
+
+def iso_or_derived(robot, iso):  # noqa: ANN001, ANN201 - IsoPathConfig in, a copy out (control layer type)
+    """A copy of the ISO path settings with ``centre_m`` / ``edge_m`` / ``speed_m_s`` left ``None``
+    filled from :func:`iso_cube` (the search runs only when something is missing)."""
+    if iso.centre_m is not None and iso.edge_m is not None and iso.speed_m_s is not None:
+        return iso
+    out = copy.copy(iso)
+    cube = iso_cube(robot, iso.plane, iso.tool_down, 1.0 if iso.speed_m_s is None else iso.speed_m_s)
+    if iso.centre_m is None or iso.edge_m is None:
+        out.centre_m, out.edge_m = [float(v) for v in cube.centre_m], float(cube.edge_m)
+    if iso.speed_m_s is None or ((iso.centre_m is None or iso.edge_m is None) and cube.speed_m_s < iso.speed_m_s):
+        out.speed_m_s = cube.speed_m_s       # a derived cube that no joint speeds allow at the configured speed
+    return out
