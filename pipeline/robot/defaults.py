@@ -7,8 +7,9 @@ kinematics and capsules with a fixed-seed search (same robot -> same defaults).
   self- and floor-collision with the flange above the base, the one with the best-conditioned
   position Jacobian, penalised by the distance from mid-range (limits) — a "ready" pose for pictures.
 * ``ik_seeds_rad``: the best few of that ranking (distinct by > 30°), ready pose first.
-* ``ptp_move_rad``: mid-range -/+ a fraction of each joint's range (40 %, else smaller), both ends and
-  the joint-space midpoint collision-free.
+* ``ptp_move_rad``: ready pose -/+ a fraction of each joint's range (40 %, else smaller), both ends and
+  the joint-space midpoint collision-free; else the pair of well-ranked poses with the largest
+  smallest joint motion whose midpoint is collision-free.
 * ``iso_cube``: EN ISO 9283 (DESIGN.md): the largest cube, with its diagonal plane, whose whole path
   (sampled) is reachable from one IK branch with ``cond(J) <= MAX_CONDITION`` (away from
   singularities), every joint at least ``LIMIT_MARGIN_RAD`` inside its limits and the joint speeds
@@ -97,8 +98,18 @@ def ptp_move_rad(robot, fractions: tuple[float, ...] = (0.4, 0.3, 0.2, 0.1)) -> 
         ends = [start, goal, 0.5 * (start + goal)]
         if not robot.capsules or not any(robot.in_collision(q, 0.0) for q in ends):
             return start, goal
-    raise InfeasibleError(None, "trajectory.ptp_start_deg", "no collision-free default move found: set "
-                          "trajectory.ptp_start_deg and ptp_goal_deg")
+    # else the largest move between two well-ranked poses whose midpoint is collision-free too
+    ranked = _ranked_poses(robot)[:60]
+    best, pair = 0.0, None
+    for i, a in enumerate(ranked):
+        for b in ranked[i + 1:]:
+            size = float(np.min(np.abs(b - a)))
+            if size > best and not robot.in_collision(0.5 * (a + b), 0.0):
+                best, pair = size, (a.copy(), b.copy())
+    if pair is None:
+        raise InfeasibleError(None, "trajectory.ptp_start_deg", "no collision-free default move found: set "
+                              "trajectory.ptp_start_deg and ptp_goal_deg")
+    return pair
 
 
 def _speed_ratio(robot, path, seeds: np.ndarray, frame: str, speed_m_s: float, n: int = 48) -> float:

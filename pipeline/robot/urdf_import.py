@@ -15,7 +15,8 @@ What a URDF lacks is assumed from rules stated here (each becomes a line of
 * a laser tracker 1.5 reaches in front of the base (x), 0.2 reaches up (DESIGN.md: 2.5 m from an
   arm of 1.66 m reach), with DESIGN.md's noise model;
 * one capsule per moving link fitted to its collision geometry (principal axis of the points,
-  95th percentile radius), or, where no geometry or mesh is available, a capsule from the joint
+  75th percentile radius: housings that stick out are not all covered, long links are not
+  swollen), or, where no geometry or mesh is available, a capsule from the joint
   to the next joint with a radius of a quarter of that length.
 """
 
@@ -166,7 +167,7 @@ def _capsule_from_points(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, fl
     axis = vt[0]
     t = (points - centre) @ axis
     radial = np.linalg.norm(points - centre - np.outer(t, axis), axis=1)
-    radius = float(max(np.percentile(radial, 95), 1e-3))
+    radius = float(max(np.percentile(radial, 75), 1e-3))
     lo, hi = t.min() + radius, t.max() - radius
     if lo > hi:
         lo = hi = 0.5 * (t.min() + t.max())
