@@ -185,7 +185,7 @@ def test_bad_robot_run_defaults_name_robot_yaml(tmp_path, block, field_name):
     ("bad", "field_name", "problem"),
     [
         ("control:\n    iso: {centre: [0.35, 0.0, 0.2]}\n", "control.iso.centre", "unknown key"),
-        ("trajectory:\n    cp_edge_m: abc\n", "trajectory.cp_edge_m", "expected number"),
+        ("trajectory:\n    cp_edge_m: abc\n", "trajectory.cp_edge_m", "got 'abc'"),
         ("control:\n    iso: {centre_m: [0.35, 0]}\n", "control.iso.centre_m", "3 numbers"),
     ],
 )
