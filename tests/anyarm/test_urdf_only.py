@@ -85,3 +85,25 @@ def test_ready_pose_and_move_are_collision_free_and_inside_limits():
     assert robot.within_limits(start) and robot.within_limits(goal) and np.max(np.abs(goal - start)) > 0.1
     seeds = defaults.ik_seeds_rad(robot)
     assert seeds.shape[1] == robot.nq and len(seeds) >= 2
+
+
+def test_robot_init_writes_an_editable_yaml_that_loads_back(tmp_path):
+    import shutil
+
+    from pipeline.robot.yaml_init import write_robot_yaml
+
+    source = _erd("ur_description/urdf/ur5_robot.urdf")
+    urdf = tmp_path / "ur5.urdf"
+    shutil.copy(source, urdf)
+    assumed = RobotModel.load(urdf)
+    written = write_robot_yaml(urdf)
+    text = written.read_text()
+    assert text.startswith("# robot.yaml written by") and "gear ratio" in text
+    with pytest.raises(RobotFileError, match="already exists"):
+        write_robot_yaml(urdf)
+    loaded = RobotModel.load(urdf)                        # now read from the yaml, not assumed
+    assert loaded.spec.path == written
+    assert np.allclose(loaded.actuation.gear_ratio, assumed.actuation.gear_ratio)
+    assert [c.name for c in loaded.capsules] == [c.name for c in assumed.capsules]
+    q = defaults.ready_pose_rad(assumed)
+    assert np.allclose(loaded.fk(q, "reflector").translation, assumed.fk(q, "reflector").translation)
