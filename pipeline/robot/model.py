@@ -24,6 +24,7 @@ from pipeline.robot.ik import IKResult, solve_ik
 from pipeline.robot.loading import ROBOTS_DIR, JointLimits, load_robot_files, resolve_robot_files, validate_joint_limits
 from pipeline.robot.spec import Capsule, RobotSpec, robot_spec_to_yaml
 from pipeline.robot.urdf_export import export_urdf
+from pipeline.robot.urdf_import import absolute_mesh_paths
 
 WORLD = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 #: a capsule pair closer than zero in at least this share of random configurations always collides
@@ -392,6 +393,9 @@ class RobotModel:
         spec.tool.reflector_offset_m = self.reflector_offset_m
         spec.tool.reflector_axis = self.reflector_axis
         spec.limit_overrides = {}
-        write_text(folder / urdf_name, export_urdf(self.model, self.urdf_text))
+        urdf_text = export_urdf(self.model, self.urdf_text)
+        if self.urdf_path is not None and Path(self.urdf_path).is_file():
+            urdf_text = absolute_mesh_paths(urdf_text, Path(self.urdf_path))   # meshes still found from folder
+        write_text(folder / urdf_name, urdf_text)
         write_text(folder / "robot.yaml", yaml.safe_dump(robot_spec_to_yaml(spec, urdf_name), sort_keys=False))
         return folder

@@ -51,6 +51,31 @@ def package_dirs(urdf: Path) -> list[str]:
     return dirs
 
 
+def resolve_mesh(filename: str, urdf: Path) -> Path | None:
+    """The file a URDF mesh reference names (``package://NAME/...`` or a path relative to the URDF)."""
+    if filename.startswith("file://"):
+        filename = filename[len("file://"):]
+    if filename.startswith("package://"):
+        relative = filename[len("package://"):]
+        for folder in package_dirs(urdf):
+            if (Path(folder) / relative).is_file():
+                return Path(folder) / relative
+        return None
+    path = Path(filename) if Path(filename).is_absolute() else Path(urdf).resolve().parent / filename
+    return path if path.is_file() else None
+
+
+def absolute_mesh_paths(urdf_text: str, urdf: Path) -> str:
+    """``urdf_text`` with every resolvable mesh reference replaced by its absolute path (so a copy
+    written elsewhere, e.g. a stage's calibrated robot, still shows the meshes)."""
+    root = ET.fromstring(urdf_text)
+    for mesh in root.iter("mesh"):
+        found = resolve_mesh(mesh.get("filename", ""), urdf)
+        if found is not None:
+            mesh.set("filename", str(found.resolve()))
+    return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+
+
 def _is_arm_joint(joint: ET.Element) -> bool:
     """A revolute joint not named as a gripper or finger joint (the default tip's rule)."""
     name = (joint.get("name") or "").lower()

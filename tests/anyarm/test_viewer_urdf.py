@@ -24,6 +24,8 @@ def test_meshes_resolved_from_package_paths_else_capsules(tmp_path):
     ur5 = RobotModel.load(_erd("ur_description/urdf/ur5_robot.urdf"))
     geometry, how = visual_model(ur5)
     assert how == "meshes" and geometry.ngeoms >= ur5.nq
+    saved = RobotModel.load(ur5.save(tmp_path / "saved"))            # a stage's copy elsewhere
+    assert visual_model(saved)[1] == "meshes"
     bare = _ur5_without_meshes(tmp_path)
     geometry, how = visual_model(bare)
     assert how == "capsules" and geometry.ngeoms == len(bare.capsules) >= bare.nq
