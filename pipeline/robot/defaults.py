@@ -9,7 +9,7 @@ kinematics and capsules with a fixed-seed search (same robot -> same defaults).
 * ``ik_seeds_rad``: the best few of that ranking (distinct by > 30°), ready pose first.
 * ``ptp_move_rad``: ready pose -/+ a fraction of each joint's range (40 %, else smaller), both ends and
   the joint-space midpoint collision-free; else the pair of well-ranked poses with the largest
-  smallest joint motion whose midpoint is collision-free.
+  smallest joint motion (no joint beyond ``MAX_MOVE_RAD``) whose midpoint is collision-free.
 * ``iso_cube``: EN ISO 9283 (DESIGN.md): the largest cube, with its diagonal plane, whose whole path
   (sampled) is reachable from one IK branch with ``cond(J) <= MAX_CONDITION`` (away from
   singularities), every joint at least ``LIMIT_MARGIN_RAD`` inside its limits and the joint speeds
@@ -33,6 +33,7 @@ MAX_CONDITION = 300.0
 LIMIT_MARGIN_RAD = np.deg2rad(5.0)
 VELOCITY_SHARE = 0.9
 N_SAMPLES = 3000
+MAX_MOVE_RAD = np.pi / 2      # the searched PtP move turns no joint by more than this
 
 
 @dataclass
@@ -104,7 +105,7 @@ def ptp_move_rad(robot, fractions: tuple[float, ...] = (0.4, 0.3, 0.2, 0.1)) -> 
     for i, a in enumerate(ranked):
         for b in ranked[i + 1:]:
             size = float(np.min(np.abs(b - a)))
-            if size > best and not robot.in_collision(0.5 * (a + b), 0.0):
+            if size > best and np.max(np.abs(b - a)) <= MAX_MOVE_RAD and not robot.in_collision(0.5 * (a + b), 0.0):
                 best, pair = size, (a.copy(), b.copy())
     if pair is None:
         raise InfeasibleError(None, "trajectory.ptp_start_deg", "no collision-free default move found: set "
