@@ -18,10 +18,12 @@ import time
 import numpy as np
 import pinocchio as pin
 
+from pipeline.config import load_config
 from pipeline.control.config import ControlConfig
 from pipeline.control.iso9283 import iso9283_path
 from pipeline.control.reference import cartesian_reference
 from pipeline.control.simulate import simulate_joint_trajectory
+from pipeline.robot.defaults import ik_seeds_or_derived_rad, iso_or_derived
 from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import start_configuration
 from pipeline.robot.truth import RealRobot, TruthConfig
@@ -29,10 +31,10 @@ from pipeline.robot.truth import RealRobot, TruthConfig
 
 def main(robot_name: str = "rx130l", python_seconds: float = 1.0) -> None:
     robot = RobotModel.load(robot_name)
-    cfg = ControlConfig(on_saturation="clip")
-    iso = cfg.iso
+    cfg = load_config(values={"robot": robot_name, "control.on_saturation": "clip"}).control   # + run_defaults
+    iso = iso_or_derived(robot, cfg.iso)             # None fields derived from the robot
     path = iso9283_path(robot, iso.edge_m, iso.centre_m, iso.plane, pin.utils.rotate("x", np.pi))
-    q0 = start_configuration(robot, path.poses([0.0])[0], np.radians(cfg.ik_seeds_deg))
+    q0 = start_configuration(robot, path.poses([0.0])[0], ik_seeds_or_derived_rad(robot, cfg.ik_seeds_deg))
     t0 = time.perf_counter()
     ref = cartesian_reference(robot, path, cfg.sample_time_s, iso.speed_m_s, iso.acceleration_m_s2, iso.jerk_m_s3, q0)
     t_ref = time.perf_counter() - t0

@@ -30,8 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.config import load_config
+from pipeline.robot.defaults import ptp_move_rad
 from pipeline.robot.model import RobotModel
-from pipeline.trajectory.config import TrajectoryConfig
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.ptp import energy_weights
 from pipeline.trajectory.solve import cp_joint_path, plan_cp, plan_ptp, ptp_problem, solve_ptp_verified
@@ -56,12 +57,14 @@ def perturbed_starts(problem, q0: np.ndarray, q1: np.ndarray, duration_s: float,
 
 def main(robot_name: str = "rx130l", segment: str = "circle_large", torque_reserve: str | None = None,
          energy_starts: str = "8") -> None:
-    cfg = TrajectoryConfig(cp_segment=segment, acceleration_limits=False)
+    cfg = load_config(values={"robot": robot_name, "trajectory.cp_segment": segment,
+                              "trajectory.acceleration_limits": False}).trajectory  # + run_defaults
     if torque_reserve is not None:
         cfg.torque_reserve = float(torque_reserve)
     robot = RobotModel.load(robot_name)
     pm = PlanningModel.from_robot(robot, cfg.torque_reserve)
-    q_goal = np.radians(cfg.ptp_goal_deg)
+    q_start, q_goal = (ptp_move_rad(robot) if cfg.ptp_start_deg is None     # None: derived from the robot
+                       else (np.radians(cfg.ptp_start_deg), np.radians(cfg.ptp_goal_deg)))
     print(f"dynamics: {robot_name} ({'robot folder' if Path(robot_name).is_dir() else 'built-in, nominal dynamics'}); "
           f"static torques at the PtP goal {np.round(pm.rigid_torques(q_goal, 0 * q_goal, 0 * q_goal)[0], 1)} N m")
     print(f"limits for every planner and baseline (CP, toppra, PtP, ruckig): torque (1 - {cfg.torque_reserve:g}) x "
@@ -88,7 +91,7 @@ def main(robot_name: str = "rx130l", segment: str = "circle_large", torque_reser
     problem = ptp_problem(pm, robot, cfg)
     print(f"PtP problem (N = {cfg.ptp_n_intervals}): build {problem.build_time_s:.1f} s, compile "
           f"{problem.compile_time_s:.1f} s (0 when cached), ready after {time.perf_counter() - t0:.1f} s")
-    q0, q1 = np.radians(cfg.ptp_start_deg), np.radians(cfg.ptp_goal_deg)
+    q0, q1 = q_start, q_goal
     ptp = plan_ptp(pm, problem, q0, q1, cfg)
     p = ptp.summary()
     # solve time after compile: a second, cold-started solve of the same move

@@ -469,20 +469,21 @@ def resolve_robot_dir(cfg: RunConfig) -> Path:
     p = Path(value).expanduser()
     candidates = [p] if p.is_absolute() else [cfg.base_dir / p, Path.cwd() / p, REPO_ROOT / "robots" / p]
     for c in candidates:
-        if c.is_dir():
+        if c.is_dir() or (c.suffix == ".urdf" and c.is_file()):   # a URDF alone: facts assumed (urdf_import)
             return c.resolve()
     source = cfg.origins.get("robot", cfg.source)
     robots = REPO_ROOT / "robots"
     known = sorted(d.name for d in robots.iterdir() if d.is_dir()) if robots.is_dir() else []
     hint = f" (built-in robots: {', '.join(known)})" if known else ""
-    raise ConfigError(source, "robot", f"no robot folder {value!r}{hint}")
+    raise ConfigError(source, "robot", f"no robot folder or URDF file {value!r}{hint}")
 
 
 def robot_run_defaults(cfg: RunConfig) -> tuple[str, Mapping[str, Any]] | None:
     """(source, sections) of the ``run_defaults`` mapping in the robot's ``robot.yaml``, or None
     (no such section, or no robot folder yet: the runner reports a missing robot)."""
     try:
-        robot_yaml = resolve_robot_dir(cfg) / "robot.yaml"
+        robot_dir = resolve_robot_dir(cfg)
+        robot_yaml = (robot_dir.parent if robot_dir.is_file() else robot_dir) / "robot.yaml"
     except ConfigError:
         return None
     if not robot_yaml.is_file():

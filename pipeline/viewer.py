@@ -23,27 +23,66 @@ The visual model comes from the URDF's ``<visual>`` primitives, attached to the 
 from __future__ import annotations
 
 import re
+import signal
 import sys
 import time
+import warnings
 from pathlib import Path
 from typing import Any
 
+import coal
 import numpy as np
 import pinocchio as pin
 
 from pipeline.errors import PipelineError
+from pipeline.robot.urdf_import import package_dirs
 
 TRAJECTORY_RE = re.compile(r"^trajectory_(?P<name>.+)_t$")
 CONFIGURATIONS_PREFIX = "configurations_"
 COLORS = (0xE6550D, 0x3182BD, 0x31A354, 0x756BB1, 0xD62728, 0x8C564B)
 
 
-def visual_model(robot: Any) -> pin.GeometryModel:
-    """Visual geometry of ``robot`` built from its URDF text (primitives only)."""
-    urdf_text = getattr(robot, "urdf_text", None)
-    if urdf_text is None:
-        return pin.buildGeomFromUrdf(robot.model, str(robot.urdf_path), pin.GeometryType.VISUAL)
-    return pin.buildGeomFromUrdfString(robot.model, urdf_text, pin.GeometryType.VISUAL)
+def capsule_geometry(robot: Any) -> pin.GeometryModel:
+    """The robot's collision capsules as a Pinocchio geometry model (drawn when meshes are missing)."""
+    geometry = pin.GeometryModel()
+    for capsule in getattr(robot, "capsules", []):
+        fid = robot.model.getFrameId(capsule.frame)
+        frame = robot.model.frames[fid]
+        axis = np.asarray(capsule.p1, float) - np.asarray(capsule.p0, float)
+        length = float(np.linalg.norm(axis))
+        z = axis / length if length > 1e-9 else np.array([0.0, 0.0, 1.0])
+        rotation = pin.Quaternion.FromTwoVectors(np.array([0.0, 0.0, 1.0]), z).matrix()
+        local = pin.SE3(rotation, 0.5 * (np.asarray(capsule.p0, float) + np.asarray(capsule.p1, float)))
+        obj = pin.GeometryObject(f"capsule_{capsule.name}", frame.parentJoint, fid, frame.placement * local,
+                                 coal.Capsule(capsule.radius_m, length))
+        obj.meshColor = np.array([0.6, 0.65, 0.75, 1.0])
+        geometry.addGeometryObject(obj)
+    return geometry
+
+
+def visual_model(robot: Any) -> tuple[pin.GeometryModel, str]:
+    """(visual geometry, "meshes" | "capsules") of ``robot``.
+
+    The URDF is read from its file so relative and ``package://`` meshes resolve (ROS_PACKAGE_PATH,
+    the URDF's folder and its parents: :func:`pipeline.robot.urdf_import.package_dirs`); when a mesh
+    cannot be found or read, the robot's collision capsules are drawn instead.
+    """
+    urdf = getattr(robot, "urdf_path", None)
+    try:
+        if urdf is not None and Path(urdf).is_file():
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                geometry = pin.buildGeomFromUrdf(robot.model, str(urdf), pin.GeometryType.VISUAL, package_dirs(urdf))
+        else:
+            geometry = pin.buildGeomFromUrdfString(robot.model, robot.urdf_text, pin.GeometryType.VISUAL)
+        missing = [g.meshPath for g in geometry.geometryObjects
+                   if g.meshPath and not Path(g.meshPath).is_file() and "BOX" not in g.meshPath
+                   and "CYLINDER" not in g.meshPath and "SPHERE" not in g.meshPath]
+        if geometry.ngeoms and not missing:
+            return geometry, "meshes"
+    except (RuntimeError, ValueError, OSError):
+        pass
+    return capsule_geometry(robot), "capsules"
 
 
 class Viewer:
@@ -64,7 +103,10 @@ class Viewer:
         if viewer is None:
             viewer = meshcat.Visualizer(zmq_url=zmq_url)
         self.vis = viewer
-        geometry = visual_model(robot)
+        geometry, self.drawn_as = visual_model(robot)
+        if self.drawn_as == "capsules":
+            print(f"viewer: meshes of {getattr(robot, 'name', 'the robot')} not found; drawing its collision "
+                  "capsules", file=sys.stderr)
         self.viz = MeshcatVisualizer(self.model, geometry, geometry)
         self.viz.initViewer(viewer=viewer, open=open_browser)
         self.root = root or str(getattr(robot, "name", "robot"))
@@ -301,6 +343,14 @@ def view_run(run_dir: str | Path | None = None, *, robot: str | None = None, con
                                            "manifest.json; make one with `python -m pipeline run`)")
     if robot is not None:
         model = RobotModel.load(resolve_robot_dir(RunConfig(robot=robot, source="--robot")))
+        if path is not None:
+            run_robot = robot_of_run(path)
+            if run_robot.nq != model.nq:
+                raise PipelineError(path, "--robot", f"{model.name} has {model.nq} joints but the run's robot "
+                                    f"{run_robot.name} has {run_robot.nq}: its motions cannot be drawn on it")
+            if run_robot.name != model.name:
+                print(f"WARNING: --robot {model.name} is not this run's robot ({run_robot.name}): its "
+                      "configurations and trajectories are drawn on another arm", file=sys.stderr)
     elif path is not None:
         model = robot_of_run(path)
     else:
@@ -332,12 +382,18 @@ def view_run(run_dir: str | Path | None = None, *, robot: str | None = None, con
     print(f"open {viewer.url}", flush=True)
     if wait:
         print("press Ctrl-C to stop the viewer", file=sys.stderr)
+
+        def _stop(signum: int, frame: Any) -> None:    # SIGTERM ends the meshcat server like Ctrl-C
+            raise KeyboardInterrupt
+
+        previous = signal.signal(signal.SIGTERM, _stop)
         try:
             while True:
                 time.sleep(1.0)
         except KeyboardInterrupt:
             pass
         finally:
+            signal.signal(signal.SIGTERM, previous)
             viewer.close()
     return viewer
 

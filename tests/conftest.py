@@ -105,6 +105,8 @@ def fake_stages(monkeypatch):
     fakes = FakeStages()
     registry = {"a": fakes.make("a"), "b": fakes.make("b", ("a",)), "c": fakes.make("c", ("b",))}
     monkeypatch.setattr(config, "STAGES", registry)
+    # the built-in robots' run_defaults name the real stages' sections, which the fakes replace
+    monkeypatch.setattr(config, "robot_run_defaults", lambda cfg: None)
     return fakes
 
 

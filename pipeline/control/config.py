@@ -26,8 +26,9 @@ ON_SATURATION = ("error", "clip")
 class IsoPathConfig:
     """EN ISO 9283 test path (DESIGN.md): cube of edge L, centre, diagonal plane, speeds."""
 
-    edge_m: float = 0.5
-    centre_m: list[float] = field(default_factory=lambda: [1.0, 0.0, 0.6])
+    #: None = derived from the robot: the largest feasible cube (pipeline.robot.defaults.iso_cube)
+    edge_m: float | None = None
+    centre_m: list[float] | None = None
     plane: str = "diagonal_x"          # diagonal_x | diagonal_y | horizontal
     tool_down: bool = True             # TCP z axis pointing down (else: normal to the plane, away from the base)
     speed_m_s: float = 1.0
@@ -43,8 +44,10 @@ class IsoPathConfig:
 
     def validate(self, source: Any = None, where: str = "control.iso") -> None:
         """Robot-independent checks; ConfigError naming ``<where>.<field>``."""
-        check_number(source, f"{where}.edge_m", self.edge_m, gt=0, unit="m")
-        check_vector(source, f"{where}.centre_m", self.centre_m, 3, "m")
+        if self.edge_m is not None:
+            check_number(source, f"{where}.edge_m", self.edge_m, gt=0, unit="m")
+        if self.centre_m is not None:
+            check_vector(source, f"{where}.centre_m", self.centre_m, 3, "m")
         check_choice(source, f"{where}.plane", self.plane, ISO_PLANES)
         check_number(source, f"{where}.speed_m_s", self.speed_m_s, gt=0, unit="m/s")
         check_number(source, f"{where}.acceleration_m_s2", self.acceleration_m_s2, gt=0, unit="m/s^2")
@@ -85,9 +88,9 @@ class ControlConfig:
     variants: list[str] = field(default_factory=lambda: list(FEEDFORWARD_VARIANTS))
     compare_nominal_feedforward: bool = True    # also run full_friction from the nominal model
     ik_tolerance_m: float = 1e-9
-    #: cold-start seeds (deg) for the IK of the first path point, tried in order
-    ik_seeds_deg: list[list[float]] = field(default_factory=lambda: [[0.0, 17.0, 86.0, 0.0, 75.0, 0.0],
-                                                                      [0.0, 30.0, 70.0, 0.0, 80.0, 0.0]])
+    #: cold-start seeds (deg) for the IK of the first path point, tried in order; None = derived from
+    #: the robot (pipeline.robot.defaults.ik_seeds_rad)
+    ik_seeds_deg: list[list[float]] | None = None
     #: the point that follows the ISO path and whose error is scored: the laser tracker's reflector,
     #: as paper 004 measures the path with the tracker ("reflector"), or the tool centre point ("tcp";
     #: its offset from the reflector is not observable by the calibration, so its absolute error
@@ -133,10 +136,12 @@ class ControlConfig:
         check_unique(s, "control.variants", self.variants)
         check_number(s, "control.ik_tolerance_m", self.ik_tolerance_m, gt=0, le=1e-4, unit="m",
                      why=" (the IK error of the reference must stay far below the sub-mm errors being measured)")
-        if not isinstance(self.ik_seeds_deg, (list, tuple)) or not self.ik_seeds_deg:
+        if self.ik_seeds_deg is None:
+            pass
+        elif not isinstance(self.ik_seeds_deg, (list, tuple)) or not self.ik_seeds_deg:
             raise ConfigError(s, "control.ik_seeds_deg",
                               f"expected a non-empty list of joint vectors (deg), got {self.ik_seeds_deg!r}")
-        for i, seed in enumerate(self.ik_seeds_deg):
+        for i, seed in enumerate(self.ik_seeds_deg or []):
             check_vector(s, f"control.ik_seeds_deg[{i}]", seed, unit="deg", nonempty=True)
         check_choice(s, "control.path_frame", self.path_frame, PATH_FRAMES)
         if isinstance(self.iso, IsoPathConfig):

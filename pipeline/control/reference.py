@@ -8,8 +8,14 @@ transform the desired end-effector movement into joint positions, velocities and
   speed is also capped by the normal acceleration, ``s_dot <= sqrt(a_max / kappa_max)``.
 * ``p_dot = p'(s) s_dot``, ``p_ddot = p''(s) s_dot^2 + p'(s) s_ddot``; the orientation is constant.
 * IK at every sample warm-started from the previous one (:func:`pipeline.robot.paths.ik_track`),
-  then ``v_d = J^-1 [p_dot; 0]`` and ``a_d = J^-1 ([p_ddot; 0] - Jdot v_d)`` with ``Jdot v_d`` the
+  then ``v_d = J^+ [p_dot; 0]`` and ``a_d = J^+ ([p_ddot; 0] - Jdot v_d)`` with ``Jdot v_d`` the
   classical frame acceleration at zero joint acceleration.
+* Redundancy (7 or more axes): ``J^+ = J^T (J J^T)^-1`` is the right pseudo-inverse, i.e. the
+  minimum-norm joint motion (no null-space motion at all), the same resolution as the IK of
+  :func:`pipeline.robot.paths.ik_track` (damped least squares with a 1e-12 damping) used for the CP
+  joint path, so control and trajectory move a redundant arm the same way. For 6 axes ``J^+ = J^-1``.
+  Undamped on purpose: ``v_d`` and ``a_d`` must be the exact derivatives of the path; singular
+  points are refused (``cond(J) > 1e6``) instead of being damped.
 """
 
 from __future__ import annotations
@@ -99,13 +105,21 @@ def cartesian_reference(robot, path: CartesianPath, sample_time_s: float, speed_
     return Reference(t, q, v, a, P, speed, seg, [sg.label for sg in segs], s_all)
 
 
+def resolved_rate(J: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Minimum-norm ``dq`` with ``J dq = x``: ``J^T (J J^T)^-1 x`` (``J^-1 x`` for a square ``J``)."""
+    if J.shape[0] == J.shape[1]:
+        return np.linalg.solve(J, x)
+    return J.T @ np.linalg.solve(J @ J.T, x)
+
+
 def track(robot, rotation: np.ndarray, P: np.ndarray, Pd: np.ndarray, Pdd: np.ndarray, q_start: np.ndarray,
           frame: str, t_s: np.ndarray, tolerance_m: float = 1e-9, max_iterations: int = 20):
     """IK + joint velocities/accelerations at every sample in one pass.
 
-    Warm start ``q_k^0 = q_{k-1} + dt v_{k-1} + dt^2/2 a_{k-1}``; Newton ``dq = J^-1 e`` with
-    ``e = [p* - p, log3(R* R^T)]``; then ``v = J^-1 [p_dot; 0]``,
-    ``a = J^-1 ([p_ddot; 0] - Jdot v)`` (``Jdot v``: classical frame acceleration at zero ``a``).
+    Warm start ``q_k^0 = q_{k-1} + dt v_{k-1} + dt^2/2 a_{k-1}``; Newton ``dq = J^+ e`` with
+    ``e = [p* - p, log3(R* R^T)]``; then ``v = J^+ [p_dot; 0]``,
+    ``a = J^+ ([p_ddot; 0] - Jdot v)`` (``J^+``: :func:`resolved_rate`; ``Jdot v``: classical frame
+    acceleration at zero ``a``).
     Raises InfeasibleError naming the time, point and joint on failure, singularity or limits.
     """
     model = robot.model
@@ -132,7 +146,7 @@ def track(robot, rotation: np.ndarray, P: np.ndarray, Pd: np.ndarray, Pdd: np.nd
             J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
             if err < tolerance_m:
                 break
-            q = q + np.linalg.solve(J, e)
+            q = q + resolved_rate(J, e)
         def where(k=k) -> str:
             return f"TCP point {np.array2string(P[k], precision=4)} m at t = {t_s[k]:.4f} s"
 
@@ -141,10 +155,10 @@ def track(robot, rotation: np.ndarray, P: np.ndarray, Pd: np.ndarray, Pdd: np.nd
             raise InfeasibleError(None, "ik", f"{where()} not reached (error {err:.1e} m, cond(J) {cond:.1e}; "
                                   f"{limiting_joint(robot, q)})")
         check_within_limits(robot, q, where())
-        v = np.linalg.solve(J, np.concatenate([Pd[k], np.zeros(3)]))
+        v = resolved_rate(J, np.concatenate([Pd[k], np.zeros(3)]))
         pin.forwardKinematics(model, data, q, v, zero)
         drift = pin.getFrameClassicalAcceleration(model, data, fid, pin.LOCAL_WORLD_ALIGNED).vector
-        a = np.linalg.solve(J, np.concatenate([Pdd[k], np.zeros(3)]) - drift)
+        a = resolved_rate(J, np.concatenate([Pdd[k], np.zeros(3)]) - drift)
         over = np.nonzero(np.abs(v) > vlim)[0]
         if len(over):
             j = int(over[0])

@@ -43,6 +43,7 @@ from pipeline.control.validate import (
     tcp_figure,
 )
 from pipeline.errors import ConfigError, InfeasibleError, PipelineError
+from pipeline.robot.defaults import ik_seeds_or_derived_rad, iso_or_derived
 from pipeline.robot.paths import start_configuration
 from pipeline.runner import StageContext, StageResult
 
@@ -55,7 +56,7 @@ def check(config: ControlConfig, robot) -> None:
     """Validate the section against the robot before anything runs (ConfigError naming the field)."""
     config.validate(None)
     nq = robot.nq
-    for i, seed in enumerate(config.ik_seeds_deg):
+    for i, seed in enumerate(config.ik_seeds_deg or []):
         if len(seed) != nq:
             raise ConfigError(None, f"control.ik_seeds_deg[{i}]", f"expected {nq} joint angles (deg) for robot "
                               f"{robot.name}, got {len(seed)}: {list(seed)!r}")
@@ -92,13 +93,13 @@ def run(ctx: StageContext) -> StageResult:
     nominal = _nominal_robot(ctx)
     calibrated = _upstream_robot(ctx, "calibration") is not None
     identified = _upstream_robot(ctx, "identification") is not None
-    iso = cfg.iso
+    iso = iso_or_derived(robot, cfg.iso)          # None fields derived from the robot
     dt = cfg.sample_time_s
     frame = robot.frame_reflector if cfg.path_frame == "reflector" else robot.frame_tcp
     rotation = tool_rotation(iso.plane, iso.tool_down)
     path = iso9283_path(robot, iso.edge_m, iso.centre_m, iso.plane, rotation, iso.corner_fraction,
                         iso.large_circle_fraction, iso.small_circle_fraction, tuple(iso.segments))
-    seeds = np.radians(np.atleast_2d(np.asarray(cfg.ik_seeds_deg, float)))
+    seeds = ik_seeds_or_derived_rad(robot, cfg.ik_seeds_deg)
     t0 = time.perf_counter()
     try:
         q_start = start_configuration(robot, path.poses([0.0])[0], seeds, frame)

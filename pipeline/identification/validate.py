@@ -20,6 +20,7 @@ import numpy as np
 
 from pipeline.errors import PipelineError
 from pipeline.identification.regressor import BaseParameters
+from pipeline.robot.defaults import ik_seeds_or_derived_rad, iso_or_derived
 
 
 @dataclass
@@ -48,12 +49,14 @@ def run_iso_config(run: Any) -> Any:
     return run_control_config(run).iso
 
 
-def ik_seeds_rad(control: Any, nq: int) -> np.ndarray:
-    """The run's ``control.ik_seeds_deg`` as (k, nq) rad; none given -> (0, nq) (the IK's own
-    random starts). A seed of the wrong length raises :class:`PipelineError` naming the field."""
+def ik_seeds_rad(control: Any, robot: Any) -> np.ndarray:
+    """The run's ``control.ik_seeds_deg`` as (k, nq) rad; none given -> seeds derived from the
+    robot (:func:`pipeline.robot.defaults.ik_seeds_or_derived_rad`). A seed of the wrong length
+    raises :class:`PipelineError` naming the field."""
+    nq = robot.nq
     seeds = getattr(control, "ik_seeds_deg", None)
     if seeds is None or len(seeds) == 0:
-        return np.empty((0, nq))
+        return ik_seeds_or_derived_rad(robot, None)
     arr = [np.asarray(s, float).ravel() for s in seeds]
     bad = [i for i, s in enumerate(arr) if s.size != nq]
     if bad:
@@ -72,11 +75,11 @@ def iso_validation_trajectory(robot: Any, sample_time_s: float, control: Any = N
     from pipeline.robot.paths import start_configuration
 
     cfg = ControlConfig() if control is None else control
-    iso = cfg.iso
+    iso = iso_or_derived(robot, cfg.iso)
     rotation = tool_rotation(iso.plane, iso.tool_down)
     path = iso9283_path(robot, iso.edge_m, iso.centre_m, iso.plane, rotation, iso.corner_fraction,
                         iso.large_circle_fraction, iso.small_circle_fraction, tuple(iso.segments))
-    seeds = ik_seeds_rad(cfg, robot.nq)
+    seeds = ik_seeds_rad(cfg, robot)
     q_start = start_configuration(robot, path.poses([0.0])[0], seeds, robot.frame_tcp)
     ref = cartesian_reference(robot, path, sample_time_s, iso.speed_m_s, iso.acceleration_m_s2,
                               iso.jerk_m_s3, q_start, robot.frame_tcp, cfg.ik_tolerance_m)

@@ -11,8 +11,6 @@ a wrong pose.
 from __future__ import annotations
 
 import copy as _copy
-import xml.etree.ElementTree as ET
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -23,135 +21,18 @@ from pipeline.artefacts import write_text
 from pipeline.errors import RobotFileError
 from pipeline.robot.collision import CapsuleDistances, segment_distances
 from pipeline.robot.ik import IKResult, solve_ik
-from pipeline.robot.spec import Capsule, RobotSpec, load_robot_spec, robot_spec_to_yaml
+from pipeline.robot.loading import ROBOTS_DIR, JointLimits, load_robot_files, resolve_robot_files, validate_joint_limits
+from pipeline.robot.spec import Capsule, RobotSpec, robot_spec_to_yaml
 from pipeline.robot.urdf_export import export_urdf
+from pipeline.robot.urdf_import import absolute_mesh_paths
 
-ROBOTS_DIR = Path(__file__).resolve().parents[2] / "robots"
 WORLD = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-_JOINT_TYPES = {"revolute", "continuous", "prismatic", "fixed", "floating", "planar"}
-
-
-@dataclass
-class JointLimits:
-    lower_rad: np.ndarray
-    upper_rad: np.ndarray
-    velocity_rad_s: np.ndarray
-    effort_Nm: np.ndarray
-    acceleration_rad_s2: np.ndarray
-
-
-def resolve_robot_files(robot: str | Path, yaml_path: str | Path | None = None) -> tuple[Path, Path]:
-    """(robot.yaml, folder) for a robot name under ``robots/``, a folder, or a URDF + yaml pair."""
-    candidate = Path(robot)
-    if yaml_path is not None:
-        return Path(yaml_path), Path(yaml_path).parent
-    if candidate.suffix == ".urdf":
-        guess = candidate.parent / "robot.yaml"
-        if not guess.is_file():
-            raise RobotFileError(candidate, "robot.yaml", "a URDF needs a robot.yaml beside it or given explicitly")
-        return guess, candidate.parent
-    for folder in (candidate, ROBOTS_DIR / str(robot)):
-        if folder.is_dir() and (folder / "robot.yaml").is_file():
-            return folder / "robot.yaml", folder
-    known = sorted(p.name for p in ROBOTS_DIR.iterdir() if (p / "robot.yaml").is_file()) if ROBOTS_DIR.is_dir() else []
-    raise RobotFileError(None, "robot", f"'{robot}' is neither a folder with a robot.yaml nor a robot under "
-                         f"{ROBOTS_DIR} (known: {', '.join(known)})")
-
-
-def _check_urdf_xml(urdf: Path) -> ET.Element:
-    if not urdf.is_file():
-        raise RobotFileError(urdf, "urdf", "file not found")
-    try:
-        root = ET.parse(urdf).getroot()
-    except ET.ParseError as exc:
-        raise RobotFileError(urdf, "xml", f"not valid XML ({exc})") from None
-    if root.tag != "robot":
-        raise RobotFileError(urdf, "xml", f"root element is <{root.tag}>, expected <robot>")
-    # what urdfdom would otherwise reject with several lines of C++ errors on stderr
-    links = {link.get("name") for link in root.findall("link")}
-    for joint in root.findall("joint"):
-        name, kind = joint.get("name"), joint.get("type")
-        for tag in ("parent", "child"):
-            element = joint.find(tag)
-            if element is None or element.get("link") not in links:
-                raise RobotFileError(urdf, f"joint {name}: <{tag}>", "missing or names an unknown link")
-        # the kinematic error model, the symbolic bridge and calibration assume revolute axes:
-        # every movable joint must be revolute (fixed joints only place frames)
-        if kind not in _JOINT_TYPES:
-            raise RobotFileError(urdf, f"joint {name}: type", f"{kind!r} is not a URDF joint type "
-                                 f"({', '.join(sorted(_JOINT_TYPES))})")
-        if kind not in ("revolute", "fixed"):
-            raise RobotFileError(urdf, f"joint {name}: type", f"'{kind}' joints are not supported; "
-                                 "only revolute joints move (and fixed joints place frames)")
-        if kind == "revolute":
-            limit = joint.find("limit")
-            missing = [a for a in ("lower", "upper", "velocity", "effort") if limit is None or limit.get(a) is None]
-            if missing:
-                raise RobotFileError(urdf, f"joint {name}: <limit>", f"a {kind} joint needs {', '.join(missing)}")
-            for attribute in ("lower", "upper", "velocity", "effort"):
-                try:
-                    value = float(limit.get(attribute))
-                except ValueError:
-                    value = None
-                if value is None or not np.isfinite(value):
-                    raise RobotFileError(urdf, f"joint {name}: <limit {attribute}>",
-                                         f"not a finite number: {limit.get(attribute)!r}")
-    return root
-
-
-def _validate_inertials(urdf: Path, model: pin.Model) -> None:
-    for j in range(1, model.njoints):
-        inertia = model.inertias[j]
-        name = model.names[j]
-        if not inertia.mass > 0:
-            raise RobotFileError(urdf, f"joint {name}: link inertial.mass", f"must be positive, got {inertia.mass}")
-        eig = np.linalg.eigvalsh(inertia.inertia)
-        if eig.min() <= 0:
-            raise RobotFileError(urdf, f"joint {name}: link inertial.inertia",
-                                 f"not positive definite (eigenvalues {np.round(eig, 6).tolist()})")
-        a, b, c = np.sort(eig)
-        if a + b < c * (1 - 1e-9):
-            raise RobotFileError(urdf, f"joint {name}: link inertial.inertia",
-                                 "violates the triangle inequality of principal moments")
-
-
-def _validate_joint_limits(spec: RobotSpec, model: pin.Model, limits: JointLimits) -> None:
-    """Each joint must be able to move (lower < upper) and have positive velocity and effort limits.
-
-    A limit comes from the URDF unless ``robot.yaml`` overrides it (``limits.lower_rad`` ...); the
-    error names the file and field the offending value came from.
-    """
-    urdf, overrides = spec.urdf, spec.limit_overrides
-    for i in range(model.nq):
-        name = model.names[i + 1]
-        lower, upper = float(limits.lower_rad[i]), float(limits.upper_rad[i])
-        if not lower < upper:
-            _raise_limit_order(spec, urdf, overrides, f"joint {name}", i, lower, upper)
-        # robot.yaml velocity/effort overrides are checked positive by load_robot_spec
-        if not limits.velocity_rad_s[i] > 0:
-            raise RobotFileError(urdf, f"joint {name}: limit.velocity", "must be positive")
-        if not limits.effort_Nm[i] > 0:
-            raise RobotFileError(urdf, f"joint {name}: limit.effort", "must be positive")
-
-
-def _raise_limit_order(spec: RobotSpec, urdf: Path, overrides: dict, joint: str, i: int, lower: float,
-                       upper: float) -> None:
-    """Report ``lower >= upper`` against the file and field each of the two values came from."""
-    relation = "is above" if lower > upper else "equals"
-    stuck = "" if lower > upper else " (the joint could not move)"
-    entry = f"{joint} (entry {i})"
-    if "lower_rad" in overrides and "upper_rad" in overrides:
-        raise RobotFileError(spec.path, "limits.lower_rad", f"{entry}: {lower} {relation} limits.upper_rad "
-                             f"{upper}; the lower limit must be below the upper{stuck}")
-    if "lower_rad" in overrides:
-        raise RobotFileError(spec.path, "limits.lower_rad", f"{entry}: {lower} {relation} the upper limit "
-                             f"{upper} in {urdf.name}; the lower limit must be below it{stuck}")
-    if "upper_rad" in overrides:
-        below = "is below" if lower > upper else "equals"
-        raise RobotFileError(spec.path, "limits.upper_rad", f"{entry}: {upper} {below} the lower limit "
-                             f"{lower} in {urdf.name}; the upper limit must be above it{stuck}")
-    raise RobotFileError(urdf, f"{joint}: limit", f"lower {lower} {relation} upper {upper}; "
-                         f"the lower limit must be below the upper{stuck}")
+#: a capsule pair closer than zero in at least this share of random configurations always collides
+ALWAYS_COLLIDING_SHARE = 0.95
+#: assumed (fitted) capsules: pairs overlapping in this share of random configurations are neighbours in
+#: all but name (a UR base and shoulder) and are left out of the self-collision check
+ASSUMED_COLLIDING_SHARE = 0.3
+__all__ = ["ROBOTS_DIR", "JointLimits", "RobotModel", "resolve_robot_files"]
 
 
 class RobotModel:
@@ -161,42 +42,43 @@ class RobotModel:
     frame_tcp = "tcp"
     frame_reflector = "reflector"
 
-    def __init__(self, spec: RobotSpec, model: pin.Model, urdf_text: str) -> None:
+    def __init__(self, spec: RobotSpec, model: pin.Model, urdf_text: str,
+                 assumptions: list[str] | None = None) -> None:
         self.spec = spec
         self.model = model
         self.urdf_text = urdf_text
+        if assumptions:
+            spec.assumptions = list(dict.fromkeys([*spec.assumptions, *assumptions]))
         self._data = model.createData()
         self._frame_ids: dict[str, int] = {}
         self._check_frames()
         capsule_joints = [self.model.frames[self.frame_id(c.frame)].parentJoint for c in spec.capsules]
         self._capsule_joint = np.array(capsule_joints, dtype=int)
+        names = [c.name for c in spec.capsules]
+        ignored = {frozenset(pair) for pair in spec.collision.ignore_pairs}
         self._self_pairs = [(i, k) for i in range(len(spec.capsules)) for k in range(i + 1, len(spec.capsules))
-                            if abs(capsule_joints[i] - capsule_joints[k]) > 1]
+                            if abs(capsule_joints[i] - capsule_joints[k]) > 1
+                            and frozenset((names[i], names[k])) not in ignored]
         self._floor_capsules = [i for i, j in enumerate(capsule_joints) if j >= spec.collision.floor_check_from_joint]
 
     # ------------------------------------------------------------------ loading
     @classmethod
-    def load(cls, robot: str | Path, yaml_path: str | Path | None = None) -> RobotModel:
-        """Load ``robots/<robot>/``, a folder with ``robot.yaml``, or a URDF (+ yaml)."""
-        yaml_file, _ = resolve_robot_files(robot, yaml_path)
-        spec = load_robot_spec(yaml_file)
-        urdf = Path(robot) if str(robot).endswith(".urdf") else spec.urdf
-        _check_urdf_xml(urdf)
-        try:
-            model = pin.buildModelFromUrdf(str(urdf))
-        except (RuntimeError, ValueError) as exc:
-            raise RobotFileError(urdf, "urdf", f"Pinocchio could not build the model ({exc})") from None
-        if model.nq == 0:
-            raise RobotFileError(urdf, "joints", "no movable joint (expected a chain of revolute joints)")
-        if model.nq != model.nv:  # caught by _check_urdf_xml; kept as a guard
-            raise RobotFileError(urdf, "joints", f"expected revolute joints only (nq={model.nq}, nv={model.nv})")
-        spec = load_robot_spec(yaml_file, nq=model.nq)
-        _validate_inertials(urdf, model)
-        spec.urdf = urdf
-        return cls._assemble(spec, model, urdf.read_text())
+    def load(cls, robot: str | Path, yaml_path: str | Path | None = None, *, base: str | None = None,
+             tip: str | None = None) -> RobotModel:
+        """Load ``robots/<robot>/``, a folder with ``robot.yaml``, a URDF + yaml, or a URDF alone.
+
+        A URDF alone gets stated assumptions for what it lacks (``assumptions``); joints off the
+        base->tip chain are locked (:mod:`pipeline.robot.loading`).
+        """
+        spec, model, urdf_text, assumptions = load_robot_files(robot, yaml_path, base=base, tip=tip)
+        assumed = spec.path == spec.urdf
+        robot_model = cls._assemble(spec, model, urdf_text, assumptions)
+        robot_model._check_always_colliding(fix=assumed)
+        return robot_model
 
     @classmethod
-    def _assemble(cls, spec: RobotSpec, model: pin.Model, urdf_text: str) -> RobotModel:
+    def _assemble(cls, spec: RobotSpec, model: pin.Model, urdf_text: str,
+                  assumptions: list[str] | None = None) -> RobotModel:
         if not model.existFrame(spec.flange_frame):
             raise RobotFileError(spec.path, "flange_frame", f"frame '{spec.flange_frame}' not in the URDF "
                                  f"(frames: {', '.join(f.name for f in model.frames)})")
@@ -218,9 +100,37 @@ class RobotModel:
             if model.existFrame(name):
                 raise RobotFileError(spec.urdf, name, f"the URDF already has a frame '{name}'; the yaml defines it")
             model.addFrame(pin.Frame(name, joint, flange_id, placement * local, frame_type))
-        robot = cls(spec, model, urdf_text)
-        _validate_joint_limits(spec, model, robot.limits)
+        robot = cls(spec, model, urdf_text, assumptions)
+        validate_joint_limits(spec, model, robot.limits)
         return robot
+
+    def _check_always_colliding(self, fix: bool, samples: int = 200) -> None:
+        """Capsule pairs that overlap in (almost) every random configuration inside the limits.
+
+        Such a pair makes every candidate configuration "in collision". With assumed capsules the
+        pair is left out of the self-collision check (an assumption); with a robot.yaml it is an
+        error naming the pair and the fix.
+        """
+        if not self._self_pairs:
+            return
+        rng = np.random.default_rng(0)
+        Q = rng.uniform(self.model.lowerPositionLimit, self.model.upperPositionLimit, size=(samples, self.nq))
+        pair, _ = self.capsule_clearances(self.capsule_segments(Q))
+        share = (pair < 0).mean(axis=0)
+        bad = [self._self_pairs[i] for i in np.flatnonzero(share >= (ASSUMED_COLLIDING_SHARE if fix
+                                                                      else ALWAYS_COLLIDING_SHARE))]
+        if not bad:
+            return
+        names = [(self.capsules[i].name, self.capsules[k].name) for i, k in bad]
+        if not fix:
+            i, k = bad[0]
+            raise RobotFileError(self.spec.path, "capsules", f"capsules '{names[0][0]}' and '{names[0][1]}' overlap in "
+                                 f"{share[self._self_pairs.index((i, k))]:.0%} of random configurations: shrink "
+                                 "them (radius_m, p0, p1) or list the pair under collision.ignore_pairs")
+        self.spec.collision.ignore_pairs = list(self.spec.collision.ignore_pairs) + names
+        self._self_pairs = [p for p in self._self_pairs if p not in bad]
+        self.spec.assumptions.append("capsule pairs overlapping in almost every configuration left out of the "
+                                f"self-collision check: {', '.join(f'{a}-{b}' for a, b in names)}")
 
     def _check_frames(self) -> None:
         for k, capsule in enumerate(self.spec.capsules):
@@ -250,6 +160,16 @@ class RobotModel:
     @property
     def tracker(self):  # noqa: ANN201 - TrackerSpec
         return self.spec.tracker
+
+    @property
+    def assumptions(self) -> list[str]:
+        """What was assumed because the robot files do not say it (listed in the run report)."""
+        return self.spec.assumptions
+
+    @property
+    def has_tracker(self) -> bool:
+        """False when robot.yaml has no tracker section: no calibration stage (nominal kinematics)."""
+        return self.spec.has_tracker
 
     @property
     def capsules(self) -> list[Capsule]:
@@ -473,6 +393,9 @@ class RobotModel:
         spec.tool.reflector_offset_m = self.reflector_offset_m
         spec.tool.reflector_axis = self.reflector_axis
         spec.limit_overrides = {}
-        write_text(folder / urdf_name, export_urdf(self.model, self.urdf_text))
+        urdf_text = export_urdf(self.model, self.urdf_text)
+        if self.urdf_path is not None and Path(self.urdf_path).is_file():
+            urdf_text = absolute_mesh_paths(urdf_text, Path(self.urdf_path))   # meshes still found from folder
+        write_text(folder / urdf_name, urdf_text)
         write_text(folder / "robot.yaml", yaml.safe_dump(robot_spec_to_yaml(spec, urdf_name), sort_keys=False))
         return folder

@@ -68,6 +68,8 @@ class TrackerSpec:
 class CollisionSpec:
     floor_z_m: float
     floor_check_from_joint: int
+    #: capsule name pairs left out of the self-collision check
+    ignore_pairs: list[tuple[str, str]] = field(default_factory=list)
 
 
 @dataclass
@@ -86,16 +88,20 @@ class RobotSpec:
     tracker: TrackerSpec
     collision: CollisionSpec
     capsules: list[Capsule] = field(default_factory=list)
+    #: False when robot.yaml has no tracker section (``tracker`` is then a placeholder, never measured)
+    has_tracker: bool = True
+    #: what was assumed about this robot (kept when a stage saves the model)
+    assumptions: list[str] = field(default_factory=list)
 
 
 _TOP_KEYS = {
     "name", "urdf", "flange_frame", "payload_kg", "tool", "actuation", "limits", "tracker",
-    "collision", "capsules",
+    "collision", "capsules", "assumptions",
     # robot-specific defaults of the run configuration (test path placement, moves); read and
     # checked by pipeline.config.load_config, which layers them under the config file
     "run_defaults",
 }
-_REQUIRED_TOP = {"urdf", "flange_frame", "tool", "actuation", "limits", "tracker"}
+_REQUIRED_TOP = {"urdf", "flange_frame", "tool", "actuation", "limits"}
 
 
 def _is_number(value: Any) -> bool:
@@ -278,7 +284,10 @@ def load_robot_spec(path: Path, nq: int | None = None) -> RobotSpec:
         if key in overrides and np.any(overrides[key] <= 0):
             raise lim.error(key, "must be positive")
 
-    trk = top.sub("tracker")
+    has_tracker = data.get("tracker") is not None
+    trk = top.sub("tracker") if has_tracker else _Reader(path, {"transform_tracker_to_base":
+                                                                {"xyz": [0.0, 0.0, 0.0], "rpy": [0.0, 0.0, 0.0]}},
+                                                         "tracker.")
     trk.check_keys({"transform_tracker_to_base", "noise_const_m", "noise_per_m", "max_incidence_deg"},
                    {"transform_tracker_to_base"})
     tracker = TrackerSpec(
@@ -291,9 +300,14 @@ def load_robot_spec(path: Path, nq: int | None = None) -> RobotSpec:
     collision = CollisionSpec(0.0, 2)
     if "collision" in data:
         col = top.sub("collision")
-        col.check_keys({"floor_z_m", "floor_check_from_joint"})
+        col.check_keys({"floor_z_m", "floor_check_from_joint", "ignore_pairs"})
+        ignore = _optional_list(col, "ignore_pairs", "a list of [capsule name, capsule name]")
+        for k, pair in enumerate(ignore):
+            if not (isinstance(pair, list) and len(pair) == 2 and all(isinstance(n, str) for n in pair)):
+                raise col.error(f"ignore_pairs[{k}]", f"expected [capsule name, capsule name], got {pair!r}")
         collision = CollisionSpec(col.number("floor_z_m", default=0.0),
-                                  col.integer("floor_check_from_joint", minimum=0, maximum=nq, default=2))
+                                  col.integer("floor_check_from_joint", minimum=0, maximum=nq, default=2),
+                                  [tuple(pair) for pair in ignore])
 
     capsules = []
     raw_capsules = _optional_list(top, "capsules", "a list of capsules")
@@ -319,6 +333,8 @@ def load_robot_spec(path: Path, nq: int | None = None) -> RobotSpec:
         tracker=tracker,
         collision=collision,
         capsules=capsules,
+        has_tracker=has_tracker,
+        assumptions=[str(a) for a in _optional_list(top, "assumptions", "a list of sentences")],
     )
 
 
@@ -353,18 +369,21 @@ def robot_spec_to_yaml(spec: RobotSpec, urdf_name: str) -> dict:
              else {"joint_stiffness_Nm_rad": [float(v) for v in act.joint_stiffness_Nm_rad]}),
         "limits": {"acceleration_rad_s2": [float(v) for v in spec.acceleration_rad_s2]}
         | {k: [float(x) for x in v] for k, v in spec.limit_overrides.items()},
-        "tracker": {
+        "tracker": None if not spec.has_tracker else {
             "transform_tracker_to_base": _se3_yaml(spec.tracker.transform_tracker_to_base),
             "noise_const_m": float(spec.tracker.noise_const_m),
             "noise_per_m": float(spec.tracker.noise_per_m),
             "max_incidence_deg": float(np.rad2deg(spec.tracker.max_incidence_rad)),
         },
         "collision": {"floor_z_m": float(spec.collision.floor_z_m),
-                      "floor_check_from_joint": int(spec.collision.floor_check_from_joint)},
+                      "floor_check_from_joint": int(spec.collision.floor_check_from_joint),
+                      "ignore_pairs": [list(p) for p in spec.collision.ignore_pairs]},
         "capsules": [
             {"name": c.name, "frame": c.frame, "p0": [float(v) for v in c.p0], "p1": [float(v) for v in c.p1],
              "radius_m": float(c.radius_m)}
             for c in spec.capsules
         ],
     }
+    if spec.assumptions:
+        out["assumptions"] = list(spec.assumptions)
     return out

@@ -14,6 +14,7 @@ import numpy as np
 
 from pipeline.errors import ConfigError
 from pipeline.plotting import robot_figure
+from pipeline.robot.defaults import ready_pose_rad
 from pipeline.runner import StageContext, StageResult
 
 NAME = "model"
@@ -93,10 +94,7 @@ def _pose(ctx: StageContext) -> np.ndarray:
     robot = ctx.robot
     lim = robot.limits
     if ctx.config.pose_deg is None:
-        q = np.zeros(robot.nq)
-        if robot.nq >= 3:
-            q[1], q[2] = np.deg2rad(30.0), np.deg2rad(60.0)
-        return np.clip(q, lim.lower_rad, lim.upper_rad)
+        return ready_pose_rad(robot)          # derived from the robot: collision-free, above the floor
     problem = _pose_problem(ctx.config.pose_deg, robot)      # check() ran already; a safety net
     if problem:
         raise ConfigError(ctx.run.source_of("model.pose_deg"), "model.pose_deg", problem)
@@ -129,5 +127,12 @@ def run(ctx: StageContext) -> StageResult:
         rows.append(f"| {name} | {np.rad2deg(lim.lower_rad[i]):.1f} | {np.rad2deg(lim.upper_rad[i]):.1f} | "
                     f"{np.rad2deg(lim.velocity_rad_s[i]):.0f} | {lim.effort_Nm[i]:.0f} | "
                     f"{robot.actuation.gear_ratio[i]:g} |")
+    if robot.assumptions:
+        rows += ["", "**Assumptions** (the robot files do not say these; `python -m pipeline robot init` writes "
+                 "them to a robot.yaml to edit):", ""] + [f"* {a}" for a in robot.assumptions]
+    if not robot.has_tracker:
+        rows += ["", "No tracker in robot.yaml: no calibration; later stages use the nominal kinematics."]
+    summary["assumptions"] = list(robot.assumptions)
+    summary["has_tracker"] = bool(robot.has_tracker)
     return StageResult(summary=summary, arrays=arrays, figures={"robot": fig},
                        data={"pose_deg": np.rad2deg(q)}, report_md="\n".join(rows))

@@ -34,12 +34,13 @@ def export_urdf(model: pin.Model, template_urdf: str) -> str:
         element = joints.get(name)
         if element is None:
             raise RobotFileError(None, f"joint {name}", "not in the template URDF")
-        placement = model.jointPlacements[j]
         parent_link = element.find("parent").get("link")
-        parent_joint = [jn for jn in joints.values() if jn.find("child").get("link") == parent_link]
-        if parent_joint and parent_joint[0].get("type") == "fixed":
-            raise RobotFileError(None, f"joint {name}", "export of a fixed joint between moving joints is not "
-                                 "supported")
+        # Pinocchio folds fixed joints (a `world` root, flange adapters) into the joint placement: the
+        # URDF origin is the placement seen from the parent link's frame
+        if not model.existFrame(parent_link, pin.FrameType.BODY):
+            raise RobotFileError(None, f"joint {name}", f"parent link '{parent_link}' is not a frame of the model")
+        body = model.frames[model.getFrameId(parent_link, pin.FrameType.BODY)]
+        placement = body.placement.actInv(model.jointPlacements[j])
         origin = element.find("origin")
         if origin is None:
             origin = ET.SubElement(element, "origin")

@@ -29,11 +29,12 @@ class TrajectoryConfig:
     # spline: a cubic spline through these TCP points (base frame, metres; >= 3), the tool
     # orientation as on the ISO path (z axis down); the ISO fields below are then unused
     cp_points_m: list[list[float]] = field(default_factory=list)
-    cp_edge_m: float = 0.5                    # ISO cube edge L
-    cp_centre_m: list[float] = field(default_factory=lambda: [0.9, 0.0, 0.3])
+    # ISO cube edge L and centre; None = derived from the robot (pipeline.robot.defaults.iso_cube)
+    cp_edge_m: float | None = None
+    cp_centre_m: list[float] | None = None
     cp_plane: str = "diagonal_x"
     cp_ik_points: int = 200                   # IK samples of the Cartesian path
-    cp_ik_seed_deg: list[float] = field(default_factory=lambda: [0.0, 17.0, 86.0, 0.0, 75.0, 0.0])
+    cp_ik_seed_deg: list[float] | None = None  # None = the robot's ready pose (pipeline.robot.defaults)
     cp_max_ik_step_deg: float = 15.0          # larger jumps between IK samples = branch change
     cp_n_grid: int = 400                      # path grid (toppra uses the same grid)
     # reachability: TOPP-RA with the full friction model (pipeline/trajectory/reachability.py, fast);
@@ -45,8 +46,9 @@ class TrajectoryConfig:
     cp_smooth_jerk_rise_time_s: float = 0.05  # jerk limit = peak acceleration / rise time
     cp_smooth_torque_margin: float = 0.004
     # --- point to point (PtP), seed 004 eq. 40 ----------------------------------------------
-    ptp_start_deg: list[float] = field(default_factory=lambda: [-45.0, 20.0, 30.0, 0.0, 40.0, 0.0])
-    ptp_goal_deg: list[float] = field(default_factory=lambda: [45.0, 60.0, -20.0, 30.0, 50.0, 60.0])
+    # None = a large collision-free move derived from the robot (pipeline.robot.defaults.ptp_move_rad)
+    ptp_start_deg: list[float] | None = None
+    ptp_goal_deg: list[float] | None = None
     ptp_n_intervals: int = 50
     ptp_k1: float = 1.0
     ptp_k2: float = 0.01
@@ -64,8 +66,9 @@ class TrajectoryConfig:
     # alone is worse (0.761 identified). Multi-starts (time-optimal stretched, ruckig resampled, via a
     # low-gravity pose, Pareto point) reach 0.70-0.78, none better by more than 0.005.
     ptp_fixed_coulomb_widths_rad_s: list[float] = field(default_factory=lambda: [1.0, 0.3, 0.1])
-    motor_resistance_ohm: list[float] = field(default_factory=lambda: [0.6, 0.6, 1.2, 2.5, 2.5, 3.0])
-    torque_constant_Nm_A: list[float] = field(default_factory=lambda: [0.9, 0.9, 0.6, 0.35, 0.3, 0.3])
+    # motor data of ptp_energy: electrical (no robot-independent default: give them for that energy)
+    motor_resistance_ohm: list[float] | None = None
+    torque_constant_Nm_A: list[float] | None = None
     # --- baselines and verification ----------------------------------------------------------
     ruckig_check_dt_s: float = 5e-4
     ruckig_jerk_ratios_1_s: list[float] = field(default_factory=lambda: [10.0, 25.0, 60.0])
@@ -105,11 +108,14 @@ class TrajectoryConfig:
                 a, b = self.cp_points_m[i - 1], self.cp_points_m[i]
                 if sum((x - y) ** 2 for x, y in zip(a, b, strict=True)) ** 0.5 < 1e-6:
                     raise ConfigError(s, name(f"cp_points_m[{i}]"), f"coincides with point {i - 1} ({list(a)!r})")
-        check_number(s, name("cp_edge_m"), self.cp_edge_m, gt=0, unit="m")
-        check_vector(s, name("cp_centre_m"), self.cp_centre_m, 3, "m")
+        if self.cp_edge_m is not None:
+            check_number(s, name("cp_edge_m"), self.cp_edge_m, gt=0, unit="m")
+        if self.cp_centre_m is not None:
+            check_vector(s, name("cp_centre_m"), self.cp_centre_m, 3, "m")
         check_choice(s, name("cp_plane"), self.cp_plane, ISO_PLANES)
         check_count(s, name("cp_ik_points"), self.cp_ik_points, MIN_GRID)
-        check_vector(s, name("cp_ik_seed_deg"), self.cp_ik_seed_deg, unit="deg", nonempty=True)
+        if self.cp_ik_seed_deg is not None:
+            check_vector(s, name("cp_ik_seed_deg"), self.cp_ik_seed_deg, unit="deg", nonempty=True)
         check_number(s, name("cp_max_ik_step_deg"), self.cp_max_ik_step_deg, gt=0, unit="deg")
         check_count(s, name("cp_n_grid"), self.cp_n_grid, MIN_GRID)
         check_choice(s, name("cp_method"), self.cp_method, CP_METHODS)
@@ -120,9 +126,14 @@ class TrajectoryConfig:
         check_number(s, name("cp_smooth_torque_margin"), self.cp_smooth_torque_margin, ge=0, lt=1,
                      why=" (relative tightening of the torque limits)")
         # --- PtP
-        check_vector(s, name("ptp_start_deg"), self.ptp_start_deg, unit="deg", nonempty=True)
-        check_vector(s, name("ptp_goal_deg"), self.ptp_goal_deg, unit="deg", nonempty=True)
-        if len(self.ptp_start_deg) == len(self.ptp_goal_deg) and \
+        if (self.ptp_start_deg is None) != (self.ptp_goal_deg is None):
+            given, missing = ("ptp_start_deg", "ptp_goal_deg")[::1 if self.ptp_goal_deg is None else -1]
+            raise ConfigError(s, name(missing), f"trajectory.{given} is set: set {missing} too (or neither, "
+                              "for a move derived from the robot)")
+        for field_name in ("ptp_start_deg", "ptp_goal_deg"):
+            if getattr(self, field_name) is not None:
+                check_vector(s, name(field_name), getattr(self, field_name), unit="deg", nonempty=True)
+        if self.ptp_start_deg is not None and len(self.ptp_start_deg) == len(self.ptp_goal_deg) and \
                 max(abs(a - b) for a, b in zip(self.ptp_start_deg, self.ptp_goal_deg, strict=True)) < 1e-6:
             raise ConfigError(s, name("ptp_goal_deg"), f"equals trajectory.ptp_start_deg {list(self.ptp_start_deg)!r}: "
                               "a point-to-point move needs two different poses")
@@ -142,8 +153,11 @@ class TrajectoryConfig:
         check_vector(s, name("ptp_coulomb_widths_rad_s"), self.ptp_coulomb_widths_rad_s, unit="rad/s", gt=0)
         check_vector(s, name("ptp_fixed_coulomb_widths_rad_s"), self.ptp_fixed_coulomb_widths_rad_s,
                      unit="rad/s", gt=0)
-        check_vector(s, name("motor_resistance_ohm"), self.motor_resistance_ohm, unit="ohm", gt=0, nonempty=True)
-        check_vector(s, name("torque_constant_Nm_A"), self.torque_constant_Nm_A, unit="N m/A", gt=0, nonempty=True)
+        for field_name, unit in (("motor_resistance_ohm", "ohm"), ("torque_constant_Nm_A", "N m/A")):
+            if getattr(self, field_name) is not None:
+                check_vector(s, name(field_name), getattr(self, field_name), unit=unit, gt=0, nonempty=True)
+            elif self.ptp_energy == "electrical":
+                raise ConfigError(s, name(field_name), "ptp_energy: electrical needs the motors' data (per joint)")
         # --- baselines and verification
         check_number(s, name("ruckig_check_dt_s"), self.ruckig_check_dt_s, gt=0, le=MAX_CHECK_DT_S, unit="s",
                      why=" (torques must be checked at least every 0.5 ms)")

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.robot.defaults import iso_cube, ready_pose_rad
 from pipeline.trajectory.baselines import RuckigResult, ruckig_torque_feasible, toppra_cp
 from pipeline.trajectory.config import TrajectoryConfig
 from pipeline.trajectory.cp import (
@@ -46,10 +47,15 @@ def cp_joint_path(robot: Any, cfg: TrajectoryConfig) -> tuple[JointPath, Any]:
     if cfg.cp_segment == "spline":
         piece = SplinePath(np.asarray(cfg.cp_points_m, float), tool_rotation(cfg.cp_plane, True), label="spline")
     else:
-        iso = iso9283_path(robot, cfg.cp_edge_m, tuple(cfg.cp_centre_m), cfg.cp_plane,
+        edge, centre = cfg.cp_edge_m, cfg.cp_centre_m
+        if edge is None or centre is None:           # None: the robot's largest feasible ISO cube
+            cube = iso_cube(robot, cfg.cp_plane, True, frame=robot.frame_tcp)
+            edge, centre = (cube.edge_m if edge is None else edge), (cube.centre_m if centre is None else centre)
+        iso = iso9283_path(robot, edge, tuple(centre), cfg.cp_plane,
                            tool_rotation(cfg.cp_plane, True), segments=(cfg.cp_segment,))
         piece = iso.pieces[0]
-    path = joint_path_from_cartesian(robot, piece, cfg.cp_ik_points, np.radians(cfg.cp_ik_seed_deg),
+    seed = ready_pose_rad(robot) if cfg.cp_ik_seed_deg is None else np.radians(cfg.cp_ik_seed_deg)
+    path = joint_path_from_cartesian(robot, piece, cfg.cp_ik_points, seed,
                                      robot.frame_tcp, np.radians(cfg.cp_max_ik_step_deg),
                                      name=f"trajectory.cp_segment {cfg.cp_segment}")
     return path, piece

@@ -26,6 +26,7 @@ import numpy as np
 
 from pipeline.errors import ConfigError
 from pipeline.quality import QualityGates
+from pipeline.robot.defaults import ptp_move_rad
 from pipeline.runner import StageContext, StageResult
 from pipeline.solver_status import SUCCESS_STATUSES
 from pipeline.trajectory.config import TrajectoryConfig
@@ -51,11 +52,13 @@ def check(config: TrajectoryConfig, robot) -> None:
     config.validate(None)          # the robot-independent checks, also for configs built in Python
     nq = robot.nq
     for field in ("ptp_start_deg", "ptp_goal_deg", "cp_ik_seed_deg", "motor_resistance_ohm", "torque_constant_Nm_A"):
-        if len(getattr(config, field)) != nq:
+        if getattr(config, field) is not None and len(getattr(config, field)) != nq:
             raise bad(field, f"expected {nq} numbers for robot {robot.name}, got {len(getattr(config, field))}: "
                       f"{list(getattr(config, field))!r}")
     lo, hi = np.degrees(robot.limits.lower_rad), np.degrees(robot.limits.upper_rad)
     for field in ("ptp_start_deg", "ptp_goal_deg"):
+        if getattr(config, field) is None:
+            continue
         q = np.asarray(getattr(config, field), float)
         out = np.flatnonzero((q < lo) | (q > hi))
         if out.size:
@@ -138,7 +141,8 @@ def run(ctx: StageContext) -> StageResult:
     t0 = time.perf_counter()
     problem = ptp_problem(pm, robot, cfg)
     timings["ptp_build_and_compile_s"] = time.perf_counter() - t0
-    q0, q1 = np.radians(cfg.ptp_start_deg), np.radians(cfg.ptp_goal_deg)
+    q0, q1 = (ptp_move_rad(robot) if cfg.ptp_start_deg is None       # None: derived from the robot
+              else (np.radians(cfg.ptp_start_deg), np.radians(cfg.ptp_goal_deg)))
     t0 = time.perf_counter()
     ptp = plan_ptp(pm, problem, q0, q1, cfg)
     timings["ptp_s"] = time.perf_counter() - t0

@@ -56,9 +56,10 @@ def test_tx40_validates_on_the_iso_path_of_its_run_defaults(tx40):
 def test_rx130l_sized_path_falls_back_on_the_tx40(tx40):
     fallback = val_mod.ValidationTrajectory(np.zeros(2), np.zeros((2, 6)), np.zeros((2, 6)), np.zeros((2, 6)),
                                             "fourier", "a random feasible Fourier trajectory")
-    vt = val_mod.validation_trajectory(tx40, 4e-3, lambda: fallback, control=ControlConfig())
+    rx130l_cube = ControlConfig(iso={"centre_m": [1.0, 0.0, 0.6], "edge_m": 0.5})   # out of the TX40's reach
+    vt = val_mod.validation_trajectory(tx40, 4e-3, lambda: fallback, control=rx130l_cube)
     assert vt.label == "fourier" and "ISO 9283 path" in vt.note
-    md = stage._validation_markdown(stage.Config(), vt, ControlConfig().iso, tx40)
+    md = stage._validation_markdown(stage.Config(), vt, rx130l_cube.iso, tx40)
     assert "Warning" in md and "control.iso.centre_m" in md and "control.iso.edge_m" in md
     assert "fell back" in md
 

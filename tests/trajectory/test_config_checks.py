@@ -131,7 +131,8 @@ def test_allowed_sets_match_the_planner(pm):
     from pipeline.trajectory.ptp import energy_weights
 
     assert set(CP_SEGMENTS) - {"spline"} <= set(ISO_SEGMENTS)    # smooth pieces the ISO path builder draws
-    cfg = TrajectoryConfig()
+    motors = {"motor_resistance_ohm": [1.0] * pm.nq, "torque_constant_Nm_A": [0.5] * pm.nq}   # no default
+    cfg = TrajectoryConfig(**motors)
     for kind in PTP_ENERGIES:           # the planner knows every energy measure the config allows
         w = energy_weights(pm, kind, cfg.motor_resistance_ohm, cfg.torque_constant_Nm_A, np.ones(pm.nq))
         assert np.all(np.asarray(w) > 0)

@@ -1,0 +1,190 @@
+"""Reading a robot from disk: URDF checks, the arm chain, limits, and the robot.yaml (or its assumed stand-in).
+
+``load_robot_files`` returns what :class:`pipeline.robot.model.RobotModel` is assembled from:
+a robot folder (``robot.yaml`` + URDF), a URDF + yaml pair, or a URDF alone (the facts it lacks
+are assumed by :mod:`pipeline.robot.urdf_import` and listed). The URDF is parsed from its file
+path (so relative and ``package://`` meshes can be resolved later); joints off the base->tip
+chain (grippers, fingers) are locked with Pinocchio's ``buildReducedModel``.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from pipeline.errors import RobotFileError
+from pipeline.robot.spec import RobotSpec, load_robot_spec
+from pipeline.robot.urdf_import import arm_chain, assumed_spec, build_arm_model
+
+ROBOTS_DIR = Path(__file__).resolve().parents[2] / "robots"
+_JOINT_TYPES = {"revolute", "continuous", "prismatic", "fixed", "floating", "planar"}
+
+
+@dataclass
+class JointLimits:
+    lower_rad: np.ndarray
+    upper_rad: np.ndarray
+    velocity_rad_s: np.ndarray
+    effort_Nm: np.ndarray
+    acceleration_rad_s2: np.ndarray
+
+
+def resolve_robot_files(robot: str | Path, yaml_path: str | Path | None = None) -> tuple[Path | None, Path]:
+    """(robot.yaml or None, folder) for a robot name under ``robots/``, a folder, or a URDF (+ yaml).
+
+    A URDF without a ``robot.yaml`` beside it gives ``None``: the facts it lacks are assumed.
+    """
+    candidate = Path(robot)
+    if yaml_path is not None:
+        return Path(yaml_path), Path(yaml_path).parent
+    if candidate.suffix == ".urdf":
+        if not candidate.is_file():
+            raise RobotFileError(candidate, "urdf", "file not found")
+        guess = candidate.parent / "robot.yaml"
+        return (guess if guess.is_file() else None), candidate.parent
+    for folder in (candidate, ROBOTS_DIR / str(robot)):
+        if folder.is_dir() and (folder / "robot.yaml").is_file():
+            return folder / "robot.yaml", folder
+    known = sorted(p.name for p in ROBOTS_DIR.iterdir() if (p / "robot.yaml").is_file()) if ROBOTS_DIR.is_dir() else []
+    raise RobotFileError(None, "robot", f"'{robot}' is neither a URDF, a folder with a robot.yaml nor a robot "
+                         f"under {ROBOTS_DIR} (known: {', '.join(known)})")
+
+
+def check_urdf_xml(urdf: Path) -> ET.Element:
+    """Parse the URDF and check what urdfdom would reject with lines of C++ errors on stderr."""
+    if not urdf.is_file():
+        raise RobotFileError(urdf, "urdf", "file not found")
+    try:
+        root = ET.parse(urdf).getroot()
+    except ET.ParseError as exc:
+        raise RobotFileError(urdf, "xml", f"not valid XML ({exc})") from None
+    if root.tag != "robot":
+        raise RobotFileError(urdf, "xml", f"root element is <{root.tag}>, expected <robot>")
+    links = {link.get("name") for link in root.findall("link")}
+    for joint in root.findall("joint"):
+        name, kind = joint.get("name"), joint.get("type")
+        for tag in ("parent", "child"):
+            element = joint.find(tag)
+            if element is None or element.get("link") not in links:
+                raise RobotFileError(urdf, f"joint {name}: <{tag}>", "missing or names an unknown link")
+        if kind not in _JOINT_TYPES:
+            raise RobotFileError(urdf, f"joint {name}: type", f"{kind!r} is not a URDF joint type "
+                                 f"({', '.join(sorted(_JOINT_TYPES))})")
+    return root
+
+
+def check_chain_joints(urdf: Path, root: ET.Element, chain: list[str]) -> None:
+    """Arm joints must be revolute with finite limits and no ``<mimic>`` (the error model, the
+    symbolic bridge and calibration assume independent revolute axes); other joints are locked."""
+    joints = {j.get("name"): j for j in root.findall("joint")}
+    for name in chain:
+        joint = joints[name]
+        kind = joint.get("type")
+        if kind != "revolute":
+            raise RobotFileError(urdf, f"joint {name}: type", f"'{kind}' joints are not supported on the arm chain; "
+                                 "only revolute joints move (fixed joints place frames; joints off the base->tip "
+                                 "chain are locked)")
+        if joint.find("mimic") is not None:
+            raise RobotFileError(urdf, f"joint {name}: <mimic>", "a mimic joint on the arm chain is not supported "
+                                 "(its motion is not independent); choose another --tip or remove the mimic tag")
+        limit = joint.find("limit")
+        missing = [a for a in ("lower", "upper", "velocity", "effort") if limit is None or limit.get(a) is None]
+        if missing:
+            raise RobotFileError(urdf, f"joint {name}: <limit>", f"a revolute joint needs {', '.join(missing)}")
+        for attribute in ("lower", "upper", "velocity", "effort"):
+            try:
+                value = float(limit.get(attribute))
+            except ValueError:
+                value = None
+            if value is None or not np.isfinite(value):
+                raise RobotFileError(urdf, f"joint {name}: <limit {attribute}>",
+                                     f"not a finite number: {limit.get(attribute)!r}")
+
+
+def validate_inertials(urdf: Path, model: pin.Model) -> None:
+    for j in range(1, model.njoints):
+        inertia = model.inertias[j]
+        name = model.names[j]
+        if not inertia.mass > 0:
+            raise RobotFileError(urdf, f"joint {name}: link inertial.mass", f"must be positive, got {inertia.mass}")
+        eig = np.linalg.eigvalsh(inertia.inertia)
+        if eig.min() <= 0:
+            raise RobotFileError(urdf, f"joint {name}: link inertial.inertia",
+                                 f"not positive definite (eigenvalues {np.round(eig, 6).tolist()})")
+        a, b, c = np.sort(eig)
+        if a + b < c * (1 - 1e-9):
+            raise RobotFileError(urdf, f"joint {name}: link inertial.inertia",
+                                 "violates the triangle inequality of principal moments")
+
+
+def validate_joint_limits(spec: RobotSpec, model: pin.Model, limits: JointLimits) -> None:
+    """Each joint must be able to move (lower < upper) and have positive velocity and effort limits.
+
+    A limit comes from the URDF unless ``robot.yaml`` overrides it (``limits.lower_rad`` ...); the
+    error names the file and field the offending value came from.
+    """
+    urdf, overrides = spec.urdf, spec.limit_overrides
+    for i in range(model.nq):
+        name = model.names[i + 1]
+        lower, upper = float(limits.lower_rad[i]), float(limits.upper_rad[i])
+        if not lower < upper:
+            _raise_limit_order(spec, urdf, overrides, f"joint {name}", i, lower, upper)
+        if not limits.velocity_rad_s[i] > 0:
+            raise RobotFileError(urdf, f"joint {name}: limit.velocity", "must be positive")
+        if not limits.effort_Nm[i] > 0:
+            raise RobotFileError(urdf, f"joint {name}: limit.effort", "must be positive")
+
+
+def _raise_limit_order(spec: RobotSpec, urdf: Path, overrides: dict, joint: str, i: int, lower: float,
+                       upper: float) -> None:
+    """Report ``lower >= upper`` against the file and field each of the two values came from."""
+    relation = "is above" if lower > upper else "equals"
+    stuck = "" if lower > upper else " (the joint could not move)"
+    entry = f"{joint} (entry {i})"
+    if "lower_rad" in overrides and "upper_rad" in overrides:
+        raise RobotFileError(spec.path, "limits.lower_rad", f"{entry}: {lower} {relation} limits.upper_rad "
+                             f"{upper}; the lower limit must be below the upper{stuck}")
+    if "lower_rad" in overrides:
+        raise RobotFileError(spec.path, "limits.lower_rad", f"{entry}: {lower} {relation} the upper limit "
+                             f"{upper} in {urdf.name}; the lower limit must be below it{stuck}")
+    if "upper_rad" in overrides:
+        below = "is below" if lower > upper else "equals"
+        raise RobotFileError(spec.path, "limits.upper_rad", f"{entry}: {upper} {below} the lower limit "
+                             f"{lower} in {urdf.name}; the upper limit must be above it{stuck}")
+    raise RobotFileError(urdf, f"{joint}: limit", f"lower {lower} {relation} upper {upper}; "
+                         f"the lower limit must be below the upper{stuck}")
+
+
+def load_robot_files(robot: str | Path, yaml_path: str | Path | None = None, *, base: str | None = None,
+                     tip: str | None = None) -> tuple[RobotSpec, pin.Model, str, list[str]]:
+    """(spec, reduced Pinocchio model, URDF text, assumptions) of a robot folder, URDF + yaml or URDF alone.
+
+    With a ``robot.yaml`` the arm chain ends at its ``flange_frame`` (its link); without one at
+    ``tip`` or, by default, at the child link of the deepest revolute joint.
+    """
+    yaml_file, _ = resolve_robot_files(robot, yaml_path)
+    spec = load_robot_spec(yaml_file) if yaml_file is not None else None
+    urdf = Path(robot) if str(robot).endswith(".urdf") else spec.urdf
+    root = check_urdf_xml(urdf)
+    flange = spec.flange_frame if spec is not None else tip
+    chain, base_link, tip_link = arm_chain(urdf, root, base=base, tip=flange, tip_is_frame=spec is not None)
+    check_chain_joints(urdf, root, chain)
+    model, locked = build_arm_model(urdf, root, chain)
+    if model.nq != model.nv:  # guard: chain joints are revolute
+        raise RobotFileError(urdf, "joints", f"expected revolute joints only (nq={model.nq}, nv={model.nv})")
+    validate_inertials(urdf, model)
+    assumptions: list[str] = []
+    if locked:
+        assumptions.append(f"joints off the arm chain {base_link} -> {tip_link} locked at their reference "
+                           f"position: {', '.join(locked)}")
+    if spec is None:
+        spec, assumed = assumed_spec(urdf, root, model, tip_link)
+        assumptions += assumed
+    else:
+        spec = load_robot_spec(yaml_file, nq=model.nq)
+        spec.urdf = urdf
+    return spec, model, urdf.read_text(), assumptions

@@ -1,0 +1,303 @@
+"""A robot from its URDF alone: the arm chain, locked extra joints, and stated assumptions.
+
+What a URDF lacks is assumed from rules stated here (each becomes a line of
+``RobotModel.assumptions`` that the report lists), sized by the URDF's own limits and reach:
+
+* gear ratio 100 on axes 1-3 and 50 on the wrist, the sizes DESIGN.md gives for an industrial
+  arm (RX130L: about 100 and 50-70);
+* joint-side rotor inertia ``5e-3 s^2 x effort limit`` (the RX130L's 3 kg m^2 at 550 N m and
+  0.1 kg m^2 at 30 N m, DESIGN.md), viscous friction ``0.1 x effort / velocity limit`` and
+  Coulomb friction ``4 % of the effort limit`` (RX130L: 20 N m s/rad at 550 N m and 3.5 rad/s,
+  25 N m at 550 N m);
+* acceleration limits ``5 x velocity limit`` per second (full speed in 0.2 s);
+* TCP at the flange (the tip link), reflector on the flange z axis 10 mm beyond the last link's
+  capsule (at least 30 mm), opening along z;
+* a laser tracker 1.5 reaches in front of the base (x), 0.2 reaches up (DESIGN.md: 2.5 m from an
+  arm of 1.66 m reach), with DESIGN.md's noise model;
+* one capsule per moving link fitted to its collision geometry (principal axis of the points,
+  75th percentile radius: housings that stick out are not all covered, long links are not
+  swollen), or, where no geometry or mesh is available, a capsule from the joint
+  to the next joint with a radius of a quarter of that length.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from pipeline.errors import RobotFileError
+from pipeline.robot.spec import ActuationSpec, Capsule, CollisionSpec, RobotSpec, ToolSpec, TrackerSpec
+
+WRIST_GEAR_RATIO, ARM_GEAR_RATIO = 50.0, 100.0
+ROTOR_INERTIA_PER_EFFORT_S2 = 5e-3
+VISCOUS_FRACTION, COULOMB_FRACTION = 0.1, 0.04
+ACCELERATION_PER_VELOCITY_1_S = 5.0
+REFLECTOR_OFFSET_M = 0.03
+GRIPPER_WORDS = ("finger", "gripper", "hand")
+TRACKER_DISTANCE_REACHES, TRACKER_HEIGHT_REACHES = 1.5, 0.2
+
+
+def package_dirs(urdf: Path) -> list[str]:
+    """Folders where ``package://NAME/...`` is looked up: ROS_PACKAGE_PATH, then the URDF's folder
+    and its parents (a package folder's parent holds ``NAME/``)."""
+    dirs = [d for d in os.environ.get("ROS_PACKAGE_PATH", "").split(os.pathsep) if d]
+    folder = Path(urdf).resolve().parent
+    dirs += [str(p) for p in [folder, *folder.parents][:8]]
+    return dirs
+
+
+def resolve_mesh(filename: str, urdf: Path) -> Path | None:
+    """The file a URDF mesh reference names (``package://NAME/...`` or a path relative to the URDF)."""
+    if filename.startswith("file://"):
+        filename = filename[len("file://"):]
+    if filename.startswith("package://"):
+        relative = filename[len("package://"):]
+        for folder in package_dirs(urdf):
+            if (Path(folder) / relative).is_file():
+                return Path(folder) / relative
+        return None
+    path = Path(filename) if Path(filename).is_absolute() else Path(urdf).resolve().parent / filename
+    return path if path.is_file() else None
+
+
+def absolute_mesh_paths(urdf_text: str, urdf: Path) -> str:
+    """``urdf_text`` with every resolvable mesh reference replaced by its absolute path (so a copy
+    written elsewhere, e.g. a stage's calibrated robot, still shows the meshes)."""
+    root = ET.fromstring(urdf_text)
+    for mesh in root.iter("mesh"):
+        found = resolve_mesh(mesh.get("filename", ""), urdf)
+        if found is not None:
+            mesh.set("filename", str(found.resolve()))
+    return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+
+
+def _is_arm_joint(joint: ET.Element) -> bool:
+    """A revolute joint not named as a gripper or finger joint (the default tip's rule)."""
+    name = (joint.get("name") or "").lower()
+    return joint.get("type") in ("revolute", "continuous") and not any(w in name for w in GRIPPER_WORDS)
+
+
+def arm_chain(urdf: Path, root: ET.Element, *, base: str | None = None, tip: str | None = None,
+              tip_is_frame: bool = False) -> tuple[list[str], str, str]:
+    """(movable joint names base->tip, base link, tip link).
+
+    Default tip: the child link of the deepest revolute joint not named as a gripper/finger/hand joint
+    (the most such joints between it and the root); an ambiguous choice (several such chains) asks
+    for ``--tip``.
+    """
+    joints = root.findall("joint")
+    parent_joint = {j.find("child").get("link"): j for j in joints}
+    links = [link.get("name") for link in root.findall("link")]
+
+    def path_to_root(link: str) -> list[ET.Element]:
+        path = []
+        while link in parent_joint:
+            joint = parent_joint[link]
+            path.append(joint)
+            link = joint.find("parent").get("link")
+        return path[::-1]
+
+    if tip is not None and tip not in links:
+        if not tip_is_frame:
+            raise RobotFileError(urdf, "tip", f"no link '{tip}' (links: {', '.join(links)})")
+        tip = None          # a yaml flange frame that is not a link: default chain
+    if tip is None:
+        depth = {link: sum(_is_arm_joint(j) for j in path_to_root(link)) for link in links}
+        deepest = max(depth.values(), default=0)
+        ends = {link for link in links if depth[link] == deepest and link in parent_joint
+                and _is_arm_joint(parent_joint[link])}
+        if deepest == 0 or not ends:
+            raise RobotFileError(urdf, "joints", "no movable joint (expected a chain of revolute joints)")
+        if len(ends) > 1:
+            raise RobotFileError(urdf, "tip", f"several arm chains end {deepest} joints from the root "
+                                 f"({', '.join(sorted(ends))}): choose one with --tip LINK")
+        tip = ends.pop()
+    path = path_to_root(tip)
+    root_link = path[0].find("parent").get("link") if path else tip
+    if base is not None:
+        names = [j.find("parent").get("link") for j in path]
+        if base not in names:
+            raise RobotFileError(urdf, "base", f"link '{base}' is not between the root and '{tip}' "
+                                 f"(links on that path: {', '.join(names)})")
+        above = path[:names.index(base)]
+        moving = [j.get("name") for j in above if j.get("type") != "fixed"]
+        if moving:
+            raise RobotFileError(urdf, "base", f"link '{base}' is carried by movable joints {', '.join(moving)}; "
+                                 "choose a base link fixed to the root")
+        path = path[names.index(base):]
+    chain = [j.get("name") for j in path if j.get("type") != "fixed"]
+    if not chain:
+        raise RobotFileError(urdf, "joints", f"no movable joint between '{base or root_link}' and '{tip}'")
+    return chain, base or root_link, tip
+
+
+def build_arm_model(urdf: Path, root: ET.Element, chain: list[str]) -> tuple[pin.Model, list[str]]:
+    """Pinocchio model of the chain: every other joint locked at its neutral position clipped into its
+    limits (``pin.buildReducedModel``, which merges the locked links' inertia into the arm)."""
+    try:
+        full = pin.buildModelFromUrdf(str(urdf))
+    except (RuntimeError, ValueError) as exc:
+        raise RobotFileError(urdf, "urdf", f"Pinocchio could not build the model ({exc})") from None
+    locked = [str(n) for n in full.names[1:] if n not in chain]
+    if not locked:
+        return full, []
+    q_ref = pin.neutral(full)
+    for jid in (full.getJointId(n) for n in locked):
+        joint = full.joints[jid]
+        i, n = joint.idx_q, joint.nq
+        if n == 1:
+            q_ref[i] = np.clip(0.0, full.lowerPositionLimit[i], full.upperPositionLimit[i])
+    reduced = pin.buildReducedModel(full, [full.getJointId(n) for n in locked], q_ref)
+    return reduced, locked
+
+
+def _geometry_points(model: pin.Model, urdf: Path) -> dict[int, np.ndarray]:
+    """Collision-geometry points of each joint's links, in the joint frame (empty if none load)."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            geometry = pin.buildGeomFromUrdf(model, str(urdf), pin.GeometryType.COLLISION, package_dirs(urdf))
+    except (RuntimeError, ValueError, OSError):
+        return {}
+    points: dict[int, list[np.ndarray]] = {}
+    for obj in geometry.geometryObjects:
+        shape = obj.geometry
+        if hasattr(shape, "vertices"):
+            local = np.asarray(shape.vertices(), float) * np.asarray(obj.meshScale, float)
+        elif hasattr(shape, "halfLength"):       # cylinder / capsule along z
+            r, h = shape.radius, shape.halfLength
+            ring = np.array([[r * np.cos(a), r * np.sin(a)] for a in np.linspace(0, 2 * np.pi, 12)])
+            local = np.vstack([np.c_[ring, np.full(12, z)] for z in (-h, h)])
+        elif hasattr(shape, "halfSide"):
+            local = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * shape.halfSide
+        elif hasattr(shape, "radius"):
+            local = np.vstack([np.eye(3), -np.eye(3)]) * shape.radius
+        else:
+            continue
+        if len(local):
+            points.setdefault(int(obj.parentJoint), []).append(local @ obj.placement.rotation.T
+                                                               + obj.placement.translation)
+    return {j: np.vstack(p) for j, p in points.items()}
+
+
+def _capsule_from_points(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """Capsule around a point cloud: segment on the principal axis, radius the 95th percentile distance."""
+    centre = points.mean(axis=0)
+    _, _, vt = np.linalg.svd(points - centre, full_matrices=False)
+    axis = vt[0]
+    t = (points - centre) @ axis
+    radial = np.linalg.norm(points - centre - np.outer(t, axis), axis=1)
+    radius = float(max(np.percentile(radial, 75), 1e-3))
+    lo, hi = t.min() + radius, t.max() - radius
+    if lo > hi:
+        lo = hi = 0.5 * (t.min() + t.max())
+    return centre + lo * axis, centre + hi * axis, radius
+
+
+def fit_capsules(model: pin.Model, urdf: Path, flange: str, reach_m: float) -> tuple[list[Capsule], str]:
+    """One capsule per moving link (and the base) and a sentence saying how they were made."""
+    clouds = _geometry_points(model, urdf)
+    capsules = []
+    flange_local = model.frames[model.getFrameId(flange)].placement.translation
+    for j in range(0, model.njoints):
+        frame = "universe" if j == 0 else str(model.names[j])
+        if j in clouds and len(clouds[j]) >= 4:
+            p0, p1, radius = _capsule_from_points(clouds[j])
+        elif j == 0:
+            continue
+        else:
+            end = model.jointPlacements[j + 1].translation if j + 1 < model.njoints else flange_local
+            p0, p1 = np.zeros(3), np.asarray(end, float).copy()
+            radius = float(np.clip(0.25 * np.linalg.norm(p1), 0.02, 0.12 * reach_m))
+        capsules.append(Capsule(f"link{j}" if j else "base", frame, p0, p1, radius))
+    how = ("fitted to the URDF collision geometry" if clouds else
+           "from each joint to the next, radius a quarter of that length (no collision geometry loaded)")
+    return capsules, how
+
+
+def _reflector_offset_m(model: pin.Model, flange: str, capsules: list[Capsule]) -> float:
+    """Distance along the flange z axis just beyond the last link's capsule (at least REFLECTOR_OFFSET_M)."""
+    flange_frame = model.frames[model.getFrameId(flange)]
+    offset = REFLECTOR_OFFSET_M
+    for capsule in capsules:
+        if capsule.frame == str(model.names[flange_frame.parentJoint]):
+            ends = [flange_frame.placement.actInv(p) for p in (capsule.p0, capsule.p1)]
+            offset = max(offset, max(e[2] for e in ends) + capsule.radius_m + 0.01)
+    return float(offset)
+
+
+def _floor_check_from_joint(model: pin.Model, capsules: list[Capsule], clearance_m: float = 0.06) -> int:
+    """First joint (>= 2) whose capsule can leave the floor's neighbourhood: a link turning about an
+    axis that stays within its capsule radius + ``clearance_m`` of the floor (a UR shoulder) is bolted
+    near the floor and not checked against it."""
+    data = model.createData()
+    Q = np.random.default_rng(0).uniform(model.lowerPositionLimit, model.upperPositionLimit, (100, model.nq))
+    heights = np.empty((len(Q), model.njoints))
+    for n, q in enumerate(Q):
+        pin.forwardKinematics(model, data, q)
+        heights[n] = [data.oMi[j].translation[2] for j in range(model.njoints)]
+    radius = {str(model.names[j]): 0.0 for j in range(model.njoints)}
+    for capsule in capsules:
+        radius[capsule.frame] = max(radius.get(capsule.frame, 0.0), capsule.radius_m)
+    k = 2
+    while (k < model.nq and np.ptp(heights[:, k]) < 1e-9
+           and heights[0, k] < radius[str(model.names[k])] + clearance_m):
+        k += 1
+    return min(k, model.nq)
+
+
+def _reach_m(model: pin.Model, flange: str) -> float:
+    data = model.createData()
+    fid = model.getFrameId(flange)
+    rng = np.random.default_rng(0)
+    lo, hi = model.lowerPositionLimit, model.upperPositionLimit
+    base = model.jointPlacements[1].translation
+    reach = 0.0
+    for q in rng.uniform(lo, hi, size=(300, model.nq)):
+        pin.framesForwardKinematics(model, data, q)
+        reach = max(reach, float(np.linalg.norm(data.oMf[fid].translation - base)))
+    return reach
+
+
+def assumed_tracker(reach_m: float) -> TrackerSpec:
+    """DESIGN.md's tracker (8 µm + 3 µm/m, 30°) placed in front of the arm, scaled by its reach."""
+    xyz = np.array([TRACKER_DISTANCE_REACHES * reach_m, 0.0, TRACKER_HEIGHT_REACHES * reach_m])
+    return TrackerSpec(pin.SE3(np.eye(3), xyz), 8e-6, 3e-6, np.deg2rad(30.0))
+
+
+def assumed_spec(urdf: Path, root: ET.Element, model: pin.Model, tip_link: str) -> tuple[RobotSpec, list[str]]:
+    """RobotSpec of a URDF without robot.yaml, and the list of what was assumed (module docstring)."""
+    nq = model.nq
+    effort, velocity = model.effortLimit.copy(), model.velocityLimit.copy()
+    gear = np.where(np.arange(nq) < 3, ARM_GEAR_RATIO, WRIST_GEAR_RATIO)
+    reach = _reach_m(model, tip_link)
+    capsules, how = fit_capsules(model, urdf, tip_link, reach)
+    tracker = assumed_tracker(reach)
+    reflector_m = _reflector_offset_m(model, tip_link, capsules)
+    spec = RobotSpec(
+        path=urdf, name=root.get("name") or urdf.stem, urdf=urdf, flange_frame=tip_link, payload_kg=0.0,
+        tool=ToolSpec(pin.SE3.Identity(), np.array([0.0, 0.0, reflector_m]), np.array([0.0, 0.0, 1.0])),
+        actuation=ActuationSpec(gear, np.diag(gear), ROTOR_INERTIA_PER_EFFORT_S2 * effort,
+                                VISCOUS_FRACTION * effort / velocity, COULOMB_FRACTION * effort, 0.01),
+        acceleration_rad_s2=ACCELERATION_PER_VELOCITY_1_S * velocity, limit_overrides={}, tracker=tracker,
+        collision=CollisionSpec(0.0, _floor_check_from_joint(model, capsules)), capsules=capsules)
+    t = tracker.transform_tracker_to_base.translation
+    assumptions = [
+        f"no robot.yaml: the facts a URDF lacks are assumed (write one to edit: python -m pipeline robot init {urdf})",
+        f"flange = tip link '{tip_link}', TCP at the flange, payload 0 kg, reflector {reflector_m * 1e3:.0f} mm "
+        "along the flange z axis (beyond the last link's capsule, so the beam can reach it)",
+        f"gear ratios {ARM_GEAR_RATIO:g} (axes 1-3) and {WRIST_GEAR_RATIO:g} (wrist), no coupling",
+        f"rotor inertia {ROTOR_INERTIA_PER_EFFORT_S2:g} s² x effort limit, viscous friction {VISCOUS_FRACTION:g} x "
+        f"effort/velocity limit, Coulomb friction {COULOMB_FRACTION:.0%} of the effort limit",
+        f"acceleration limits {ACCELERATION_PER_VELOCITY_1_S:g}/s x velocity limit",
+        f"laser tracker at {np.round(t, 3).tolist()} m in the base frame (1.5 reaches in front), "
+        "8 µm + 3 µm/m, incidence <= 30°",
+        f"collision capsules {how}; floor at z = 0, checked from joint {spec.collision.floor_check_from_joint} "
+        "(links whose axis stays within their capsule radius + 6 cm of the floor are not checked)",
+    ]
+    return spec, assumptions

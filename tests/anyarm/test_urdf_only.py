@@ -1,0 +1,109 @@
+"""A robot from its URDF alone (no robot.yaml): chain, locked joints, assumptions, save/load, n-DOF reference."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.control.reference import resolved_rate
+from pipeline.errors import RobotFileError
+from pipeline.robot import defaults
+from pipeline.robot.model import RobotModel
+
+
+def _erd(rel: str) -> Path:
+    for base in map(Path, sys.path):
+        candidate = base / "cmeel.prefix" / "share" / "example-robot-data" / "robots" / rel
+        if candidate.is_file():
+            return candidate
+    pytest.skip("example-robot-data not installed")
+
+
+ARMS = {"ur5": ("ur_description/urdf/ur5_robot.urdf", 6), "ur10": ("ur_description/urdf/ur10_robot.urdf", 6),
+        "panda": ("panda_description/urdf/panda.urdf", 7), "xarm7": ("xarm_description/urdf/xarm7.urdf", 7),
+        "z1": ("z1_description/urdf/z1.urdf", 6)}
+
+
+@pytest.mark.parametrize("name", sorted(ARMS))
+def test_urdf_alone_loads_with_stated_assumptions_and_survives_save(name, tmp_path):
+    rel, dof = ARMS[name]
+    robot = RobotModel.load(_erd(rel))
+    assert robot.nq == dof                     # fingers / gripper joints locked, world root accepted
+    assert any("gear ratio" in a for a in robot.assumptions)
+    assert any("tracker" in a for a in robot.assumptions)
+    assert robot.has_tracker and robot.capsules
+    again = RobotModel.load(robot.save(tmp_path / name))
+    q = np.random.default_rng(3).uniform(robot.limits.lower_rad, robot.limits.upper_rad)
+    assert np.allclose(robot.fk(q).homogeneous, again.fk(q).homogeneous, atol=1e-12)
+    assert np.allclose(robot.inverse_dynamics(q, q, q), again.inverse_dynamics(q, q, q), rtol=1e-9, atol=1e-9)
+    assert again.assumptions == robot.assumptions
+
+
+def test_panda_fingers_locked_and_listed():
+    robot = RobotModel.load(_erd("panda_description/urdf/panda.urdf"))
+    assert "panda_finger_joint1" not in list(robot.model.names)
+    assert any("panda_finger_joint1" in a for a in robot.assumptions)
+
+
+def test_bad_tip_and_base_name_the_field():
+    urdf = _erd("ur_description/urdf/ur5_robot.urdf")
+    with pytest.raises(RobotFileError, match="tip"):
+        RobotModel.load(urdf, tip="no_such_link")
+    with pytest.raises(RobotFileError, match="base"):
+        RobotModel.load(urdf, base="wrist_3_link")
+
+
+def test_mimic_on_the_chain_is_rejected(tmp_path):
+    text = _erd("ur_description/urdf/ur5_robot.urdf").read_text()
+    text = text.replace('<joint name="elbow_joint" type="revolute">',
+                        '<joint name="elbow_joint" type="revolute"><mimic joint="shoulder_lift_joint"/>')
+    urdf = tmp_path / "ur5.urdf"
+    urdf.write_text(text)
+    with pytest.raises(RobotFileError, match="mimic"):
+        RobotModel.load(urdf)
+
+
+def test_redundant_resolved_rate_is_the_minimum_norm_solution():
+    robot = RobotModel.load(_erd("panda_description/urdf/panda.urdf"))
+    q = defaults.ready_pose_rad(robot)
+    J = robot.jacobian(q)
+    x = np.arange(6.0)
+    dq = resolved_rate(J, x)
+    assert np.allclose(J @ dq, x)
+    assert np.allclose(dq, np.linalg.pinv(J) @ x)
+
+
+def test_ready_pose_and_move_are_collision_free_and_inside_limits():
+    robot = RobotModel.load(_erd("ur_description/urdf/ur5_robot.urdf"))
+    q = defaults.ready_pose_rad(robot)
+    assert robot.within_limits(q) and not robot.in_collision(q)
+    assert robot.fk(q, robot.frame_flange).translation[2] > robot.model.jointPlacements[1].translation[2]
+    start, goal = defaults.ptp_move_rad(robot)
+    assert robot.within_limits(start) and robot.within_limits(goal) and np.max(np.abs(goal - start)) > 0.1
+    seeds = defaults.ik_seeds_rad(robot)
+    assert seeds.shape[1] == robot.nq and len(seeds) >= 2
+
+
+def test_robot_init_writes_an_editable_yaml_that_loads_back(tmp_path):
+    import shutil
+
+    from pipeline.robot.yaml_init import write_robot_yaml
+
+    source = _erd("ur_description/urdf/ur5_robot.urdf")
+    urdf = tmp_path / "ur5.urdf"
+    shutil.copy(source, urdf)
+    assumed = RobotModel.load(urdf)
+    written = write_robot_yaml(urdf)
+    text = written.read_text()
+    assert text.startswith("# robot.yaml written by") and "gear ratio" in text
+    with pytest.raises(RobotFileError, match="already exists"):
+        write_robot_yaml(urdf)
+    loaded = RobotModel.load(urdf)                        # now read from the yaml, not assumed
+    assert loaded.spec.path == written
+    assert np.allclose(loaded.actuation.gear_ratio, assumed.actuation.gear_ratio)
+    assert [c.name for c in loaded.capsules] == [c.name for c in assumed.capsules]
+    q = defaults.ready_pose_rad(assumed)
+    assert np.allclose(loaded.fk(q, "reflector").translation, assumed.fk(q, "reflector").translation)
