@@ -1,10 +1,11 @@
-"""Command line: ``python -m pipeline run | check | view | study | sweep``.
+"""Command line: ``python -m pipeline run | check | view | study | sweep | robot init``.
 
 * ``run [--config FILE] [--set key=value ...] [--stages a,b] [--out DIR] [--force] [--accept-poor]``
 * ``check`` (same options as ``run``): validate what ``run`` would validate, write nothing, and
   print which stages would run or be reused
 * ``view [RUN_DIR] [--robot NAME] [--configurations NAME] [--trajectory NAME] [--open]``
 * ``study [NAME [ARGS...]]`` (no name: list the registered studies)
+* ``robot init ARM.urdf [--base LINK] [--tip LINK] [--out FILE]``: a commented robot.yaml
 * ``sweep [--seeds 0-19] [--robots A,B] [--config FILE] [--set k=v] [--vary k=[a,b]] [--scheduler ADDR]``
 
 Exit codes: 0 done; 2 a :class:`pipeline.errors.PipelineError` (bad input, a fault writing
@@ -24,6 +25,7 @@ from pipeline import config as config_mod
 from pipeline import sweep
 from pipeline.errors import PipelineError, QualityGateError
 from pipeline.interrupts import handle_termination
+from pipeline.robot.yaml_init import write_robot_yaml
 from pipeline.runner import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_QUALITY_GATE
 
 
@@ -47,7 +49,7 @@ def _add_run_options(r: argparse.ArgumentParser) -> None:
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m pipeline", description=__doc__.split("\n\n")[0])
     p.add_argument("--version", action="version", version=f"pipeline {pipeline.__version__}")
-    sub = p.add_subparsers(dest="command", required=True, metavar="{run,check,view,study,sweep}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="{run,check,view,study,sweep,robot}")
 
     stages_robots = (f"stages (in order): {', '.join(config_mod.stage_names())}; "
                      f"built-in robots: {', '.join(_built_in_robots()) or 'none'}")
@@ -77,6 +79,17 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("args", nargs=argparse.REMAINDER, help="arguments passed to the study")
 
     sweep.add_arguments(sub.add_parser("sweep", help="run a grid of runs (seeds x robots x settings), one table"))
+
+    rb = sub.add_parser("robot", help="robot files: `robot init ARM.urdf` writes a commented robot.yaml")
+    rsub = rb.add_subparsers(dest="robot_command", required=True, metavar="{init}")
+    ri = rsub.add_parser("init", help="write a commented robot.yaml for a URDF (assumed values to edit)",
+                         description="Write robot.yaml beside ARM.urdf (or --out) with the values the URDF "
+                                     "lacks (gear ratios, rotor inertia, friction, tool, tracker, capsules) "
+                                     "assumed by stated rules, each commented, for you to edit.")
+    ri.add_argument("urdf", metavar="ARM.urdf")
+    ri.add_argument("--base", metavar="LINK", help="first link of the arm chain (default: the URDF's root)")
+    ri.add_argument("--tip", metavar="LINK", help="last link of the arm chain (default: found from the joints)")
+    ri.add_argument("--out", metavar="FILE", help="where to write (default: robot.yaml beside the URDF)")
     return p
 
 
@@ -105,6 +118,12 @@ def _cmd_check(ns: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_robot(ns: argparse.Namespace) -> int:
+    written = write_robot_yaml(ns.urdf, ns.out, base=ns.base, tip=ns.tip)
+    print(f"wrote {written}: edit the values marked as assumed, then run with --set robot={written.parent}")
+    return 0
+
+
 def _cmd_view(ns: argparse.Namespace) -> int:
     from pipeline.viewer import view_run
 
@@ -126,7 +145,7 @@ def _cmd_study(ns: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     ns = _parser().parse_args(argv)
     commands = {"run": _cmd_run, "check": _cmd_check, "view": _cmd_view, "study": _cmd_study,
-                "sweep": sweep.main}
+                "sweep": sweep.main, "robot": _cmd_robot}
     try:
         with handle_termination():
             return commands[ns.command](ns)

@@ -41,7 +41,7 @@ from pipeline import artefacts
 from pipeline import config as config_mod
 from pipeline import report as report_mod
 from pipeline.config import REPO_ROOT, RunConfig, resolve_robot_dir
-from pipeline.errors import ArtefactWriteError, ConfigError, PipelineError, QualityGateError
+from pipeline.errors import ArtefactWriteError, ConfigError, QualityGateError
 from pipeline.interrupts import handle_termination
 from pipeline.locking import run_lock
 from pipeline.progress import Progress
@@ -57,6 +57,8 @@ from pipeline.stage_io import (
     write_rejected,
     write_stage_result,
 )
+from pipeline.stage_plan import Plan as _Plan
+from pipeline.stage_plan import plan_stages, unavailable_stages
 
 __all__ = [
     "StageContext", "StageResult", "StageOutput", "RunResult", "run_pipeline", "load_run",
@@ -180,79 +182,6 @@ def _copy_robot(robot: RobotModel) -> RobotModel:
     return copy() if callable(copy) else robot
 
 
-@dataclass
-class _Plan:
-    name: str
-    module: ModuleType
-    config: Any                   # the stage's Config dataclass instance
-    depends: tuple[str, ...]
-    closure: list[str]            # all upstream stages (transitive), in run order
-    inputs_sha256: str = ""
-
-
-def _check_stage_module(name: str, module: ModuleType) -> None:
-    where = str(getattr(module, "__file__", None) or f"stage {name}")
-    for attr in ("NAME", "DEPENDS", "Config", "run"):
-        if not hasattr(module, attr):
-            raise PipelineError(where, attr, f"stage {name!r} does not define {attr}")
-    if module.NAME != name:
-        raise PipelineError(where, "NAME", f"is {module.NAME!r}, registered as {name!r}")
-    reads = getattr(module, "CONFIG_READS", ())
-    if not isinstance(reads, (tuple, list)) or not all(isinstance(r, str) and r for r in reads):
-        raise PipelineError(where, "CONFIG_READS", f"expected a tuple of dotted setting names, got {reads!r}")
-    for dotted in reads:
-        if dotted.split(".")[0] not in config_mod.section_names():
-            raise PipelineError(where, "CONFIG_READS", f"{dotted!r} is not in a section of the run "
-                                f"configuration (sections: {', '.join(config_mod.section_names())})")
-
-
-def plan_stages(cfg: RunConfig) -> list[_Plan]:
-    """Needed stages (selected + their transitive dependencies) in registry order."""
-    order = config_mod.stage_names()
-    modules: dict[str, ModuleType] = {}
-
-    def module_of(name: str) -> ModuleType:
-        if name not in modules:
-            modules[name] = config_mod.load_stage_module(name)
-            _check_stage_module(name, modules[name])
-        return modules[name]
-
-    needed: set[str] = set()
-    stack = list(cfg.stages)
-    while stack:
-        name = stack.pop()
-        if name in needed:
-            continue
-        if name not in order:
-            raise ConfigError(cfg.origins.get("stages", cfg.source), "stages", f"unknown stage {name!r}")
-        needed.add(name)
-        module = module_of(name)
-        where = str(getattr(module, "__file__", None) or name)
-        for dep in tuple(module.DEPENDS):
-            if dep not in order:
-                raise PipelineError(where, "DEPENDS", f"unknown stage {dep!r}")
-            if order.index(dep) >= order.index(name):
-                raise PipelineError(where, "DEPENDS",
-                                    f"{dep!r} does not run before {name!r}")
-            stack.append(dep)
-
-    plans: dict[str, _Plan] = {}
-    for name in order:
-        if name not in needed:
-            continue
-        module = module_of(name)
-        section = cfg.sections.get(name)
-        if section is None or isinstance(section, dict):
-            section = config_mod.build_dataclass(module.Config, section or {}, name, cfg.source)
-            cfg.sections[name] = section
-        closure: set[str] = set()
-        for dep in module.DEPENDS:
-            closure.add(dep)
-            closure.update(plans[dep].closure)
-        plans[name] = _Plan(name, module, section, tuple(module.DEPENDS), [s for s in order if s in closure])
-    return list(plans.values())
-
-
 def _check_result(name: str, result: object) -> StageResult:
     where = f"stage {name}"
     if not isinstance(result, StageResult):
@@ -328,7 +257,7 @@ def prepare_run(cfg: RunConfig, out_root: str | Path | None = None,
     of a stage that would run) without writing anything."""
     robot_dir = resolve_robot_dir(cfg)         # user input first: the robot, then the stage modules
     nominal = RobotModel.load(robot_dir)
-    plans = plan_stages(cfg)
+    plans = plan_stages(cfg, unavailable_stages(nominal))
     real = _make_real(nominal, cfg)
     hashes = stage_inputs_hashes(cfg, plans, robot_dir)
     forced = set(hashes) if force is True else set(force or ())

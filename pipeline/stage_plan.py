@@ -1,0 +1,109 @@
+"""The stage plan of a run: the selected stages and their upstream stages, in registry order.
+
+A stage module exposes ``NAME``, ``DEPENDS``, ``Config``, ``run`` and optionally ``check`` and
+``CONFIG_READS`` (:mod:`pipeline.runner`). A stage the robot cannot run (e.g. calibration
+without a tracker) is left out with its reason (:func:`unavailable_stages`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from types import ModuleType
+from typing import Any
+
+from pipeline import config as config_mod
+from pipeline.config import RunConfig
+from pipeline.errors import ConfigError, PipelineError
+from pipeline.robot.model import RobotModel
+
+
+@dataclass
+class Plan:
+    name: str
+    module: ModuleType
+    config: Any                   # the stage's Config dataclass instance
+    depends: tuple[str, ...]
+    closure: list[str]            # all upstream stages (transitive), in run order
+    inputs_sha256: str = ""
+
+
+def _check_stage_module(name: str, module: ModuleType) -> None:
+    where = str(getattr(module, "__file__", None) or f"stage {name}")
+    for attr in ("NAME", "DEPENDS", "Config", "run"):
+        if not hasattr(module, attr):
+            raise PipelineError(where, attr, f"stage {name!r} does not define {attr}")
+    if module.NAME != name:
+        raise PipelineError(where, "NAME", f"is {module.NAME!r}, registered as {name!r}")
+    reads = getattr(module, "CONFIG_READS", ())
+    if not isinstance(reads, (tuple, list)) or not all(isinstance(r, str) and r for r in reads):
+        raise PipelineError(where, "CONFIG_READS", f"expected a tuple of dotted setting names, got {reads!r}")
+    for dotted in reads:
+        if dotted.split(".")[0] not in config_mod.section_names():
+            raise PipelineError(where, "CONFIG_READS", f"{dotted!r} is not in a section of the run "
+                                f"configuration (sections: {', '.join(config_mod.section_names())})")
+
+
+def unavailable_stages(robot: RobotModel) -> dict[str, str]:
+    """Stages the robot cannot run, with the reason: no tracker in robot.yaml -> no calibration
+    (the later stages use the nominal kinematics, and the model stage's report says so)."""
+    return {} if robot.has_tracker else {
+        "calibration": f"robot {robot.name!r} has no tracker section in robot.yaml: no calibration "
+                       "(the later stages use the nominal kinematics)"}
+
+
+def plan_stages(cfg: RunConfig, unavailable: Mapping[str, str] | None = None) -> list[Plan]:
+    """Needed stages (selected + their transitive dependencies) in registry order.
+
+    ``unavailable``: stage -> reason (:func:`unavailable_stages`); such a stage is left out of
+    the plan and of its dependants' upstream stages; asking for it explicitly (``--stages``, the
+    config's ``stages``) is an error naming the reason."""
+    unavailable = dict(unavailable or {})
+    if "stages" in cfg.origins:
+        for name in cfg.stages:
+            if name in unavailable:
+                raise ConfigError(cfg.origins["stages"], "stages", f"{name}: {unavailable[name]}")
+    order = config_mod.stage_names()
+    modules: dict[str, ModuleType] = {}
+
+    def module_of(name: str) -> ModuleType:
+        if name not in modules:
+            modules[name] = config_mod.load_stage_module(name)
+            _check_stage_module(name, modules[name])
+        return modules[name]
+
+    needed: set[str] = set()
+    stack = list(cfg.stages)
+    while stack:
+        name = stack.pop()
+        if name in needed or name in unavailable:
+            continue
+        if name not in order:
+            raise ConfigError(cfg.origins.get("stages", cfg.source), "stages", f"unknown stage {name!r}")
+        needed.add(name)
+        module = module_of(name)
+        where = str(getattr(module, "__file__", None) or name)
+        for dep in tuple(module.DEPENDS):
+            if dep not in order:
+                raise PipelineError(where, "DEPENDS", f"unknown stage {dep!r}")
+            if order.index(dep) >= order.index(name):
+                raise PipelineError(where, "DEPENDS",
+                                    f"{dep!r} does not run before {name!r}")
+            stack.append(dep)
+
+    plans: dict[str, Plan] = {}
+    for name in order:
+        if name not in needed:
+            continue
+        module = module_of(name)
+        section = cfg.sections.get(name)
+        if section is None or isinstance(section, dict):
+            section = config_mod.build_dataclass(module.Config, section or {}, name, cfg.source)
+            cfg.sections[name] = section
+        closure: set[str] = set()
+        depends = tuple(d for d in module.DEPENDS if d not in unavailable)
+        for dep in depends:
+            closure.add(dep)
+            closure.update(plans[dep].closure)
+        plans[name] = Plan(name, module, section, depends, [s for s in order if s in closure])
+    return list(plans.values())

@@ -1,0 +1,53 @@
+"""`python -m pipeline robot init` and the stage plan of a robot without a tracker."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from pipeline.cli import main
+from pipeline.config import load_config
+from pipeline.errors import ConfigError
+from pipeline.robot.model import RobotModel
+from pipeline.stage_plan import plan_stages, unavailable_stages
+
+
+def _ur5() -> Path:
+    for base in map(Path, sys.path):
+        candidate = base / "cmeel.prefix/share/example-robot-data/robots/ur_description/urdf/ur5_robot.urdf"
+        if candidate.is_file():
+            return candidate
+    pytest.skip("example-robot-data not installed")
+
+
+@pytest.fixture(scope="module")
+def ur5_folder(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("ur5")
+    assert main(["robot", "init", str(_ur5()), "--out", str(folder / "robot.yaml")]) == 0
+    return folder
+
+
+def test_robot_init_writes_a_loadable_yaml_and_refuses_to_overwrite(ur5_folder, capsys):
+    robot = RobotModel.load(ur5_folder)
+    assert robot.nq == 6 and robot.has_tracker
+    assert main(["robot", "init", str(_ur5()), "--out", str(ur5_folder / "robot.yaml")]) == 2
+    assert "already exists" in capsys.readouterr().err
+
+
+def test_robot_without_tracker_has_no_calibration_stage(ur5_folder, tmp_path):
+    data = yaml.safe_load((ur5_folder / "robot.yaml").read_text())
+    data.pop("tracker")
+    (tmp_path / "robot.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+    robot = RobotModel.load(tmp_path)
+    assert not robot.has_tracker
+    unavailable = unavailable_stages(robot)
+    assert "calibration" in unavailable and "tracker" in unavailable["calibration"]
+    plans = plan_stages(load_config(None, [f"robot={tmp_path}"]), unavailable)
+    names = [p.name for p in plans]
+    assert "calibration" not in names and "identification" in names
+    assert all("calibration" not in p.depends and "calibration" not in p.closure for p in plans)
+    with pytest.raises(ConfigError, match="no tracker"):
+        plan_stages(load_config(None, [f"robot={tmp_path}"], stages="calibration"), unavailable)
