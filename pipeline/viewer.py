@@ -79,6 +79,12 @@ def visual_model(robot: Any) -> tuple[pin.GeometryModel, str]:
                    if g.meshPath and not Path(g.meshPath).is_file() and "BOX" not in g.meshPath
                    and "CYLINDER" not in g.meshPath and "SPHERE" not in g.meshPath]
         if geometry.ngeoms and not missing:
+            for g in geometry.geometryObjects:
+                # Collada files go to the browser as text and are parsed there by three.js, which
+                # headless browsers and some meshcat builds skip silently; the triangles coal already
+                # loaded from the file are sent instead (same shape, the URDF's colour).
+                if g.meshPath.lower().endswith(".dae") and isinstance(g.geometry, coal.BVHModelBase):
+                    g.meshPath = ""
             return geometry, "meshes"
     except (RuntimeError, ValueError, OSError):
         pass

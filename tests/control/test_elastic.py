@@ -8,6 +8,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from pipeline.config import load_config
 from pipeline.control.config import ControlConfig
 from pipeline.control.elastic_feedforward import elastic_feedforward, link_torque
 from pipeline.control.iso9283 import iso9283_path
@@ -15,6 +16,7 @@ from pipeline.control.plant import Plant
 from pipeline.control.reference import cartesian_reference
 from pipeline.control.simulate import feedforward_torque, simulate_joint_trajectory
 from pipeline.control.validate import settling_time
+from pipeline.robot.defaults import ik_seeds_or_derived_rad, iso_or_derived
 from pipeline.robot.paths import start_configuration
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 from pipeline.robot.truth import RealRobot, TruthConfig
@@ -137,10 +139,10 @@ def test_elastic_feedforward_leads_by_the_deflection(rx130l):
 
 @pytest.fixture(scope="module")
 def iso_ref(rx130l):
-    cfg = ControlConfig()
-    iso = cfg.iso
+    cfg = load_config(values={"robot": "rx130l"}).control          # the RX130L's run_defaults (paper 004)
+    iso = iso_or_derived(rx130l, cfg.iso)
     path = iso9283_path(rx130l, iso.edge_m, iso.centre_m, iso.plane, DOWN, segments=("line", "circle_large"))
-    q0 = start_configuration(rx130l, path.poses([0.0])[0], np.radians(cfg.ik_seeds_deg))
+    q0 = start_configuration(rx130l, path.poses([0.0])[0], ik_seeds_or_derived_rad(rx130l, cfg.ik_seeds_deg))
     return cartesian_reference(rx130l, path, cfg.sample_time_s, iso.speed_m_s, iso.acceleration_m_s2,
                                iso.jerk_m_s3, q0)
 

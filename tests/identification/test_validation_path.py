@@ -99,7 +99,7 @@ def test_ik_seeds_come_from_the_run(tx40, monkeypatch):
 def test_wrong_seed_length_is_the_stated_reason(tx40):
     fallback = val_mod.ValidationTrajectory(np.zeros(2), np.zeros((2, 6)), np.zeros((2, 6)), np.zeros((2, 6)),
                                             "fourier", "a random feasible Fourier trajectory")
-    control = ControlConfig(ik_seeds_deg=[[0.0] * 7])
+    control = load_config(values={"robot": "staubli_tx40", "control.ik_seeds_deg": [[0.0] * 7]}).control
     vt = val_mod.validation_trajectory(tx40, 4e-3, lambda: fallback, control=control)
     assert vt.label == "fourier" and "control.ik_seeds_deg[0]" in vt.note and "7 values" in vt.note
     md = stage._validation_markdown(stage.Config(), vt, control.iso, tx40)

@@ -49,6 +49,8 @@ def gate_stages(monkeypatch):
     registry = {"a": _gate_stage("a", (), calls), "b": _gate_stage("b", ("a",), calls),
                 "c": _gate_stage("c", ("b",), calls)}
     monkeypatch.setattr(config, "STAGES", registry)
+    # the built-in robots' run_defaults name the real stages' sections, which the fakes replace
+    monkeypatch.setattr(config, "robot_run_defaults", lambda cfg: None)
     return calls
 
 
