@@ -54,18 +54,22 @@ def test_smooth_ptp_settles_faster_on_the_elastic_truth(rx130l, ptp_problem, qui
     pm = PlanningModel.from_robot(rx130l, cfg.torque_reserve)    # as the stage plans (ptp_problem: warm cache)
     q0, q1 = np.radians(cfg.ptp_start_deg), np.radians(cfg.ptp_goal_deg)
     plan = plan_ptp(pm, build_ptp_problem(pm, rx130l, cfg), q0, q1, cfg)
-    # the run's seed (on seed 0's truth this move drives the servo far into torque saturation and
-    # both plans ring for ~1 s: a limit of the servo on that truth, not a property of the plans)
-    real = RealRobot.create(rx130l, quick_config.seed, TruthConfig())   # the default truth: elastic joints
-    assert real.plant.elastic
-    results, s = settle_study(real, rx130l, plan.trajectories, None, np.random.default_rng(3))
-    opt, sm = results["ptp"], results["ptp_smooth"]
-    assert np.isfinite(opt.settling_time_s) and np.isfinite(sm.settling_time_s)
-    assert sm.settling_time_s < opt.settling_time_s and s["ptp_smooth_settles_faster"]
-    # the smoothing removes most of the ringing at the goal, for one filter length of motion time
-    vib = lambda r: r.position_error_m[r.t_s >= r.duration_s].max()  # noqa: E731
-    assert vib(sm) < 0.5 * vib(opt)
-    assert np.isclose(sm.duration_s - opt.duration_s, s["ptp_smooth_filter_time_s"], atol=2e-3)
-    assert s["ptp_move_and_settle_s"] == opt.duration_s + opt.settling_time_s
+    # the run's seed with the default truth (elastic joints, Stribeck friction), and a truth without the
+    # Stribeck and load-dependent friction: their stick-slip creep of the wrist can set the last 0.1 mrad
+    # on other seeds (seed 3: smooth 1.12 s vs 0.63 s; README "Move and settle"), the gear ringing never
+    truths = [(quick_config.seed, TruthConfig()),
+              (3, TruthConfig(stribeck_excess_relative=0.0, coulomb_load_coefficient=0.0))]
+    for seed, truth in truths:
+        real = RealRobot.create(rx130l, seed, truth)
+        assert real.plant.elastic                                  # the default truth: elastic joints
+        results, s = settle_study(real, rx130l, plan.trajectories, None, np.random.default_rng(3))
+        opt, sm = results["ptp"], results["ptp_smooth"]
+        assert np.isfinite(opt.settling_time_s) and np.isfinite(sm.settling_time_s)
+        assert sm.settling_time_s < opt.settling_time_s and s["ptp_smooth_settles_faster"], seed
+        # the smoothing removes most of the ringing at the goal, for one filter length of motion time
+        vib = lambda r: r.position_error_m[r.t_s >= r.duration_s].max()  # noqa: E731
+        assert vib(sm) < 0.5 * vib(opt)
+        assert np.isclose(sm.duration_s - opt.duration_s, s["ptp_smooth_filter_time_s"], atol=2e-3)
+        assert s["ptp_move_and_settle_s"] == opt.duration_s + opt.settling_time_s
     table = settling_table(list(results.values()))
     assert "move + settle [s]" in table and all(f"| {n} |" in table for n in results)
