@@ -246,4 +246,9 @@ def settling_verdict(summary: dict) -> str:
         text += " Choose the smooth plan when the robot must stand still at the goal."
     else:
         text += " The settling gain does not pay for the longer motion here: choose by the application."
+    late = [n for n in ("ptp", "ptp_smooth", "ptp_ruckig")
+            if not summary.get(f"{n}_settling_time_s", 0.0) < 0.8 * summary["ptp_settle_hold_s"]]
+    if late:
+        text += (f" Settling of {', '.join(late)} within 20 % of the end of the {summary['ptp_settle_hold_s']:g} s "
+                 "hold (or not at all): the rest pose is uncertain there.")
     return text
