@@ -44,7 +44,9 @@ from pipeline.control.validate import (
     settling_time,
 )
 from pipeline.robot.transmission import nominal_joint_stiffness_Nm_rad
-from pipeline.trajectory.trajectories import JointTrajectory
+from pipeline.trajectory.dynamics import PlanningModel
+from pipeline.trajectory.solve import PTPPlan
+from pipeline.trajectory.trajectories import JointTrajectory, check_trajectory
 
 
 def lowest_mode_hz(robot, q: np.ndarray, stiffness_Nm_rad: np.ndarray | None = None) -> float:
@@ -197,6 +199,17 @@ def settling_figure(results: list[SettleResult]) -> Figure:
     return fig
 
 
+def add_smooth_ptp(pm: PlanningModel, robot, plan: PTPPlan, filter_periods: float = 1.0) -> JointTrajectory:
+    """Add the smooth variant of ``plan.trajectories["ptp"]`` (moving average over ``filter_periods``
+    periods of the lowest elastic mode at the goal) to ``plan.trajectories`` and its fine-grid check
+    (full friction model, the plan's energy weights) to ``plan.checks``, both under ``"ptp_smooth"``."""
+    tr = plan.trajectories["ptp"]
+    smooth = smooth_trajectory(tr, filter_periods / lowest_mode_hz(robot, tr.q[-1]), "ptp_smooth")
+    plan.trajectories["ptp_smooth"] = smooth
+    plan.checks["ptp_smooth"] = check_trajectory(pm, smooth, energy_weights=plan.weights)
+    return smooth
+
+
 #: hold after the move for the settling time [s] (the slow tail of the servo on the elastic joints)
 SETTLE_HOLD_S = 1.5
 
@@ -210,7 +223,8 @@ def settle_study(real, robot, trajectories: dict[str, JointTrajectory], control_
     Returns the results and the summary entries (``ptp_settle_*``, ``<name>_settling_time_s``, ...)."""
     tr = trajectories["ptp"]
     f1 = lowest_mode_hz(robot, tr.q[-1])
-    plans = {"ptp": tr, "ptp_smooth": smooth_trajectory(tr, filter_periods / f1, "ptp_smooth")}
+    smooth = trajectories.get("ptp_smooth") or smooth_trajectory(tr, filter_periods / f1, "ptp_smooth")
+    plans = {"ptp": tr, "ptp_smooth": smooth}
     if "ptp_ruckig" in trajectories:
         plans["ptp_ruckig"] = trajectories["ptp_ruckig"]
     seed = int(rng.integers(2**32))
