@@ -51,6 +51,17 @@ def test_stage_quick(quick_config, rx130l, ptp_problem, tmp_path):
         assert q.shape == (len(t), 6) and np.all(np.diff(t) > 0)
     assert {"cp_normalised", "ptp_normalised", "ptp_pareto"} <= set(res.figures)
     assert "toppra" in res.report_md
+    # the PtP plans on the elastic truth: duration, settling time and move + settle of each, the
+    # smooth variant one filter length longer
+    for name in ("ptp", "ptp_smooth", "ptp_ruckig"):
+        assert s[f"{name}_move_and_settle_s"] is None or np.isclose(
+            s[f"{name}_move_and_settle_s"], s[f"{name}_settle_duration_s"] + s[f"{name}_settling_time_s"])
+        assert f"| {name} |" in res.report_md
+    assert abs(s["ptp_smooth_settle_duration_s"] - s["ptp_duration_s"] - s["ptp_smooth_filter_time_s"]) < 2e-3
+    assert "ptp_settling" in res.figures and "move + settle [s]" in res.report_md
+    assert s["ptp_smooth_sim_tcp_error_max_m"] is not None
+    assert s["ptp_smooth_fine_violation"] <= tol and "ptp_smooth_fine_violation" in gates
+    assert s["ptp_smooth_duration_s"] == s["ptp_smooth_settle_duration_s"]
     # one energy per motion: the fine-grid value in the summary and in the Pareto entry alike
     main = next(e for e in s["ptp_pareto"] if e["k2"] == cfg.ptp_k2)
     assert main["energy"] == s["ptp_energy"] and main["duration_s"] == s["ptp_duration_s"]
