@@ -43,7 +43,7 @@ from pipeline.control.validate import (
     SETTLING_ROTATION_TOLERANCE_RAD,
     settling_time,
 )
-from pipeline.robot.transmission import nominal_joint_stiffness_Nm_rad
+from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.solve import PTPPlan
 from pipeline.trajectory.trajectories import JointTrajectory, check_trajectory

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.robot.transmission import nominal_joint_stiffness_Nm_rad
+from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 from pipeline.robot.truth import RealRobot, TruthConfig
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.settling import lowest_mode_hz, settle_study, settling_table, smooth_trajectory
