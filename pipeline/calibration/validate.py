@@ -21,7 +21,7 @@ from scipy.stats import chi2
 
 from pipeline.calibration.error_model import MeasurementModel
 from pipeline.calibration.estimate import Estimate
-from pipeline.calibration.gravity_uncertainty import GravityCovariance, Whitener
+from pipeline.calibration.gravity_uncertainty import GravityCovariance
 from pipeline.calibration.measure import Measurements
 
 
@@ -39,23 +39,34 @@ def _axis_stats(e: np.ndarray) -> dict[str, dict[str, float]]:
     return out
 
 
-def predicted_error(mm: MeasurementModel, est: Estimate, Q: np.ndarray, sigma_m: np.ndarray,
-                    gravity: GravityCovariance | None = None) -> dict:
-    """Covariance-predicted tracker-measured position error at configurations ``Q`` (no measurement
-    needed): ``E|e_k|^2 = trace(J_k C J_k^T) + trace(A_k Sigma_pi A_k^T) + 3 sigma_k^2`` (paper 000
-    eq. 16; the gravity-model term only with ``gravity``)."""
+def predicted_covariance(mm: MeasurementModel, est: Estimate, Q: np.ndarray, sigma_m: np.ndarray,
+                         gravity: GravityCovariance | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``(N, 3, 3)`` covariance of the error ``y_h - h(q_h, x_hat)`` of a reading at each configuration
+    (module docstring) and ``(N,)`` its gravity-model part ``|B_h - J_h M|_F^2``."""
     _, J = mm.jacobian(Q, est.x, est.registration, est.basis)
     C = est.covariance
     var_gravity = np.zeros(len(Q))
+    cov = 0.0
     if gravity is not None and gravity.active and est.gravity_gain is not None:
         M = est.gravity_gain
         C = C - M @ M.T
         R = gravity.factors(Q, est.x, est.registration) - J @ M
         var_gravity = np.einsum("nir,nir->n", R, R)
-    var_model = np.einsum("nip,pq,niq->n", J, C, J)
-    var_total = var_model + var_gravity + 3 * np.asarray(sigma_m, float) ** 2
+        cov = np.einsum("nir,njr->nij", R, R)
+    cov = cov + np.einsum("nip,pq,njq->nij", J, C, J) + np.asarray(sigma_m, float)[:, None, None] ** 2 * np.eye(3)
+    return cov, var_gravity
+
+
+def predicted_error(mm: MeasurementModel, est: Estimate, Q: np.ndarray, sigma_m: np.ndarray,
+                    gravity: GravityCovariance | None = None) -> dict:
+    """Covariance-predicted tracker-measured position error at configurations ``Q`` (no measurement
+    needed): ``E|e_k|^2 = trace(J_k C J_k^T) + 3 sigma_k^2`` (paper 000 eq. 16), with ``gravity``
+    the gravity-model term of the module docstring."""
+    cov, var_gravity = predicted_covariance(mm, est, Q, sigma_m, gravity)
+    var_total = np.trace(cov, axis1=1, axis2=2)
+    var_model = var_total - var_gravity - 3 * np.asarray(sigma_m, float) ** 2
     return {"n_poses": int(len(Q)), "predicted_rms_m": float(np.sqrt(np.mean(var_total))),
-            "predicted_model_rms_m": float(np.sqrt(np.mean(var_model))),
+            "predicted_model_rms_m": float(np.sqrt(max(np.mean(var_model), 0.0))),
             "predicted_gravity_model_rms_m": float(np.sqrt(np.mean(var_gravity))),
             "gravity_model_share": float(np.mean(var_gravity) / np.mean(var_total)),
             "tracker_noise_sigma_m": float(np.sqrt(np.mean(np.asarray(sigma_m, float) ** 2))),
@@ -103,10 +114,12 @@ def gross_error_rows(mm: MeasurementModel, est: Estimate, meas: Measurements, co
                      gravity: GravityCovariance | None = None) -> np.ndarray:
     """Held-out readings that fail the calibration's outlier test (:mod:`pipeline.calibration.robust`:
     chi-square, 3 dof, at ``confidence``, scaled by the robust residual scale) under the identified
-    model: a gross tracker error says nothing about the calibration's accuracy."""
-    fac = gravity.factors(meas.Q, est.x, est.registration) if gravity is not None and gravity.active else None
+    model: a gross tracker error says nothing about the calibration's accuracy. Each reading is
+    whitened by its predicted error covariance (:func:`predicted_covariance`: tracker noise,
+    parameter uncertainty and, with ``gravity``, the gravity-model part)."""
+    cov, _ = predicted_covariance(mm, est, meas.Q, meas.sigma_m, gravity)
     e = meas.Y - mm.predict(meas.Q, est.x, est.registration)
-    w = Whitener(meas.sigma_m, fac).reading_norm(e)
+    w = np.sqrt(np.einsum("ni,nij,nj->n", e, np.linalg.inv(cov), e))
     scale = max(1.0, float(np.sqrt(np.median(w ** 2) / chi2.ppf(0.5, 3))))
     return np.flatnonzero(w > np.sqrt(chi2.ppf(confidence, 3)) * scale)
 
