@@ -101,7 +101,8 @@ def fit_markdown(fit: dict, prediction: dict | None) -> str:
              "", "| ‖y − h‖ on the calibration points | RMS [mm] | max [mm] |", "|---|---|---|",
              f"| before (nominal model, registered tracker) | {1e3 * fit['rms_residual_before_m']:.4f} | |",
              f"| after the fit | {1e3 * fit['rms_residual_after_m']:.4f} | {1e3 * fit['max_residual_after_m']:.4f} |",
-             "", f"chi²/dof = {fit['chi2_per_dof']:.3f} (1 if the tracker noise model is right)."]
+             "", f"chi²/dof = {fit['chi2_per_dof']:.3f} (1 if the tracker noise model, and for the elastostatic "
+             "model the gravity-model prior, are right)."]
     if prediction is not None:
         lines += ["", f"Covariance-predicted RMS position error over {prediction['n_poses']} random visible poses "
                   f"(parameter covariance + tracker noise): {1e3 * prediction['predicted_rms_m']:.4f} mm "
@@ -186,10 +187,6 @@ def table_markdown(v: dict) -> str:
     for key, s in (("before", b), ("after", a)):
         lines.append(f"| {key} | {1e3 * s['mean']:.4f} | {1e3 * s['rms']:.4f} | {1e3 * s['max']:.4f} |")
     lines.append(f"| predicted (covariance + noise) | | {1e3 * v['predicted_rms_m']:.4f} | |")
-    if v.get("predicted_gravity_model_rms_m"):
-        lines.append(f"\nOf the predicted mean-square error, {100 * v['gravity_model_share']:.0f} % comes from the "
-                     f"gravity-model uncertainty (RMS {1e3 * v['predicted_gravity_model_rms_m']:.4f} mm: the "
-                     "deflection C g(q) with inertial parameters of the stated prior uncertainty).")
     if v.get("n_rejected"):
         lines.append(f"\n{v['n_rejected']} held-out reading(s) failed the outlier test (gross tracker errors) and are "
                      "left out of these statistics.")
