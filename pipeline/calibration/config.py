@@ -71,9 +71,10 @@ class Config:
     outlier_confidence: float = 0.999
     #: at most this fraction of the readings is rejected (more failing the test: model inadequate)
     max_outlier_fraction: float = 0.1
-    #: quality gate: chi²/dof of the final fit must not exceed this (1 = the tracker noise model).
-    #: A rigid model of an elastic arm gives hundreds; the elastostatic model with the nominal
-    #: (unidentified) gravity model 1-5 (its inertia errors; the second pass with gravity_model brings it to 1)
+    #: quality gate: chi²/dof of the final fit must not exceed this (1 = the noise model: tracker
+    #: noise, and for the elastostatic model the gravity-model prior below). A rigid model of an
+    #: elastic arm gives hundreds; the elastostatic model ~1 (its gravity-model uncertainty is in
+    #: the covariance, pipeline.calibration.gravity_uncertainty)
     max_chi2_per_dof: float = 10.0
     #: known payload mounted on the flange for some measurements: mass (kg), COM in the flange frame (m)
     payload_mass_kg: float | None = None
