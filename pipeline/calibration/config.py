@@ -11,6 +11,7 @@ import math
 from dataclasses import dataclass
 
 from pipeline.calibration import indices as ix
+from pipeline.calibration.gravity_uncertainty import GravityPrior
 from pipeline.calibration.robust import LOSSES
 from pipeline.calibration.subsets import check_parameters
 from pipeline.calibration.task_space import check_task_fields
@@ -70,9 +71,10 @@ class Config:
     outlier_confidence: float = 0.999
     #: at most this fraction of the readings is rejected (more failing the test: model inadequate)
     max_outlier_fraction: float = 0.1
-    #: quality gate: chi²/dof of the final fit must not exceed this (1 = the tracker noise model).
-    #: A rigid model of an elastic arm gives hundreds; the elastostatic model with the nominal
-    #: (unidentified) gravity model 1-5 (its inertia errors; the second pass with gravity_model brings it to 1)
+    #: quality gate: chi²/dof of the final fit must not exceed this (1 = the noise model: tracker
+    #: noise, and for the elastostatic model the gravity-model prior below). A rigid model of an
+    #: elastic arm gives hundreds; the elastostatic model ~1 (its gravity-model uncertainty is in
+    #: the covariance, pipeline.calibration.gravity_uncertainty)
     max_chi2_per_dof: float = 10.0
     #: known payload mounted on the flange for some measurements: mass (kg), COM in the flange frame (m)
     payload_mass_kg: float | None = None
@@ -90,6 +92,14 @@ class Config:
     #: after identification: ``<runs>/<name>/identification/robot`` of a previous run); None: this
     #: run's model (nominal)
     gravity_model: str | None = None
+    #: prior uncertainty of the gravity model's inertial parameters in the elastostatic measurement
+    #: covariance (pipeline.calibration.gravity_uncertainty): relative 1-sigma of each link mass and
+    #: 1-sigma of each centre of mass (m); typical data-sheet/CAD values ("inertial parameters
+    #: 10-20 %"); 0 and 0: no gravity-model term
+    gravity_model_relative_sigma: float = 0.15
+    gravity_model_com_sigma_m: float = 0.02
+    #: both sigmas are multiplied by this with an identified gravity model (calibration.gravity_model)
+    gravity_model_identified_scale: float = 0.1
 
     # -- task-space criterion and design table (pipeline.calibration.task_space, design_table) --
     #: iso_cube (control.iso) | box (working_box_m) | csv (working_csv: columns q1..qn, rad)
@@ -102,6 +112,11 @@ class Config:
     #: simulation also measured on design_table_heldout visible poses of the working region)
     design_table: bool = True
     design_table_heldout: int = 300
+
+    def gravity_prior(self) -> GravityPrior:
+        """Prior uncertainty of the gravity model (scaled down for an identified one)."""
+        f = self.gravity_model_identified_scale if self.gravity_model is not None else 1.0
+        return GravityPrior(f * float(self.gravity_model_relative_sigma), f * float(self.gravity_model_com_sigma_m))
 
     def payload(self) -> Payload | None:
         """The known payload (None when no mass is given)."""
@@ -163,6 +178,11 @@ class Config:
         if not (math.isfinite(self.max_chi2_per_dof) and self.max_chi2_per_dof > 1):
             raise bad("max_chi2_per_dof", f"must be > 1 (chi²/dof is 1 for a right model), got {self.max_chi2_per_dof}")
         self._validate_payload(bad)
+        for key, hi in (("gravity_model_relative_sigma", 1.0), ("gravity_model_com_sigma_m", 0.5),
+                        ("gravity_model_identified_scale", 1.0)):
+            v = getattr(self, key)
+            if isinstance(v, bool) or not isinstance(v, int | float) or not (math.isfinite(v) and 0 <= v <= hi):
+                raise bad(key, f"must be in [0, {hi}], got {v!r}")
         if self.cross_validation_folds != 0 and not 2 <= self.cross_validation_folds <= 50:
             raise bad("cross_validation_folds", f"must be 0 (none) or in [2, 50], got {self.cross_validation_folds}")
         if self.position_sigma_m is not None and not (math.isfinite(self.position_sigma_m)

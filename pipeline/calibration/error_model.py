@@ -105,6 +105,9 @@ class MeasurementModel:
         self.hj = ca.Function("hj", [q, x, t0, *extra], [y, ca.jacobian(y, x)])
         # base-frame reflector position and its configuration Jacobian (for predictions)
         self.base_pos = ca.Function("pb", [q, x, *extra], [p_base, rot])
+        # sensitivity of the reading to the gravity torques (gravity-model uncertainty)
+        if self.compliance:
+            self.ht = ca.Function("ht", [q, x, t0, *extra], [ca.jacobian(y, tau)])
         self._maps: dict[tuple[str, int], ca.Function] = {}
 
     @property
@@ -137,7 +140,7 @@ class MeasurementModel:
     def _mapped(self, name: str, n: int) -> ca.Function:
         key = (name, n)
         if key not in self._maps:
-            f = {"h": self.h, "hj": self.hj, "pb": self.base_pos}[name]
+            f = {"h": self.h, "hj": self.hj, "pb": self.base_pos, "ht": getattr(self, "ht", None)}[name]
             self._maps[key] = f.map(n)
         return self._maps[key]
 
@@ -175,6 +178,24 @@ class MeasurementModel:
             jac = np.asarray(jac).reshape(3, n, self.n).transpose(1, 0, 2)  # hcat of (3 x n_x) blocks
             J[s : s + n] = jac @ P
         return Y, J
+
+    def torque_jacobian(self, Q: np.ndarray, x: np.ndarray, T0: pin.SE3, mounted: np.ndarray | None = None,
+                        offsets: np.ndarray | None = None) -> np.ndarray:
+        """``(N, 3, nq)`` sensitivity ``dy/dtau = -(dy/dq_link) diag(c)`` of the reading to the static
+        joint torques (elastostatic model only; zero compliances give zero)."""
+        Q = np.atleast_2d(np.asarray(Q, float))
+        if not self.compliance:
+            return np.zeros((len(Q), 3, self.nq))
+        t0 = se3_to_vector(T0)
+        out = np.empty((len(Q), 3, self.nq))
+        for s in range(0, len(Q), self.chunk):
+            Qc = Q[s : s + self.chunk]
+            n = len(Qc)
+            mc = None if mounted is None else mounted[s : s + self.chunk]
+            oc = None if offsets is None else offsets[s : s + self.chunk]
+            jac = self._mapped("ht", n)(Qc.T, x, t0, *self._extra(Qc, mc, oc))
+            out[s : s + n] = np.asarray(jac).reshape(3, n, self.nq).transpose(1, 0, 2)
+        return out
 
     def base_positions(self, Q: np.ndarray, x: np.ndarray, mounted: np.ndarray | None = None,
                        offsets: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:

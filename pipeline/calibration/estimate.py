@@ -6,10 +6,14 @@
    ``scipy.spatial.transform.Rotation.align_vectors`` on the centred point sets).
 2. Levenberg-Marquardt (paper 003 eq. 27; paper 002 eq. 12 Gauss-Newton steps) on the identifiable
    parameters ``theta = x[cols]`` with the exact CasADi Jacobian and whitened residuals
-   ``r_k = (y_k - h(q_k, x, T_tb)) / sigma_k``:
+   ``r_k = (y_k - h(q_k, x, T_tb)) / sigma_k`` (with the gravity-model uncertainty of the
+   elastostatic model, ``factors``: ``r_k = W_k (y_k - h)`` with each reading's covariance block,
+   :class:`pipeline.calibration.gravity_uncertainty.Whitener`):
    ``(J^T J + lambda diag(J^T J)) d = J^T r``, lambda adapted (Marquardt/Nielsen).
 3. Covariance from the noise model: ``C = (J^T J)^-1`` of the whitened Jacobian at the solution
-   (paper 000 eq. 5); ``chi2 / dof`` is reported as a check of the noise model.
+   (paper 000 eq. 5); ``chi2 / dof`` is reported as a check of the noise model. With gravity
+   factors the covariance is the sandwich ``K D K^T + M M^T`` of the weighted estimator (the
+   readings' errors are correlated through the common inertial error, ``Whitener.sandwich``).
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
 from pipeline.calibration.error_model import MeasurementModel
+from pipeline.calibration.gravity_uncertainty import Whitener
 from pipeline.errors import SolverError
 from pipeline.robot.parameters import apply_kinematic_errors
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
@@ -53,6 +58,8 @@ class Estimate:
     residual_rms_m: float
     converged: bool
     cost_history: list[float]
+    #: gain ``M = K B`` (p, r) of the inertial error on the estimate (gravity factors; else None)
+    gravity_gain: np.ndarray | None = None
 
     @property
     def std(self) -> np.ndarray:
@@ -62,18 +69,17 @@ class Estimate:
 def levenberg_marquardt(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarray,
                         basis: np.ndarray, T0: pin.SE3, max_iterations: int = 50,
                         tol: float = 1e-10, mounted: np.ndarray | None = None,
-                        offsets: np.ndarray | None = None
+                        offsets: np.ndarray | None = None, whitener: Whitener | None = None
                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, bool, list[float]]:
-    """Minimise ``sum |(Y - h(Q, basis @ theta, T0)) / sigma|^2`` over ``theta``."""
+    """Minimise ``|L^-1 (Y - h(Q, basis @ theta, T0))|^2`` over ``theta`` (``whitener``; None:
+    ``sum |(Y - h) / sigma|^2``)."""
     P = np.asarray(basis, float)
     theta = np.zeros(P.shape[1])
-    w = 1.0 / np.asarray(sigma, float)
+    wh = whitener if whitener is not None else Whitener(sigma)
 
     def resid_jac(th: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         pred, J = mm.jacobian(Q, P @ th, T0, P, mounted, offsets)
-        r = ((Y - pred) * w[:, None]).reshape(-1)
-        Jw = (J * w[:, None, None]).reshape(-1, P.shape[1])
-        return r, Jw
+        return wh.vector(Y - pred), wh.matrix(J)
 
     r, J = resid_jac(theta)
     cost = float(r @ r)
@@ -114,8 +120,10 @@ def levenberg_marquardt(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigm
 
 def estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarray, basis: np.ndarray,
              source: str = "measurements", max_iterations: int = 50, mounted: np.ndarray | None = None,
-             offsets: np.ndarray | None = None) -> Estimate:
-    """Registration + LM + covariance (see module docstring); ``mounted``: rows read with the payload."""
+             offsets: np.ndarray | None = None, factors: np.ndarray | None = None) -> Estimate:
+    """Registration + LM + covariance (see module docstring); ``mounted``: rows read with the payload;
+    ``factors`` (N, 3, r): gravity-model covariance factors ``B_k`` of the readings
+    (:class:`pipeline.calibration.gravity_uncertainty.GravityCovariance`; None: ``sigma_k^2 I``)."""
     Q = np.asarray(Q, float)
     Y = np.asarray(Y, float)
     P = np.asarray(basis, float)
@@ -127,14 +135,15 @@ def estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarr
     T_reg = register_points(Y, P_nom)
     # regularity of the information matrix before iterating
     _, J0 = mm.jacobian(Q, np.zeros(mm.n), T_reg, P, mounted, offsets)
-    J0 = (J0 / np.asarray(sigma, float)[:, None, None]).reshape(-1, p)
+    wh = Whitener(np.asarray(sigma, float), factors)
+    J0 = wh.matrix(J0)
     ev = np.linalg.eigvalsh(J0.T @ J0)
     if not ev[0] > 1e-12 * ev[-1]:
         raise SolverError(source, "information matrix",
                           f"singular (smallest/largest eigenvalue {max(ev[0], 0.0) / ev[-1]:.3g}): "
                           f"the configurations do not excite all {p} identifiable parameters")
     theta, x, J, it, conv, hist = levenberg_marquardt(mm, Q, Y, sigma, P, T_reg, max_iterations, mounted=mounted,
-                                                      offsets=offsets)
+                                                      offsets=offsets, whitener=wh)
     A = J.T @ J
     C = np.linalg.inv(A)
     C = 0.5 * (C + C.T)
@@ -143,7 +152,8 @@ def estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarr
     pred = mm.predict(Q, x, T_reg, mounted, offsets)
     res = np.linalg.norm(Y - pred, axis=1)
     T_id = T_reg * pin.exp6(x[mm.sl_tracker])
-    return Estimate(x, theta, P, C, T_id, T_reg, it, float(chi2), float(np.sqrt(np.mean(res ** 2))), conv, hist)
+    C, M = wh.sandwich(J, C)
+    return Estimate(x, theta, P, C, T_id, T_reg, it, float(chi2), float(np.sqrt(np.mean(res ** 2))), conv, hist, M)
 
 
 def calibrated_robot(robot, mm: MeasurementModel, x: np.ndarray, basis: np.ndarray | None = None):

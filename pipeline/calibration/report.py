@@ -28,12 +28,9 @@ def summary_of(out: CalibrationOutcome, cfg: Config) -> dict:
     sel = out.selection
     user = from_file(out)
     design = out.measured_design or {}
-    if v is not None:
-        predicted, sigma = v["predicted_rms_m"], v["tracker_noise_sigma_m"]
-    elif out.prediction is not None:
-        predicted, sigma = out.prediction["predicted_rms_m"], out.prediction["tracker_noise_sigma_m"]
-    else:
-        predicted = sigma = None
+    pred = v if v is not None else out.prediction
+    predicted = pred["predicted_rms_m"] if pred is not None else None
+    sigma = pred["tracker_noise_sigma_m"] if pred is not None else None
     fit = out.fit or {}
     return {
         "n_configurations": int(len(out.measurements)),
@@ -62,6 +59,9 @@ def summary_of(out: CalibrationOutcome, cfg: Config) -> dict:
         "predicted_rms_position_error_m": predicted,
         "actual_over_predicted": v["after"]["rms"] / v["predicted_rms_m"] if v is not None else None,
         "tracker_noise_sigma_m": sigma,
+        "predicted_gravity_model_rms_m": pred.get("predicted_gravity_model_rms_m") if pred is not None else None,
+        "gravity_model_share": pred.get("gravity_model_share") if pred is not None else None,
+        "gravity_model_prior": gravity_prior_of(out, cfg),
         "rms_after_over_sigma": v["after"]["rms"] / v["tracker_noise_sigma_m"] if v is not None else None,
         "fit_rms_residual_before_m": fit.get("rms_residual_before_m"),
         "fit_rms_residual_after_m": fit.get("rms_residual_after_m"),
@@ -78,6 +78,38 @@ def summary_of(out: CalibrationOutcome, cfg: Config) -> dict:
         "lm_iterations": out.estimate.iterations,
         "timings_s": {k: round(t, 3) for k, t in out.timings_s.items()},
     }
+
+
+#: gravity-model share of the predicted mean-square error above which the report suggests the
+#: second calibration pass with an identified gravity model
+GRAVITY_SHARE_SUGGEST = 0.5
+
+
+def gravity_prior_of(out: CalibrationOutcome, cfg: Config) -> dict | None:
+    """The gravity-model prior used in the measurement covariance (None: rigid model)."""
+    if not any(n.endswith(".c") for n in out.report.identifiable_names):
+        return None
+    prior = cfg.gravity_prior()
+    return {"mass_relative_sigma": prior.mass_relative_sigma, "com_sigma_m": prior.com_sigma_m,
+            "gravity_model": cfg.gravity_model or "nominal"}
+
+
+def gravity_markdown(out: CalibrationOutcome, cfg: Config) -> list[str]:
+    """The gravity-model share of the predicted error, and the second pass when it dominates."""
+    prior = gravity_prior_of(out, cfg)
+    pred = out.validation if out.validation is not None else out.prediction
+    if prior is None or pred is None or pred.get("gravity_model_share") is None:
+        return []
+    share = pred["gravity_model_share"]
+    md = [f"Gravity-model uncertainty in the measurement covariance ({prior['gravity_model']} inertias, prior "
+          f"1σ {100 * prior['mass_relative_sigma']:.1f} % of each link mass and {1e3 * prior['com_sigma_m']:.1f} mm "
+          f"of each centre of mass): {100 * share:.0f} % of the predicted mean-square held-out error "
+          f"(RMS {1e3 * pred['predicted_gravity_model_rms_m']:.4f} mm)."]
+    if share > GRAVITY_SHARE_SUGGEST and cfg.gravity_model is None:
+        md[0] += (" It dominates: run a second calibration pass with "
+                  "`calibration.gravity_model: <runs>/<name>/identification/robot` once the identification "
+                  "stage has run (identified inertias give the gravity torques of the elastostatic model).")
+    return md + [""]
 
 
 def rejected_readings(out: CalibrationOutcome) -> list[dict]:
@@ -151,12 +183,7 @@ def report_markdown(out: CalibrationOutcome, cfg: Config, robot) -> str:
                for r in g["compliances"]]
         md.append("")
     k = out.robot.spec.actuation.joint_stiffness_Nm_rad
-    if (any(n.endswith(".c") for n in out.report.identifiable_names) and g is None
-            and out.estimate.chi2_per_dof > 1.5):
-        md += [f"chi²/dof = {out.estimate.chi2_per_dof:.2f} with the elastostatic model: the gravity torques come "
-               "from this run's (nominal) inertias, whose errors bias the compliances. Run a second calibration "
-               "pass with `calibration.gravity_model: <runs>/<name>/identification/robot` once the "
-               "identification stage has run.", ""]
+    md += gravity_markdown(out, cfg)
     if any(n.endswith(".c") for n in out.report.identifiable_names) and k is not None:
         md += ["Joint stiffness carried by the calibrated model (1 / identified compliance; nominal where "
                "not identified) [N·m/rad]: " + ", ".join(f"{v:.4g}" for v in k), ""]

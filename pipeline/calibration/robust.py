@@ -16,6 +16,14 @@ stale reading repeated after a blocked beam). One of them moves a least-squares 
    rejected reading that fits again comes back) until the set is stable (at most
    :data:`MAX_ROUNDS`).
 
+With a gravity-model covariance (:mod:`pipeline.calibration.gravity_uncertainty`, elastostatic
+model) the fit whitens with the full covariance ``Sigma = D + B B^T`` of the readings and the
+outlier test uses each reading's marginal block ``Sigma_k = sigma_k^2 I + B_k B_k^T``
+(``s_k = r_k^T Sigma_k^-1 r_k``, still chi-square with 3 dof); the covariance needs the
+compliances, so it is evaluated at the plain fit of step 1 and once more at the final
+fit (a fixed-point step: the last least-squares fit uses the covariance of its own starting
+estimate).
+
 The final estimate, its covariance and chi²/dof are those of plain least squares on the kept
 readings, so with no gross error nothing changes against the plain fit. The test is per reading
 at the stated confidence: with the default 0.999 a good reading is rejected with probability
@@ -32,6 +40,7 @@ from scipy.stats import chi2
 
 from pipeline.calibration.error_model import MeasurementModel
 from pipeline.calibration.estimate import Estimate, estimate
+from pipeline.calibration.gravity_uncertainty import GravityCovariance, Whitener
 
 #: scale of the robust loss in whitened units (readings within 2 sigma count quadratically)
 ROBUST_SCALE = 2.0
@@ -56,24 +65,25 @@ class Rejection:
 
 
 def _whitened_norm(mm: MeasurementModel, est: Estimate, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarray,
-                   mounted: np.ndarray | None, offsets: np.ndarray | None) -> np.ndarray:
+                   mounted: np.ndarray | None, offsets: np.ndarray | None, factors: np.ndarray | None = None
+                   ) -> np.ndarray:
     pred = mm.predict(Q, est.x, est.registration, mounted, offsets)
-    return np.linalg.norm(Y - pred, axis=1) / sigma
+    return Whitener(sigma, factors).reading_norm(Y - pred)
 
 
 def _robust_refit(mm: MeasurementModel, est: Estimate, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarray,
                   mounted: np.ndarray | None, loss: str, max_iterations: int,
-                  offsets: np.ndarray | None) -> Estimate:
+                  offsets: np.ndarray | None, factors: np.ndarray | None = None) -> Estimate:
     """``least_squares`` with the robust loss from the plain fit (same registration and basis)."""
     P = est.basis
-    w = 1.0 / sigma
+    wh = Whitener(sigma, factors)
 
     def fun(th: np.ndarray) -> np.ndarray:
-        return ((Y - mm.predict(Q, P @ th, est.registration, mounted, offsets)) * w[:, None]).reshape(-1)
+        return wh.vector(Y - mm.predict(Q, P @ th, est.registration, mounted, offsets))
 
     def jac(th: np.ndarray) -> np.ndarray:
         _, J = mm.jacobian(Q, P @ th, est.registration, P, mounted, offsets)
-        return -(J * w[:, None, None]).reshape(-1, P.shape[1])
+        return -wh.matrix(J)
 
     sol = least_squares(fun, est.theta, jac=jac, loss=loss, f_scale=ROBUST_SCALE, method="trf",
                         max_nfev=max(4 * max_iterations, 20), x_scale="jac")
@@ -84,8 +94,10 @@ def _robust_refit(mm: MeasurementModel, est: Estimate, Q: np.ndarray, Y: np.ndar
 def robust_estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarray, basis: np.ndarray,
                     source: str = "measurements", max_iterations: int = 50, mounted: np.ndarray | None = None,
                     loss: str = "huber", confidence: float = 0.999, max_fraction: float = 0.1,
-                    offsets: np.ndarray | None = None) -> tuple[Estimate, Rejection]:
-    """Steps 1-4 of the module docstring. ``loss`` "linear": no robust refit (outlier test only)."""
+                    offsets: np.ndarray | None = None, gravity: GravityCovariance | None = None
+                    ) -> tuple[Estimate, Rejection]:
+    """Steps 1-4 of the module docstring. ``loss`` "linear": no robust refit (outlier test only);
+    ``gravity``: the gravity-model covariance of the readings (None or inactive: ``sigma_k`` only)."""
     Q, Y, sigma = np.asarray(Q, float), np.asarray(Y, float), np.asarray(sigma, float)
     n = len(Q)
     base_threshold = float(np.sqrt(chi2.ppf(confidence, 3)))
@@ -93,11 +105,20 @@ def robust_estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: n
     threshold = base_threshold
     max_rejected = int(np.floor(max_fraction * n))
     est = estimate(mm, Q, Y, sigma, basis, source, max_iterations, mounted, offsets)
-    probe = est if loss == "linear" else _robust_refit(mm, est, Q, Y, sigma, mounted, loss, max_iterations, offsets)
+    use_gravity = gravity is not None and gravity.active
+
+    def gravity_factors(e: Estimate) -> np.ndarray | None:
+        return gravity.factors(Q, e.x, e.registration, mounted, offsets) if use_gravity else None
+
+    fac = gravity_factors(est)
+    if fac is not None:
+        est = estimate(mm, Q, Y, sigma, basis, source, max_iterations, mounted, offsets, fac)
+    probe = est if loss == "linear" else _robust_refit(mm, est, Q, Y, sigma, mounted, loss, max_iterations, offsets,
+                                                       fac)
     kept = np.ones(n, bool)
     capped = False
     for _ in range(MAX_ROUNDS):
-        norm = _whitened_norm(mm, probe, Q, Y, sigma, mounted, offsets)
+        norm = _whitened_norm(mm, probe, Q, Y, sigma, mounted, offsets, fac)
         threshold = base_threshold * max(1.0, float(np.sqrt(np.median(norm ** 2) / median_3)))
         bad = np.flatnonzero(norm > threshold)
         capped = len(bad) > max_rejected
@@ -109,7 +130,13 @@ def robust_estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: n
         kept = new_kept
         m = None if mounted is None else mounted[kept]
         o = None if offsets is None else offsets[kept]
-        est = estimate(mm, Q[kept], Y[kept], sigma[kept], basis, source, max_iterations, m, o)
+        est = estimate(mm, Q[kept], Y[kept], sigma[kept], basis, source, max_iterations, m, o,
+                       None if fac is None else fac[kept])
         probe = est
-    norm = _whitened_norm(mm, est, Q, Y, sigma, mounted, offsets)
+    if fac is not None:   # fixed-point step: the covariance at the final compliances
+        fac = gravity_factors(est)
+        m = None if mounted is None else mounted[kept]
+        o = None if offsets is None else offsets[kept]
+        est = estimate(mm, Q[kept], Y[kept], sigma[kept], basis, source, max_iterations, m, o, fac[kept])
+    norm = _whitened_norm(mm, est, Q, Y, sigma, mounted, offsets, fac)
     return est, Rejection(np.flatnonzero(~kept), norm, threshold, confidence, loss, capped)

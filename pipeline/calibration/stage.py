@@ -46,6 +46,7 @@ from pipeline.calibration.elastostatic import (
     measurement_model,
 )
 from pipeline.calibration.estimate import Estimate, calibrated_robot
+from pipeline.calibration.gravity_uncertainty import GravityCovariance
 from pipeline.calibration.outcome import CalibrationOutcome
 from pipeline.calibration.report import (  # noqa: F401 - re-exported (tests, notebook)
     from_file,
@@ -163,14 +164,14 @@ def measured_design(robot, mm: em.MeasurementModel, basis: np.ndarray, Q: np.nda
 
 
 def predicted_on_random_poses(robot, mm: em.MeasurementModel, est: Estimate, cfg: Config,
-                              rng: np.random.Generator) -> dict:
+                              rng: np.random.Generator, gravity: GravityCovariance | None = None) -> dict:
     """Covariance-predicted error over ``n_heldout`` random collision-free poses visible to the
     identified tracker (nominal model only: nothing is measured)."""
     chain = cd.chain_from_robot(robot, est.transform_tracker_to_base)
     margins = cd.FilterMargins(cfg.margin_collision_m, math.radians(1.0), 0.005)
     Q, _ = cd.random_candidates(chain, cfg.n_heldout, rng, margins)
     sigma = ms.noise_model_sigma(robot, mm.predict(Q, est.x, est.registration))
-    return va.predicted_error(mm, est, Q, sigma)
+    return va.predicted_error(mm, est, Q, sigma, gravity)
 
 
 def calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None,
@@ -260,9 +261,10 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress, reg
         meas = user  # the user's configurations: no candidates, no selection, no simulated robot
     t = time.perf_counter()
     rec = ms.expand_orientation(meas, cfg.orientation_sigma_rad) if six_d else meas   # the fitted rows
+    gravity = GravityCovariance(mm, cfg.gravity_prior())
     est, rejection = robust_estimate(mm, rec.Q, rec.Y, rec.sigma_m, basis, rec.source, cfg.max_lm_iterations,
                                      rec.payload_mounted, cfg.robust_loss, cfg.outlier_confidence,
-                                     cfg.max_outlier_fraction, rec.offset_m)
+                                     cfg.max_outlier_fraction, rec.offset_m, gravity)
     notes: dict = {"fit_record": rec} if six_d else {}
     if user is not None and cfg.cross_validation_folds:
         notes["cross_validation"] = cross_validate(mm, rec, basis, rejection.rejected, cfg.cross_validation_folds,
@@ -279,14 +281,14 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress, reg
         if real is None:
             raise PipelineError(None, "calibration.validation_csv", "no validation file and no simulated robot")
         held = heldout_measurements(robot, real, est, cfg, rng)
-    validation = va.validate(mm, est, held, cfg.outlier_confidence) if held is not None else None
+    validation = va.validate(mm, est, held, cfg.outlier_confidence, gravity) if held is not None else None
     timings["validate_s"] = time.perf_counter() - t
     if spec is None:
         spec, Qw = index_spec(cfg, robot, mm, dbasis, rng, region)
     design = measured_design(robot, mm, dbasis, meas.Q, spec, est.transform_tracker_to_base,
                              "user file" if user is not None else "measured subset")
     fit = va.fit_residuals(mm, est, rec, rejection.rejected)
-    prediction = predicted_on_random_poses(robot, mm, est, cfg, rng) if validation is None else None
+    prediction = predicted_on_random_poses(robot, mm, est, cfg, rng, gravity) if validation is None else None
     new_robot = calibrated_robot(robot, mm, est.x, basis)
     table = dtab.for_run(cfg, robot, real if user is None else None, mm, basis, spec, meas.Q, est, cs, region, rng,
                          dbasis)

@@ -5,7 +5,12 @@ prediction, expressed in the robot base frame (``R_tb e_k``). "Before" uses the 
 with the tracker pose registered on the calibration data (closed form, paper 003 §2.2); "after"
 the identified parameters and tracker pose. The predicted error follows from the parameter
 covariance (paper 000 eq. 16 linear error propagation) plus the tracker noise:
-``E|e_k|^2 = trace(J_k C J_k^T) + 3 sigma_k^2``; the predicted RMS is the root of its mean.
+``E|e_k|^2 = trace(J_k C J_k^T) + 3 sigma_k^2``; the predicted RMS is the root of its mean. With
+the elastostatic model and a gravity-model prior (:mod:`pipeline.calibration.gravity_uncertainty`)
+the held-out error is ``e_h = (B_h - J_h M) z - J_h K n + n_h`` (the fit absorbs part of the
+inertial error ``z``, ``M`` = ``Estimate.gravity_gain``), so
+``E|e_h|^2 = trace(J_h (C - M M^T) J_h^T) + |B_h - J_h M|_F^2 + 3 sigma_h^2``; the second term
+is the gravity-model part, whose share of the predicted mean square is reported.
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ from scipy.stats import chi2
 
 from pipeline.calibration.error_model import MeasurementModel
 from pipeline.calibration.estimate import Estimate
+from pipeline.calibration.gravity_uncertainty import GravityCovariance
 from pipeline.calibration.measure import Measurements
 
 
@@ -33,14 +39,36 @@ def _axis_stats(e: np.ndarray) -> dict[str, dict[str, float]]:
     return out
 
 
-def predicted_error(mm: MeasurementModel, est: Estimate, Q: np.ndarray, sigma_m: np.ndarray) -> dict:
-    """Covariance-predicted tracker-measured position error at configurations ``Q`` (no measurement
-    needed): ``E|e_k|^2 = trace(J_k C J_k^T) + 3 sigma_k^2`` (paper 000 eq. 16)."""
+def predicted_covariance(mm: MeasurementModel, est: Estimate, Q: np.ndarray, sigma_m: np.ndarray,
+                         gravity: GravityCovariance | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``(N, 3, 3)`` covariance of the error ``y_h - h(q_h, x_hat)`` of a reading at each configuration
+    (module docstring) and ``(N,)`` its gravity-model part ``|B_h - J_h M|_F^2``."""
     _, J = mm.jacobian(Q, est.x, est.registration, est.basis)
-    var_model = np.einsum("nip,pq,niq->n", J, est.covariance, J)
-    var_total = var_model + 3 * np.asarray(sigma_m, float) ** 2
+    C = est.covariance
+    var_gravity = np.zeros(len(Q))
+    cov = 0.0
+    if gravity is not None and gravity.active and est.gravity_gain is not None:
+        M = est.gravity_gain
+        C = C - M @ M.T
+        R = gravity.factors(Q, est.x, est.registration) - J @ M
+        var_gravity = np.einsum("nir,nir->n", R, R)
+        cov = np.einsum("nir,njr->nij", R, R)
+    cov = cov + np.einsum("nip,pq,njq->nij", J, C, J) + np.asarray(sigma_m, float)[:, None, None] ** 2 * np.eye(3)
+    return cov, var_gravity
+
+
+def predicted_error(mm: MeasurementModel, est: Estimate, Q: np.ndarray, sigma_m: np.ndarray,
+                    gravity: GravityCovariance | None = None) -> dict:
+    """Covariance-predicted tracker-measured position error at configurations ``Q`` (no measurement
+    needed): ``E|e_k|^2 = trace(J_k C J_k^T) + 3 sigma_k^2`` (paper 000 eq. 16), with ``gravity``
+    the gravity-model term of the module docstring."""
+    cov, var_gravity = predicted_covariance(mm, est, Q, sigma_m, gravity)
+    var_total = np.trace(cov, axis1=1, axis2=2)
+    var_model = var_total - var_gravity - 3 * np.asarray(sigma_m, float) ** 2
     return {"n_poses": int(len(Q)), "predicted_rms_m": float(np.sqrt(np.mean(var_total))),
-            "predicted_model_rms_m": float(np.sqrt(np.mean(var_model))),
+            "predicted_model_rms_m": float(np.sqrt(max(np.mean(var_model), 0.0))),
+            "predicted_gravity_model_rms_m": float(np.sqrt(np.mean(var_gravity))),
+            "gravity_model_share": float(np.mean(var_gravity) / np.mean(var_total)),
             "tracker_noise_sigma_m": float(np.sqrt(np.mean(np.asarray(sigma_m, float) ** 2))),
             "predicted_std_m": np.sqrt(var_total)}
 
@@ -73,32 +101,39 @@ def fit_markdown(fit: dict, prediction: dict | None) -> str:
              "", "| ‖y − h‖ on the calibration points | RMS [mm] | max [mm] |", "|---|---|---|",
              f"| before (nominal model, registered tracker) | {1e3 * fit['rms_residual_before_m']:.4f} | |",
              f"| after the fit | {1e3 * fit['rms_residual_after_m']:.4f} | {1e3 * fit['max_residual_after_m']:.4f} |",
-             "", f"chi²/dof = {fit['chi2_per_dof']:.3f} (1 if the tracker noise model is right)."]
+             "", f"chi²/dof = {fit['chi2_per_dof']:.3f} (1 if the tracker noise model, and for the elastostatic "
+             "model the gravity-model prior, are right)."]
     if prediction is not None:
         lines += ["", f"Covariance-predicted RMS position error over {prediction['n_poses']} random visible poses "
                   f"(parameter covariance + tracker noise): {1e3 * prediction['predicted_rms_m']:.4f} mm "
-                  f"(model part {1e3 * prediction['predicted_model_rms_m']:.4f} mm)."]
+                  f"(model part {1e3 * prediction['predicted_model_rms_m']:.4f} mm, gravity-model part "
+                  f"{1e3 * prediction['predicted_gravity_model_rms_m']:.4f} mm)."]
     return "\n".join(lines)
 
 
-def gross_error_rows(mm: MeasurementModel, est: Estimate, meas: Measurements, confidence: float) -> np.ndarray:
+def gross_error_rows(mm: MeasurementModel, est: Estimate, meas: Measurements, confidence: float,
+                     gravity: GravityCovariance | None = None) -> np.ndarray:
     """Held-out readings that fail the calibration's outlier test (:mod:`pipeline.calibration.robust`:
     chi-square, 3 dof, at ``confidence``, scaled by the robust residual scale) under the identified
-    model: a gross tracker error says nothing about the calibration's accuracy."""
-    w = np.linalg.norm(meas.Y - mm.predict(meas.Q, est.x, est.registration), axis=1) / meas.sigma_m
+    model: a gross tracker error says nothing about the calibration's accuracy. Each reading is
+    whitened by its predicted error covariance (:func:`predicted_covariance`: tracker noise,
+    parameter uncertainty and, with ``gravity``, the gravity-model part)."""
+    cov, _ = predicted_covariance(mm, est, meas.Q, meas.sigma_m, gravity)
+    e = meas.Y - mm.predict(meas.Q, est.x, est.registration)
+    w = np.sqrt(np.einsum("ni,nij,nj->n", e, np.linalg.inv(cov), e))
     scale = max(1.0, float(np.sqrt(np.median(w ** 2) / chi2.ppf(0.5, 3))))
     return np.flatnonzero(w > np.sqrt(chi2.ppf(confidence, 3)) * scale)
 
 
-def validate(mm: MeasurementModel, est: Estimate, meas: Measurements, outlier_confidence: float | None = None
-             ) -> dict:
-    """Held-out statistics before/after calibration and the covariance prediction; with
-    ``outlier_confidence`` the held-out readings failing the outlier test are left out and counted
-    (``n_rejected``, ``rejected_rows``)."""
+def validate(mm: MeasurementModel, est: Estimate, meas: Measurements, outlier_confidence: float | None = None,
+             gravity: GravityCovariance | None = None) -> dict:
+    """Held-out statistics before/after calibration and the covariance prediction (with the
+    gravity-model term when ``gravity`` is given); with ``outlier_confidence`` the held-out readings
+    failing the outlier test are left out and counted (``n_rejected``, ``rejected_rows``)."""
     rejected = np.zeros(0, int)
     n_measured = len(meas)
     if outlier_confidence is not None:
-        rejected = gross_error_rows(mm, est, meas, outlier_confidence)
+        rejected = gross_error_rows(mm, est, meas, outlier_confidence, gravity)
         if len(rejected):
             keep = np.ones(len(meas), bool)
             keep[rejected] = False
@@ -110,7 +145,7 @@ def validate(mm: MeasurementModel, est: Estimate, meas: Measurements, outlier_co
     R_after = est.transform_tracker_to_base.rotation
     e_before = (Y - mm.predict(Q, x0, est.registration)) @ R_before.T
     e_after = (Y - mm.predict(Q, est.x, est.registration)) @ R_after.T
-    pred = predicted_error(mm, est, Q, meas.sigma_m)
+    pred = predicted_error(mm, est, Q, meas.sigma_m, gravity)
     out = {
         "n_poses": int(n_measured),
         "source": meas.source,
@@ -118,6 +153,8 @@ def validate(mm: MeasurementModel, est: Estimate, meas: Measurements, outlier_co
         "after": _stats(e_after) | {"axes": _axis_stats(e_after)},
         "predicted_rms_m": pred["predicted_rms_m"],
         "predicted_model_rms_m": pred["predicted_model_rms_m"],
+        "predicted_gravity_model_rms_m": pred["predicted_gravity_model_rms_m"],
+        "gravity_model_share": pred["gravity_model_share"],
         "tracker_noise_sigma_m": pred["tracker_noise_sigma_m"],
         "errors_before_m": np.linalg.norm(e_before, axis=1),
         "errors_after_m": np.linalg.norm(e_after, axis=1),
