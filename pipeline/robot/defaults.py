@@ -11,11 +11,10 @@ kinematics and capsules with a fixed-seed search (same robot -> same defaults).
   the joint-space midpoint collision-free; else the pair of well-ranked poses with the largest
   smallest joint motion (no joint beyond ``MAX_MOVE_RAD``) whose midpoint is collision-free.
 * ``iso_cube``: EN ISO 9283 (DESIGN.md): the largest cube, with its diagonal plane, whose whole path
-  (sampled) is reachable from one IK branch with ``cond(J) <= MAX_CONDITION`` (away from
-  singularities), every joint at least ``LIMIT_MARGIN_RAD`` inside its limits and the joint speeds
-  for ``speed_m_s`` along the path tangent at most ``VELOCITY_SHARE`` of their limits; searched over centres in front of
-  the base at fractions of the reach, edges from large to small. Capsule self-collision is not part
-  of this search (fitted capsules are conservative); the stages check it where they need it.
+  is reachable from the stages' IK branch, away from limits and singularities and within the joint
+  speeds at the path speed, found by a search over the workspace (:mod:`pipeline.robot.iso_search`,
+  which states the thresholds). Capsule self-collision is not part of this search (fitted capsules are
+  conservative); the stages check it where they need it.
 """
 
 from __future__ import annotations
@@ -24,15 +23,12 @@ import copy
 from dataclasses import dataclass
 
 import numpy as np
-import pinocchio as pin
 
-from pipeline.control.iso9283 import iso9283_path, tool_rotation
 from pipeline.errors import InfeasibleError
+from pipeline.robot.iso_search import MIN_EDGE_REACH, VELOCITY_SHARE, search_cube, verified_edge
 
-MAX_CONDITION = 300.0
-LIMIT_MARGIN_RAD = np.deg2rad(5.0)
-VELOCITY_SHARE = 0.9
 N_SAMPLES = 3000
+SLOW_SHARE = 0.8              # lowered ISO speed: this share of the highest speed a small cube allows
 MAX_MOVE_RAD = np.pi / 2      # the searched PtP move turns no joint by more than this
 
 
@@ -45,6 +41,7 @@ class IsoCube:
     plane: str
     speed_m_s: float
     note: str
+    q_start_rad: np.ndarray | None = None      # the IK branch the search validated (path start)
 
 
 def _ranked_poses(robot) -> np.ndarray:
@@ -113,82 +110,69 @@ def ptp_move_rad(robot, fractions: tuple[float, ...] = (0.4, 0.3, 0.2, 0.1)) -> 
     return pair
 
 
-def _speed_ratio(robot, path, seeds: np.ndarray, frame: str, speed_m_s: float, n: int = 48) -> float:
-    """Smallest over the seeds' IK branches of the largest ``|v_joint| / (VELOCITY_SHARE v_max)`` along the
-    sampled ``path`` at ``speed_m_s``; ``inf`` when no branch reaches it within the margins."""
-    model, data = robot.model, robot.new_data()
-    fid = robot.frame_id(frame)
-    lo, hi = robot.limits.lower_rad + LIMIT_MARGIN_RAD, robot.limits.upper_rad - LIMIT_MARGIN_RAD
-    vmax = VELOCITY_SHARE * robot.limits.velocity_rad_s
-    poses = path.sample(n)
-    points = np.array([T.translation for T in poses])
-    tangents = np.gradient(points, axis=0)
-    tangents /= np.maximum(np.linalg.norm(tangents, axis=1, keepdims=True), 1e-12)
-    best = np.inf
-    for seed in seeds:
-        q, worst = seed.copy(), 0.0
-        for T, tangent in zip(poses, tangents, strict=True):
-            for _ in range(60):
-                pin.framesForwardKinematics(model, data, q)
-                cur = data.oMf[fid]
-                e = np.concatenate([T.translation - cur.translation, pin.log3(T.rotation @ cur.rotation.T)])
-                if np.linalg.norm(e) < 1e-8:
-                    break
-                J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
-                dq = J.T @ np.linalg.solve(J @ J.T + 1e-6 * np.eye(6), e)
-                q = q + dq * min(1.0, 0.3 / max(np.abs(dq).max(), 1e-12))
-            J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
-            if (np.linalg.norm(e) > 1e-6 or np.any(q < lo) or np.any(q > hi)
-                    or np.linalg.cond(J) > MAX_CONDITION):
-                worst = np.inf
-                break
-            v = J.T @ np.linalg.solve(J @ J.T, np.r_[speed_m_s * tangent, 0, 0, 0])
-            worst = max(worst, float(np.max(np.abs(v) / vmax)))
-        best = min(best, worst)
-    return best
+_CUBES: dict[tuple, IsoCube] = {}
+
+
+def _cache_key(robot, seeds: np.ndarray, plane: str, tool_down: bool, speed_m_s: float, frame: str) -> tuple:
+    """The robot's name plus everything of the model the search reads (the search is a pure function)."""
+    placements = np.array([robot.model.jointPlacements[i].homogeneous for i in range(1, robot.model.njoints)])
+    frame_placement = robot.model.frames[robot.frame_id(frame)].placement.homogeneous
+    lim = robot.limits
+    model_bytes = b"".join(np.ascontiguousarray(a, float).tobytes() for a in (
+        placements, frame_placement, lim.lower_rad, lim.upper_rad, lim.velocity_rad_s, seeds,
+        [robot.spec.collision.floor_z_m]))
+    return (robot.name, hash(model_bytes), plane, bool(tool_down), float(speed_m_s), frame)
 
 
 def iso_cube(robot, plane: str = "diagonal_x", tool_down: bool = True, speed_m_s: float = 1.0,
              frame: str | None = None) -> IsoCube:
-    """The largest ISO 9283 cube whose whole path is feasible (module docstring), found by a search.
+    """The largest ISO 9283 cube whose whole path is feasible, found by a search over the workspace
+    (:mod:`pipeline.robot.iso_search`; the IK branch starts from :func:`ik_seeds_rad`, as the stages do).
 
-    If no cube is feasible at ``speed_m_s`` (a small arm's joint speeds), the cube of at least 0.2
-    reaches with the lowest speed demand is returned with ``speed_m_s`` lowered to what its joints allow.
+    If no cube is feasible at ``speed_m_s`` (the joint speeds of a small or slow arm), the speed is lowered
+    to ``SLOW_SHARE`` of the highest speed a small cube allows, and the largest cube at that speed returned.
+    Results are cached per robot model (same model -> same cube).
     """
     frame = frame or robot.frame_reflector
+    seeds = ik_seeds_rad(robot)
+    key = _cache_key(robot, seeds, plane, tool_down, speed_m_s, frame)
+    if key in _CUBES:
+        return copy.deepcopy(_CUBES[key])
     reach = float(robot.summary()["reach_m"])
-    base = robot.model.jointPlacements[1].translation
-    rotation = tool_rotation(plane, tool_down)
-    seeds = ik_seeds_rad(robot, 6)
-    fallback: tuple[float, np.ndarray, float] | None = None
-    for edge_fraction in (0.4, 0.33, 0.27, 0.22, 0.18, 0.14, 0.1):
-        edge = edge_fraction * reach
-        for radial in (0.55, 0.45, 0.65, 0.35):
-            for height in (0.0, 0.2, -0.15, 0.4):
-                centre = base + np.array([radial * reach, 0.0, height * reach])
-                if centre[2] - 0.5 * edge * np.sqrt(2) < robot.spec.collision.floor_z_m + 0.05 * reach:
-                    continue
-                path = iso9283_path(robot, edge, centre, plane, rotation)
-                ratio = _speed_ratio(robot, path, seeds, frame, speed_m_s)
-                if ratio <= 1.0:
-                    return IsoCube(centre, edge, plane, speed_m_s, f"largest feasible cube found by search: edge "
-                                   f"{edge:.3f} m ({edge_fraction:g} x reach {reach:.3f} m), centre "
-                                   f"{np.round(centre, 3).tolist()} m")
-                if np.isfinite(ratio) and edge_fraction >= 0.2 and (fallback is None or ratio < fallback[0]):
-                    fallback = (ratio, centre, edge)
-    if fallback is not None:
-        ratio, centre, edge = fallback
-        slower = float(np.floor(100 * speed_m_s / ratio) / 100)
-        return IsoCube(centre, edge, plane, slower, f"no cube is feasible at {speed_m_s:g} m/s (joint speeds): "
-                       f"edge {edge:.3f} m, centre {np.round(centre, 3).tolist()} m at {slower:g} m/s")
-    raise InfeasibleError(None, "control.iso", f"no ISO 9283 cube of edge >= {0.1 * reach:.3f} m is feasible for "
-                          f"{robot.name}: set control.iso.centre_m and edge_m")
+    memo: dict = {}
+    best = search_cube(robot, seeds, plane, tool_down, speed_m_s, frame, memo=memo)
+    speed, how = speed_m_s, "largest feasible cube found by search"
+    if best is None:
+        slowest = search_cube(robot, seeds, plane, tool_down, speed_m_s, frame, ignore_speed=True, memo=memo)
+        if slowest is not None:       # SLOW_SHARE of the highest speed a small cube allows, then the largest cube
+            speed = float(np.floor(100 * SLOW_SHARE * speed_m_s / slowest[2]) / 100)
+            how = f"no cube is feasible at {speed_m_s:g} m/s (joint speeds); largest cube at {speed:g} m/s"
+            best = search_cube(robot, seeds, plane, tool_down, speed, frame, memo=memo) if speed > 0 else None
+    found = None if best is None or speed <= 0 else verified_edge(robot, best[0], best[1], plane, tool_down, seeds,
+                                                                  frame, speed)
+    if found is None:
+        raise InfeasibleError(None, "control.iso", f"no ISO 9283 cube of edge >= {MIN_EDGE_REACH * reach:.3f} m "
+                              f"is feasible for {robot.name}: set control.iso.centre_m and edge_m")
+    edge, q_start = found
+    centre = best[1]
+    cube = IsoCube(centre, edge, plane, speed, f"{how}: edge {edge:.3f} m ({edge / reach:.2f} x reach "
+                   f"{reach:.3f} m), centre {np.round(centre, 3).tolist()} m, joint speeds within "
+                   f"{VELOCITY_SHARE:.0%} of their limits", q_start)
+    _CUBES[key] = cube
+    return copy.deepcopy(cube)
 
 
 def ik_seeds_or_derived_rad(robot, seeds_deg: list | None) -> np.ndarray:
-    """``(k, nq)`` IK seeds: the configured ones (deg) or, when ``None``, :func:`ik_seeds_rad`."""
+    """``(k, nq)`` IK seeds: the configured ones (deg) or, when ``None``, :func:`ik_seeds_rad` after the
+    start configuration of the default derived cube (:func:`iso_cube`, cached), so that a derived ISO path
+    starts on the IK branch the search validated."""
     if seeds_deg is None:
-        return ik_seeds_rad(robot)
+        seeds = ik_seeds_rad(robot)
+        try:
+            start = iso_cube(robot).q_start_rad
+        except InfeasibleError:
+            return seeds
+        return seeds if start is None else np.vstack([start, seeds])
     return np.radians(np.atleast_2d(np.asarray(seeds_deg, float)))
 
 
