@@ -22,11 +22,13 @@ from collections.abc import Sequence
 
 import pipeline
 from pipeline import config as config_mod
-from pipeline import sweep
+from pipeline import studies, sweep
+from pipeline.config import load_config
 from pipeline.errors import PipelineError, QualityGateError
 from pipeline.interrupts import handle_termination
 from pipeline.robot.yaml_init import write_robot_yaml
-from pipeline.runner import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_QUALITY_GATE
+from pipeline.runner import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_QUALITY_GATE, prepare_run, run_pipeline
+from pipeline.viewer import view_run
 
 
 def _built_in_robots() -> list[str]:
@@ -94,9 +96,6 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _cmd_run(ns: argparse.Namespace) -> int:
-    from pipeline.config import load_config
-    from pipeline.runner import run_pipeline
-
     cfg = load_config(ns.config, ns.overrides, ns.stages)
     cfg.accept_poor = ns.accept_poor
     result = run_pipeline(cfg, out_root=ns.out, force=ns.force)
@@ -105,9 +104,6 @@ def _cmd_run(ns: argparse.Namespace) -> int:
 
 
 def _cmd_check(ns: argparse.Namespace) -> int:
-    from pipeline.config import load_config
-    from pipeline.runner import prepare_run
-
     cfg = load_config(ns.config, ns.overrides, ns.stages)
     cfg.accept_poor = ns.accept_poor
     prep = prepare_run(cfg, out_root=ns.out, force=ns.force)
@@ -125,16 +121,12 @@ def _cmd_robot(ns: argparse.Namespace) -> int:
 
 
 def _cmd_view(ns: argparse.Namespace) -> int:
-    from pipeline.viewer import view_run
-
     view_run(ns.run_dir, robot=ns.robot, configurations=ns.configurations, trajectory=ns.trajectory,
              open_browser=ns.open, wait=not ns.once)
     return 0
 
 
 def _cmd_study(ns: argparse.Namespace) -> int:
-    from pipeline import studies
-
     if not ns.name:
         names = studies.list_studies()
         print("\n".join(names) if names else "no studies registered (see pipeline/studies.py)")

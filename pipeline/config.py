@@ -27,8 +27,18 @@ from typing import Any
 
 import yaml
 
+from pipeline.config_layers import (
+    field_path,
+    leaf_paths,
+    lookup_origin,
+    merge_layers,
+    parse_set,
+    read_yaml,
+    related,
+    to_plain,
+)
 from pipeline.errors import ConfigError, PipelineError
-from pipeline.typed_config import build_dataclass, describe, one_line, with_source
+from pipeline.typed_config import build_dataclass, describe, with_source
 
 #: Stage registry, in run order: stage name -> module path (or a module-like object exposing
 #: ``NAME``, ``DEPENDS``, ``Config`` and ``run``; tests put fake stages here).
@@ -159,12 +169,12 @@ class RunConfig:
         """Where the value of field ``dotted`` (e.g. ``"model.pose_deg[2]"``) came from: the
         layer that last set it (or a part of it), else ``default``, else the section's last
         layer (:attr:`origins`), else :attr:`source`."""
-        found = _lookup_origin(self.field_origins, dotted) if dotted else None
+        found = lookup_origin(self.field_origins, dotted) if dotted else None
         if found is not None:
             return found
         if default is not None:
             return default
-        head = _field_path(dotted)[0] if dotted else ""
+        head = field_path(dotted)[0] if dotted else ""
         return self.origins.get(head, self.source)
 
     def section(self, name: str) -> Any:
@@ -190,128 +200,9 @@ class RunConfig:
         return yaml.safe_dump(self.to_dict(), sort_keys=False)
 
 
-def _field_path(dotted: str) -> tuple[str, ...]:
-    """``"control.iso.centre_m[1]"`` -> ``("control", "iso", "centre_m")``."""
-    parts = []
-    for part in str(dotted).split("."):
-        part = part.split("[", 1)[0].strip()
-        if part:
-            parts.append(part)
-    return tuple(parts)
-
-
-def _leaf_paths(value: Mapping[str, Any], prefix: tuple[str, ...]) -> list[tuple[str, ...]]:
-    """Dotted paths of the values a layer sets (mappings are walked into; ``{}`` sets nothing)."""
-    out: list[tuple[str, ...]] = []
-    for key, item in value.items():
-        path = (*prefix, str(key))
-        if isinstance(item, Mapping) and item:
-            out.extend(_leaf_paths(item, path))
-        else:
-            out.append(path)
-    return out
-
-
-def _related(a: tuple[str, ...], b: tuple[str, ...]) -> bool:
-    """One path is the other or a part of it."""
-    n = min(len(a), len(b))
-    return n > 0 and a[:n] == b[:n]
-
-
-def _lookup_origin(origins: Mapping[str, str], dotted: str) -> str | None:
-    """The latest layer in ``origins`` (ordered by when the field was last set) that set
-    ``dotted``, a part of it, or a field inside it."""
-    target = _field_path(dotted)
-    if len(target) < 2:          # a whole section or a top-level key: not a field
-        return None
-    found = None
-    for key, src in origins.items():
-        if _related(_field_path(key), target):
-            found = src
-    return found
-
-
-def to_plain(value: Any) -> Any:
-    """Dataclasses, tuples, Paths and numpy values -> plain Python (dict/list/str/float/...)."""
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return {f.name: to_plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
-    if isinstance(value, Mapping):
-        return {str(k): to_plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [to_plain(v) for v in value]
-    if isinstance(value, Path):
-        return str(value)
-    if hasattr(value, "tolist"):      # numpy arrays and scalars
-        return to_plain(value.tolist())
-    return value
-
-
 # --------------------------------------------------------------------------------------------
 # Parsing and validation
 # --------------------------------------------------------------------------------------------
-def parse_set(item: str) -> tuple[list[str], Any]:
-    """``"a.b=3"`` -> (["a", "b"], 3); the value is parsed as a YAML scalar/flow value."""
-    if "=" not in item:
-        raise ConfigError("--set", item, "expected key=value")
-    key, _, text = item.partition("=")
-    key = key.strip()
-    if not key or any(not part for part in key.split(".")):
-        raise ConfigError("--set", item, "empty key")
-    try:
-        value = yaml.safe_load(text) if text.strip() else ""
-    except yaml.YAMLError as exc:
-        raise ConfigError("--set", key, f"cannot parse value {text!r}: {one_line(exc)}") from None
-    return key.split("."), value
-
-
-def read_yaml(path: Path) -> dict[str, Any]:
-    """Read a YAML config file whose top level must be a mapping.
-
-    A file that is not UTF-8 text (binary, another encoding) and an empty file (or one holding
-    only comments) are errors: an empty ``--config`` would otherwise silently start the full
-    default profile; leave ``--config`` out to run the defaults.
-    """
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise ConfigError(path, None, "config file not found") from None
-    except IsADirectoryError:
-        raise ConfigError(path, None, "is a directory, expected a YAML file") from None
-    except OSError as exc:
-        raise ConfigError(path, None, f"cannot read: {exc.strerror or exc}") from None
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise ConfigError(path, None, f"not a UTF-8 text file (byte {exc.start}: {raw[exc.start]:#04x}); "
-                          "expected a YAML run configuration") from None
-    if "\0" in text:
-        raise ConfigError(path, None, "contains NUL bytes (a binary file?); expected a YAML run configuration")
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"line {mark.line + 1}" if mark is not None else None
-        problem = getattr(exc, "problem", None) or one_line(exc)
-        raise ConfigError(path, where, f"invalid YAML: {problem}") from None
-    if data is None:
-        raise ConfigError(path, None, "the config file is empty; leave out --config to run the "
-                          "built-in defaults (full profile), or write e.g. 'profile: full'")
-    if not isinstance(data, dict):
-        raise ConfigError(path, None, f"top level must be a mapping, got {type(data).__name__}")
-    return data
-
-
-def _merge(base: dict[str, Any], update: Mapping[str, Any]) -> dict[str, Any]:
-    """Deep merge of plain dicts (update wins)."""
-    out = dict(base)
-    for key, value in update.items():
-        if isinstance(value, Mapping) and isinstance(out.get(key), Mapping):
-            out[key] = _merge(dict(out[key]), value)
-        else:
-            out[key] = value
-    return out
-
-
 def _parse_stages(value: Any, source: str) -> list[str]:
     if isinstance(value, str):
         items = [s.strip() for s in value.split(",") if s.strip()]
@@ -435,7 +326,7 @@ def load_config(
         # on the layer that introduced it (a bad value in a file that a later --set repairs is
         # no error), see _blame
         for src, value in items:
-            for path in _leaf_paths(value, (section,)):
+            for path in leaf_paths(value, (section,)):
                 key = ".".join(path)
                 cfg.field_origins.pop(key, None)       # keep the dict ordered by last setting
                 cfg.field_origins[key] = src
@@ -443,7 +334,7 @@ def load_config(
         errors: list[ConfigError | None] = []
         instance: Any = None
         for src, value in items:
-            merged = _merge(merged, value)
+            merged = merge_layers(merged, value)
             try:
                 instance = build_dataclass(cls, merged, section, src)
                 _semantic_check(instance, src)
@@ -518,10 +409,10 @@ def _blame(errors: list[ConfigError | None], items: list[tuple[str, Any]], secti
     while k > 0 and errors[k - 1] is not None:
         k -= 1
     blame = items[k][0]
-    target = _field_path(final.field or "")
+    target = field_path(final.field or "")
     if len(target) >= 2 and target[0] == section:
         for src, value in items[k:]:
-            if any(_related(path, target) for path in _leaf_paths(value, (section,))):
+            if any(related(path, target) for path in leaf_paths(value, (section,))):
                 blame = src
     return ConfigError(blame, final.field, final.problem)
 

@@ -17,6 +17,7 @@ import importlib
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from pipeline.config import REPO_ROOT
 from pipeline.errors import PipelineError
 
 #: study name -> "module:function". Stage owners append their entries here.
@@ -66,8 +67,6 @@ def run_study(name: str, argv: Sequence[str] = ()) -> int:
 
 def study_dir(name: str, root: str | Path | None = None) -> Path:
     """``<repo>/data/studies/<name>/`` (created)."""
-    from pipeline.config import REPO_ROOT
-
     base = Path(root) if root is not None else REPO_ROOT / "data" / "studies"
     path = base / name
     path.mkdir(parents=True, exist_ok=True)

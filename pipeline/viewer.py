@@ -31,11 +31,20 @@ from pathlib import Path
 from typing import Any
 
 import coal
+import meshcat
+import meshcat.geometry as mg
 import numpy as np
 import pinocchio as pin
+import yaml
+from meshcat.animation import Animation
+from pinocchio.visualize import MeshcatVisualizer
 
+from pipeline.artefacts import MANIFEST, RESULTS_NPZ, read_npz
+from pipeline.config import RunConfig, resolve_robot_dir, stage_names
 from pipeline.errors import PipelineError
+from pipeline.robot.model import RobotModel
 from pipeline.robot.urdf_import import package_dirs
+from pipeline.runner import default_runs_dir, load_run
 
 TRAJECTORY_RE = re.compile(r"^trajectory_(?P<name>.+)_t$")
 CONFIGURATIONS_PREFIX = "configurations_"
@@ -100,8 +109,6 @@ class Viewer:
 
     def __init__(self, robot: Any, *, zmq_url: str | None = None, viewer: Any = None,
                  open_browser: bool = False, root: str | None = None) -> None:
-        import meshcat
-        from pinocchio.visualize import MeshcatVisualizer
 
         self.robot = robot
         self.model = robot.model
@@ -174,20 +181,18 @@ class Viewer:
 
     def show_points(self, points: np.ndarray, name: str, color: int = 0xE6550D, size_m: float = 0.02) -> None:
         """Draw ``(N, 3)`` points as a point cloud under ``points/<name>``."""
-        import meshcat.geometry as g
 
         P = np.atleast_2d(np.asarray(points, float))
         rgb = np.array([(color >> 16) & 255, (color >> 8) & 255, color & 255], float) / 255.0
         colors = np.tile(rgb[:, None], (1, len(P)))
-        self.vis["points"][name].set_object(g.PointCloud(P.T, colors, size=size_m))
+        self.vis["points"][name].set_object(mg.PointCloud(P.T, colors, size=size_m))
 
     def show_path(self, points: np.ndarray, name: str, color: int = 0x3182BD) -> None:
         """Draw ``(N, 3)`` points as a polyline under ``paths/<name>``."""
-        import meshcat.geometry as g
 
         P = np.atleast_2d(np.asarray(points, float))
         self.vis["paths"][name].set_object(
-            g.Line(g.PointsGeometry(P.T), g.LineBasicMaterial(color=color, linewidth=2)))
+            mg.Line(mg.PointsGeometry(P.T), mg.LineBasicMaterial(color=color, linewidth=2)))
 
     def show_configurations(self, Q: np.ndarray, name: str = "configurations", *, frame: str = "tcp",
                             seconds_each: float = 1.0, color: int = 0xE6550D, animate: bool = True) -> Any:
@@ -235,7 +240,6 @@ class Viewer:
     def animate(self, fps: float = 30.0, gap_s: float = 0.5) -> Any:
         """Send one meshcat animation playing every queued clip (configuration sets and
         trajectories) one after the other; returns the ``meshcat.animation.Animation``."""
-        from meshcat.animation import Animation
 
         anim = Animation(default_framerate=int(round(fps)))
         geom = self.viz.visual_model
@@ -276,8 +280,6 @@ def find_saved_motions(run_dir: str | Path) -> tuple[dict[str, np.ndarray], dict
 
     Returns ``({"<stage>/<name>": Q}, {"<stage>/<name>": (t, q)})``.
     """
-    from pipeline.artefacts import RESULTS_NPZ, read_npz
-    from pipeline.runner import load_run
 
     configurations: dict[str, np.ndarray] = {}
     trajectories: dict[str, tuple[np.ndarray, np.ndarray]] = {}
@@ -296,7 +298,6 @@ def find_saved_motions(run_dir: str | Path) -> tuple[dict[str, np.ndarray], dict
 
 def is_run_dir(path: str | Path) -> bool:
     """``path`` holds a run: a ``config.yaml`` or a stage folder with a ``manifest.json``."""
-    from pipeline.artefacts import MANIFEST
 
     path = Path(path)
     if not path.is_dir():
@@ -307,7 +308,6 @@ def is_run_dir(path: str | Path) -> bool:
 
 
 def latest_run_dir(runs_dir: str | Path | None = None) -> Path | None:
-    from pipeline.runner import default_runs_dir
 
     base = Path(runs_dir) if runs_dir is not None else default_runs_dir()
     if not base.is_dir():
@@ -318,11 +318,7 @@ def latest_run_dir(runs_dir: str | Path | None = None) -> Path | None:
 
 def robot_of_run(run_dir: Path) -> Any:
     """The last robot a stage of the run handed on, else the run's nominal robot."""
-    import yaml
 
-    from pipeline.config import RunConfig, stage_names
-    from pipeline.robot.model import RobotModel
-    from pipeline.runner import resolve_robot_dir
 
     for stage in reversed(stage_names()):
         if (run_dir / stage / "robot" / "robot.yaml").exists():
@@ -337,9 +333,6 @@ def robot_of_run(run_dir: Path) -> Any:
 def view_run(run_dir: str | Path | None = None, *, robot: str | None = None, configurations: str | None = None,
              trajectory: str | None = None, open_browser: bool = False, wait: bool = True) -> Viewer:
     """``python -m pipeline view``: show a run's robot, configuration sets and trajectories."""
-    from pipeline.config import RunConfig
-    from pipeline.robot.model import RobotModel
-    from pipeline.runner import resolve_robot_dir
 
     path = Path(run_dir) if run_dir is not None else latest_run_dir()
     if run_dir is not None and not Path(run_dir).is_dir():

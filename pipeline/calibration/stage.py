@@ -33,7 +33,7 @@ from pipeline.calibration import design_table as dtab
 from pipeline.calibration import error_model as em
 from pipeline.calibration import indices as ix
 from pipeline.calibration import measure as ms
-from pipeline.calibration import subsets
+from pipeline.calibration import plots, subsets
 from pipeline.calibration import task_space as ts
 from pipeline.calibration import validate as va
 from pipeline.calibration.config import MAX_CANDIDATES, Config
@@ -45,7 +45,8 @@ from pipeline.calibration.elastostatic import (
     measure_with_payload,
     measurement_model,
 )
-from pipeline.calibration.estimate import Estimate, calibrated_robot
+from pipeline.calibration.estimate import Estimate, calibrated_robot, register_points
+from pipeline.calibration.gradient_design import GradientDesignConfig, gradient_design
 from pipeline.calibration.gravity_uncertainty import GravityCovariance
 from pipeline.calibration.outcome import CalibrationOutcome
 from pipeline.calibration.report import (  # noqa: F401 - re-exported (tests, notebook)
@@ -59,6 +60,7 @@ from pipeline.calibration.robust import robust_estimate
 from pipeline.errors import ConfigError, DataFileError, InfeasibleError, PipelineError
 from pipeline.progress import task
 from pipeline.quality import QualityGates
+from pipeline.stage_api import StageResult
 
 NAME = "calibration"
 DEPENDS: tuple[str, ...] = ("model",)
@@ -235,9 +237,6 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress, reg
         timings["selection_s"] = time.perf_counter() - t
         Q_sel = cs.Q[selection.selected]
         if pilot is not None:
-            from pipeline.calibration.estimate import register_points
-            from pipeline.calibration.gradient_design import GradientDesignConfig, gradient_design
-
             t = time.perf_counter()
             T_pilot = register_points(pilot.Y, mm.base_positions(pilot.Q, np.zeros(mm.n))[0]) \
                 if len(pilot) >= 3 else None
@@ -385,8 +384,6 @@ def check(config: Config, robot) -> None:
 
 
 def run(ctx) -> Any:
-    from pipeline.runner import StageResult
-
     cfg: Config = ctx.config
     t0 = time.perf_counter()
     # real tracker data: the simulated hidden robot must not be touched (not even ctx.real)
@@ -435,8 +432,6 @@ def run(ctx) -> Any:
     }
     figures = {}
     if cfg.figures:
-        from pipeline.calibration import plots
-
         figures = plots.stage_figures(out)
     data["design_table"] = out.design_table
     result = StageResult(summary=summary, arrays=arrays, data=data, figures=figures, robot=out.robot,

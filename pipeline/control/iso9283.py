@@ -13,6 +13,8 @@ transition to the small circle (0.1 L), the small circle.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import pinocchio as pin
 
@@ -80,11 +82,13 @@ def tool_rotation(plane: str, tool_down: bool = True) -> np.ndarray:
     return np.column_stack([x, np.cross(z, x), z])
 
 
-def iso9283_path(robot=None, edge_m: float = 0.6, centre_m=(1.05, 0.0, 0.85), plane: str = "diagonal_x",
+def iso9283_path(robot: object | None, edge_m: float, centre_m: Sequence[float], plane: str = "diagonal_x",
                  rotation: np.ndarray | None = None, corner_fraction: float = 0.1,
                  large_circle_fraction: float = 0.8, small_circle_fraction: float = 0.1,
                  segments=("line", "rectangle", "circle_large", "circle_small")) -> IsoPath:
-    """Build the ISO 9283 path. ``rotation``: constant TCP orientation (default: tool z axis down).
+    """Build the ISO 9283 path in a cube of edge ``edge_m`` centred at ``centre_m`` (base frame, m;
+    a robot's cube comes from :func:`pipeline.robot.defaults.iso_cube` or its ``run_defaults``).
+    ``rotation``: constant TCP orientation (default: tool z axis down).
 
     ``robot`` is accepted for the contract (the workspace check is done by IK when the path is
     executed).

@@ -38,6 +38,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from pipeline.blas import single_thread_blas
+from pipeline.config import resolve_robot_dir
 from pipeline.errors import ConfigError, InfeasibleError, PipelineError
 from pipeline.identification import design as design_mod
 from pipeline.identification import estimate as est_mod
@@ -57,7 +58,10 @@ from pipeline.identification.tx40 import (
     run_tx40,
 )
 from pipeline.quality import QualityGates
-from pipeline.runner import StageContext, StageResult
+from pipeline.robot.model import RobotModel
+from pipeline.robot.parameters import set_dynamic_parameters
+from pipeline.robot.symbolic import SymbolicRobot
+from pipeline.stage_api import StageContext, StageResult
 
 NAME = "identification"
 DEPENDS: tuple[str, ...] = ("model", "calibration")
@@ -78,9 +82,6 @@ def tx40_wanted(cfg: Config, robot: Any) -> bool:
 def _nominal_robot(ctx: StageContext) -> Any:
     """The robot as loaded from its files (structure of the base parameters)."""
     try:
-        from pipeline.robot.model import RobotModel
-        from pipeline.runner import resolve_robot_dir
-
         return RobotModel.load(resolve_robot_dir(ctx.run))
     except PipelineError:
         return ctx.robot
@@ -89,8 +90,6 @@ def _nominal_robot(ctx: StageContext) -> Any:
 def identified_robot(robot: Any, p: np.ndarray) -> Any:
     """Copy of ``robot`` with the standard parameters ``p`` (inertias, rotor inertia, viscous and
     Coulomb friction; torque offsets are not part of a RobotModel)."""
-    from pipeline.robot.parameters import set_dynamic_parameters
-
     nq = robot.nq
     model = set_dynamic_parameters(robot.model, p)
     spec = copy.deepcopy(robot.spec)
@@ -185,8 +184,6 @@ def _run(ctx: StageContext) -> StageResult:
         data = meas_mod.process_record(rec, reg, cfg.data_cutoff_hz, cfg.data_decimation, DATA_BORDER_SAMPLES)
         data_source = str(cfg.data_file)
     else:
-        from pipeline.robot.symbolic import SymbolicRobot
-
         limits = fourier.ExcitationLimits.from_robot(
             robot, ex.position_margin, ex.velocity_margin, ex.acceleration_margin, ex.torque_margin,
             ex.floor_clearance_m, ex.self_clearance_m)
@@ -281,8 +278,6 @@ def _run(ctx: StageContext) -> StageResult:
     tx: Tx40Result | None = None
     if tx40_wanted(cfg, robot):
         t1 = time.perf_counter()
-        from pipeline.robot.model import RobotModel
-
         tx = run_tx40(RobotModel.load("staubli_tx40"), cfg.tx40)   # its own fixed seed (tx40.base_seed)
         timings["tx40_s"] = time.perf_counter() - t1
     timings["total_s"] = time.perf_counter() - t0
