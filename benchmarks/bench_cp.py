@@ -19,13 +19,13 @@ from __future__ import annotations
 
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 
 from pipeline.config import load_config
 from pipeline.errors import PipelineError
+from pipeline.robot.example_robots import example_arm_urdf
 from pipeline.robot.model import RobotModel
 from pipeline.trajectory.baselines import toppra_cp
 from pipeline.trajectory.cp import solve_cp_convex, solve_cp_refined
@@ -79,9 +79,8 @@ def ur5_joint_move() -> None:
     """The UR5 of example-robot-data from its URDF alone (no robot.yaml: friction assumed, viscous
     2 N m s/rad and Coulomb 3 N m per joint, acceleration limits 15 rad/s^2, 10 % torque reserve)
     on a joint-space move with a detour (no ISO path: that needs the robot's IK setup)."""
-    urdf = (Path(sys.prefix) / "lib" / f"python{sys.version_info.major}.{sys.version_info.minor}" / "site-packages"
-            / "cmeel.prefix" / "share" / "example-robot-data" / "robots" / "ur_description" / "urdf" / "ur5_robot.urdf")
-    if not urdf.is_file():
+    urdf = example_arm_urdf("ur5")
+    if urdf is None:
         print("ur5: example-robot-data not installed; skipped")
         return
     model = pin.buildModelFromUrdf(str(urdf))

@@ -43,6 +43,7 @@ from pipeline.calibration import indices as ix
 from pipeline.calibration.error_model import MeasurementModel
 from pipeline.control.config import IsoPathConfig
 from pipeline.errors import ConfigError, DataFileError, InfeasibleError
+from pipeline.robot.defaults import iso_or_derived
 
 WORKING_REGIONS = ("iso_cube", "box", "csv")
 
@@ -71,9 +72,9 @@ def region_from_config(cfg, iso_centre_m, iso_edge_m, robot) -> WorkingRegion:
         return WorkingRegion("box", box[0], box[1])
     if cfg.working_region == "csv":
         return WorkingRegion(cfg.working_csv, configurations=read_working_csv(cfg.working_csv, robot))
-    if iso_centre_m is None or iso_edge_m is None:
-        raise ConfigError(None, "control.iso", "the ISO 9283 cube (centre_m, edge_m) defines the calibration's "
-                          "working region; give it, or calibration.working_region: box / csv")
+    if iso_centre_m is None or iso_edge_m is None:      # not configured: the cube derived from the model
+        derived = iso_or_derived(robot, IsoPathConfig(centre_m=iso_centre_m, edge_m=iso_edge_m))
+        iso_centre_m, iso_edge_m = derived.centre_m, derived.edge_m
     c = np.asarray(iso_centre_m, float)
     h = 0.5 * float(iso_edge_m)
     return WorkingRegion("ISO 9283 cube", c - h, c + h)
@@ -211,7 +212,8 @@ def check_task_fields(cfg, source: str = "config") -> None:
 def default_region(robot) -> WorkingRegion:
     """The ISO 9283 cube the run uses by default for ``robot``: ``control.iso`` of the robot's
     ``run_defaults`` (robot.yaml), else the control stage's defaults (for callers without a run
-    configuration: studies, notebooks)."""
+    configuration: studies, notebooks), else the cube derived from the model
+    (:func:`pipeline.robot.defaults.iso_or_derived`)."""
     iso = IsoPathConfig()
     centre, edge = iso.centre_m, iso.edge_m
     try:
@@ -220,6 +222,9 @@ def default_region(robot) -> WorkingRegion:
         centre, edge = section.get("centre_m", centre), section.get("edge_m", edge)
     except (OSError, AttributeError, yaml.YAMLError):
         pass
+    if centre is None or edge is None:
+        iso = iso_or_derived(robot, IsoPathConfig(centre_m=centre, edge_m=edge))
+        centre, edge = iso.centre_m, iso.edge_m
     c = np.asarray(centre, float)
     return WorkingRegion("ISO 9283 cube", c - 0.5 * float(edge), c + 0.5 * float(edge))
 
@@ -229,4 +234,6 @@ def region_of_run(run, cfg, robot) -> WorkingRegion:
     iso = getattr(getattr(run, "control", None), "iso", None)
     if cfg.working_region == "iso_cube" and iso is None:
         return default_region(robot)
+    if cfg.working_region == "iso_cube":
+        iso = iso_or_derived(robot, iso)     # the cube the control stage derives for this robot
     return region_from_config(cfg, getattr(iso, "centre_m", None), getattr(iso, "edge_m", None), robot)

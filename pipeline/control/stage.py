@@ -20,7 +20,8 @@ desired path in the base frame), ``tcp_error_registered_*`` (after a best-fit ri
 ``on_saturation = clip``), ``realtime_factor`` (wall) and ``realtime_factor_cpu``, the speed-up
 against the plain Python loop, ``tcp_error_rms_{nominal,calibrated}_kinematics_m`` (and registered),
 ``improvement`` (none / full_friction ratios), ``elastic_improvement`` (with an elastic variant:
-max TCP tracking error of none and of rigid full_friction over the best elastic variant's).
+max TCP tracking error of none and of rigid full_friction over the best elastic variant's, and the
+same for the max path error ``path_error_max_*_over_elastic``).
 """
 
 from __future__ import annotations
@@ -239,7 +240,9 @@ def _summary(cfg, ref, metrics, main, speed, rms_nominal_kin, calibrated, identi
         best = min(elastic, key=lambda k: metrics[k][key])
         s["elastic_improvement"] = {"variant": best, **{
             f"{k}_over_elastic": metrics[k][key] / metrics[best][key] for k in ("none", "full_friction")
-            if k in metrics}}
+            if k in metrics}, **{
+            f"path_error_max_{k}_over_elastic": metrics[k]["tcp_error_max_m"] / metrics[best]["tcp_error_max_m"]
+            for k in ("none", "full_friction") if k in metrics}}
     return s
 
 

@@ -3,7 +3,6 @@ its whole path is reachable by IK from the stages' seeds, inside the joint limit
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -13,28 +12,26 @@ from pipeline.control.iso9283 import iso9283_path, tool_rotation
 from pipeline.control.reference import cartesian_reference
 from pipeline.errors import InfeasibleError
 from pipeline.robot import defaults
+from pipeline.robot.example_robots import EXAMPLE_ARMS, example_arm_urdf
 from pipeline.robot.iso_search import MIN_EDGE_REACH
 from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import ik_track, start_configuration
 
 
-def _erd(rel: str) -> Path:
-    for base in map(Path, sys.path):
-        candidate = base / "cmeel.prefix" / "share" / "example-robot-data" / "robots" / rel
-        if candidate.is_file():
-            return candidate
-    pytest.skip("example-robot-data not installed")
+def _erd(name: str) -> Path:
+    path = example_arm_urdf(name)
+    if path is None:
+        pytest.skip("example-robot-data not installed")
+    return path
 
 
-ERD = {"ur3": "ur_description/urdf/ur3_robot.urdf", "ur5": "ur_description/urdf/ur5_robot.urdf",
-       "ur10": "ur_description/urdf/ur10_robot.urdf", "panda": "panda_description/urdf/panda.urdf",
-       "xarm7": "xarm_description/urdf/xarm7.urdf", "z1": "z1_description/urdf/z1.urdf"}
+ERD = EXAMPLE_ARMS
 # kinova_description's arm has 'continuous' joints, which the loader rejects today: not listed
 FAST = ("staubli_tx40", "ur5", "panda")
 
 
 def _load(name: str) -> RobotModel:
-    return RobotModel.load(_erd(ERD[name]) if name in ERD else name)
+    return RobotModel.load(_erd(name) if name in ERD else name)
 
 
 def _check(robot: RobotModel) -> defaults.IsoCube:

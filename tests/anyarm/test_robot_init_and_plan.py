@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import pytest
@@ -11,16 +10,16 @@ import yaml
 from pipeline.cli import main
 from pipeline.config import load_config
 from pipeline.errors import ConfigError
+from pipeline.robot.example_robots import example_arm_urdf
 from pipeline.robot.model import RobotModel
 from pipeline.stage_plan import plan_stages, unavailable_stages
 
 
 def _ur5() -> Path:
-    for base in map(Path, sys.path):
-        candidate = base / "cmeel.prefix/share/example-robot-data/robots/ur_description/urdf/ur5_robot.urdf"
-        if candidate.is_file():
-            return candidate
-    pytest.skip("example-robot-data not installed")
+    path = example_arm_urdf("ur5")
+    if path is None:
+        pytest.skip("example-robot-data not installed")
+    return path
 
 
 @pytest.fixture(scope="module")

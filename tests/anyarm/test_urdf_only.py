@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -11,15 +10,15 @@ import pytest
 from pipeline.control.reference import resolved_rate
 from pipeline.errors import RobotFileError
 from pipeline.robot import defaults
+from pipeline.robot.example_robots import example_arm_urdf
 from pipeline.robot.model import RobotModel
 
 
-def _erd(rel: str) -> Path:
-    for base in map(Path, sys.path):
-        candidate = base / "cmeel.prefix" / "share" / "example-robot-data" / "robots" / rel
-        if candidate.is_file():
-            return candidate
-    pytest.skip("example-robot-data not installed")
+def _erd(name: str) -> Path:
+    path = example_arm_urdf(name)
+    if path is None:
+        pytest.skip("example-robot-data not installed")
+    return path
 
 
 ARMS = {"ur5": ("ur_description/urdf/ur5_robot.urdf", 6), "ur10": ("ur_description/urdf/ur10_robot.urdf", 6),

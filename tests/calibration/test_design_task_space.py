@@ -13,6 +13,7 @@ from pipeline.calibration import indices as ix
 from pipeline.calibration import stage as st
 from pipeline.calibration import task_space as ts
 from pipeline.errors import ConfigError, DataFileError
+from pipeline.robot.defaults import iso_cube
 from pipeline.robot.model import RobotModel
 
 
@@ -136,5 +137,8 @@ def test_region_config_fields(robot, tmp_path):
     path.write_text("q1,q2,q3,q4,q5,q6\n0,9,0,0,0,0\n")
     with pytest.raises(DataFileError, match="row 2"):
         ts.read_working_csv(str(path), robot)
-    with pytest.raises(ConfigError, match="control.iso"):
-        ts.region_from_config(st.Config(), None, None, robot)
+    # no cube configured: the cube derived from the model (the one the control stage derives too)
+    derived = ts.region_from_config(st.Config(), None, None, robot)
+    cube = iso_cube(robot)
+    assert np.allclose(0.5 * (derived.lower_m + derived.upper_m), cube.centre_m)
+    assert np.allclose(derived.upper_m - derived.lower_m, cube.edge_m)

@@ -4,8 +4,6 @@ limits in every planner; IPOPT interrupt statuses."""
 from __future__ import annotations
 
 import dataclasses
-import sys
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -13,6 +11,7 @@ import pytest
 
 from pipeline.errors import InfeasibleError
 from pipeline.interrupts import INTERRUPT_STATUSES, raise_if_interrupted
+from pipeline.robot.example_robots import example_arm_urdf
 from pipeline.trajectory.baselines import ruckig_torque_feasible, toppra_cp
 from pipeline.trajectory.cp import solve_cp_convex, solve_cp_refined
 from pipeline.trajectory.design import JointPath
@@ -87,9 +86,8 @@ def test_interrupt_statuses_are_interrupts(status):
 
 def _panda_arm() -> PlanningModel:
     """The 7-axis Franka Panda of example-robot-data (fingers locked), with stated friction."""
-    urdf = Path(sys.prefix) / "lib" / f"python{sys.version_info.major}.{sys.version_info.minor}" / "site-packages" \
-        / "cmeel.prefix" / "share" / "example-robot-data" / "robots" / "panda_description" / "urdf" / "panda.urdf"
-    if not urdf.is_file():
+    urdf = example_arm_urdf("panda")
+    if urdf is None:
         pytest.skip("example-robot-data not installed")
     full = pin.buildModelFromUrdf(str(urdf))
     fingers = [full.getJointId(n) for n in full.names if "finger" in n]
