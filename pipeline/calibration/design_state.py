@@ -128,8 +128,15 @@ class DesignState:
         sel = np.array(self.selected)
         self.evaluations += len(sel)
         cache = self.update_cache()
-        if cache is not None:
-            return self._cache_scores(cache.remove_values(sel), self.n - 1)
+        if cache is None:
+            return self._direct_remove_scores(sel)
+        out = self._cache_scores(cache.remove_values(sel), self.n - 1)
+        bad = np.isnan(out)             # an untrusted update: evaluate those designs directly
+        if bad.any():
+            out[bad] = self._direct_remove_scores(sel)[bad]
+        return out
+
+    def _direct_remove_scores(self, sel: np.ndarray) -> np.ndarray:
         Gs = self.G[sel]
         Ms = self.M[None] - np.einsum("kmi,kmj->kij", Gs, Gs)
         pos = None
@@ -161,7 +168,8 @@ class DesignState:
     def best_exchange(self, k: int) -> tuple[int, float]:
         """Best unselected candidate to replace selected ``k`` and the score of the exchanged design;
         the state is unchanged. Update indices: all candidates at once by the exchange update
-        (:mod:`pipeline.calibration.trace_updates`); others: remove, :meth:`best_add`, put back."""
+        (:mod:`pipeline.calibration.trace_updates`); other indices and untrusted updates (removing
+        ``k`` leaves M nearly singular): remove, :meth:`best_add`, put back."""
         cache = self.update_cache()
         values = None if cache is None else cache.exchange_values(k)
         if values is not None:

@@ -32,9 +32,12 @@ from __future__ import annotations
 
 import numpy as np
 
-#: an update whose m x m system ``I - P_k`` has a condition number above this is not trusted (the
-#: design would become (nearly) singular): removal scores worst, exchanges fall back to the caller
-MAX_CONDITION = 1e10
+#: largest condition number of ``R = I - P_k`` for which a removal or exchange update is trusted:
+#: the updates' relative round-off grows like 1e-16 cond(R) (Higham, *Accuracy and Stability of
+#: Numerical Algorithms*, 2nd ed., §7), here <= 1e-10, far below the selections' relative tolerance
+#: (1e-6); above it (the configuration is nearly alone in exciting a direction) the caller evaluates
+#: those designs directly
+MAX_CONDITION = 1e6
 
 
 def _cofactors3(S: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -141,7 +144,7 @@ class LowRankCache:
 
     def removal(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """Eigenvalues ``r`` of ``R = I - P_k``, ``L = Q diag(r)^-1/2`` (``R^-1 = L L^T``) and
-        ``a L = M^-1 G_k^T L`` (p, m); None when removing ``k`` leaves ``M`` (nearly) singular."""
+        ``a L = M^-1 G_k^T L`` (p, m); None when the update is not trusted (:data:`MAX_CONDITION`)."""
         r, Q = np.linalg.eigh(np.eye(self.m) - self.P[:, :, k])
         if not (r[0] > 0 and r[-1] < MAX_CONDITION * r[0]):
             return None
@@ -151,7 +154,8 @@ class LowRankCache:
     def removal_ok(self, sel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``R_k = I - P_k`` (len(sel), m, m) of the configurations ``sel`` and where it is trusted."""
         R = np.eye(self.m)[None] - self.P[:, :, sel].transpose(2, 0, 1)
-        return R, np.linalg.cond(R) < MAX_CONDITION
+        r = np.linalg.eigvalsh(R)
+        return R, (r[:, 0] > 0) & (r[:, -1] < MAX_CONDITION * r[:, 0])
 
 
 class TraceCache(LowRankCache):
@@ -177,10 +181,10 @@ class TraceCache(LowRankCache):
         return self.value - trace_solve(_plus_identity(self.P.copy()), self.T)
 
     def remove_values(self, sel: np.ndarray) -> np.ndarray:
-        """Criterion after removing each configuration of ``sel`` (inf where ``M`` would become
-        singular)."""
+        """Criterion after removing each configuration of ``sel`` (NaN where the update is not
+        trusted, :data:`MAX_CONDITION`)."""
         R, ok = self.removal_ok(sel)
-        out = np.full(len(sel), np.inf)
+        out = np.full(len(sel), np.nan)
         if ok.any():
             Tk = self.T[:, :, sel].transpose(2, 0, 1)[ok]
             out[ok] = self.value + np.trace(np.linalg.solve(R[ok], Tk), axis1=1, axis2=2)
@@ -188,7 +192,7 @@ class TraceCache(LowRankCache):
 
     def exchange_values(self, k: int) -> np.ndarray | None:
         """Criterion after removing selected ``k`` and adding each candidate (N,); None when
-        removing ``k`` leaves ``M`` (nearly) singular."""
+        the update is not trusted (:data:`MAX_CONDITION`)."""
         rem = self.removal(k)
         if rem is None:
             return None
@@ -217,17 +221,17 @@ class LogDetCache(LowRankCache):
         return self.value + logdet(_plus_identity(self.P.copy()))
 
     def remove_values(self, sel: np.ndarray) -> np.ndarray:
-        """``log det`` after removing each configuration of ``sel`` (-inf where ``M`` would become
-        singular)."""
+        """``log det`` after removing each configuration of ``sel`` (NaN where the update is not
+        trusted, :data:`MAX_CONDITION`)."""
         R, ok = self.removal_ok(sel)
-        out = np.full(len(sel), -np.inf)
+        out = np.full(len(sel), np.nan)
         if ok.any():
             out[ok] = self.value + logdet(R[ok].transpose(1, 2, 0))
         return out
 
     def exchange_values(self, k: int) -> np.ndarray | None:
         """``log det`` after removing selected ``k`` and adding each candidate (N,); None when
-        removing ``k`` leaves ``M`` (nearly) singular."""
+        the update is not trusted (:data:`MAX_CONDITION`)."""
         rem = self.removal(k)
         if rem is None:
             return None
