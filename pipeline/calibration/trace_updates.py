@@ -21,11 +21,11 @@ Log-det criteria (``D = det(M)^(1/p)``, ``O1``): ``log det(M + G_j^T G_j) = log 
 ``log det(M - G_k^T G_k) = log det M + log det R`` and the exchange
 ``log det M + log det R + log det(I + P'_j)``.
 
-A cache holds ``M^-1``, ``H = G M^-1`` (and ``H W``) and the blocks ``P_j`` (``T_j``) of all N
-candidates at the current ``M``: O(N m p^2) once per accepted change. One exchange search (one
-removal, all additions) is then two (m x p) @ (p x N m) products and batched m x m algebra,
-O(N m^2 p), with no Python loop over candidates (the batched m x m algebra is a few contiguous
-length-N vector operations per matrix entry).
+A cache holds ``M^-1`` and the blocks ``P_j`` (and ``T_j``) of all N candidates at the current
+``M``: O(N m p^2) once per accepted change. One exchange search (one removal, all additions) is
+then one (2m x p) @ (p x N m) product (``c_j`` and ``d_j`` of every candidate) and batched m x m
+algebra, O(N m^2 p), with no Python loop over candidates (the batched m x m algebra is a few
+contiguous length-N vector operations per matrix entry).
 """
 
 from __future__ import annotations
