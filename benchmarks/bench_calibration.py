@@ -1,14 +1,21 @@
 """Speed of the calibration designs, as ratios against baselines measured in the same run.
 
-Run: ``.venv/bin/python benchmarks/bench_calibration.py [robot] [grid_per_axis] [n_gradient]``
-(defaults rx130l, 13, 60).
+Run: ``.venv/bin/python benchmarks/bench_calibration.py [robot] [grid_per_axis] [n_gradient]
+[full|sampled]`` (defaults rx130l, 13, 60, full).
 
-1. Filter the full ``grid^6`` joint grid and evaluate the whitened Jacobians of the survivors.
+1. Filter the full ``grid^6`` joint grid and evaluate the whitened Jacobians of the survivors
+   (the calibration stage's default settings: parameters, design basis, V criterion).
 2. Remove-and-replace (paper 004, O3, 32 configurations) on it. Baseline: the same exhaustive
    searches done by recomputing ``M = J^T J`` from the stacked Jacobian of the whole selection for
    every candidate (one full recompute per swap candidate); its cost is measured per candidate and
    multiplied by the number of candidates every search has to visit.
-3. Gradient design (paper 000) of ``n_gradient`` configurations (task-space V criterion, collision
+3. Remove-and-replace on the default criterion (V, ``n_configurations`` of the default profile) with
+   the low-rank updates of every candidate at once (:mod:`pipeline.calibration.trace_updates`).
+   Baseline: the previous per-candidate path (each exchange = remove, score every candidate by its
+   own p x p Sherman-Morrison-Woodbury update, put back), ``full``: the whole selection run again
+   (same design required), ``sampled``: its cost per search at the final design times the number
+   of searches.
+4. Gradient design (paper 000) of ``n_gradient`` configurations (task-space V criterion, collision
    constraints, IPOPT) warm-started from remove-and-replace on a random candidate set, three seeds:
    IPOPT status, time against the 10 s target, index gain over remove-and-replace. Baseline: one
    evaluation of the objective (ratio = equivalent number of evaluations).
@@ -26,8 +33,111 @@ from pipeline.calibration import design as ds
 from pipeline.calibration import error_model as em
 from pipeline.calibration import indices as ix
 from pipeline.calibration import stage as st
+from pipeline.calibration.design_state import DesignState, is_regular
+from pipeline.calibration.elastostatic import design_basis, measurement_model
 from pipeline.calibration.gradient_design import GradientDesignConfig, gradient_design
 from pipeline.robot.model import RobotModel
+
+
+class PerCandidateState(DesignState):
+    """The previous candidate searches of the trace indices: no update cache; an exchange removes,
+    scores every candidate by its own Sherman-Morrison-Woodbury update
+    ``trace(W M^-1) - trace(S^-1 H W H^T)`` (``H = G M^-1``, ``S = I + H G^T``, O(p^2) each) and
+    puts back."""
+
+    def update_cache(self) -> None:
+        return None
+
+    def best_add(self, exclude: np.ndarray | None = None) -> tuple[int, float]:
+        if self.spec.name not in ix.TRACE_INDICES or not is_regular(self.M):
+            return super().best_add(exclude)
+        allowed = ~self.in_set
+        if exclude is not None:
+            allowed[exclude] = False
+        cand = np.flatnonzero(allowed)
+        Minv = np.linalg.inv(self.M)
+        Minv = 0.5 * (Minv + Minv.T)
+        W = self.spec.weight_matrix(self.p)
+        base = float(np.sum(Minv * W))
+        MWM = Minv @ W @ Minv
+        eye = np.eye(self.G.shape[1])
+        out = np.empty(cand.size)
+        for s in range(0, cand.size, 8192):
+            Gc = self.G[cand[s : s + 8192]]
+            S = eye + np.einsum("bmi,bni->bmn", Gc @ Minv, Gc)
+            T = np.einsum("bmi,ij,bnj->bmn", Gc, MWM, Gc)
+            out[s : s + Gc.shape[0]] = -(base - np.einsum("bmn,bnm->b", np.linalg.inv(S), T))
+        self.evaluations += cand.size
+        i = int(np.argmax(out))
+        return int(cand[i]), float(out[i])
+
+
+def counting(cls: type[DesignState]) -> tuple[type[DesignState], dict[str, int]]:
+    """A subclass of ``cls`` counting its exhaustive searches (additions, and exchanges including
+    the addition an exchange may do inside)."""
+    calls = {"add": 0, "exchange": 0, "depth": 0}
+
+    class Counting(cls):
+        def best_add(self, exclude: np.ndarray | None = None) -> tuple[int, float]:
+            calls["add"] += calls["depth"] == 0
+            return super().best_add(exclude)
+
+        def best_exchange(self, k: int) -> tuple[int, float]:
+            calls["exchange"] += 1
+            calls["depth"] += 1
+            try:
+                return super().best_exchange(k)
+            finally:
+                calls["depth"] -= 1
+
+    return Counting, calls
+
+
+def timed_selection(cls: type[DesignState], G: np.ndarray, spec: ix.IndexSpec, n: int,
+                    rng: np.random.Generator, n_initial: int | None = None
+                    ) -> tuple[ds.SelectionResult, float, dict[str, int]]:
+    """Remove-and-replace with the state class ``cls``: result, seconds, search counts."""
+    state_cls, calls = counting(cls)
+    ds.DesignState = state_cls
+    try:
+        t0 = time.perf_counter()
+        res = ds.remove_and_replace(G, spec, n, rng, n_initial=n_initial)
+        return res, time.perf_counter() - t0, calls
+    finally:
+        ds.DesignState = DesignState
+
+
+def per_search_s(cls: type[DesignState], G: np.ndarray, spec: ix.IndexSpec, selected: np.ndarray,
+                 n_removals: int = 10) -> float:
+    """Seconds of one exchange search (``n_removals`` removals at the design ``selected``)."""
+    st_ = cls(G, spec, None, selected)
+    st_.best_exchange(int(selected[0]))        # build the cache (amortised over a pass)
+    t0 = time.perf_counter()
+    for k in selected[:n_removals]:
+        st_.best_exchange(int(k))
+    return (time.perf_counter() - t0) / n_removals
+
+
+def bench_default_selection(G: np.ndarray, spec: ix.IndexSpec, n: int, baseline: str) -> None:
+    """Section 3 of the module docstring."""
+    N, m, p = G.shape
+    new, t_new, calls = timed_selection(DesignState, G, spec, n, np.random.default_rng(0))
+    searches = calls["add"] + calls["exchange"]
+    print(f"remove-and-replace {spec.name}, {n} of {N} candidates (m = {m}, p = {p}): {t_new:.1f} s, "
+          f"{calls['exchange']} exchange + {calls['add']} addition searches, {new.evaluations} candidate "
+          f"evaluations (target <= 30 s: ratio {t_new / 30:.2f})")
+    c_new = per_search_s(DesignState, G, spec, new.selected)
+    c_old = per_search_s(PerCandidateState, G, spec, new.selected)
+    print(f"  one exchange search at the final design: low-rank updates {1e3 * c_new:.1f} ms, per-candidate "
+          f"path {1e3 * c_old:.1f} ms -> speed-up {c_old / c_new:.1f}x")
+    if baseline == "full":
+        old, t_old, _ = timed_selection(PerCandidateState, G, spec, n, np.random.default_rng(0))
+        same = sorted(old.selected.tolist()) == sorted(new.selected.tolist())
+        print(f"  per-candidate path, whole selection: {t_old:.1f} s -> speed-up {t_old / t_new:.1f}x; "
+              f"same design: {same} (index {new.index_value:.6g} vs {old.index_value:.6g})")
+    else:
+        print(f"  per-candidate path, estimated ({searches} searches x {1e3 * c_old:.1f} ms): {searches * c_old:.0f} s "
+              f"-> speed-up {searches * c_old / t_new:.1f}x")
 
 
 def naive_cost_per_candidate(G: np.ndarray, n: int, rng: np.random.Generator, repeat: int = 300) -> float:
@@ -42,39 +152,32 @@ def naive_cost_per_candidate(G: np.ndarray, n: int, rng: np.random.Generator, re
     return (time.perf_counter() - t0) / repeat
 
 
-def main(robot_name: str = "rx130l", grid: int = 13, n_gradient: int = 60) -> None:
+def main(robot_name: str = "rx130l", grid: int = 13, n_gradient: int = 60, baseline: str = "full") -> None:
     robot = RobotModel.load(robot_name)
     rng = np.random.default_rng(0)
-    mm = em.MeasurementModel(robot)
     with single_thread_blas():
         cfg = st.Config(grid_per_axis=grid)
-        _, basis = st.identify_parameter_set(robot, mm, cfg, rng)
+        mm = measurement_model(robot, cfg)
+        _, full_basis = st.identify_parameter_set(robot, mm, cfg, rng)
+        basis = design_basis(mm, full_basis)
+        mm_geo = em.MeasurementModel(robot, mm.sym) if mm.compliance else mm
         t0 = time.perf_counter()
         cs = st.build_candidates(robot, cfg, basis, rng)
         t_cand = time.perf_counter() - t0
         print(f"{robot_name}: grid {grid}^6 = {cs.counts['total']} configurations -> {len(cs)} feasible "
               f"candidates; filter + Jacobians {t_cand:.1f} s "
               f"(target <= 120 s: ratio {t_cand / 120:.2f} of the budget)")
-        # instrument best_add to count candidate searches
-        calls = {"n": 0}
-        orig = ds._State.best_add
-
-        def counting(self, exclude=None):
-            calls["n"] += 1
-            return orig(self, exclude)
-
-        ds._State.best_add = counting
-        t0 = time.perf_counter()
-        rr = ds.remove_and_replace(cs.G, ix.IndexSpec("O3"), 32, rng, n_initial=32)
-        t_rr = time.perf_counter() - t0
-        ds._State.best_add = orig
+        rr, t_rr, calls = timed_selection(DesignState, cs.G, ix.IndexSpec("O3"), 32, rng, n_initial=32)
+        n_searches = calls["add"] + calls["exchange"]
         t_naive = naive_cost_per_candidate(cs.G, 32, rng)
-        naive_total = t_naive * len(cs) * calls["n"]
-        print(f"remove-and-replace O3, 32 configurations: {t_rr:.1f} s, {calls['n']} exhaustive searches over "
+        naive_total = t_naive * len(cs) * n_searches
+        print(f"remove-and-replace O3, 32 configurations: {t_rr:.1f} s, {n_searches} exhaustive searches over "
               f"{len(cs)} candidates, {rr.evaluations} exact index evaluations")
         print(f"  baseline (one full J^T J recompute per candidate): {1e6 * t_naive:.0f} us per candidate, "
               f"estimated {naive_total:.0f} s -> speed-up of rank-one updates + bound-and-prune: "
               f"{naive_total / t_rr:.0f}x; remove-and-replace / 120 s budget: {t_rr / 120:.2f}")
+        spec_v, _ = st.index_spec(cfg, robot, mm, basis, rng)
+        bench_default_selection(cs.G, spec_v, cfg.n_configurations, baseline)
         # gradient design (V criterion over the ISO 9283 cube), three seeds of the candidate set
         for seed in (0, 1, 2):
             grng = np.random.default_rng(seed)
@@ -83,7 +186,7 @@ def main(robot_name: str = "rx130l", grid: int = 13, n_gradient: int = 60) -> No
             spec, _ = st.index_spec(cfg_r, robot, mm, basis, grng)
             start = ds.remove_and_replace(cs_r.G, spec, n_gradient, grng, n_initial=n_gradient)
             t0 = time.perf_counter()
-            res = gradient_design(robot, mm, basis, cs_r.Q[start.selected], spec, GradientDesignConfig())
+            res = gradient_design(robot, mm_geo, basis, cs_r.Q[start.selected], spec, GradientDesignConfig())
             t_grad = time.perf_counter() - t0
             G = cs_r.G[start.selected]
             t0 = time.perf_counter()
@@ -103,4 +206,4 @@ def main(robot_name: str = "rx130l", grid: int = 13, n_gradient: int = 60) -> No
 if __name__ == "__main__":
     args = sys.argv[1:]
     main(args[0] if args else "rx130l", int(args[1]) if len(args) > 1 else 13,
-         int(args[2]) if len(args) > 2 else 60)
+         int(args[2]) if len(args) > 2 else 60, args[3] if len(args) > 3 else "full")

@@ -7,6 +7,7 @@ import pytest
 
 from pipeline.calibration import design as ds
 from pipeline.calibration import indices as ix
+from pipeline.calibration.design_state import DesignState
 from pipeline.errors import InfeasibleError
 
 
@@ -42,7 +43,7 @@ def test_fast_best_add_equals_brute_force(name):
     G, P = _cands(400)
     Jw = np.random.default_rng(5).normal(size=(3, G.shape[2]))
     spec = ix.IndexSpec(name, working_jacobian=Jw)
-    st = ds._State(G, spec, P, np.arange(8))
+    st = DesignState(G, spec, P, np.arange(8))
     j, s = st.best_add()
     brute = [ix.score(spec, st.M + G[c].T @ G[c], st.n + 1, np.vstack([P[:8], P[c]])) for c in range(8, 400)]
     assert j == 8 + int(np.argmax(brute))
@@ -93,7 +94,7 @@ def test_weighted_a_criterion_fast_path_matches_brute_force():
     G, P = _cands(300)
     w = (np.arange(G.shape[2]) % 2).astype(float)
     spec = ix.IndexSpec("A", parameter_weights=w)
-    st = ds._State(G, spec, P, np.arange(8))
+    st = DesignState(G, spec, P, np.arange(8))
     j, s = st.best_add()
     brute = [ix.score(spec, st.M + G[c].T @ G[c], 9) for c in range(8, 300)]
     assert j == 8 + int(np.argmax(brute)) and s == pytest.approx(max(brute), rel=1e-8)

@@ -12,6 +12,7 @@ from pipeline.calibration import error_model as em
 from pipeline.calibration import indices as ix
 from pipeline.calibration import stage as st
 from pipeline.calibration import task_space as ts
+from pipeline.calibration.design_state import DesignState
 from pipeline.errors import ConfigError, DataFileError
 from pipeline.robot.defaults import iso_cube
 from pipeline.robot.model import RobotModel
@@ -68,7 +69,7 @@ def test_v_is_the_mean_predicted_tcp_variance(robot, setup):
 def test_rank_one_search_on_v_matches_brute_force(setup):
     mm, basis, cs, _, Qw = setup
     spec = ts.task_space_spec(mm, Qw, basis)
-    state = ds._State(cs.G, spec, None, np.arange(20))
+    state = DesignState(cs.G, spec, None, np.arange(20))
     j, score = state.best_add()
     brute = [ix.score(spec, state.M + cs.G[c].T @ cs.G[c], 21) if c >= 20 else -np.inf for c in range(len(cs))]
     assert j == int(np.argmax(brute)) and score == pytest.approx(max(brute), rel=1e-8)
