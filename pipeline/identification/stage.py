@@ -58,6 +58,7 @@ from pipeline.identification.tx40 import (
     run_tx40,
 )
 from pipeline.quality import QualityGates
+from pipeline.robot.defaults import iso_or_derived
 from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import set_dynamic_parameters
 from pipeline.robot.symbolic import SymbolicRobot
@@ -241,7 +242,10 @@ def _run(ctx: StageContext) -> StageResult:
     else:
         assert limits is not None
         control = val_mod.run_control_config(ctx.run)
-        iso = control.iso
+        try:
+            iso = iso_or_derived(robot, control.iso)     # the cube of the report (configured or derived)
+        except InfeasibleError:
+            iso = control.iso                            # no cube found: the fallback's note says why
         vt = val_mod.validation_trajectory(
             robot, cfg.validation_sample_time_s,
             lambda: _fourier_validation(robot, limits, ex, cfg.validation_sample_time_s, ctx.rng),
@@ -420,7 +424,8 @@ def _validation_markdown(cfg: Config, vt: val_mod.ValidationTrajectory, iso: Any
            "Set `control.iso.centre_m` and `control.iso.edge_m` (or the robot's `run_defaults`) to a cube inside "
            "its workspace")
     return ("**Warning: validation fell back to a random Fourier trajectory.** The EN ISO 9283 path "
-            f"(`control.iso.centre_m` = {list(iso.centre_m)} m, `control.iso.edge_m` = {iso.edge_m} m) "
+            f"(`control.iso.centre_m` = {None if iso.centre_m is None else list(iso.centre_m)} m, "
+            f"`control.iso.edge_m` = {iso.edge_m} m) "
             f"cannot be followed by {robot.name}: {why}. {fix}.\n\n")
 
 
