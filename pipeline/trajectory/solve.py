@@ -172,12 +172,13 @@ class PTPPlan:
     weights: np.ndarray
     result: PtpResult
     ruckig: RuckigResult
-    at_ruckig_duration: PtpResult
+    at_ruckig_duration: PtpResult | None          # None: no plan of the transcription at ruckig's duration
     pareto: list[PtpResult]
     trajectories: dict[str, JointTrajectory] = field(default_factory=dict)
     checks: dict[str, TorqueCheck] = field(default_factory=dict)
     compile_time_s: float = 0.0
     build_time_s: float = 0.0
+    at_ruckig_duration_note: str = ""             # why at_ruckig_duration is None
 
     def summary(self) -> dict:
         """Headline figures. Every energy here (``ptp_energy``, ``ptp_energy_at_ruckig_duration``,
@@ -189,8 +190,9 @@ class PTPPlan:
         ``duration_s``, ``energy``, ``dominated`` (another point of the sweep is at least as short
         and as economical: a poorer local optimum, kept after a cold-start re-solve did not beat it)
         and ``cold_restart`` (the outcome of that re-solve, None when the point was not dominated)."""
-        e_nlp = self.checks["ptp_energy_at_ruckig_duration"].energy
         e_rk = self.checks["ptp_ruckig"].energy
+        fixed = self.checks.get("ptp_energy_at_ruckig_duration")
+        e_nlp = None if fixed is None else fixed.energy
         return {
             "ptp_duration_s": self.result.duration_s,
             "ptp_ruckig_duration_s": self.ruckig.duration_s,
@@ -201,11 +203,12 @@ class PTPPlan:
             "ptp_energy": self.checks["ptp"].energy,
             "ptp_energy_at_ruckig_duration": e_nlp,
             "ptp_ruckig_energy": e_rk,
-            "ptp_energy_at_ruckig_duration_ratio": e_nlp / e_rk,
-            "ptp_energy_at_ruckig_duration_fine_violation": self.checks["ptp_energy_at_ruckig_duration"].violation,
+            "ptp_energy_at_ruckig_duration_ratio": None if e_nlp is None else e_nlp / e_rk,
+            "ptp_energy_at_ruckig_duration_fine_violation": None if fixed is None else fixed.violation,
+            "ptp_energy_at_ruckig_duration_note": self.at_ruckig_duration_note,
             "ptp_solve_time_s": self.result.solve_time_s,
             "ptp_solver_status": self.result.info.get("solver_status"),
-            "ptp_energy_at_ruckig_duration_solver_status": self.at_ruckig_duration.info.get("solver_status"),
+            "ptp_energy_at_ruckig_duration_solver_status": self.at_ruckig_duration_status(),
             "ptp_fine_max_acceleration_ratio": self.checks["ptp"].max_acceleration_ratio,
             "ptp_ruckig_fine_max_acceleration_ratio": self.checks["ptp_ruckig"].max_acceleration_ratio,
             "ptp_acceleration_limits": bool(self.result.info.get("acceleration_limits")),
@@ -219,6 +222,13 @@ class PTPPlan:
                             "dominated": bool(r.info.get("dominated", False)),
                             "cold_restart": r.info.get("cold_restart")} for r in self.pareto],
         }
+
+
+    def at_ruckig_duration_status(self) -> str | None:
+        """IPOPT status of the energy plan at ruckig's duration, or ``not_attempted`` when there is none."""
+        if self.at_ruckig_duration is None:
+            return "not_attempted"
+        return self.at_ruckig_duration.info.get("solver_status")
 
 
 def ptp_problem(pm: PlanningModel, robot: Any, cfg: TrajectoryConfig) -> PtpProblem:
@@ -345,8 +355,16 @@ def plan_ptp(pm: PlanningModel, problem: PtpProblem, q0: np.ndarray, q1: np.ndar
                                 joint_rounds=cfg.ruckig_joint_rounds,
                                 refine_evaluations=cfg.ruckig_refine_evaluations,
                                 acceleration_limits=cfg.acceleration_limits)
-    fixed = solve_ptp_verified(pm, problem, q0, q1, cfg, 0.0, 1.0, w, duration_s=rk.duration_s,
-                               coulomb_widths_rad_s=tuple(cfg.ptp_fixed_coulomb_widths_rad_s))
+    fixed: PtpResult | None = None
+    note = ""
+    if rk.duration_s < res.duration_s:
+        # ruckig's jerk-limited profile of a kinematically limited move switches its accelerations
+        # between the transcription's nodes: no plan of this transcription exists at its duration
+        note = (f"ruckig's plan ({rk.duration_s:.4f} s) is shorter than this transcription's minimum time "
+                f"({res.duration_s:.4f} s, {problem.N} intervals): no energy plan at ruckig's duration")
+    else:
+        fixed = solve_ptp_verified(pm, problem, q0, q1, cfg, 0.0, 1.0, w, duration_s=rk.duration_s,
+                                   coulomb_widths_rad_s=tuple(cfg.ptp_fixed_coulomb_widths_rad_s))
     sweep: list[PtpResult] = []
     if pareto:
         # continuation from the main solution outwards (k1 = 1), same verification as the main one
@@ -370,8 +388,9 @@ def plan_ptp(pm: PlanningModel, problem: PtpProblem, q0: np.ndarray, q1: np.ndar
             sweep, lambda r: check_trajectory(pm, r.sample(cfg.fine_dt_s), energy_weights=w).energy,
             lambda r: solve_ptp_verified(pm, problem, q0, q1, cfg, r.k1, r.k2, w, torque_scale=scale0),
             cold_started=(res,))
-    trajs = {"ptp": res.sample(cfg.fine_dt_s, "ptp"), "ptp_ruckig": rk.trajectory,
-             "ptp_energy_at_ruckig_duration": fixed.sample(cfg.fine_dt_s, "ptp_energy_at_ruckig_duration")}
+    trajs = {"ptp": res.sample(cfg.fine_dt_s, "ptp"), "ptp_ruckig": rk.trajectory}
+    if fixed is not None:
+        trajs["ptp_energy_at_ruckig_duration"] = fixed.sample(cfg.fine_dt_s, "ptp_energy_at_ruckig_duration")
     checks = {k: check_trajectory(pm, v, energy_weights=w) for k, v in trajs.items()}
     return PTPPlan(np.asarray(q0, float), np.asarray(q1, float), w, res, rk, fixed, sweep, trajs, checks,
-                   problem.compile_time_s, problem.build_time_s)
+                   problem.compile_time_s, problem.build_time_s, note)

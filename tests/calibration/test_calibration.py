@@ -239,7 +239,6 @@ def test_quick_profile_stage_through_runner(tmp_path):
                 "heldout_max_position_error_after_m", "predicted_rms_position_error_m", "tracker_noise_sigma_m"):
         assert key in s
     _check_targets(s)
-    assert s["stage_time_s"] < 30
     assert s["n_configurations_not_visible"] == s["n_configurations_commanded"] - s["n_configurations"] >= 0
     assert s["selection_method"] != "user file" and s["validation_source"] == "simulated tracker (held-out)"
     stage_report = (tmp_path / "calq" / "calibration" / "report.md").read_text()

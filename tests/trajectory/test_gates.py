@@ -25,7 +25,8 @@ def _plans(cp_check: TorqueCheck | None = None, ptp_status: str = "Solve_Succeed
                          optimal=SimpleNamespace(info={"method": "reachability"}))
     ptp = SimpleNamespace(checks={"ptp": _check(), "ptp_energy_at_ruckig_duration": _check()},
                           result=SimpleNamespace(info={"solver_status": ptp_status}),
-                          at_ruckig_duration=SimpleNamespace(info=ok))
+                          at_ruckig_duration=SimpleNamespace(info=ok),
+                          at_ruckig_duration_status=lambda: ok["solver_status"])
     return cp, ptp
 
 

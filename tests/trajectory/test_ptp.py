@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from pipeline.errors import InfeasibleError, PipelineError, SolverError
+from pipeline.trajectory import solve as solve_mod
 from pipeline.trajectory.baselines import ruckig_torque_feasible
 from pipeline.trajectory.ptp import energy_weights
 from pipeline.trajectory.solve import plan_ptp
@@ -217,3 +218,27 @@ def test_ruckig_refinement_is_feasible_and_not_slower(pm, big_move):
     assert refined.evaluations > plain.evaluations
     assert np.diff(refined.trajectory.t_s).max() <= 5e-4 + 1e-12
     assert check_trajectory(pm, refined.trajectory).max_torque_ratio <= 1.0 + 1e-9
+
+
+def test_no_energy_plan_when_ruckig_is_shorter_than_the_transcription(pm, ptp_problem, big_move,
+                                                                      quick_traj_config, monkeypatch):
+    """A kinematically limited move (the Panda's derived move): ruckig's jerk-limited profile switches
+    between the transcription's nodes and is shorter than any of its plans; the energy comparison at
+    ruckig's duration is then reported as absent with the reason, not as a failed solve. Here a
+    baseline time-compressed to 0.8 of ruckig's stands for it."""
+    real = solve_mod.ruckig_torque_feasible
+
+    def faster(*args, **kwargs):
+        rk = real(*args, **kwargs)
+        tr = rk.trajectory
+        quick = dataclasses.replace(tr, t_s=0.8 * tr.t_s, v=tr.v / 0.8, a=tr.a / 0.64)
+        return dataclasses.replace(rk, trajectory=quick, duration_s=0.8 * rk.duration_s)
+
+    monkeypatch.setattr(solve_mod, "ruckig_torque_feasible", faster)
+    cfg = dataclasses.replace(quick_traj_config, ptp_pareto_k2=[0.01])
+    plan = plan_ptp(pm, ptp_problem, *big_move, cfg)
+    assert plan.ruckig.duration_s < plan.result.duration_s
+    assert plan.at_ruckig_duration is None and "ptp_energy_at_ruckig_duration" not in plan.trajectories
+    s = plan.summary()
+    assert s["ptp_energy_at_ruckig_duration_ratio"] is None and "shorter" in s["ptp_energy_at_ruckig_duration_note"]
+    assert s["ptp_energy_at_ruckig_duration_solver_status"] == "not_attempted"
