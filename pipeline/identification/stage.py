@@ -68,7 +68,8 @@ NAME = "identification"
 DEPENDS: tuple[str, ...] = ("model", "calibration")
 #: settings of other sections this stage reads (the runner adds them to its inputs hash): the
 #: validation path is the run's EN ISO 9283 path (robot ``run_defaults`` included)
-CONFIG_READS: tuple[str, ...] = ("control.iso", "control.ik_seeds_deg", "control.ik_tolerance_m")
+CONFIG_READS: tuple[str, ...] = ("control.iso", "control.ik_seeds_deg", "control.ik_tolerance_m",
+                                  "control.path_frame")
 TX40_ROBOT_NAME = "staubli_tx40"
 
 

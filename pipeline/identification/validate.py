@@ -18,9 +18,13 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.control.config import ControlConfig
+from pipeline.control.iso9283 import iso9283_path, tool_rotation
+from pipeline.control.reference import cartesian_reference
 from pipeline.errors import PipelineError
 from pipeline.identification.regressor import BaseParameters
 from pipeline.robot.defaults import ik_seeds_or_derived_rad, iso_or_derived
+from pipeline.robot.paths import start_configuration
 
 
 @dataclass
@@ -37,8 +41,6 @@ def run_control_config(run: Any) -> Any:
     """The run's validated ``control`` section (robot ``run_defaults`` merged in; read through the
     stage's ``CONFIG_READS``), or the built-in ``ControlConfig()`` when the run has none (a plain
     dict: module missing, or a bare RunConfig)."""
-    from pipeline.control.config import ControlConfig
-
     sections = getattr(run, "sections", None) if run is not None else None
     control = sections.get("control") if isinstance(sections, dict) else None
     return control if isinstance(control, ControlConfig) else ControlConfig()
@@ -66,23 +68,20 @@ def ik_seeds_rad(control: Any, robot: Any) -> np.ndarray:
 
 
 def iso_validation_trajectory(robot: Any, sample_time_s: float, control: Any = None) -> ValidationTrajectory:
-    """The ISO 9283 path of the run's ``control.iso`` as joint reference of the TCP, started by IK
+    """The ISO 9283 path of the run's ``control.iso`` as joint reference of the control stage's path
+    frame (``control.path_frame``: the tracker's reflector or the TCP), started by IK
     from the run's ``control.ik_seeds_deg`` with its ``control.ik_tolerance_m`` (``control`` from
     :func:`run_control_config`; None: the built-in control defaults)."""
-    from pipeline.control.config import ControlConfig
-    from pipeline.control.iso9283 import iso9283_path, tool_rotation
-    from pipeline.control.reference import cartesian_reference
-    from pipeline.robot.paths import start_configuration
-
     cfg = ControlConfig() if control is None else control
     iso = iso_or_derived(robot, cfg.iso)
     rotation = tool_rotation(iso.plane, iso.tool_down)
     path = iso9283_path(robot, iso.edge_m, iso.centre_m, iso.plane, rotation, iso.corner_fraction,
                         iso.large_circle_fraction, iso.small_circle_fraction, tuple(iso.segments))
     seeds = ik_seeds_rad(cfg, robot)
-    q_start = start_configuration(robot, path.poses([0.0])[0], seeds, robot.frame_tcp)
+    frame = robot.frame_reflector if cfg.path_frame == "reflector" else robot.frame_tcp   # as the control stage
+    q_start = start_configuration(robot, path.poses([0.0])[0], seeds, frame)
     ref = cartesian_reference(robot, path, sample_time_s, iso.speed_m_s, iso.acceleration_m_s2,
-                              iso.jerk_m_s3, q_start, robot.frame_tcp, cfg.ik_tolerance_m)
+                              iso.jerk_m_s3, q_start, frame, cfg.ik_tolerance_m)
     return ValidationTrajectory(ref.t_s, ref.q_d, ref.v_d, ref.a_d, "iso9283",
                                 f"edge {iso.edge_m} m, centre {list(iso.centre_m)} m, {iso.speed_m_s} m/s")
 

@@ -10,7 +10,6 @@ from pipeline.config import load_config, resolve_robot_dir
 from pipeline.control.config import ControlConfig
 from pipeline.identification import stage
 from pipeline.identification import validate as val_mod
-from pipeline.robot import paths
 from pipeline.robot.model import RobotModel
 from pipeline.runner import RunConfig, plan_stages, stage_inputs_hashes
 
@@ -82,13 +81,13 @@ def test_missing_control_section_uses_the_built_in_path():
 def test_ik_seeds_come_from_the_run(tx40, monkeypatch):
     """The ISO path starts from the run's control.ik_seeds_deg, not the built-in ControlConfig()."""
     seen = []
-    original = paths.start_configuration
+    original = val_mod.start_configuration
 
     def spy(robot, pose, seeds, *args, **kwargs):
         seen.append(np.array(seeds))
         return original(robot, pose, seeds, *args, **kwargs)
 
-    monkeypatch.setattr(paths, "start_configuration", spy)
+    monkeypatch.setattr(val_mod, "start_configuration", spy)
     run = load_config(values={"robot": "staubli_tx40", "control.ik_seeds_deg": [[5, 10, 90, 0, 60, 0]]})
     control = val_mod.run_control_config(run)
     assert control is run.control
