@@ -64,13 +64,18 @@ PAPER = {"grid": 13, "visible": 4000, "n": 32, "factor": 18.5,
          "table2": {"x": (7.779, 0.272, 6.171, 0.271), "y": (19.026, 0.310, 4.267, 0.303),
                     "z": (12.614, 0.414, 1.402, 0.376), "alpha": (1.140, 0.128, 0.272, 0.109),
                     "beta": (1.817, 0.191, 0.335, 0.182), "gamma": (1.160, 0.131, 0.514, 0.116)}}
-BASELINES = ("grid_order", "joint_line", "joint_line_visible", "joint_sweeps", "cartesian_raster", "random")
+BASELINES = ("grid_order", "joint_line", "joint_line_visible", "joint_sweeps", "joint_sweeps_visible",
+             "cartesian_raster", "cartesian_raster_tilted", "random")
+#: tilts of the probe cycled over the raster points (deviation ``cartesian_raster_tilted``)
+RASTER_TILT_RAD = np.radians(20.0)
 READINGS = {
     "grid_order": "every (N/n)-th visible grid configuration in grid order (axis 1 slowest)",
     "joint_line": "n equally spaced poses on the joint-space diagonal lower->upper (visible ones measured)",
     "joint_line_visible": "n equally spaced among the visible points of the densely sampled joint-space diagonal",
     "joint_sweeps": "each joint swept through its range in turn, others at a visible home pose",
+    "joint_sweeps_visible": "each joint swept in turn, n/6 poses equally spaced among the visible ones of its sweep",
     "cartesian_raster": "4x4x2 raster of the visible workspace box, line by line, probe facing the cameras",
+    "cartesian_raster_tilted": "the same raster, the probe tilted by 20 deg about flange x/y in a 4-cycle (deviation)",
     "random": "a random subset of the visible grid (not a scan; reference)",
 }
 
@@ -109,8 +114,13 @@ def baseline_configurations(robot: RobotModel, Qc: np.ndarray, n: int, visible, 
     towards = spec.transform_camera_to_base.translation - centre
     R = sd.facing_rotation(spec.diode_axis, towards)
     raster, _ = sd.cartesian_raster(robot, lo, hi, (4, 4, 2), R, home)
+    t = RASTER_TILT_RAD
+    tilted, _ = sd.cartesian_raster(robot, lo, hi, (4, 4, 2), R, home,
+                                    np.array([[t, 0, 0], [0, t, 0], [-t, 0, 0], [0, -t, 0]]))
     return {"joint_line": sd.joint_line(robot, n), "joint_line_visible": sd.joint_line_visible(robot, n, visible),
-            "joint_sweeps": sd.joint_sweeps(robot, home, n), "cartesian_raster": raster}
+            "joint_sweeps": sd.joint_sweeps(robot, home, n),
+            "joint_sweeps_visible": sd.joint_sweeps_visible(robot, home, n, visible),
+            "cartesian_raster": raster, "cartesian_raster_tilted": tilted}
 
 
 def _seed(args: tuple) -> dict:
@@ -254,8 +264,8 @@ def study_004(argv: list[str]) -> int:
     ap.add_argument("--heldout", type=int, default=300)
     ap.add_argument("--criteria", nargs="+", default=["O3", "D", "A"], help="R&R criteria (first: the paper's)")
     ap.add_argument("--truth", nargs="+", default=["default", "ideal"], choices=["default", "ideal"])
-    ap.add_argument("--margin-angle-deg", type=float, default=3.0)
-    ap.add_argument("--margin-occlusion-m", type=float, default=0.02)
+    ap.add_argument("--margin-angle-deg", type=float, default=1.0)
+    ap.add_argument("--margin-occlusion-m", type=float, default=0.01)
     ap.add_argument("--jobs", type=int, default=1)
     a = ap.parse_args(argv)
     t0 = time.perf_counter()

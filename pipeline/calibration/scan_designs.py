@@ -13,9 +13,11 @@ see is never measured, so it adds nothing to the information matrix):
   points;
 - :func:`joint_sweeps`: each joint in turn swept through its range (midpoints of equal intervals),
   the others at a home pose, ``n / nq`` poses per joint;
+  (:func:`joint_sweeps_visible`: equally spaced among the visible poses of each sweep);
 - :func:`cartesian_raster`: a raster of a box of the workspace traversed line by line (x fastest,
   direction reversed on every other line), the probe held at one orientation facing the cameras,
-  joint angles by inverse kinematics seeded from the previous raster point.
+  joint angles by inverse kinematics seeded from the previous raster point (optionally tilted by a
+  cycle of small rotations, a deviation that makes the orientation parameters observable).
 """
 
 from __future__ import annotations
@@ -59,6 +61,21 @@ def joint_sweeps(robot: RobotModel, home: np.ndarray, n: int) -> np.ndarray:
     return np.array(rows[:n])
 
 
+def joint_sweeps_visible(robot: RobotModel, home: np.ndarray, n: int, visible, samples: int = 400) -> np.ndarray:
+    """Each joint swept in turn from ``home``: ``ceil(n / nq)`` poses equally spaced among the visible
+    points of its densely sampled range (first ``n``)."""
+    nq = robot.nq
+    per = -(-n // nq)
+    lo, hi = robot.limits.lower_rad, robot.limits.upper_rad
+    rows = []
+    for j in range(nq):
+        Q = np.repeat(np.asarray(home, float)[None], samples, axis=0)
+        Q[:, j] = lo[j] + _midpoints(samples) * (hi[j] - lo[j])
+        Q = Q[visible(Q)]
+        rows += list(Q if len(Q) <= per else Q[np.linspace(0, len(Q) - 1, per).round().astype(int)])
+    return np.array(rows[:n]) if rows else np.zeros((0, nq))
+
+
 def raster_points(box_lo: np.ndarray, box_hi: np.ndarray, shape: tuple[int, int, int]) -> np.ndarray:
     """Box points at the midpoints of ``shape`` cells, line by line (boustrophedon: x fastest,
     reversed on every other line, y reversed on every other layer)."""
@@ -84,14 +101,17 @@ def facing_rotation(axis_flange: np.ndarray, towards: np.ndarray) -> np.ndarray:
 
 
 def cartesian_raster(robot: RobotModel, box_lo: np.ndarray, box_hi: np.ndarray, shape: tuple[int, int, int],
-                     rotation: np.ndarray, seed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Raster of the box (``raster_points``) with the flange at ``rotation``; returns the joint
-    configurations of the points IK reached (scan order) and a mask of which points it reached."""
+                     rotation: np.ndarray, seed: np.ndarray, tilts_rad: np.ndarray | None = None
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Raster of the box (``raster_points``) with the flange at ``rotation`` (times ``exp(tilts_rad[k])``
+    cycled over the points, when given); returns the joint configurations of the points IK reached
+    (scan order) and a mask of which points it reached."""
     pts = raster_points(box_lo, box_hi, shape)
     q_prev = np.asarray(seed, float)
     out, ok = [], np.zeros(len(pts), bool)
     for k, p in enumerate(pts):
-        target = pin.SE3(rotation, p)
+        R = rotation if tilts_rad is None else rotation @ pin.exp3(tilts_rad[k % len(tilts_rad)])
+        target = pin.SE3(R, p)
         for q0 in (q_prev, np.asarray(seed, float)):
             res = robot.ik(target, q0, frame=robot.frame_flange)
             if res.success and robot.within_limits(res.q):
