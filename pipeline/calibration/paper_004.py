@@ -31,8 +31,9 @@ What this study does, per seed of the hidden robot:
    angles, maximum and half peak-to-peak, before/after);
 5. experiments on why the O3 design calibrates no better than a baseline: the covariance-predicted
    error of each design next to the measured one, remove-and-replace on other criteria
-   (``--criteria D A``), and the same designs on the ideal (rigid, no gear error) hidden robot
-   (``--truth ideal``).
+   (``--criteria D A``), the same designs on the ideal (rigid, no gear error) hidden robot
+   (``--truth ideal``), and the laser-tracker set-up of the study's earlier version
+   (:mod:`pipeline.calibration.paper_004_laser`, ``--laser-grid``).
 
 Run time (``python -m pipeline study calib-004 --jobs 1``, defaults: 3 seeds, 13^6 grid, 300
 held-out poses, criteria O3 D A, both truths): measured on the shared 2-core machine with other jobs,
@@ -51,6 +52,7 @@ from pipeline.calibration import design as ds
 from pipeline.calibration import error_model as em
 from pipeline.calibration import indices as ix
 from pipeline.calibration import optical as op
+from pipeline.calibration import paper_004_laser as lz
 from pipeline.calibration import scan_designs as sd
 from pipeline.calibration import stage as st
 from pipeline.calibration.studies import _parallel, _save
@@ -266,6 +268,8 @@ def study_004(argv: list[str]) -> int:
     ap.add_argument("--truth", nargs="+", default=["default", "ideal"], choices=["default", "ideal"])
     ap.add_argument("--margin-angle-deg", type=float, default=1.0)
     ap.add_argument("--margin-occlusion-m", type=float, default=0.01)
+    ap.add_argument("--laser-grid", type=int, default=9,
+                    help="grid per axis of the laser-tracker experiment (0: skip it)")
     ap.add_argument("--jobs", type=int, default=1)
     a = ap.parse_args(argv)
     t0 = time.perf_counter()
@@ -288,9 +292,15 @@ def study_004(argv: list[str]) -> int:
                    for r in rows] for b in BASELINES}
     print("\nfactor B_R&R / B_baseline per reading (median over seeds and truths; paper 18.5): "
           + ", ".join(f"{b} {np.median(v):.1f}" for b, v in factors.items()))
+    laser: dict = {}
+    if a.laser_grid:
+        Ql = lz.laser_grid(a.robot, a.laser_grid)
+        laser_rows = _parallel(lz.laser_seed, [(a.robot, s, t, Ql, a.n, a.heldout) for t in a.truth for s in a.seeds],
+                               a.jobs)
+        laser = {"grid": a.laser_grid, "rows": laser_rows, "summary": lz.print_laser(laser_rows)}
     elapsed = time.perf_counter() - t0
     print(f"study time {elapsed:.0f} s")
     _save("calib-004", {"args": vars(a), "grid": {k: v for k, v in grid.items() if k not in ("Q", "flat")},
                         "rows": rows, "summary": summary, "factors_B": factors, "paper": PAPER,
-                        "time_s": elapsed})
+                        "laser_experiment": laser, "time_s": elapsed})
     return 0
