@@ -30,7 +30,7 @@ from scipy.spatial.transform import Rotation
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import measure as ms
 from pipeline.calibration.error_model import MeasurementModel
-from pipeline.calibration.estimate import Estimate, estimate
+from pipeline.calibration.estimate import Estimate, estimate, register_points
 from pipeline.robot import optical_tracker as ot
 from pipeline.robot.model import RobotModel
 from pipeline.robot.spec import OpticalTrackerSpec
@@ -116,6 +116,26 @@ def measure_optical(real, Q: np.ndarray, rng: np.random.Generator) -> tuple[ms.M
     meas = ms.Measurements(Q[v], r.position_m[v], r.sigma_m[v], "simulated optical tracker", r.rotvec[v],
                            len(Q), Q[~v])
     return meas, float(np.median(r.sigma_rad[v])) if v.any() else float("nan")
+
+
+def register_camera(robot: RobotModel, real, Q_pool: np.ndarray, rng: np.random.Generator, n_pilot: int = 8,
+                    tries: int = 10) -> tuple[pin.SE3, int]:
+    """Camera-bar pose from a few pilot readings: ``n_pilot`` configurations drawn from ``Q_pool``
+    (predicted visible with the nominal pose), read on the hidden robot, the visible ones registered
+    onto the nominal marker positions (closed form, :func:`estimate.register_points`). Returns the
+    pose and the number of pilot configurations commanded (the visibility of the design is then
+    predicted with this pose, not the nominal one)."""
+    commanded = 0
+    Y, P = np.zeros((0, 3)), np.zeros((0, 3))
+    for _ in range(tries):
+        Q = Q_pool[rng.choice(len(Q_pool), size=min(n_pilot, len(Q_pool)), replace=False)]
+        meas, _ = measure_optical(real, Q, rng)
+        commanded += len(Q)
+        Y = np.concatenate([Y, meas.Y])
+        P = np.concatenate([P, robot.poses(meas.Q, robot.frame_reflector)[0]])
+        if len(Y) >= 3:
+            return register_points(Y, P), commanded
+    raise ValueError(f"{robot.name}: fewer than 3 of {commanded} pilot configurations were visible")
 
 
 def calibrate_6d(mm: MeasurementModel, meas: ms.Measurements, orientation_sigma_rad: float,
