@@ -293,7 +293,7 @@ def study_004(argv: list[str]) -> int:
           f"{grid['n_candidates_nominal']} [{grid['time_s']:.0f} s]")
     jobs = [(a.robot, s, t, grid, a.n, a.heldout, a.criteria, margins, a.camera) for t in a.truth for s in a.seeds]
     rows = _parallel(_seed, jobs, a.jobs)
-    print("candidates per seed (visible with the margins at the camera pose registered from pilot readings): "
+    print(f"candidates per seed (visible with the margins at the {a.camera} camera pose): "
           + ", ".join(f"seed {r['seed']} {r['n_candidates']} ({r['n_pilot']} pilot poses)" for r in rows
                       if r["truth"] == rows[0]["truth"]))
     key = f"rr_{a.criteria[0]}"
