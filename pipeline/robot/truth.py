@@ -24,7 +24,9 @@ settable to 0 to get the ideal robot back bit for bit:
   reading repeated after a blocked beam).
 
 These draws come from a second stream (salt + 1) so the first stream, and therefore every
-geometric and inertial deviation, is the same as for the ideal robot.
+geometric and inertial deviation, is the same as for the ideal robot. A robot whose robot.yaml
+declares an ``optical_tracker`` (:mod:`pipeline.robot.optical_tracker`) gets one at a camera pose
+perturbed with the tracker sigmas, drawn from a third stream (salt + 2): nothing else changes.
 
 Stage code may use only :attr:`RealRobot.tracker`, :attr:`RealRobot.encoders`,
 :attr:`RealRobot.torque_sensor`, :meth:`RealRobot.execute_joint_trajectory` and
