@@ -131,8 +131,7 @@ def baseline_configurations(robot: RobotModel, Qc: np.ndarray, n: int, visible, 
 
 
 def _seed(args: tuple) -> dict:
-    robot_name, seed, truth_name, grid_data, n, n_heldout, criteria, margins = args[:8]
-    camera = args[8] if len(args) > 8 else "registered"
+    robot_name, seed, truth_name, grid_data, n, n_heldout, criteria, margins, camera = args
     with single_thread_blas():
         robot = RobotModel.load(robot_name)
         truth = TruthConfig.ideal() if truth_name == "ideal" else TruthConfig()
