@@ -23,7 +23,7 @@ from pipeline.errors import PipelineError
 #: study name -> "module:function". Stage owners append their entries here.
 STUDIES: dict[str, str] = {
     # calibration
-    "calib-004": "pipeline.calibration.studies:study_004",
+    "calib-004": "pipeline.calibration.paper_004:study_004",
     "calib-000": "pipeline.calibration.studies:study_000",
     "calib-002": "pipeline.calibration.studies:study_002",
     "calib-003": "pipeline.calibration.studies:study_003",

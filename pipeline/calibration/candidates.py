@@ -33,6 +33,7 @@ against the CasADi Jacobian.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -253,7 +254,9 @@ def grid_values(chain: Chain, n_per_axis: int | list[int]) -> list[np.ndarray]:
 
 
 def filter_grid(chain: Chain, n_per_axis: int | list[int] = 13, margins: FilterMargins | None = None,
-                chunk: int = 20_000, progress: Any = None) -> tuple[np.ndarray, np.ndarray, dict]:
+                chunk: int = 20_000, progress: Any = None,
+                visibility: Callable[[Kinematics, np.ndarray], np.ndarray] | None = None
+                ) -> tuple[np.ndarray, np.ndarray, dict]:
     """Coarse-first filtering of the full joint-space grid.
 
     Returns the feasible configurations (M, nq) in lexicographic grid order, their flat grid
@@ -262,6 +265,8 @@ def filter_grid(chain: Chain, n_per_axis: int | list[int] = 13, margins: FilterM
     do not hang on the last joint; survivors are expanded along the last axis in chunks and checked
     for the remaining pairs, floor and visibility. ``progress``: an optional
     :class:`pipeline.progress.TaskHandle` advanced over the collision-free prefixes.
+    ``visibility(kinematics, capsule_segments) -> mask``: another sensor's line of sight (e.g. the
+    optical 6-D tracker, :mod:`pipeline.robot.optical_tracker`) instead of the laser tracker's.
     """
     t0 = time.perf_counter()
     margins = margins or FilterMargins()
@@ -307,7 +312,8 @@ def filter_grid(chain: Chain, n_per_axis: int | list[int] = 13, margins: FilterM
         if idx.size:
             sub = Kinematics(kin.Rpre[idx], kin.opre[idx], kin.Rpost[idx], kin.p_reflector[idx],
                              kin.R_flange[idx], kin.o_flange[idx], kin.reflector_axis[idx])
-            vis = _visibility_ok(chain, sub, seg[idx], margins)
+            vis = (_visibility_ok(chain, sub, seg[idx], margins) if visibility is None
+                   else visibility(sub, seg[idx]))
             counts["visibility"] += int((~vis).sum())
             feas_Q.append(Q[idx[vis]])
         if progress is not None:

@@ -3,9 +3,7 @@
 Each study prints a table beside the paper's numbers and writes ``data/studies/<name>/result.json``.
 Runs over seeds / arms are parallel with joblib (``--jobs``, default 1 on the shared machine).
 
-- calib-004 (papers/004 §3.4): 32 configurations from the joint grid by remove-and-replace on O3
-  against a linear scan with the same number of poses (paper: index better by a factor 18.5);
-  held-out errors before/after calibration (paper Table 2 layout).
+- calib-004: moved to :mod:`pipeline.calibration.paper_004` (``_calibrate_with`` below stays shared).
 - calib-000 (papers/000 §3.3, Tables 6-8): 60 configurations; average TCP variance at one working
   configuration for random (heuristic) vs parameter-covariance OED vs TCP-covariance OED
   (remove-and-replace warm start + IPOPT with collision constraints), over arms whose link 2 and
@@ -65,67 +63,6 @@ def _calibrate_with(robot, real, mm, basis, Q, rng, n_heldout: int):
     est = estimate(mm, meas.Q, meas.Y, meas.sigma_m, basis)
     held = st.heldout_measurements(robot, real, est, st.Config(n_heldout=n_heldout), rng)
     return va.validate(mm, est, held), len(meas)
-
-
-def _study_004_seed(args) -> dict:
-    robot_name, seed, grid, n, n_heldout = args
-    from pipeline.robot.model import RobotModel
-    from pipeline.robot.truth import RealRobot
-
-    with single_thread_blas():
-        robot = RobotModel.load(robot_name)
-        real = RealRobot.create(robot, seed)
-        rng = np.random.default_rng([seed, 4])
-        mm = em.MeasurementModel(robot)
-        cfg = st.Config(grid_per_axis=grid)
-        rep, basis = st.identify_parameter_set(robot, mm, cfg, rng)
-        cs = st.build_candidates(robot, cfg, basis, rng)
-        spec = ix.IndexSpec("O3")
-        rr = ds.remove_and_replace(cs.G, spec, n, rng, n_initial=n)
-        lin = ds.linear_scan_design(cs.G, spec, n)
-        rnd = ds.random_design(cs.G, spec, n, rng)
-        v_rr, m_rr = _calibrate_with(robot, real, mm, basis, cs.Q[rr.selected], rng, n_heldout)
-        v_lin, m_lin = _calibrate_with(robot, real, mm, basis, cs.Q[lin.selected], rng, n_heldout)
-    strip = ("errors_before_m", "errors_after_m", "predicted_std_m")
-    return {"seed": seed, "n_candidates": len(cs), "grid_total": cs.counts.get("total"),
-            "O3_rr": rr.index_value, "O3_linear": lin.index_value, "O3_random": rnd.index_value,
-            "rr_time_s": rr.run_time_s,
-            "rr_evaluations": rr.evaluations, "measured_rr": m_rr, "measured_linear": m_lin,
-            "rr": {k: v for k, v in v_rr.items() if k not in strip},
-            "linear": {k: v for k, v in v_lin.items() if k not in strip}}
-
-
-def study_004(argv: list[str]) -> int:
-    ap = argparse.ArgumentParser(prog="study calib-004")
-    ap.add_argument("--robot", default="rx130l")
-    ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
-    ap.add_argument("--grid", type=int, default=13)
-    ap.add_argument("--n", type=int, default=32)
-    ap.add_argument("--heldout", type=int, default=1000)
-    ap.add_argument("--jobs", type=int, default=1)
-    a = ap.parse_args(argv)
-    rows = _parallel(_study_004_seed, [(a.robot, s, a.grid, a.n, a.heldout) for s in a.seeds], a.jobs)
-    print(f"\npaper 004 §3.4: {a.n} configurations from the {a.grid}^6 grid, remove-and-replace on O3")
-    print("(linear scan: every (N/n)-th feasible grid configuration in grid order; random: a random subset)")
-    print("| seed | candidates | O3 R&R | O3 linear scan | ratio (paper 18.5) | O3 random | ratio | R&R time [s] |")
-    print("|---|---|---|---|---|---|---|---|")
-    for r in rows:
-        print(f"| {r['seed']} | {r['n_candidates']} | {r['O3_rr']:.4g} | {r['O3_linear']:.4g} | "
-              f"{r['O3_rr'] / max(r['O3_linear'], 1e-300):.1f} | {r['O3_random']:.4g} | "
-              f"{r['O3_rr'] / max(r['O3_random'], 1e-300):.1f} | {r['rr_time_s']:.1f} |")
-    print("\nheld-out errors (paper Table 2: max uncal. 7.8/19.0/12.6 mm, cal. 0.27/0.31/0.41 mm per axis)")
-    print("| seed | design | RMS before [mm] | max before [mm] | RMS after [µm] | max after [µm] | "
-          "predicted RMS [µm] | max |ex|,|ey|,|ez| after [µm] |")
-    print("|---|---|---|---|---|---|---|---|")
-    for r in rows:
-        for key in ("rr", "linear"):
-            v = r[key]
-            ax = v["after"]["axes"]
-            print(f"| {r['seed']} | {key} | {1e3 * v['before']['rms']:.3f} | {1e3 * v['before']['max']:.3f} | "
-                  f"{1e6 * v['after']['rms']:.1f} | {1e6 * v['after']['max']:.1f} | {1e6 * v['predicted_rms_m']:.1f} | "
-                  f"{1e6 * ax['x']['max_abs']:.0f}, {1e6 * ax['y']['max_abs']:.0f}, {1e6 * ax['z']['max_abs']:.0f} |")
-    _save("calib-004", {"args": vars(a), "rows": rows, "paper": {"index_factor": 18.5}})
-    return 0
 
 
 # ------------------------------------------------------------------------------------------------

@@ -65,6 +65,29 @@ class TrackerSpec:
 
 
 @dataclass
+class OpticalTrackerSpec:
+    """A camera-based 6-D tracker: a probe of infrared diodes on the tool seen by several cameras
+    (paper 004 §3.4: 3D-Creator, 4 diodes, three CCD cameras, pose by stereovision). Model in
+    :mod:`pipeline.robot.optical_tracker`; numbers of a particular system go in its robot.yaml.
+
+    Camera-bar frame: ``p_base = transform_camera_to_base p_bar``; every camera looks along the bar's
+    +z axis. Probe: diode positions in the marker frame (the reflector frame of ``tool``: flange
+    orientation at ``reflector_offset_m``), all emitting along ``diode_axis`` (flange frame).
+    """
+
+    transform_camera_to_base: pin.SE3
+    camera_positions_m: np.ndarray          # (k, 3) in the bar frame
+    field_of_view_half_angle_rad: float     # cone about +z of each camera
+    range_m: np.ndarray                     # (2,) nearest and farthest diode distance from a camera
+    probe_diodes_m: np.ndarray              # (d, 3) in the marker frame
+    diode_axis: np.ndarray                  # (3,) unit, flange frame
+    emission_half_angle_rad: float          # a camera sees a diode within this angle of its axis
+    min_diodes: int                         # diodes every camera must see for a pose (>= 3)
+    noise_const_m: float                    # per-diode isotropic 1-sigma
+    noise_per_m: float                      # ... growing with the distance from the bar origin
+
+
+@dataclass
 class CollisionSpec:
     floor_z_m: float
     floor_check_from_joint: int
@@ -90,13 +113,15 @@ class RobotSpec:
     capsules: list[Capsule] = field(default_factory=list)
     #: False when robot.yaml has no tracker section (``tracker`` is then a placeholder, never measured)
     has_tracker: bool = True
+    #: optional camera-based 6-D tracker (robot.yaml ``optical_tracker``); None: none declared
+    optical_tracker: OpticalTrackerSpec | None = None
     #: what was assumed about this robot (kept when a stage saves the model)
     assumptions: list[str] = field(default_factory=list)
 
 
 _TOP_KEYS = {
     "name", "urdf", "flange_frame", "payload_kg", "tool", "actuation", "limits", "tracker",
-    "collision", "capsules", "assumptions",
+    "collision", "capsules", "assumptions", "optical_tracker",
     # robot-specific defaults of the run configuration (test path placement, moves); read and
     # checked by pipeline.config.load_config, which layers them under the config file
     "run_defaults",
@@ -319,6 +344,8 @@ def load_robot_spec(path: Path, nq: int | None = None) -> RobotSpec:
         capsules.append(Capsule(cap.text("name"), cap.text("frame"), cap.vector("p0", 3), cap.vector("p1", 3),
                                 cap.number("radius_m", positive=True)))
 
+    optical = _optical_tracker(top.sub("optical_tracker")) if data.get("optical_tracker") is not None else None
+
     return RobotSpec(
         path=path,
         name=top.text("name", default=path.parent.name),
@@ -335,7 +362,62 @@ def load_robot_spec(path: Path, nq: int | None = None) -> RobotSpec:
         capsules=capsules,
         has_tracker=has_tracker,
         assumptions=[str(a) for a in _optional_list(top, "assumptions", "a list of sentences")],
+        optical_tracker=optical,
     )
+
+
+def _points(reader: _Reader, key: str, minimum: int) -> np.ndarray:
+    value = reader.data.get(key)
+    if not isinstance(value, list) or len(value) < minimum or not all(
+            isinstance(v, list) and len(v) == 3 and all(_is_number(c) for c in v) for v in value):
+        raise reader.error(key, f"expected a list of at least {minimum} [x, y, z] points, got {value!r}")
+    return np.asarray(value, float)
+
+
+def _optical_tracker(opt: _Reader) -> OpticalTrackerSpec:
+    """The ``optical_tracker`` section (:class:`OpticalTrackerSpec`)."""
+    opt.check_keys({"transform_camera_to_base", "camera_positions_m", "field_of_view_half_angle_deg", "range_m",
+                    "probe_diodes_m", "diode_axis", "emission_half_angle_deg", "min_diodes", "noise_const_m",
+                    "noise_per_m"}, {"transform_camera_to_base", "camera_positions_m", "probe_diodes_m"})
+    diodes = _points(opt, "probe_diodes_m", 3)
+    axis = opt.vector("diode_axis", 3, default=[0.0, 0.0, 1.0])
+    if np.linalg.norm(axis) < 1e-9:
+        raise opt.error("diode_axis", "must not be the zero vector")
+    rng = opt.vector("range_m", 2, nonnegative=True, default=[0.5, 6.0])
+    if not rng[0] < rng[1]:
+        raise opt.error("range_m", f"expected [nearest, farthest] with nearest < farthest, got {list(rng)}")
+    spread = np.linalg.svd(diodes - diodes.mean(axis=0), compute_uv=False)
+    if spread[1] < 1e-6:
+        raise opt.error("probe_diodes_m", "the diodes are collinear: they cannot fix an orientation")
+    fov = opt.number("field_of_view_half_angle_deg", positive=True, default=35.0)
+    emission = opt.number("emission_half_angle_deg", positive=True, default=60.0)
+    for key, value in (("field_of_view_half_angle_deg", fov), ("emission_half_angle_deg", emission)):
+        if value >= 90.0:
+            raise opt.error(key, f"must be below 90 deg, got {value}")
+    return OpticalTrackerSpec(
+        transform_camera_to_base=opt.transform("transform_camera_to_base"),
+        camera_positions_m=_points(opt, "camera_positions_m", 2),
+        field_of_view_half_angle_rad=float(np.deg2rad(fov)),
+        range_m=rng,
+        probe_diodes_m=diodes,
+        diode_axis=axis / np.linalg.norm(axis),
+        emission_half_angle_rad=float(np.deg2rad(emission)),
+        min_diodes=opt.integer("min_diodes", minimum=3, maximum=len(diodes), default=3),
+        noise_const_m=opt.number("noise_const_m", nonnegative=True, default=1.0e-4),
+        noise_per_m=opt.number("noise_per_m", nonnegative=True, default=0.0),
+    )
+
+
+def _optical_yaml(o: OpticalTrackerSpec) -> dict:
+    return {"transform_camera_to_base": _se3_yaml(o.transform_camera_to_base),
+            "camera_positions_m": [[float(v) for v in c] for c in o.camera_positions_m],
+            "field_of_view_half_angle_deg": float(np.rad2deg(o.field_of_view_half_angle_rad)),
+            "range_m": [float(v) for v in o.range_m],
+            "probe_diodes_m": [[float(v) for v in d] for d in o.probe_diodes_m],
+            "diode_axis": [float(v) for v in o.diode_axis],
+            "emission_half_angle_deg": float(np.rad2deg(o.emission_half_angle_rad)),
+            "min_diodes": int(o.min_diodes), "noise_const_m": float(o.noise_const_m),
+            "noise_per_m": float(o.noise_per_m)}
 
 
 def _se3_yaml(transform: pin.SE3) -> dict:
@@ -386,4 +468,6 @@ def robot_spec_to_yaml(spec: RobotSpec, urdf_name: str) -> dict:
     }
     if spec.assumptions:
         out["assumptions"] = list(spec.assumptions)
+    if spec.optical_tracker is not None:
+        out["optical_tracker"] = _optical_yaml(spec.optical_tracker)
     return out

@@ -24,7 +24,9 @@ settable to 0 to get the ideal robot back bit for bit:
   reading repeated after a blocked beam).
 
 These draws come from a second stream (salt + 1) so the first stream, and therefore every
-geometric and inertial deviation, is the same as for the ideal robot.
+geometric and inertial deviation, is the same as for the ideal robot. A robot whose robot.yaml
+declares an ``optical_tracker`` (:mod:`pipeline.robot.optical_tracker`) gets one at a camera pose
+perturbed with the tracker sigmas, drawn from a third stream (salt + 2): nothing else changes.
 
 Stage code may use only :attr:`RealRobot.tracker`, :attr:`RealRobot.encoders`,
 :attr:`RealRobot.torque_sensor`, :meth:`RealRobot.execute_joint_trajectory` and
@@ -42,6 +44,7 @@ from scipy.linalg import expm
 
 from pipeline.errors import ConfigError
 from pipeline.robot.model import RobotModel
+from pipeline.robot.optical_tracker import OpticalTracker
 from pipeline.robot.parameters import KinematicLayout, apply_kinematic_errors, joint_infos
 from pipeline.robot.payload import Payload, gravity_torques_Nm, with_payload
 from pipeline.robot.sensors import Encoders, GrossErrors, LaserTracker, TorqueSensor
@@ -162,7 +165,7 @@ class RealRobot:
     def __init__(self, truth: RobotModel, kinematic_errors: np.ndarray, transform_tracker_to_base: pin.SE3,
                  config: TruthConfig, joint_stiffness_Nm_rad: np.ndarray | None = None,
                  transmission_cycles: np.ndarray | None = None, transmission_phase_rad: np.ndarray | None = None,
-                 seed: int = 0) -> None:
+                 seed: int = 0, transform_camera_to_base: pin.SE3 | None = None) -> None:
         self._seed = int(seed)
         self._truth = truth
         self._kinematic_errors = kinematic_errors
@@ -175,6 +178,9 @@ class RealRobot:
         self._phase = np.zeros(nq) if transmission_phase_rad is None else np.asarray(transmission_phase_rad, float)
         gross = GrossErrors(config.tracker_outlier_rate, config.tracker_outlier_magnitude_m, config.tracker_stale_rate)
         self.tracker = LaserTracker(truth, transform_tracker_to_base, self.link_angles, gross)
+        #: the optical 6-D tracker when robot.yaml declares one (pipeline.robot.optical_tracker), else None
+        self.optical_tracker = (OpticalTracker(truth, transform_camera_to_base, self.link_angles)
+                                if transform_camera_to_base is not None else None)
         self.encoders = Encoders(config.encoder_noise_rad)
         self.torque_sensor = TorqueSensor(config.torque_noise_fraction_of_limit * truth.limits.effort_Nm)
         self._plant = None
@@ -225,7 +231,13 @@ class RealRobot:
         phase = rng2.uniform(0.0, 2.0 * np.pi, nq)
         stiffness = (nominal_joint_stiffness_Nm_rad(nominal) * spread / config.joint_compliance_scale
                      if config.joint_compliance_scale > 0 else np.full(nq, np.inf))
-        return cls(truth, errors, tracker_pose, config, stiffness, cycles, phase, seed)
+        camera_pose = None
+        if nominal.spec.optical_tracker is not None:   # own stream: nothing else changes
+            rng3 = np.random.default_rng([int(seed), _TRUTH_SALT + 2])
+            camera_pose = nominal.spec.optical_tracker.transform_camera_to_base * pin.exp6(np.concatenate([
+                config.tracker_translation_sigma_m * rng3.standard_normal(3),
+                config.tracker_rotation_sigma_rad * rng3.standard_normal(3)]))
+        return cls(truth, errors, tracker_pose, config, stiffness, cycles, phase, seed, camera_pose)
 
     # ------------------------------------------------------------ stage-facing
     def execute_joint_trajectory(self, t_s: np.ndarray, q: np.ndarray, v: np.ndarray, a: np.ndarray,
@@ -299,6 +311,11 @@ class RealRobot:
     def transform_tracker_to_base(self) -> pin.SE3:
         """Tests only: the true tracker placement."""
         return self._transform_tracker_to_base.copy()
+
+    @property
+    def transform_camera_to_base(self) -> pin.SE3 | None:
+        """Tests only: the true optical-tracker camera-bar placement (None: no optical tracker)."""
+        return None if self.optical_tracker is None else self.optical_tracker._transform_camera_to_base.copy()
 
     @property
     def reflector_offset_m(self) -> np.ndarray:

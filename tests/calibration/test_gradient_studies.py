@@ -64,15 +64,6 @@ def test_study_002_finds_two_redundant_parameters(capsys):
 
 
 @pytest.mark.slow
-def test_study_004_optimal_design_beats_linear_scan():
-    from pipeline.calibration import studies
-
-    row = studies._study_004_seed(("rx130l", 1, 9, 32, 1000))
-    assert row["O3_rr"] > 1.2 * row["O3_linear"]
-    assert row["rr"]["after"]["rms"] < row["rr"]["before"]["rms"] / 20
-
-
-@pytest.mark.slow
 def test_study_000_tcp_criterion_beats_random_and_parameter_criterion():
     from pipeline.calibration import studies
 
