@@ -61,6 +61,10 @@ def test_stage_with_calibrated_kinematics(quick_config, rx130l, real, tmp_path):
     assert s["kinematics"] == "calibrated"
     # nominal kinematics: mm-level absolute error; calibrated: only the tracking error remains
     assert s["tcp_error_rms_nominal_kinematics_m"] > 5 * s["tcp_error_rms_calibrated_kinematics_m"]
+    # a calibration without compliances: every joint's stiffness is nominal, and the report says what it is worth
+    js = s["joint_stiffness"]
+    assert js["nominal_joints"] == [1, 2, 3, 4, 5, 6] and js["gravity_model_factor"] == [1.0] * 6
+    assert max(js["tcp_deflection_max_m"]) > 0 and "nominal stiffness" in res.report_md
 
 
 @pytest.mark.parametrize("kwargs", [{"engine": "fortran"}, {"on_saturation": "ignore"}, {"variants": ["magic"]},
