@@ -12,12 +12,16 @@ model and the stage's encoder-noise stream, for the ``elastic_flat`` feedforward
 
 * the exact hidden robot (kinematics, inertias, rotor inertia, friction with its Stribeck term at
   zero load, true joint stiffness), and the hidden robot with the nominal stiffness rule;
-* the pipeline's model (``<run>/identification/robot``: calibrated kinematics and stiffness,
-  identified inertias and friction);
-* the pipeline's model with ONE ingredient from the hidden robot: one joint's stiffness, every
-  stiffness, the link inertias, the viscous + Coulomb numbers, the Stribeck friction, the rotor
-  inertia, the kinematics; and the pipeline's model with the nominal stiffness rule
-  (:func:`pipeline.robot.stiffness.nominal_joint_stiffness_Nm_rad`) in place of the calibrated one.
+* the pipeline's model (``<run>/identification/robot``: calibrated kinematics, identified inertias
+  and friction) with the stiffness the control stage uses
+  (:func:`pipeline.control.joint_stiffness.feedforward_stiffness`: calibrated and re-expressed for
+  the identified inertias, nominal where not identified), and with the calibration's stiffness as
+  the identification hands it on;
+* the pipeline's model with ONE ingredient from the hidden robot: one joint's stiffness (its source
+  in brackets), the stiffness of every nominal joint, every stiffness, the link inertias, the
+  viscous + Coulomb numbers, the Stribeck friction, the rotor inertia, the kinematics; and the
+  pipeline's model with the nominal stiffness rule
+  (:func:`pipeline.robot.stiffness.nominal_joint_stiffness_Nm_rad`) for every joint.
 
 Printed per case: the max TCP tracking error (measured TCP vs the hidden robot standing at the
 reference joints, the stage's ``tcp_tracking_error_max_m``) and its ratio ``none / case`` (the
@@ -151,13 +155,13 @@ def main(run_dir: str = "data/runs/default") -> None:
         return float(np.linalg.norm(res.tcp_position_m - at_ref, axis=1).max())
 
     base = tracking_max_m(pipe, "none")
-    print(f"\n{'feedforward (elastic_flat unless named)':<42} {'max tracking [mm]':>18} {'none / case':>12}")
-    print(f"{'none (no feedforward)':<42} {base * 1e3:>18.3f} {1.0:>12.2f}")
+    print(f"\n{'feedforward (elastic_flat unless named)':<50} {'max tracking [mm]':>18} {'none / case':>12}")
+    print(f"{'none (no feedforward)':<50} {base * 1e3:>18.3f} {1.0:>12.2f}")
     ff = tracking_max_m(pipe, "full_friction")
-    print(f"{'rigid full_friction, pipeline model':<42} {ff * 1e3:>18.3f} {base / ff:>12.2f}")
+    print(f"{'rigid full_friction, pipeline model':<50} {ff * 1e3:>18.3f} {base / ff:>12.2f}")
     for label, model in cases(pipe, handed_on, choice, real, nominal):
         e = tracking_max_m(model, "elastic_flat")
-        print(f"{label:<42} {e * 1e3:>18.3f} {base / e:>12.2f}")
+        print(f"{label:<50} {e * 1e3:>18.3f} {base / e:>12.2f}")
     print(f"\ntotal {time.perf_counter() - t0:.0f} s")
 
 

@@ -21,7 +21,9 @@ desired path in the base frame), ``tcp_error_registered_*`` (after a best-fit ri
 against the plain Python loop, ``tcp_error_rms_{nominal,calibrated}_kinematics_m`` (and registered),
 ``improvement`` (none / full_friction ratios), ``elastic_improvement`` (with an elastic variant:
 max TCP tracking error of none and of rigid full_friction over the best elastic variant's, and the
-same for the max path error ``path_error_max_*_over_elastic``).
+same for the max path error ``path_error_max_*_over_elastic``), ``joint_stiffness`` (with an elastic
+variant: the stiffness the feedforward uses, its source per joint, the gravity-model factor and the
+deflection budget, :mod:`pipeline.control.joint_stiffness`).
 """
 
 from __future__ import annotations
