@@ -33,7 +33,11 @@ def test_stage_without_upstream(quick_config, rx130l, real, tmp_path):
     s = res.summary
     for key in REQUIRED:
         assert key in s, key
-    assert set(s["tcp_error_max_m"]) == {"none", "full_friction"} == set(s["tcp_error_registered_max_m"])
+    assert set(s["tcp_error_max_m"]) == set(quick_config.control.variants) == set(s["tcp_error_registered_max_m"])
+    assert {"none", "full_friction"} <= set(s["tcp_error_max_m"])
+    if "elastic_flat" in s["tcp_error_max_m"]:   # no calibration: every joint's stiffness is nominal
+        assert s["joint_stiffness"]["nominal_joints"] == [1, 2, 3, 4, 5, 6]
+        assert "this run has no elastostatic calibration" in res.report_md
     assert len(s["lag_error_max_rad"]["none"]) == 3
     assert s["sample_time_s"] == 4e-4 and s["delay_samples"] == {"setpoint": 2, "measurement": 1}
     assert s["feedforward_model"] == "nominal" and s["kinematics"] == "nominal"
