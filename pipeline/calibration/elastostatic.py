@@ -105,14 +105,19 @@ def measure_with_payload(mm: em.MeasurementModel, real, meas: ms.Measurements, c
     return ms.concatenate([meas, with_load], meas.source)
 
 
-def static_torque_record(mm: em.MeasurementModel, meas: ms.Measurements, x: np.ndarray,
-                         basis: np.ndarray) -> dict[str, np.ndarray]:
+def static_torque_record(mm: em.MeasurementModel, meas: ms.Measurements, est: Estimate, basis: np.ndarray,
+                         identifiable_names: list[str]) -> dict[str, np.ndarray]:
     """What a later stage needs to re-express the identified stiffness for its own gravity model
     (:func:`pipeline.robot.stiffness.stiffness_for_gravity_model`): per measured configuration the
     static torques the fit used (``elastostatic_torques_Nm``, payload included where mounted), the
-    payload's share of them, and which joints' compliance was identified (the others are nominal)."""
+    payload's share of them, which joints' compliance was identified (the others are nominal), and
+    the standard deviation of each compliance (``joint_compliance_std``, rad/(N m); NaN where not
+    identified)."""
     used = mm.static_torques(meas.Q, meas.payload_mounted)
+    std = dict(zip(identifiable_names, est.std, strict=True))
+    names = mm.names[mm.sl_compliance]
     return {"elastostatic_configurations_rad": np.asarray(meas.Q, float),
             "elastostatic_torques_Nm": used,
             "elastostatic_payload_torques_Nm": used - mm.static_torques(meas.Q),
-            "joint_stiffness_identified": identified_compliance(mm, x, basis)}
+            "joint_stiffness_identified": identified_compliance(mm, est.x, basis),
+            "joint_compliance_std": np.array([float(std.get(n, np.nan)) for n in names])}

@@ -272,7 +272,7 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress, reg
     if upstream_gravity is not None:
         notes["gravity_pass"] = gravity_pass(mm, rec, basis, est, rejection.rejected, cfg, str(cfg.gravity_model))
     if mm.compliance:
-        notes["static_torques"] = static_torque_record(mm, meas, est.x, basis)
+        notes["static_torques"] = static_torque_record(mm, meas, est, basis, report.identifiable_names)
     timings["estimate_s"] = time.perf_counter() - t
     t = time.perf_counter()
     if val_user is not None:

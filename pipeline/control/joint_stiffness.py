@@ -11,7 +11,8 @@ relative stiffness error ``e`` leaves ``e tau_l / k`` of it uncompensated. Sourc
   which biases each stiffness by the relative error of that joint's torque;
 * ``nominal``: robot.yaml or the rated-torque rule (:mod:`pipeline.robot.stiffness`), for joints the
   calibration cannot identify (no gravity load: a vertical first axis, a wrist whose torque does not
-  vary over the measured poses) or when the run has no elastostatic calibration.
+  vary over the measured poses; or a compliance below :data:`MIN_SIGNIFICANCE` standard deviations,
+  which says little more than "not rigid") or when the run has no elastostatic calibration.
 
 :func:`deflection_budget` states the cost: per joint the largest TCP displacement of the deflection
 the feedforward compensates along the reference (``|J_i(q)| |tau_l,i| / k_i``, first order), so a
@@ -27,6 +28,9 @@ import numpy as np
 from pipeline.control.elastic_feedforward import link_torque
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad, stiffness_for_gravity_model
 
+#: a calibrated compliance is used when it is at least this many standard deviations (else nominal)
+MIN_SIGNIFICANCE = 3.0
+
 
 @dataclass
 class StiffnessChoice:
@@ -40,27 +44,37 @@ class StiffnessChoice:
     @property
     def nominal_joints(self) -> list[int]:
         """1-based joints whose stiffness is nominal (not identified)."""
-        return [i + 1 for i, s in enumerate(self.source) if s == "nominal"]
+        return [i + 1 for i, s in enumerate(self.source) if s.startswith("nominal")]
 
 
-def feedforward_stiffness(robot, calibration_arrays: dict[str, np.ndarray] | None,
-                          identified_inertias: bool) -> StiffnessChoice:
+def feedforward_stiffness(robot, calibration_arrays: dict[str, np.ndarray] | None, identified_inertias: bool,
+                          nominal_Nm_rad: np.ndarray | None = None) -> StiffnessChoice:
     """The stiffness for the feedforward of ``robot`` (the run's best model, carrying the calibrated
-    stiffness in ``actuation.joint_stiffness_Nm_rad``), its source per joint, and, when the run has
-    identified inertias (``identified_inertias``) and an elastostatic calibration whose static-torque
-    record is in ``calibration_arrays``, the stiffness re-expressed for the identified gravity torques."""
+    stiffness in ``actuation.joint_stiffness_Nm_rad``) and its source per joint.
+
+    With the calibration's static-torque record in ``calibration_arrays``: a joint whose compliance
+    the calibration identified keeps it if it is significant (``c >= MIN_SIGNIFICANCE`` standard
+    deviations, ``joint_compliance_std``), else takes ``nominal_Nm_rad`` (default: ``robot``'s
+    value); with identified inertias (``identified_inertias``) the calibrated ones are re-expressed
+    for their gravity torques (module docstring)."""
     k = nominal_joint_stiffness_Nm_rad(robot)
+    k_nom = k.copy() if nominal_Nm_rad is None else np.asarray(nominal_Nm_rad, float).copy()
     arrays = calibration_arrays or {}
     fitted = "joint_stiffness_identified" in arrays
-    known = np.asarray(arrays.get("joint_stiffness_identified", np.zeros(robot.nq, bool)), bool)
+    known = np.asarray(arrays.get("joint_stiffness_identified", np.zeros(robot.nq, bool)), bool).copy()
     source = ["calibrated" if kn else "nominal" for kn in known]
+    std = np.asarray(arrays.get("joint_compliance_std", np.zeros(robot.nq)), float)
+    weak = known & ~(1.0 / k >= MIN_SIGNIFICANCE * np.nan_to_num(std, nan=np.inf))
+    for i in np.flatnonzero(weak):
+        source[i], k[i] = f"nominal (calibrated compliance < {MIN_SIGNIFICANCE:g} sigma)", k_nom[i]
+    known &= ~weak
     factor = np.ones(robot.nq)
     if identified_inertias and known.any() and "elastostatic_torques_Nm" in arrays:
         Q = np.asarray(arrays["elastostatic_configurations_rad"], float)
         g_fit = np.asarray(arrays["elastostatic_torques_Nm"], float)
         g_new = np.array([robot.gravity_torque(q) for q in Q]) + np.asarray(arrays["elastostatic_payload_torques_Nm"])
         k, factor = stiffness_for_gravity_model(k, known, g_fit, g_new)
-        source = ["calibrated, identified gravity" if kn else "nominal" for kn in known]
+        source = ["calibrated, identified gravity" if kn else src for kn, src in zip(known, source, strict=True)]
     return StiffnessChoice(k, source, factor, fitted)
 
 
@@ -90,7 +104,8 @@ def stiffness_markdown(choice: StiffnessChoice, budget: dict[str, list[float]]) 
     if nominal:
         cost = sum(budget["tcp_deflection_max_m"][j - 1] for j in nominal)
         why = ("the elastostatic calibration did not identify it: no gravity load varying over the measured "
-               "poses, or a non-positive estimate" if choice.elastostatic_calibration
+               f"poses, a non-positive estimate, or one below {MIN_SIGNIFICANCE:g} standard deviations"
+               if choice.elastostatic_calibration
                else "this run has no elastostatic calibration")
         rows.append(f"Joints {', '.join(map(str, nominal))}: nominal stiffness (robot.yaml or the rated-torque rule; "
                     f"{why}). The feedforward compensates up to {cost * 1e6:.0f} µm of TCP deflection on them "

@@ -130,7 +130,8 @@ def run(ctx: StageContext) -> StageResult:
     t_ref = time.perf_counter() - t0
     # the elastic variants' stiffness: calibrated (re-expressed for the identified inertias) or nominal
     cal_out = ctx.upstream.get("calibration")
-    stiffness = feedforward_stiffness(robot, None if cal_out is None else cal_out.arrays, identified)
+    stiffness = feedforward_stiffness(robot, None if cal_out is None else cal_out.arrays, identified,
+                                      nominal_joint_stiffness_Nm_rad(nominal))
     robot.spec.actuation.joint_stiffness_Nm_rad = stiffness.stiffness_Nm_rad
 
     gains = servo_gains(robot, np.mean(ref.q_d, axis=0), cfg)

@@ -33,6 +33,9 @@ def test_static_torque_record_matches_the_calibrated_stiffness(nominal_gravity_r
     known = rec["joint_stiffness_identified"]
     assert not known[0]                                            # vertical axis 1: no gravity load
     assert known[1] and known[2]
+    std = rec["joint_compliance_std"]
+    assert np.all(np.isfinite(std[known])) and np.all(std[known] > 0)
+    assert np.all(1.0 / out.robot.spec.actuation.joint_stiffness_Nm_rad[[1, 2]] > 3 * std[[1, 2]])  # significant
     k = out.robot.spec.actuation.joint_stiffness_Nm_rad
     np.testing.assert_array_equal(k[~known], nominal_joint_stiffness_Nm_rad(robot)[~known])
 

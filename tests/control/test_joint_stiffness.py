@@ -77,3 +77,19 @@ def test_gravity_factor_needs_a_positive_correlation(bad, rx130l):
     """Torques that vanish or flip sign between the models carry no scale: the factor stays 1."""
     k, s = stiffness_for_gravity_model(np.ones(6), np.ones(6, bool), np.ones((5, 6)), bad * np.ones((5, 6)))
     assert np.all(s == 1.0) and np.all(k == 1.0)
+
+
+def test_insignificant_compliance_falls_back_to_the_nominal_stiffness(rx130l):
+    """A compliance within 3 standard deviations of zero (a barely loaded wrist) says little: nominal."""
+    robot = rx130l.copy()
+    k_nom = nominal_joint_stiffness_Nm_rad(robot)
+    k_cal = k_nom * np.array([1.0, 1.2, 0.8, 1.0, 0.05, 1.0])        # joint 5: 20x too soft, poorly determined
+    robot.spec.actuation.joint_stiffness_Nm_rad = k_cal
+    rec = _record(robot, np.random.default_rng(3).uniform(-1.0, 1.0, (30, 6)), 1.0)
+    rec["joint_compliance_std"] = np.where(IDENTIFIED, 0.1 / k_cal, np.nan)
+    rec["joint_compliance_std"][4] = 0.5 / k_cal[4]                   # c = 2 sigma
+    choice = feedforward_stiffness(robot, rec, identified_inertias=True, nominal_Nm_rad=k_nom)
+    assert choice.nominal_joints == [1, 4, 5, 6]
+    assert choice.stiffness_Nm_rad[4] == k_nom[4] and choice.source[4].startswith("nominal (")
+    np.testing.assert_allclose(choice.stiffness_Nm_rad[[1, 2]], k_cal[[1, 2]], rtol=1e-9)  # same gravity model
+    assert choice.source[1] == "calibrated, identified gravity"
