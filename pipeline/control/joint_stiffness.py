@@ -62,7 +62,10 @@ def feedforward_stiffness(robot, calibration_arrays: dict[str, np.ndarray] | Non
     arrays = calibration_arrays or {}
     fitted = "joint_stiffness_identified" in arrays
     known = np.asarray(arrays.get("joint_stiffness_identified", np.zeros(robot.nq, bool)), bool).copy()
-    source = ["calibrated" if kn else "nominal" for kn in known]
+    # without a record (a rigid calibration, or artefacts written before it existed) a value that is not
+    # the nominal one came from upstream
+    source = ["calibrated" if kn else "nominal" if fitted or np.isclose(k[i], k_nom[i]) else "as handed on"
+              for i, kn in enumerate(known)]
     std = np.asarray(arrays.get("joint_compliance_std", np.zeros(robot.nq)), float)
     weak = known & ~(1.0 / k >= MIN_SIGNIFICANCE * np.nan_to_num(std, nan=np.inf))
     for i in np.flatnonzero(weak):

@@ -55,6 +55,9 @@ def test_feedforward_stiffness_sources_and_gravity_factor(rx130l):
     np.testing.assert_array_equal(same.stiffness_Nm_rad, k_cal)
     assert same.source[1] == "calibrated" and np.all(same.gravity_factor == 1.0)
     assert feedforward_stiffness(robot, None, True).nominal_joints == [1, 2, 3, 4, 5, 6]
+    # a stiffness that is not the nominal one but has no record behind it is named as handed on
+    handed = feedforward_stiffness(robot, None, True, nominal_joint_stiffness_Nm_rad(rx130l))
+    assert handed.source == ["as handed on"] * 6 and handed.nominal_joints == []
 
 
 def test_deflection_budget_scales_with_the_compliance(rx130l):
