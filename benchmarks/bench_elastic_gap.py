@@ -107,7 +107,8 @@ def cases(pipe: RobotModel, handed_on: RobotModel, choice: StiffnessChoice, real
     for i in range(pipe.nq):
         k = k_pipe.copy()
         k[i] = k_true[i]
-        out.append((f"(c) pipeline, true k{i + 1} ({choice.source[i].split(',')[0]})", with_stiffness(pipe, k)))
+        src = choice.source[i].split(" ")[0].rstrip(",")
+        out.append((f"(c) pipeline, true k{i + 1} ({src})", with_stiffness(pipe, k)))
     nominal_joints = [j - 1 for j in choice.nominal_joints]
     if nominal_joints:
         k = k_pipe.copy()
@@ -133,7 +134,7 @@ def main(run_dir: str = "data/runs/default") -> None:
     handed_on = RobotModel.load(run / "identification" / "robot")
     with np.load(run / "calibration" / "results.npz") as z:
         cal_arrays = {k: z[k] for k in z.files}
-    choice = feedforward_stiffness(handed_on, cal_arrays, True)      # what the control stage does
+    choice = feedforward_stiffness(handed_on, cal_arrays, True, nominal_joint_stiffness_Nm_rad(nominal))  # as the stage
     pipe = with_stiffness(handed_on, choice.stiffness_Nm_rad)
     real = RealRobot.create(nominal, seed, truth_cfg)
     t0 = time.perf_counter()
