@@ -156,6 +156,15 @@ def estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarr
     return Estimate(x, theta, P, C, T_id, T_reg, it, float(chi2), float(np.sqrt(np.mean(res ** 2))), conv, hist, M)
 
 
+def identified_compliance(mm: MeasurementModel, x: np.ndarray, basis: np.ndarray | None = None) -> np.ndarray:
+    """``(nq,)`` bool: joints whose compliance the fit identified (in the basis) and found positive;
+    all False for a rigid error model."""
+    if not mm.compliance:
+        return np.zeros(mm.nq, bool)
+    rows = np.ones(mm.n, bool) if basis is None else np.any(np.asarray(basis) != 0, axis=1)
+    return rows[mm.sl_compliance] & (np.asarray(x, float)[mm.sl_compliance] > 0)
+
+
 def calibrated_robot(robot, mm: MeasurementModel, x: np.ndarray, basis: np.ndarray | None = None):
     """``RobotModel`` with the identified kinematic errors (lead's conventions, docs/requests/calibration.md).
 
@@ -190,8 +199,7 @@ def calibrated_robot(robot, mm: MeasurementModel, x: np.ndarray, basis: np.ndarr
     new.spec.tool.reflector_offset_m = np.asarray(rfl.translation, float).copy()
     if mm.compliance:
         c = x[mm.sl_compliance]
-        rows = np.ones(mm.n, bool) if basis is None else np.any(np.asarray(basis)[:, :] != 0, axis=1)
-        known = rows[mm.sl_compliance] & (c > 0)
+        known = identified_compliance(mm, x, basis)
         k = nominal_joint_stiffness_Nm_rad(robot)
         k[known] = 1.0 / c[known]
         new.spec.actuation.joint_stiffness_Nm_rad = k

@@ -44,6 +44,7 @@ from pipeline.calibration.elastostatic import (
     load_gravity_model,
     measure_with_payload,
     measurement_model,
+    static_torque_record,
 )
 from pipeline.calibration.estimate import Estimate, calibrated_robot, register_points
 from pipeline.calibration.gradient_design import GradientDesignConfig, gradient_design
@@ -270,6 +271,8 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress, reg
                                                    cfg.max_lm_iterations)
     if upstream_gravity is not None:
         notes["gravity_pass"] = gravity_pass(mm, rec, basis, est, rejection.rejected, cfg, str(cfg.gravity_model))
+    if mm.compliance:
+        notes["static_torques"] = static_torque_record(mm, meas, est, basis, report.identifiable_names)
     timings["estimate_s"] = time.perf_counter() - t
     t = time.perf_counter()
     if val_user is not None:
@@ -412,6 +415,7 @@ def run(ctx) -> Any:
         arrays["heldout_errors_before_m"] = out.validation["errors_before_m"]
         arrays["heldout_errors_after_m"] = out.validation["errors_after_m"]
         arrays["heldout_predicted_std_m"] = out.validation["predicted_std_m"]
+    arrays.update(out.notes.get("static_torques", {}))   # elastostatic model: for later gravity models
     if out.selection is not None:
         arrays["index_history"] = np.array(out.selection.history, float).reshape(-1, 2)
 

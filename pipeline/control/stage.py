@@ -21,7 +21,9 @@ desired path in the base frame), ``tcp_error_registered_*`` (after a best-fit ri
 against the plain Python loop, ``tcp_error_rms_{nominal,calibrated}_kinematics_m`` (and registered),
 ``improvement`` (none / full_friction ratios), ``elastic_improvement`` (with an elastic variant:
 max TCP tracking error of none and of rigid full_friction over the best elastic variant's, and the
-same for the max path error ``path_error_max_*_over_elastic``).
+same for the max path error ``path_error_max_*_over_elastic``), ``joint_stiffness`` (with an elastic
+variant: the stiffness the feedforward uses, its source per joint, the gravity-model factor and the
+deflection budget, :mod:`pipeline.control.joint_stiffness`).
 """
 
 from __future__ import annotations
@@ -32,7 +34,9 @@ import numpy as np
 
 from pipeline.control.config import ControlConfig
 from pipeline.control.design import filter_alpha, loop_models, servo_report
+from pipeline.control.elastic_feedforward import ELASTIC_VARIANTS
 from pipeline.control.iso9283 import iso9283_path, tool_rotation
+from pipeline.control.joint_stiffness import deflection_budget, feedforward_stiffness, stiffness_markdown
 from pipeline.control.reference import cartesian_reference
 from pipeline.control.simulate import first_saturation, servo_gains, simulate_joint_trajectory
 from pipeline.control.validate import (
@@ -46,6 +50,7 @@ from pipeline.control.validate import (
 from pipeline.errors import ConfigError, InfeasibleError, PipelineError
 from pipeline.robot.defaults import ik_seeds_or_derived_rad, iso_or_derived
 from pipeline.robot.paths import start_configuration
+from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 from pipeline.runner import StageContext, StageResult
 
 NAME = "control"
@@ -71,19 +76,43 @@ def _nominal_robot(ctx: StageContext):
 
 
 def _with_dynamics_of(kinematics_robot, dynamics_robot):
-    """Copy of ``kinematics_robot`` whose inertias, armature and friction are ``dynamics_robot``'s."""
+    """Copy of ``kinematics_robot`` whose inertias, armature, friction and joint stiffness are
+    ``dynamics_robot``'s."""
     out = kinematics_robot.copy()
     for j in range(1, out.model.njoints):
         out.model.inertias[j] = dynamics_robot.model.inertias[j].copy()
     out.model.armature = np.array(dynamics_robot.model.armature).copy()
     for name in ("viscous_Nms_rad", "coulomb_Nm", "rotor_inertia_kgm2"):
         setattr(out.actuation, name, np.array(getattr(dynamics_robot.actuation, name)).copy())
+    out.spec.actuation.joint_stiffness_Nm_rad = nominal_joint_stiffness_Nm_rad(dynamics_robot)
     return out
 
 
 def _upstream_robot(ctx: StageContext, stage: str):
     out = ctx.upstream.get(stage)
     return None if out is None else out.robot
+
+
+def iso_reference(robot, cfg: ControlConfig):
+    """The EN ISO 9283 path of ``cfg.iso`` (None fields derived from ``robot``) and its joint reference:
+    ``(ref, path, frame, ik_seeds, q_start)``; ``ref`` from ruckig + IK at every sample with ``robot``'s
+    kinematics. Raises InfeasibleError naming ``control.iso`` when the path leaves the workspace."""
+    iso = iso_or_derived(robot, cfg.iso)
+    frame = robot.frame_reflector if cfg.path_frame == "reflector" else robot.frame_tcp
+    rotation = tool_rotation(iso.plane, iso.tool_down)
+    path = iso9283_path(robot, iso.edge_m, iso.centre_m, iso.plane, rotation, iso.corner_fraction,
+                        iso.large_circle_fraction, iso.small_circle_fraction, tuple(iso.segments))
+    seeds = ik_seeds_or_derived_rad(robot, cfg.ik_seeds_deg)
+    try:
+        q_start = start_configuration(robot, path.poses([0.0])[0], seeds, frame)
+        ref = cartesian_reference(robot, path, cfg.sample_time_s, iso.speed_m_s, iso.acceleration_m_s2,
+                                  iso.jerk_m_s3, q_start, frame, cfg.ik_tolerance_m)
+    except InfeasibleError as exc:
+        raise InfeasibleError(exc.file, "control.iso", f"{exc.field}: {exc.problem}; the ISO path (cube centre "
+                              f"{iso.centre_m} m, edge {iso.edge_m} m) must lie in this robot's workspace: set "
+                              "control.iso.centre_m / edge_m in the run config, or run_defaults in its robot.yaml"
+                              ) from None
+    return ref, path, frame, seeds, q_start
 
 
 def run(ctx: StageContext) -> StageResult:
@@ -96,22 +125,14 @@ def run(ctx: StageContext) -> StageResult:
     identified = _upstream_robot(ctx, "identification") is not None
     iso = iso_or_derived(robot, cfg.iso)          # None fields derived from the robot
     dt = cfg.sample_time_s
-    frame = robot.frame_reflector if cfg.path_frame == "reflector" else robot.frame_tcp
-    rotation = tool_rotation(iso.plane, iso.tool_down)
-    path = iso9283_path(robot, iso.edge_m, iso.centre_m, iso.plane, rotation, iso.corner_fraction,
-                        iso.large_circle_fraction, iso.small_circle_fraction, tuple(iso.segments))
-    seeds = ik_seeds_or_derived_rad(robot, cfg.ik_seeds_deg)
     t0 = time.perf_counter()
-    try:
-        q_start = start_configuration(robot, path.poses([0.0])[0], seeds, frame)
-        ref = cartesian_reference(robot, path, dt, iso.speed_m_s, iso.acceleration_m_s2, iso.jerk_m_s3, q_start,
-                                  frame, cfg.ik_tolerance_m)
-    except InfeasibleError as exc:
-        raise InfeasibleError(exc.file, "control.iso", f"{exc.field}: {exc.problem}; the ISO path (cube centre "
-                              f"{iso.centre_m} m, edge {iso.edge_m} m) must lie in this robot's workspace: set "
-                              "control.iso.centre_m / edge_m in the run config, or run_defaults in its robot.yaml"
-                              ) from None
+    ref, path, frame, seeds, q_start = iso_reference(robot, cfg)
     t_ref = time.perf_counter() - t0
+    # the elastic variants' stiffness: calibrated (re-expressed for the identified inertias) or nominal
+    cal_out = ctx.upstream.get("calibration")
+    stiffness = feedforward_stiffness(robot, None if cal_out is None else cal_out.arrays, identified,
+                                      nominal_joint_stiffness_Nm_rad(nominal))
+    robot.spec.actuation.joint_stiffness_Nm_rad = stiffness.stiffness_Nm_rad
 
     gains = servo_gains(robot, np.mean(ref.q_d, axis=0), cfg)
     nv = cfg.velocity_samples_per_position_sample
@@ -176,6 +197,13 @@ def run(ctx: StageContext) -> StageResult:
 
     summary = _summary(cfg, ref, metrics, main, speed, rms_nominal_kin, calibrated, identified, servo, t_ref)
     summary.update(registered)
+    stiffness_md = ""
+    if any(v in ELASTIC_VARIANTS for v in cfg.variants):
+        budget = deflection_budget(robot, ref.q_d, ref.v_d, ref.a_d, stiffness.stiffness_Nm_rad, frame)
+        summary["joint_stiffness"] = {"Nm_rad": stiffness.stiffness_Nm_rad.tolist(), "source": stiffness.source,
+                                      "gravity_model_factor": stiffness.gravity_factor.tolist(),
+                                      "nominal_joints": stiffness.nominal_joints, **budget}
+        stiffness_md = "\n\n" + stiffness_markdown(stiffness, budget)
     figures = _figures(ref, runs, path, tcp_at_ref, servo_models=[
         loop_models(gains.inertia_kgm2[i], gains.kp[i], gains.kv[i], gains.ki[i], dt, nv,
                     cfg.measurement_delay_samples, alpha) for i in range(min(3, robot.nq))])
@@ -194,7 +222,7 @@ def run(ctx: StageContext) -> StageResult:
     data = {"metrics": metrics, "servo": servo, "iso_points_m": {k: v.tolist() for k, v in path.points.items()},
             "segments": ref.segment_labels, "q_start_rad": q_start.tolist()}
     return StageResult(summary=summary, arrays=arrays, data=data, figures=figures,
-                       report_md=_report(summary, metrics, servo))
+                       report_md=_report(summary, metrics, servo) + stiffness_md)
 
 
 def _summary(cfg, ref, metrics, main, speed, rms_nominal_kin, calibrated, identified, servo, t_ref) -> dict:

@@ -33,7 +33,11 @@ def test_stage_without_upstream(quick_config, rx130l, real, tmp_path):
     s = res.summary
     for key in REQUIRED:
         assert key in s, key
-    assert set(s["tcp_error_max_m"]) == {"none", "full_friction"} == set(s["tcp_error_registered_max_m"])
+    assert set(s["tcp_error_max_m"]) == set(quick_config.control.variants) == set(s["tcp_error_registered_max_m"])
+    assert {"none", "full_friction"} <= set(s["tcp_error_max_m"])
+    if "elastic_flat" in s["tcp_error_max_m"]:   # no calibration: every joint's stiffness is nominal
+        assert s["joint_stiffness"]["nominal_joints"] == [1, 2, 3, 4, 5, 6]
+        assert "this run has no elastostatic calibration" in res.report_md
     assert len(s["lag_error_max_rad"]["none"]) == 3
     assert s["sample_time_s"] == 4e-4 and s["delay_samples"] == {"setpoint": 2, "measurement": 1}
     assert s["feedforward_model"] == "nominal" and s["kinematics"] == "nominal"
@@ -61,6 +65,10 @@ def test_stage_with_calibrated_kinematics(quick_config, rx130l, real, tmp_path):
     assert s["kinematics"] == "calibrated"
     # nominal kinematics: mm-level absolute error; calibrated: only the tracking error remains
     assert s["tcp_error_rms_nominal_kinematics_m"] > 5 * s["tcp_error_rms_calibrated_kinematics_m"]
+    # a calibration without compliances: every joint's stiffness is nominal, and the report says what it is worth
+    js = s["joint_stiffness"]
+    assert js["nominal_joints"] == [1, 2, 3, 4, 5, 6] and js["gravity_model_factor"] == [1.0] * 6
+    assert max(js["tcp_deflection_max_m"]) > 0 and "nominal stiffness" in res.report_md
 
 
 @pytest.mark.parametrize("kwargs", [{"engine": "fortran"}, {"on_saturation": "ignore"}, {"variants": ["magic"]},
