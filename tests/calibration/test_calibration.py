@@ -369,7 +369,9 @@ def test_measurement_file_without_validation_file_has_no_heldout_validation(robo
 
 def test_measurement_and_validation_files_validate_on_the_validation_file(robot, tracker_files):
     path, vpath, n_meas, n_val = tracker_files
-    cfg = _cfg(measurements_csv=str(path), validation_csv=str(vpath), identifiability_samples=60)
+    # the files come from TruthConfig.ideal(): the nominal masses are exact, no gravity-model uncertainty
+    cfg = _cfg(measurements_csv=str(path), validation_csv=str(vpath), identifiability_samples=60,
+               gravity_model_relative_sigma=0.0, gravity_model_com_sigma_m=0.0)
     out = st.calibrate(robot, _NoHiddenRobot(), cfg, np.random.default_rng(6))
     s = st.summary_of(out, cfg)
     assert s["heldout_n_poses"] == n_val and s["validation_source"] == str(vpath)
@@ -381,7 +383,9 @@ def test_measurement_and_validation_files_validate_on_the_validation_file(robot,
     res = st.run(_Ctx(cfg, robot, 6))
     assert "Held-out validation" in res.report_md and str(vpath) in res.report_md
     assert "no held-out validation" not in res.report_md
-    assert len(res.arrays["heldout_errors_after_m"]) == n_val
+    # the held-out gross-error test may reject a reading of clean data at its 99.9 % level, rarely
+    rejected = res.summary["heldout_n_rejected"]
+    assert rejected <= 2 and len(res.arrays["heldout_errors_after_m"]) == n_val - rejected
 
 
 def test_report_says_how_many_selected_poses_were_not_visible(robot):
