@@ -243,18 +243,13 @@ class RealRobot:
     def execute_joint_trajectory(self, t_s: np.ndarray, q: np.ndarray, v: np.ndarray, a: np.ndarray,
                                  rng: np.random.Generator) -> JointMeasurement:
         """Ideal tracking of ``(q, v, a)``: encoder readings and joint torques (motor currents
-        through the gear matrix) with sensor noise. The friction is the hidden transmission's
-        (:meth:`Transmission.friction_torque`: Stribeck and load-dependent Coulomb when the truth has
-        them, else the model's viscous + Coulomb), as in the closed-loop plant. Torque saturation is
-        not modelled here; use :attr:`plant` for a closed-loop experiment."""
+        through the gear matrix) with sensor noise. Torque saturation is not modelled here;
+        use :attr:`plant` for a closed-loop experiment."""
         q, v, a = (np.atleast_2d(np.asarray(x, float)) for x in (q, v, a))
         if not (len(t_s) == len(q) == len(v) == len(a)):
             raise ConfigError(None, "trajectory", f"t, q, v, a have different lengths "
                               f"({len(t_s)}, {len(q)}, {len(v)}, {len(a)})")
         tau = np.array([self._truth.inverse_dynamics(qk, vk, ak) for qk, vk, ak in zip(q, v, a, strict=True)])
-        if self.transmission.nonlinear_friction:
-            load = tau - self._truth.friction_torque(v)          # the torque the gears transmit
-            tau = load + self.transmission.friction_torque(v, load)
         return JointMeasurement(np.asarray(t_s, float).copy(), self.encoders.read(q, rng),
                                 self.torque_sensor.read(tau, rng), self.torque_sensor.sigma_Nm.copy(),
                                 self.encoders.noise_rad)
