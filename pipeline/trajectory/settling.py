@@ -46,7 +46,7 @@ from pipeline.control.validate import (
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.solve import PTPPlan
-from pipeline.trajectory.trajectories import JointTrajectory, check_trajectory
+from pipeline.trajectory.trajectories import JointTrajectory, TorqueCheck, check_trajectory
 
 
 def lowest_mode_hz(robot, q: np.ndarray, stiffness_Nm_rad: np.ndarray | None = None) -> float:
@@ -199,14 +199,44 @@ def settling_figure(results: list[SettleResult]) -> Figure:
     return fig
 
 
-def add_smooth_ptp(pm: PlanningModel, robot, plan: PTPPlan, filter_periods: float = 1.0) -> JointTrajectory:
+def time_scaled(traj: JointTrajectory, factor: float, name: str | None = None) -> JointTrajectory:
+    """The same path ``factor`` times slower: ``t' = factor t``, ``v' = v / factor``, ``a' = a / factor^2``."""
+    info = {**traj.info, "time_scale": float(factor)}
+    return JointTrajectory(name or traj.name, traj.t_s[0] + factor * (traj.t_s - traj.t_s[0]), traj.q.copy(),
+                           traj.v / factor, traj.a / factor**2, info)
+
+
+def _within_limits(check: TorqueCheck, tolerance: float, acceleration_limits: bool) -> bool:
+    return bool(check.violation <= tolerance and check.max_velocity_ratio <= 1.0 + tolerance
+                and (not acceleration_limits or check.max_acceleration_ratio <= 1.0 + tolerance))
+
+
+def add_smooth_ptp(pm: PlanningModel, robot, plan: PTPPlan, filter_periods: float = 1.0,
+                   tolerance: float | None = None, acceleration_limits: bool = True) -> JointTrajectory:
     """Add the smooth variant of ``plan.trajectories["ptp"]`` (moving average over ``filter_periods``
     periods of the lowest elastic mode at the goal) to ``plan.trajectories`` and its fine-grid check
-    (full friction model, the plan's energy weights) to ``plan.checks``, both under ``"ptp_smooth"``."""
+    (full friction model, the plan's energy weights) to ``plan.checks``, both under ``"ptp_smooth"``.
+
+    The average of a plan on its torque limits can exceed them a little (the torque of the averaged
+    motion is not the average torque); with a ``tolerance`` the smooth plan is then slowed down
+    (:func:`time_scaled`, bisection on the factor) until its fine-grid check is within the limits."""
     tr = plan.trajectories["ptp"]
     smooth = smooth_trajectory(tr, filter_periods / lowest_mode_hz(robot, tr.q[-1]), "ptp_smooth")
+    check = check_trajectory(pm, smooth, energy_weights=plan.weights)
+    if tolerance is not None and not _within_limits(check, tolerance, acceleration_limits):
+        lo, hi = 1.0, 1.05
+        while not _within_limits(check_trajectory(pm, time_scaled(smooth, hi)), tolerance, acceleration_limits):
+            lo, hi = hi, 1.0 + 2.0 * (hi - 1.0)
+            if hi > 4.0:
+                break                     # left to the stage's gate
+        for _ in range(12):
+            mid = 0.5 * (lo + hi)
+            ok = _within_limits(check_trajectory(pm, time_scaled(smooth, mid)), tolerance, acceleration_limits)
+            lo, hi = (lo, mid) if ok else (mid, hi)
+        smooth = time_scaled(smooth, hi, "ptp_smooth")
+        check = check_trajectory(pm, smooth, energy_weights=plan.weights)
     plan.trajectories["ptp_smooth"] = smooth
-    plan.checks["ptp_smooth"] = check_trajectory(pm, smooth, energy_weights=plan.weights)
+    plan.checks["ptp_smooth"] = check
     return smooth
 
 

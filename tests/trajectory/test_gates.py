@@ -67,3 +67,15 @@ def test_acceleration_gate_follows_the_switch():
     cp, ptp = _plans(cp_check=_check(a=1.5))
     res = _finish(quality_gates(TrajectoryConfig(acceleration_limits=False), cp, ptp, {}))
     assert res.summary["quality_gates"]["passed"]
+
+
+def test_on_an_elastic_plant_the_smooth_ptp_is_gated_not_the_time_optimal_one():
+    cp, ptp = _plans()
+    sims = {"ptp": {"max_averaged_torque_ratio": 17.0}, "ptp_smooth": {"max_averaged_torque_ratio": 0.9}}
+    with pytest.raises(QualityGateError, match="ptp_sim_max_averaged_torque_ratio"):
+        _finish(quality_gates(TrajectoryConfig(), cp, ptp, sims))          # rigid plant: the plan must run
+    assert _finish(quality_gates(TrajectoryConfig(), cp, ptp, sims, elastic_plant=True)).summary[
+        "quality_gates"]["passed"]
+    sims["ptp_smooth"]["max_averaged_torque_ratio"] = 1.2
+    with pytest.raises(QualityGateError, match="ptp_smooth_sim_max_averaged_torque_ratio"):
+        _finish(quality_gates(TrajectoryConfig(), cp, ptp, sims, elastic_plant=True))

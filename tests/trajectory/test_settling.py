@@ -7,10 +7,17 @@ import numpy as np
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 from pipeline.robot.truth import RealRobot, TruthConfig
 from pipeline.trajectory.dynamics import PlanningModel
-from pipeline.trajectory.settling import lowest_mode_hz, settle_study, settling_table, smooth_trajectory
+from pipeline.trajectory.settling import (
+    add_smooth_ptp,
+    lowest_mode_hz,
+    settle_study,
+    settling_table,
+    smooth_trajectory,
+    time_scaled,
+)
 from pipeline.trajectory.solve import plan_ptp
 from pipeline.trajectory.solve import ptp_problem as build_ptp_problem
-from pipeline.trajectory.trajectories import JointTrajectory
+from pipeline.trajectory.trajectories import JointTrajectory, check_trajectory
 
 
 def _bang_bang(dt: float = 1e-3, T: float = 0.4, n: int = 6) -> JointTrajectory:
@@ -73,3 +80,27 @@ def test_smooth_ptp_settles_faster_on_the_elastic_truth(rx130l, ptp_problem, qui
         assert s["ptp_move_and_settle_s"] == opt.duration_s + opt.settling_time_s
     table = settling_table(list(results.values()))
     assert "move + settle [s]" in table and all(f"| {n} |" in table for n in results)
+
+
+def test_time_scaling_keeps_the_path_and_slows_the_derivatives():
+    tr = _bang_bang()
+    slow = time_scaled(tr, 1.25)
+    assert np.array_equal(slow.q, tr.q) and slow.duration_s == 1.25 * tr.duration_s
+    assert np.allclose(slow.v, tr.v / 1.25) and np.allclose(slow.a, tr.a / 1.25**2)
+
+
+def test_smooth_ptp_is_slowed_into_the_limits(rx130l, pm, ptp_problem, big_move, quick_traj_config):
+    """The moving average of a plan on its torque limits may leave them; with a tolerance the smooth
+    plan is slowed down until its fine-grid check holds (and not slowed when it already does)."""
+    cfg = quick_traj_config
+    plan = plan_ptp(pm, ptp_problem, *big_move, cfg)
+    tol = cfg.violation_tolerance
+    raw = smooth_trajectory(plan.trajectories["ptp"], 1.0 / lowest_mode_hz(rx130l, plan.q1))
+    smooth = add_smooth_ptp(pm, rx130l, plan, tolerance=tol, acceleration_limits=cfg.acceleration_limits)
+    chk = plan.checks["ptp_smooth"]
+    assert chk.violation <= tol and chk.max_velocity_ratio <= 1 + tol
+    raw_chk = check_trajectory(pm, raw)
+    if raw_chk.violation <= tol and raw_chk.max_velocity_ratio <= 1 + tol:
+        assert smooth.duration_s == raw.duration_s
+    else:
+        assert smooth.duration_s > raw.duration_s and smooth.info["time_scale"] > 1
