@@ -24,7 +24,7 @@ STUDIES: dict[str, str] = {
     # calibration
     "calib-004": "pipeline.calibration.studies:study_004",
     "calib-000": "pipeline.calibration.studies:study_000",
-    "calib-002": "pipeline.calibration.studies:study_002",
+    "calib-002": "pipeline.calibration.paper_002:study_002",
     "calib-003": "pipeline.calibration.studies:study_003",
     "calib-design": "pipeline.calibration.design_study:study_design",
     # identification

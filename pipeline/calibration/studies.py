@@ -11,10 +11,7 @@ Runs over seeds / arms are parallel with joblib (``--jobs``, default 1 on the sh
   (remove-and-replace warm start + IPOPT with collision constraints), over arms whose link 2 and
   link 4 lengths vary (paper: 90 notional arms; TCP criterion 40-44 % better than heuristic and
   10-19 % better than the parameter criterion).
-- calib-002 (papers/002 §3): a 6-axis DH arm with a probe (25 parameters): redundant parameters by
-  SVD (paper: rank 23, 2 redundant) and Gauss-Newton steps converging.
-- calib-003 (papers/003 Table 2): a UR10-like arm: mean/RMS/max positioning error on 50 validation
-  poses for random ("none"), DETMAX x {O1, O2, O3, Oc} and BSAA x {O1, O2, O3, Oc}.
+- calib-002 and calib-003: :mod:`pipeline.calibration.paper_002`, :mod:`pipeline.calibration.paper_003`.
 """
 
 from __future__ import annotations
@@ -25,7 +22,6 @@ import math
 import time
 from types import SimpleNamespace
 
-import casadi as ca
 import numpy as np
 import pinocchio as pin
 
@@ -226,88 +222,6 @@ def study_000(argv: list[str]) -> int:
     _save("calib-000", {"args": vars(a), "rows": rows, "mean_improvement_vs_random": float(np.mean(imp_r)),
                         "mean_improvement_vs_parameter": float(np.mean(imp_p)),
                         "paper": {"vs_random": [0.40, 0.44], "vs_parameter": [0.10, 0.19]}})
-    return 0
-
-
-# ------------------------------------------------------------------------------------------------
-# calib-002: DH arm with a probe, SVD of the identification Jacobian, Gauss-Newton
-# ------------------------------------------------------------------------------------------------
-#: AACMM-like standard DH table (theta offset, d, a, alpha) and probe length: alternating swivel and
-#: hinge joints (papers/002 Table 1 is not in the extracted text; representative values)
-AACMM_DH = [(0.0, 0.25, 0.03, -np.pi / 2), (0.0, 0.05, 0.03, np.pi / 2), (0.0, 0.60, 0.03, -np.pi / 2),
-            (0.0, 0.05, 0.03, np.pi / 2), (0.0, 0.55, 0.03, -np.pi / 2), (0.0, 0.05, 0.04, 0.0)]
-AACMM_PROBE_M = 0.12
-
-
-def dh_probe_function() -> tuple[ca.Function, list[str]]:
-    """``p(q, params)`` of the DH arm: ``T_i = Rz(theta_i + q_i) Tz(d_i) Tx(a_i) Rx(alpha_i)``,
-    probe tip at ``(0, 0, l)`` of the last frame (papers/002 eq. 1-5)."""
-    q = ca.SX.sym("q", 6)
-    prm = ca.SX.sym("p", 25)
-    T = ca.SX.eye(4)
-    names = []
-    for i in range(6):
-        th, d, a, al = prm[4 * i], prm[4 * i + 1], prm[4 * i + 2], prm[4 * i + 3]
-        names += [f"theta{i + 1}", f"d{i + 1}", f"a{i + 1}", f"alpha{i + 1}"]
-        c, s = ca.cos(th + q[i]), ca.sin(th + q[i])
-        ca_, sa = ca.cos(al), ca.sin(al)
-        A = ca.vertcat(ca.horzcat(c, -s * ca_, s * sa, a * c), ca.horzcat(s, c * ca_, -c * sa, a * s),
-                       ca.horzcat(0, sa, ca_, d), ca.horzcat(0, 0, 0, 1))
-        T = T @ A
-    names.append("probe_l")
-    tip = T @ ca.vertcat(0, 0, prm[24], 1)
-    p = tip[:3]
-    return ca.Function("dh", [q, prm], [p, ca.jacobian(p, prm)]), names
-
-
-def study_002(argv: list[str]) -> int:
-    ap = argparse.ArgumentParser(prog="study calib-002")
-    ap.add_argument("--poses", type=int, default=60)
-    ap.add_argument("--noise-um", type=float, default=5.0)
-    ap.add_argument("--seed", type=int, default=0)
-    a = ap.parse_args(argv)
-    rng = np.random.default_rng(a.seed)
-    f, names = dh_probe_function()
-    nominal = np.array([v for row in AACMM_DH for v in row] + [AACMM_PROBE_M])
-    Q = rng.uniform(-np.pi, np.pi, size=(a.poses, 6))
-    J = np.vstack([np.asarray(f(q, nominal)[1]) for q in Q])
-    rep = em.identifiability(J, names, order=list(range(25)))
-    print(f"\npaper 002: DH arm with probe, {len(names)} parameters: rank {rep.rank} "
-          f"(paper: 23), redundant {len(names) - rep.rank} (paper: 2)")
-    for k, v in rep.combined.items():
-        print(f"  {k}: combined with " + ", ".join(f"{n} ({c:+.3g})" for n, c in v))
-    for k in rep.unidentifiable:
-        print(f"  {k}: no effect")
-    print("  SVD null-space vectors: " + "; ".join(", ".join(f"{n} {c:+.2f}" for n, c in v) for v in rep.null_space))
-    # Gauss-Newton on the identifiable set from the nominal parameters
-    true = nominal + rng.normal(size=25) * 2e-4   # 0.2 mm / 0.2 mrad errors
-    noise = a.noise_um * 1e-6
-
-    def meas(Qs):
-        return np.array([np.asarray(f(q, true)[0]).ravel() for q in Qs]) + noise * rng.standard_normal((len(Qs), 3))
-
-    Y = meas(Q)
-    cols = rep.identifiable
-    prm = nominal.copy()
-    Qv = rng.uniform(-np.pi, np.pi, size=(200, 6))
-    Yv_true = np.array([np.asarray(f(q, true)[0]).ravel() for q in Qv])
-    print("\n| Gauss-Newton step | RMS residual [µm] | RMS validation error [µm] |")
-    print("|---|---|---|")
-    hist = []
-    for it in range(5):
-        P = np.array([np.asarray(f(q, prm)[0]).ravel() for q in Q])
-        Pv = np.array([np.asarray(f(q, prm)[0]).ravel() for q in Qv])
-        r = (Y - P).ravel()
-        rv = np.sqrt(np.mean(np.sum((Yv_true - Pv) ** 2, axis=1)))
-        hist.append((it, float(np.sqrt(np.mean(r.reshape(-1, 3) ** 2) * 3)), float(rv)))
-        print(f"| {it} | {1e6 * hist[-1][1]:.2f} | {1e6 * rv:.2f} |")
-        Jc = np.vstack([np.asarray(f(q, prm)[1]) for q in Q])[:, cols]
-        d, *_ = np.linalg.lstsq(Jc, r, rcond=None)
-        prm[cols] += d
-    print(f"(noise {a.noise_um} µm per axis: the residual after one step is at the noise level, "
-          f"sqrt(3) sigma = {math.sqrt(3) * a.noise_um:.1f} µm)")
-    _save("calib-002", {"args": vars(a), "rank": rep.rank, "n_parameters": 25, "combined": rep.as_dict()["combined"],
-                        "gauss_newton": hist, "paper": {"rank": 23, "redundant": 2}})
     return 0
 
 

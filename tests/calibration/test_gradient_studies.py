@@ -56,14 +56,6 @@ def test_gradient_design_improves_and_stays_feasible():
 
 
 @pytest.mark.slow
-def test_study_002_finds_two_redundant_parameters(capsys):
-    from pipeline.calibration import studies
-
-    studies.study_002([])
-    assert "rank 23 (paper: 23), redundant 2" in capsys.readouterr().out
-
-
-@pytest.mark.slow
 def test_study_004_optimal_design_beats_linear_scan():
     from pipeline.calibration import studies
 
