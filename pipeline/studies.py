@@ -25,7 +25,7 @@ STUDIES: dict[str, str] = {
     "calib-004": "pipeline.calibration.studies:study_004",
     "calib-000": "pipeline.calibration.studies:study_000",
     "calib-002": "pipeline.calibration.paper_002:study_002",
-    "calib-003": "pipeline.calibration.studies:study_003",
+    "calib-003": "pipeline.calibration.paper_003:study_003",
     "calib-design": "pipeline.calibration.design_study:study_design",
     # identification
     # control
