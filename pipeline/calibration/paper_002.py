@@ -265,6 +265,18 @@ def study_002(argv: list[str]) -> int:
             mn = [float(r["after"]["mean_abs"].mean()) for r in rr]
             result["noise_sweep"].append({"noise_mm": nz * 1e3, "after_mean_abs_mm": _mse(mn)[0] * 1e3})
             print(f"| {nz * 1e3:.3f} | {_fmt(mn, digits=4)} | {nz * 1e3 * math.sqrt(2 / math.pi):.4f} |")
+        print("\nexperiment 'number of identification poses' (paper §4: stable above 30 poses, almost invariant "
+              "above 50):")
+        print("| poses | mean |e| after [mm] | max |e| after [mm] |")
+        print("|---|---|---|")
+        result["poses_sweep"] = []
+        for n_id in (10, 20, 30, 50, 100, 200):
+            rr = [run_seed(s, scale, noise, n_id=n_id, model=model) for s in seeds[:10]]
+            mn = [float(r["after"]["mean_abs"].mean()) for r in rr]
+            mx = [float(r["after"]["max_abs"].max()) for r in rr]
+            result["poses_sweep"].append({"poses": n_id, "after_mean_abs_mm": _mse(mn)[0] * 1e3,
+                                          "after_max_abs_mm": _mse(mx)[0] * 1e3})
+            print(f"| {n_id} | {_fmt(mn, digits=4)} | {_fmt(mx, digits=4)} |")
         print("\nexperiment 'imprecise initial parameters' (paper §1: initial values may be arbitrary 'as long as "
               "they are not too exaggerated'):")
         print("| start offset (1 sigma) | mean |e| after 1 / 2 / 5 iterations [mm] |")
