@@ -1,8 +1,8 @@
 """Study calib-003: calibration pose selection by DETMAX / BSAA x {O1, O2, O3, Oc} on a UR10 (papers/003).
 
-``python -m pipeline study calib-003 [--seeds 20] [--quick]``: about 25 min with the defaults (20 seeds,
-500 of 583 poses, the magnitude sweep on 8 seeds) on the shared 2-core machine with 5 other workers;
-``--quick`` (3 seeds, 60 of 150 poses, no sweep) about 1 min.
+``python -m pipeline study calib-003 [--seeds 20] [--quick]``: 16 min with the defaults (966 s measured
+for 20 seeds, 500 of 583 poses, the sweeps on 8 seeds, on the shared 2-core machine with 5 other
+workers); ``--quick`` (at most 3 seeds, 60 of 150 poses, no sweep) about 20 s per seed.
 
 Paper ``003_16198f1660ab3739.txt``: UR10 (Table 1 joint ranges), laser tracker Leica AT403 (maximum
 single-point error 10 µm) about 2.5 m from the robot (§4.1); simulation (§4.2): structural errors
@@ -46,7 +46,7 @@ from pipeline.calibration import error_model as em
 from pipeline.calibration import paper_003_search as ps
 from pipeline.calibration import stage as st
 from pipeline.calibration.estimate import estimate, register_points
-from pipeline.errors import DataFileError
+from pipeline.errors import DataFileError, SolverError
 from pipeline.robot.model import RobotModel
 from pipeline.robot.spec import TrackerSpec
 from pipeline.robot.truth import RealRobot, TruthConfig
@@ -192,6 +192,8 @@ def _calibrate_all(robot: RobotModel, mm: em.MeasurementModel, basis: np.ndarray
     for key, sel in selections.items():
         rows = np.intersect1d(np.asarray(sel, int), vis_p)
         est = estimate(mm, Qp[rows], np.asarray(rp.position_m)[rows], np.asarray(rp.sigma_m)[rows], basis)
+        if not est.converged:
+            raise SolverError(None, f"calib-003 seed {seed} design {key}", "Levenberg-Marquardt did not converge")
         e = np.linalg.norm(Yv - mm.predict(Qv[vis_v], est.x, est.registration), axis=1)
         res[key] = _errors(e) | {"measured": int(rows.size), "converged": bool(est.converged)}
     return res
