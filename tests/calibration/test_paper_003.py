@@ -87,6 +87,7 @@ def test_quick_study_prints_every_row_and_calibrates(tmp_path, monkeypatch, caps
     assert p3.study_003(["--quick", "--seeds", "1", "--sweep-seeds", "1", "--small", "20"]) == 0
     res = json.loads((tmp_path / "result.json").read_text())
     out = capsys.readouterr().out
+    assert {"none", "bsaa_Oc", "gain", "ours_gain"} <= set(res["paper_table4"])
     for table in ("table_literal", "table_realistic"):
         for key in p3.KEYS:
             assert key in res[table]
