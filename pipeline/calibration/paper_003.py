@@ -22,9 +22,12 @@ Estimation: closed-form registration + Levenberg-Marquardt (:mod:`pipeline.calib
 Experiments printed: (1) the literal simulation (geometric truth only): errors of micrometres,
 where the paper has 0.36-0.49 mm; (2) the magnitude sweep: the hidden robot's unmodelled effects
 (:class:`pipeline.robot.truth.TruthConfig`: joint compliance under gravity, cyclic gear transmission
-error), which level brings "none" to the paper's 0.485 mm; (3) Table 2 with that truth; (4) Oc with
-the paper's units (each term's spread shows which term counts) against Oc normalised by reference
-values (:class:`~pipeline.calibration.paper_003_search.OcScale`).
+error), which level brings "none" to the paper's 0.485 mm; (3) Table 2 with that truth, the index
+value each search reaches and the poses it shares with the random design; (4) Oc searched in the
+paper's units against Oc normalised by reference values
+(:class:`~pipeline.calibration.paper_003_search.OcScale`); (5) the same searches for 30 of the 583
+poses, where the choice matters; (6) the spread of each term of Oc over random designs (which term
+can steer the search).
 """
 
 from __future__ import annotations
