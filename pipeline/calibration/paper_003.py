@@ -1,8 +1,9 @@
 """Study calib-003: calibration pose selection by DETMAX / BSAA x {O1, O2, O3, Oc} on a UR10 (papers/003).
 
-``python -m pipeline study calib-003 [--seeds 20] [--quick]``: 16-19 min with the defaults (966, 1080
-and 1103 s measured for 20 seeds, 500 of 583 poses, the sweeps on 8 seeds, on the shared 2-core machine with 5 other
-workers); ``--quick`` (at most 3 seeds, 60 of 150 poses, no sweep) about 20 s per seed.
+``python -m pipeline study calib-003 [--seeds 20] [--quick]``: 14-19 min with the defaults (841 to
+1103 s measured in four runs for 20 seeds, 500 of 583 poses, the sweeps on 8 seeds, on the shared
+2-core machine with 5 other workers); ``--quick`` (at most 3 seeds, 60 of 150 poses, no sweep)
+about 20 s per seed.
 
 Paper ``003_16198f1660ab3739.txt``: UR10 (Table 1 joint ranges), laser tracker Leica AT403 (maximum
 single-point error 10 µm) about 2.5 m from the robot (§4.1); simulation (§4.2): structural errors
