@@ -25,8 +25,8 @@ STUDIES: dict[str, str] = {
     # calibration
     "calib-004": "pipeline.calibration.paper_004:study_004",
     "calib-000": "pipeline.calibration.studies:study_000",
-    "calib-002": "pipeline.calibration.studies:study_002",
-    "calib-003": "pipeline.calibration.studies:study_003",
+    "calib-002": "pipeline.calibration.paper_002:study_002",
+    "calib-003": "pipeline.calibration.paper_003:study_003",
     "calib-design": "pipeline.calibration.design_study:study_design",
     # identification
     # control
