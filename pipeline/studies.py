@@ -23,7 +23,7 @@ from pipeline.errors import PipelineError
 STUDIES: dict[str, str] = {
     # calibration
     "calib-004": "pipeline.calibration.studies:study_004",
-    "calib-000": "pipeline.calibration.studies:study_000",
+    "calib-000": "pipeline.calibration.paper_000:study",
     "calib-002": "pipeline.calibration.studies:study_002",
     "calib-003": "pipeline.calibration.studies:study_003",
     "calib-design": "pipeline.calibration.design_study:study_design",
