@@ -71,6 +71,10 @@ class Settings:
     iterations: int = 60
     gradient: bool = True
     criteria: tuple[str, ...] = CRITERIA
+    #: also the literal SQP reading: IPOPT from the random (heuristic) design, no discrete search,
+    #: no trust region (``*_ca_local``; CA only)
+    local: bool = False
+    local_iterations: int = 300
 
 
 @dataclass
@@ -169,6 +173,21 @@ def optimise(setup: ArmSetup, key: str, ca: bool, cfg: Settings, rng: np.random.
     return out
 
 
+def optimise_local(setup: ArmSetup, key: str, Q_start: np.ndarray, cfg: Settings) -> dict:
+    """The SQP of paper 000 §3.1 read literally: all joint angles optimised by IPOPT from the
+    heuristic (random) design, with the cell's constraints, no discrete preselection and no trust
+    region. A non-success status keeps the start (never stored as a result)."""
+    spec, basis = criterion(setup, key)
+    t0 = time.perf_counter()
+    gcfg = GradientDesignConfig(max_iterations=cfg.local_iterations, max_step_rad=2 * np.pi,
+                                obstacles=setup.scene.obstacles)
+    g = gradient_design(setup.robot, setup.mm, basis, Q_start, spec, gcfg,
+                        transform_tracker_to_base=setup.scene.tracker)
+    return {"tcp_var_start": tcp_variance(setup, Q_start), "tcp_var": tcp_variance(setup, g.Q),
+            "ipopt_status": g.status, "fallback": g.fallback, "reverted": g.reverted,
+            "collision_share": collision_share(setup, g.Q), "time_s": time.perf_counter() - t0}
+
+
 def run_arm(name: str, robot: RobotModel, cfg: Settings, seed: int) -> dict:
     """Every design of Table 8 for one arm (a result row)."""
     with single_thread_blas():
@@ -176,7 +195,8 @@ def run_arm(name: str, robot: RobotModel, cfg: Settings, seed: int) -> dict:
         t0 = time.perf_counter()
         setup = setup_arm(name, robot, cfg.pool, rng)
         pool = setup.pools[True]
-        rnd = [tcp_variance(setup, sc.random_design(pool, cfg.n, rng)) for _ in range(5)]
+        starts = [sc.random_design(pool, cfg.n, rng) for _ in range(5)]
+        rnd = [tcp_variance(setup, Q) for Q in starts]
         spread = sc.spread_design(setup.robot, setup.scene, pool, cfg.n)
         row: dict = {"arm": name, "n": cfg.n, "pool": {str(k): len(v) for k, v in setup.pools.items()},
                      "q_work_deg": np.rad2deg(setup.q_work).round(1).tolist(),
@@ -187,6 +207,8 @@ def run_arm(name: str, robot: RobotModel, cfg: Settings, seed: int) -> dict:
         for key in cfg.criteria:
             for ca in (True, False):
                 row[f"{key}_{'ca' if ca else 'free'}"] = optimise(setup, key, ca, cfg, rng)
+            if cfg.local:
+                row[f"{key}_ca_local"] = optimise_local(setup, key, starts[0], cfg)
         row["time_s"] = time.perf_counter() - t0
     return row
 
@@ -218,13 +240,15 @@ def study(argv: list[str]) -> int:
     ap.add_argument("--iterations", type=int, default=60, help="IPOPT iterations of the refinement")
     ap.add_argument("--no-gradient", action="store_true", help="remove-and-replace designs only")
     ap.add_argument("--notional-gradient", action="store_true", help="refine the notional arms' designs too")
+    ap.add_argument("--no-local", action="store_true",
+                    help="skip the literal SQP reading (IPOPT from the heuristic design) on the named arms")
     ap.add_argument("--quick", action="store_true", help="one arm (KR 15), pool 300, 15 iterations, no notional arms")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--jobs", type=int, default=1)
     a = ap.parse_args(argv)
     if a.quick:
-        a.arms, a.notional, a.pool, a.iterations = ["kuka_kr15"], 0, 300, 15
-    cfg = Settings(n=a.n, pool=a.pool, iterations=a.iterations, gradient=not a.no_gradient)
+        a.arms, a.notional, a.pool, a.iterations, a.no_local = ["kuka_kr15"], 0, 300, 15, True
+    cfg = Settings(n=a.n, pool=a.pool, iterations=a.iterations, gradient=not a.no_gradient, local=not a.no_local)
     t0 = time.perf_counter()
     kuka = kuka_rows(cfg, a.seed, a.jobs, tuple(a.arms))
     ncfg = Settings(n=a.n, pool=a.pool, iterations=a.iterations, gradient=cfg.gradient and a.notional_gradient)
