@@ -16,5 +16,6 @@ Public entry points:
 - :mod:`~pipeline.calibration.gradient_design`: CasADi/IPOPT design of n configurations.
 - :mod:`~pipeline.calibration.measure`: simulated tracker or CSV files; :mod:`.estimate`:
   registration, Levenberg-Marquardt, covariance, ``calibrated_robot``; :mod:`.validate`.
-- :mod:`~pipeline.calibration.studies`: ``python -m pipeline study calib-004|calib-000|calib-002|calib-003``.
+- :mod:`~pipeline.calibration.studies`: ``python -m pipeline study calib-004|calib-002|calib-003``;
+  :mod:`~pipeline.calibration.paper_000`: ``calib-000`` (cell and baselines: ``paper_000_scene``).
 """

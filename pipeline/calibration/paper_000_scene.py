@@ -45,6 +45,7 @@ import pinocchio as pin
 
 from pipeline.calibration import candidates as cd
 from pipeline.calibration.gradient_design import feasible_configurations
+from pipeline.errors import InfeasibleError
 from pipeline.robot.collision import segment_distances
 from pipeline.robot.mdh import MDHRow
 from pipeline.robot.model import RobotModel
@@ -143,6 +144,9 @@ def working_configuration(robot: RobotModel, scene: Scene, rng: np.random.Genera
                                          np.broadcast_to(o1, (len(Q), 3)))
                 ok &= d >= cap.radius_m + r_o
     Q = Q[ok]
+    if not len(Q):
+        raise InfeasibleError(None, "calib-000", f"{robot.name}: no collision-free configuration facing the car "
+                              "(|q1| <= 45°) in the cell")
     tcp = arm.positions(Q, arm.frame_tcp)
     return Q[int(np.argmin(np.linalg.norm(tcp - scene.work_target_m, axis=1)))]
 
