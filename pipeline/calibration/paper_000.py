@@ -245,6 +245,7 @@ def study(argv: list[str]) -> int:
     ap.add_argument("--quick", action="store_true", help="one arm (KR 15), pool 300, 15 iterations, no notional arms")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--tag", default="", help="write data/studies/calib-000[-TAG]/result.json")
     a = ap.parse_args(argv)
     if a.quick:
         a.arms, a.notional, a.pool, a.iterations, a.no_local = ["kuka_kr15"], 0, 300, 15, True
@@ -254,5 +255,5 @@ def study(argv: list[str]) -> int:
     ncfg = Settings(n=a.n, pool=a.pool, iterations=a.iterations, gradient=cfg.gradient and a.notional_gradient)
     notional = notional_rows(ncfg, a.seed, a.jobs, a.notional) if a.notional else []
     result = rp.report(kuka, notional, vars(a), time.perf_counter() - t0)
-    rp.save("calib-000", result)
+    rp.save("calib-000" + (f"-{a.tag}" if a.tag else ""), result)
     return 0
