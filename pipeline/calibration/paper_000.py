@@ -75,6 +75,9 @@ class Settings:
     #: no trust region (``*_ca_local``; CA only)
     local: bool = False
     local_iterations: int = 300
+    #: ``calibration.parameters`` of the identified arm parameters (tracker and reflector always);
+    #: a list of DH/Hayati names leaves out the legacy (SE(3)) criterion
+    parameters: str | list[str] = "geometric"
 
 
 @dataclass
@@ -95,12 +98,14 @@ class ArmSetup:
     pools: dict[bool, np.ndarray]
 
 
-def setup_arm(name: str, robot: RobotModel, pool: int, rng: np.random.Generator) -> ArmSetup:
+def setup_arm(name: str, robot: RobotModel, pool: int, rng: np.random.Generator,
+              parameters: str | list[str] = "geometric") -> ArmSetup:
     scene = sc.fms_scene(robot)
     arm = sc.scene_robot(robot, scene, True)
     mm = em.MeasurementModel(arm)
-    rep, basis = st.identify_parameter_set(arm, mm, st.Config(error_model="mdh_hayati", parameters="geometric"), rng)
-    rep3, basis3 = st.identify_parameter_set(arm, mm, st.Config(error_model="se3", parameters="geometric"), rng)
+    rep, basis = st.identify_parameter_set(arm, mm, st.Config(error_model="mdh_hayati", parameters=parameters), rng)
+    se3_parameters = "geometric" if isinstance(parameters, list) else parameters
+    rep3, basis3 = st.identify_parameter_set(arm, mm, st.Config(error_model="se3", parameters=se3_parameters), rng)
     q_work = sc.working_configuration(robot, scene, rng)
     Jw = st.working_jacobian(arm, mm, q_work[None], basis)
     pools = {ca: sc.candidate_pool(robot, scene, pool, rng, ca) for ca in (True, False)}
@@ -193,7 +198,7 @@ def run_arm(name: str, robot: RobotModel, cfg: Settings, seed: int) -> dict:
     with single_thread_blas():
         rng = np.random.default_rng([seed, sum(map(ord, name))])
         t0 = time.perf_counter()
-        setup = setup_arm(name, robot, cfg.pool, rng)
+        setup = setup_arm(name, robot, cfg.pool, rng, cfg.parameters)
         pool = setup.pools[True]
         starts = [sc.random_design(pool, cfg.n, rng) for _ in range(5)]
         rnd = [tcp_variance(setup, Q) for Q in starts]
@@ -204,7 +209,7 @@ def run_arm(name: str, robot: RobotModel, cfg: Settings, seed: int) -> dict:
                      "n_parameters": len(setup.names), "n_arm_parameters": sum(map(_is_arm, setup.names)),
                      "random": float(np.mean(rnd)), "random_sem": float(np.std(rnd, ddof=1) / np.sqrt(len(rnd))),
                      "spread": tcp_variance(setup, spread), "spread_collision_share": collision_share(setup, spread)}
-        for key in cfg.criteria:
+        for key in [c for c in cfg.criteria if not (c == "param_legacy" and isinstance(cfg.parameters, list))]:
             for ca in (True, False):
                 row[f"{key}_{'ca' if ca else 'free'}"] = optimise(setup, key, ca, cfg, rng)
             if cfg.local:
@@ -246,13 +251,20 @@ def study(argv: list[str]) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--tag", default="", help="write data/studies/calib-000[-TAG]/result.json")
+    ap.add_argument("--parameters", default="geometric",
+                    help="identified arm parameters (calibration.parameters: geometric, joint_offsets, or "
+                         "comma-separated DH/Hayati names such as j2.da,j3.dq)")
     a = ap.parse_args(argv)
+    if "," in a.parameters:
+        a.parameters = a.parameters.split(",")
     if a.quick:
         a.arms, a.notional, a.pool, a.iterations, a.no_local = ["kuka_kr15"], 0, 300, 15, True
-    cfg = Settings(n=a.n, pool=a.pool, iterations=a.iterations, gradient=not a.no_gradient, local=not a.no_local)
+    cfg = Settings(n=a.n, pool=a.pool, iterations=a.iterations, gradient=not a.no_gradient, local=not a.no_local,
+                   parameters=a.parameters)
     t0 = time.perf_counter()
     kuka = kuka_rows(cfg, a.seed, a.jobs, tuple(a.arms))
-    ncfg = Settings(n=a.n, pool=a.pool, iterations=a.iterations, gradient=cfg.gradient and a.notional_gradient)
+    ncfg = Settings(n=a.n, pool=a.pool, iterations=a.iterations, gradient=cfg.gradient and a.notional_gradient,
+                    parameters=a.parameters)
     notional = notional_rows(ncfg, a.seed, a.jobs, a.notional) if a.notional else []
     result = rp.report(kuka, notional, vars(a), time.perf_counter() - t0)
     rp.save("calib-000" + (f"-{a.tag}" if a.tag else ""), result)
