@@ -34,9 +34,14 @@ of feasible random candidates, then the gradient-based refinement of all joint a
 cell's obstacles (CA) or with limits and incidence only (no CA). Cell, baselines and notional arms:
 :mod:`pipeline.calibration.paper_000_scene`. Tables: :mod:`pipeline.calibration.paper_000_report`.
 
-Run time (measured on the shared 2-core machine under load, ``--jobs 1``): the three KUKA arms and
-the 90 notional arms with the defaults take about 40 min (see docs/papers/paper_000.md);
-``--quick`` (one arm, small pool, 15 IPOPT iterations) about 1 min.
+Experiments beside the defaults (docs/papers/paper_000.md): ``--parameters joint_offsets`` (or a
+comma-separated list of DH/Hayati names) identifies fewer arm parameters, ``--tag`` names the
+output folder ``data/studies/calib-000-TAG/``.
+
+Run time (measured on the shared 2-core machine under load, load average about 8, ``--jobs 1``):
+the three KUKA arms (IPOPT refinement and the literal SQP reading) 740 s; the notional arms
+(remove-and-replace only, pool 400) about 36 s each, so the default 90 about 55 min;
+``--quick`` (KR 15, pool 300, 15 IPOPT iterations) about 30 s.
 """
 
 from __future__ import annotations
@@ -245,6 +250,7 @@ def study(argv: list[str]) -> int:
     ap.add_argument("--iterations", type=int, default=60, help="IPOPT iterations of the refinement")
     ap.add_argument("--no-gradient", action="store_true", help="remove-and-replace designs only")
     ap.add_argument("--notional-gradient", action="store_true", help="refine the notional arms' designs too")
+    ap.add_argument("--notional-pool", type=int, default=400, help="candidates per notional arm and CA setting")
     ap.add_argument("--no-local", action="store_true",
                     help="skip the literal SQP reading (IPOPT from the heuristic design) on the named arms")
     ap.add_argument("--quick", action="store_true", help="one arm (KR 15), pool 300, 15 iterations, no notional arms")
@@ -263,7 +269,7 @@ def study(argv: list[str]) -> int:
                    parameters=a.parameters)
     t0 = time.perf_counter()
     kuka = kuka_rows(cfg, a.seed, a.jobs, tuple(a.arms))
-    ncfg = Settings(n=a.n, pool=a.pool, iterations=a.iterations, gradient=cfg.gradient and a.notional_gradient,
+    ncfg = Settings(n=a.n, pool=a.notional_pool, iterations=a.iterations, gradient=cfg.gradient and a.notional_gradient,
                     parameters=a.parameters)
     notional = notional_rows(ncfg, a.seed, a.jobs, a.notional) if a.notional else []
     result = rp.report(kuka, notional, vars(a), time.perf_counter() - t0)
