@@ -39,8 +39,8 @@ comma-separated list of DH/Hayati names) identifies fewer arm parameters, ``--ta
 output folder ``data/studies/calib-000-TAG/``.
 
 Run time (measured on the shared 2-core machine under load, load average about 8, ``--jobs 1``):
-the three KUKA arms (IPOPT refinement and the literal SQP reading) 740 s; the notional arms
-(remove-and-replace only, pool 400) about 36 s each, so the default 90 about 55 min;
+the three KUKA arms (IPOPT refinement and the literal SQP reading) 740 s; the 90 notional arms
+(remove-and-replace only, pool 400) 1917 s, so the defaults about 45 min;
 ``--quick`` (KR 15, pool 300, 15 IPOPT iterations) about 30 s.
 """
 
