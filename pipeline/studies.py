@@ -24,7 +24,7 @@ from pipeline.errors import PipelineError
 STUDIES: dict[str, str] = {
     # calibration
     "calib-004": "pipeline.calibration.paper_004:study_004",
-    "calib-000": "pipeline.calibration.studies:study_000",
+    "calib-000": "pipeline.calibration.paper_000:study",
     "calib-002": "pipeline.calibration.paper_002:study_002",
     "calib-003": "pipeline.calibration.paper_003:study_003",
     "calib-design": "pipeline.calibration.design_study:study_design",

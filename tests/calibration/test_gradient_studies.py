@@ -53,16 +53,3 @@ def test_gradient_design_improves_and_stays_feasible():
     assert mask.all()
     assert tracker_visibility(robot, robot.tracker.transform_tracker_to_base, res.Q).visible.all()
     assert res.run_time_s < 120 and res.evaluations > 0
-
-
-@pytest.mark.slow
-
-
-@pytest.mark.slow
-def test_study_000_tcp_criterion_beats_random_and_parameter_criterion():
-    from pipeline.calibration import studies
-
-    rows = [studies._study_000_arm(("rx130l", f2, f4, 0, 60, 1000, 60)) for f2, f4 in ((0.9, 1.0), (1.1, 0.9))]
-    for r in rows:
-        assert r["tcp_oed"] < r["random"] and r["tcp_oed"] < r["parameter_oed"]
-        assert r["tcp_oed"] <= r["tcp_oed_discrete"] * (1 + 1e-9)

@@ -1,0 +1,78 @@
+"""Paper 000 study (``study calib-000``): the KUKA arms, the cell, the baselines and a quick run."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from pipeline.calibration import paper_000 as p0
+from pipeline.calibration import paper_000_report as rp
+from pipeline.calibration import paper_000_scene as sc
+from pipeline.robot.model import RobotModel
+
+
+@pytest.mark.parametrize(("name", "reach_m"), [("kuka_kr15", 1.61), ("kuka_kr300", 2.50), ("kuka_kr500", 2.825)])
+def test_kuka_arms_reach_their_data_sheet_wrist_point(name: str, reach_m: float) -> None:
+    robot = RobotModel.load(name)
+    # KUKA's reach: axis 1 to the wrist point (frame of joint 5) with the arm stretched horizontally
+    robot_data = robot.model.createData()
+    pin.forwardKinematics(robot.model, robot_data, np.zeros(6))
+    assert np.linalg.norm(robot_data.oMi[5].translation[:2]) == pytest.approx(reach_m, abs=1e-9)
+    assert not robot.in_collision(np.zeros(6))
+
+
+def test_notional_arm_has_the_papers_segment_lengths() -> None:
+    base = RobotModel.load("kuka_kr15")
+    arm = sc.notional_arm(base, 1.1, 0.6)
+    q = np.zeros(6)
+    q[1] = -np.pi / 2   # upper arm upright: joint 3 is lambda above joint 2
+    z2 = arm.fk(q, "flange").translation
+    assert arm.model.jointPlacements[3].translation[0] == pytest.approx(1.1)
+    assert np.linalg.norm(arm.model.jointPlacements[4].translation) == pytest.approx(np.hypot(0.6, 0.035))
+    assert z2[2] > base.fk(q, "flange").translation[2]   # taller than the KR 15 (a2 0.68 m)
+    assert len(sc.LAMBDA_M) * len(sc.MU_M) == 90
+
+
+def test_parameter_weights_scale_only_angles() -> None:
+    names = ["j2.da", "j2.dalpha", "j3.beta", "j4.dd", "j2.dq", "tracker.dx", "reflector.dz"]
+    lit = p0.parameter_weights(names, 1.0)
+    scaled = p0.parameter_weights(names, 2.0)
+    assert np.all(lit[-2:] == 0) and np.count_nonzero(lit) == 5
+    assert np.allclose(scaled[:5] / lit[:5], [1, 4, 4, 1, 4])   # lengths kept, angles x 2^2
+
+
+@pytest.fixture(scope="module")
+def quick_row() -> dict:
+    cfg = p0.Settings(n=60, pool=250, gradient=False)
+    return p0.run_arm("kuka_kr15", RobotModel.load("kuka_kr15"), cfg, seed=0)
+
+
+def test_quick_run_tcp_criterion_is_best_on_its_figure_and_feasible(quick_row: dict) -> None:
+    r = quick_row
+    for key in ("random", "spread") + tuple(f"{c}_{m}" for c in p0.CRITERIA for m in ("ca", "free")):
+        assert key in r
+    tcp = r["tcp_ca"]["tcp_var"]
+    assert tcp < r["random"] and tcp < r["spread"]
+    for c in ("param_literal", "param_scaled", "param_legacy"):
+        assert tcp <= r[f"{c}_ca"]["tcp_var"]
+    # designs with collision avoidance are feasible in the cell; the spread baseline too
+    for c in p0.CRITERIA:
+        assert r[f"{c}_ca"]["collision_share"] == 0.0
+        assert 0.0 <= r[f"{c}_free"]["collision_share"] <= 1.0
+    assert r["spread_collision_share"] == 0.0
+    head = rp.headline([r], [r | {"lambda_m": 0.7, "mu_m": 0.65}])
+    for key in ("kuka_kr15.tcp_vs_heuristic", "kuka_kr15.tcp_vs_parameter", "notional.tcp_vs_heuristic",
+                "notional.ca_effect", "notional.free_collision_share", "notional.table7_min_max_um2",
+                "notional.tcp_vs_parameter.param_literal", "notional.parameter_vs_heuristic.param_scaled"):
+        assert key in head
+    gv, gs = rp.gain(1.0, 4.0)
+    assert gv == pytest.approx(0.75) and gs == pytest.approx(0.5)
+
+
+def test_gradient_refinement_never_worse_and_collision_free() -> None:
+    rng = np.random.default_rng(1)
+    setup = p0.setup_arm("kuka_kr15", RobotModel.load("kuka_kr15"), 200, rng)
+    out = p0.optimise(setup, "tcp", True, p0.Settings(pool=200, iterations=8), rng)
+    assert out["tcp_var"] <= out["tcp_var_discrete"] * (1 + 1e-9)
+    assert out["collision_share"] == 0.0
