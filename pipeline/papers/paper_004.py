@@ -14,7 +14,9 @@ Runs (``pipeline.runner.run_pipeline``; each its own run directory under ``--out
   control, to show what the elastic joints do to Fig. 2(b);
 - ``acceleration limits`` (experiment): the trajectory stage with joint acceleration limits as
   well (the pipeline's default, not the paper's eqs. 38/40), upstream stages copied from
-  ``main`` and reused.
+  ``main`` and reused;
+- ``full torque`` (experiment): the identification stage with the excitation allowed the whole
+  (estimated) torque limit instead of 80 % of it, to show what holds the excitation's TCP speed.
 The stages up to control must pass their quality gates; the trajectory stages are kept when the
 servo simulation of their plans fails a gate (``accept_poor``) and the failed gates are a row of
 the table: on the elastic hidden robot the paper's literal (acceleration- and jerk-free) optimum
@@ -26,8 +28,8 @@ Output: the table of :mod:`pipeline.papers.paper_004_rows` (paper, ours, verdict
 ``<study dir>/result.json``. ``--quick`` uses ``configs/quick.yaml`` sizes with the same paper
 settings (the test ``tests/papers/test_paper_004_chain.py``).
 
-Run time on the shared 2-core box (loaded by other jobs), one seed: full study about 16 min
-(see ``docs/papers/paper_004_chain.md``); ``--quick`` about 1.5 min.
+Run time on the shared 2-core box (loaded by other jobs): see ``docs/papers/paper_004_chain.md``
+(full study, seeds 1-3: measured there); ``--quick`` (seed 1) about 3-4 min.
 """
 
 from __future__ import annotations
@@ -68,6 +70,8 @@ QUICK_SETTINGS: dict[str, Any] = {"control.variants": ["none", "full_friction", 
 #: stages of the rigid-robot experiment (Fig. 2 only)
 RIGID_STAGES = ("model", "calibration", "identification", "control")
 CHAIN_UPSTREAM = ("model", "calibration", "identification", "control")
+#: stages of the excitation experiment (model and calibration copied from the main run)
+EXCITATION_STAGES = ("model", "calibration", "identification")
 
 
 def rigid_truth() -> dict[str, Any]:
@@ -78,7 +82,7 @@ def rigid_truth() -> dict[str, Any]:
 
 def chain_config(seed: int, quick: bool, variant: str = "main", stages: Sequence[str] | None = None,
                  accept_poor: bool = False) -> RunConfig:
-    """The run config of one chain: ``variant`` main | rigid | acceleration_limits."""
+    """The run config of one chain: ``variant`` main | rigid | acceleration_limits | full_torque."""
     values: dict[str, Any] = {"seed": seed, **PAPER_SETTINGS}
     if quick:
         values.update(QUICK_SETTINGS)
@@ -87,6 +91,9 @@ def chain_config(seed: int, quick: bool, variant: str = "main", stages: Sequence
         stages = stages or list(RIGID_STAGES)
     elif variant == "acceleration_limits":
         values["trajectory.acceleration_limits"] = True
+    elif variant == "full_torque":
+        values["identification.excitation.torque_margin"] = 1.0
+        stages = stages or list(EXCITATION_STAGES)
     elif variant != "main":
         raise ValueError(f"unknown variant {variant!r}")
     prefix = "p004q" if quick else "p004"
@@ -121,6 +128,7 @@ def run_study(seeds: Sequence[int], quick: bool, out: Path, experiments: bool = 
     main: list[Run] = []
     rigid: list[Run] = []
     acc: list[Run] = []
+    full_torque: list[Run] = []
     t0 = time.perf_counter()
     for seed in seeds:
         # the stages up to control must pass their quality gates; the trajectory stage with the
@@ -139,17 +147,25 @@ def run_study(seeds: Sequence[int], quick: bool, out: Path, experiments: bool = 
             _copy_upstream(out / chain_config(seed, quick).name, out / cfg.name, CHAIN_UPSTREAM)
             acc.append(run_chain(cfg, out, say))
         timings["acceleration_limits_s"] = time.perf_counter() - t0
-    return all_rows(main, rigid, acc), timings
+        t0 = time.perf_counter()
+        for seed in seeds:
+            cfg = chain_config(seed, quick, "full_torque")
+            _copy_upstream(out / chain_config(seed, quick).name, out / cfg.name, EXCITATION_STAGES[:2])
+            full_torque.append(run_chain(cfg, out, say))
+        timings["full_torque_s"] = time.perf_counter() - t0
+    return all_rows(main, rigid, acc, full_torque), timings
 
 
 def study_paper_004(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(prog=f"study {NAME}", description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="configs/quick.yaml sizes (the test)")
-    ap.add_argument("--seeds", type=int, nargs="+", default=[1])
+    ap.add_argument("--seeds", type=int, nargs="+", default=None, help="default 1 2 3 (--quick: 1)")
     ap.add_argument("--out", type=Path, default=None, help="runs directory (default <study dir>/runs[-quick])")
     ap.add_argument("--no-experiments", action="store_true", help="only the main chain (no rigid / acceleration runs)")
     ap.add_argument("--jobs", type=int, default=1, help="accepted for uniformity; the runs are sequential")
     a = ap.parse_args(argv)
+    if a.seeds is None:
+        a.seeds = [1] if a.quick else [1, 2, 3]
     out = a.out if a.out is not None else study_dir(NAME) / ("runs-quick" if a.quick else "runs")
     t0 = time.perf_counter()
     print(f"paper 004 §2.3.3, §4, §5 on the RX130L ({'quick' if a.quick else 'full'} sizes, seeds {a.seeds}); "

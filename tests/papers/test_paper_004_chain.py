@@ -40,7 +40,10 @@ def test_experiment_configs():
     main = study.chain_config(1, quick=True)
     rigid = study.chain_config(1, quick=True, variant="rigid")
     acc = study.chain_config(1, quick=True, variant="acceleration_limits", accept_poor=True)
-    assert len({main.name, rigid.name, acc.name}) == 3
+    full = study.chain_config(1, quick=True, variant="full_torque")
+    assert len({main.name, rigid.name, acc.name, full.name}) == 4
+    assert full.identification.excitation.torque_margin == 1.0 > main.identification.excitation.torque_margin
+    assert full.stages == list(study.EXCITATION_STAGES)
     assert rigid.stages == list(study.RIGID_STAGES) and "trajectory" in main.stages
     assert rigid.truth == TruthConfig.ideal() and main.truth == TruthConfig()
     assert acc.trajectory.acceleration_limits and not main.trajectory.acceleration_limits
@@ -72,6 +75,7 @@ def test_quick_study_properties(tmp_path):
     for j in (1, 2, 3):
         assert min(by["fig2a_lag"].values[f"lag_reduction_axis{j}"]) > 1.0
     assert min(by["fig2b_tcp"].values["tcp_reduction_rigid"]) > 1.0
+    assert min(by["fig2b_tcp"].values["tcp_tracking_reduction_elastic_static"]) > 1.0
     # Fig. 5: measured vs predicted torques within the identification gate
     assert max(by["fig5_torques"].values["rms_over_noise_worst"]) <= rows_mod.TORQUE_MATCH_OVER_NOISE
     # Fig. 8: a torque or speed limit active at >= 99 % of the CP grid points
@@ -79,4 +83,9 @@ def test_quick_study_properties(tmp_path):
     # PtP: raising k2 costs time and saves energy
     assert min(by["ptp_tradeoff"].values["energy_decrease"]) > 0
     assert min(by["ptp_tradeoff"].values["time_increase"]) >= 0
+    # the jerk-limited plans need less torque in the servo than the unsmoothed optimum
+    ex = by["executed"].values
+    assert max(ex["cp_smooth_torque_ratio"]) < max(ex["cp_torque_ratio"])
+    assert max(ex["ptp_smooth_torque_ratio"]) < max(ex["ptp_torque_ratio"])
     assert all(math.isfinite(t) for t in timings.values())
+    assert set(timings) >= {"main_s", "rigid_s", "acceleration_limits_s", "full_torque_s"}
