@@ -44,10 +44,12 @@ from pathlib import Path
 from typing import Any
 
 from pipeline.config import CONFIGS_DIR, RunConfig, load_config
+from pipeline.errors import PipelineError
 from pipeline.papers.paper_004_rows import Row, Run, all_rows, markdown
 from pipeline.progress import Progress
 from pipeline.robot.truth import TruthConfig
 from pipeline.runner import run_pipeline
+from pipeline.stage_io import load_run
 from pipeline.studies import study_dir
 
 NAME = "paper-004"
@@ -121,9 +123,23 @@ def run_chain(cfg: RunConfig, out: Path, say: Any) -> Run:
     return res.outputs
 
 
-def run_study(seeds: Sequence[int], quick: bool, out: Path, experiments: bool = True,
-              say: Any = print) -> tuple[list[Row], dict[str, float]]:
-    """Every run of the study, then the rows; returns (rows, timings in s)."""
+def run_or_report(cfg: RunConfig, out: Path, say: Any, failures: dict[str, str]) -> Run | None:
+    """:func:`run_chain`, or None with the error recorded in ``failures[run name]`` (a stage that
+    cannot plan or solve under the paper's settings is a result of the study, not its end)."""
+    try:
+        return run_chain(cfg, out, say)
+    except PipelineError as exc:
+        failures[cfg.name] = str(exc)
+        say(f"  [{cfg.name}] failed: {exc}")
+        return None
+
+
+def run_study(seeds: Sequence[int], quick: bool, out: Path, experiments: bool = True, say: Any = print,
+              failures: dict[str, str] | None = None) -> tuple[list[Row], dict[str, float]]:
+    """Every run of the study, then the rows; returns (rows, timings in s). The trajectory runs
+    that fail (main and acceleration-limit experiment) are recorded in ``failures`` and their
+    seeds left out of the trajectory rows."""
+    failures = {} if failures is None else failures
     timings: dict[str, float] = {}
     main: list[Run] = []
     rigid: list[Run] = []
@@ -133,8 +149,8 @@ def run_study(seeds: Sequence[int], quick: bool, out: Path, experiments: bool = 
     for seed in seeds:
         # the stages up to control must pass their quality gates; the trajectory stage with the
         # paper's literal limits is kept even when its servo-simulation gates fail (reported)
-        run_chain(chain_config(seed, quick, stages=CHAIN_UPSTREAM), out, say)
-        main.append(run_chain(chain_config(seed, quick, accept_poor=True), out, say))
+        upstream = run_chain(chain_config(seed, quick, stages=CHAIN_UPSTREAM), out, say)
+        main.append(run_or_report(chain_config(seed, quick, accept_poor=True), out, say, failures) or upstream)
     timings["main_s"] = time.perf_counter() - t0
     if experiments:
         t0 = time.perf_counter()
@@ -145,7 +161,9 @@ def run_study(seeds: Sequence[int], quick: bool, out: Path, experiments: bool = 
         for seed in seeds:
             cfg = chain_config(seed, quick, "acceleration_limits", accept_poor=True)
             _copy_upstream(out / chain_config(seed, quick).name, out / cfg.name, CHAIN_UPSTREAM)
-            acc.append(run_chain(cfg, out, say))
+            res = run_or_report(cfg, out, say, failures)
+            if res is not None:
+                acc.append(res)
         timings["acceleration_limits_s"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         for seed in seeds:
@@ -153,7 +171,23 @@ def run_study(seeds: Sequence[int], quick: bool, out: Path, experiments: bool = 
             _copy_upstream(out / chain_config(seed, quick).name, out / cfg.name, EXCITATION_STAGES[:2])
             full_torque.append(run_chain(cfg, out, say))
         timings["full_torque_s"] = time.perf_counter() - t0
-    return all_rows(main, rigid, acc, full_torque), timings
+    return all_rows(main, rigid, acc, full_torque, failures), timings
+
+
+#: the experiments (run variants) beside the main chain
+EXPERIMENTS = ("rigid", "acceleration_limits", "full_torque")
+
+
+def stored_rows(seeds: Sequence[int], quick: bool, out: Path, failures: dict[str, str] | None = None) -> list[Row]:
+    """The rows from the runs already under ``out`` (``--report``: nothing is run; an experiment
+    whose run directories are missing is left out)."""
+    main = [load_run(out / chain_config(seed, quick).name) for seed in seeds]
+    found: dict[str, list[Run]] = {}
+    for variant in EXPERIMENTS:
+        dirs = [out / chain_config(seed, quick, variant).name for seed in seeds]
+        runs = [load_run(d) for d in dirs if d.is_dir()]
+        found[variant] = [r for r in runs if variant != "acceleration_limits" or "trajectory" in r]
+    return all_rows(main, found["rigid"], found["acceleration_limits"], found["full_torque"], failures or {})
 
 
 def study_paper_004(argv: list[str]) -> int:
@@ -163,6 +197,7 @@ def study_paper_004(argv: list[str]) -> int:
     ap.add_argument("--out", type=Path, default=None, help="runs directory (default <study dir>/runs[-quick])")
     ap.add_argument("--no-experiments", action="store_true", help="only the main chain (no rigid / acceleration runs)")
     ap.add_argument("--jobs", type=int, default=1, help="accepted for uniformity; the runs are sequential")
+    ap.add_argument("--report", action="store_true", help="only print the table from the runs under --out")
     a = ap.parse_args(argv)
     if a.seeds is None:
         a.seeds = [1] if a.quick else [1, 2, 3]
@@ -170,13 +205,24 @@ def study_paper_004(argv: list[str]) -> int:
     t0 = time.perf_counter()
     print(f"paper 004 §2.3.3, §4, §5 on the RX130L ({'quick' if a.quick else 'full'} sizes, seeds {a.seeds}); "
           f"runs under {out}")
-    rows, timings = run_study(a.seeds, a.quick, out, not a.no_experiments)
-    timings["total_s"] = time.perf_counter() - t0
-    print("\n" + markdown(rows))
-    print(f"\nstudy time {timings['total_s']:.0f} s ({', '.join(f'{k} {v:.0f}' for k, v in timings.items())})")
-    result = {"args": {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(a).items()},
-              "paper_settings": PAPER_SETTINGS, "rows": [r.to_dict() for r in rows], "timings_s": timings}
     path = study_dir(NAME) / ("result-quick.json" if a.quick else "result.json")
+    failures: dict[str, str] = {}
+    if a.report:
+        last = json.loads(path.read_text()) if path.exists() else {}
+        failures.update(last.get("failures", {}))
+        rows = stored_rows(a.seeds, a.quick, out, failures)
+        timings = last.get("timings_s", {})
+        print("(--report: rows from the stored runs; failures and study time of the last full run)")
+    else:
+        rows, timings = run_study(a.seeds, a.quick, out, not a.no_experiments, failures=failures)
+        timings["total_s"] = time.perf_counter() - t0
+    print("\n" + markdown(rows))
+    if timings:
+        print(f"\nstudy time {timings.get('total_s', float('nan')):.0f} s "
+              f"({', '.join(f'{k} {v:.0f}' for k, v in timings.items())})")
+    result = {"args": {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(a).items()},
+              "paper_settings": PAPER_SETTINGS, "rows": [r.to_dict() for r in rows], "timings_s": timings,
+              "failures": failures}
     path.write_text(json.dumps(result, indent=1, default=float))
     print(f"written {path}")
     return 0

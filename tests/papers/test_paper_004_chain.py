@@ -89,3 +89,6 @@ def test_quick_study_properties(tmp_path):
     assert max(ex["ptp_smooth_torque_ratio"]) < max(ex["ptp_torque_ratio"])
     assert all(math.isfinite(t) for t in timings.values())
     assert set(timings) >= {"main_s", "rigid_s", "acceleration_limits_s", "full_torque_s"}
+    # --report: the same table from the stored runs
+    again = study.stored_rows([1], quick=True, out=tmp_path)
+    assert [(r.key, r.ours, r.verdict) for r in again] == [(r.key, r.ours, r.verdict) for r in rows]
