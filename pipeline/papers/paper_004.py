@@ -28,8 +28,9 @@ Output: the table of :mod:`pipeline.papers.paper_004_rows` (paper, ours, verdict
 ``<study dir>/result.json``. ``--quick`` uses ``configs/quick.yaml`` sizes with the same paper
 settings (the test ``tests/papers/test_paper_004_chain.py``).
 
-Run time on the shared 2-core box (loaded by other jobs): see ``docs/papers/paper_004_chain.md``
-(full study, seeds 1-3: measured there); ``--quick`` (seed 1) about 3-4 min.
+Run time on the shared 2-core box (loaded by other jobs), measured once: the full study (seeds
+1-3) 42 min (2494 s); ``--quick`` (seed 1) about 3-4 min; ``--report`` (the table from the stored
+runs) seconds. Results: ``docs/papers/paper_004_chain.md``.
 """
 
 from __future__ import annotations
