@@ -28,6 +28,8 @@ STUDIES: dict[str, str] = {
     "calib-002": "pipeline.calibration.paper_002:study_002",
     "calib-003": "pipeline.calibration.paper_003:study_003",
     "calib-design": "pipeline.calibration.design_study:study_design",
+    # whole-chain paper reproductions
+    "paper-004": "pipeline.papers.paper_004:study_paper_004",
     # identification
     # control
     # trajectory

@@ -43,6 +43,10 @@ class ExcitationConfig:
     torque_margin: float = 0.8  # of the torque limit, for the nominal model (truth differs)
     floor_clearance_m: float = 0.05
     self_clearance_m: float = 0.02
+    # bounds of the TCP speed and acceleration along the excitation (None: none; paper 004 §4.3
+    # reports up to 5 m/s and 12 m/s^2 on the RX130L); NLP constraints and fine-grid check
+    max_tcp_speed_m_s: float | None = None
+    max_tcp_acceleration_m_s2: float | None = None
     n_check: int = 400  # fine grid of the final feasibility check
     # IPOPT "acceptable" stop: feasible and the objective changing by less than this (relative)
     objective_change_tol: float = 1e-2
@@ -160,6 +164,11 @@ class Config:
                 for part in fld.split("."):
                     value = getattr(value, part)
                 raise ConfigError(source, p + fld, f"{problem}, got {value!r}")
+        for name in ("max_tcp_speed_m_s", "max_tcp_acceleration_m_s2"):
+            v = getattr(ex, name)
+            if v is not None and not (isinstance(v, int | float) and fin(v) and v > 0):
+                raise ConfigError(source, f"{p}excitation.{name}",
+                                  f"must be a number > 0 or null (no bound), got {v!r}")
         for name in ("position_margin", "velocity_margin", "acceleration_margin", "torque_margin"):
             v = getattr(ex, name)
             if not 0 < v <= 1:

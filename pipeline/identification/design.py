@@ -12,6 +12,7 @@ of one period, ``W = [Y_b(q(t_k), v(t_k), a(t_k))]_k`` (``cond(W)^2 = lambda_max
            |tau_nominal(q, v, a)| <= margin x tau_max            (symbolic RNEA, exact Jacobian)
            z_tcp(q) >= floor + clearance                        (symbolic FK)
            capsule pair distances >= clearance, capsule end points above the floor
+           |p_dot_tcp| <= v_max, |p_ddot_tcp| <= a_max  (optional; :mod:`.tcp_motion`)
            rest-to-rest equalities.
 
 The NLP is lifted: the sample states ``S = [q; v; a]_k`` are variables tied to the coefficients by
@@ -58,6 +59,7 @@ from pipeline.identification.fourier import (
     rest_constraint_matrix,
 )
 from pipeline.identification.regressor import BaseParameters, RegressorModel
+from pipeline.identification.tcp_motion import tcp_motion_sx
 from pipeline.interrupts import raise_if_interrupted
 from pipeline.robot.collision_sx import capsule_clearance_function
 from pipeline.solver_status import is_success
@@ -271,7 +273,8 @@ class ExcitationResult:
 
 def sample_constraint_function(robot: Any, sym: Any, limits: ExcitationLimits) -> ca.Function:
     """Per-sample nonlinear constraints ``h([q; v; a])``: torque / limit (nominal model), TCP
-    height, capsule self clearances, capsule floor clearances (SX, expanded)."""
+    height, capsule self clearances, capsule floor clearances and, when ``limits`` bound them,
+    ``|p_dot|^2 / v_max^2`` and ``|p_ddot|^2 / a_max^2`` of the TCP (SX, expanded)."""
     nq = robot.nq
     s = ca.SX.sym("s", 3 * nq)
     q, v, a = s[:nq], s[nq : 2 * nq], s[2 * nq :]
@@ -279,6 +282,9 @@ def sample_constraint_function(robot: Any, sym: Any, limits: ExcitationLimits) -
     pos, _ = sym.fk(robot.frame_tcp)(q, ca.DM(sym.nominal_kinematic_parameters()))
     pair, floor = capsule_clearance_function(robot, sym)(q)
     h = ca.vertcat(tau / ca.DM(limits.effort_Nm), pos[2], pair, floor)
+    if limits.bounds_tcp:
+        speed2, acc2 = tcp_motion_sx(robot, sym, q, v, a)
+        h = ca.vertcat(h, speed2 / limits.tcp_speed_m_s**2, acc2 / limits.tcp_acceleration_m_s2**2)
     return ca.Function("sample_constraints", [s], [h]).expand()
 
 
@@ -307,13 +313,15 @@ def _build_nlp(
     n_h = h.shape[0]
     n_tau = nq
     n_pair = len(robot.self_collision_pairs)
+    n_tcp = 2 if limits.bounds_tcp else 0
     h_lo = np.concatenate([
         -np.ones(n_tau),
         [robot.spec.collision.floor_z_m + limits.floor_clearance_m],
         np.full(n_pair, limits.self_clearance_m),
-        np.full(n_h - n_tau - 1 - n_pair, limits.floor_clearance_m),
+        np.full(n_h - n_tau - 1 - n_pair - n_tcp, limits.floor_clearance_m),
+        np.full(n_tcp, -np.inf),
     ])
-    h_hi = np.concatenate([np.ones(n_tau), np.full(n_h - n_tau, np.inf)])
+    h_hi = np.concatenate([np.ones(n_tau), np.full(n_h - n_tau - n_tcp, np.inf), np.ones(n_tcp)])
     g = ca.vertcat(ca.vec(rest), ca.vec(S - S_of_c), ca.vec(h))
     lbg = np.concatenate([np.zeros(2 * nq + 3 * nq * n), np.tile(h_lo, n)])
     ubg = np.concatenate([np.zeros(2 * nq + 3 * nq * n), np.tile(h_hi, n)])

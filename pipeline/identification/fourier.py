@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.errors import InfeasibleError
+from pipeline.identification.tcp_motion import tcp_speed_acceleration
 
 
 # ------------------------------------------------------------------------------ trajectories
@@ -103,6 +104,9 @@ class ExcitationLimits:
     effort_Nm: np.ndarray
     floor_clearance_m: float
     self_clearance_m: float
+    #: TCP speed and acceleration bounds (inf: none; paper 004 §4.3: 5 m/s and 12 m/s^2)
+    tcp_speed_m_s: float = np.inf
+    tcp_acceleration_m_s2: float = np.inf
 
     def tightened(self, factor: float, clearance_m: float) -> ExcitationLimits:
         """Limits scaled by ``factor`` about their middle and clearances ``+ clearance_m`` (the NLP
@@ -112,7 +116,8 @@ class ExcitationLimits:
         half = 0.5 * (self.upper_rad - self.lower_rad) * factor
         return ExcitationLimits(mid - half, mid + half, self.velocity_rad_s * factor,
                                 self.acceleration_rad_s2 * factor, self.effort_Nm * factor,
-                                self.floor_clearance_m + clearance_m, self.self_clearance_m + clearance_m)
+                                self.floor_clearance_m + clearance_m, self.self_clearance_m + clearance_m,
+                                self.tcp_speed_m_s * factor, self.tcp_acceleration_m_s2 * factor)
 
     @classmethod
     def from_robot(
@@ -124,6 +129,8 @@ class ExcitationLimits:
         torque_margin: float,
         floor_clearance_m: float,
         self_clearance_m: float,
+        tcp_speed_m_s: float | None = None,
+        tcp_acceleration_m_s2: float | None = None,
     ) -> ExcitationLimits:
         lim = robot.limits
         mid = 0.5 * (lim.lower_rad + lim.upper_rad)
@@ -136,7 +143,13 @@ class ExcitationLimits:
             lim.effort_Nm * torque_margin,
             floor_clearance_m,
             self_clearance_m,
+            np.inf if tcp_speed_m_s is None else float(tcp_speed_m_s),
+            np.inf if tcp_acceleration_m_s2 is None else float(tcp_acceleration_m_s2),
         )
+
+    @property
+    def bounds_tcp(self) -> bool:
+        return bool(np.isfinite(self.tcp_speed_m_s) or np.isfinite(self.tcp_acceleration_m_s2))
 
 
 @dataclass
@@ -151,9 +164,16 @@ class FeasibilityReport:
     floor_clearance_m: float
     tcp_floor_m: float
     feasible: bool
+    tcp_speed_max_m_s: float = float("nan")          # largest TCP speed on the grid
+    tcp_acceleration_max_m_s2: float = float("nan")  # largest TCP acceleration on the grid
 
     def to_dict(self) -> dict:
         return {k: (bool(v) if k == "feasible" else float(v)) for k, v in vars(self).items()}
+
+    def tcp_ratio(self, limits: ExcitationLimits) -> float:
+        """Largest TCP speed or acceleration over its bound (0 when unbounded)."""
+        return max(self.tcp_speed_max_m_s / limits.tcp_speed_m_s,
+                   self.tcp_acceleration_max_m_s2 / limits.tcp_acceleration_m_s2)
 
 
 def check_trajectory(
@@ -163,7 +183,8 @@ def check_trajectory(
     n_samples: int = 400,
     floor_z_m: float | None = None,
 ) -> FeasibilityReport:
-    """Evaluate every constraint on ``n_samples`` points of one period (nominal dynamics)."""
+    """Evaluate every constraint on ``n_samples`` points of one period (nominal dynamics); the
+    TCP speed and acceleration are reported always and bounded when ``limits`` bound them."""
     t = traj.sample_times(n_samples)
     q, v, a = traj.evaluate(t)
     mid = 0.5 * (limits.lower_rad + limits.upper_rad)
@@ -179,13 +200,16 @@ def check_trajectory(
     floor_min = float(floor.min()) if floor.size else np.inf
     fz = robot.spec.collision.floor_z_m if floor_z_m is None else floor_z_m
     tcp = float(robot.positions(q, robot.frame_tcp)[:, 2].min() - fz)
+    tcp_v, tcp_a = tcp_speed_acceleration(robot, q, v, a)
+    tcp_ratio = max(float(tcp_v.max()) / limits.tcp_speed_m_s, float(tcp_a.max()) / limits.tcp_acceleration_m_s2)
     ok = (
-        max(pos, vel, acc, trq) <= 1.0 + 1e-9
+        max(pos, vel, acc, trq, tcp_ratio) <= 1.0 + 1e-9
         and self_min >= limits.self_clearance_m
         and floor_min >= limits.floor_clearance_m
         and tcp >= limits.floor_clearance_m
     )
-    return FeasibilityReport(pos, vel, acc, trq, self_min, floor_min, tcp, bool(ok))
+    return FeasibilityReport(pos, vel, acc, trq, self_min, floor_min, tcp, bool(ok), float(tcp_v.max()),
+                             float(tcp_a.max()))
 
 
 def random_trajectory(
@@ -200,8 +224,9 @@ def random_trajectory(
 
     Coefficients ~ N(0, 1/l), projected onto the rest-to-rest constraints, each joint scaled by a
     random fraction (0.3..1) of the largest factor its position/velocity/acceleration limits allow
-    and centred at a random point of its range; then scaled down until the nominal torques fit.
-    Collisions are not checked here (see :func:`random_feasible_trajectories`).
+    and centred at a random point of its range; then scaled down until the nominal torques fit
+    (and, when ``limits`` bound them, the TCP speed and acceleration). Collisions are not checked
+    here (see :func:`random_feasible_trajectories`).
     """
     nq = robot.nq
     L = harmonics
@@ -246,6 +271,14 @@ def random_trajectory(
                 trial[:, 1:] *= mid
                 lo_s, hi_s = (mid, hi_s) if torque_ratio(trial) <= 1.0 else (lo_s, mid)
             coef[:, 1:] *= 0.97 * lo_s
+        if limits.bounds_tcp:  # TCP speed/acceleration: shrink the oscillation about the mean
+            for _ in range(10):
+                q, v, a = (b @ coef.T for b in (bq, bv, ba))
+                tv, ta = tcp_speed_acceleration(robot, q, v, a)
+                r = max(tv.max() / limits.tcp_speed_m_s, ta.max() / limits.tcp_acceleration_m_s2)
+                if r <= 1.0:
+                    break
+                coef[:, 1:] *= 0.97 / r
         return FourierTrajectory(coef, base_frequency_hz)
     raise InfeasibleError(
         None, "identification.excitation", "no centre position with static torques below 90 % "

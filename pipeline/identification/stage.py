@@ -188,7 +188,7 @@ def _run(ctx: StageContext) -> StageResult:
     else:
         limits = fourier.ExcitationLimits.from_robot(
             robot, ex.position_margin, ex.velocity_margin, ex.acceleration_margin, ex.torque_margin,
-            ex.floor_clearance_m, ex.self_clearance_m)
+            ex.floor_clearance_m, ex.self_clearance_m, ex.max_tcp_speed_m_s, ex.max_tcp_acceleration_m_s2)
         sym = SymbolicRobot(robot)
         exc = design_mod.optimize_excitation(
             robot, sym, reg, base_design, limits, ctx.rng, harmonics=ex.harmonics,
@@ -301,6 +301,11 @@ def _run(ctx: StageContext) -> StageResult:
         "cond_base_regressor_data": cond_data,
         "cond_base_regressor_data_structural": cond_data_structural,
         "excitation_criterion": None if exc is None else ex.criterion,
+        # largest TCP speed / acceleration of the excitation (fine grid, nominal kinematics) and the bounds
+        "excitation_tcp_speed_max_m_s": None if exc is None else exc.feasibility.tcp_speed_max_m_s,
+        "excitation_tcp_acceleration_max_m_s2": None if exc is None else exc.feasibility.tcp_acceleration_max_m_s2,
+        "excitation_tcp_speed_bound_m_s": ex.max_tcp_speed_m_s,
+        "excitation_tcp_acceleration_bound_m_s2": ex.max_tcp_acceleration_m_s2,
         "validation_trajectory": vt.label,
         "validation_torque_rms_Nm": rms_phys.tolist(),
         "validation_relative_error": rel_phys.tolist(),

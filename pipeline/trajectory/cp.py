@@ -37,6 +37,9 @@ from pipeline.trajectory.design import JointPath
 from pipeline.trajectory.dynamics import PlanningModel, path_coefficients
 from pipeline.trajectory.trajectories import JointTrajectory
 
+#: a constraint counts as active at this fraction of its limit (paper 004 Fig. 8)
+CP_ACTIVE_LEVEL = 0.98
+
 _IPOPT = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
           "ipopt.tol": 1e-9, "ipopt.acceptable_tol": 1e-6, "ipopt.max_iter": 3000}
 
@@ -278,7 +281,7 @@ def cp_constraint_activity(pm: PlanningModel, path: JointPath, traj: JointTrajec
     vr = np.abs(traj.v) / pm.velocity_rad_s
     level = np.maximum(tr.max(axis=1), vr.max(axis=1))
     return {"torque_ratio": tr, "velocity_ratio": vr, "activity": level,
-            "active_fraction": float(np.mean(level >= 0.98)), "min_activity": float(level.min())}
+            "active_fraction": float(np.mean(level >= CP_ACTIVE_LEVEL)), "min_activity": float(level.min())}
 
 
 def cp_grid_activity(pm: PlanningModel, path: JointPath, profile: CPProfile) -> np.ndarray:
