@@ -30,6 +30,8 @@ contiguous length-N vector operations per matrix entry).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 #: largest condition number of ``R = I - P_k`` for which a removal or exchange update is trusted:
@@ -157,6 +159,15 @@ class LowRankCache:
         r = np.linalg.eigvalsh(R)
         return R, (r[:, 0] > 0) & (r[:, -1] < MAX_CONDITION * r[:, 0])
 
+    def trusted_removals(self, sel: np.ndarray, value_of: Callable[[np.ndarray, np.ndarray], np.ndarray]
+                         ) -> np.ndarray:
+        """``value_of(R_k, trusted mask)`` for the trusted removals of ``sel``, NaN elsewhere."""
+        R, ok = self.removal_ok(sel)
+        out = np.full(len(sel), np.nan)
+        if ok.any():
+            out[ok] = value_of(R[ok], ok)
+        return out
+
 
 class TraceCache(LowRankCache):
     """``trace(W M^-1)`` after adding, removing or exchanging configurations (module docstring).
@@ -183,12 +194,8 @@ class TraceCache(LowRankCache):
     def remove_values(self, sel: np.ndarray) -> np.ndarray:
         """Criterion after removing each configuration of ``sel`` (NaN where the update is not
         trusted, :data:`MAX_CONDITION`)."""
-        R, ok = self.removal_ok(sel)
-        out = np.full(len(sel), np.nan)
-        if ok.any():
-            Tk = self.T[:, :, sel].transpose(2, 0, 1)[ok]
-            out[ok] = self.value + np.trace(np.linalg.solve(R[ok], Tk), axis1=1, axis2=2)
-        return out
+        return self.trusted_removals(sel, lambda R, ok: self.value + np.trace(
+            np.linalg.solve(R, self.T[:, :, sel].transpose(2, 0, 1)[ok]), axis1=1, axis2=2))
 
     def exchange_values(self, k: int) -> np.ndarray | None:
         """Criterion after removing selected ``k`` and adding each candidate (N,); None when
@@ -223,11 +230,7 @@ class LogDetCache(LowRankCache):
     def remove_values(self, sel: np.ndarray) -> np.ndarray:
         """``log det`` after removing each configuration of ``sel`` (NaN where the update is not
         trusted, :data:`MAX_CONDITION`)."""
-        R, ok = self.removal_ok(sel)
-        out = np.full(len(sel), np.nan)
-        if ok.any():
-            out[ok] = self.value + logdet(R[ok].transpose(1, 2, 0))
-        return out
+        return self.trusted_removals(sel, lambda R, ok: self.value + logdet(R.transpose(1, 2, 0)))
 
     def exchange_values(self, k: int) -> np.ndarray | None:
         """``log det`` after removing selected ``k`` and adding each candidate (N,); None when

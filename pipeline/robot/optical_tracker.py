@@ -42,6 +42,7 @@ from scipy.spatial.transform import Rotation
 from pipeline.robot.collision import segment_distances
 from pipeline.robot.model import RobotModel
 from pipeline.robot.payload import Payload
+from pipeline.robot.sensors import LinkSideSensor
 from pipeline.robot.spec import OpticalTrackerSpec
 
 #: sight lines are checked for blockage up to this distance before the diode (its holder)
@@ -188,7 +189,7 @@ def _spec_of(robot: RobotModel) -> OpticalTrackerSpec:
     return spec
 
 
-class OpticalTracker:
+class OpticalTracker(LinkSideSensor):
     """The optical 6-D tracker at a fixed (unknown to the stages) camera pose, measuring the probe."""
 
     def __init__(self, robot: RobotModel, transform_camera_to_base: pin.SE3,
@@ -197,10 +198,6 @@ class OpticalTracker:
         self._transform_camera_to_base = transform_camera_to_base
         self._link_angles = link_angles
         self.spec = _spec_of(robot)
-
-    def _link(self, Q: np.ndarray, payload: Payload | None) -> np.ndarray:
-        Q = np.atleast_2d(np.asarray(Q, float))
-        return Q if self._link_angles is None else self._link_angles(Q, payload)
 
     def visible(self, Q: np.ndarray, payload: Payload | None = None) -> np.ndarray:
         """Whether each configuration can be measured (``min_diodes`` diodes seen by every camera)."""

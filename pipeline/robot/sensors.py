@@ -115,7 +115,18 @@ def tracker_visibility(robot: RobotModel, transform_tracker_to_base: pin.SE3, Q:
     return Visibility(visible, incidence, clearance, range_m)
 
 
-class LaserTracker:
+class LinkSideSensor:
+    """A sensor that looks at the links: it reads the link-side joint angles of the commanded encoder
+    angles ``Q`` (``link_angles(Q, payload)``: joint elasticity, gear error; None: the same)."""
+
+    _link_angles: Callable[[np.ndarray, Payload | None], np.ndarray] | None = None
+
+    def _link(self, Q: np.ndarray, payload: Payload | None) -> np.ndarray:
+        Q = np.atleast_2d(np.asarray(Q, float))
+        return Q if self._link_angles is None else self._link_angles(Q, payload)
+
+
+class LaserTracker(LinkSideSensor):
     """A laser tracker at a fixed (unknown to the stages) pose, measuring the reflector."""
 
     def __init__(self, robot: RobotModel, transform_tracker_to_base: pin.SE3,
@@ -128,10 +139,6 @@ class LaserTracker:
         self.noise_const_m = robot.tracker.noise_const_m
         self.noise_per_m = robot.tracker.noise_per_m
         self.max_incidence_rad = robot.tracker.max_incidence_rad
-
-    def _link(self, Q: np.ndarray, payload: Payload | None) -> np.ndarray:
-        Q = np.atleast_2d(np.asarray(Q, float))
-        return Q if self._link_angles is None else self._link_angles(Q, payload)
 
     def visible(self, Q: np.ndarray, payload: Payload | None = None) -> np.ndarray:
         """Whether each configuration can be measured (incidence and beam blockage)."""
