@@ -200,8 +200,9 @@ def settling_figure(results: list[SettleResult]) -> Figure:
 
 
 def time_scaled(traj: JointTrajectory, factor: float, name: str | None = None) -> JointTrajectory:
-    """The same path ``factor`` times slower: ``t' = factor t``, ``v' = v / factor``, ``a' = a / factor^2``."""
-    info = {**traj.info, "time_scale": float(factor)}
+    """The same path ``factor`` times slower: ``t' = factor t``, ``v' = v / factor``, ``a' = a / factor^2``
+    (``info["time_scale"]``: the product of all scalings)."""
+    info = {**traj.info, "time_scale": float(traj.info.get("time_scale", 1.0)) * float(factor)}
     return JointTrajectory(name or traj.name, traj.t_s[0] + factor * (traj.t_s - traj.t_s[0]), traj.q.copy(),
                            traj.v / factor, traj.a / factor**2, info)
 

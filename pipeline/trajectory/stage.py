@@ -223,6 +223,9 @@ def run(ctx: StageContext) -> StageResult:
             items["ptp_energy_at_ruckig_duration"] = ptp.trajectories["ptp_energy_at_ruckig_duration"]
         smooth_ptp, sims["ptp_smooth"] = _executable_smooth_ptp(ctx, pm, ptp, ccfg, seed, cfg)
         summary["ptp_smooth_servo_time_scale"] = float(smooth_ptp.info.get("servo_time_scale", 1.0))
+        summary["ptp_smooth_time_scale"] = float(smooth_ptp.info.get("time_scale", 1.0))
+        summary["ptp_smooth_duration_s"] = smooth_ptp.duration_s
+        summary["ptp_smooth_fine_violation"] = ptp.checks["ptp_smooth"].violation
         settle, settle_summary = settle_study(ctx.real, robot, ptp.trajectories, ccfg, ctx.rng)
         summary.update(settle_summary)
         items["ptp_smooth"] = smooth_ptp

@@ -57,7 +57,11 @@ def test_stage_quick(quick_config, rx130l, ptp_problem, tmp_path):
         assert s[f"{name}_move_and_settle_s"] is None or np.isclose(
             s[f"{name}_move_and_settle_s"], s[f"{name}_settle_duration_s"] + s[f"{name}_settling_time_s"])
         assert f"| {name} |" in res.report_md
-    assert abs(s["ptp_smooth_settle_duration_s"] - s["ptp_duration_s"] - s["ptp_smooth_filter_time_s"]) < 2e-3
+    # (slowed by ptp_smooth_time_scale >= 1 when needed to keep the limits on the fine grid and in the servo)
+    scale = s["ptp_smooth_time_scale"]
+    assert scale >= 1.0 and s["ptp_smooth_sim_max_averaged_torque_ratio"] <= 1.0
+    assert abs(s["ptp_smooth_settle_duration_s"] - scale * (s["ptp_duration_s"] + s["ptp_smooth_filter_time_s"])) \
+        < 2e-3 * scale
     assert "ptp_settling" in res.figures and "move + settle [s]" in res.report_md
     assert s["ptp_smooth_sim_tcp_error_max_m"] is not None
     assert s["ptp_smooth_fine_violation"] <= tol and "ptp_smooth_fine_violation" in gates
