@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pinocchio as pin
 
 from pipeline.calibration import error_model as em
 from pipeline.calibration import measure as ms
@@ -32,6 +33,43 @@ def measurement_model(robot, cfg: Config, marker_points: bool = False) -> em.Mea
     points when the readings are 6-D, :func:`pipeline.calibration.measure.expand_orientation`)."""
     return em.MeasurementModel(robot, compliance=subsets.wants_compliance(cfg.parameters), payload=cfg.payload(),
                                marker_points=marker_points)
+
+
+#: a compliance this many times the nominal one is the largest the identifiability check considers
+PLAUSIBLE_COMPLIANCE_FACTOR = 3.0
+#: ... and its effect must reach this fraction of the tracker noise to count as observable
+OBSERVABLE_NOISE_FRACTION = 0.1
+
+
+def negligible_compliances(mm: em.MeasurementModel, J: np.ndarray) -> np.ndarray:
+    """(nq,) bool: joints whose compliance cannot move the readings measurably.
+
+    ``J`` (rows, mm.n) is the identification Jacobian on sampled poses. A compliance ``c_i`` moves
+    the readings by ``J[:, c_i] c_i``; with ``c_i`` = 3x the nominal compliance its RMS effect below a
+    tenth of the tracker's constant noise means the joint carries (almost) no gravity torque (a
+    vertical first axis, a wrist roll whose centre of mass is on its axis). The rank test alone
+    would call such a column identifiable whenever its torque is not exactly zero (an identified
+    gravity model puts a small first moment off every axis), and the design would then chase it."""
+    cols = np.asarray(J, float)[:, mm.sl_compliance]
+    plausible = PLAUSIBLE_COMPLIANCE_FACTOR / nominal_joint_stiffness_Nm_rad(mm.robot)
+    effect_m = np.sqrt(np.mean(cols**2, axis=0)) * plausible
+    return effect_m < OBSERVABLE_NOISE_FRACTION * float(mm.robot.tracker.noise_const_m)
+
+
+def gravity_model_of(robot: RobotModel, upstream: RobotModel) -> pin.Model:
+    """``robot``'s kinematics with ``upstream``'s link inertias (matched by joint name).
+
+    The elastostatic model needs the gravity torques of the kinematics being calibrated: the
+    upstream robot of a previous run carries that run's calibrated kinematics (a base tilted by
+    a fraction of a milliradian would give a vertical first axis a spurious gravity torque and
+    make its compliance look identifiable), so only its inertias are taken."""
+    model = robot.model.copy()
+    for jid in range(1, model.njoints):
+        name = model.names[jid]
+        if not upstream.model.existJointName(name):
+            raise ConfigError(None, "calibration.gravity_model", f"the upstream robot has no joint {name!r}")
+        model.inertias[jid] = upstream.model.inertias[upstream.model.getJointId(name)].copy()
+    return model
 
 
 def load_gravity_model(cfg: Config, robot) -> RobotModel | None:

@@ -40,10 +40,12 @@ from pipeline.calibration.config import MAX_CANDIDATES, Config
 from pipeline.calibration.crossval import cross_validate
 from pipeline.calibration.elastostatic import (
     design_basis,
+    gravity_model_of,
     gravity_pass,
     load_gravity_model,
     measure_with_payload,
     measurement_model,
+    negligible_compliances,
     static_torque_record,
 )
 from pipeline.calibration.estimate import Estimate, calibrated_robot, register_points
@@ -86,6 +88,8 @@ def identify_parameter_set(robot, mm: em.MeasurementModel, cfg: Config, rng: np.
     else:
         _, J = cd.nominal_jacobian(cd.chain_from_robot(robot), Q, robot.tracker.transform_tracker_to_base)
     J = J.reshape(-1, mm.n)
+    if mm.compliance:   # no gravity torque on a joint: its compliance has no effect
+        J[:, np.arange(mm.n)[mm.sl_compliance][negligible_compliances(mm, J)]] = 0.0
     if cfg.error_model == "se3":
         B, names = np.eye(mm.n), mm.names
     else:
@@ -200,7 +204,7 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress, reg
     mm = measurement_model(robot, cfg, marker_points=six_d)
     upstream_gravity = load_gravity_model(cfg, robot)
     if upstream_gravity is not None:
-        mm.set_gravity_model(upstream_gravity.model)
+        mm.set_gravity_model(gravity_model_of(robot, upstream_gravity))
     report, basis = identify_parameter_set(robot, mm, cfg, rng)
     dbasis = design_basis(mm, basis)
     timings["identifiability_s"] = time.perf_counter() - t
