@@ -157,5 +157,5 @@ def static_torque_record(mm: em.MeasurementModel, meas: ms.Measurements, est: Es
     return {"elastostatic_configurations_rad": np.asarray(meas.Q, float),
             "elastostatic_torques_Nm": used,
             "elastostatic_payload_torques_Nm": used - mm.static_torques(meas.Q),
-            "joint_stiffness_identified": identified_compliance(mm, est.x, basis),
+            "joint_stiffness_identified": identified_compliance(mm, est.x, basis, est.covariance),
             "joint_compliance_std": np.array([float(std.get(n, np.nan)) for n in names])}

@@ -156,16 +156,32 @@ def estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarr
     return Estimate(x, theta, P, C, T_id, T_reg, it, float(chi2), float(np.sqrt(np.mean(res ** 2))), conv, hist, M)
 
 
-def identified_compliance(mm: MeasurementModel, x: np.ndarray, basis: np.ndarray | None = None) -> np.ndarray:
-    """``(nq,)`` bool: joints whose compliance the fit identified (in the basis) and found positive;
-    all False for a rigid error model."""
+#: a compliance known to worse than this relative standard deviation is not handed on: the nominal
+#: stiffness rule (:mod:`pipeline.robot.stiffness`) is about as good (it spreads by ~30 % between
+#: arms of one type), and a poorly determined estimate can be several times off (a soft wrist
+#: joint would then ruin the elastic feedforward)
+MAX_COMPLIANCE_RELATIVE_STD = 0.3
+
+
+def identified_compliance(mm: MeasurementModel, x: np.ndarray, basis: np.ndarray | None = None,
+                          covariance: np.ndarray | None = None) -> np.ndarray:
+    """``(nq,)`` bool: joints whose compliance the fit identified (in the basis), found positive and,
+    given the covariance of ``theta`` (``x = basis theta``), determined to better than
+    :data:`MAX_COMPLIANCE_RELATIVE_STD`; all False for a rigid error model."""
     if not mm.compliance:
         return np.zeros(mm.nq, bool)
     rows = np.ones(mm.n, bool) if basis is None else np.any(np.asarray(basis) != 0, axis=1)
-    return rows[mm.sl_compliance] & (np.asarray(x, float)[mm.sl_compliance] > 0)
+    c = np.asarray(x, float)[mm.sl_compliance]
+    known = rows[mm.sl_compliance] & (c > 0)
+    if covariance is not None and basis is not None:
+        B = np.asarray(basis, float)[mm.sl_compliance]
+        std = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", B, np.asarray(covariance, float), B), 0.0))
+        known &= std < MAX_COMPLIANCE_RELATIVE_STD * np.abs(c)
+    return known
 
 
-def calibrated_robot(robot, mm: MeasurementModel, x: np.ndarray, basis: np.ndarray | None = None):
+def calibrated_robot(robot, mm: MeasurementModel, x: np.ndarray, basis: np.ndarray | None = None,
+                     covariance: np.ndarray | None = None):
     """``RobotModel`` with the identified kinematic errors (lead's conventions, docs/requests/calibration.md).
 
     - Joint placements and zero offsets: the identified ``j{i}.*`` errors (``apply_kinematic_errors``).
@@ -177,7 +193,8 @@ def calibrated_robot(robot, mm: MeasurementModel, x: np.ndarray, basis: np.ndarr
       nominal; 6-D readings (marker orientation) identify them (``tool.rx..rz``, applied with the rest).
     - Joint compliances (elastostatic model): ``actuation.joint_stiffness_Nm_rad = 1 / c_i`` for each
       identified positive compliance; a joint whose compliance was not identified (no gravity
-      load, or not in the parameter subset) or came out non-positive keeps the nominal stiffness
+      load, or not in the parameter subset), came out non-positive or, given ``covariance``, is
+      not determined to :data:`MAX_COMPLIANCE_RELATIVE_STD` keeps the nominal stiffness
       (:func:`pipeline.robot.stiffness.nominal_joint_stiffness_Nm_rad`).
     The robot.yaml facts (TCP and reflector in the flange frame) are updated to match, so
     ``save``/``load`` reproduce the model.
@@ -199,7 +216,7 @@ def calibrated_robot(robot, mm: MeasurementModel, x: np.ndarray, basis: np.ndarr
     new.spec.tool.reflector_offset_m = np.asarray(rfl.translation, float).copy()
     if mm.compliance:
         c = x[mm.sl_compliance]
-        known = identified_compliance(mm, x, basis)
+        known = identified_compliance(mm, x, basis, covariance)
         k = nominal_joint_stiffness_Nm_rad(robot)
         k[known] = 1.0 / c[known]
         new.spec.actuation.joint_stiffness_Nm_rad = k

@@ -8,6 +8,7 @@ import numpy as np
 
 from pipeline.calibration import validate as va
 from pipeline.calibration.config import Config
+from pipeline.calibration.estimate import MAX_COMPLIANCE_RELATIVE_STD
 from pipeline.calibration.outcome import CalibrationOutcome
 
 
@@ -186,7 +187,8 @@ def report_markdown(out: CalibrationOutcome, cfg: Config, robot) -> str:
     md += gravity_markdown(out, cfg)
     if any(n.endswith(".c") for n in out.report.identifiable_names) and k is not None:
         md += ["Joint stiffness carried by the calibrated model (1 / identified compliance; nominal where "
-               "not identified) [N·m/rad]: " + ", ".join(f"{v:.4g}" for v in k), ""]
+               f"not identified or not determined to {100 * MAX_COMPLIANCE_RELATIVE_STD:.0f} % (1 sigma)) "
+               "[N·m/rad]: " + ", ".join(f"{v:.4g}" for v in k), ""]
     if out.validation is None:
         md += ["### Held-out validation", "",
                "**no held-out validation: give calibration.validation_csv** (poses measured on the real "

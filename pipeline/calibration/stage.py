@@ -295,7 +295,7 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress, reg
                              "user file" if user is not None else "measured subset")
     fit = va.fit_residuals(mm, est, rec, rejection.rejected)
     prediction = predicted_on_random_poses(robot, mm, est, cfg, rng, gravity) if validation is None else None
-    new_robot = calibrated_robot(robot, mm, est.x, basis)
+    new_robot = calibrated_robot(robot, mm, est.x, basis, est.covariance)
     table = dtab.for_run(cfg, robot, real if user is None else None, mm, basis, spec, meas.Q, est, cs, region, rng,
                          dbasis)
     return CalibrationOutcome(report, mm.names, cs, selection, meas, est, validation, new_robot, timings, grad, Qw,
