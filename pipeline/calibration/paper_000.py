@@ -38,10 +38,17 @@ Experiments beside the defaults (docs/papers/paper_000.md): ``--parameters joint
 comma-separated list of DH/Hayati names) identifies fewer arm parameters, ``--tag`` names the
 output folder ``data/studies/calib-000-TAG/``.
 
-Run time (measured on the shared 2-core machine under load, load average about 8, ``--jobs 1``):
-the three KUKA arms (IPOPT refinement and the literal SQP reading) 740 s; the 90 notional arms
-(remove-and-replace only, pool 400) 1917 s, so the defaults about 45 min;
-``--quick`` (KR 15, pool 300, 15 IPOPT iterations) about 30 s.
+The arms are independent tasks of :func:`pipeline.dispatch.map_tasks` (one dispatch, the named
+arms first): ``--jobs N`` local processes or ``--scheduler ADDRESS`` a Dask cluster, as
+``python -m pipeline sweep``; the rows do not depend on it (each arm's generator is seeded by the
+seed and the arm's name).
+
+Run time: the defaults as one command, ``python -m pipeline study calib-000 --jobs 2`` (three KUKA
+arms with IPOPT refinement and the literal SQP reading, 90 notional arms with remove-and-replace on
+pools of 400), took 12 min 39 s wall-clock on the shared 2-core machine with other runs beside it
+(load average 4-6.4); the arms' own times add up to 1482 s (KUKA 418 s, notional 1064 s, about
+12 s each), about what ``--jobs 1`` needs at that load (an earlier ``--jobs 1`` measurement in two
+parts at load about 8: 740 s + 1917 s). ``--quick`` (KR 15, pool 300, 15 IPOPT iterations) about 30 s.
 """
 
 from __future__ import annotations
