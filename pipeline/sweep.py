@@ -9,7 +9,8 @@ stage with the same inputs is reused, as with ``run``). Each run returns its fla
 ``<out>/sweep.csv``, ``sweep.md`` and ``sweep.png`` (median and 95th percentile per robot).
 
 The runs go to local worker processes through joblib (``jobs``), or, with ``scheduler`` (an
-address such as ``tcp://host:8786``, or a ``distributed.Client``), to a Dask distributed cluster:
+address such as ``tcp://host:8786``, or a ``distributed.Client``), to a Dask distributed cluster
+(:func:`pipeline.dispatch.map_tasks`):
 its workers need this package installed, the robot and config files at the same paths and the
 output directory on a shared file system. A run is a pure function of its configuration (every
 random number comes from a generator seeded by it, :func:`pipeline.runner.stage_rng`), so the
@@ -29,20 +30,14 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import joblib
 import yaml
 
 from pipeline.config import REPO_ROOT, load_config, parse_set
+from pipeline.dispatch import map_tasks
 from pipeline.errors import ConfigError, PipelineError
 from pipeline.progress import Progress
 from pipeline.runner import run_pipeline
 from pipeline.sweep_table import Cell, Row, flatten_summary, write_outputs
-
-try:  # optional extra ``cluster``: dask[distributed]
-    from distributed import Client, as_completed
-except ModuleNotFoundError:  # pragma: no cover - depends on the environment
-    Client = None  # type: ignore[assignment,misc]
-    as_completed = None  # type: ignore[assignment]
 
 __all__ = ["SweepPoint", "SweepSpec", "parse_seeds", "parse_vary", "grid", "run_point", "run_sweep",
            "add_arguments", "main", "varied_column"]
@@ -157,40 +152,6 @@ def _quiet(_message: str) -> None:
     """Workers do not print the runner's stage messages (the sweep shows one bar)."""
 
 
-def _run_local(points: Sequence[SweepPoint], jobs: int, progress: Progress) -> list[Row]:
-    rows: dict[str, Row] = {}
-    if jobs == 1:
-        for point in progress.track(points, "sweep (local)"):
-            rows[point.name] = run_point(point)
-    else:
-        parallel = joblib.Parallel(n_jobs=jobs, return_as="generator_unordered")
-        for row in progress.track(parallel(joblib.delayed(run_point)(p) for p in points), "sweep (joblib)",
-                                  total=len(points)):
-            rows[str(row["run"])] = row
-    return [rows[p.name] for p in points]
-
-
-def _run_dask(points: Sequence[SweepPoint], scheduler: object, progress: Progress) -> list[Row]:
-    if Client is None or as_completed is None:
-        raise ConfigError("--scheduler", str(scheduler),
-                          "dask distributed is not installed (pip install 'pipeline[cluster]')")
-    own = not isinstance(scheduler, Client)
-    try:
-        client = Client(scheduler) if own else scheduler
-    except OSError as exc:
-        raise ConfigError("--scheduler", str(scheduler), f"cannot connect: {exc}") from None
-    try:
-        futures = [client.submit(run_point, p, pure=False) for p in points]
-        rows: dict[str, Row] = {}
-        for future in progress.track(as_completed(futures), "sweep (dask)", total=len(futures)):
-            row = future.result()
-            rows[str(row["run"])] = row
-    finally:
-        if own:
-            client.close()
-    return [rows[p.name] for p in points]
-
-
 def run_sweep(spec: SweepSpec, jobs: int = 1, scheduler: object = None,
               metrics: Sequence[str] = (), progress: Progress | None = None) -> tuple[list[Row], dict[str, Path]]:
     """Run the grid of ``spec`` and write the table; returns the rows (grid order) and the paths of
@@ -198,7 +159,7 @@ def run_sweep(spec: SweepSpec, jobs: int = 1, scheduler: object = None,
     points = grid(spec)
     prog = progress if progress is not None else Progress()
     with prog:
-        rows = _run_dask(points, scheduler, prog) if scheduler is not None else _run_local(points, jobs, prog)
+        rows = map_tasks(run_point, points, jobs=jobs, scheduler=scheduler, progress=prog, description="sweep")
     return rows, write_outputs(spec.out_dir, rows, [varied_column(k) for k in spec.vary], metrics)
 
 

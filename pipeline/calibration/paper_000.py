@@ -38,10 +38,17 @@ Experiments beside the defaults (docs/papers/paper_000.md): ``--parameters joint
 comma-separated list of DH/Hayati names) identifies fewer arm parameters, ``--tag`` names the
 output folder ``data/studies/calib-000-TAG/``.
 
-Run time (measured on the shared 2-core machine under load, load average about 8, ``--jobs 1``):
-the three KUKA arms (IPOPT refinement and the literal SQP reading) 740 s; the 90 notional arms
-(remove-and-replace only, pool 400) 1917 s, so the defaults about 45 min;
-``--quick`` (KR 15, pool 300, 15 IPOPT iterations) about 30 s.
+The arms are independent tasks of :func:`pipeline.dispatch.map_tasks` (one dispatch, the named
+arms first): ``--jobs N`` local processes or ``--scheduler ADDRESS`` a Dask cluster, as
+``python -m pipeline sweep``; the rows do not depend on it (each arm's generator is seeded by the
+seed and the arm's name).
+
+Run time: the defaults as one command, ``python -m pipeline study calib-000 --jobs 2`` (three KUKA
+arms with IPOPT refinement and the literal SQP reading, 90 notional arms with remove-and-replace on
+pools of 400), took 12 min 39 s wall-clock on the shared 2-core machine with other runs beside it
+(load average 4-6.4); the arms' own times add up to 1482 s (KUKA 418 s, notional 1064 s, about
+12 s each), about what ``--jobs 1`` needs at that load (an earlier ``--jobs 1`` measurement in two
+parts at load about 8: 740 s + 1917 s). ``--quick`` (KR 15, pool 300, 15 IPOPT iterations) about 30 s.
 """
 
 from __future__ import annotations
@@ -61,6 +68,8 @@ from pipeline.calibration import paper_000_report as rp
 from pipeline.calibration import paper_000_scene as sc
 from pipeline.calibration import stage as st
 from pipeline.calibration.gradient_design import GradientDesignConfig, feasible_configurations, gradient_design
+from pipeline.dispatch import map_tasks
+from pipeline.progress import Progress
 from pipeline.robot.model import RobotModel
 
 KUKA_ARMS = ("kuka_kr15", "kuka_kr300", "kuka_kr500")
@@ -223,22 +232,44 @@ def run_arm(name: str, robot: RobotModel, cfg: Settings, seed: int) -> dict:
     return row
 
 
-def kuka_rows(cfg: Settings, seed: int, jobs: int, arms: tuple[str, ...] = KUKA_ARMS) -> list[dict]:
-    return rp.parallel(lambda a: run_arm(a, RobotModel.load(a), cfg, seed), list(arms), jobs)
+@dataclass(frozen=True)
+class ArmTask:
+    """One arm of the study (a task of :func:`pipeline.dispatch.map_tasks`): a robot folder, or a
+    notional arm (segment lengths ``lambda_m``, ``mu_m`` on the ``robot`` folder's kinematics)."""
+
+    name: str
+    robot: str
+    cfg: Settings
+    seed: int
+    lambda_m: float | None = None
+    mu_m: float | None = None
 
 
-def notional_rows(cfg: Settings, seed: int, jobs: int, count: int, base: str = "kuka_kr15") -> list[dict]:
-    """The paper's 90 notional arms (or the first ``count`` of a spread subset of them)."""
+def run_task(task: ArmTask) -> dict:
+    """The result row of one arm (a pure function of ``task``: the arm's generator is seeded by
+    the study seed and the arm's name, so the row does not depend on where or when it runs)."""
+    robot = RobotModel.load(task.robot)
+    if task.lambda_m is None or task.mu_m is None:
+        return run_arm(task.name, robot, task.cfg, task.seed)
+    row = run_arm(task.name, sc.notional_arm(robot, task.lambda_m, task.mu_m), task.cfg, task.seed)
+    return row | {"lambda_m": task.lambda_m, "mu_m": task.mu_m}
+
+
+def kuka_tasks(cfg: Settings, seed: int, arms: tuple[str, ...] = KUKA_ARMS) -> list[ArmTask]:
+    return [ArmTask(a, a, cfg, seed) for a in arms]
+
+
+def notional_tasks(cfg: Settings, seed: int, count: int, base: str = "kuka_kr15") -> list[ArmTask]:
+    """The paper's 90 notional arms (or ``count`` of them spread over the lambda x mu grid)."""
     grid = [(lam, mu) for lam in sc.LAMBDA_M for mu in sc.MU_M]
     if count < len(grid):
         grid = [grid[i] for i in np.unique(np.linspace(0, len(grid) - 1, count).round().astype(int))]
+    return [ArmTask(f"lambda {lam:.2f} mu {mu:.2f}", base, cfg, seed, lam, mu) for lam, mu in grid]
 
-    def one(lm: tuple[float, float]) -> dict:
-        robot = sc.notional_arm(RobotModel.load(base), *lm)
-        row = run_arm(f"lambda {lm[0]:.2f} mu {lm[1]:.2f}", robot, cfg, seed)
-        return row | {"lambda_m": lm[0], "mu_m": lm[1]}
 
-    return rp.parallel(one, grid, jobs)
+def run_tasks(tasks: list[ArmTask], jobs: int = 1, scheduler: object = None) -> list[dict]:
+    """The rows of ``tasks`` in order, on ``jobs`` local processes or a Dask ``scheduler``."""
+    return map_tasks(run_task, tasks, jobs=jobs, scheduler=scheduler, progress=Progress(), description="calib-000 arms")
 
 
 def study(argv: list[str]) -> int:
@@ -255,7 +286,9 @@ def study(argv: list[str]) -> int:
                     help="skip the literal SQP reading (IPOPT from the heuristic design) on the named arms")
     ap.add_argument("--quick", action="store_true", help="one arm (KR 15), pool 300, 15 iterations, no notional arms")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--jobs", type=int, default=1, help="local worker processes (joblib; default 1)")
+    ap.add_argument("--scheduler", metavar="ADDRESS",
+                    help="Dask scheduler address (tcp://host:8786): the arms run on its workers")
     ap.add_argument("--tag", default="", help="write data/studies/calib-000[-TAG]/result.json")
     ap.add_argument("--parameters", default="geometric",
                     help="identified arm parameters (calibration.parameters: geometric, joint_offsets, or "
@@ -267,11 +300,13 @@ def study(argv: list[str]) -> int:
         a.arms, a.notional, a.pool, a.iterations, a.no_local = ["kuka_kr15"], 0, 300, 15, True
     cfg = Settings(n=a.n, pool=a.pool, iterations=a.iterations, gradient=not a.no_gradient, local=not a.no_local,
                    parameters=a.parameters)
-    t0 = time.perf_counter()
-    kuka = kuka_rows(cfg, a.seed, a.jobs, tuple(a.arms))
     ncfg = Settings(n=a.n, pool=a.notional_pool, iterations=a.iterations, gradient=cfg.gradient and a.notional_gradient,
                     parameters=a.parameters)
-    notional = notional_rows(ncfg, a.seed, a.jobs, a.notional) if a.notional else []
-    result = rp.report(kuka, notional, vars(a), time.perf_counter() - t0)
+    kuka = kuka_tasks(cfg, a.seed, tuple(a.arms))
+    t0 = time.perf_counter()
+    # one dispatch for all arms (the named arms, the slowest, first): workers stay busy to the end
+    rows = run_tasks(kuka + (notional_tasks(ncfg, a.seed, a.notional) if a.notional else []), a.jobs, a.scheduler)
+    kuka_rows, notional = rows[:len(kuka)], rows[len(kuka):]
+    result = rp.report(kuka_rows, notional, vars(a), time.perf_counter() - t0)
     rp.save("calib-000" + (f"-{a.tag}" if a.tag else ""), result)
     return 0

@@ -16,27 +16,16 @@ by 6-9 %, 50-70 % of the configurations designed without it collide.
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Sequence
-from typing import TypeVar
+from collections.abc import Callable
 
-import joblib
 import numpy as np
 
 from pipeline.studies import study_dir
-
-T = TypeVar("T")
-R = TypeVar("R")
 
 PAPER_KUKA = {"kuka_kr15": (0.44, 0.17), "kuka_kr300": (0.40, 0.10), "kuka_kr500": (0.43, 0.12)}
 PAPER_NOTIONAL = {"both_vs_heuristic_min": 0.36, "tcp_vs_heuristic": 0.43, "tcp_vs_parameter": 0.19,
                   "ca_effect": (0.06, 0.09), "free_collision_share": (0.50, 0.70)}
 PARAMS = ("param_literal", "param_scaled", "param_legacy")
-
-
-def parallel(fn: Callable[[T], R], items: Sequence[T], jobs: int) -> list[R]:
-    if jobs <= 1:
-        return [fn(i) for i in items]
-    return list(joblib.Parallel(n_jobs=jobs)(joblib.delayed(fn)(i) for i in items))
 
 
 def gain(v: float, ref: float) -> tuple[float, float]:

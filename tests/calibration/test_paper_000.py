@@ -76,3 +76,24 @@ def test_gradient_refinement_never_worse_and_collision_free() -> None:
     out = p0.optimise(setup, "tcp", True, p0.Settings(pool=200, iterations=8), rng)
     assert out["tcp_var"] <= out["tcp_var_discrete"] * (1 + 1e-9)
     assert out["collision_share"] == 0.0
+
+
+def _without_timings(value: object) -> object:
+    """``value`` with every wall-clock entry (``*time_s``) removed (nested dicts and lists)."""
+    if isinstance(value, dict):
+        return {k: _without_timings(v) for k, v in value.items() if not str(k).endswith("time_s")}
+    if isinstance(value, list):
+        return [_without_timings(v) for v in value]
+    return value
+
+
+def test_notional_rows_do_not_depend_on_the_worker_count() -> None:
+    cfg = p0.Settings(n=20, pool=60, gradient=False, criteria=("param_literal", "tcp"))
+    tasks = p0.notional_tasks(cfg, seed=0, count=2)
+    assert len({t.name for t in tasks}) == 2
+    serial = p0.run_tasks(tasks, jobs=1)
+    parallel = p0.run_tasks(tasks, jobs=2)
+    assert [r["arm"] for r in parallel] == [t.name for t in tasks]
+    assert [(r["lambda_m"], r["mu_m"]) for r in serial] == [(t.lambda_m, t.mu_m) for t in tasks]
+    assert _without_timings(parallel) == _without_timings(serial)
+    assert serial[0]["tcp_ca"]["tcp_var"] != serial[1]["tcp_ca"]["tcp_var"]   # two arms, two results

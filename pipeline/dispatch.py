@@ -1,0 +1,85 @@
+"""Task dispatch: one function over many items, serially, on local worker processes (joblib) or on
+a Dask distributed cluster, with a progress bar; the results in input order.
+
+Used by ``python -m pipeline sweep`` (:mod:`pipeline.sweep`, one run per grid point) and by studies
+that run many independent tasks (e.g. ``study calib-000``, one arm per task). ``jobs=1`` runs the
+tasks in this process; ``jobs=N`` in ``N`` joblib (loky) worker processes; ``scheduler`` (an address
+such as ``tcp://host:8786``, or a ``distributed.Client``) sends them to a Dask cluster instead
+(``jobs`` is then ignored): its workers need this package installed and any file a task reads at
+the same path. Tasks finish in any order; each result is put back at its item's position, so the
+output does not depend on where or in which order the tasks ran when ``fn`` is a pure function of
+its item (every random number from a generator seeded by the item).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import TypeVar
+
+import joblib
+
+from pipeline.errors import ConfigError
+from pipeline.progress import Progress, current
+
+try:  # optional extra ``cluster``: dask[distributed]
+    from distributed import Client, as_completed
+except ModuleNotFoundError:  # pragma: no cover - depends on the environment
+    Client = None  # type: ignore[assignment,misc]
+    as_completed = None  # type: ignore[assignment]
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+__all__ = ["map_tasks"]
+
+
+def _indexed(fn: Callable[[T], R], index: int, item: T) -> tuple[int, R]:
+    return index, fn(item)
+
+
+def _run_local(fn: Callable[[T], R], items: Sequence[T], jobs: int, progress: Progress,
+               description: str) -> list[R]:
+    if jobs == 1:
+        return [fn(item) for item in progress.track(items, f"{description} (local)")]
+    results: dict[int, R] = {}
+    parallel = joblib.Parallel(n_jobs=jobs, return_as="generator_unordered")
+    done = parallel(joblib.delayed(_indexed)(fn, i, item) for i, item in enumerate(items))
+    for i, result in progress.track(done, f"{description} (joblib)", total=len(items)):
+        results[i] = result
+    return [results[i] for i in range(len(items))]
+
+
+def _run_dask(fn: Callable[[T], R], items: Sequence[T], scheduler: object, progress: Progress,
+              description: str) -> list[R]:
+    if Client is None or as_completed is None:
+        raise ConfigError("--scheduler", str(scheduler),
+                          "dask distributed is not installed (pip install 'pipeline[cluster]')")
+    own = not isinstance(scheduler, Client)
+    try:
+        client = Client(scheduler) if own else scheduler
+    except OSError as exc:
+        raise ConfigError("--scheduler", str(scheduler), f"cannot connect: {exc}") from None
+    try:
+        futures = [client.submit(_indexed, fn, i, item, pure=False) for i, item in enumerate(items)]
+        results: dict[int, R] = {}
+        for future in progress.track(as_completed(futures), f"{description} (dask)", total=len(futures)):
+            i, result = future.result()
+            results[i] = result
+    finally:
+        if own:
+            client.close()
+    return [results[i] for i in range(len(items))]
+
+
+def map_tasks(fn: Callable[[T], R], items: Sequence[T], jobs: int = 1, scheduler: object = None,
+              progress: Progress | None = None, description: str = "tasks") -> list[R]:
+    """``[fn(item) for item in items]`` on ``jobs`` local processes or the Dask ``scheduler``
+    (address or ``distributed.Client``), one bar ``description`` on ``progress`` (default: the
+    active display). ``fn`` and the items must be picklable for ``jobs > 1`` or a scheduler."""
+    if jobs < 1:
+        raise ConfigError("--jobs", str(jobs), "must be >= 1")
+    prog = progress if progress is not None else current()
+    with prog:
+        if scheduler is not None:
+            return _run_dask(fn, items, scheduler, prog, description)
+        return _run_local(fn, items, jobs, prog, description)
