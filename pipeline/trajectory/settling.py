@@ -89,7 +89,7 @@ def smooth_trajectory(traj: JointTrajectory, filter_time_s: float, name: str | N
     # the padded average starts at the rest value and reaches the goal exactly width - 1 samples late
     q, v, a = q[: len(t) + width - 1], v[: len(t) + width - 1], a[: len(t) + width - 1]
     t_new = t[0] + dt * np.arange(len(q))
-    info = {**traj.info, "smoothed_from": traj.name, "filter_time_s": width * dt,
+    info = {**traj.info, "time_scale": 1.0, "smoothed_from": traj.name, "filter_time_s": width * dt,
             "max_jerk_rad_s3": (np.abs(np.diff(a, axis=0)) / dt).max(axis=0).tolist()}
     return JointTrajectory(name or f"{traj.name}_smooth", t_new, q, v, a, info)
 
@@ -212,6 +212,28 @@ def _within_limits(check: TorqueCheck, tolerance: float, acceleration_limits: bo
                 and (not acceleration_limits or check.max_acceleration_ratio <= 1.0 + tolerance))
 
 
+def slowed_into_limits(pm: PlanningModel, traj: JointTrajectory, tolerance: float, acceleration_limits: bool = True,
+                       energy_weights: np.ndarray | None = None) -> tuple[JointTrajectory, TorqueCheck]:
+    """``traj`` and its fine-grid check when within the limits (ratios <= 1 + ``tolerance``), else the
+    same path slowed down (:func:`time_scaled`; bisection on the factor to ~1e-5) until it is. A plan
+    that 4x slower still breaks a limit (a static torque: slowing does not help) is returned at that
+    speed, for the stage's gate to report."""
+    check = check_trajectory(pm, traj, energy_weights=energy_weights)
+    if _within_limits(check, tolerance, acceleration_limits):
+        return traj, check
+    lo, hi = 1.0, 1.05
+    while not _within_limits(check_trajectory(pm, time_scaled(traj, hi)), tolerance, acceleration_limits):
+        lo, hi = hi, 1.0 + 2.0 * (hi - 1.0)
+        if hi > 4.0:
+            break                     # left to the stage's gate
+    for _ in range(12):
+        mid = 0.5 * (lo + hi)
+        ok = _within_limits(check_trajectory(pm, time_scaled(traj, mid)), tolerance, acceleration_limits)
+        lo, hi = (lo, mid) if ok else (mid, hi)
+    slowed = time_scaled(traj, hi, traj.name)
+    return slowed, check_trajectory(pm, slowed, energy_weights=energy_weights)
+
+
 def add_smooth_ptp(pm: PlanningModel, robot, plan: PTPPlan, filter_periods: float = 1.0,
                    tolerance: float | None = None, acceleration_limits: bool = True) -> JointTrajectory:
     """Add the smooth variant of ``plan.trajectories["ptp"]`` (moving average over ``filter_periods``
@@ -220,22 +242,13 @@ def add_smooth_ptp(pm: PlanningModel, robot, plan: PTPPlan, filter_periods: floa
 
     The average of a plan on its torque limits can exceed them a little (the torque of the averaged
     motion is not the average torque); with a ``tolerance`` the smooth plan is then slowed down
-    (:func:`time_scaled`, bisection on the factor) until its fine-grid check is within the limits."""
+    (:func:`slowed_into_limits`) until its fine-grid check is within the limits."""
     tr = plan.trajectories["ptp"]
     smooth = smooth_trajectory(tr, filter_periods / lowest_mode_hz(robot, tr.q[-1]), "ptp_smooth")
-    check = check_trajectory(pm, smooth, energy_weights=plan.weights)
-    if tolerance is not None and not _within_limits(check, tolerance, acceleration_limits):
-        lo, hi = 1.0, 1.05
-        while not _within_limits(check_trajectory(pm, time_scaled(smooth, hi)), tolerance, acceleration_limits):
-            lo, hi = hi, 1.0 + 2.0 * (hi - 1.0)
-            if hi > 4.0:
-                break                     # left to the stage's gate
-        for _ in range(12):
-            mid = 0.5 * (lo + hi)
-            ok = _within_limits(check_trajectory(pm, time_scaled(smooth, mid)), tolerance, acceleration_limits)
-            lo, hi = (lo, mid) if ok else (mid, hi)
-        smooth = time_scaled(smooth, hi, "ptp_smooth")
+    if tolerance is None:
         check = check_trajectory(pm, smooth, energy_weights=plan.weights)
+    else:
+        smooth, check = slowed_into_limits(pm, smooth, tolerance, acceleration_limits, plan.weights)
     plan.trajectories["ptp_smooth"] = smooth
     plan.checks["ptp_smooth"] = check
     return smooth

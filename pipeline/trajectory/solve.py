@@ -198,9 +198,10 @@ class PTPPlan:
         fixed = self.checks.get("ptp_energy_at_ruckig_duration")
         e_nlp = None if fixed is None else fixed.energy
         return {
-            "ptp_duration_s": self.result.duration_s,
+            "ptp_duration_s": self.trajectories["ptp"].duration_s,     # the plan handed on (slowed into
+            "ptp_nlp_duration_s": self.result.duration_s,              # the fine-grid limits) / the NLP's
             "ptp_ruckig_duration_s": self.ruckig.duration_s,
-            "ptp_duration_vs_ruckig_ratio": self.result.duration_s / self.ruckig.duration_s,
+            "ptp_duration_vs_ruckig_ratio": self.trajectories["ptp"].duration_s / self.ruckig.duration_s,
             "ptp_fine_violation": self.checks["ptp"].violation,
             "ptp_fine_max_velocity_ratio": self.checks["ptp"].max_velocity_ratio,
             "ptp_ruckig_fine_violation": self.checks["ptp_ruckig"].violation,

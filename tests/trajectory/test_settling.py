@@ -12,6 +12,7 @@ from pipeline.trajectory.settling import (
     lowest_mode_hz,
     settle_study,
     settling_table,
+    slowed_into_limits,
     smooth_trajectory,
     time_scaled,
 )
@@ -104,3 +105,17 @@ def test_smooth_ptp_is_slowed_into_the_limits(rx130l, pm, ptp_problem, big_move,
         assert smooth.duration_s == raw.duration_s
     else:
         assert smooth.duration_s > raw.duration_s and smooth.info["time_scale"] > 1
+
+
+def test_a_plan_over_its_limits_is_slowed_exactly_into_them(pm, ptp_problem, big_move, quick_traj_config):
+    """The interpolated plan may pass a limit between the NLP's nodes: slowed_into_limits stretches
+    time until every fine-grid ratio is within the tolerance, and leaves a plan within them alone."""
+    traj = plan_ptp(pm, ptp_problem, *big_move, quick_traj_config).trajectories["ptp"]
+    fast = time_scaled(traj, 0.97, "ptp")             # 3 % too fast: over a speed or torque limit
+    check = check_trajectory(pm, fast)
+    assert check.max_velocity_ratio > 1.0 + 1e-4 or check.violation > 1e-4
+    slowed, check = slowed_into_limits(pm, fast, 1e-4)
+    assert check.violation <= 1e-4 and check.max_velocity_ratio <= 1.0 + 1e-4
+    assert 1.0 < slowed.info["time_scale"] / 0.97 < 1.04     # not slower than needed (to the bisection)
+    same, _ = slowed_into_limits(pm, slowed, 1e-4)
+    assert same is slowed

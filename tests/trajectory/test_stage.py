@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import pytest
 
 from pipeline.progress import Progress
 from pipeline.robot.truth import RealRobot, TruthConfig
@@ -68,7 +69,10 @@ def test_stage_quick(quick_config, rx130l, ptp_problem, tmp_path):
     assert s["ptp_smooth_duration_s"] == s["ptp_smooth_settle_duration_s"]
     # one energy per motion: the fine-grid value in the summary and in the Pareto entry alike
     main = next(e for e in s["ptp_pareto"] if e["k2"] == cfg.ptp_k2)
-    assert main["energy"] == s["ptp_energy"] and main["duration_s"] == s["ptp_duration_s"]
+    assert main["duration_s"] == s["ptp_nlp_duration_s"] and s["ptp_time_scale"] >= 1.0
+    assert s["ptp_duration_s"] == pytest.approx(s["ptp_time_scale"] * s["ptp_nlp_duration_s"], rel=1e-6)
+    if s["ptp_time_scale"] == 1.0:   # the plan handed on is the NLP's own
+        assert main["energy"] == s["ptp_energy"]
     assert all(set(e) >= {"k2", "duration_s", "energy", "dominated"} for e in s["ptp_pareto"])
     # the report: violations in %, the Pareto sweep as a table, torques in N·m
     row = _report_row(res.report_md, "PtP fine-grid torque violation")
