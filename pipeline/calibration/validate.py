@@ -10,7 +10,8 @@ the elastostatic model and a gravity-model prior (:mod:`pipeline.calibration.gra
 the held-out error is ``e_h = (B_h - J_h M) z - J_h K n + n_h`` (the fit absorbs part of the
 inertial error ``z``, ``M`` = ``Estimate.gravity_gain``), so
 ``E|e_h|^2 = trace(J_h (C - M M^T) J_h^T) + |B_h - J_h M|_F^2 + 3 sigma_h^2``; the second term
-is the gravity-model part, whose share of the predicted mean square is reported.
+is the gravity-model part, whose share of the predicted mean square is reported (``B_h`` at the
+compliances the calibrated robot hands on, :func:`gravity_linearisation_point`).
 
 Orientation (6-D readings fitted as marker points, :func:`pipeline.calibration.measure.
 expand_orientation`): the errors ``e_0, e_x, e_y`` of the marker origin and of the virtual points
@@ -28,9 +29,10 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
 from pipeline.calibration.error_model import MeasurementModel
-from pipeline.calibration.estimate import Estimate
+from pipeline.calibration.estimate import MAX_COMPLIANCE_RELATIVE_STD, Estimate
 from pipeline.calibration.gravity_uncertainty import GravityCovariance
 from pipeline.calibration.measure import MARKER_LEVER_M, Measurements
+from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 
 
 def _stats(e: np.ndarray) -> dict[str, float]:
@@ -47,6 +49,31 @@ def _axis_stats(e: np.ndarray) -> dict[str, dict[str, float]]:
     return out
 
 
+def gravity_linearisation_point(mm: MeasurementModel, est: Estimate) -> np.ndarray:
+    """Parameters at which the gravity-model factors of a prediction are evaluated: the estimate,
+    with each estimated compliance replaced by its combination with the nominal rule
+    (:func:`pipeline.robot.stiffness.nominal_joint_stiffness_Nm_rad`, relative spread
+    :data:`pipeline.calibration.estimate.MAX_COMPLIANCE_RELATIVE_STD` between arms of one type),
+    weighted by the inverse variances, ``c = (c_hat s_n^2 + c_n s_hat^2) / (s_n^2 + s_hat^2)``,
+    non-negative. The inertial error moves the arm through the true compliance; a well determined
+    estimate (also a rigid joint's ~0) is kept, a poor one (a wrist compliance seen by 6-D
+    readings, known to +-80 %) does not inflate the prediction. Compliances outside the
+    identified set stay as they are."""
+    x = np.asarray(est.x, float).copy()
+    if not mm.compliance:
+        return x
+    B = np.asarray(est.basis, float)[mm.sl_compliance]
+    in_set = np.any(B != 0, axis=1)
+    var_hat = np.maximum(np.einsum("ij,jk,ik->i", B, np.asarray(est.covariance, float), B), 0.0)
+    c_nom = 1.0 / nominal_joint_stiffness_Nm_rad(mm.robot)
+    var_nom = (MAX_COMPLIANCE_RELATIVE_STD * c_nom) ** 2
+    c = x[mm.sl_compliance]
+    combined = (c * var_nom + c_nom * var_hat) / (var_nom + var_hat)
+    c[in_set] = np.maximum(combined[in_set], 0.0)
+    x[mm.sl_compliance] = c
+    return x
+
+
 def predicted_covariance(mm: MeasurementModel, est: Estimate, Q: np.ndarray, sigma_m: np.ndarray,
                          gravity: GravityCovariance | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``(N, 3, 3)`` covariance of the error ``y_h - h(q_h, x_hat)`` of a reading at each configuration
@@ -58,7 +85,7 @@ def predicted_covariance(mm: MeasurementModel, est: Estimate, Q: np.ndarray, sig
     if gravity is not None and gravity.active and est.gravity_gain is not None:
         M = est.gravity_gain
         C = C - M @ M.T
-        R = gravity.factors(Q, est.x, est.registration) - J @ M
+        R = gravity.factors(Q, gravity_linearisation_point(mm, est), est.registration) - J @ M
         var_gravity = np.einsum("nir,nir->n", R, R)
         cov = np.einsum("nir,njr->nij", R, R)
     cov = cov + np.einsum("nip,pq,njq->nij", J, C, J) + np.asarray(sigma_m, float)[:, None, None] ** 2 * np.eye(3)
@@ -104,7 +131,8 @@ def predicted_orientation_covariance(mm: MeasurementModel, est: Estimate, Q: np.
     if gravity is not None and gravity.active and est.gravity_gain is not None:
         M = est.gravity_gain
         C = C - M @ M.T
-        B = [gravity.factors(Q, est.x, est.registration, offsets=o) for o in _marker_offsets(len(Q), lever_m)]
+        x_g = gravity_linearisation_point(mm, est)
+        B = [gravity.factors(Q, x_g, est.registration, offsets=o) for o in _marker_offsets(len(Q), lever_m)]
         Rw = _orientation_rows(_marker_rotation(mm, est, Q), B, lever_m) - Jw @ M
         var_gravity = np.einsum("nir,nir->n", Rw, Rw)
         cov = np.einsum("nir,njr->nij", Rw, Rw)
