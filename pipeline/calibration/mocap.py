@@ -11,9 +11,10 @@ robot.yaml: flange orientation, at the reflector offset) of the deflected arm
   ``R_meas = exp(r^)`` (axis * angle, scipy ``Rotation.from_rotvec``), which maps marker-frame
   axes to measurement-frame axes: the CSV convention of :mod:`pipeline.calibration.measure`.
 
-Mocap-like noise is ``sigma_p`` = 0.1 mm and ``sigma_rot`` = 1 mrad per axis (marker clusters of
-a few hundred mm seen by an optical motion-capture system, e.g. Vicon/OptiTrack accuracy
-statements; paper 004 §3.4 used an optical 6-D tracker of the same class).
+The defaults, ``sigma_p`` = 0.1 mm and ``sigma_rot`` = 1 mrad per axis, are a stated order of
+magnitude for a marker cluster of a few hundred mm seen by an optical motion-capture system (not a
+vendor's figure); paper 004 §3.4 calibrated with an optical 6-D tracker of this class. What such a
+record can give is measured by ``benchmarks/bench_six_d.py``.
 """
 
 from __future__ import annotations
@@ -67,7 +68,7 @@ class SixDTrial:
 
 def six_d_trial(robot, real, n_poses: int, rng: np.random.Generator, folder: str | Path,
                 position_sigma_m: float = 1e-4, orientation_sigma_rad: float = 1e-3, n_validation: int = 200,
-                **config) -> SixDTrial:
+                **config: object) -> SixDTrial:
     """Calibrate ``all`` parameters from ``n_poses`` random 6-D readings of ``real``
     (:func:`simulate_six_d_record`, written to ``folder/fit.csv`` and read back as a user file) and
     validate on ``n_validation`` exact poses (``folder/validation.csv``: the nominal orientation
