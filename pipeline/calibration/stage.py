@@ -287,7 +287,8 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress, reg
         if real is None:
             raise PipelineError(None, "calibration.validation_csv", "no validation file and no simulated robot")
         held = heldout_measurements(robot, real, est, cfg, rng)
-    validation = va.validate(mm, est, held, cfg.outlier_confidence, gravity) if held is not None else None
+    validation = (va.validate(mm, est, held, cfg.outlier_confidence, gravity, cfg.orientation_sigma_rad)
+                  if held is not None else None)
     timings["validate_s"] = time.perf_counter() - t
     if spec is None:
         spec, Qw = index_spec(cfg, robot, mm, dbasis, rng, region)

@@ -10,7 +10,16 @@ the elastostatic model and a gravity-model prior (:mod:`pipeline.calibration.gra
 the held-out error is ``e_h = (B_h - J_h M) z - J_h K n + n_h`` (the fit absorbs part of the
 inertial error ``z``, ``M`` = ``Estimate.gravity_gain``), so
 ``E|e_h|^2 = trace(J_h (C - M M^T) J_h^T) + |B_h - J_h M|_F^2 + 3 sigma_h^2``; the second term
-is the gravity-model part, whose share of the predicted mean square is reported.
+is the gravity-model part, whose share of the predicted mean square is reported (``B_h`` at the
+compliances the calibrated robot hands on, :func:`gravity_linearisation_point`).
+
+Orientation (6-D readings fitted as marker points, :func:`pipeline.calibration.measure.
+expand_orientation`): the errors ``e_0, e_x, e_y`` of the marker origin and of the virtual points
+``L`` along the marker x and y axes give the marker-frame orientation error ``w`` to first order,
+``R^T (e_x - e_0) = L w x e_x`` and ``R^T (e_y - e_0) = L w x e_y`` (``R`` the marker orientation in
+the tracker frame), so ``w = (g_y[z], -g_x[z], g_x[y])`` with ``g_k = R^T (e_k - e_0) / L``: a linear
+map ``S`` of the point errors, whose covariance follows as above with ``J_h, B_h`` replaced by
+``S J_h, S B_h``; ``E|w|^2`` adds ``3 sigma_rot^2`` of a noisy reading.
 """
 
 from __future__ import annotations
@@ -20,9 +29,10 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
 from pipeline.calibration.error_model import MeasurementModel
-from pipeline.calibration.estimate import Estimate
+from pipeline.calibration.estimate import MAX_COMPLIANCE_RELATIVE_STD, Estimate
 from pipeline.calibration.gravity_uncertainty import GravityCovariance
-from pipeline.calibration.measure import Measurements
+from pipeline.calibration.measure import MARKER_LEVER_M, Measurements
+from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 
 
 def _stats(e: np.ndarray) -> dict[str, float]:
@@ -39,6 +49,31 @@ def _axis_stats(e: np.ndarray) -> dict[str, dict[str, float]]:
     return out
 
 
+def gravity_linearisation_point(mm: MeasurementModel, est: Estimate) -> np.ndarray:
+    """Parameters at which the gravity-model factors of a prediction are evaluated: the estimate,
+    with each estimated compliance replaced by its combination with the nominal rule
+    (:func:`pipeline.robot.stiffness.nominal_joint_stiffness_Nm_rad`, relative spread
+    :data:`pipeline.calibration.estimate.MAX_COMPLIANCE_RELATIVE_STD` between arms of one type),
+    weighted by the inverse variances, ``c = (c_hat s_n^2 + c_n s_hat^2) / (s_n^2 + s_hat^2)``,
+    non-negative. The inertial error moves the arm through the true compliance; a well determined
+    estimate (also a rigid joint's ~0) is kept, a poor one (a wrist compliance seen by 6-D
+    readings, known to +-80 %) does not inflate the prediction. Compliances outside the
+    identified set stay as they are."""
+    x = np.asarray(est.x, float).copy()
+    if not mm.compliance:
+        return x
+    B = np.asarray(est.basis, float)[mm.sl_compliance]
+    in_set = np.any(B != 0, axis=1)
+    var_hat = np.maximum(np.einsum("ij,jk,ik->i", B, np.asarray(est.covariance, float), B), 0.0)
+    c_nom = 1.0 / nominal_joint_stiffness_Nm_rad(mm.robot)
+    var_nom = (MAX_COMPLIANCE_RELATIVE_STD * c_nom) ** 2
+    c = x[mm.sl_compliance]
+    combined = (c * var_nom + c_nom * var_hat) / (var_nom + var_hat)
+    c[in_set] = np.maximum(combined[in_set], 0.0)
+    x[mm.sl_compliance] = c
+    return x
+
+
 def predicted_covariance(mm: MeasurementModel, est: Estimate, Q: np.ndarray, sigma_m: np.ndarray,
                          gravity: GravityCovariance | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``(N, 3, 3)`` covariance of the error ``y_h - h(q_h, x_hat)`` of a reading at each configuration
@@ -50,11 +85,58 @@ def predicted_covariance(mm: MeasurementModel, est: Estimate, Q: np.ndarray, sig
     if gravity is not None and gravity.active and est.gravity_gain is not None:
         M = est.gravity_gain
         C = C - M @ M.T
-        R = gravity.factors(Q, est.x, est.registration) - J @ M
+        R = gravity.factors(Q, gravity_linearisation_point(mm, est), est.registration) - J @ M
         var_gravity = np.einsum("nir,nir->n", R, R)
         cov = np.einsum("nir,njr->nij", R, R)
     cov = cov + np.einsum("nip,pq,njq->nij", J, C, J) + np.asarray(sigma_m, float)[:, None, None] ** 2 * np.eye(3)
     return cov, var_gravity
+
+
+def _orientation_rows(R: np.ndarray, points: list[np.ndarray], lever_m: float) -> np.ndarray:
+    """``S`` of the module docstring applied to the origin / x / y point blocks ``(N, 3, k)``:
+    ``(N, 3, k)`` rows of the marker-frame orientation error."""
+    gx = np.einsum("nji,njk->nik", R, points[1] - points[0]) / lever_m
+    gy = np.einsum("nji,njk->nik", R, points[2] - points[0]) / lever_m
+    return np.stack([gy[:, 2], -gx[:, 2], gx[:, 1]], axis=1)
+
+
+def _marker_offsets(n: int, lever_m: float) -> list[np.ndarray]:
+    return [np.zeros((n, 3)), np.tile([lever_m, 0.0, 0.0], (n, 1)), np.tile([0.0, lever_m, 0.0], (n, 1))]
+
+
+def _marker_rotation(mm: MeasurementModel, est: Estimate, Q: np.ndarray) -> np.ndarray:
+    """``(N, 3, 3)`` marker orientation of the identified model in the identified tracker frame."""
+    _, R_base = mm.base_positions(Q, est.x)
+    return np.einsum("ji,njk->nik", est.transform_tracker_to_base.rotation, R_base)
+
+
+def orientation_jacobian(mm: MeasurementModel, est: Estimate, Q: np.ndarray,
+                         lever_m: float = MARKER_LEVER_M) -> np.ndarray:
+    """``(N, 3, p)`` Jacobian of the marker-frame orientation (rad) wrt the identified parameters
+    ``theta`` at configurations ``Q`` (``S J`` of the module docstring; marker-point model)."""
+    J = [mm.jacobian(Q, est.x, est.registration, est.basis, offsets=o)[1] for o in _marker_offsets(len(Q), lever_m)]
+    return _orientation_rows(_marker_rotation(mm, est, Q), J, lever_m)
+
+
+def predicted_orientation_covariance(mm: MeasurementModel, est: Estimate, Q: np.ndarray,
+                                     gravity: GravityCovariance | None = None,
+                                     lever_m: float = MARKER_LEVER_M) -> tuple[np.ndarray, np.ndarray]:
+    """``(N, 3, 3)`` covariance of the marker-frame orientation error (rad) of the identified model
+    at each configuration, without reading noise (module docstring; needs a marker-point model,
+    ``mm.marker_points``), and ``(N,)`` its gravity-model part."""
+    Jw = orientation_jacobian(mm, est, Q, lever_m)
+    C = est.covariance
+    var_gravity = np.zeros(len(Q))
+    cov = 0.0
+    if gravity is not None and gravity.active and est.gravity_gain is not None:
+        M = est.gravity_gain
+        C = C - M @ M.T
+        x_g = gravity_linearisation_point(mm, est)
+        B = [gravity.factors(Q, x_g, est.registration, offsets=o) for o in _marker_offsets(len(Q), lever_m)]
+        Rw = _orientation_rows(_marker_rotation(mm, est, Q), B, lever_m) - Jw @ M
+        var_gravity = np.einsum("nir,nir->n", Rw, Rw)
+        cov = np.einsum("nir,njr->nij", Rw, Rw)
+    return cov + np.einsum("nip,pq,njq->nij", Jw, C, Jw), var_gravity
 
 
 def predicted_error(mm: MeasurementModel, est: Estimate, Q: np.ndarray, sigma_m: np.ndarray,
@@ -126,10 +208,13 @@ def gross_error_rows(mm: MeasurementModel, est: Estimate, meas: Measurements, co
 
 
 def validate(mm: MeasurementModel, est: Estimate, meas: Measurements, outlier_confidence: float | None = None,
-             gravity: GravityCovariance | None = None) -> dict:
+             gravity: GravityCovariance | None = None, orientation_sigma_rad: float = 0.0) -> dict:
     """Held-out statistics before/after calibration and the covariance prediction (with the
     gravity-model term when ``gravity`` is given); with ``outlier_confidence`` the held-out readings
-    failing the outlier test are left out and counted (``n_rejected``, ``rejected_rows``)."""
+    failing the outlier test are left out and counted (``n_rejected``, ``rejected_rows``). 6-D
+    held-out readings give orientation errors; with a marker-point model (orientation fitted) also
+    their prediction, ``after.orientation_rad.predicted_rms`` (``orientation_sigma_rad`` the 1-sigma
+    per axis of a held-out reading) and ``predicted_model_rms`` (the model part alone)."""
     rejected = np.zeros(0, int)
     n_measured = len(meas)
     if outlier_confidence is not None:
@@ -172,6 +257,12 @@ def validate(mm: MeasurementModel, est: Estimate, meas: Measurements, outlier_co
             ang = np.linalg.norm(err, axis=1)
             out[key]["orientation_rad"] = {"mean": float(ang.mean()), "rms": float(np.sqrt(np.mean(ang ** 2))),
                                            "max": float(ang.max())}
+        if mm.marker_points:
+            cov_w, _ = predicted_orientation_covariance(mm, est, Q, gravity)
+            var_w = np.trace(cov_w, axis1=1, axis2=2)
+            out["after"]["orientation_rad"] |= {
+                "predicted_rms": float(np.sqrt(np.mean(var_w) + 3 * orientation_sigma_rad ** 2)),
+                "predicted_model_rms": float(np.sqrt(np.mean(var_w)))}
     return out
 
 
@@ -196,6 +287,10 @@ def table_markdown(v: dict) -> str:
             o = s["orientation_rad"]
             lines.append(f"| {key} | {np.rad2deg(o['mean']):.4f} | {np.rad2deg(o['rms']):.4f} | "
                          f"{np.rad2deg(o['max']):.4f} |")
+        if "predicted_rms" in a["orientation_rad"]:
+            o = a["orientation_rad"]
+            lines.append(f"| predicted (covariance + noise) | | {np.rad2deg(o['predicted_rms']):.4f} | |")
+            lines.append(f"| predicted, model part (exact readings) | | {np.rad2deg(o['predicted_model_rms']):.4f} | |")
     else:
         lines.append("\nOrientation errors: not measured (the laser tracker reads positions only).")
     return "\n".join(lines)
