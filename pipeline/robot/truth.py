@@ -54,7 +54,7 @@ from pipeline.robot.transmission import Transmission, create_transmission
 #: fixed salt so the truth stream is independent of every stage's stream
 _TRUTH_SALT = 0x74727574
 #: fixed-point iterations of the load-dependent friction in the measured torque (error ~ (mu F_c/tau_max)^k)
-_LOAD_ITERATIONS = 3
+_LOAD_ITERATIONS = 5
 
 
 @dataclass
