@@ -224,6 +224,7 @@ def _run(ctx: StageContext) -> StageResult:
     # the torques and fit the rest as before; viscous_coulomb kept beside it for the report
     fit = (fit_stribeck(Wb, y, data.v_blocks, wls_vc.beta, wls_vc.joint_sigma_Nm, reg.coulomb_width_rad_s)
            if cfg.friction_model == "stribeck" else None)
+    timings["stribeck_fit_s"] = time.perf_counter() - t1
     y_fit = y if fit is None else y - fit.stribeck_torque(data.v_blocks).ravel()
     ols = est_mod.ols(Wb, y_fit, nq)
     wls = wls_vc if fit is None else est_mod.wls(Wb, y_fit, nq)
