@@ -14,6 +14,7 @@ from pipeline.identification import fourier, stage
 from pipeline.identification import measure as meas_mod
 from pipeline.identification.friction import StribeckFit, fit_stribeck, stribeck_torque
 from pipeline.identification.regressor import RegressorModel, base_parameters, standard_parameters
+from pipeline.robot.exact import load_exact_robot, robots_equal, save_exact_robot
 from pipeline.robot.model import RobotModel
 from pipeline.robot.truth import RealRobot, TruthConfig
 
@@ -81,7 +82,9 @@ def test_stribeck_fit_is_handed_on_in_the_saved_model(rx130l: RobotModel, tmp_pa
     p = standard_parameters(rx130l.model, act.rotor_inertia_kgm2, act.viscous_Nms_rad, act.coulomb_Nm)
     fs, vs = np.linspace(1.0, 3.0, nq), np.linspace(0.03, 0.08, nq)
     fit = StribeckFit(np.zeros(1), fs, vs, act.coulomb_smoothing_rad_s, "Solve_Succeeded", 1)
-    loaded = RobotModel.load(stage.identified_robot(rx130l, p, fit).save(tmp_path / "identified"))
+    identified = stage.identified_robot(rx130l, p, fit)
+    loaded = RobotModel.load(identified.save(tmp_path / "identified"))
+    assert robots_equal(load_exact_robot(save_exact_robot(identified, tmp_path / "exact")), identified)
     v = np.linspace(-0.3, 0.3, 61)[:, None] * np.ones(nq)
     linear = rx130l.friction_torque(v)
     np.testing.assert_allclose(loaded.friction_torque(v), linear + stribeck_torque(v, fs, vs, WIDTH), atol=1e-9)
