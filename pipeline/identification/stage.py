@@ -17,7 +17,10 @@ and the real Stäubli TX40 record (paper ``004_abbe750b8bbcc3aa.txt`` §4; issue
 4. Period averaging, zero-phase filtering, differentiation, block decimation (:mod:`.measure`);
    the data must excite the model (motion per joint, rank and condition; :mod:`.gates`).
 5. OLS, Gautier's WLS (covariance -> base parameter sigmas) and the physically consistent fit
-   (log-Cholesky, IPOPT) whose standard parameters become the handed-on ``RobotModel``.
+   (log-Cholesky, IPOPT) whose standard parameters become the handed-on ``RobotModel``. With
+   ``friction_model: stribeck`` (default) a Stribeck term is fitted first with the base parameters
+   (:mod:`.friction`), taken off the torques and handed on in the model's actuation; the
+   viscous + Coulomb fit is kept beside it and both are scored on the validation torques.
 6. Validation on the run's ISO 9283 path (``control.iso`` from the run's ``control.ik_seeds_deg``,
    measured vs predicted torques; a random Fourier trajectory, with the real reason in the report,
    when that path cannot be used), or the held-out tail of a record.
