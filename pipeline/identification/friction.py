@@ -42,6 +42,9 @@ FRICTION_MODELS = ("viscous_coulomb", "stribeck")
 VS_MIN_RAD_S = 1e-3
 VS_MAX_RAD_S = 5.0
 VS_START_RAD_S = 0.05
+#: a joint's Stribeck term is kept when it lowers chi-squared by this much: the 0.1 % quantile of
+#: chi-squared with 2 degrees of freedom (f_s, v_s), -2 ln(0.001)
+MIN_CHI2_GAIN = 13.8
 
 
 @dataclass
@@ -52,6 +55,8 @@ class StribeckFit:
     coulomb_width_rad_s: float
     status: str
     iterations: int
+    #: per joint likelihood-ratio statistic of the Stribeck term (:func:`stribeck_chi2_gain`)
+    chi2_gain: np.ndarray | None = None
 
     def stribeck_torque(self, v: np.ndarray) -> np.ndarray:
         """(N, nq) the Stribeck excess torque ``fs exp(-(v/vs)^2) tanh(v/w)``; for ``v`` of shape
@@ -67,14 +72,18 @@ class StribeckFit:
 
 def fit_stribeck(
     Wb: np.ndarray, y: np.ndarray, v: np.ndarray, beta0: np.ndarray, joint_sigma_Nm: np.ndarray,
-    coulomb_width_rad_s: float, max_iter: int = 200,
+    coulomb_width_rad_s: float, max_iter: int = 200, min_chi2_gain: float = MIN_CHI2_GAIN,
 ) -> StribeckFit:
     """Joint weighted least squares of ``beta``, ``fs``, ``vs`` (module doc); raises
     :class:`SolverError` unless IPOPT succeeds (KeyboardInterrupt when interrupted).
 
     ``v``: (n, nq) velocities of the samples, or (n, k, nq) when each sample (row block of ``Wb``
     and ``y``) is the mean of k samples (:attr:`ProcessedData.v_blocks`): the Stribeck term is then
-    averaged the same way, which keeps the model exact at velocity reversals inside a block."""
+    averaged the same way, which keeps the model exact at velocity reversals inside a block.
+
+    A joint's term is kept only when it is significant: its likelihood-ratio statistic
+    (:func:`stribeck_chi2_gain`) at least ``min_chi2_gain``; else its ``fs`` is set to 0 (no
+    Stribeck term fitted to noise is handed on)."""
     v = np.asarray(v, float)
     v3 = v[:, None, :] if v.ndim == 2 else v
     n, k, nq = v3.shape
@@ -108,9 +117,35 @@ def fit_stribeck(
     if not is_success(status):
         raise SolverError(None, "identification.friction_model", f"IPOPT returned {status} for the Stribeck fit")
     xs = np.asarray(sol["x"]).ravel()
-    return StribeckFit(beta=xs[:nb], static_excess_Nm=xs[nb : nb + nq], stribeck_velocity_rad_s=np.exp(xs[nb + nq :]),
-                       coulomb_width_rad_s=float(coulomb_width_rad_s), status=status,
-                       iterations=int(stats["iter_count"]))
+    fit = StribeckFit(beta=xs[:nb], static_excess_Nm=xs[nb : nb + nq], stribeck_velocity_rad_s=np.exp(xs[nb + nq :]),
+                      coulomb_width_rad_s=float(coulomb_width_rad_s), status=status,
+                      iterations=int(stats["iter_count"]))
+    fit.chi2_gain = stribeck_chi2_gain(Wb, y, fit.stribeck_torque(v3))
+    fit.static_excess_Nm = np.where(fit.chi2_gain >= min_chi2_gain, fit.static_excess_Nm, 0.0)
+    return fit
+
+
+def stribeck_chi2_gain(Wb: np.ndarray, y: np.ndarray, st: np.ndarray) -> np.ndarray:
+    """Per joint, the drop of the residual sum of squares (in units of that joint's residual
+    variance) that joint's Stribeck term ``st[:, j]`` buys, the base parameters refitted both ways:
+    the likelihood-ratio statistic, chi-squared with 2 degrees of freedom (f_s, v_s) when the term is
+    not there (Wilks)."""
+    n, nq = st.shape
+    Q, _ = np.linalg.qr(Wb)
+
+    def residual(rhs: np.ndarray) -> np.ndarray:
+        return (rhs - Q @ (Q.T @ rhs)).reshape(n, nq)
+
+    y = np.asarray(y, float)
+    full = residual(y - st.ravel())
+    var = np.maximum(np.mean(full**2, axis=0), 1e-300)
+    ssr_full = np.sum(full**2 / var)
+    gain = np.empty(nq)
+    for j in range(nq):
+        without = st.copy()
+        without[:, j] = 0.0
+        gain[j] = np.sum(residual(y - without.ravel()) ** 2 / var) - ssr_full
+    return gain
 
 
 def stribeck_heldout(data: ProcessedData, base: BaseParameters, p_nominal: np.ndarray, nq: int,
@@ -145,6 +180,7 @@ def friction_summary(rms_Nm: dict[str, np.ndarray], sigma_Nm: np.ndarray | None,
         "stribeck_static_excess_Nm": fit.static_excess_Nm.tolist(),
         "stribeck_velocity_rad_s": fit.stribeck_velocity_rad_s.tolist(),
         "stribeck_status": fit.status,
+        "stribeck_chi2_gain": None if fit.chi2_gain is None else fit.chi2_gain.tolist(),
     }
 
 
