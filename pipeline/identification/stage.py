@@ -65,6 +65,7 @@ from pipeline.robot.defaults import iso_or_derived
 from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import set_dynamic_parameters
 from pipeline.robot.symbolic import SymbolicRobot
+from pipeline.solver_status import is_success
 from pipeline.stage_api import StageContext, StageResult
 
 NAME = "identification"
@@ -289,8 +290,10 @@ def _run(ctx: StageContext) -> StageResult:
             noise_source = "torque sensor of the simulation"
     friction: dict[str, Any] = {}
     if fit is not None:  # both friction models' physically consistent fits on the same held-out torques
-        rms_vc, _ = val_mod.torque_rms(tau_v, pred_vc)
-        friction = friction_summary({"viscous_coulomb": rms_vc, "stribeck": rms_phys}, noise_sigma, fit)
+        vc_status = phys_vc.status if rec is None else ho.phys.status
+        scored = {"viscous_coulomb": val_mod.torque_rms(tau_v, pred_vc)[0]} if is_success(vc_status) else {}
+        friction = friction_summary(scored | {"stribeck": rms_phys}, noise_sigma, fit)
+        friction["friction_viscous_coulomb_status"] = vc_status   # not scored unless IPOPT succeeded
     timings["validation_s"] = time.perf_counter() - t1
 
     truth = None
