@@ -87,6 +87,8 @@ def with_truth_kinematics(robot: RobotModel, truth: RobotModel) -> RobotModel:
     out.model.armature = np.array(robot.model.armature, float).copy()
     for name in ("viscous_Nms_rad", "coulomb_Nm", "rotor_inertia_kgm2"):
         setattr(out.actuation, name, np.array(getattr(robot.actuation, name), float).copy())
+    for name in ("static_friction_excess_Nm", "stribeck_velocity_rad_s"):   # identified Stribeck term or None
+        setattr(out.actuation, name, getattr(robot.actuation, name))
     out.spec.actuation.joint_stiffness_Nm_rad = nominal_joint_stiffness_Nm_rad(robot)
     return out
 

@@ -84,6 +84,9 @@ def _with_dynamics_of(kinematics_robot, dynamics_robot):
     out.model.armature = np.array(dynamics_robot.model.armature).copy()
     for name in ("viscous_Nms_rad", "coulomb_Nm", "rotor_inertia_kgm2"):
         setattr(out.actuation, name, np.array(getattr(dynamics_robot.actuation, name)).copy())
+    for name in ("static_friction_excess_Nm", "stribeck_velocity_rad_s"):    # identified Stribeck term, or None
+        value = getattr(dynamics_robot.actuation, name)
+        setattr(out.actuation, name, None if value is None else np.array(value).copy())
     out.spec.actuation.joint_stiffness_Nm_rad = nominal_joint_stiffness_Nm_rad(dynamics_robot)
     return out
 

@@ -67,9 +67,10 @@ class Config:
     base_samples: int = 300
     regularization: float = 1e-3  # pull of the physical fit towards the nominal model
     physical_max_iter: int = 1000
-    # viscous_coulomb (linear, handed on) | stribeck: also fit a Stribeck term (IPOPT) and report
-    # both friction models' held-out errors (friction.py)
-    friction_model: str = "viscous_coulomb"
+    # stribeck: viscous + Coulomb + a Stribeck term per joint (IPOPT), handed on in the identified
+    # model, with the viscous_coulomb fit's validation errors reported beside it (friction.py);
+    # viscous_coulomb: the linear friction model only
+    friction_model: str = "stribeck"
     validation: str = "iso9283"  # iso9283 | fourier
     validation_sample_time_s: float = 4e-3
     data_file: str = ""  # CSV record instead of the simulated experiment

@@ -13,17 +13,28 @@ the base parameters ``beta`` and in ``fs`` but not in ``vs``; all are estimated 
 IPOPT with exact derivatives (CasADi automatic differentiation, exact Hessian) minimising the
 residual weighted by the per-joint noise sigmas (the WLS weights, Gautier), started from the WLS
 estimate with ``fs = 0``. ``log vs`` is the variable (``vs`` in [``VS_MIN``, ``VS_MAX``]).
+
+With ``friction_model: stribeck`` the stage subtracts the fitted Stribeck term from the measured
+torques before the physically consistent fit and hands ``fs``, ``vs`` on in the identified model
+(``actuation.static_friction_excess_Nm``, ``actuation.stribeck_velocity_rad_s``; the model's
+``friction_torque`` is :func:`pipeline.robot.friction.joint_friction_torque`). Both models are
+scored on the held-out validation torques (:func:`friction_summary`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import casadi as ca
 import numpy as np
 
 from pipeline.errors import SolverError
+from pipeline.identification import estimate as est_mod
+from pipeline.identification.measure import ProcessedData
+from pipeline.identification.regressor import BaseParameters
+from pipeline.identification.tx40 import heldout_validation
 from pipeline.interrupts import raise_if_interrupted
+from pipeline.robot.friction import stribeck_excess_torque as stribeck_torque
 from pipeline.solver_status import is_success
 
 FRICTION_MODELS = ("viscous_coulomb", "stribeck")
@@ -31,6 +42,9 @@ FRICTION_MODELS = ("viscous_coulomb", "stribeck")
 VS_MIN_RAD_S = 1e-3
 VS_MAX_RAD_S = 5.0
 VS_START_RAD_S = 0.05
+#: a joint's Stribeck term is kept when it lowers chi-squared by this much: the 0.1 % quantile of
+#: chi-squared with 2 degrees of freedom (f_s, v_s), -2 ln(0.001)
+MIN_CHI2_GAIN = 13.8
 
 
 @dataclass
@@ -41,10 +55,14 @@ class StribeckFit:
     coulomb_width_rad_s: float
     status: str
     iterations: int
+    #: per joint likelihood-ratio statistic of the Stribeck term (:func:`stribeck_chi2_gain`)
+    chi2_gain: np.ndarray | None = None
 
     def stribeck_torque(self, v: np.ndarray) -> np.ndarray:
-        """(N, nq) the Stribeck excess torque ``fs exp(-(v/vs)^2) tanh(v/w)``."""
-        return stribeck_torque(v, self.static_excess_Nm, self.stribeck_velocity_rad_s, self.coulomb_width_rad_s)
+        """(N, nq) the Stribeck excess torque ``fs exp(-(v/vs)^2) tanh(v/w)``; for ``v`` of shape
+        (N, k, nq) (:attr:`ProcessedData.v_blocks`) its mean over the k velocities of each sample."""
+        st = stribeck_torque(v, self.static_excess_Nm, self.stribeck_velocity_rad_s, self.coulomb_width_rad_s)
+        return st.mean(axis=1) if st.ndim == 3 else st
 
     def predict(self, Wb: np.ndarray, v: np.ndarray) -> np.ndarray:
         """(N, nq) torques of the base regressor ``Wb`` (sample-major rows) and velocities ``v``."""
@@ -52,20 +70,23 @@ class StribeckFit:
         return (Wb @ self.beta).reshape(-1, nq) + self.stribeck_torque(v)
 
 
-def stribeck_torque(v: np.ndarray, fs: np.ndarray, vs: np.ndarray, width_rad_s: float) -> np.ndarray:
-    v = np.asarray(v, float)
-    s = np.tanh(v / width_rad_s) if width_rad_s > 0 else np.sign(v)
-    return np.asarray(fs, float) * np.exp(-((v / np.asarray(vs, float)) ** 2)) * s
-
-
 def fit_stribeck(
     Wb: np.ndarray, y: np.ndarray, v: np.ndarray, beta0: np.ndarray, joint_sigma_Nm: np.ndarray,
-    coulomb_width_rad_s: float, max_iter: int = 200,
+    coulomb_width_rad_s: float, max_iter: int = 200, min_chi2_gain: float = MIN_CHI2_GAIN,
 ) -> StribeckFit:
     """Joint weighted least squares of ``beta``, ``fs``, ``vs`` (module doc); raises
-    :class:`SolverError` unless IPOPT succeeds (KeyboardInterrupt when interrupted)."""
+    :class:`SolverError` unless IPOPT succeeds (KeyboardInterrupt when interrupted).
+
+    ``v``: (n, nq) velocities of the samples, or (n, k, nq) when each sample (row block of ``Wb``
+    and ``y``) is the mean of k samples (:attr:`ProcessedData.v_blocks`): the Stribeck term is then
+    averaged the same way, which keeps the model exact at velocity reversals inside a block.
+
+    A joint's term is kept only when it is significant: its likelihood-ratio statistic
+    (:func:`stribeck_chi2_gain`) at least ``min_chi2_gain``; else its ``fs`` is set to 0 (no
+    Stribeck term fitted to noise is handed on)."""
     v = np.asarray(v, float)
-    n, nq = v.shape
+    v3 = v[:, None, :] if v.ndim == 2 else v
+    n, k, nq = v3.shape
     nb = Wb.shape[1]
     w_row = np.tile(1.0 / np.asarray(joint_sigma_Nm, float), n)
     A = ca.DM(Wb * w_row[:, None])
@@ -73,11 +94,13 @@ def fit_stribeck(
     beta = ca.MX.sym("beta", nb)
     fs = ca.MX.sym("fs", nq)
     log_vs = ca.MX.sym("log_vs", nq)
-    V = ca.DM(v)  # (n, nq)
-    sgn = ca.DM(np.tanh(v / coulomb_width_rad_s) if coulomb_width_rad_s > 0 else np.sign(v))
-    vs_row = ca.repmat(ca.exp(log_vs).T, n, 1)
-    fs_row = ca.repmat(fs.T, n, 1)
-    st = fs_row * ca.exp(-((V / vs_row) ** 2)) * sgn  # (n, nq)
+    sgn = np.tanh(v3 / coulomb_width_rad_s) if coulomb_width_rad_s > 0 else np.sign(v3)
+    mean = ca.DM(np.full((k, 1), 1.0 / k))
+    columns = []
+    for j in range(nq):   # (n, k) per joint, averaged over the block: (n, 1)
+        shape = ca.exp(-((ca.DM(v3[:, :, j]) * ca.exp(-log_vs[j])) ** 2)) * ca.DM(sgn[:, :, j])
+        columns.append(fs[j] * ca.mtimes(shape, mean))
+    st = ca.horzcat(*columns)  # (n, nq)
     st_w = ca.vec(st.T) * ca.DM(w_row)  # sample-major like y
     r = ca.mtimes(A, beta) + st_w - b
     x = ca.vertcat(beta, fs, log_vs)
@@ -94,34 +117,71 @@ def fit_stribeck(
     if not is_success(status):
         raise SolverError(None, "identification.friction_model", f"IPOPT returned {status} for the Stribeck fit")
     xs = np.asarray(sol["x"]).ravel()
-    return StribeckFit(beta=xs[:nb], static_excess_Nm=xs[nb : nb + nq], stribeck_velocity_rad_s=np.exp(xs[nb + nq :]),
-                       coulomb_width_rad_s=float(coulomb_width_rad_s), status=status,
-                       iterations=int(stats["iter_count"]))
+    fit = StribeckFit(beta=xs[:nb], static_excess_Nm=xs[nb : nb + nq], stribeck_velocity_rad_s=np.exp(xs[nb + nq :]),
+                      coulomb_width_rad_s=float(coulomb_width_rad_s), status=status,
+                      iterations=int(stats["iter_count"]))
+    fit.chi2_gain = stribeck_chi2_gain(Wb, y, fit.stribeck_torque(v3))
+    fit.static_excess_Nm = np.where(fit.chi2_gain >= min_chi2_gain, fit.static_excess_Nm, 0.0)
+    return fit
 
 
-def compare_friction_models(
-    Wb_train: np.ndarray, tau_train: np.ndarray, v_train: np.ndarray, joint_sigma_Nm: np.ndarray,
-    coulomb_width_rad_s: float, Wb_val: np.ndarray, tau_val: np.ndarray, v_val: np.ndarray,
-    max_iter: int = 200,
-) -> dict:
-    """Fit ``viscous_coulomb`` (weighted LS) and ``stribeck`` (:func:`fit_stribeck`) on the
-    training samples and score both on held-out ones: per joint RMS and the model with the smaller
-    mean RMS / sigma (``friction_model_best``). JSON-able."""
-    nq = np.asarray(v_train).shape[1]
-    sigma = np.asarray(joint_sigma_Nm, float)
-    w = np.tile(1.0 / sigma, np.asarray(v_train).shape[0])
-    beta_lin = np.linalg.lstsq(Wb_train * w[:, None], np.ravel(tau_train) * w, rcond=None)[0]
-    fit = fit_stribeck(Wb_train, np.ravel(tau_train), v_train, beta_lin, sigma, coulomb_width_rad_s, max_iter)
-    tau_val = np.asarray(tau_val, float).reshape(-1, nq)
-    rms = {
-        "viscous_coulomb": np.sqrt(np.mean(((Wb_val @ beta_lin).reshape(-1, nq) - tau_val) ** 2, axis=0)),
-        "stribeck": np.sqrt(np.mean((fit.predict(Wb_val, v_val) - tau_val) ** 2, axis=0)),
-    }
-    best = min(rms, key=lambda k: float(np.mean(rms[k] / sigma)))
+def stribeck_chi2_gain(Wb: np.ndarray, y: np.ndarray, st: np.ndarray) -> np.ndarray:
+    """Per joint, the drop of the residual sum of squares (in units of that joint's residual
+    variance) that joint's Stribeck term ``st[:, j]`` buys, the base parameters refitted both ways:
+    the likelihood-ratio statistic, chi-squared with 2 degrees of freedom (f_s, v_s) when the term is
+    not there (Wilks)."""
+    n, nq = st.shape
+    Q, _ = np.linalg.qr(Wb)
+
+    def residual(rhs: np.ndarray) -> np.ndarray:
+        return (rhs - Q @ (Q.T @ rhs)).reshape(n, nq)
+
+    y = np.asarray(y, float)
+    full = residual(y - st.ravel())
+    var = np.maximum(np.mean(full**2, axis=0), 1e-300)
+    ssr_full = np.sum(full**2 / var)
+    gain = np.empty(nq)
+    for j in range(nq):
+        without = st.copy()
+        without[:, j] = 0.0
+        gain[j] = np.sum(residual(y - without.ravel()) ** 2 / var) - ssr_full
+    return gain
+
+
+def stribeck_heldout(data: ProcessedData, base: BaseParameters, p_nominal: np.ndarray, nq: int,
+                     train_fraction: float, regularization: float, max_iter: int, coulomb_width_rad_s: float,
+                     field_name: str = "train_fraction") -> dict[str, np.ndarray]:
+    """Held-out predictions of the Stribeck model on a (non-periodic) record: Stribeck term fitted
+    with the base parameters on the first ``train_fraction`` of the samples, taken off the torques,
+    then :func:`~pipeline.identification.tx40.heldout_validation`'s fits; their predictions on the
+    rest plus the Stribeck term (keys ``ols``, ``wls``, ``physical``)."""
+    n_train = int(train_fraction * data.n_samples)
+    rows = n_train * nq
+    Wb = base.base_regressor(data.Y)
+    wls = est_mod.wls(Wb[:rows], data.y[:rows], nq)
+    vb = data.v_blocks
+    fit = fit_stribeck(Wb[:rows], data.y[:rows], vb[:n_train], wls.beta, wls.joint_sigma_Nm, coulomb_width_rad_s)
+    st = fit.stribeck_torque(vb)
+    ho = heldout_validation(replace(data, tau=data.tau - st), base, p_nominal, nq, train_fraction, regularization,
+                            max_iter, field_name)
+    return {k: pred + st[n_train:] for k, pred in ho.pred.items()}
+
+
+def friction_summary(rms_Nm: dict[str, np.ndarray], sigma_Nm: np.ndarray | None, fit: StribeckFit) -> dict:
+    """Summary entries of the two friction models scored on the same held-out torques: per joint
+    RMS (``friction_heldout_rms_Nm``), RMS / noise sigma, the model with the smaller mean RMS /
+    sigma (``friction_model_best``) and the Stribeck fit. JSON-able."""
+    sigma = np.ones_like(next(iter(rms_Nm.values()))) if sigma_Nm is None else np.asarray(sigma_Nm, float)
+    best = min(rms_Nm, key=lambda k: float(np.mean(np.asarray(rms_Nm[k]) / sigma)))
     return {
-        "friction_heldout_rms_Nm": {k: r.tolist() for k, r in rms.items()},
+        "friction_heldout_rms_Nm": {k: np.asarray(r, float).tolist() for k, r in rms_Nm.items()},
+        "friction_heldout_rms_over_noise": {k: (np.asarray(r, float) / sigma).tolist() for k, r in rms_Nm.items()},
         "friction_model_best": best,
         "stribeck_static_excess_Nm": fit.static_excess_Nm.tolist(),
         "stribeck_velocity_rad_s": fit.stribeck_velocity_rad_s.tolist(),
         "stribeck_status": fit.status,
+        "stribeck_chi2_gain": None if fit.chi2_gain is None else fit.chi2_gain.tolist(),
     }
+
+
+__all__ = ["FRICTION_MODELS", "StribeckFit", "fit_stribeck", "friction_summary", "stribeck_heldout", "stribeck_torque"]

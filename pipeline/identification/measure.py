@@ -218,10 +218,18 @@ class ProcessedData:
     Y: np.ndarray  # (N*nq, n_std) standard regressor after the parallel decimation
     sample_time_s: float
     noise_sigma_Nm: np.ndarray | None = None  # per raw sample, from the spread between periods
+    #: (N, decimation, nq) full-rate velocities behind each block mean (process_periodic), for a
+    #: model term non-linear in v (Stribeck) averaged like the regressor; None: ``v`` itself
+    v_full: np.ndarray | None = None
 
     @property
     def n_samples(self) -> int:
         return self.q.shape[0]
+
+    @property
+    def v_blocks(self) -> np.ndarray:
+        """(N, k, nq) velocities whose mean of a function gives that function's processed sample."""
+        return self.v[:, None, :] if self.v_full is None else self.v_full
 
     @property
     def y(self) -> np.ndarray:
@@ -281,7 +289,7 @@ def process_periodic(
     Yd = Y[: m * dec * nq].reshape(m, dec, nq, p).mean(axis=1).reshape(m * nq, p)
     taud = tau_mean[: m * dec].reshape(m, dec, nq).mean(axis=1)
     mid = np.arange(m) * dec + dec // 2
-    return ProcessedData(q[mid], v[mid], a[mid], taud, Yd, dt * dec, noise)
+    return ProcessedData(q[mid], v[mid], a[mid], taud, Yd, dt * dec, noise, v[: m * dec].reshape(m, dec, nq))
 
 
 def process_record(

@@ -71,6 +71,10 @@ def convergence_figure(res: design_mod.ExcitationResult) -> Figure:
 
 
 
+def _numbers(values: list[float]) -> str:
+    return "[" + ", ".join(f"{v:.3g}" for v in values) + "]"
+
+
 def report_markdown(summary: dict, tx: Tx40Result | None) -> str:
     if summary["cond_optimized"] is None:
         head = (f"Excitation: from the user's record ({summary['data_source']}); condition number of "
@@ -95,6 +99,15 @@ def report_markdown(summary: dict, tx: Tx40Result | None) -> str:
     sig = summary["torque_noise_sigma_Nm"] or [float("nan")] * len(summary["validation_torque_rms_Nm"])
     for j, (r, s) in enumerate(zip(summary["validation_torque_rms_Nm"], sig, strict=True)):
         lines.append(f"| {j + 1} | {r:.3f} | {s:.3f} | {r / s:.2f} |")
+    by_model = summary.get("friction_heldout_rms_over_noise")
+    if by_model:
+        lines += ["", f"Friction models on the same validation torques (handed on: `{summary['friction_model']}`; "
+                  f"static excess {_numbers(summary['stribeck_static_excess_Nm'])} N m, Stribeck velocity "
+                  f"{_numbers(summary['stribeck_velocity_rad_s'])} rad/s):", "",
+                  "| joint | " + " | ".join(f"{k} RMS / sigma" for k in by_model) + " |",
+                  "|---|" + "---|" * len(by_model)]
+        lines += [f"| {j + 1} | " + " | ".join(f"{by_model[k][j]:.2f}" for k in by_model) + " |"
+                  for j in range(len(next(iter(by_model.values()))))]
     if tx is not None:
         lines += [
             "",

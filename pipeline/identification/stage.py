@@ -17,7 +17,10 @@ and the real Stäubli TX40 record (paper ``004_abbe750b8bbcc3aa.txt`` §4; issue
 4. Period averaging, zero-phase filtering, differentiation, block decimation (:mod:`.measure`);
    the data must excite the model (motion per joint, rank and condition; :mod:`.gates`).
 5. OLS, Gautier's WLS (covariance -> base parameter sigmas) and the physically consistent fit
-   (log-Cholesky, IPOPT) whose standard parameters become the handed-on ``RobotModel``.
+   (log-Cholesky, IPOPT) whose standard parameters become the handed-on ``RobotModel``. With
+   ``friction_model: stribeck`` (default) a Stribeck term is fitted first with the base parameters
+   (:mod:`.friction`), taken off the torques and handed on in the model's actuation; the
+   viscous + Coulomb fit is kept beside it and both are scored on the validation torques.
 6. Validation on the run's ISO 9283 path (``control.iso`` from the run's ``control.ik_seeds_deg``,
    measured vs predicted torques; a random Fourier trajectory, with the real reason in the report,
    when that path cannot be used), or the held-out tail of a record.
@@ -47,7 +50,7 @@ from pipeline.identification import measure as meas_mod
 from pipeline.identification import validate as val_mod
 from pipeline.identification.base_set import structural_base_parameters
 from pipeline.identification.config import DATA_BORDER_SAMPLES, Config, ExcitationConfig
-from pipeline.identification.friction import compare_friction_models
+from pipeline.identification.friction import StribeckFit, fit_stribeck, friction_summary, stribeck_heldout
 from pipeline.identification.gates import add_result_gates, check_data_excites
 from pipeline.identification.record import load_user_record
 from pipeline.identification.regressor import RegressorModel, standard_parameters
@@ -62,6 +65,7 @@ from pipeline.robot.defaults import iso_or_derived
 from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import set_dynamic_parameters
 from pipeline.robot.symbolic import SymbolicRobot
+from pipeline.solver_status import is_success
 from pipeline.stage_api import StageContext, StageResult
 
 NAME = "identification"
@@ -89,16 +93,20 @@ def _nominal_robot(ctx: StageContext) -> Any:
         return ctx.robot
 
 
-def identified_robot(robot: Any, p: np.ndarray) -> Any:
+def identified_robot(robot: Any, p: np.ndarray, stribeck: StribeckFit | None = None) -> Any:
     """Copy of ``robot`` with the standard parameters ``p`` (inertias, rotor inertia, viscous and
-    Coulomb friction; torque offsets are not part of a RobotModel)."""
+    Coulomb friction; torque offsets are not part of a RobotModel) and, with a Stribeck fit, its
+    static excess and Stribeck velocity (``friction_model: stribeck``; else none)."""
     nq = robot.nq
     model = set_dynamic_parameters(robot.model, p)
     spec = copy.deepcopy(robot.spec)
     off = 10 * (robot.model.njoints - 1)
-    spec.actuation.rotor_inertia_kgm2 = p[off : off + nq].copy()
-    spec.actuation.viscous_Nms_rad = p[off + nq : off + 2 * nq].copy()
-    spec.actuation.coulomb_Nm = p[off + 2 * nq : off + 3 * nq].copy()
+    act = spec.actuation
+    act.rotor_inertia_kgm2 = p[off : off + nq].copy()
+    act.viscous_Nms_rad = p[off + nq : off + 2 * nq].copy()
+    act.coulomb_Nm = p[off + 2 * nq : off + 3 * nq].copy()
+    act.static_friction_excess_Nm = None if stribeck is None else stribeck.static_excess_Nm.copy()
+    act.stribeck_velocity_rad_s = None if stribeck is None else stribeck.stribeck_velocity_rad_s.copy()
     return robot.with_model(model, spec)
 
 
@@ -215,13 +223,22 @@ def _run(ctx: StageContext) -> StageResult:
     cond_data = check_data_excites(data.q, Wb, [f"q{j + 1}" for j in range(nq)], cfg.min_joint_motion_rad,
                                    cfg.max_cond_base_regressor_data, str(cfg.data_file) if user_data else None)
     cond_data_structural = float(np.linalg.cond(base_design.base_regressor(data.Y)))  # design criterion's set
-    ols = est_mod.ols(Wb, y, nq)
-    wls = est_mod.wls(Wb, y, nq)
+    wls_vc = est_mod.wls(Wb, y, nq)
+    # friction_model stribeck: fit the Stribeck term with the base parameters (IPOPT), take it off
+    # the torques and fit the rest as before; viscous_coulomb kept beside it for the report
+    fit = (fit_stribeck(Wb, y, data.v_blocks, wls_vc.beta, wls_vc.joint_sigma_Nm, reg.coulomb_width_rad_s)
+           if cfg.friction_model == "stribeck" else None)
+    timings["stribeck_fit_s"] = time.perf_counter() - t1
+    y_fit = y if fit is None else y - fit.stribeck_torque(data.v_blocks).ravel()
+    ols = est_mod.ols(Wb, y_fit, nq)
+    wls = wls_vc if fit is None else est_mod.wls(Wb, y_fit, nq)
     p_nom = standard_parameters(robot.model, act.rotor_inertia_kgm2, act.viscous_Nms_rad, act.coulomb_Nm)
-    phys = est_mod.physical_fit(data.Y, y, nq, p_nom, wls.joint_sigma_Nm, cfg.regularization,
+    phys = est_mod.physical_fit(data.Y, y_fit, nq, p_nom, wls.joint_sigma_Nm, cfg.regularization,
                                 cfg.physical_max_iter)
+    phys_vc = phys if fit is None else est_mod.physical_fit(data.Y, y, nq, p_nom, wls_vc.joint_sigma_Nm,
+                                                            cfg.regularization, cfg.physical_max_iter)
     timings["estimation_s"] = time.perf_counter() - t1
-    new_robot = identified_robot(robot, phys.p)
+    new_robot = identified_robot(robot, phys.p, fit)
 
     # ---------------------------------------------------------------- validation
     t1 = time.perf_counter()
@@ -233,9 +250,14 @@ def _run(ctx: StageContext) -> StageResult:
         vt = val_mod.ValidationTrajectory(
             ho.t_s, ho.q, np.empty((0, nq)), np.empty((0, nq)), f"held-out last {pct} % of the user's record",
             f"fit on the first {ho.n_train} of {ho.n_samples} processed samples, scored on the rest")
-        tau_v, pred_phys = ho.tau_Nm, ho.pred["physical"]
+        tau_v, pred_phys, pred_wls, pred_vc = ho.tau_Nm, ho.pred["physical"], ho.pred["wls"], ho.pred["physical"]
+        if fit is not None:   # the Stribeck model: its own fit on the first part, scored on the rest
+            pred_s = stribeck_heldout(data, base, p_nom, nq, cfg.data_train_fraction, cfg.regularization,
+                                      cfg.physical_max_iter, reg.coulomb_width_rad_s,
+                                      "identification.data_train_fraction")
+            pred_phys, pred_wls = pred_s["physical"], pred_s["wls"]
         rms_phys, rel_phys = val_mod.torque_rms(tau_v, pred_phys)
-        rms_wls, rel_wls = val_mod.torque_rms(tau_v, ho.pred["wls"])
+        rms_wls, rel_wls = val_mod.torque_rms(tau_v, pred_wls)
         # residual sigma per joint of the WLS fit on all samples (processed torques, like the RMS)
         noise_sigma: np.ndarray | None = np.asarray(wls.joint_sigma_Nm, float)
         noise_source = "residuals of the WLS fit (processed torques)"
@@ -257,22 +279,21 @@ def _run(ctx: StageContext) -> StageResult:
         meas_v = ctx.real.execute_joint_trajectory(vt.t_s, vt.q, vt.v, vt.a, ctx.rng)
         tau_v = meas_v.tau_Nm
         Yv = reg.stacked(vt.q, vt.v, vt.a)
-        pred_phys = (Yv @ phys.p).reshape(-1, nq)
-        pred_wls = (base.base_regressor(Yv) @ wls.beta).reshape(-1, nq)
+        st_v = 0.0 if fit is None else fit.stribeck_torque(vt.v)
+        pred_phys = (Yv @ phys.p).reshape(-1, nq) + st_v
+        pred_wls = (base.base_regressor(Yv) @ wls.beta).reshape(-1, nq) + st_v
+        pred_vc = (Yv @ phys_vc.p).reshape(-1, nq)
         rms_phys, rel_phys = val_mod.torque_rms(tau_v, pred_phys)
         rms_wls, rel_wls = val_mod.torque_rms(tau_v, pred_wls)
         if noise_sigma is None or not np.all(np.isfinite(noise_sigma)):
             noise_sigma = np.asarray(meas_v.tau_sigma_Nm, float)
             noise_source = "torque sensor of the simulation"
     friction: dict[str, Any] = {}
-    if cfg.friction_model == "stribeck":  # both friction models scored on held-out samples
-        if rec is not None:
-            k, n_rows = ho.n_train, ho.n_train * nq
-            friction = compare_friction_models(Wb[:n_rows], data.tau[:k], data.v[:k], wls.joint_sigma_Nm,
-                                               reg.coulomb_width_rad_s, Wb[n_rows:], data.tau[k:], data.v[k:])
-        else:
-            friction = compare_friction_models(Wb, data.tau, data.v, wls.joint_sigma_Nm, reg.coulomb_width_rad_s,
-                                               base.base_regressor(Yv), tau_v, vt.v)
+    if fit is not None:  # both friction models' physically consistent fits on the same held-out torques
+        vc_status = phys_vc.status if rec is None else ho.phys.status
+        scored = {"viscous_coulomb": val_mod.torque_rms(tau_v, pred_vc)[0]} if is_success(vc_status) else {}
+        friction = friction_summary(scored | {"stribeck": rms_phys}, noise_sigma, fit)
+        friction["friction_viscous_coulomb_status"] = vc_status   # not scored unless IPOPT succeeded
     timings["validation_s"] = time.perf_counter() - t1
 
     truth = None

@@ -20,6 +20,7 @@ import yaml
 from pipeline.artefacts import write_text
 from pipeline.errors import RobotFileError
 from pipeline.robot.collision import CapsuleDistances, segment_distances
+from pipeline.robot.friction import joint_friction_torque
 from pipeline.robot.ik import IKResult, solve_ik
 from pipeline.robot.loading import ROBOTS_DIR, JointLimits, load_robot_files, resolve_robot_files, validate_joint_limits
 from pipeline.robot.spec import Capsule, RobotSpec, robot_spec_to_yaml
@@ -260,10 +261,9 @@ class RobotModel:
 
     # ----------------------------------------------------------------- dynamics
     def friction_torque(self, v: np.ndarray) -> np.ndarray:
-        """Joint friction ``f_v v + f_c tanh(v / width)`` (smooth Coulomb, DESIGN.md)."""
-        act = self.spec.actuation
-        v = np.asarray(v, float)
-        return act.viscous_Nms_rad * v + act.coulomb_Nm * np.tanh(v / act.coulomb_smoothing_rad_s)
+        """Joint friction ``f_v v + f_c tanh(v / width)`` (smooth Coulomb, DESIGN.md) plus the
+        identified Stribeck excess when the actuation has one (:mod:`pipeline.robot.friction`)."""
+        return joint_friction_torque(self.spec.actuation, v)
 
     def inverse_dynamics(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
         """``tau = M(q) a + h(q, v) + friction(v)``; M includes the rotor inertia (armature)."""

@@ -48,6 +48,10 @@ class ActuationSpec:
     coulomb_smoothing_rad_s: float
     #: torsional joint stiffness (joint side, N m/rad); None: derived (pipeline.robot.stiffness)
     joint_stiffness_Nm_rad: np.ndarray | None = None
+    #: Stribeck friction (identified, ``friction_model: stribeck``): static excess over Coulomb
+    #: ``f_s`` (N m) and Stribeck velocity ``v_s`` (rad/s) per joint; None: viscous + Coulomb only
+    static_friction_excess_Nm: np.ndarray | None = None
+    stribeck_velocity_rad_s: np.ndarray | None = None
 
 
 @dataclass
@@ -260,7 +264,8 @@ def load_robot_spec(path: Path, nq: int | None = None) -> RobotSpec:
     act = top.sub("actuation")
     act.check_keys(
         {"gear_ratio", "gear_coupling", "rotor_inertia_kgm2", "viscous_Nms_rad", "coulomb_Nm",
-         "coulomb_smoothing_rad_s", "joint_stiffness_Nm_rad"},
+         "coulomb_smoothing_rad_s", "joint_stiffness_Nm_rad", "static_friction_excess_Nm",
+         "stribeck_velocity_rad_s"},
         {"gear_ratio", "rotor_inertia_kgm2", "viscous_Nms_rad", "coulomb_Nm"},
     )
     per_joint = [len(v) for k in ("gear_ratio", "rotor_inertia_kgm2", "viscous_Nms_rad", "coulomb_Nm")
@@ -300,6 +305,12 @@ def load_robot_spec(path: Path, nq: int | None = None) -> RobotSpec:
         joint_stiffness_Nm_rad=(act.vector("joint_stiffness_Nm_rad", n, positive=True)
                                 if "joint_stiffness_Nm_rad" in act.data else None),
     )
+    if ("static_friction_excess_Nm" in act.data) != ("stribeck_velocity_rad_s" in act.data):
+        raise act.error("stribeck_velocity_rad_s", "give static_friction_excess_Nm and stribeck_velocity_rad_s "
+                        "together (the Stribeck friction term) or neither")
+    if "static_friction_excess_Nm" in act.data:
+        actuation.static_friction_excess_Nm = act.vector("static_friction_excess_Nm", n, nonnegative=True)
+        actuation.stribeck_velocity_rad_s = act.vector("stribeck_velocity_rad_s", n, positive=True)
 
     lim = top.sub("limits")
     overridable = ("lower_rad", "upper_rad", "velocity_rad_s", "effort_Nm")
@@ -448,7 +459,10 @@ def robot_spec_to_yaml(spec: RobotSpec, urdf_name: str) -> dict:
             "coulomb_Nm": [float(v) for v in act.coulomb_Nm],
             "coulomb_smoothing_rad_s": float(act.coulomb_smoothing_rad_s),
         } | ({} if act.joint_stiffness_Nm_rad is None
-             else {"joint_stiffness_Nm_rad": [float(v) for v in act.joint_stiffness_Nm_rad]}),
+             else {"joint_stiffness_Nm_rad": [float(v) for v in act.joint_stiffness_Nm_rad]})
+        | ({} if act.static_friction_excess_Nm is None or act.stribeck_velocity_rad_s is None
+           else {"static_friction_excess_Nm": [float(v) for v in act.static_friction_excess_Nm],
+                 "stribeck_velocity_rad_s": [float(v) for v in act.stribeck_velocity_rad_s]}),
         "limits": {"acceleration_rad_s2": [float(v) for v in spec.acceleration_rad_s2]}
         | {k: [float(x) for x in v] for k, v in spec.limit_overrides.items()},
         "tracker": None if not spec.has_tracker else {

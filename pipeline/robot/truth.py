@@ -53,6 +53,8 @@ from pipeline.robot.transmission import Transmission, create_transmission
 
 #: fixed salt so the truth stream is independent of every stage's stream
 _TRUTH_SALT = 0x74727574
+#: fixed-point iterations of the load-dependent friction in the measured torque (error ~ (mu F_c/tau_max)^k)
+_LOAD_ITERATIONS = 5
 
 
 @dataclass
@@ -244,12 +246,25 @@ class RealRobot:
                                  rng: np.random.Generator) -> JointMeasurement:
         """Ideal tracking of ``(q, v, a)``: encoder readings and joint torques (motor currents
         through the gear matrix) with sensor noise. Torque saturation is not modelled here;
-        use :attr:`plant` for a closed-loop experiment."""
+        use :attr:`plant` for a closed-loop experiment.
+
+        The torque is the rigid-body torque plus the transmission's friction, the same function
+        the plant integrates (:meth:`Transmission.friction_torque`: Stribeck excess and Coulomb
+        friction growing with the transmitted torque); like the rigid plant, the load is the motor
+        torque itself, ``tau = rnea(q, v, a) + f(v, |tau|)``, solved by fixed-point iteration
+        (a contraction: ``mu F_c / tau_max`` is far below 1). With the Stribeck numbers at 0 this
+        is ``truth.inverse_dynamics`` bit for bit."""
         q, v, a = (np.atleast_2d(np.asarray(x, float)) for x in (q, v, a))
         if not (len(t_s) == len(q) == len(v) == len(a)):
             raise ConfigError(None, "trajectory", f"t, q, v, a have different lengths "
                               f"({len(t_s)}, {len(q)}, {len(v)}, {len(a)})")
-        tau = np.array([self._truth.inverse_dynamics(qk, vk, ak) for qk, vk, ak in zip(q, v, a, strict=True)])
+        model, data = self._truth.model, self._truth.model.createData()
+        rigid = np.array([pin.rnea(model, data, qk, vk, ak) for qk, vk, ak in zip(q, v, a, strict=True)])
+        tr = self.transmission
+        tau = rigid + tr.friction_torque(v)
+        if np.any(tr.coulomb_load_coefficient > 0):
+            for _ in range(_LOAD_ITERATIONS):
+                tau = rigid + tr.friction_torque(v, tau)
         return JointMeasurement(np.asarray(t_s, float).copy(), self.encoders.read(q, rng),
                                 self.torque_sensor.read(tau, rng), self.torque_sensor.sigma_Nm.copy(),
                                 self.encoders.noise_rad)

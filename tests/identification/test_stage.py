@@ -14,7 +14,7 @@ from pipeline.identification import stage
 from pipeline.identification.estimate import is_physically_consistent
 from pipeline.robot.model import RobotModel
 
-from .helpers import quick_context, true_base
+from .helpers import NO_LOAD_FRICTION, quick_context, true_base
 
 SUMMARY_KEYS = (
     "n_base_parameters", "cond_optimized", "cond_random_median", "validation_torque_rms_Nm",
@@ -26,7 +26,7 @@ TX40_KEYS = ("tx40_heldout_rms_Nm_ols", "tx40_heldout_rms_Nm_physical", "tx40_ph
 
 @pytest.fixture(scope="module")
 def quick_run(tmp_path_factory):
-    ctx, real = quick_context(tmp_path_factory.mktemp("id"))
+    ctx, real = quick_context(tmp_path_factory.mktemp("id"), truth=NO_LOAD_FRICTION)   # Stribeck, no load term
     return ctx, real, stage.run(ctx)
 
 

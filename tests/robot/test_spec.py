@@ -87,3 +87,20 @@ def test_valid_couplings_and_empty_lists_still_load(tmp_path: Path) -> None:
     assert robot.spec.collision.floor_check_from_joint == 6
     robot = RobotModel.load(_robot_with(tmp_path / "b", lambda d: d["actuation"].update(gear_coupling=None)))
     assert robot.actuation.gear_matrix[5, 4] == 0.0
+
+
+@pytest.mark.parametrize(
+    ("values", "field", "problem"),
+    [
+        ({"static_friction_excess_Nm": [1.0] * 6}, "actuation.stribeck_velocity_rad_s", "together"),
+        ({"static_friction_excess_Nm": [1.0] * 6, "stribeck_velocity_rad_s": [0.05] * 5},
+         "actuation.stribeck_velocity_rad_s", "expected 6 numbers"),
+        ({"static_friction_excess_Nm": [-1.0] * 6, "stribeck_velocity_rad_s": [0.05] * 6},
+         "actuation.static_friction_excess_Nm", "must not be negative"),
+        ({"static_friction_excess_Nm": [1.0] * 6, "stribeck_velocity_rad_s": [0.0] * 6},
+         "actuation.stribeck_velocity_rad_s", "must be positive"),
+    ],
+)
+def test_bad_stribeck_friction(tmp_path: Path, values: dict, field: str, problem: str) -> None:
+    err = _error(_robot_with(tmp_path, lambda d: d["actuation"].update(values)))
+    assert field in str(err) and problem in str(err)

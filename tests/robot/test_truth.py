@@ -179,3 +179,41 @@ def test_gross_tracker_errors_are_injected_at_the_stated_rate(rx130l: RobotModel
 def test_truth_config_rejects_a_rate_above_one_half(rx130l: RobotModel) -> None:
     with pytest.raises(ConfigError, match="truth.tracker_outlier_rate"):
         RealRobot.create(rx130l, 0, TruthConfig(tracker_outlier_rate=0.9))
+
+
+def _sweep(robot: RobotModel, n: int = 400) -> tuple[np.ndarray, ...]:
+    """A slow sinusoidal sweep of every joint (many samples below the Stribeck velocity)."""
+    t = np.arange(n) * 0.01
+    lim = robot.limits
+    mid, amp = 0.5 * (lim.lower_rad + lim.upper_rad), 0.1 * (lim.upper_rad - lim.lower_rad)
+    w = 2 * np.pi * np.linspace(0.2, 0.4, robot.nq)
+    q = mid + amp * np.sin(w * t[:, None])
+    return t, q, amp * w * np.cos(w * t[:, None]), -amp * w**2 * np.sin(w * t[:, None])
+
+
+def test_measured_torque_without_stribeck_is_the_rigid_inverse_dynamics_bit_for_bit(rx130l: RobotModel) -> None:
+    cfg = TruthConfig(stribeck_excess_relative=0.0, coulomb_load_coefficient=0.0, torque_noise_fraction_of_limit=0.0)
+    real = RealRobot.create(rx130l, 7, cfg)
+    t, q, v, a = _sweep(rx130l)
+    measured = real.execute_joint_trajectory(t, q, v, a, np.random.default_rng(0))
+    exact = np.array([real.truth.inverse_dynamics(*s) for s in zip(q, v, a, strict=True)])
+    assert np.array_equal(measured.tau_Nm, exact)
+
+
+def test_measured_torque_carries_the_plants_stribeck_and_load_dependent_friction(rx130l: RobotModel) -> None:
+    """The measurement uses the plant's friction function with the motor torque as the load (a
+    fixed point), and differs from the rigid viscous + Coulomb torques by up to the static excess."""
+    real = RealRobot.create(rx130l, 7, TruthConfig(torque_noise_fraction_of_limit=0.0))
+    tr = real.transmission
+    assert tr.nonlinear_friction
+    t, q, v, a = _sweep(rx130l)
+    tau = real.execute_joint_trajectory(t, q, v, a, np.random.default_rng(0)).tau_Nm
+    rigid = (np.array([real.truth.inverse_dynamics(*s) for s in zip(q, v, a, strict=True)])
+             - real.truth.friction_torque(v))
+    np.testing.assert_allclose(tau, rigid + tr.friction_torque(v, tau), rtol=0, atol=1e-9 * np.abs(tau).max())
+    excess = np.abs(tau - rigid - real.truth.friction_torque(v))
+    # near rest the static excess shows (its peak over v is ~0.8 f_s for w_s = 5 x the Coulomb width) ...
+    assert np.all(excess.max(axis=0) >= 0.5 * tr.static_excess_Nm)
+    # ... and never more than the excess and the load growth of Coulomb friction together
+    grow = 1 + tr.coulomb_load_coefficient * np.abs(tau).max(axis=0) / tr.effort_Nm
+    assert np.all(excess.max(axis=0) <= (tr.static_excess_Nm + tr.coulomb_Nm) * grow - tr.coulomb_Nm + 1e-9)

@@ -1,0 +1,39 @@
+"""Joint friction of a robot model (joint side): viscous, smooth Coulomb and, when identified, the
+Stribeck excess of static over Coulomb friction.
+
+    tau_f = f_v v + f_c tanh(v / w) + f_s exp(-(v / v_s)^2) tanh(v / w)
+
+(Armstrong-Hélouvry, Dupont & Canudas de Wit 1994, "A survey of models, analysis tools and
+compensation methods for the control of machines with friction", Automatica 30(7), the
+steady-state "Stribeck" curve; ``w`` the Coulomb smoothing width of DESIGN.md). ``f_s`` and
+``v_s`` are ``actuation.static_friction_excess_Nm`` and ``actuation.stribeck_velocity_rad_s``
+(written by the identification with ``friction_model: stribeck``); without them the model is
+viscous + Coulomb. The hidden robot's own friction is :class:`pipeline.robot.transmission.Transmission`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.robot.spec import ActuationSpec
+
+
+def stribeck_excess_torque(v: np.ndarray, fs: np.ndarray, vs: np.ndarray, width_rad_s: float) -> np.ndarray:
+    """``fs exp(-(v / vs)^2) tanh(v / width)`` (``sign`` for ``width = 0``), per joint (last axis)."""
+    v = np.asarray(v, float)
+    s = np.tanh(v / width_rad_s) if width_rad_s > 0 else np.sign(v)
+    return np.asarray(fs, float) * np.exp(-((v / np.asarray(vs, float)) ** 2)) * s
+
+
+def has_stribeck(act: ActuationSpec) -> bool:
+    return act.static_friction_excess_Nm is not None and act.stribeck_velocity_rad_s is not None
+
+
+def joint_friction_torque(act: ActuationSpec, v: np.ndarray) -> np.ndarray:
+    """Friction torque at joint velocities ``v`` (..., nq) of the model's actuation (module doc)."""
+    v = np.asarray(v, float)
+    tau = act.viscous_Nms_rad * v + act.coulomb_Nm * np.tanh(v / act.coulomb_smoothing_rad_s)
+    if act.static_friction_excess_Nm is not None and act.stribeck_velocity_rad_s is not None:
+        tau = tau + stribeck_excess_torque(v, act.static_friction_excess_Nm, act.stribeck_velocity_rad_s,
+                                           act.coulomb_smoothing_rad_s)
+    return tau
