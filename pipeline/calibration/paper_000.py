@@ -64,6 +64,7 @@ from pipeline.calibration import candidates as cd
 from pipeline.calibration import design as ds
 from pipeline.calibration import error_model as em
 from pipeline.calibration import indices as ix
+from pipeline.calibration import paper_000_elastic as el
 from pipeline.calibration import paper_000_report as rp
 from pipeline.calibration import paper_000_scene as sc
 from pipeline.calibration import stage as st
@@ -92,6 +93,9 @@ class Settings:
     #: ``calibration.parameters`` of the identified arm parameters (tracker and reflector always);
     #: a list of DH/Hayati names leaves out the legacy (SE(3)) criterion
     parameters: str | list[str] = "geometric"
+    #: hidden robots (seeds 0..k-1) of the elasticity experiment on the tcp_ca design
+    #: (:mod:`pipeline.calibration.paper_000_elastic`; 0: off)
+    elastic_seeds: int = 3
 
 
 @dataclass
@@ -174,6 +178,11 @@ def collision_share(setup: ArmSetup, Q: np.ndarray) -> float:
 
 def optimise(setup: ArmSetup, key: str, ca: bool, cfg: Settings, rng: np.random.Generator) -> dict:
     """Remove-and-replace on the pool, then (optionally) the IPOPT refinement; the design's scores."""
+    return design(setup, key, ca, cfg, rng)[0]
+
+
+def design(setup: ArmSetup, key: str, ca: bool, cfg: Settings, rng: np.random.Generator) -> tuple[dict, np.ndarray]:
+    """:func:`optimise`'s scores and the designed configurations."""
     spec, basis = criterion(setup, key)
     pool = setup.pools[ca]
     t0 = time.perf_counter()
@@ -189,7 +198,7 @@ def optimise(setup: ArmSetup, key: str, ca: bool, cfg: Settings, rng: np.random.
         out |= {"ipopt_status": g.status, "reverted": g.reverted, "fallback": g.fallback}
     out |= {"tcp_var": tcp_variance(setup, Q), "collision_share": collision_share(setup, Q),
             "time_s": time.perf_counter() - t0}
-    return out
+    return out, Q
 
 
 def optimise_local(setup: ArmSetup, key: str, Q_start: np.ndarray, cfg: Settings) -> dict:
@@ -223,11 +232,18 @@ def run_arm(name: str, robot: RobotModel, cfg: Settings, seed: int) -> dict:
                      "n_parameters": len(setup.names), "n_arm_parameters": sum(map(_is_arm, setup.names)),
                      "random": float(np.mean(rnd)), "random_sem": float(np.std(rnd, ddof=1) / np.sqrt(len(rnd))),
                      "spread": tcp_variance(setup, spread), "spread_collision_share": collision_share(setup, spread)}
+        designs = {}
         for key in [c for c in cfg.criteria if not (c == "param_legacy" and isinstance(cfg.parameters, list))]:
             for ca in (True, False):
-                row[f"{key}_{'ca' if ca else 'free'}"] = optimise(setup, key, ca, cfg, rng)
+                row[f"{key}_{'ca' if ca else 'free'}"], designs[key, ca] = design(setup, key, ca, cfg, rng)
             if cfg.local:
                 row[f"{key}_ca_local"] = optimise_local(setup, key, starts[0], cfg)
+        if cfg.elastic_seeds and ("tcp", True) in designs:   # own generator: the rows above do not change
+            t1 = time.perf_counter()
+            row["elastic"] = el.elastic_gain(setup.robot, setup.mm, designs["tcp", True], setup.q_work,
+                                             list(range(cfg.elastic_seeds)),
+                                             np.random.default_rng([seed, sum(map(ord, name)), 1]))
+            row["elastic"]["time_s"] = time.perf_counter() - t1
         row["time_s"] = time.perf_counter() - t0
     return row
 
@@ -286,6 +302,10 @@ def study(argv: list[str]) -> int:
                     help="skip the literal SQP reading (IPOPT from the heuristic design) on the named arms")
     ap.add_argument("--quick", action="store_true", help="one arm (KR 15), pool 300, 15 iterations, no notional arms")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--elastic-seeds", type=int, default=3,
+                    help="hidden robots of the elasticity experiment (paper's outlook) per arm; 0: off")
+    ap.add_argument("--notional-elastic-seeds", type=int, default=1,
+                    help="the same for each notional arm (0: off)")
     ap.add_argument("--jobs", type=int, default=1, help="local worker processes (joblib; default 1)")
     ap.add_argument("--scheduler", metavar="ADDRESS",
                     help="Dask scheduler address (tcp://host:8786): the arms run on its workers")
@@ -297,11 +317,11 @@ def study(argv: list[str]) -> int:
     if "," in a.parameters:
         a.parameters = a.parameters.split(",")
     if a.quick:
-        a.arms, a.notional, a.pool, a.iterations, a.no_local = ["kuka_kr15"], 0, 300, 15, True
+        a.arms, a.notional, a.pool, a.iterations, a.no_local, a.elastic_seeds = ["kuka_kr15"], 0, 300, 15, True, 1
     cfg = Settings(n=a.n, pool=a.pool, iterations=a.iterations, gradient=not a.no_gradient, local=not a.no_local,
-                   parameters=a.parameters)
+                   parameters=a.parameters, elastic_seeds=a.elastic_seeds)
     ncfg = Settings(n=a.n, pool=a.notional_pool, iterations=a.iterations, gradient=cfg.gradient and a.notional_gradient,
-                    parameters=a.parameters)
+                    parameters=a.parameters, elastic_seeds=a.notional_elastic_seeds)
     kuka = kuka_tasks(cfg, a.seed, tuple(a.arms))
     t0 = time.perf_counter()
     # one dispatch for all arms (the named arms, the slowest, first): workers stay busy to the end

@@ -20,12 +20,15 @@ from collections.abc import Callable
 
 import numpy as np
 
+from pipeline.calibration import paper_000_elastic as el
 from pipeline.studies import study_dir
 
 PAPER_KUKA = {"kuka_kr15": (0.44, 0.17), "kuka_kr300": (0.40, 0.10), "kuka_kr500": (0.43, 0.12)}
 PAPER_NOTIONAL = {"both_vs_heuristic_min": 0.36, "tcp_vs_heuristic": 0.43, "tcp_vs_parameter": 0.19,
                   "ca_effect": (0.06, 0.09), "free_collision_share": (0.50, 0.70)}
 PARAMS = ("param_literal", "param_scaled", "param_legacy")
+#: Outlook: elasticities named as the next step, no number given
+PAPER_ELASTIC = "outlook, not measured"
 
 
 def gain(v: float, ref: float) -> tuple[float, float]:
@@ -102,6 +105,13 @@ def _mean_sem(values: list[float]) -> dict:
     return {"mean": float(a.mean()), "sem": sem, "min": float(a.min()), "max": float(a.max()), "n": int(len(a))}
 
 
+def elastic_headline(e: dict) -> dict:
+    """The elasticity experiment's headline: gains of the compliance-aware calibration and the errors."""
+    return {"paper": PAPER_ELASTIC, "ours_work": e["gain_work"], "ours_random": e["gain_random"],
+            "seeds": len(e["seeds"])} | {
+        f"{m}_{k}": e[m][k] for m in (*el.MODELS, el.RIGID) for k in ("work_rms_m", "work_sem_m", "random_rms_m")}
+
+
 def headline(kuka: list[dict], notional: list[dict]) -> dict:
     """Every headline number of the paper with ours (variance and std readings)."""
     out: dict = {}
@@ -119,6 +129,12 @@ def headline(kuka: list[dict], notional: list[dict]) -> dict:
                 f"tcp_vs_{p}": gain(_v(r, "tcp_ca_local"), _v(r, f"{p}_ca_local"))
                 for p in PARAMS if f"{p}_ca_local" in r} | {
                 f"{p}_vs_start": gain(_v(r, f"{p}_ca_local"), start) for p in PARAMS if f"{p}_ca_local" in r}
+    for r in kuka:
+        if "elastic" in r:
+            out[f"{r['arm']}.elastic_gain"] = elastic_headline(r["elastic"])
+    if notional and "elastic" in notional[0]:
+        out["notional.elastic_gain"] = {"paper": PAPER_ELASTIC} | {
+            f"ours_{k}": _mean_sem([r["elastic"][f"gain_{k}"] for r in notional]) for k in ("work", "random")}
     if notional:
         def over(fn: Callable[[dict], float]) -> dict:
             return _mean_sem([fn(r) for r in notional])
@@ -179,6 +195,17 @@ def report(kuka: list[dict], notional: list[dict], args: dict, run_time_s: float
                 print(f"  {k}: paper {paper} | ours {ours}")
         print("  Table 7 (min, max of the mean TCP variance over the arms) [µm²]: " + ", ".join(
             f"{k} {a:.1f}..{b:.1f}" for k, (a, b) in head["notional.table7_min_max_um2"].items()))
+    lines = el.elastic_table(kuka)
+    if lines:
+        print("\nelasticity (paper's outlook, measured): the tcp_ca design measured on the elastic hidden robot, "
+              "calibrated with the geometric model and with joint compliances; TCP error at the working configuration:")
+        for line in lines:
+            print(line)
+    if "notional.elastic_gain" in head:
+        v = head["notional.elastic_gain"]
+        print(f"  {len(notional)} notional arms: gain at q_work {100 * v['ours_work']['mean']:.0f} ± "
+              f"{100 * v['ours_work']['sem']:.0f} %, over random poses {100 * v['ours_random']['mean']:.0f} ± "
+              f"{100 * v['ours_random']['sem']:.0f} % (mean ± s.e. over the arms)")
     print(f"\nrun time {run_time_s:.0f} s")
     return {"args": args, "kuka": kuka, "notional": notional, "headline": head, "run_time_s": run_time_s,
             "paper": {"kuka": PAPER_KUKA, "notional": PAPER_NOTIONAL}}
