@@ -34,6 +34,12 @@ of feasible random candidates, then the gradient-based refinement of all joint a
 cell's obstacles (CA) or with limits and incidence only (no CA). Cell, baselines and notional arms:
 :mod:`pipeline.calibration.paper_000_scene`. Tables: :mod:`pipeline.calibration.paper_000_report`.
 
+The paper's outlook measured (:mod:`pipeline.calibration.paper_000_elastic`): each arm's
+``tcp_ca`` design is measured on the default elastic hidden robot (``--elastic-seeds`` seeds, 3;
+notional arms ``--notional-elastic-seeds``, 1) and calibrated with the geometric and with the
+compliance-aware model; the TCP error at the working configuration of both and the gain of
+modelling elasticity are printed (a few seconds per arm and seed).
+
 Experiments beside the defaults (docs/papers/paper_000.md): ``--parameters joint_offsets`` (or a
 comma-separated list of DH/Hayati names) identifies fewer arm parameters, ``--tag`` names the
 output folder ``data/studies/calib-000-TAG/``.
@@ -48,7 +54,7 @@ arms with IPOPT refinement and the literal SQP reading, 90 notional arms with re
 pools of 400), took 12 min 39 s wall-clock on the shared 2-core machine with other runs beside it
 (load average 4-6.4); the arms' own times add up to 1482 s (KUKA 418 s, notional 1064 s, about
 12 s each), about what ``--jobs 1`` needs at that load (an earlier ``--jobs 1`` measurement in two
-parts at load about 8: 740 s + 1917 s). ``--quick`` (KR 15, pool 300, 15 IPOPT iterations) about 30 s.
+parts at load about 8: 740 s + 1917 s). ``--quick`` (KR 15, pool 300, 15 IPOPT iterations, one elastic seed) 10-30 s.
 """
 
 from __future__ import annotations
@@ -300,7 +306,8 @@ def study(argv: list[str]) -> int:
     ap.add_argument("--notional-pool", type=int, default=400, help="candidates per notional arm and CA setting")
     ap.add_argument("--no-local", action="store_true",
                     help="skip the literal SQP reading (IPOPT from the heuristic design) on the named arms")
-    ap.add_argument("--quick", action="store_true", help="one arm (KR 15), pool 300, 15 iterations, no notional arms")
+    ap.add_argument("--quick", action="store_true",
+                    help="one arm (KR 15), pool 300, 15 iterations, no notional arms, one elastic seed")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--elastic-seeds", type=int, default=3,
                     help="hidden robots of the elasticity experiment (paper's outlook) per arm; 0: off")
