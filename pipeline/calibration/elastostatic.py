@@ -13,19 +13,22 @@ trustworthy.
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections.abc import Callable
 
 import numpy as np
 import pinocchio as pin
 
 from pipeline.calibration import error_model as em
+from pipeline.calibration import indices as ix
 from pipeline.calibration import measure as ms
 from pipeline.calibration import subsets
 from pipeline.calibration.config import Config
 from pipeline.calibration.estimate import Estimate, estimate, identified_compliance
 from pipeline.errors import ConfigError, PipelineError
 from pipeline.robot.model import RobotModel
-from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
+from pipeline.robot.stiffness import DEFLECTION_AT_TORQUE_LIMIT_RAD, nominal_joint_stiffness_Nm_rad
 
 
 def measurement_model(robot, cfg: Config, marker_points: bool = False) -> em.MeasurementModel:
@@ -119,12 +122,54 @@ def gravity_pass(mm: em.MeasurementModel, meas: ms.Measurements, basis: np.ndarr
             "chi2_per_dof_upstream_gravity": float(est.chi2_per_dof), "compliances": rows}
 
 
+def compliance_design_scale(robot) -> np.ndarray:
+    """``(nq,)`` torque scale ``tau_s`` (N m) of the design's compliance unit ``theta_j = c_j tau_s_j``:
+    the joint's torque limit (``robot.limits.effort_Nm``), or where none is given the torque that
+    twists the nominal stiffness by :data:`pipeline.robot.stiffness.DEFLECTION_AT_TORQUE_LIMIT_RAD`."""
+    effort = np.asarray(robot.limits.effort_Nm, float)
+    rule = nominal_joint_stiffness_Nm_rad(robot) * DEFLECTION_AT_TORQUE_LIMIT_RAD
+    return np.where(np.isfinite(effort) & (effort > 0), effort, rule)
+
+
 def design_basis(mm: em.MeasurementModel, basis: np.ndarray) -> np.ndarray:
-    """The geometric part of ``basis`` for the pose design (candidate Jacobians are geometric; the
-    compliance columns are left out of the observability index: the design does not yet cover them)."""
+    """The pose design's basis: the identifiable ``basis`` (geometric and compliance columns) with
+    each compliance as the twist (rad) it gives at the joint's torque scale,
+    ``theta_j = c_j tau_s_j`` (:func:`compliance_design_scale`).
+
+    The candidate and working Jacobians then carry the compliance columns
+    (:func:`pipeline.calibration.candidates.with_compliance_columns`,
+    :func:`pipeline.calibration.task_space.tcp_jacobian`), so every selector works on the extended
+    parameter set. Why this unit: a compliance column is ``-tau_j(q) dy/dq_j``, so in this unit it
+    is the joint-offset column ``dy/dq_j`` times ``tau_j / tau_s_j`` (a fraction of one), of the
+    same order as the geometric columns (m, rad). No index is column-normalised
+    (:mod:`pipeline.calibration.indices`): in the natural unit rad/(N m) the columns are 10^2-10^3
+    times the geometric ones, in nominal compliances (``1/k``, a twist of ~2 mrad at the torque
+    limit) ~10^-3 times, and the selectors' regularity test (eigenvalues above 1e-10 of the
+    largest) then calls the set singular. The scale matters only to the unit-dependent indices
+    (O1-O5, A, E; paper 003 §3); the default ``V`` criterion ``trace(W M^-1)`` and ``D`` rank
+    designs independently of any column scale."""
+    P = np.asarray(basis, float).copy()
+    if mm.compliance:
+        P[mm.sl_compliance] /= compliance_design_scale(mm.robot)[:, None]
+    return P[:, np.any(P != 0, axis=0)]
+
+
+def design_torques(mm: em.MeasurementModel) -> Callable[[np.ndarray], np.ndarray] | None:
+    """The static torques the candidate Jacobians' compliance columns need (None: rigid model)."""
+    return mm.static_torques if mm.compliance else None
+
+
+def geometric_design(mm: em.MeasurementModel, dbasis: np.ndarray, spec: ix.IndexSpec
+                     ) -> tuple[np.ndarray, ix.IndexSpec]:
+    """The geometric rows and columns of the design basis ``dbasis`` and the index ``spec``
+    restricted to them (the gradient design differentiates the rigid measurement model only)."""
     n_geo = mm.n_kin + 9
-    rows = np.asarray(basis)[:n_geo]
-    return rows[:, np.any(rows != 0, axis=0)]
+    cols = np.any(np.asarray(dbasis)[:n_geo] != 0, axis=0)
+    Jw = spec.working_jacobian
+    w = spec.parameter_weights
+    sub = dataclasses.replace(spec, working_jacobian=None if Jw is None else Jw[:, cols],
+                              parameter_weights=None if w is None else np.asarray(w)[cols], _W=None)
+    return np.asarray(dbasis)[:n_geo][:, cols], sub
 
 
 def measure_with_payload(mm: em.MeasurementModel, real, meas: ms.Measurements, cfg: Config,

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -40,6 +41,8 @@ from pipeline.calibration.config import MAX_CANDIDATES, Config
 from pipeline.calibration.crossval import cross_validate
 from pipeline.calibration.elastostatic import (
     design_basis,
+    design_torques,
+    geometric_design,
     gravity_model_of,
     gravity_pass,
     load_gravity_model,
@@ -102,8 +105,10 @@ def identify_parameter_set(robot, mm: em.MeasurementModel, cfg: Config, rng: np.
     return rep, em.parameter_basis(rep, mm.n, B[:, cols])
 
 
-def build_candidates(robot, cfg: Config, basis: np.ndarray, rng: np.random.Generator) -> cd.CandidateSet:
-    """Filtered candidate set with whitened Jacobians (nominal model, nominal tracker pose)."""
+def build_candidates(robot, cfg: Config, basis: np.ndarray, rng: np.random.Generator,
+                     static_torques: Callable[[np.ndarray], np.ndarray] | None = None) -> cd.CandidateSet:
+    """Filtered candidate set with whitened Jacobians (nominal model, nominal tracker pose;
+    ``static_torques`` for a basis with compliances, :func:`cd.build_candidate_set`)."""
     chain = cd.chain_from_robot(robot)
     margins = cd.FilterMargins(cfg.margin_collision_m, math.radians(cfg.margin_incidence_deg), cfg.margin_beam_m)
     grid_index = None
@@ -118,7 +123,8 @@ def build_candidates(robot, cfg: Config, basis: np.ndarray, rng: np.random.Gener
         raise InfeasibleError(None, key,
                               f"no feasible candidate configuration (joint limits, collisions, floor, tracker "
                               f"visibility with the calibration.margin_* values; {counts_text})")
-    return cd.build_candidate_set(chain, Q, basis, robot.tracker.transform_tracker_to_base, counts, grid_index)
+    return cd.build_candidate_set(chain, Q, basis, robot.tracker.transform_tracker_to_base, counts, grid_index,
+                                  static_torques=static_torques)
 
 
 def too_few_candidates(cfg: Config, robot, n_feasible: int) -> str:
@@ -135,14 +141,9 @@ def too_few_candidates(cfg: Config, robot, n_feasible: int) -> str:
 
 def working_jacobian(robot, mm: em.MeasurementModel, Qw: np.ndarray, basis: np.ndarray) -> np.ndarray:
     """TCP-position Jacobian rows (3 n_w, p) at working configurations wrt ``theta`` (base frame;
-    tracker and reflector parameters do not move the TCP)."""
-    f = mm.sym.fk_position_jacobian(robot.frame_tcp)
-    rows = []
-    for q in Qw:
-        full = np.zeros((3, basis.shape[0]))
-        full[:, mm.sl_kin] = np.asarray(f(q, np.zeros(mm.n_kin))[0])
-        rows.append(full @ basis)
-    return np.vstack(rows)
+    tracker and reflector parameters do not move the TCP; compliances by the gravity deflection,
+    :func:`pipeline.calibration.task_space.tcp_jacobian`)."""
+    return ts.tcp_jacobian(mm, Qw, basis, robot.frame_tcp)
 
 
 def index_spec(cfg: Config, robot, mm: em.MeasurementModel, basis: np.ndarray, rng: np.random.Generator,
@@ -164,7 +165,7 @@ def measured_design(robot, mm: em.MeasurementModel, basis: np.ndarray, Q: np.nda
                     T_tb, method: str) -> dict:
     """Observability index of the configurations ``Q`` actually measured (nominal model, whitened
     by the tracker noise model, tracker pose ``T_tb``); same conventions as the selection."""
-    cs = cd.build_candidate_set(cd.chain_from_robot(robot), Q, basis, T_tb)
+    cs = cd.build_candidate_set(cd.chain_from_robot(robot), Q, basis, T_tb, static_torques=design_torques(mm))
     G = cs.G.reshape(-1, basis.shape[1])
     value = ix.evaluate(spec, G.T @ G, len(Q), cs.Y if spec.needs_positions else None)
     return {"method": method, "index_name": spec.name, "n_configurations": int(len(Q)), "index_value": float(value)}
@@ -220,7 +221,7 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress, reg
         if real is None:
             raise PipelineError(None, "calibration", "no measurement file and no simulated robot")
         t = time.perf_counter()
-        cs = build_candidates(robot, cfg, dbasis, rng)
+        cs = build_candidates(robot, cfg, dbasis, rng, design_torques(mm))
         timings["candidates_s"] = time.perf_counter() - t
         if len(cs) < cfg.n_configurations:
             raise InfeasibleError(None, "calibration.grid_per_axis" if cfg.candidates == "grid"
@@ -246,7 +247,8 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress, reg
             T_pilot = register_points(pilot.Y, mm.base_positions(pilot.Q, np.zeros(mm.n))[0]) \
                 if len(pilot) >= 3 else None
             mm_geo = em.MeasurementModel(robot, mm.sym) if mm.compliance else mm
-            grad = gradient_design(robot, mm_geo, dbasis, Q_sel, spec, GradientDesignConfig(
+            gbasis, gspec = geometric_design(mm, dbasis, spec)   # the rigid model's gradient
+            grad = gradient_design(robot, mm_geo, gbasis, Q_sel, gspec, GradientDesignConfig(
                 max_iterations=cfg.gradient_max_iterations), transform_tracker_to_base=T_pilot)
             timings["gradient_s"] = time.perf_counter() - t
             Q_sel = grad.Q

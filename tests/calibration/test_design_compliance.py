@@ -1,0 +1,104 @@
+"""The pose design covers the joint compliances of the elastostatic error model.
+
+Properties: the extended candidate Jacobian (closed-form geometric columns plus
+``-tau_j dy/dq_j``) equals the CasADi Jacobian of :class:`MeasurementModel` with compliances; the
+TCP working Jacobian's compliance columns match a finite difference of the deflected TCP; a V
+design identifies the compliances (non-singular information on them) and predicts them no worse
+than random sets of the same size.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.calibration import candidates as cd
+from pipeline.calibration import design as ds
+from pipeline.calibration import stage as st
+from pipeline.calibration import task_space as ts
+from pipeline.calibration.elastostatic import design_basis, design_torques, geometric_design, measurement_model
+from pipeline.robot.model import RobotModel
+
+
+@pytest.fixture(scope="module")
+def setup():
+    robot = RobotModel.load("rx130l")
+    cfg = st.Config(candidates="random", n_random_candidates=600, identifiability_samples=80,
+                    n_region_configurations=80)
+    mm = measurement_model(robot, cfg)
+    rng = np.random.default_rng(5)
+    _, basis = st.identify_parameter_set(robot, mm, cfg, rng)
+    dbasis = design_basis(mm, basis)
+    cs = st.build_candidates(robot, cfg, dbasis, rng, design_torques(mm))
+    spec, Qw = st.index_spec(cfg, robot, mm, dbasis, rng)
+    return robot, cfg, mm, dbasis, cs, spec, Qw
+
+
+def compliance_columns(mm, dbasis: np.ndarray) -> np.ndarray:
+    return np.flatnonzero(np.any(dbasis[mm.sl_compliance] != 0, axis=0))
+
+
+def test_design_basis_holds_the_identifiable_compliances(setup):
+    _, _, mm, dbasis, cs, _, _ = setup
+    assert mm.compliance and len(compliance_columns(mm, dbasis)) >= 3
+    assert cs.G.shape[2] == dbasis.shape[1]
+
+
+def test_extended_candidate_jacobian_equals_the_casadi_one(setup):
+    robot, _, mm, dbasis, cs, _, _ = setup
+    Q = cs.Q[:6]
+    T0 = robot.tracker.transform_tracker_to_base
+    Y_ref, J_ref = mm.jacobian(Q, np.zeros(mm.n), T0)
+    Y, J = cd.nominal_jacobian(cd.chain_from_robot(robot), Q, T0)
+    J = cd.with_compliance_columns(J, mm.static_torques(Q))
+    assert J.shape == J_ref.shape
+    scale = np.abs(J_ref).max(axis=(0, 1)) + 1e-12
+    assert np.max(np.abs(J - J_ref) / scale) < 1e-8
+    assert np.allclose(Y, Y_ref, atol=1e-9)
+    sigma = cd.noise_sigma(cd.chain_from_robot(robot), Y_ref)
+    assert np.allclose(cs.G[:6], (J_ref @ dbasis) / sigma[:, None, None], rtol=1e-8,
+                       atol=1e-8 * np.abs(cs.G[:6]).max())
+
+
+def test_working_jacobian_compliance_columns_match_a_finite_difference(setup):
+    robot, _, mm, dbasis, _, _, Qw = setup
+    Q = Qw[:4]
+    Jw = ts.tcp_jacobian(mm, Q, dbasis).reshape(len(Q), 3, -1)
+    tau = mm.static_torques(Q)
+    unit = np.where(dbasis[mm.sl_compliance] != 0, dbasis[mm.sl_compliance], np.nan)   # c per theta
+    for col in compliance_columns(mm, dbasis):
+        j = int(np.flatnonzero(dbasis[mm.sl_compliance][:, col])[0])
+        h = 1e-5 * unit[j, col]           # central difference, theta = +-1e-5
+        Qp, Qm = Q.copy(), Q.copy()
+        Qp[:, j] -= h * tau[:, j]
+        Qm[:, j] += h * tau[:, j]
+        fd = (robot.positions(Qp, robot.frame_tcp) - robot.positions(Qm, robot.frame_tcp)) / 2e-5
+        assert np.allclose(Jw[:, :, col], fd, rtol=1e-4, atol=1e-9)
+
+
+def test_v_design_identifies_the_compliances_better_than_random_sets(setup):
+    _, cfg, mm, dbasis, cs, spec, _ = setup
+    n = 30
+    rng = np.random.default_rng(11)
+    sel = ds.select("remove_and_replace", cs.G, spec, n, rng, n_initial=20).selected
+
+    def compliance_std(idx: np.ndarray) -> np.ndarray:
+        G = cs.G[idx].reshape(-1, dbasis.shape[1])
+        M = G.T @ G
+        ev = np.linalg.eigvalsh(M)
+        if ev[0] <= 1e-12 * ev[-1]:
+            return np.full(len(compliance_columns(mm, dbasis)), np.inf)
+        return np.sqrt(np.diag(np.linalg.inv(M)))[compliance_columns(mm, dbasis)]
+
+    designed = compliance_std(sel)
+    assert np.all(np.isfinite(designed))     # the selected set identifies every compliance
+    random = np.array([compliance_std(rng.choice(len(cs), n, replace=False)) for _ in range(7)])
+    assert np.sqrt(np.mean(designed**2)) <= np.median(np.sqrt(np.mean(random**2, axis=1)))
+
+
+def test_geometric_design_restricts_basis_and_index(setup):
+    _, _, mm, dbasis, _, spec, _ = setup
+    gbasis, gspec = geometric_design(mm, dbasis, spec)
+    n_c = len(compliance_columns(mm, dbasis))
+    assert gbasis.shape == (mm.n_kin + 9, dbasis.shape[1] - n_c)
+    assert gspec.weight_matrix(gbasis.shape[1]).shape == (gbasis.shape[1],) * 2
