@@ -20,6 +20,7 @@ from collections.abc import Callable
 import numpy as np
 import pinocchio as pin
 
+from pipeline.calibration import candidates as cd
 from pipeline.calibration import error_model as em
 from pipeline.calibration import indices as ix
 from pipeline.calibration import measure as ms
@@ -172,18 +173,63 @@ def geometric_design(mm: em.MeasurementModel, dbasis: np.ndarray, spec: ix.Index
     return np.asarray(dbasis)[:n_geo][:, cols], sub
 
 
+def design_blocks(mm: em.MeasurementModel, Q: np.ndarray, dbasis: np.ndarray, transform_tracker_to_base,
+                  mounted: np.ndarray | None = None) -> np.ndarray:
+    """Whitened design Jacobian blocks ``(N, 3, p)`` of the configurations ``Q`` (nominal model),
+    the compliance columns with the payload's torque where ``mounted``."""
+    chain = cd.chain_from_robot(mm.robot)
+    Q = np.atleast_2d(np.asarray(Q, float))
+    G = cd.build_candidate_set(chain, Q, dbasis, transform_tracker_to_base, static_torques=design_torques(mm)).G
+    if mounted is not None and np.any(mounted) and mm.compliance:
+        m = np.asarray(mounted, bool)
+        G[m] = cd.build_candidate_set(chain, Q[m], dbasis, transform_tracker_to_base,
+                                      static_torques=lambda Qc: mm.static_torques(Qc, np.ones(len(Qc), bool))).G
+    return G
+
+
+def payload_poses(mm: em.MeasurementModel, Q: np.ndarray, k: int, dbasis: np.ndarray | None = None,
+                  spec: ix.IndexSpec | None = None) -> np.ndarray:
+    """Sorted indices of the ``k`` rows of ``Q`` to measure again with the payload mounted.
+
+    With the design basis and index (``dbasis``, ``spec``; not the position-only ``Od``/``Oc``)
+    the design chooses: greedy forward selection, each step adding the loaded reading that most
+    improves the index of the information matrix of all readings so far (Atkinson, Donev & Tobias,
+    *Optimum Experimental Designs*, 2007, §12.6 sequential construction; the loaded Jacobian's
+    compliance columns carry the payload's torque). Ties (e.g. a singular start) and the other
+    indices fall back to the payload's extra joint deflection ``|Delta tau / k_nom|``, largest first."""
+    loaded = mm.static_torques(Q, np.ones(len(Q), bool))
+    extra = (np.abs(loaded - mm.static_torques(Q)) / nominal_joint_stiffness_Nm_rad(mm.robot)).sum(axis=1)
+    order = np.argsort(-extra, kind="stable")
+    if dbasis is None or spec is None or spec.needs_positions or not mm.compliance:
+        return np.sort(order[:k])
+    T0 = mm.robot.tracker.transform_tracker_to_base
+    free = design_blocks(mm, Q, dbasis, T0)[order]
+    load = design_blocks(mm, Q, dbasis, T0, np.ones(len(Q), bool))[order]
+    M = np.einsum("kmi,kmj->ij", free, free)
+    info = np.einsum("kmi,kmj->kij", load, load)
+    chosen: list[int] = []
+    for _ in range(k):
+        scores = np.array([-np.inf if c in chosen else ix.score(spec, M + info[c], len(Q) + len(chosen) + 1)
+                           for c in range(len(Q))])
+        best = int(np.argmax(np.nan_to_num(scores, nan=-np.inf, posinf=np.inf)))
+        if not np.isfinite(scores[best]):
+            best = next(c for c in range(len(Q)) if c not in chosen)
+        chosen.append(best)
+        M = M + info[best]
+    return np.sort(order[chosen])
+
+
 def measure_with_payload(mm: em.MeasurementModel, real, meas: ms.Measurements, cfg: Config,
-                         rng: np.random.Generator) -> ms.Measurements:
-    """Measure ``payload_fraction`` of the measured configurations again with the payload mounted:
-    those whose payload torque deflects the joints most (``|Delta tau / k_nom|``); the same pose
-    under two loads separates the compliances from the geometry."""
+                         rng: np.random.Generator, dbasis: np.ndarray | None = None,
+                         spec: ix.IndexSpec | None = None) -> ms.Measurements:
+    """Measure ``payload_fraction`` of the measured configurations again with the payload mounted,
+    those the design chooses (:func:`payload_poses`); the same pose under two loads separates the
+    compliances from the geometry."""
     payload = cfg.payload()
     if payload is None or cfg.payload_fraction == 0 or len(meas) == 0:
         return meas
     k = int(math.ceil(cfg.payload_fraction * len(meas)))
-    loaded = mm.static_torques(meas.Q, np.ones(len(meas), bool))
-    extra = np.abs(loaded - mm.static_torques(meas.Q)) / nominal_joint_stiffness_Nm_rad(mm.robot)
-    idx = np.sort(np.argsort(-extra.sum(axis=1))[:k])
+    idx = payload_poses(mm, meas.Q, k, dbasis, spec)
     with_load = ms.measure_simulated(real, meas.Q[idx], rng, payload)
     return ms.concatenate([meas, with_load], meas.source)
 

@@ -41,6 +41,7 @@ from pipeline.calibration.config import MAX_CANDIDATES, Config
 from pipeline.calibration.crossval import cross_validate
 from pipeline.calibration.elastostatic import (
     design_basis,
+    design_blocks,
     design_torques,
     geometric_design,
     gravity_model_of,
@@ -162,12 +163,13 @@ def index_spec(cfg: Config, robot, mm: em.MeasurementModel, basis: np.ndarray, r
 
 
 def measured_design(robot, mm: em.MeasurementModel, basis: np.ndarray, Q: np.ndarray, spec: ix.IndexSpec,
-                    T_tb, method: str) -> dict:
+                    T_tb, method: str, mounted: np.ndarray | None = None) -> dict:
     """Observability index of the configurations ``Q`` actually measured (nominal model, whitened
-    by the tracker noise model, tracker pose ``T_tb``); same conventions as the selection."""
-    cs = cd.build_candidate_set(cd.chain_from_robot(robot), Q, basis, T_tb, static_torques=design_torques(mm))
-    G = cs.G.reshape(-1, basis.shape[1])
-    value = ix.evaluate(spec, G.T @ G, len(Q), cs.Y if spec.needs_positions else None)
+    by the tracker noise model, tracker pose ``T_tb``, the payload's torque where ``mounted``);
+    same conventions as the selection."""
+    G = design_blocks(mm, Q, basis, T_tb, mounted).reshape(-1, basis.shape[1])
+    Y = cd.nominal_jacobian(cd.chain_from_robot(robot), Q, T_tb)[0] if spec.needs_positions else None
+    value = ix.evaluate(spec, G.T @ G, len(Q), Y)
     return {"method": method, "index_name": spec.name, "n_configurations": int(len(Q)), "index_value": float(value)}
 
 
@@ -256,7 +258,7 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress, reg
         meas = ms.measure_simulated(real, Q_sel, rng)
         if pilot is not None:
             meas = ms.concatenate([pilot, meas], meas.source)
-        meas = measure_with_payload(mm, real, meas, cfg, rng)
+        meas = measure_with_payload(mm, real, meas, cfg, rng, dbasis, spec)
         timings["measure_s"] = time.perf_counter() - t
         if 3 * len(meas) < p:
             raise InfeasibleError(None, "calibration.n_configurations",
@@ -295,7 +297,7 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress, reg
     if spec is None:
         spec, Qw = index_spec(cfg, robot, mm, dbasis, rng, region)
     design = measured_design(robot, mm, dbasis, meas.Q, spec, est.transform_tracker_to_base,
-                             "user file" if user is not None else "measured subset")
+                             "user file" if user is not None else "measured subset", meas.payload_mounted)
     fit = va.fit_residuals(mm, est, rec, rejection.rejected)
     prediction = predicted_on_random_poses(robot, mm, est, cfg, rng, gravity) if validation is None else None
     new_robot = calibrated_robot(robot, mm, est.x, basis, est.covariance)

@@ -14,9 +14,17 @@ import pytest
 
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import design as ds
+from pipeline.calibration import indices as ix
 from pipeline.calibration import stage as st
 from pipeline.calibration import task_space as ts
-from pipeline.calibration.elastostatic import design_basis, design_torques, geometric_design, measurement_model
+from pipeline.calibration.elastostatic import (
+    design_basis,
+    design_blocks,
+    design_torques,
+    geometric_design,
+    measurement_model,
+    payload_poses,
+)
 from pipeline.robot.model import RobotModel
 
 
@@ -24,7 +32,8 @@ from pipeline.robot.model import RobotModel
 def setup():
     robot = RobotModel.load("rx130l")
     cfg = st.Config(candidates="random", n_random_candidates=600, identifiability_samples=80,
-                    n_region_configurations=80)
+                    n_region_configurations=80, payload_mass_kg=10.0, payload_com_m=[0.0, 0.0, 0.1],
+                    payload_fraction=0.5)
     mm = measurement_model(robot, cfg)
     rng = np.random.default_rng(5)
     _, basis = st.identify_parameter_set(robot, mm, cfg, rng)
@@ -102,3 +111,23 @@ def test_geometric_design_restricts_basis_and_index(setup):
     n_c = len(compliance_columns(mm, dbasis))
     assert gbasis.shape == (mm.n_kin + 9, dbasis.shape[1] - n_c)
     assert gspec.weight_matrix(gbasis.shape[1]).shape == (gbasis.shape[1],) * 2
+
+
+def test_the_design_chooses_the_payload_poses(setup):
+    robot, _, mm, dbasis, cs, spec, _ = setup
+    rng = np.random.default_rng(2)
+    Q = cs.Q[ds.select("remove_and_replace", cs.G, spec, 24, rng, n_initial=20).selected]
+    T0 = robot.tracker.transform_tracker_to_base
+
+    def value(idx: np.ndarray) -> float:
+        QQ = np.concatenate([Q, Q[idx]])
+        mounted = np.r_[np.zeros(len(Q), bool), np.ones(len(idx), bool)]
+        G = design_blocks(mm, QQ, dbasis, T0, mounted).reshape(-1, dbasis.shape[1])
+        return ix.evaluate(spec, G.T @ G, len(QQ))
+
+    first = payload_poses(mm, Q, 1, dbasis, spec)
+    assert value(first) == pytest.approx(min(value(np.array([i])) for i in range(len(Q))), rel=1e-9)
+    chosen = payload_poses(mm, Q, 8, dbasis, spec)
+    assert len(np.unique(chosen)) == 8
+    assert value(chosen) < value(np.zeros(0, int))
+    assert value(chosen) <= np.median([value(rng.choice(len(Q), 8, replace=False)) for _ in range(7)])
