@@ -1,5 +1,6 @@
 """Stage pieces of the elastostatic calibration: the error model a parameter subset needs, the
-known payload, and the second pass with an upstream (identified) gravity model.
+pose design over geometry and compliances (design basis, payload poses), the known payload, and
+the second pass with an upstream (identified) gravity model.
 
 Data flow stays one-way: a calibration run uses the dynamic model it is given (``ctx.robot``:
 nominal) for the gravity torques of ``q_link = q - c g(q)``; the identification stage runs after
