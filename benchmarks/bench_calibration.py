@@ -30,11 +30,10 @@ import numpy as np
 
 from pipeline.blas import single_thread_blas
 from pipeline.calibration import design as ds
-from pipeline.calibration import error_model as em
 from pipeline.calibration import indices as ix
 from pipeline.calibration import stage as st
 from pipeline.calibration.design_state import DesignState, is_regular
-from pipeline.calibration.elastostatic import design_basis, design_torques, geometric_design, measurement_model
+from pipeline.calibration.elastostatic import design_basis, design_torques, measurement_model
 from pipeline.calibration.gradient_design import GradientDesignConfig, gradient_design
 from pipeline.robot.model import RobotModel
 
@@ -160,7 +159,6 @@ def main(robot_name: str = "rx130l", grid: int = 13, n_gradient: int = 60, basel
         mm = measurement_model(robot, cfg)
         _, full_basis = st.identify_parameter_set(robot, mm, cfg, rng)
         basis = design_basis(mm, full_basis)
-        mm_geo = em.MeasurementModel(robot, mm.sym) if mm.compliance else mm
         t0 = time.perf_counter()
         cs = st.build_candidates(robot, cfg, basis, rng, design_torques(mm))
         t_cand = time.perf_counter() - t0
@@ -186,8 +184,7 @@ def main(robot_name: str = "rx130l", grid: int = 13, n_gradient: int = 60, basel
             spec, _ = st.index_spec(cfg_r, robot, mm, basis, grng)
             start = ds.remove_and_replace(cs_r.G, spec, n_gradient, grng, n_initial=n_gradient)
             t0 = time.perf_counter()
-            gbasis, gspec = geometric_design(mm, basis, spec)   # as the stage: the rigid model's gradient
-            res = gradient_design(robot, mm_geo, gbasis, cs_r.Q[start.selected], gspec, GradientDesignConfig())
+            res = gradient_design(robot, mm, basis, cs_r.Q[start.selected], spec, GradientDesignConfig())
             t_grad = time.perf_counter() - t0
             G = cs_r.G[start.selected]
             t0 = time.perf_counter()

@@ -14,7 +14,6 @@ trustworthy.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Callable
 
@@ -159,19 +158,6 @@ def design_basis(mm: em.MeasurementModel, basis: np.ndarray) -> np.ndarray:
 def design_torques(mm: em.MeasurementModel) -> Callable[[np.ndarray], np.ndarray] | None:
     """The static torques the candidate Jacobians' compliance columns need (None: rigid model)."""
     return mm.static_torques if mm.compliance else None
-
-
-def geometric_design(mm: em.MeasurementModel, dbasis: np.ndarray, spec: ix.IndexSpec
-                     ) -> tuple[np.ndarray, ix.IndexSpec]:
-    """The geometric rows and columns of the design basis ``dbasis`` and the index ``spec``
-    restricted to them (the gradient design differentiates the rigid measurement model only)."""
-    n_geo = mm.n_kin + 9
-    cols = np.any(np.asarray(dbasis)[:n_geo] != 0, axis=0)
-    Jw = spec.working_jacobian
-    w = spec.parameter_weights
-    sub = dataclasses.replace(spec, working_jacobian=None if Jw is None else Jw[:, cols],
-                              parameter_weights=None if w is None else np.asarray(w)[cols], _W=None)
-    return np.asarray(dbasis)[:n_geo][:, cols], sub
 
 
 def design_blocks(mm: em.MeasurementModel, Q: np.ndarray, dbasis: np.ndarray, transform_tracker_to_base,

@@ -43,7 +43,6 @@ from pipeline.calibration.elastostatic import (
     design_basis,
     design_blocks,
     design_torques,
-    geometric_design,
     gravity_model_of,
     gravity_pass,
     load_gravity_model,
@@ -248,9 +247,7 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress, reg
             t = time.perf_counter()
             T_pilot = register_points(pilot.Y, mm.base_positions(pilot.Q, np.zeros(mm.n))[0]) \
                 if len(pilot) >= 3 else None
-            mm_geo = em.MeasurementModel(robot, mm.sym) if mm.compliance else mm
-            gbasis, gspec = geometric_design(mm, dbasis, spec)   # the rigid model's gradient
-            grad = gradient_design(robot, mm_geo, gbasis, Q_sel, gspec, GradientDesignConfig(
+            grad = gradient_design(robot, mm, dbasis, Q_sel, spec, GradientDesignConfig(
                 max_iterations=cfg.gradient_max_iterations), transform_tracker_to_base=T_pilot)
             timings["gradient_s"] = time.perf_counter() - t
             Q_sel = grad.Q

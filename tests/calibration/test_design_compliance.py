@@ -9,6 +9,7 @@ than random sets of the same size.
 
 from __future__ import annotations
 
+import casadi as ca
 import numpy as np
 import pytest
 
@@ -21,11 +22,12 @@ from pipeline.calibration.elastostatic import (
     design_basis,
     design_blocks,
     design_torques,
-    geometric_design,
     measurement_model,
     payload_poses,
 )
+from pipeline.calibration.error_model import se3_to_vector
 from pipeline.robot.model import RobotModel
+from pipeline.robot.parameters import pinocchio_dynamic_parameters
 
 
 @pytest.fixture(scope="module")
@@ -105,12 +107,17 @@ def test_v_design_identifies_the_compliances_better_than_random_sets(setup):
     assert np.sqrt(np.mean(designed**2)) <= np.median(np.sqrt(np.mean(random**2, axis=1)))
 
 
-def test_geometric_design_restricts_basis_and_index(setup):
-    _, _, mm, dbasis, _, spec, _ = setup
-    gbasis, gspec = geometric_design(mm, dbasis, spec)
-    n_c = len(compliance_columns(mm, dbasis))
-    assert gbasis.shape == (mm.n_kin + 9, dbasis.shape[1] - n_c)
-    assert gspec.weight_matrix(gbasis.shape[1]).shape == (gbasis.shape[1],) * 2
+def test_gradient_design_information_has_the_compliance_columns(setup):
+    robot, _, mm, dbasis, cs, _, _ = setup
+    q = ca.SX.sym("q", mm.nq)
+    tau = mm.sym.gravity(q, pinocchio_dynamic_parameters(mm.gravity_model))
+    T0 = robot.tracker.transform_tracker_to_base
+    _, J = mm.hj(q, ca.DM.zeros(mm.n), ca.DM(se3_to_vector(T0)), tau)
+    f = ca.Function("J", [q], [J])
+    for k in range(3):
+        sigma = cd.noise_sigma(cd.chain_from_robot(robot), cs.Y[k : k + 1])[0]
+        G = np.asarray(f(cs.Q[k])) @ dbasis / sigma
+        assert np.allclose(G, cs.G[k], rtol=1e-7, atol=1e-7 * np.abs(cs.G[k]).max())
 
 
 def test_the_design_chooses_the_payload_poses(setup):
