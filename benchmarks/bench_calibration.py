@@ -30,11 +30,10 @@ import numpy as np
 
 from pipeline.blas import single_thread_blas
 from pipeline.calibration import design as ds
-from pipeline.calibration import error_model as em
 from pipeline.calibration import indices as ix
 from pipeline.calibration import stage as st
 from pipeline.calibration.design_state import DesignState, is_regular
-from pipeline.calibration.elastostatic import design_basis, measurement_model
+from pipeline.calibration.elastostatic import design_basis, design_torques, measurement_model
 from pipeline.calibration.gradient_design import GradientDesignConfig, gradient_design
 from pipeline.robot.model import RobotModel
 
@@ -160,9 +159,8 @@ def main(robot_name: str = "rx130l", grid: int = 13, n_gradient: int = 60, basel
         mm = measurement_model(robot, cfg)
         _, full_basis = st.identify_parameter_set(robot, mm, cfg, rng)
         basis = design_basis(mm, full_basis)
-        mm_geo = em.MeasurementModel(robot, mm.sym) if mm.compliance else mm
         t0 = time.perf_counter()
-        cs = st.build_candidates(robot, cfg, basis, rng)
+        cs = st.build_candidates(robot, cfg, basis, rng, design_torques(mm))
         t_cand = time.perf_counter() - t0
         print(f"{robot_name}: grid {grid}^6 = {cs.counts['total']} configurations -> {len(cs)} feasible "
               f"candidates; filter + Jacobians {t_cand:.1f} s "
@@ -182,11 +180,11 @@ def main(robot_name: str = "rx130l", grid: int = 13, n_gradient: int = 60, basel
         for seed in (0, 1, 2):
             grng = np.random.default_rng(seed)
             cfg_r = st.Config(candidates="random", n_random_candidates=2000, n_region_configurations=100)
-            cs_r = st.build_candidates(robot, cfg_r, basis, grng)
+            cs_r = st.build_candidates(robot, cfg_r, basis, grng, design_torques(mm))
             spec, _ = st.index_spec(cfg_r, robot, mm, basis, grng)
             start = ds.remove_and_replace(cs_r.G, spec, n_gradient, grng, n_initial=n_gradient)
             t0 = time.perf_counter()
-            res = gradient_design(robot, mm_geo, basis, cs_r.Q[start.selected], spec, GradientDesignConfig())
+            res = gradient_design(robot, mm, basis, cs_r.Q[start.selected], spec, GradientDesignConfig())
             t_grad = time.perf_counter() - t0
             G = cs_r.G[start.selected]
             t0 = time.perf_counter()

@@ -401,6 +401,17 @@ def nominal_jacobian(chain: Chain, Q: np.ndarray, transform_tracker_to_base: pin
     return Y, J
 
 
+def with_compliance_columns(J: np.ndarray, tau_Nm: np.ndarray) -> np.ndarray:
+    """``J`` (N, m, 7 nq + 21) of :func:`nominal_jacobian` with the joint compliance columns appended
+    (the elastostatic layout of :class:`~pipeline.calibration.error_model.MeasurementModel`).
+
+    ``q_link = q - c tau(q)`` (paper 000 Outlook; error_model.py), so at ``c = 0``
+    ``dy/dc_j = -tau_j(q) dy/dq_j`` and ``dy/dq_j`` is the joint zero-offset column ``j{j}.dq``
+    (indices ``6 nq .. 7 nq - 1``). ``tau_Nm`` (N, nq): the static joint torques of each row."""
+    nq = tau_Nm.shape[1]
+    return np.concatenate([J, -tau_Nm[:, None, :] * J[:, :, 6 * nq : 7 * nq]], axis=2)
+
+
 def noise_sigma(chain: Chain, Y: np.ndarray) -> np.ndarray:
     """Isotropic tracker sigma (m) at the range of each tracker-frame point (DESIGN.md)."""
     return chain.noise_const_m + chain.noise_per_m * np.linalg.norm(Y, axis=1)
@@ -423,14 +434,24 @@ class CandidateSet:
 
 
 def build_candidate_set(chain: Chain, Q: np.ndarray, basis: np.ndarray, T0: pin.SE3, counts: dict | None = None,
-                        grid_index: np.ndarray | None = None, dtype=np.float64) -> CandidateSet:
-    """Whitened Jacobian blocks ``J P / sigma`` (identifiable basis P) for feasible configurations."""
+                        grid_index: np.ndarray | None = None, dtype=np.float64,
+                        static_torques: Callable[[np.ndarray], np.ndarray] | None = None) -> CandidateSet:
+    """Whitened Jacobian blocks ``J P / sigma`` (identifiable basis P) for feasible configurations.
+
+    A basis with rows beyond the geometric ``7 nq + 21`` holds joint compliances (elastostatic
+    model): ``static_torques(Q) -> (N, nq)`` (N m) then gives the gravity torques of the compliance
+    columns (:func:`with_compliance_columns`)."""
     P = np.asarray(basis, float)
     N = len(Q)
+    n_geo = 7 * chain.nq + 21
+    if P.shape[0] > n_geo and static_torques is None:
+        raise ValueError("a basis with compliance rows needs the static torques of the candidates")
     G = np.empty((N, 3, P.shape[1]), dtype)
     Y = np.empty((N, 3))
     for s in range(0, N, 50_000):
         y, J = nominal_jacobian(chain, Q[s : s + 50_000], T0)
+        if P.shape[0] > n_geo and static_torques is not None:
+            J = with_compliance_columns(J, np.asarray(static_torques(Q[s : s + 50_000]), float))
         Y[s : s + len(y)] = y
         sig = noise_sigma(chain, y)
         G[s : s + len(y)] = (J @ P) / sig[:, None, None]

@@ -75,7 +75,8 @@ def design_table(robot, real, mm: MeasurementModel, basis: np.ndarray, spec_v: i
     """Rows ``{design, n_configurations, predicted_tcp_rms_m, actual_model_rms_m, predicted_model_rms_m}``
     for the chosen design and the baselines (``real`` None or ``cs`` None: predicted figures of the
     chosen design only). ``basis`` is the fit's (it may hold joint compliances); the candidate
-    Jacobians and the V criterion use its geometric part ``geometric_basis`` (default ``basis``)."""
+    Jacobians and the V criterion use the design's basis ``geometric_basis`` (default ``basis``;
+    :func:`pipeline.calibration.elastostatic.design_basis`: compliances included, rescaled)."""
     geometric_basis = basis if geometric_basis is None else geometric_basis
     n = len(chosen_Q)
     chain = cd.chain_from_robot(robot, chosen_est.transform_tracker_to_base)
@@ -86,7 +87,8 @@ def design_table(robot, real, mm: MeasurementModel, basis: np.ndarray, spec_v: i
     held = heldout_in_region(robot, real, region, chosen_est, n_heldout, rng) if real is not None else None
     rows = []
     for label, Q in designs.items():
-        G = cd.build_candidate_set(chain, Q, geometric_basis, chosen_est.transform_tracker_to_base).G
+        G = cd.build_candidate_set(chain, Q, geometric_basis, chosen_est.transform_tracker_to_base,
+                                   static_torques=mm.static_torques if mm.compliance else None).G
         row = {"design": label, "n_configurations": int(len(Q)),
                "predicted_tcp_rms_m": ts.predicted_tcp_rms_m(spec_v, information(G)),
                "actual_model_rms_m": None, "predicted_model_rms_m": None, "heldout_rms_m": None}
@@ -143,7 +145,7 @@ def for_run(cfg, robot, real, mm: MeasurementModel, basis: np.ndarray, spec: ix.
             rng: np.random.Generator, geometric_basis: np.ndarray | None = None) -> dict | None:
     """The stage's call: the table of a calibration ``Config`` (None when ``design_table`` is off);
     ``spec`` the run's index (its working set is reused when it is ``V``); ``geometric_basis``: the
-    design's basis when ``basis`` holds compliances (see :func:`design_table`)."""
+    design's basis (see :func:`design_table`)."""
     geometric_basis = basis if geometric_basis is None else geometric_basis
     if not cfg.design_table:
         return None

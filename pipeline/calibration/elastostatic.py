@@ -1,5 +1,6 @@
 """Stage pieces of the elastostatic calibration: the error model a parameter subset needs, the
-known payload, and the second pass with an upstream (identified) gravity model.
+pose design over geometry and compliances (design basis, payload poses), the known payload, and
+the second pass with an upstream (identified) gravity model.
 
 Data flow stays one-way: a calibration run uses the dynamic model it is given (``ctx.robot``:
 nominal) for the gravity torques of ``q_link = q - c g(q)``; the identification stage runs after
@@ -14,18 +15,21 @@ trustworthy.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 import pinocchio as pin
 
+from pipeline.calibration import candidates as cd
 from pipeline.calibration import error_model as em
+from pipeline.calibration import indices as ix
 from pipeline.calibration import measure as ms
 from pipeline.calibration import subsets
 from pipeline.calibration.config import Config
 from pipeline.calibration.estimate import Estimate, estimate, identified_compliance
 from pipeline.errors import ConfigError, PipelineError
 from pipeline.robot.model import RobotModel
-from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
+from pipeline.robot.stiffness import DEFLECTION_AT_TORQUE_LIMIT_RAD, nominal_joint_stiffness_Nm_rad
 
 
 def measurement_model(robot, cfg: Config, marker_points: bool = False) -> em.MeasurementModel:
@@ -119,26 +123,100 @@ def gravity_pass(mm: em.MeasurementModel, meas: ms.Measurements, basis: np.ndarr
             "chi2_per_dof_upstream_gravity": float(est.chi2_per_dof), "compliances": rows}
 
 
+def compliance_design_scale(robot) -> np.ndarray:
+    """``(nq,)`` torque scale ``tau_s`` (N m) of the design's compliance unit ``theta_j = c_j tau_s_j``:
+    the joint's torque limit (``robot.limits.effort_Nm``), or where none is given the torque that
+    twists the nominal stiffness by :data:`pipeline.robot.stiffness.DEFLECTION_AT_TORQUE_LIMIT_RAD`."""
+    effort = np.asarray(robot.limits.effort_Nm, float)
+    rule = nominal_joint_stiffness_Nm_rad(robot) * DEFLECTION_AT_TORQUE_LIMIT_RAD
+    return np.where(np.isfinite(effort) & (effort > 0), effort, rule)
+
+
 def design_basis(mm: em.MeasurementModel, basis: np.ndarray) -> np.ndarray:
-    """The geometric part of ``basis`` for the pose design (candidate Jacobians are geometric; the
-    compliance columns are left out of the observability index: the design does not yet cover them)."""
-    n_geo = mm.n_kin + 9
-    rows = np.asarray(basis)[:n_geo]
-    return rows[:, np.any(rows != 0, axis=0)]
+    """The pose design's basis: the identifiable ``basis`` (geometric and compliance columns) with
+    each compliance as the twist (rad) it gives at the joint's torque scale,
+    ``theta_j = c_j tau_s_j`` (:func:`compliance_design_scale`).
+
+    The candidate and working Jacobians then carry the compliance columns
+    (:func:`pipeline.calibration.candidates.with_compliance_columns`,
+    :func:`pipeline.calibration.task_space.tcp_jacobian`), so every selector works on the extended
+    parameter set. Why this unit: a compliance column is ``-tau_j(q) dy/dq_j``, so in this unit it
+    is the joint-offset column ``dy/dq_j`` times ``tau_j / tau_s_j`` (a fraction of one), of the
+    same order as the geometric columns (m, rad). No index is column-normalised
+    (:mod:`pipeline.calibration.indices`): in the natural unit rad/(N m) the columns are 10^2-10^3
+    times the geometric ones, in nominal compliances (``1/k``, a twist of ~2 mrad at the torque
+    limit) ~10^-3 times, and the selectors' regularity test (eigenvalues above 1e-10 of the
+    largest) then calls the set singular. The scale matters only to the unit-dependent indices
+    (O1-O5, A, E; paper 003 §3); the default ``V`` criterion ``trace(W M^-1)`` and ``D`` rank
+    designs independently of any column scale."""
+    P = np.asarray(basis, float).copy()
+    if mm.compliance:
+        P[mm.sl_compliance] /= compliance_design_scale(mm.robot)[:, None]
+    return P[:, np.any(P != 0, axis=0)]
+
+
+def design_torques(mm: em.MeasurementModel) -> Callable[[np.ndarray], np.ndarray] | None:
+    """The static torques the candidate Jacobians' compliance columns need (None: rigid model)."""
+    return mm.static_torques if mm.compliance else None
+
+
+def design_blocks(mm: em.MeasurementModel, Q: np.ndarray, dbasis: np.ndarray, transform_tracker_to_base,
+                  mounted: np.ndarray | None = None) -> np.ndarray:
+    """Whitened design Jacobian blocks ``(N, 3, p)`` of the configurations ``Q`` (nominal model),
+    the compliance columns with the payload's torque where ``mounted``."""
+    chain = cd.chain_from_robot(mm.robot)
+    Q = np.atleast_2d(np.asarray(Q, float))
+    G = cd.build_candidate_set(chain, Q, dbasis, transform_tracker_to_base, static_torques=design_torques(mm)).G
+    if mounted is not None and np.any(mounted) and mm.compliance:
+        m = np.asarray(mounted, bool)
+        G[m] = cd.build_candidate_set(chain, Q[m], dbasis, transform_tracker_to_base,
+                                      static_torques=lambda Qc: mm.static_torques(Qc, np.ones(len(Qc), bool))).G
+    return G
+
+
+def payload_poses(mm: em.MeasurementModel, Q: np.ndarray, k: int, dbasis: np.ndarray | None = None,
+                  spec: ix.IndexSpec | None = None) -> np.ndarray:
+    """Sorted indices of the ``k`` rows of ``Q`` to measure again with the payload mounted.
+
+    With the design basis and index (``dbasis``, ``spec``; not the position-only ``Od``/``Oc``)
+    the design chooses: greedy forward selection, each step adding the loaded reading that most
+    improves the index of the information matrix of all readings so far (Atkinson, Donev & Tobias,
+    *Optimum Experimental Designs*, 2007, §12.6 sequential construction; the loaded Jacobian's
+    compliance columns carry the payload's torque). Ties (e.g. a singular start) and the other
+    indices fall back to the payload's extra joint deflection ``|Delta tau / k_nom|``, largest first."""
+    loaded = mm.static_torques(Q, np.ones(len(Q), bool))
+    extra = (np.abs(loaded - mm.static_torques(Q)) / nominal_joint_stiffness_Nm_rad(mm.robot)).sum(axis=1)
+    order = np.argsort(-extra, kind="stable")
+    if dbasis is None or spec is None or spec.needs_positions or not mm.compliance:
+        return np.sort(order[:k])
+    T0 = mm.robot.tracker.transform_tracker_to_base
+    free = design_blocks(mm, Q, dbasis, T0)[order]
+    load = design_blocks(mm, Q, dbasis, T0, np.ones(len(Q), bool))[order]
+    M = np.einsum("kmi,kmj->ij", free, free)
+    info = np.einsum("kmi,kmj->kij", load, load)
+    chosen: list[int] = []
+    for _ in range(k):
+        scores = np.array([-np.inf if c in chosen else ix.score(spec, M + info[c], len(Q) + len(chosen) + 1)
+                           for c in range(len(Q))])
+        best = int(np.argmax(np.nan_to_num(scores, nan=-np.inf, posinf=np.inf)))
+        if not np.isfinite(scores[best]):
+            best = next(c for c in range(len(Q)) if c not in chosen)
+        chosen.append(best)
+        M = M + info[best]
+    return np.sort(order[chosen])
 
 
 def measure_with_payload(mm: em.MeasurementModel, real, meas: ms.Measurements, cfg: Config,
-                         rng: np.random.Generator) -> ms.Measurements:
-    """Measure ``payload_fraction`` of the measured configurations again with the payload mounted:
-    those whose payload torque deflects the joints most (``|Delta tau / k_nom|``); the same pose
-    under two loads separates the compliances from the geometry."""
+                         rng: np.random.Generator, dbasis: np.ndarray | None = None,
+                         spec: ix.IndexSpec | None = None) -> ms.Measurements:
+    """Measure ``payload_fraction`` of the measured configurations again with the payload mounted,
+    those the design chooses (:func:`payload_poses`); the same pose under two loads separates the
+    compliances from the geometry."""
     payload = cfg.payload()
     if payload is None or cfg.payload_fraction == 0 or len(meas) == 0:
         return meas
     k = int(math.ceil(cfg.payload_fraction * len(meas)))
-    loaded = mm.static_torques(meas.Q, np.ones(len(meas), bool))
-    extra = np.abs(loaded - mm.static_torques(meas.Q)) / nominal_joint_stiffness_Nm_rad(mm.robot)
-    idx = np.sort(np.argsort(-extra.sum(axis=1))[:k])
+    idx = payload_poses(mm, meas.Q, k, dbasis, spec)
     with_load = ms.measure_simulated(real, meas.Q[idx], rng, payload)
     return ms.concatenate([meas, with_load], meas.source)
 

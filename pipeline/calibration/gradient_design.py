@@ -7,7 +7,9 @@ Objective (paper 000 eq. 24a with the KPI covariance ``C_s``): the index of an
     phi(Q) = trace(W M(Q)^-1),   M(Q) = sum_k G_k(q_k)^T G_k(q_k),
 
 ``G_k = J_k P / sigma_k`` the whitened identification Jacobian (exact, CasADi AD of the measurement
-model at ``x = 0``), ``W = J_w^T J_w / n_w`` for the TCP criterion. Constraints per configuration
+model at ``x = 0``; with joint compliances the static torques are the symbolic gravity torques
+:meth:`pipeline.robot.symbolic.SymbolicRobot.gravity` of the model's gravity model),
+``W = J_w^T J_w / n_w`` for the TCP criterion. Constraints per configuration
 (paper 000 eqs. 19-24): joint limits (bounds); laser incidence ``cos(beta) >= cos(beta_max - margin)``;
 capsule-capsule clearances of non-adjacent links and capsule end points above the floor
 ``>= margin`` (the shared :func:`pipeline.robot.collision_sx.capsule_clearance_function`,
@@ -41,6 +43,7 @@ from pipeline.calibration import indices as ix
 from pipeline.calibration.error_model import MeasurementModel, se3_to_vector
 from pipeline.robot.collision import segment_distances
 from pipeline.robot.collision_sx import capsule_clearance_function, segment_distance_sx
+from pipeline.robot.parameters import pinocchio_dynamic_parameters
 from pipeline.robot.sensors import BEAM_END_CLEARANCE_M, tracker_visibility
 
 
@@ -141,7 +144,12 @@ def gradient_design(robot, mm: MeasurementModel, basis: np.ndarray, Q_start: np.
 
     # per-configuration information matrix as a function of q (exact AD of the measurement model)
     q = ca.SX.sym("q", nq)
-    y, J = mm.hj(q, ca.DM.zeros(mm.n), ca.DM(se3_to_vector(T0)))
+    extra: list[ca.SX | ca.DM] = []
+    if mm.compliance:   # compliance columns: the gravity torques of mm's dynamic model, symbolic in q
+        extra.append(mm.sym.gravity(q, pinocchio_dynamic_parameters(mm.gravity_model)))
+    if mm.marker_points:
+        extra.append(ca.DM.zeros(3))
+    y, J = mm.hj(q, ca.DM.zeros(mm.n), ca.DM(se3_to_vector(T0)), *extra)
     sigma = tracker_spec.noise_const_m + tracker_spec.noise_per_m * ca.norm_2(y)
     G = (J @ ca.DM(P)) / sigma
     info = ca.Function("info", [q], [G.T @ G])

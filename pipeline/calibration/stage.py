@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -40,6 +41,8 @@ from pipeline.calibration.config import MAX_CANDIDATES, Config
 from pipeline.calibration.crossval import cross_validate
 from pipeline.calibration.elastostatic import (
     design_basis,
+    design_blocks,
+    design_torques,
     gravity_model_of,
     gravity_pass,
     load_gravity_model,
@@ -102,8 +105,10 @@ def identify_parameter_set(robot, mm: em.MeasurementModel, cfg: Config, rng: np.
     return rep, em.parameter_basis(rep, mm.n, B[:, cols])
 
 
-def build_candidates(robot, cfg: Config, basis: np.ndarray, rng: np.random.Generator) -> cd.CandidateSet:
-    """Filtered candidate set with whitened Jacobians (nominal model, nominal tracker pose)."""
+def build_candidates(robot, cfg: Config, basis: np.ndarray, rng: np.random.Generator,
+                     static_torques: Callable[[np.ndarray], np.ndarray] | None = None) -> cd.CandidateSet:
+    """Filtered candidate set with whitened Jacobians (nominal model, nominal tracker pose;
+    ``static_torques`` for a basis with compliances, :func:`cd.build_candidate_set`)."""
     chain = cd.chain_from_robot(robot)
     margins = cd.FilterMargins(cfg.margin_collision_m, math.radians(cfg.margin_incidence_deg), cfg.margin_beam_m)
     grid_index = None
@@ -118,7 +123,8 @@ def build_candidates(robot, cfg: Config, basis: np.ndarray, rng: np.random.Gener
         raise InfeasibleError(None, key,
                               f"no feasible candidate configuration (joint limits, collisions, floor, tracker "
                               f"visibility with the calibration.margin_* values; {counts_text})")
-    return cd.build_candidate_set(chain, Q, basis, robot.tracker.transform_tracker_to_base, counts, grid_index)
+    return cd.build_candidate_set(chain, Q, basis, robot.tracker.transform_tracker_to_base, counts, grid_index,
+                                  static_torques=static_torques)
 
 
 def too_few_candidates(cfg: Config, robot, n_feasible: int) -> str:
@@ -135,14 +141,9 @@ def too_few_candidates(cfg: Config, robot, n_feasible: int) -> str:
 
 def working_jacobian(robot, mm: em.MeasurementModel, Qw: np.ndarray, basis: np.ndarray) -> np.ndarray:
     """TCP-position Jacobian rows (3 n_w, p) at working configurations wrt ``theta`` (base frame;
-    tracker and reflector parameters do not move the TCP)."""
-    f = mm.sym.fk_position_jacobian(robot.frame_tcp)
-    rows = []
-    for q in Qw:
-        full = np.zeros((3, basis.shape[0]))
-        full[:, mm.sl_kin] = np.asarray(f(q, np.zeros(mm.n_kin))[0])
-        rows.append(full @ basis)
-    return np.vstack(rows)
+    tracker and reflector parameters do not move the TCP; compliances by the gravity deflection,
+    :func:`pipeline.calibration.task_space.tcp_jacobian`)."""
+    return ts.tcp_jacobian(mm, Qw, basis, robot.frame_tcp)
 
 
 def index_spec(cfg: Config, robot, mm: em.MeasurementModel, basis: np.ndarray, rng: np.random.Generator,
@@ -161,12 +162,13 @@ def index_spec(cfg: Config, robot, mm: em.MeasurementModel, basis: np.ndarray, r
 
 
 def measured_design(robot, mm: em.MeasurementModel, basis: np.ndarray, Q: np.ndarray, spec: ix.IndexSpec,
-                    T_tb, method: str) -> dict:
+                    T_tb, method: str, mounted: np.ndarray | None = None) -> dict:
     """Observability index of the configurations ``Q`` actually measured (nominal model, whitened
-    by the tracker noise model, tracker pose ``T_tb``); same conventions as the selection."""
-    cs = cd.build_candidate_set(cd.chain_from_robot(robot), Q, basis, T_tb)
-    G = cs.G.reshape(-1, basis.shape[1])
-    value = ix.evaluate(spec, G.T @ G, len(Q), cs.Y if spec.needs_positions else None)
+    by the tracker noise model, tracker pose ``T_tb``, the payload's torque where ``mounted``);
+    same conventions as the selection."""
+    G = design_blocks(mm, Q, basis, T_tb, mounted).reshape(-1, basis.shape[1])
+    Y = cd.nominal_jacobian(cd.chain_from_robot(robot), Q, T_tb)[0] if spec.needs_positions else None
+    value = ix.evaluate(spec, G.T @ G, len(Q), Y)
     return {"method": method, "index_name": spec.name, "n_configurations": int(len(Q)), "index_value": float(value)}
 
 
@@ -220,7 +222,7 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress, reg
         if real is None:
             raise PipelineError(None, "calibration", "no measurement file and no simulated robot")
         t = time.perf_counter()
-        cs = build_candidates(robot, cfg, dbasis, rng)
+        cs = build_candidates(robot, cfg, dbasis, rng, design_torques(mm))
         timings["candidates_s"] = time.perf_counter() - t
         if len(cs) < cfg.n_configurations:
             raise InfeasibleError(None, "calibration.grid_per_axis" if cfg.candidates == "grid"
@@ -245,8 +247,7 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress, reg
             t = time.perf_counter()
             T_pilot = register_points(pilot.Y, mm.base_positions(pilot.Q, np.zeros(mm.n))[0]) \
                 if len(pilot) >= 3 else None
-            mm_geo = em.MeasurementModel(robot, mm.sym) if mm.compliance else mm
-            grad = gradient_design(robot, mm_geo, dbasis, Q_sel, spec, GradientDesignConfig(
+            grad = gradient_design(robot, mm, dbasis, Q_sel, spec, GradientDesignConfig(
                 max_iterations=cfg.gradient_max_iterations), transform_tracker_to_base=T_pilot)
             timings["gradient_s"] = time.perf_counter() - t
             Q_sel = grad.Q
@@ -254,7 +255,7 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress, reg
         meas = ms.measure_simulated(real, Q_sel, rng)
         if pilot is not None:
             meas = ms.concatenate([pilot, meas], meas.source)
-        meas = measure_with_payload(mm, real, meas, cfg, rng)
+        meas = measure_with_payload(mm, real, meas, cfg, rng, dbasis, spec)
         timings["measure_s"] = time.perf_counter() - t
         if 3 * len(meas) < p:
             raise InfeasibleError(None, "calibration.n_configurations",
@@ -293,7 +294,7 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress, reg
     if spec is None:
         spec, Qw = index_spec(cfg, robot, mm, dbasis, rng, region)
     design = measured_design(robot, mm, dbasis, meas.Q, spec, est.transform_tracker_to_base,
-                             "user file" if user is not None else "measured subset")
+                             "user file" if user is not None else "measured subset", meas.payload_mounted)
     fit = va.fit_residuals(mm, est, rec, rejection.rejected)
     prediction = predicted_on_random_poses(robot, mm, est, cfg, rng, gravity) if validation is None else None
     new_robot = calibrated_robot(robot, mm, est.x, basis, est.covariance)

@@ -165,12 +165,22 @@ def _draw_near_region(chain: cd.Chain, robot, region: WorkingRegion, batch: int,
 
 def tcp_jacobian(mm: MeasurementModel, Q: np.ndarray, basis: np.ndarray, frame: str | None = None) -> np.ndarray:
     """Stacked TCP-position Jacobian rows ``(3 n_w, p)`` wrt the identifiable parameters ``theta``
-    (exact CasADi AD at the nominal parameters, one mapped call)."""
+    (exact CasADi AD at the nominal parameters, one mapped call).
+
+    Tracker and reflector parameters do not move the TCP. A basis with compliance rows
+    (elastostatic ``mm``) gets the TCP's gravity deflection: ``q_link = q - c g(q)`` gives
+    ``dp/dc_j = -g_j(q) dp/dq_j`` (the ``j{j}.dq`` column) with ``g`` the gravity torques of ``mm``'s
+    dynamic model without payload (the arm in its working region)."""
     Q = np.atleast_2d(np.asarray(Q, float))
     f = mm.sym.fk_position_jacobian(frame or mm.robot.frame_tcp).map(len(Q))
     J_kin = np.asarray(f(Q.T, np.zeros(mm.n_kin))[0]).reshape(3, len(Q), mm.n_kin).transpose(1, 0, 2)
-    P_kin = np.asarray(basis, float)[mm.sl_kin]
-    return (J_kin @ P_kin).reshape(-1, P_kin.shape[1])
+    P = np.asarray(basis, float)
+    out = J_kin @ P[mm.sl_kin]
+    if mm.compliance and P.shape[0] == mm.n:
+        dq = [mm.names.index(f"j{i}.dq") for i in range(1, mm.nq + 1)]
+        J_c = -mm.static_torques(Q)[:, None, :] * J_kin[:, :, dq]
+        out = out + J_c @ P[mm.sl_compliance]
+    return out.reshape(-1, P.shape[1])
 
 
 def task_space_spec(mm: MeasurementModel, Qw: np.ndarray, basis: np.ndarray) -> ix.IndexSpec:

@@ -13,6 +13,7 @@ from pipeline.calibration import candidates as cd
 from pipeline.calibration import error_model as em
 from pipeline.calibration import measure as ms
 from pipeline.calibration import stage as st
+from pipeline.calibration.elastostatic import design_basis, design_blocks, measurement_model
 from pipeline.calibration.estimate import estimate, register_points
 from pipeline.errors import DataFileError, InfeasibleError, PipelineError, SolverError
 
@@ -355,9 +356,11 @@ def test_measurement_file_without_validation_file_has_no_heldout_validation(robo
     assert s["selection_method"] == "user file" and s["n_configurations"] == n_meas
     assert s["n_candidates"] is None and s["selection_time_s"] is None and s["n_configurations_not_visible"] is None
     back = ms.read_csv(path, robot)
-    _, basis = st.identify_parameter_set(robot, em.MeasurementModel(robot), cfg, np.random.default_rng(0))
+    mm = measurement_model(robot, cfg)   # the design basis: geometric and compliance columns
+    _, basis = st.identify_parameter_set(robot, mm, cfg, np.random.default_rng(0))
+    basis = design_basis(mm, basis)
     T = pin.SE3(res.arrays["transform_tracker_to_base"])
-    G = cd.build_candidate_set(cd.chain_from_robot(robot), back.Q, basis, T).G.reshape(-1, basis.shape[1])
+    G = design_blocks(mm, back.Q, basis, T, back.payload_mounted).reshape(-1, basis.shape[1])
     assert s["index_value"] == pytest.approx(ix.evaluate(ix.IndexSpec("O3"), G.T @ G, len(back.Q)), rel=1e-6)
     assert s["index_value"] < ix.evaluate(ix.IndexSpec("O3"), 2 * G.T @ G, len(back.Q))  # not a constant
     # fit residuals and the covariance prediction are still reported
