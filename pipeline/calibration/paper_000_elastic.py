@@ -55,15 +55,9 @@ RIGID = "geometric_rigid_truth"
 
 def tcp_jacobian(robot: RobotModel, mm: em.MeasurementModel, q: np.ndarray, basis: np.ndarray) -> np.ndarray:
     """``(3, p)`` TCP-position Jacobian at ``q`` wrt the identifiable ``theta`` (``x = basis theta``):
-    the kinematic columns of :func:`pipeline.calibration.stage.working_jacobian` and, for the
-    elastostatic model, ``dp/dc_i = -J_q[:, i] g_i(q)`` (``q_link = q - c g(q)``)."""
-    J = st.working_jacobian(robot, mm, q[None], basis)
-    if not mm.compliance:
-        return J
-    full = np.zeros((3, mm.n))
-    J_q = np.asarray(mm.sym.fk_position_jacobian(robot.frame_tcp)(q, np.zeros(mm.n_kin))[1])
-    full[:, mm.sl_compliance] = -J_q * mm.static_torques(q[None])[0]
-    return J + full @ basis
+    :func:`pipeline.calibration.stage.working_jacobian`, whose elastostatic columns are
+    ``dp/dc_i = -J_q[:, i] g_i(q)`` (``q_link = q - c g(q)``)."""
+    return st.working_jacobian(robot, mm, q[None], basis)
 
 
 def predicted_tcp_variance(robot: RobotModel, mm: em.MeasurementModel, basis: np.ndarray, Q: np.ndarray,
