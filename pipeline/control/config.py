@@ -12,10 +12,12 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from pipeline.config_checks import check_choice, check_count, check_number, check_unique, check_vector
+from pipeline.control.iso9283 import TOOL_ORIENTATIONS
 from pipeline.errors import ConfigError
 
 FEEDFORWARD_VARIANTS = ("none", "gravity", "full", "full_friction", "elastic_static", "elastic_flat")
 ISO_PLANES = ("diagonal_x", "diagonal_y", "horizontal")        # keys of pipeline.control.iso9283.PLANES
+ISO_TOOL_ORIENTATIONS = TOOL_ORIENTATIONS
 ISO_SEGMENTS = ("line", "rectangle", "circle_large", "circle_small")
 ENGINES = ("compiled", "python")
 PATH_FRAMES = ("reflector", "tcp")
@@ -30,7 +32,9 @@ class IsoPathConfig:
     edge_m: float | None = None
     centre_m: list[float] | None = None
     plane: str = "diagonal_x"          # diagonal_x | diagonal_y | horizontal
-    tool_down: bool = True             # TCP z axis pointing down (else: normal to the plane, away from the base)
+    #: constant TCP orientation: down | plane (normal to the plane, away from the base) | ready (as at the
+    #: robot's ready pose); None = derived: down, else plane, else ready, the first with a feasible cube
+    tool_orientation: str | None = None
     speed_m_s: float = 1.0
     acceleration_m_s2: float = 5.0
     jerk_m_s3: float = 50.0
@@ -49,6 +53,8 @@ class IsoPathConfig:
         if self.centre_m is not None:
             check_vector(source, f"{where}.centre_m", self.centre_m, 3, "m")
         check_choice(source, f"{where}.plane", self.plane, ISO_PLANES)
+        if self.tool_orientation is not None:
+            check_choice(source, f"{where}.tool_orientation", self.tool_orientation, ISO_TOOL_ORIENTATIONS)
         check_number(source, f"{where}.speed_m_s", self.speed_m_s, gt=0, unit="m/s")
         check_number(source, f"{where}.acceleration_m_s2", self.acceleration_m_s2, gt=0, unit="m/s^2")
         check_number(source, f"{where}.jerk_m_s3", self.jerk_m_s3, gt=0, unit="m/s^3")

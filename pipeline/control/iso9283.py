@@ -69,6 +69,11 @@ class IsoPath(CartesianPath):
         return [sg for p in self.pieces for sg in p.segments()]
 
 
+#: constant tool orientations of the path (pipeline.robot.defaults.iso_rotation), in the order a derived
+#: cube tries them
+TOOL_ORIENTATIONS = ("down", "plane", "ready")
+
+
 def tool_rotation(plane: str, tool_down: bool = True) -> np.ndarray:
     """Constant TCP orientation: z axis pointing down, or against the measuring plane's normal."""
     if tool_down:

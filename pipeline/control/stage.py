@@ -35,7 +35,7 @@ import numpy as np
 from pipeline.control.config import ControlConfig
 from pipeline.control.design import filter_alpha, loop_models, servo_report
 from pipeline.control.elastic_feedforward import ELASTIC_VARIANTS
-from pipeline.control.iso9283 import iso9283_path, tool_rotation
+from pipeline.control.iso9283 import iso9283_path
 from pipeline.control.joint_stiffness import deflection_budget, feedforward_stiffness, stiffness_markdown
 from pipeline.control.reference import cartesian_reference
 from pipeline.control.simulate import first_saturation, servo_gains, simulate_joint_trajectory
@@ -48,7 +48,7 @@ from pipeline.control.validate import (
     tcp_figure,
 )
 from pipeline.errors import ConfigError, InfeasibleError, PipelineError
-from pipeline.robot.defaults import ik_seeds_or_derived_rad, iso_or_derived
+from pipeline.robot.defaults import ik_seeds_or_derived_rad, iso_or_derived, iso_rotation
 from pipeline.robot.paths import start_configuration
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 from pipeline.runner import StageContext, StageResult
@@ -102,7 +102,7 @@ def iso_reference(robot, cfg: ControlConfig):
     kinematics. Raises InfeasibleError naming ``control.iso`` when the path leaves the workspace."""
     iso = iso_or_derived(robot, cfg.iso)
     frame = robot.frame_reflector if cfg.path_frame == "reflector" else robot.frame_tcp
-    rotation = tool_rotation(iso.plane, iso.tool_down)
+    rotation = iso_rotation(robot, iso.plane, iso.tool_orientation)
     path = iso9283_path(robot, iso.edge_m, iso.centre_m, iso.plane, rotation, iso.corner_fraction,
                         iso.large_circle_fraction, iso.small_circle_fraction, tuple(iso.segments))
     seeds = ik_seeds_or_derived_rad(robot, cfg.ik_seeds_deg)

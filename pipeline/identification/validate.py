@@ -19,11 +19,11 @@ from typing import Any
 import numpy as np
 
 from pipeline.control.config import ControlConfig
-from pipeline.control.iso9283 import iso9283_path, tool_rotation
+from pipeline.control.iso9283 import iso9283_path
 from pipeline.control.reference import cartesian_reference
 from pipeline.errors import PipelineError
 from pipeline.identification.regressor import BaseParameters
-from pipeline.robot.defaults import ik_seeds_or_derived_rad, iso_or_derived
+from pipeline.robot.defaults import ik_seeds_or_derived_rad, iso_or_derived, iso_rotation
 from pipeline.robot.paths import start_configuration
 
 
@@ -74,7 +74,7 @@ def iso_validation_trajectory(robot: Any, sample_time_s: float, control: Any = N
     :func:`run_control_config`; None: the built-in control defaults)."""
     cfg = ControlConfig() if control is None else control
     iso = iso_or_derived(robot, cfg.iso)
-    rotation = tool_rotation(iso.plane, iso.tool_down)
+    rotation = iso_rotation(robot, iso.plane, iso.tool_orientation)
     path = iso9283_path(robot, iso.edge_m, iso.centre_m, iso.plane, rotation, iso.corner_fraction,
                         iso.large_circle_fraction, iso.small_circle_fraction, tuple(iso.segments))
     seeds = ik_seeds_rad(cfg, robot)

@@ -13,7 +13,9 @@ kinematics and capsules with a fixed-seed search (same robot -> same defaults).
 * ``iso_cube``: EN ISO 9283 (DESIGN.md): the largest cube, with its diagonal plane, whose whole path
   is reachable from the stages' IK branch, away from limits and singularities and within the joint
   speeds at the path speed, found by a search over the workspace (:mod:`pipeline.robot.iso_search`,
-  which states the thresholds). Capsule self-collision is not part of this search (fitted capsules are
+  which states the thresholds), with the tool held in a constant orientation: pointing down, else
+  normal to the path's plane, else as at the ready pose (an arm whose wrist cannot point the tool
+  down, e.g. a small arm with ±80° wrist joints). Capsule self-collision is not part of this search (fitted capsules are
   conservative); the stages check it where they need it.
 """
 
@@ -23,7 +25,9 @@ import copy
 from dataclasses import dataclass
 
 import numpy as np
+import pinocchio as pin
 
+from pipeline.control.iso9283 import TOOL_ORIENTATIONS, tool_rotation
 from pipeline.errors import InfeasibleError
 from pipeline.robot.iso_search import MIN_EDGE_REACH, VELOCITY_SHARE, search_cube, verified_edge
 
@@ -42,6 +46,8 @@ class IsoCube:
     speed_m_s: float
     note: str
     q_start_rad: np.ndarray | None = None      # the IK branch the search validated (path start)
+    orientation: str = "down"                   # of ISO_ORIENTATIONS
+    rotation: np.ndarray | None = None          # the constant TCP orientation of the path (base frame)
 
 
 def _ranked_poses(robot) -> np.ndarray:
@@ -112,8 +118,22 @@ def ptp_move_rad(robot, fractions: tuple[float, ...] = (0.4, 0.3, 0.2, 0.1)) -> 
 
 _CUBES: dict[tuple, IsoCube] = {}
 
+ISO_ORIENTATIONS = TOOL_ORIENTATIONS
 
-def _cache_key(robot, seeds: np.ndarray, plane: str, tool_down: bool, speed_m_s: float, frame: str) -> tuple:
+
+def iso_rotation(robot, plane: str, orientation: str) -> np.ndarray:
+    """The path's constant TCP orientation: ``down`` (z axis down), ``plane`` (z normal to the
+    measuring plane, away from the base) or ``ready`` (as at :func:`ready_pose_rad`)."""
+    if orientation == "ready":
+        data = robot.new_data()
+        pin.framesForwardKinematics(robot.model, data, ready_pose_rad(robot))
+        return np.array(data.oMf[robot.frame_id(robot.frame_tcp)].rotation)
+    if orientation not in ISO_ORIENTATIONS:
+        raise ValueError(f"unknown ISO tool orientation {orientation!r} (one of {', '.join(ISO_ORIENTATIONS)})")
+    return tool_rotation(plane, orientation == "down")
+
+
+def _cache_key(robot, seeds: np.ndarray, plane: str, orientation: str, speed_m_s: float, frame: str) -> tuple:
     """The robot's name plus everything of the model the search reads (the search is a pure function)."""
     placements = np.array([robot.model.jointPlacements[i].homogeneous for i in range(1, robot.model.njoints)])
     frame_placement = robot.model.frames[robot.frame_id(frame)].placement.homogeneous
@@ -121,43 +141,55 @@ def _cache_key(robot, seeds: np.ndarray, plane: str, tool_down: bool, speed_m_s:
     model_bytes = b"".join(np.ascontiguousarray(a, float).tobytes() for a in (
         placements, frame_placement, lim.lower_rad, lim.upper_rad, lim.velocity_rad_s, seeds,
         [robot.spec.collision.floor_z_m]))
-    return (robot.name, hash(model_bytes), plane, bool(tool_down), float(speed_m_s), frame)
+    return (robot.name, hash(model_bytes), plane, orientation, float(speed_m_s), frame)
 
 
-def iso_cube(robot, plane: str = "diagonal_x", tool_down: bool = True, speed_m_s: float = 1.0,
+def iso_cube(robot, plane: str = "diagonal_x", orientation: str | None = None, speed_m_s: float = 1.0,
              frame: str | None = None) -> IsoCube:
     """The largest ISO 9283 cube whose whole path is feasible, found by a search over the workspace
-    (:mod:`pipeline.robot.iso_search`; the IK branch starts from :func:`ik_seeds_rad`, as the stages do).
+    (:mod:`pipeline.robot.iso_search`; the IK branch starts from :func:`ik_seeds_rad`, as the stages do),
+    with the tool in ``orientation`` (:func:`iso_rotation`); ``None``: the first of
+    :data:`ISO_ORIENTATIONS` that has a cube.
 
     If no cube is feasible at ``speed_m_s`` (the joint speeds of a small or slow arm), the speed is lowered
     to ``SLOW_SHARE`` of the highest speed a small cube allows, and the largest cube at that speed returned.
     Results are cached per robot model (same model -> same cube).
     """
+    if orientation is None:
+        failures = []
+        for candidate in ISO_ORIENTATIONS:
+            try:
+                return iso_cube(robot, plane, candidate, speed_m_s, frame)
+            except InfeasibleError as exc:
+                failures.append(f"tool {candidate}: {exc.problem}")
+        raise InfeasibleError(None, "control.iso", "; ".join(failures))
     frame = frame or robot.frame_reflector
     seeds = ik_seeds_rad(robot)
-    key = _cache_key(robot, seeds, plane, tool_down, speed_m_s, frame)
+    key = _cache_key(robot, seeds, plane, orientation, speed_m_s, frame)
     if key in _CUBES:
         return copy.deepcopy(_CUBES[key])
+    rotation = iso_rotation(robot, plane, orientation)
     reach = float(robot.summary()["reach_m"])
     memo: dict = {}
-    best = search_cube(robot, seeds, plane, tool_down, speed_m_s, frame, memo=memo)
+    best = search_cube(robot, seeds, plane, rotation, speed_m_s, frame, memo=memo)
     speed, how = speed_m_s, "largest feasible cube found by search"
     if best is None:
-        slowest = search_cube(robot, seeds, plane, tool_down, speed_m_s, frame, ignore_speed=True, memo=memo)
+        slowest = search_cube(robot, seeds, plane, rotation, speed_m_s, frame, ignore_speed=True, memo=memo)
         if slowest is not None:       # SLOW_SHARE of the highest speed a small cube allows, then the largest cube
             speed = float(np.floor(100 * SLOW_SHARE * speed_m_s / slowest[2]) / 100)
             how = f"no cube is feasible at {speed_m_s:g} m/s (joint speeds); largest cube at {speed:g} m/s"
-            best = search_cube(robot, seeds, plane, tool_down, speed, frame, memo=memo) if speed > 0 else None
-    found = None if best is None or speed <= 0 else verified_edge(robot, best[0], best[1], plane, tool_down, seeds,
+            best = search_cube(robot, seeds, plane, rotation, speed, frame, memo=memo) if speed > 0 else None
+    found = None if best is None or speed <= 0 else verified_edge(robot, best[0], best[1], plane, rotation, seeds,
                                                                   frame, speed)
     if found is None:
         raise InfeasibleError(None, "control.iso", f"no ISO 9283 cube of edge >= {MIN_EDGE_REACH * reach:.3f} m "
-                              f"is feasible for {robot.name}: set control.iso.centre_m and edge_m")
+                              f"is feasible for {robot.name} with the tool {orientation}: set control.iso.centre_m "
+                              "and edge_m")
     edge, q_start = found
     centre = best[1]
     cube = IsoCube(centre, edge, plane, speed, f"{how}: edge {edge:.3f} m ({edge / reach:.2f} x reach "
-                   f"{reach:.3f} m), centre {np.round(centre, 3).tolist()} m, joint speeds within "
-                   f"{VELOCITY_SHARE:.0%} of their limits", q_start)
+                   f"{reach:.3f} m), centre {np.round(centre, 3).tolist()} m, tool {orientation}, joint speeds "
+                   f"within {VELOCITY_SHARE:.0%} of their limits", q_start, orientation, rotation)
     _CUBES[key] = cube
     return copy.deepcopy(cube)
 
@@ -177,12 +209,18 @@ def ik_seeds_or_derived_rad(robot, seeds_deg: list | None) -> np.ndarray:
 
 
 def iso_or_derived(robot, iso):  # noqa: ANN001, ANN201 - IsoPathConfig in, a copy out (control layer type)
-    """A copy of the ISO path settings with ``centre_m`` / ``edge_m`` / ``speed_m_s`` left ``None``
-    filled from :func:`iso_cube` (the search runs only when something is missing)."""
+    """A copy of the ISO path settings with ``centre_m`` / ``edge_m`` / ``speed_m_s`` /
+    ``tool_orientation`` left ``None`` filled from :func:`iso_cube` (the search runs only when the cube
+    is missing; a given cube keeps the tool down unless told otherwise)."""
     if iso.centre_m is not None and iso.edge_m is not None and iso.speed_m_s is not None:
-        return iso
+        if iso.tool_orientation is not None:
+            return iso
+        out = copy.copy(iso)
+        out.tool_orientation = "down"
+        return out
     out = copy.copy(iso)
-    cube = iso_cube(robot, iso.plane, iso.tool_down, 1.0 if iso.speed_m_s is None else iso.speed_m_s)
+    cube = iso_cube(robot, iso.plane, iso.tool_orientation, 1.0 if iso.speed_m_s is None else iso.speed_m_s)
+    out.tool_orientation = cube.orientation
     if iso.centre_m is None or iso.edge_m is None:
         out.centre_m, out.edge_m = [float(v) for v in cube.centre_m], float(cube.edge_m)
     if iso.speed_m_s is None or ((iso.centre_m is None or iso.edge_m is None) and cube.speed_m_s < iso.speed_m_s):

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from pipeline.control.iso9283 import PLANES, iso9283_path, tool_rotation
+from pipeline.control.iso9283 import PLANES, iso9283_path
 from pipeline.control.reference import cartesian_reference
 from pipeline.errors import InfeasibleError
 
@@ -145,7 +145,7 @@ def _geometric_edge_bound(centre: np.ndarray, shoulder: np.ndarray, reach: float
     return best
 
 
-def search_cube(robot, seeds: np.ndarray, plane: str, tool_down: bool, speed_m_s: float, frame: str,
+def search_cube(robot, seeds: np.ndarray, plane: str, rotation: np.ndarray, speed_m_s: float, frame: str,
                 ignore_speed: bool = False, memo: dict | None = None) -> tuple[float, np.ndarray, float] | None:
     """(edge, centre, speed ratio) of the largest feasible cube (module docstring), or ``None``.
 
@@ -156,7 +156,6 @@ def search_cube(robot, seeds: np.ndarray, plane: str, tool_down: bool, speed_m_s
     base = robot.model.jointPlacements[1].translation
     shoulder = robot.model.jointPlacements[2].translation + base if robot.nq > 1 else base
     floor_z = float(robot.spec.collision.floor_z_m)
-    rotation = tool_rotation(plane, tool_down)
     limit = 1e3 if ignore_speed else 1.0
 
     memo = {} if memo is None else memo      # (edge, centre) -> speed ratio per m/s (linear in the speed)
@@ -229,13 +228,12 @@ def _bisect(ok: Callable[[float, np.ndarray], float | None], centre: np.ndarray,
     return lo_edge, lo_ratio
 
 
-def verified_edge(robot, edge_m: float, centre_m: np.ndarray, plane: str, tool_down: bool, seeds: np.ndarray,
+def verified_edge(robot, edge_m: float, centre_m: np.ndarray, plane: str, rotation: np.ndarray, seeds: np.ndarray,
                   frame: str, speed_m_s: float, acceleration_m_s2: float = 5.0, jerk_m_s3: float = 50.0,
                   attempts: int = 8) -> tuple[float, np.ndarray] | None:
     """(edge, start configuration) for which the control stage's reference runs on the cube (module
     docstring), shrinking ``edge_m`` by ``SHRINK`` up to ``attempts`` times; ``None`` if none does.
     Acceleration 5 m/s² (paper 004 §2.3.3) and jerk as the control stage's defaults."""
-    rotation = tool_rotation(plane, tool_down)
     for _ in range(attempts):
         check = check_cube(robot, edge_m, centre_m, plane, rotation, seeds, frame, speed_m_s)
         if check.q_start is not None and np.isfinite(check.speed_ratio):

@@ -14,7 +14,9 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.control.iso9283 import iso9283_path, tool_rotation
 from pipeline.robot.defaults import iso_cube, ready_pose_rad
+from pipeline.robot.paths import SplinePath
 from pipeline.trajectory.baselines import RuckigResult, ruckig_torque_feasible, toppra_cp
 from pipeline.trajectory.config import TrajectoryConfig
 from pipeline.trajectory.cp import (
@@ -41,19 +43,17 @@ def cp_joint_path(robot: Any, cfg: TrajectoryConfig) -> tuple[JointPath, Any]:
     Raises InfeasibleError naming the first unreachable sample or a joint jump larger than
     ``cp_max_ik_step_deg`` between samples.
     """
-    from pipeline.control.iso9283 import iso9283_path, tool_rotation
-    from pipeline.robot.paths import SplinePath
-
     cfg.validate()       # segment, spline points, centre: ConfigError naming the field
     if cfg.cp_segment == "spline":
         piece = SplinePath(np.asarray(cfg.cp_points_m, float), tool_rotation(cfg.cp_plane, True), label="spline")
     else:
         edge, centre = cfg.cp_edge_m, cfg.cp_centre_m
-        if edge is None or centre is None:           # None: the robot's largest feasible ISO cube
-            cube = iso_cube(robot, cfg.cp_plane, True, frame=robot.frame_tcp)
+        rotation = tool_rotation(cfg.cp_plane, True)
+        if edge is None or centre is None:           # None: the robot's largest feasible ISO cube (and its tool)
+            cube = iso_cube(robot, cfg.cp_plane, None, frame=robot.frame_tcp)
             edge, centre = (cube.edge_m if edge is None else edge), (cube.centre_m if centre is None else centre)
-        iso = iso9283_path(robot, edge, tuple(centre), cfg.cp_plane,
-                           tool_rotation(cfg.cp_plane, True), segments=(cfg.cp_segment,))
+            rotation = cube.rotation
+        iso = iso9283_path(robot, edge, tuple(centre), cfg.cp_plane, rotation, segments=(cfg.cp_segment,))
         piece = iso.pieces[0]
     seed = ready_pose_rad(robot) if cfg.cp_ik_seed_deg is None else np.radians(cfg.cp_ik_seed_deg)
     path = joint_path_from_cartesian(robot, piece, cfg.cp_ik_points, seed,

@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline.control.iso9283 import iso9283_path, tool_rotation
+from pipeline.control.config import IsoPathConfig
+from pipeline.control.iso9283 import iso9283_path
 from pipeline.control.reference import cartesian_reference
 from pipeline.errors import InfeasibleError
 from pipeline.robot import defaults
@@ -41,7 +42,7 @@ def _check(robot: RobotModel) -> defaults.IsoCube:
     assert 0.0 < cube.speed_m_s <= 1.0
     assert cube.centre_m[2] - cube.edge_m / 2 > robot.spec.collision.floor_z_m   # above the floor
     frame = robot.frame_reflector
-    path = iso9283_path(robot, cube.edge_m, cube.centre_m, cube.plane, tool_rotation(cube.plane, True))
+    path = iso9283_path(robot, cube.edge_m, cube.centre_m, cube.plane, cube.rotation)
     poses = path.sample(400)                     # finer than the search's sampling
     q0 = start_configuration(robot, poses[0], defaults.ik_seeds_or_derived_rad(robot, None), frame)
     q = ik_track(robot, poses, q0, frame)        # raises when a pose is not reached or a limit is crossed
@@ -84,3 +85,19 @@ def test_cached_cube_is_a_copy():
     a = defaults.iso_cube(robot)
     a.centre_m[0] += 1.0
     assert defaults.iso_cube(robot).centre_m[0] != a.centre_m[0]
+
+
+def test_an_arm_whose_wrist_cannot_point_down_gets_a_cube_with_another_tool_orientation():
+    """The Unitree Z1's wrist (±77°, ±87°) cannot hold the tool down anywhere in front of it: the derived
+    cube falls back to another constant orientation, whose whole path the search verified."""
+    urdf = example_arm_urdf("z1")
+    if urdf is None:
+        pytest.skip("example-robot-data not installed")
+    robot = RobotModel.load(urdf)
+    with pytest.raises(InfeasibleError, match="tool down"):
+        defaults.iso_cube(robot, orientation="down")
+    cube = defaults.iso_cube(robot)
+    assert cube.orientation in ("plane", "ready") and cube.edge_m > 0
+    assert np.allclose(cube.rotation, defaults.iso_rotation(robot, cube.plane, cube.orientation))
+    iso = defaults.iso_or_derived(robot, IsoPathConfig())
+    assert iso.tool_orientation == cube.orientation and iso.edge_m == pytest.approx(cube.edge_m)
