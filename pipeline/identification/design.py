@@ -317,7 +317,7 @@ def _build_nlp(
     h_lo = np.concatenate([
         -np.ones(n_tau),
         [robot.spec.collision.floor_z_m + limits.floor_clearance_m],
-        np.full(n_pair, limits.self_clearance_m),
+        np.broadcast_to(np.asarray(limits.self_clearance_m, float), (n_pair,)),
         np.full(n_h - n_tau - 1 - n_pair - n_tcp, limits.floor_clearance_m),
         np.full(n_tcp, -np.inf),
     ])

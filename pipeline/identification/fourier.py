@@ -93,6 +93,22 @@ def rest_constraint_matrix(harmonics: int) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------ limits
+#: a capsule pair whose median clearance over the workspace is below the required margin is close by
+#: construction (a compact wrist, the upper arm over the base): it is held at this share of its median
+CLOSE_PAIR_SHARE = 0.5
+
+
+def pair_clearances_m(robot: Any, self_clearance_m: float) -> np.ndarray:
+    """Required clearance per checked capsule pair: ``self_clearance_m``, or for a pair whose median
+    clearance over random configurations (:meth:`RobotModel.typical_pair_clearances_m`) is below it,
+    :data:`CLOSE_PAIR_SHARE` of that median. Fitted capsules of a compact arm (the Unitree Z1's wrist
+    capsules are 15 mm apart in most poses) would otherwise rule out nearly every excitation; the
+    margin guards against collisions, not against the links' own geometry."""
+    typical = np.asarray(robot.typical_pair_clearances_m(), float)
+    close = typical < self_clearance_m
+    return np.where(close, CLOSE_PAIR_SHARE * np.maximum(typical, 0.0), float(self_clearance_m))
+
+
 @dataclass
 class ExcitationLimits:
     """Limits the excitation must respect (already multiplied by the margins)."""
@@ -103,7 +119,8 @@ class ExcitationLimits:
     acceleration_rad_s2: np.ndarray
     effort_Nm: np.ndarray
     floor_clearance_m: float
-    self_clearance_m: float
+    #: per checked capsule pair (robot.self_collision_pairs) or one value for all
+    self_clearance_m: float | np.ndarray
     #: TCP speed and acceleration bounds (inf: none; paper 004 §4.3: 5 m/s and 12 m/s^2)
     tcp_speed_m_s: float = np.inf
     tcp_acceleration_m_s2: float = np.inf
@@ -142,7 +159,7 @@ class ExcitationLimits:
             lim.acceleration_rad_s2 * acceleration_margin,
             lim.effort_Nm * torque_margin,
             floor_clearance_m,
-            self_clearance_m,
+            pair_clearances_m(robot, self_clearance_m),
             np.inf if tcp_speed_m_s is None else float(tcp_speed_m_s),
             np.inf if tcp_acceleration_m_s2 is None else float(tcp_acceleration_m_s2),
         )
@@ -204,7 +221,7 @@ def check_trajectory(
     tcp_ratio = max(float(tcp_v.max()) / limits.tcp_speed_m_s, float(tcp_a.max()) / limits.tcp_acceleration_m_s2)
     ok = (
         max(pos, vel, acc, trq, tcp_ratio) <= 1.0 + 1e-9
-        and self_min >= limits.self_clearance_m
+        and bool(np.all(pair >= limits.self_clearance_m))
         and floor_min >= limits.floor_clearance_m
         and tcp >= limits.floor_clearance_m
     )

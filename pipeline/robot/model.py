@@ -318,6 +318,15 @@ class RobotModel:
         return CapsuleDistances([(names[i], names[k]) for i, k in self._self_pairs], pair[0],
                                 [names[i] for i in self._floor_capsules], floor[0])
 
+    def typical_pair_clearances_m(self, samples: int = 200) -> np.ndarray:
+        """``(n_pairs,)`` median clearance of each checked capsule pair over random configurations
+        inside the limits (seed 0; the pairs of :attr:`self_collision_pairs`)."""
+        if not self._self_pairs:
+            return np.zeros(0)
+        rng = np.random.default_rng(0)
+        Q = rng.uniform(self.model.lowerPositionLimit, self.model.upperPositionLimit, size=(samples, self.nq))
+        return np.median(self.capsule_clearances(self.capsule_segments(Q))[0], axis=0)
+
     @property
     def self_collision_pairs(self) -> list[tuple[int, int]]:
         """Index pairs of capsules checked against each other (non-adjacent links)."""

@@ -52,7 +52,7 @@ def _run(name: str, quick: bool, tmp_path: Path) -> Path:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["ur5", "ur10", "panda", "ur3", "xarm7"])
+@pytest.mark.parametrize("name", ["ur5", "ur10", "panda", "ur3", "xarm7", "z1"])
 def test_quick_profile_on_a_urdf_alone(name, tmp_path):
     assert name in EXAMPLE_ARMS
     _check_run(_run(name, True, tmp_path))
