@@ -18,6 +18,9 @@ from pipeline.calibration.task_space import check_task_fields
 from pipeline.errors import ConfigError
 from pipeline.robot.payload import Payload
 
+#: values per axis of the paper's 6-axis grid (paper 004 §3: 13⁶ configurations)
+GRID_VALUES_PAPER = 13
+
 SELECTION_METHODS = ("remove_and_replace", "detmax", "bsaa", "random", "gradient")
 CANDIDATE_KINDS = ("grid", "random")
 ERROR_MODELS = ("se3", "mdh_hayati")
@@ -34,7 +37,8 @@ class Config:
 
     #: "grid" (``grid_per_axis`` values per axis, paper 004: 13) or "random"
     candidates: str = "grid"
-    grid_per_axis: int = 13
+    #: None: derived from the number of axes (:meth:`grid_points_per_axis`)
+    grid_per_axis: int | None = None
     n_random_candidates: int = 20000
     #: remove_and_replace | detmax | bsaa | random | gradient (remove-and-replace + IPOPT refinement)
     selection_method: str = "remove_and_replace"
@@ -125,6 +129,13 @@ class Config:
         com = tuple(float(v) for v in (self.payload_com_m or (0.0, 0.0, 0.0)))
         return Payload(float(self.payload_mass_kg), com)
 
+    def grid_points_per_axis(self, nq: int) -> int:
+        """``grid_per_axis``, or when None the paper's 13 values per axis for 6 axes (paper 004 §3:
+        the 13⁶ grid) and, for ``nq`` axes, the most values per axis whose grid is no larger."""
+        if self.grid_per_axis is not None:
+            return int(self.grid_per_axis)
+        return max(2, math.floor(GRID_VALUES_PAPER ** (6 / nq) + 1e-9))
+
     def validate(self, source: str = "config") -> None:
         """Robot-independent checks of every field (robot-dependent ones: :func:`check`)."""
         def bad(key: str, problem: str) -> ConfigError:
@@ -138,12 +149,12 @@ class Config:
             raise bad("index_name", f"must be one of {ix.INDEX_NAMES}, got {self.index_name!r}")
         if self.error_model not in ERROR_MODELS:
             raise bad("error_model", f"must be one of {ERROR_MODELS}, got {self.error_model!r}")
-        for key in ("grid_per_axis", "n_random_candidates", "n_configurations", "n_heldout",
+        for key in ("n_random_candidates", "n_configurations", "n_heldout",
                     "identifiability_samples", "max_lm_iterations", "n_working_configurations",
                     "gradient_max_iterations"):
             if getattr(self, key) < 1:
                 raise bad(key, f"must be >= 1, got {getattr(self, key)}")
-        if self.grid_per_axis < 2:
+        if self.grid_per_axis is not None and self.grid_per_axis < 2:
             raise bad("grid_per_axis", f"needs at least 2 values per axis, got {self.grid_per_axis}")
         if self.identifiability_samples > 100_000:
             raise bad("identifiability_samples",

@@ -113,8 +113,9 @@ def build_candidates(robot, cfg: Config, basis: np.ndarray, rng: np.random.Gener
     margins = cd.FilterMargins(cfg.margin_collision_m, math.radians(cfg.margin_incidence_deg), cfg.margin_beam_m)
     grid_index = None
     if cfg.candidates == "grid":
-        with task(f"calibration: filtering the {cfg.grid_per_axis}^{robot.nq} grid") as bar:
-            Q, grid_index, counts = cd.filter_grid(chain, cfg.grid_per_axis, margins, progress=bar)
+        per_axis = cfg.grid_points_per_axis(robot.nq)
+        with task(f"calibration: filtering the {per_axis}^{robot.nq} grid") as bar:
+            Q, grid_index, counts = cd.filter_grid(chain, per_axis, margins, progress=bar)
     else:
         Q, counts = cd.random_candidates(chain, cfg.n_random_candidates, rng, margins)
     if len(Q) == 0:
@@ -134,8 +135,9 @@ def too_few_candidates(cfg: Config, robot, n_feasible: int) -> str:
         return (f"only {n_feasible} feasible random configurations were found ({rules}; n_random_candidates = "
                 f"{cfg.n_random_candidates}), fewer than the {cfg.n_configurations} configurations asked for: "
                 "lower n_configurations or the margins, or check the robot's limits, capsules and tracker pose")
-    return (f"only {n_feasible} of the {cfg.grid_per_axis}^{robot.nq} grid configurations (grid_per_axis = "
-            f"{cfg.grid_per_axis}) are feasible ({rules}), fewer than the {cfg.n_configurations} configurations "
+    per_axis = cfg.grid_points_per_axis(robot.nq)
+    return (f"only {n_feasible} of the {per_axis}^{robot.nq} grid configurations (grid_per_axis = "
+            f"{per_axis}) are feasible ({rules}), fewer than the {cfg.n_configurations} configurations "
             "asked for: raise grid_per_axis or lower n_configurations")
 
 
@@ -362,10 +364,11 @@ def check(config: Config, robot) -> None:
                           f"{cfg.margin_incidence_deg} deg leaves no visible pose: the tracker's maximum incidence "
                           f"angle of {robot.name} is {max_inc:g} deg; the margin must be smaller")
     if not cfg.measurements_csv and cfg.candidates == "grid":
-        n_grid = cfg.grid_per_axis ** robot.nq
+        per_axis = cfg.grid_points_per_axis(robot.nq)
+        n_grid = per_axis ** robot.nq
         if n_grid > MAX_CANDIDATES:
             raise ConfigError(None, "calibration.grid_per_axis",
-                              f"{cfg.grid_per_axis}^{robot.nq} = {n_grid:.3g} grid configurations, at most "
+                              f"{per_axis}^{robot.nq} = {n_grid:.3g} grid configurations, at most "
                               f"{MAX_CANDIDATES:.3g} (time and memory); lower grid_per_axis or use candidates: random")
     _, basis = identify_parameter_set(robot, mm, cfg, np.random.default_rng(0))
     p = basis.shape[1]

@@ -208,3 +208,12 @@ def test_too_few_rows_names_the_reason(robot, measured, tmp_path):
     cfg = _load(f"calibration.measurements_csv={path}").calibration
     with pytest.raises(DataFileError, match="5 measurement rows, need at least 11 .3 equations per position row"):
         st.check(cfg, robot)
+
+
+def test_the_grid_per_axis_default_follows_the_number_of_axes():
+    """None: the paper's 13 values per axis for 6 axes, and no larger a grid for more axes."""
+    cfg = _load().calibration
+    assert cfg.grid_per_axis is None and cfg.grid_points_per_axis(6) == 13
+    for nq in (5, 7, 8):
+        k = cfg.grid_points_per_axis(nq)
+        assert k**nq <= 13**6 < (k + 1) ** nq
