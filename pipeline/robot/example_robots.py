@@ -2,8 +2,8 @@
 installed with the ``dev`` extra): where its URDFs are, by a short name.
 
 The package ships no Python module; its files live under ``<site-packages>/cmeel.prefix/share/
-example-robot-data/robots/``. Kinova's arm is not listed: its ``continuous`` joints are rejected by
-the loader (a serial arm here has revolute joints with limits).
+example-robot-data/robots/``. Kinova's Jaco (continuous joints, loaded with one turn each way) is
+left unnamed on purpose: the any-arm tests must hold for arms they do not name.
 """
 
 from __future__ import annotations

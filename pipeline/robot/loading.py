@@ -77,6 +77,29 @@ def check_urdf_xml(urdf: Path) -> ET.Element:
     return root
 
 
+#: limits given to a continuous arm joint: one turn each way (cables and hoses of a real arm allow
+#: no more; set tighter ones in the URDF)
+CONTINUOUS_LIMIT_RAD = 2.0 * np.pi
+
+
+def continuous_as_revolute(root: ET.Element, chain: list[str]) -> list[str]:
+    """Turn the ``continuous`` joints of the arm chain into revolute ones with ``±CONTINUOUS_LIMIT_RAD``
+    (in place; velocity and effort limits are kept and still required). Pinocchio models a
+    continuous joint by (cos, sin) with nq = 2, which no stage's joint-space maths expects.
+    Returns the names of the joints turned."""
+    turned = []
+    for joint in root.findall("joint"):
+        if joint.get("name") in chain and joint.get("type") == "continuous":
+            joint.set("type", "revolute")
+            limit = joint.find("limit")
+            if limit is None:
+                limit = ET.SubElement(joint, "limit")
+            limit.set("lower", repr(-CONTINUOUS_LIMIT_RAD))
+            limit.set("upper", repr(CONTINUOUS_LIMIT_RAD))
+            turned.append(str(joint.get("name")))
+    return turned
+
+
 def check_chain_joints(urdf: Path, root: ET.Element, chain: list[str]) -> None:
     """Arm joints must be revolute with finite limits and no ``<mimic>`` (the error model, the
     symbolic bridge and calibration assume independent revolute axes); other joints are locked."""
@@ -172,12 +195,16 @@ def load_robot_files(robot: str | Path, yaml_path: str | Path | None = None, *, 
     root = check_urdf_xml(urdf)
     flange = spec.flange_frame if spec is not None else tip
     chain, base_link, tip_link = arm_chain(urdf, root, base=base, tip=flange, tip_is_frame=spec is not None)
+    turned = continuous_as_revolute(root, chain)
     check_chain_joints(urdf, root, chain)
     model, locked = build_arm_model(urdf, root, chain)
     if model.nq != model.nv:  # guard: chain joints are revolute
         raise RobotFileError(urdf, "joints", f"expected revolute joints only (nq={model.nq}, nv={model.nv})")
     validate_inertials(urdf, model)
     assumptions: list[str] = []
+    if turned:
+        assumptions.append(f"continuous joints loaded as revolute ones with limits of one turn each way "
+                           f"(±{CONTINUOUS_LIMIT_RAD:.4f} rad): {', '.join(turned)}")
     if locked:
         assumptions.append(f"joints off the arm chain {base_link} -> {tip_link} locked at their reference "
                            f"position: {', '.join(locked)}")
@@ -187,4 +214,5 @@ def load_robot_files(robot: str | Path, yaml_path: str | Path | None = None, *, 
     else:
         spec = load_robot_spec(yaml_file, nq=model.nq)
         spec.urdf = urdf
-    return spec, model, urdf.read_text(), assumptions
+    text = ET.tostring(root, encoding="unicode") if turned else urdf.read_text()
+    return spec, model, text, assumptions

@@ -139,8 +139,8 @@ def arm_chain(urdf: Path, root: ET.Element, *, base: str | None = None, tip: str
 def build_arm_model(urdf: Path, root: ET.Element, chain: list[str]) -> tuple[pin.Model, list[str]]:
     """Pinocchio model of the chain: every other joint locked at its neutral position clipped into its
     limits (``pin.buildReducedModel``, which merges the locked links' inertia into the arm)."""
-    try:
-        full = pin.buildModelFromUrdf(str(urdf))
+    try:     # from the checked tree (continuous chain joints turned revolute, loading.py)
+        full = pin.buildModelFromXML(ET.tostring(root, encoding="unicode"))
     except (RuntimeError, ValueError) as exc:
         raise RobotFileError(urdf, "urdf", f"Pinocchio could not build the model ({exc})") from None
     locked = [str(n) for n in full.names[1:] if n not in chain]

@@ -241,7 +241,7 @@ def test_robot_yaml_overrides_can_repair_urdf_limits(tmp_path: Path) -> None:
     assert np.array_equal(robot.limits.lower_rad, [-1.0] * 6)
 
 
-@pytest.mark.parametrize("kind", ["prismatic", "continuous", "planar", "floating", "revolut"])
+@pytest.mark.parametrize("kind", ["prismatic", "planar", "floating", "revolut"])
 def test_non_revolute_movable_joint_is_rejected(tmp_path: Path, kind: str) -> None:
     folder = _copy_robot(tmp_path, "staubli_tx40")
     urdf = folder / "tx40.urdf"
@@ -253,6 +253,20 @@ def test_non_revolute_movable_joint_is_rejected(tmp_path: Path, kind: str) -> No
     assert error.field == "joint joint_3: type"
     assert f"'{kind}'" in error.problem
     assert "\n" not in str(error)
+
+
+def test_a_continuous_arm_joint_is_loaded_as_revolute_with_one_turn_each_way(tmp_path: Path) -> None:
+    folder = _copy_robot(tmp_path, "staubli_tx40")
+    urdf = folder / "tx40.urdf"
+    old = '<joint name="joint_3" type="revolute">'
+    urdf.write_text(urdf.read_text().replace(old, '<joint name="joint_3" type="continuous">'))
+    robot = RobotModel.load(folder)
+    assert robot.nq == robot.model.nv == 6
+    assert robot.limits.lower_rad[2] == pytest.approx(-2 * np.pi)
+    assert robot.limits.upper_rad[2] == pytest.approx(2 * np.pi)
+    assert any("continuous joints loaded as revolute" in a and "joint_3" in a for a in robot.assumptions)
+    back = RobotModel.load(robot.save(tmp_path / "saved"))   # the artefact keeps the revolute joint
+    assert back.limits.upper_rad[2] == pytest.approx(2 * np.pi)
 
 
 def test_urdf_limit_must_be_finite(tmp_path: Path) -> None:
