@@ -79,17 +79,27 @@ def predicted_covariance(mm: MeasurementModel, est: Estimate, Q: np.ndarray, sig
     """``(N, 3, 3)`` covariance of the error ``y_h - h(q_h, x_hat)`` of a reading at each configuration
     (module docstring) and ``(N,)`` its gravity-model part ``|B_h - J_h M|_F^2``."""
     _, J = mm.jacobian(Q, est.x, est.registration, est.basis)
-    C = est.covariance
-    var_gravity = np.zeros(len(Q))
-    cov = 0.0
-    if gravity is not None and gravity.active and est.gravity_gain is not None:
-        M = est.gravity_gain
-        C = C - M @ M.T
-        R = gravity.factors(Q, gravity_linearisation_point(mm, est), est.registration) - J @ M
-        var_gravity = np.einsum("nir,nir->n", R, R)
-        cov = np.einsum("nir,njr->nij", R, R)
-    cov = cov + np.einsum("nip,pq,njq->nij", J, C, J) + np.asarray(sigma_m, float)[:, None, None] ** 2 * np.eye(3)
-    return cov, var_gravity
+    B = None
+    if _gravity_active(est, gravity):
+        B = gravity.factors(Q, gravity_linearisation_point(mm, est), est.registration)
+    cov, var_gravity = _model_covariance(J, est, B)
+    return cov + np.asarray(sigma_m, float)[:, None, None] ** 2 * np.eye(3), var_gravity
+
+
+def _gravity_active(est: Estimate, gravity: GravityCovariance | None) -> bool:
+    return gravity is not None and gravity.active and est.gravity_gain is not None
+
+
+def _model_covariance(J: np.ndarray, est: Estimate, B: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """``(N, k, k)`` covariance of ``J dtheta`` plus, given the gravity factors ``B`` (``(N, k, r)``),
+    the gravity-model part ``|B - J M|_F^2`` (``M = est.gravity_gain``; the estimate's covariance then
+    excludes ``M M^T``), and ``(N,)`` that part's trace."""
+    if B is None:
+        return np.einsum("nip,pq,njq->nij", J, est.covariance, J), np.zeros(len(J))
+    M = est.gravity_gain
+    R = B - J @ M
+    cov = np.einsum("nir,njr->nij", R, R) + np.einsum("nip,pq,njq->nij", J, est.covariance - M @ M.T, J)
+    return cov, np.einsum("nir,nir->n", R, R)
 
 
 def _orientation_rows(R: np.ndarray, points: list[np.ndarray], lever_m: float) -> np.ndarray:
@@ -125,18 +135,12 @@ def predicted_orientation_covariance(mm: MeasurementModel, est: Estimate, Q: np.
     at each configuration, without reading noise (module docstring; needs a marker-point model,
     ``mm.marker_points``), and ``(N,)`` its gravity-model part."""
     Jw = orientation_jacobian(mm, est, Q, lever_m)
-    C = est.covariance
-    var_gravity = np.zeros(len(Q))
-    cov = 0.0
-    if gravity is not None and gravity.active and est.gravity_gain is not None:
-        M = est.gravity_gain
-        C = C - M @ M.T
+    Bw = None
+    if _gravity_active(est, gravity):
         x_g = gravity_linearisation_point(mm, est)
         B = [gravity.factors(Q, x_g, est.registration, offsets=o) for o in _marker_offsets(len(Q), lever_m)]
-        Rw = _orientation_rows(_marker_rotation(mm, est, Q), B, lever_m) - Jw @ M
-        var_gravity = np.einsum("nir,nir->n", Rw, Rw)
-        cov = np.einsum("nir,njr->nij", Rw, Rw)
-    return cov + np.einsum("nip,pq,njq->nij", Jw, C, Jw), var_gravity
+        Bw = _orientation_rows(_marker_rotation(mm, est, Q), B, lever_m)
+    return _model_covariance(Jw, est, Bw)
 
 
 def predicted_error(mm: MeasurementModel, est: Estimate, Q: np.ndarray, sigma_m: np.ndarray,

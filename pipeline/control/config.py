@@ -17,7 +17,6 @@ from pipeline.errors import ConfigError
 
 FEEDFORWARD_VARIANTS = ("none", "gravity", "full", "full_friction", "elastic_static", "elastic_flat")
 ISO_PLANES = ("diagonal_x", "diagonal_y", "horizontal")        # keys of pipeline.control.iso9283.PLANES
-ISO_TOOL_ORIENTATIONS = TOOL_ORIENTATIONS
 ISO_SEGMENTS = ("line", "rectangle", "circle_large", "circle_small")
 ENGINES = ("compiled", "python")
 PATH_FRAMES = ("reflector", "tcp")
@@ -54,7 +53,7 @@ class IsoPathConfig:
             check_vector(source, f"{where}.centre_m", self.centre_m, 3, "m")
         check_choice(source, f"{where}.plane", self.plane, ISO_PLANES)
         if self.tool_orientation is not None:
-            check_choice(source, f"{where}.tool_orientation", self.tool_orientation, ISO_TOOL_ORIENTATIONS)
+            check_choice(source, f"{where}.tool_orientation", self.tool_orientation, TOOL_ORIENTATIONS)
         check_number(source, f"{where}.speed_m_s", self.speed_m_s, gt=0, unit="m/s")
         check_number(source, f"{where}.acceleration_m_s2", self.acceleration_m_s2, gt=0, unit="m/s^2")
         check_number(source, f"{where}.jerk_m_s3", self.jerk_m_s3, gt=0, unit="m/s^3")

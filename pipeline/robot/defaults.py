@@ -25,7 +25,6 @@ import copy
 from dataclasses import dataclass
 
 import numpy as np
-import pinocchio as pin
 
 from pipeline.control.iso9283 import TOOL_ORIENTATIONS, tool_rotation
 from pipeline.errors import InfeasibleError
@@ -46,7 +45,7 @@ class IsoCube:
     speed_m_s: float
     note: str
     q_start_rad: np.ndarray | None = None      # the IK branch the search validated (path start)
-    orientation: str = "down"                   # of ISO_ORIENTATIONS
+    orientation: str = "down"                   # of TOOL_ORIENTATIONS
     rotation: np.ndarray | None = None          # the constant TCP orientation of the path (base frame)
 
 
@@ -118,18 +117,14 @@ def ptp_move_rad(robot, fractions: tuple[float, ...] = (0.4, 0.3, 0.2, 0.1)) -> 
 
 _CUBES: dict[tuple, IsoCube] = {}
 
-ISO_ORIENTATIONS = TOOL_ORIENTATIONS
-
 
 def iso_rotation(robot, plane: str, orientation: str) -> np.ndarray:
     """The path's constant TCP orientation: ``down`` (z axis down), ``plane`` (z normal to the
     measuring plane, away from the base) or ``ready`` (as at :func:`ready_pose_rad`)."""
     if orientation == "ready":
-        data = robot.new_data()
-        pin.framesForwardKinematics(robot.model, data, ready_pose_rad(robot))
-        return np.array(data.oMf[robot.frame_id(robot.frame_tcp)].rotation)
-    if orientation not in ISO_ORIENTATIONS:
-        raise ValueError(f"unknown ISO tool orientation {orientation!r} (one of {', '.join(ISO_ORIENTATIONS)})")
+        return robot.poses(ready_pose_rad(robot), robot.frame_tcp)[1][0]
+    if orientation not in TOOL_ORIENTATIONS:
+        raise ValueError(f"unknown ISO tool orientation {orientation!r} (one of {', '.join(TOOL_ORIENTATIONS)})")
     return tool_rotation(plane, orientation == "down")
 
 
@@ -149,7 +144,7 @@ def iso_cube(robot, plane: str = "diagonal_x", orientation: str | None = None, s
     """The largest ISO 9283 cube whose whole path is feasible, found by a search over the workspace
     (:mod:`pipeline.robot.iso_search`; the IK branch starts from :func:`ik_seeds_rad`, as the stages do),
     with the tool in ``orientation`` (:func:`iso_rotation`); ``None``: the first of
-    :data:`ISO_ORIENTATIONS` that has a cube.
+    :data:`~pipeline.control.iso9283.TOOL_ORIENTATIONS` that has a cube.
 
     If no cube is feasible at ``speed_m_s`` (the joint speeds of a small or slow arm), the speed is lowered
     to ``SLOW_SHARE`` of the highest speed a small cube allows, and the largest cube at that speed returned.
@@ -157,7 +152,7 @@ def iso_cube(robot, plane: str = "diagonal_x", orientation: str | None = None, s
     """
     if orientation is None:
         failures = []
-        for candidate in ISO_ORIENTATIONS:
+        for candidate in TOOL_ORIENTATIONS:
             try:
                 return iso_cube(robot, plane, candidate, speed_m_s, frame)
             except InfeasibleError as exc:

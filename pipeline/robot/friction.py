@@ -26,6 +26,7 @@ def stribeck_excess_torque(v: np.ndarray, fs: np.ndarray, vs: np.ndarray, width_
 
 
 def has_stribeck(act: ActuationSpec) -> bool:
+    """The actuation carries an identified Stribeck term (both numbers given)."""
     return act.static_friction_excess_Nm is not None and act.stribeck_velocity_rad_s is not None
 
 
@@ -33,7 +34,7 @@ def joint_friction_torque(act: ActuationSpec, v: np.ndarray) -> np.ndarray:
     """Friction torque at joint velocities ``v`` (..., nq) of the model's actuation (module doc)."""
     v = np.asarray(v, float)
     tau = act.viscous_Nms_rad * v + act.coulomb_Nm * np.tanh(v / act.coulomb_smoothing_rad_s)
-    if act.static_friction_excess_Nm is not None and act.stribeck_velocity_rad_s is not None:
+    if has_stribeck(act):
         tau = tau + stribeck_excess_torque(v, act.static_friction_excess_Nm, act.stribeck_velocity_rad_s,
                                            act.coulomb_smoothing_rad_s)
     return tau
