@@ -54,10 +54,8 @@ arms with IPOPT refinement and the literal SQP reading, 90 notional arms with re
 pools of 400), took 12 min 39 s wall-clock on the shared 2-core machine with other runs beside it
 (load average 4-6.4); the arms' own times add up to 1482 s (KUKA 418 s, notional 1064 s, about
 12 s each), about what ``--jobs 1`` needs at that load (an earlier ``--jobs 1`` measurement in two
-parts at load about 8: 740 s + 1917 s). That measurement predates the elasticity experiment, which
-adds about 1 s per notional arm and seed and 20-60 s per KUKA arm (3 seeds; measured on its own:
-``--notional 0`` 165 s, 18 notional arms 86 s), so the defaults now take about 14-15 min (estimated, not
-re-measured as one command). ``--quick`` (KR 15, pool 300, 15 IPOPT iterations, one elastic seed) 10-30 s.
+parts at load about 8: 740 s + 1917 s). That measurement predates the elasticity experiment; with it, the
+defaults as one command (``--jobs 2``, the test suite running beside) took 6 min 54 s. ``--quick`` (KR 15, pool 300, 15 IPOPT iterations, one elastic seed) 10-30 s.
 """
 
 from __future__ import annotations
