@@ -55,7 +55,8 @@ pools of 400), took 12 min 39 s wall-clock on the shared 2-core machine with oth
 (load average 4-6.4); the arms' own times add up to 1482 s (KUKA 418 s, notional 1064 s, about
 12 s each), about what ``--jobs 1`` needs at that load (an earlier ``--jobs 1`` measurement in two
 parts at load about 8: 740 s + 1917 s). That measurement predates the elasticity experiment; with it, the
-defaults as one command (``--jobs 2``, the test suite running beside) took 6 min 54 s. ``--quick`` (KR 15, pool 300, 15 IPOPT iterations, one elastic seed) 10-30 s.
+defaults as one command (``--jobs 2``, the test suite running beside) took 6 min 54 s.
+``--quick`` (KR 15, pool 300, 15 IPOPT iterations, one elastic seed) 10-30 s.
 """
 
 from __future__ import annotations
