@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
+from scipy.interpolate import CubicHermiteSpline
 
 from pipeline.control.config import FEEDFORWARD_VARIANTS, ControlConfig
 from pipeline.control.design import ServoGains, design_gains, filter_alpha, reflected_inertia
@@ -83,8 +84,6 @@ def resample(t_s: np.ndarray, q: np.ndarray, v: np.ndarray, a: np.ndarray, dt: f
     grid = t_s[0] + dt * np.arange(n_grid)
     if len(t_s) == n_grid and np.allclose(t_s, grid, atol=1e-9 * max(1.0, abs(t_s[-1]))):
         return grid, q, v, a
-    from scipy.interpolate import CubicHermiteSpline
-
     qs = CubicHermiteSpline(t_s, q, v, axis=0)(grid)
     vs = np.stack([np.interp(grid, t_s, v[:, j]) for j in range(q.shape[1])], axis=1)
     acc = np.stack([np.interp(grid, t_s, a[:, j]) for j in range(q.shape[1])], axis=1)

@@ -15,6 +15,7 @@
 
 from __future__ import annotations
 
+import control as ct
 import numpy as np
 import pinocchio as pin
 from matplotlib.figure import Figure
@@ -145,8 +146,6 @@ def path_figure(desired_m: np.ndarray, actual: dict[str, np.ndarray], points: di
 
 def bode_figure(models: list[dict], joints: tuple[int, ...] = (0, 1, 2)) -> Figure:
     """Bode magnitude/phase of the velocity and position open loops (python-control frequency response)."""
-    import control as ct
-
     fig = Figure(figsize=(9, 5.5), constrained_layout=True)
     axs = fig.subplots(2, 2, sharex="col")
     for col, key in enumerate(("velocity_open", "position_open")):

@@ -37,6 +37,7 @@ import numpy as np
 import pinocchio as pin
 import scipy.linalg
 
+from pipeline.blas import single_thread_blas
 from pipeline.errors import DataFileError
 
 LINK_PARAMETER_NAMES: tuple[str, ...] = (
@@ -274,8 +275,6 @@ def base_parameters_from_regressor(
     Y: np.ndarray, names: list[str], tolerance: float = BASE_QR_TOLERANCE
 ) -> BaseParameters:
     """Base parameters of a given (well excited) regressor by pivoted QR."""
-    from pipeline.blas import single_thread_blas
-
     with single_thread_blas():
         return _base_from_regressor(Y, names, tolerance)
 

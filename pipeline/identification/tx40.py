@@ -27,7 +27,7 @@ import numpy as np
 
 from pipeline.blas import single_thread_blas
 from pipeline.config import REPO_ROOT
-from pipeline.errors import DataFileError
+from pipeline.errors import ConfigError, DataFileError
 from pipeline.identification import estimate as est_mod
 from pipeline.identification.measure import JointRecord, ProcessedData, motor_to_joint, process_record
 from pipeline.identification.regressor import (
@@ -100,8 +100,6 @@ def check_tx40_config(cfg: Tx40Config, field: str = "identification.tx40") -> No
     """Cheap early check (no robot, no parsing of the numbers): the record's folder and its two
     files exist, and the samples left after ``max_samples``, decimation and the border drop are
     enough for the held-out fit of the standard parameters. Raises ConfigError / DataFileError."""
-    from pipeline.errors import ConfigError
-
     d = Path(cfg.data_dir) if cfg.data_dir else TX40_DATA_DIR
     if not d.is_dir():
         what = "does not exist" if not d.exists() else "is not a folder"

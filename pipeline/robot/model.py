@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import yaml
+from scipy.optimize import minimize
 
 from pipeline.artefacts import write_text
 from pipeline.errors import RobotFileError
@@ -352,8 +353,6 @@ class RobotModel:
         radial = flange - np.outer(flange @ axis, axis)
         reach = float(np.max(np.linalg.norm(radial, axis=1)))
         # refine the sampled maximum with the stretched configuration search of scipy
-        from scipy.optimize import minimize
-
         best = samples[int(np.argmax(np.linalg.norm(radial, axis=1)))]
 
         def negative_reach(q: np.ndarray) -> float:

@@ -17,6 +17,7 @@ from abc import ABC, abstractmethod
 
 import numpy as np
 import pinocchio as pin
+from scipy.interpolate import CubicSpline
 
 from pipeline.errors import ConfigError, InfeasibleError
 
@@ -169,8 +170,6 @@ class SplinePath(CartesianPath):
     """Cubic spline through ``points`` (chord-length knots), re-parameterised by arc length."""
 
     def __init__(self, points, rotation=None, n_table: int = 2001, label: str = "spline") -> None:
-        from scipy.interpolate import CubicSpline
-
         pts = np.asarray(points, float)
         if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 3:
             raise ConfigError(None, "spline.points", "needs (M >= 3, 3) points")

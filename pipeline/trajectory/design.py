@@ -16,6 +16,7 @@ import numpy as np
 from scipy.interpolate import make_interp_spline
 
 from pipeline.errors import InfeasibleError
+from pipeline.robot.paths import ik_track, start_configuration
 
 
 class JointPath:
@@ -56,8 +57,6 @@ def joint_path_from_cartesian(robot: Any, path: Any, n_points: int, q_seed: np.n
     naming the unreachable point, or a joint jump larger than ``max_step_rad`` between neighbours
     (singularity or branch change).
     """
-    from pipeline.robot.paths import ik_track, start_configuration
-
     frame = frame or robot.frame_tcp
     poses = path.sample(n_points)
     q0 = start_configuration(robot, poses[0], np.atleast_2d(q_seed), frame)

@@ -24,6 +24,8 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from pipeline.errors import ConfigError
+
 #: joint path derivatives smaller than this are treated as "joint does not move" (Coulomb sign).
 QPRIME_ZERO = 1e-9
 
@@ -55,8 +57,6 @@ class PlanningModel:
         ``effort_Nm = (1 - torque_reserve) * limit``.
         """
         if not 0.0 <= torque_reserve < 1.0:
-            from pipeline.errors import ConfigError
-
             raise ConfigError(None, "trajectory.torque_reserve", f"must be in [0, 1), got {torque_reserve}")
         lim, act = robot.limits, robot.actuation
         return cls(

@@ -15,8 +15,10 @@ from typing import Any
 import numpy as np
 
 from pipeline.control.iso9283 import iso9283_path, tool_rotation
+from pipeline.errors import InfeasibleError, SolverError
 from pipeline.robot.defaults import iso_cube, ready_pose_rad
 from pipeline.robot.paths import SplinePath
+from pipeline.robot.symbolic import SymbolicRobot
 from pipeline.trajectory.baselines import RuckigResult, ruckig_torque_feasible, toppra_cp
 from pipeline.trajectory.config import TrajectoryConfig
 from pipeline.trajectory.cp import (
@@ -34,6 +36,7 @@ from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.ptp import PtpProblem, PtpResult, energy_weights
 from pipeline.trajectory.reachability import solve_cp_reachability
 from pipeline.trajectory.trajectories import JointTrajectory, TorqueCheck, check_trajectory
+from pipeline.trajectory.validate import dominated_flags
 
 
 def cp_joint_path(robot: Any, cfg: TrajectoryConfig) -> tuple[JointPath, Any]:
@@ -238,8 +241,6 @@ class PTPPlan:
 
 def ptp_problem(pm: PlanningModel, robot: Any, cfg: TrajectoryConfig) -> PtpProblem:
     """The PtP NLP for ``robot``'s dynamics (symbolic bridge), compiled once and cached on disk."""
-    from pipeline.robot.symbolic import SymbolicRobot
-
     return PtpProblem(pm, SymbolicRobot(robot), cfg.ptp_n_intervals, jit=cfg.ptp_jit,
                       # tol 1e-4 on the scaled KKT error with constraints (dynamics defects in rad, torques
                       # over their limits) held to 1e-6: half the IPOPT iterations of tol 1e-6 over 12
@@ -310,9 +311,6 @@ def settle_pareto(sweep: list[PtpResult], fine_energy: Callable[[PtpResult], flo
     stays (``info["cold_restart"]``: ``"kept"`` on the cold solution, ``"discarded"`` or
     ``"failed: ..."`` on the continuation's). Results in ``cold_started`` are not re-solved
     (``"is a cold start"``). Every result gets ``info["dominated"]`` of the final set."""
-    from pipeline.errors import InfeasibleError, SolverError
-    from pipeline.trajectory.validate import dominated_flags
-
     def objective(r: PtpResult) -> float:
         return r.k1 * r.duration_s + r.k2 * r.info["fine_energy"]
 

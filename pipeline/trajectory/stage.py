@@ -26,6 +26,7 @@ import time
 
 import numpy as np
 
+from pipeline.control.config import ControlConfig
 from pipeline.errors import ConfigError
 from pipeline.quality import QualityGates
 from pipeline.robot.defaults import ptp_move_rad
@@ -104,8 +105,6 @@ def pareto_table(entries: list[dict], energy_label: str) -> str:
 
 
 def _control_config(ctx: StageContext):
-    from pipeline.control.config import ControlConfig
-
     base = getattr(ctx.run, "sections", {}).get("control") if hasattr(ctx.run, "sections") else None
     cfg = base if isinstance(base, ControlConfig) else ControlConfig()
     return ControlConfig(**{**cfg.__dict__, "on_saturation": "clip", "benchmark_python_seconds": 0.0})

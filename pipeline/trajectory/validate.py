@@ -8,6 +8,8 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
+from pipeline.control.config import ControlConfig
+from pipeline.control.simulate import simulate_joint_trajectory
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.trajectories import JointTrajectory, TorqueCheck
 
@@ -23,9 +25,6 @@ def simulate_on_real(real: Any, robot: Any, traj: JointTrajectory, control_confi
     feedforward alone, ``max_averaged_torque_ratio`` of the command averaged over
     ``average_window_s``, and the feedback share ``(tau_cmd - tau_ff) / tau_max`` per joint
     (standard deviation and maximum)."""
-    from pipeline.control.config import ControlConfig
-    from pipeline.control.simulate import simulate_joint_trajectory
-
     cfg = control_config or ControlConfig(on_saturation="clip", benchmark_python_seconds=0.0)
     if getattr(cfg, "on_saturation", "clip") != "clip":
         cfg = ControlConfig(**{**cfg.__dict__, "on_saturation": "clip"})
