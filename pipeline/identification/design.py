@@ -62,10 +62,12 @@ from pipeline.identification.regressor import BaseParameters, RegressorModel
 from pipeline.identification.tcp_motion import tcp_motion_sx
 from pipeline.interrupts import raise_if_interrupted
 from pipeline.robot.collision_sx import capsule_clearance_function
+from pipeline.robot.model import RobotModel
+from pipeline.robot.symbolic import SymbolicRobot
 from pipeline.solver_status import is_success
 
 
-def regressor_casadi(sym: Any, reg: RegressorModel, base: BaseParameters) -> ca.Function:
+def regressor_casadi(sym: SymbolicRobot, reg: RegressorModel, base: BaseParameters) -> ca.Function:
     """``Y_b(q, v, a)`` as a CasADi function: inertial columns from ``sym.regressor`` (the
     symbolic bridge), actuator columns from the gear matrix (same formulas as
     :meth:`RegressorModel.actuator_columns`), then the base columns."""
@@ -271,7 +273,7 @@ class ExcitationResult:
         return float(np.median(self.cond_random))
 
 
-def sample_constraint_function(robot: Any, sym: Any, limits: ExcitationLimits) -> ca.Function:
+def sample_constraint_function(robot: RobotModel, sym: SymbolicRobot, limits: ExcitationLimits) -> ca.Function:
     """Per-sample nonlinear constraints ``h([q; v; a])``: torque / limit (nominal model), TCP
     height, capsule self clearances, capsule floor clearances and, when ``limits`` bound them,
     ``|p_dot|^2 / v_max^2`` and ``|p_ddot|^2 / a_max^2`` of the TCP (SX, expanded)."""
@@ -289,8 +291,8 @@ def sample_constraint_function(robot: Any, sym: Any, limits: ExcitationLimits) -
 
 
 def _build_nlp(
-    robot: Any,
-    sym: Any,
+    robot: RobotModel,
+    sym: SymbolicRobot,
     crit: ExcitationCriterion,
     limits: ExcitationLimits,
     harmonics: int,
@@ -356,7 +358,7 @@ def _build_nlp(
 
 
 def shrink_to_feasible(
-    robot: Any, traj: FourierTrajectory, limits: ExcitationLimits, n_check: int
+    robot: RobotModel, traj: FourierTrajectory, limits: ExcitationLimits, n_check: int
 ) -> tuple[FourierTrajectory, FeasibilityReport]:
     """Scale the oscillation about the mean (keeps rest-to-rest) until the fine-grid check
     passes: IPOPT may stop at its iteration limit on a slightly infeasible iterate, and the NLP
@@ -378,8 +380,8 @@ def shrink_to_feasible(
     return traj, report
 
 
-def optimize_excitation(robot: Any, sym: Any, reg: RegressorModel, base: BaseParameters, limits: ExcitationLimits,
-                        rng: np.random.Generator, **options: Any) -> ExcitationResult:
+def optimize_excitation(robot: RobotModel, sym: SymbolicRobot, reg: RegressorModel, base: BaseParameters,
+                        limits: ExcitationLimits, rng: np.random.Generator, **options: Any) -> ExcitationResult:
     """Random-start IPOPT optimisation of the excitation (see the module docstring) with one BLAS
     thread; ``options`` are those of :func:`_optimize_excitation_impl`."""
     with single_thread_blas():
@@ -387,8 +389,8 @@ def optimize_excitation(robot: Any, sym: Any, reg: RegressorModel, base: BasePar
 
 
 def _optimize_excitation_impl(
-    robot: Any,
-    sym: Any,
+    robot: RobotModel,
+    sym: SymbolicRobot,
     reg: RegressorModel,
     base: BaseParameters,
     limits: ExcitationLimits,

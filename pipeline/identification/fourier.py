@@ -19,12 +19,12 @@ acceleration and nominal torque limits and the capsule self/floor clearances;
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from pipeline.errors import InfeasibleError
 from pipeline.identification.tcp_motion import tcp_speed_acceleration
+from pipeline.robot.model import RobotModel
 
 
 # ------------------------------------------------------------------------------ trajectories
@@ -98,7 +98,7 @@ def rest_constraint_matrix(harmonics: int) -> np.ndarray:
 CLOSE_PAIR_SHARE = 0.5
 
 
-def pair_clearances_m(robot: Any, self_clearance_m: float) -> np.ndarray:
+def pair_clearances_m(robot: RobotModel, self_clearance_m: float) -> np.ndarray:
     """Required clearance per checked capsule pair: ``self_clearance_m``, or for a pair whose median
     clearance over random configurations (:meth:`RobotModel.typical_pair_clearances_m`) is below it,
     :data:`CLOSE_PAIR_SHARE` of that median. Fitted capsules of a compact arm (the Unitree Z1's wrist
@@ -139,7 +139,7 @@ class ExcitationLimits:
     @classmethod
     def from_robot(
         cls,
-        robot: Any,
+        robot: RobotModel,
         position_margin: float,
         velocity_margin: float,
         acceleration_margin: float,
@@ -194,7 +194,7 @@ class FeasibilityReport:
 
 
 def check_trajectory(
-    robot: Any,
+    robot: RobotModel,
     traj: FourierTrajectory,
     limits: ExcitationLimits,
     n_samples: int = 400,
@@ -230,7 +230,7 @@ def check_trajectory(
 
 
 def random_trajectory(
-    robot: Any,
+    robot: RobotModel,
     limits: ExcitationLimits,
     harmonics: int,
     base_frequency_hz: float,
@@ -312,7 +312,7 @@ SHRINK_FACTORS = (1.0, 0.7, 0.5, 0.35)
 
 
 def random_feasible_trajectories(
-    robot: Any,
+    robot: RobotModel,
     limits: ExcitationLimits,
     harmonics: int,
     base_frequency_hz: float,

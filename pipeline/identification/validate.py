@@ -24,6 +24,7 @@ from pipeline.control.reference import cartesian_reference
 from pipeline.errors import PipelineError
 from pipeline.identification.regressor import BaseParameters
 from pipeline.robot.defaults import ik_seeds_or_derived_rad, iso_or_derived, iso_rotation
+from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import start_configuration
 
 
@@ -51,7 +52,7 @@ def run_iso_config(run: Any) -> Any:
     return run_control_config(run).iso
 
 
-def ik_seeds_rad(control: Any, robot: Any) -> np.ndarray:
+def ik_seeds_rad(control: Any, robot: RobotModel) -> np.ndarray:
     """The run's ``control.ik_seeds_deg`` as (k, nq) rad; none given -> seeds derived from the
     robot (:func:`pipeline.robot.defaults.ik_seeds_or_derived_rad`). A seed of the wrong length
     raises :class:`PipelineError` naming the field."""
@@ -67,7 +68,7 @@ def ik_seeds_rad(control: Any, robot: Any) -> np.ndarray:
     return np.radians(np.vstack(arr))
 
 
-def iso_validation_trajectory(robot: Any, sample_time_s: float, control: Any = None) -> ValidationTrajectory:
+def iso_validation_trajectory(robot: RobotModel, sample_time_s: float, control: Any = None) -> ValidationTrajectory:
     """The ISO 9283 path of the run's ``control.iso`` as joint reference of the control stage's path
     frame (``control.path_frame``: the tracker's reflector or the TCP), started by IK
     from the run's ``control.ik_seeds_deg`` with its ``control.ik_tolerance_m`` (``control`` from
@@ -87,7 +88,7 @@ def iso_validation_trajectory(robot: Any, sample_time_s: float, control: Any = N
 
 
 def validation_trajectory(
-    robot: Any, sample_time_s: float, fallback: Any, use_iso: bool = True, control: Any = None
+    robot: RobotModel, sample_time_s: float, fallback: Any, use_iso: bool = True, control: Any = None
 ) -> ValidationTrajectory:
     """ISO 9283 path of the run's control section (None: built-in defaults) if it can be built for
     ``robot`` (within limits), else ``fallback()`` with ``note`` saying the real reason."""

@@ -19,12 +19,12 @@ c = rnea(q, q', q'') - g.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
 from pipeline.errors import ConfigError
+from pipeline.robot.model import RobotModel
 
 #: joint path derivatives smaller than this are treated as "joint does not move" (Coulomb sign).
 QPRIME_ZERO = 1e-9
@@ -43,14 +43,14 @@ class PlanningModel:
     coulomb_Nm: np.ndarray
     coulomb_smoothing_rad_s: float
     acceleration_rad_s2: np.ndarray
-    robot: Any = None  # the RobotModel it was made from (IK, FK, symbolic bridge), if any
+    robot: RobotModel = None  # the RobotModel it was made from (IK, FK, symbolic bridge), if any
 
     @property
     def nq(self) -> int:
         return int(self.model.nq)
 
     @classmethod
-    def from_robot(cls, robot: Any, torque_reserve: float = 0.0) -> PlanningModel:
+    def from_robot(cls, robot: RobotModel, torque_reserve: float = 0.0) -> PlanningModel:
         """Build from a :class:`pipeline.robot.model.RobotModel` (docs/ARCHITECTURE.md).
 
         ``torque_reserve`` (fraction) is kept free for the feedback controller: the planners see

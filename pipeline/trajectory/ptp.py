@@ -39,6 +39,7 @@ import numpy as np
 from pipeline import codegen
 from pipeline.errors import InfeasibleError, PipelineError, SolverError
 from pipeline.interrupts import raise_if_interrupted
+from pipeline.robot.symbolic import SymbolicRobot
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.trajectories import JointTrajectory
 
@@ -117,7 +118,7 @@ class PtpProblem:
     overridden per call; ``p_dyn`` defaults to the symbolic robot's nominal parameters.
     """
 
-    def __init__(self, pm: PlanningModel, sym: Any, n_intervals: int = 50, jit: bool = True,
+    def __init__(self, pm: PlanningModel, sym: SymbolicRobot, n_intervals: int = 50, jit: bool = True,
                  cache_dir: Path | None = None, ipopt_options: dict | None = None,
                  jit_flags: tuple[str, ...] = JIT_FLAGS, p_dyn: np.ndarray | None = None) -> None:
         t0 = time.perf_counter()

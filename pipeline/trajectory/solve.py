@@ -17,6 +17,7 @@ import numpy as np
 from pipeline.control.iso9283 import iso9283_path, tool_rotation
 from pipeline.errors import InfeasibleError, SolverError
 from pipeline.robot.defaults import iso_cube, ready_pose_rad
+from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import SplinePath
 from pipeline.robot.symbolic import SymbolicRobot
 from pipeline.trajectory.baselines import RuckigResult, ruckig_torque_feasible, toppra_cp
@@ -39,7 +40,7 @@ from pipeline.trajectory.trajectories import JointTrajectory, TorqueCheck, check
 from pipeline.trajectory.validate import dominated_flags
 
 
-def cp_joint_path(robot: Any, cfg: TrajectoryConfig) -> tuple[JointPath, Any]:
+def cp_joint_path(robot: RobotModel, cfg: TrajectoryConfig) -> tuple[JointPath, Any]:
     """The configured Cartesian path and its joint path by IK: a smooth piece of the EN ISO 9283
     path (stage 3's builder) or a cubic spline through ``cp_points_m``.
 
@@ -239,7 +240,7 @@ class PTPPlan:
         return self.at_ruckig_duration.info.get("solver_status")
 
 
-def ptp_problem(pm: PlanningModel, robot: Any, cfg: TrajectoryConfig) -> PtpProblem:
+def ptp_problem(pm: PlanningModel, robot: RobotModel, cfg: TrajectoryConfig) -> PtpProblem:
     """The PtP NLP for ``robot``'s dynamics (symbolic bridge), compiled once and cached on disk."""
     return PtpProblem(pm, SymbolicRobot(robot), cfg.ptp_n_intervals, jit=cfg.ptp_jit,
                       # tol 1e-4 on the scaled KKT error with constraints (dynamics defects in rad, torques
