@@ -27,10 +27,12 @@ from __future__ import annotations
 import argparse
 import math
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
 from pipeline.blas import single_thread_blas
+from pipeline.calibration import candidates as cd
 from pipeline.calibration import design as ds
 from pipeline.calibration import error_model as em
 from pipeline.calibration import indices as ix
@@ -55,9 +57,22 @@ def _spec(name: str, robot, mm, basis, Qw, sigma_m: float, kpi_Q) -> ix.IndexSpe
     return ix.IndexSpec(name, oc_jacobian_scale=sigma_m, oc_od_scale=1e-6)
 
 
-def robot_designs(robot_name: str, n: int, curve: list[int], quick: bool, grid: int, n_cand: int,
-                  n_region: int, kpi_poses: int, selectors: bool) -> dict:
-    """Every design of the study for one robot: ``{key: (method, index, n, Q)}`` plus the region."""
+@dataclass
+class StudyPool:
+    """What every design of the study for one robot is built from (nominal model only)."""
+
+    robot: RobotModel
+    mm: em.MeasurementModel
+    basis: np.ndarray               # identifiable parameter basis (n_full, p)
+    cs: cd.CandidateSet             # candidates with whitened Jacobian blocks
+    region: ts.WorkingRegion
+    Qw: np.ndarray                  # working configurations of the region
+    rng: np.random.Generator        # the study's stream, to be used on by the selectors
+
+
+def study_pool(robot_name: str, n: int, quick: bool, grid: int, n_cand: int, n_region: int) -> StudyPool:
+    """Parameter set, candidates and working configurations of the study for ``n`` configurations
+    (the stream ``default_rng([7, n])``: the same pool in the study and in benchmarks that reuse it)."""
     robot = RobotModel.load(robot_name)
     rng = np.random.default_rng([7, n])
     mm = em.MeasurementModel(robot)
@@ -66,6 +81,14 @@ def robot_designs(robot_name: str, n: int, curve: list[int], quick: bool, grid: 
     cs = st.build_candidates(robot, cfg, basis, rng)
     region = ts.default_region(robot)
     Qw = ts.sample_region(robot, region, n_region, rng)
+    return StudyPool(robot, mm, basis, cs, region, Qw, rng)
+
+
+def robot_designs(robot_name: str, n: int, curve: list[int], quick: bool, grid: int, n_cand: int,
+                  n_region: int, kpi_poses: int, selectors: bool) -> dict:
+    """Every design of the study for one robot: ``{key: (method, index, n, Q)}`` plus the region."""
+    pool = study_pool(robot_name, n, quick, grid, n_cand, n_region)
+    robot, mm, basis, cs, region, Qw, rng = pool.robot, pool.mm, pool.basis, pool.cs, pool.region, pool.Qw, pool.rng
     kpi_Q = Qw[rng.choice(len(Qw), size=min(kpi_poses, len(Qw)), replace=False)]
     sigma = float(np.median(cs.sigma_m))
     specs = {name: _spec(name, robot, mm, basis, Qw, sigma, kpi_Q) for name in INDICES}
