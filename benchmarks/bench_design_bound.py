@@ -44,6 +44,7 @@ from pipeline.calibration import task_space as ts
 from pipeline.calibration.design_study import study_pool
 
 GAIN_FACTOR = 0.85        # the acceptance: >= 15 % lower RMS
+PREDICTION_FACTOR = 1.2   # the acceptance's predicted/actual bound
 EFFORT_SHARE = 0.60       # the acceptance: the baseline's RMS with <= 60 % of the measurements
 BASELINES = ("every (N/n)-th", "random", "O3 remove-and-replace")
 
@@ -130,6 +131,10 @@ def _figure(wname: str, W: np.ndarray, G: np.ndarray, sel: dict, rr_sizes: dict,
             print(f"| {label} | {what} | {pr:.3f} | {pr ** a.seeds:.1e} | {a.seeds * pr:.1f} |")
     q = {k: np.quantile(d, [0.1, 0.9]) * 1e6 for k, d in draws.items()}
     print("realised RMS, 10-90 % of the seeds [µm]: " + ", ".join(f"{k} {v[0]:.1f}..{v[1]:.1f}" for k, v in q.items()))
+    ratio = math.sqrt(V[v_key]) / draws[v_key]
+    p_ratio = float(np.mean(np.abs(np.log(ratio)) <= math.log(PREDICTION_FACTOR)))
+    print(f"predicted/actual of the V design within {PREDICTION_FACTOR} (either way) on one seed: {p_ratio:.3f}, "
+          f"on all {a.seeds} seeds: {p_ratio ** a.seeds:.1e} (noise alone, exact linear model)")
     scale = min(db.rms_scale_needed(draws["bound"], draws[b], GAIN_FACTOR, a.seeds) for b in (kth, o3))
     print(f"to pass on all {a.seeds} seeds against both with probability 0.5, a design would need a predicted RMS "
           f"of {scale:.2f} x the bound ({100 * (1 - scale):.0f} % below what any design of the pool can reach)")
