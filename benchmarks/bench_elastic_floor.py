@@ -17,8 +17,11 @@ from the EXACT hidden robot, and one thing is switched off at a time:
   k/d``); friction with the truth's load dependence (evaluated at ``tau_l``);
 * the truth's non-linear friction: the load-dependent Coulomb part, the Stribeck excess (the
   feedforward keeps matching the truth);
-* the velocity-loop gain: ``Kv`` raised where it is below 1.5 x the steepest slope of the
-  Stribeck curve (``Ki`` scaled alike).
+* the velocity-loop gain: the cases above use the servo of the bandwidth design alone
+  (``control.stick_slip_margin: 0``); then ``Kv`` raised to ``margin`` x the truth's steepest Stribeck
+  slope minus viscous friction (``Ki`` scaled alike, :func:`pipeline.control.design.stick_slip_gains`),
+  and the pipeline's model with the bandwidth design, that floor, and the stage's own floor from the
+  identified Stribeck term (``control.stick_slip_margin``).
 
 Why the last one: the Stribeck curve ``(F_s - F_c) exp(-(w/w_s)^2)`` falls with speed, at most by
 ``sqrt(2/e) (F_s - F_c)(1 + mu) / w_s`` (N m s/rad) at ``w = w_s / sqrt(2)``. That is a negative
@@ -51,34 +54,23 @@ from scipy.signal import savgol_filter
 from pipeline.config import load_config
 from pipeline.control import simulate
 from pipeline.control.config import ControlConfig
-from pipeline.control.design import ServoGains, filter_alpha, servo_report
+from pipeline.control.design import ServoGains, filter_alpha, servo_report, stick_slip_gains
 from pipeline.control.elastic_feedforward import link_torque
 from pipeline.control.joint_stiffness import feedforward_stiffness
 from pipeline.control.plant import Plant
 from pipeline.control.simulate import servo_gains, simulate_joint_trajectory
 from pipeline.control.stage import iso_reference
+from pipeline.robot.friction import stribeck_slope_Nms_rad
 from pipeline.robot.model import RobotModel
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 from pipeline.robot.transmission import Transmission
 from pipeline.robot.truth import RealRobot, TruthConfig
 from pipeline.runner import stage_rng
 
-#: steepest negative slope of exp(-(w/w_s)^2) times w_s: sqrt(2/e) at w = w_s / sqrt(2)
-STRIBECK_SLOPE_FACTOR = float(np.sqrt(2.0 / np.e))
 
-
-def stribeck_slope_Nms_rad(tr: Transmission) -> np.ndarray:
+def true_slope_Nms_rad(tr: Transmission) -> np.ndarray:
     """Steepest fall of the truth's friction with motor speed (N m s/rad, at rated load)."""
-    excess = tr.static_excess_Nm * (1.0 + tr.coulomb_load_coefficient)
-    return STRIBECK_SLOPE_FACTOR * excess / tr.stribeck_velocity_rad_s
-
-
-def identified_slope_Nms_rad(model: RobotModel) -> np.ndarray:
-    """The same from a model's identified Stribeck term (zero load; 0 without one)."""
-    act = model.spec.actuation
-    if act.static_friction_excess_Nm is None or act.stribeck_velocity_rad_s is None:
-        return np.zeros(model.nq)
-    return STRIBECK_SLOPE_FACTOR * np.asarray(act.static_friction_excess_Nm) / np.asarray(act.stribeck_velocity_rad_s)
+    return stribeck_slope_Nms_rad(tr.static_excess_Nm * (1.0 + tr.coulomb_load_coefficient), tr.stribeck_velocity_rad_s)
 
 
 def _derivative(x: np.ndarray, dt: float, order: int, window_s: float) -> np.ndarray:
@@ -146,12 +138,6 @@ class Case:
     model: RobotModel | None = None                            # None: the exact hidden robot with ``transmission``
 
 
-def raised_gains(gains: ServoGains, slope: np.ndarray, viscous: np.ndarray, margin: float) -> ServoGains:
-    """``Kv >= margin * slope - viscous`` per joint, ``Ki`` scaled by the same factor."""
-    kv = np.maximum(gains.kv, margin * slope - viscous)
-    return dataclasses.replace(gains, kv=kv, ki=gains.ki * kv / gains.kv)
-
-
 def main(run_dir: str = "data/runs/default") -> None:
     run = Path(run_dir)
     raw = yaml.safe_load((run / "config.yaml").read_text())
@@ -169,13 +155,14 @@ def main(run_dir: str = "data/runs/default") -> None:
     tr = real.transmission
     t0 = time.perf_counter()
     ref, _, frame, _, _ = iso_reference(pipe, cfg)
-    gains = servo_gains(pipe, np.mean(ref.q_d, axis=0), cfg)
+    q_mean = np.mean(ref.q_d, axis=0)
+    gains = servo_gains(pipe, q_mean, dataclasses.replace(cfg, stick_slip_margin=0.0))   # bandwidth design only
+    stage_gains = servo_gains(pipe, q_mean, cfg)                                      # + the stage's floor
     noise_seed = int(stage_rng(seed, "control").integers(2**32))   # the control stage's first draw
     at_ref = real.plant.measure_tcp(ref.q_d, frame)
-    slope = stribeck_slope_Nms_rad(tr)
-    margin = 1.5
-    stiff_gains = raised_gains(gains, slope, tr.viscous_Nms_rad, margin)
-    id_gains = raised_gains(gains, identified_slope_Nms_rad(pipe), pipe.actuation.viscous_Nms_rad, margin)
+    slope = true_slope_Nms_rad(tr)
+    margin = cfg.stick_slip_margin if cfg.stick_slip_margin > 0 else 1.5
+    stiff_gains = stick_slip_gains(gains, slope, tr.viscous_Nms_rad, margin)
 
     no_load = dataclasses.replace(tr, coulomb_load_coefficient=np.zeros_like(tr.effort_Nm))
     no_stribeck = dataclasses.replace(tr, static_excess_Nm=np.zeros_like(tr.effort_Nm))
@@ -207,10 +194,10 @@ def main(run_dir: str = "data/runs/default") -> None:
              Case("truth: Stribeck excess 0", no_stribeck, cfg, gains),
              Case("truth: Stribeck excess 0 and load dependence 0", neither, cfg, gains),
              *ff_cases("w/o Stribeck, ", no_stribeck),
-             Case(f"servo: Kv >= {margin} x Stribeck slope - viscous", tr, cfg, stiff_gains),
-             Case("pipeline model (the stage's feedforward and gains)", tr, cfg, gains, model=pipe),
+             Case(f"servo: Kv >= {margin} x true Stribeck slope - viscous", tr, cfg, stiff_gains),
+             Case("pipeline model, bandwidth design only", tr, cfg, gains, model=pipe),
              Case(f"pipeline model, Kv >= {margin} x true slope", tr, cfg, stiff_gains, model=pipe),
-             Case(f"pipeline model, Kv >= {margin} x identified slope", tr, cfg, id_gains, model=pipe)]
+             Case("pipeline model, the stage's gains (identified slope)", tr, cfg, stage_gains, model=pipe)]
 
     print(f"{robot_name}, seed {seed}, run {run}: ISO path {ref.t_s[-1]:.2f} s, reference in "
           f"{time.perf_counter() - t0:.1f} s")
@@ -220,10 +207,10 @@ def main(run_dir: str = "data/runs/default") -> None:
         alpha)]
     np.set_printoptions(precision=2, suppress=True, linewidth=150)
     print(f"steepest Stribeck slope [N m s/rad]   {slope}")
-    print(f"Kv + viscous (stage's gains)          {gains.kv + tr.viscous_Nms_rad}")
+    print(f"Kv + viscous (bandwidth design)       {gains.kv + tr.viscous_Nms_rad}")
     print(f"slope / (Kv + viscous)                {slope / (gains.kv + tr.viscous_Nms_rad)}   (> 1: stick-slip prone)")
     print(f"Kv raised to {margin} x slope: velocity-loop phase margin [deg] {np.array(pm)} (rigid loop model)")
-    print(f"identified slope (pipeline model)     {identified_slope_Nms_rad(pipe)}")
+    print(f"stage's Kv (identified Stribeck)      {stage_gains.kv}  (bandwidth design {gains.kv})")
 
     def run_case(c: Case) -> tuple[float, float, np.ndarray]:
         plant = Plant(real.truth, **({"encoder_noise_rad": truth_cfg.encoder_noise_rad} | c.plant),
