@@ -32,7 +32,7 @@ STRIBECK_SLOPE_FACTOR = float(np.sqrt(2.0 / np.e))
 def stribeck_slope_Nms_rad(fs: np.ndarray, vs: np.ndarray) -> np.ndarray:
     """Steepest negative slope of the Stribeck excess ``fs exp(-(v / vs)^2)`` over ``v`` (N m s/rad):
     ``sqrt(2 / e) fs / vs``. Friction falling with speed is a negative damping (stick-slip,
-    Armstrong-Hélouvry et al. 1994, §2.4)."""
+    Armstrong-Hélouvry, Dupont and Canudas de Wit 1994, module docstring)."""
     return STRIBECK_SLOPE_FACTOR * np.asarray(fs, float) / np.asarray(vs, float)
 
 
