@@ -162,7 +162,7 @@ def main(run_dir: str = "data/runs/default") -> None:
     at_ref = real.plant.measure_tcp(ref.q_d, frame)
     slope = true_slope_Nms_rad(tr)
     margin = cfg.stick_slip_margin if cfg.stick_slip_margin > 0 else 1.5
-    stiff_gains = stick_slip_gains(gains, slope, tr.viscous_Nms_rad, margin)
+    stiff_gains = stick_slip_gains(gains, slope, tr.viscous_Nms_rad, margin, 2 * np.pi * cfg.velocity_filter_hz)
 
     no_load = dataclasses.replace(tr, coulomb_load_coefficient=np.zeros_like(tr.effort_Nm))
     no_stribeck = dataclasses.replace(tr, static_excess_Nm=np.zeros_like(tr.effort_Nm))

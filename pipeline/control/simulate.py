@@ -121,7 +121,8 @@ def servo_gains(model, q_ref: np.ndarray, config: ControlConfig) -> ServoGains:
     act = model.spec.actuation
     if config.stick_slip_margin > 0 and has_stribeck(act):
         slope = stribeck_slope_Nms_rad(act.static_friction_excess_Nm, act.stribeck_velocity_rad_s)
-        gains = stick_slip_gains(gains, slope, act.viscous_Nms_rad, config.stick_slip_margin)
+        gains = stick_slip_gains(gains, slope, act.viscous_Nms_rad, config.stick_slip_margin,
+                                 2 * np.pi * config.velocity_filter_hz)
     return gains
 
 

@@ -22,12 +22,16 @@ def test_slope_is_the_steepest_fall_of_the_stribeck_term():
     np.testing.assert_allclose(fall.max(axis=0), stribeck_slope_Nms_rad(fs, vs), rtol=1e-4)
 
 
-def test_floor_raises_only_the_joints_below_it_and_keeps_the_pi_zero():
-    g = design_gains(np.array([1.0, 0.01, 0.02]), 2 * np.pi * 5.0, 2 * np.pi * 30.0)
-    slope, viscous = np.array([10.0, 10.0, 0.0]), np.array([1.0, 1.0, 1.0])
-    out = stick_slip_gains(g, slope, viscous, 1.5)
-    assert np.all(out.kv + viscous >= 1.5 * slope - 1e-12)
+def test_floor_raises_only_the_joints_below_it_keeps_the_pi_zero_and_stops_at_the_cap():
+    J = np.array([1.0, 0.05, 0.02, 0.001])
+    g = design_gains(J, 2 * np.pi * 5.0, 2 * np.pi * 30.0)
+    slope, viscous = np.array([10.0, 10.0, 0.0, 10.0]), np.ones(4)
+    w_max = 2 * np.pi * 150.0
+    out = stick_slip_gains(g, slope, viscous, 1.5, w_max)
+    assert np.all((out.kv + viscous >= 1.5 * slope - 1e-12) | np.isclose(out.kv, J * w_max))
     assert out.kv[0] == g.kv[0] and out.kv[2] == g.kv[2] and out.kv[1] > g.kv[1]
+    assert np.isclose(out.kv[3], J[3] * w_max) and out.kv[3] + viscous[3] < 1.5 * slope[3]   # capped
+    assert np.all(out.kv <= np.maximum(g.kv, J * w_max) * (1 + 1e-12))
     np.testing.assert_allclose(out.ki / out.kv, g.ki / g.kv)
     np.testing.assert_array_equal(out.kp, g.kp)
 
@@ -68,7 +72,9 @@ def test_floor_removes_stick_slip_of_a_joint_creeping_through_rest(rx130l, compl
     cfg = ControlConfig(on_saturation="clip", benchmark_python_seconds=0.0)
     variant = "elastic_flat" if compliance_scale > 0 else "full_friction"
     errors = []
-    for gains in (design, stick_slip_gains(design, slope, tr.viscous_Nms_rad, 1.5)):
+    raised = stick_slip_gains(design, slope, tr.viscous_Nms_rad, 1.5, 2 * np.pi * cfg.velocity_filter_hz)
+    assert raised.kv[j] + tr.viscous_Nms_rad[j] >= 1.5 * slope[j]                # not capped here
+    for gains in (design, raised):
         res = simulate_joint_trajectory(real, model, t, q, v, a, cfg, variant, np.random.default_rng(0), gains=gains)
         errors.append(np.abs(res.q_link[:, j] - q[:, j]).max())
     assert errors[1] < errors[0] / 10
