@@ -81,6 +81,9 @@ class ControlConfig:
     position_bandwidth_hz: float = 5.0
     velocity_bandwidth_hz: float = 30.0
     pi_zero_ratio: float = 4.0
+    #: Kv >= this x the steepest fall of the model's identified Stribeck friction (minus its viscous
+    #: friction): no stick-slip at low speed (pipeline.control.design); 0 = the bandwidth design only
+    stick_slip_margin: float = 1.5
     #: encoder-velocity low-pass; at 400 Hz the 2 µrad encoder noise differentiated at 200 µs put ~4.5 % of
     #: axis 2's torque limit of feedback noise on the command (150 Hz: half, 64 deg velocity-loop margin)
     velocity_filter_hz: float = 150.0
@@ -127,6 +130,8 @@ class ControlConfig:
                      why=" (the position loop of the cascade must be slower than control.velocity_bandwidth_hz)")
         check_number(s, "control.pi_zero_ratio", self.pi_zero_ratio, gt=0,
                      why=" (PI zero at velocity bandwidth / pi_zero_ratio)")
+        check_number(s, "control.stick_slip_margin", self.stick_slip_margin, ge=0,
+                     why=" (Kv >= margin x the identified Stribeck slope; 0 turns the floor off)")
         check_number(s, "control.settle_time_s", self.settle_time_s, ge=0, unit="s")
         check_choice(s, "control.engine", self.engine, ENGINES)
         check_count(s, "control.chunk_samples", self.chunk_samples, 1)

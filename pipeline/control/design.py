@@ -6,6 +6,16 @@ position-loop bandwidth ``w_p`` (rad/s)::
 
     Kv = J w_v,   Ki = Kv w_v / n_i   (PI zero a factor n_i below crossover),   Kp = w_p
 
+Stick-slip floor (:func:`stick_slip_gains`): a Stribeck friction curve falls with speed by up to
+``s = sqrt(2/e) f_s / v_s`` (:func:`pipeline.robot.friction.stribeck_slope_Nms_rad`), a negative
+damping on the motor. Where ``Kv + f_v < s`` the velocity loop is unstable at low speed whatever the
+feedforward: a joint creeping through zero speed sticks and then slips (Dupont, "Avoiding stick-slip
+through PD control", IEEE Trans. Automatic Control 39(5), 1994: enough derivative gain removes it;
+``benchmarks/bench_elastic_floor.py``). So ``Kv >= m s - f_v`` with a margin ``m``, and ``Ki`` scaled
+by the same factor (the PI zero stays where it was; the crossover rises). The raised crossover
+``Kv / J`` is capped at the velocity filter's corner (phase margin ~44 deg there with the 150 Hz
+filter at 200 µs; ~64 deg at the 30 Hz design); where the cap binds the joint keeps some stick-slip.
+
 Loop models for Bode plots and margins, at the velocity sample time ``T_v``:
     plant      q/tau = ZOH{1 / (J s^2)}
     velocity   v_hat = alpha / (1 - (1 - alpha) z^-1) * (1 - z^-1) / T_v * q
@@ -50,6 +60,16 @@ def design_gains(inertia_kgm2: np.ndarray, position_bandwidth_rad_s: np.ndarray,
     wp = np.broadcast_to(np.asarray(position_bandwidth_rad_s, float), J.shape)
     kv = J * wv
     return ServoGains(kp=wp.copy(), kv=kv, ki=kv * wv / pi_zero_ratio, inertia_kgm2=J.copy())
+
+
+def stick_slip_gains(gains: ServoGains, slope_Nms_rad: np.ndarray, viscous_Nms_rad: np.ndarray,
+                     margin: float, max_bandwidth_rad_s: float) -> ServoGains:
+    """``Kv_i >= margin * slope_i - viscous_i`` per joint, at most ``J_i * max_bandwidth_rad_s`` (never
+    below the design's ``Kv``), ``Ki`` scaled alike (module docstring)."""
+    floor = margin * np.asarray(slope_Nms_rad, float) - np.asarray(viscous_Nms_rad, float)
+    cap = np.maximum(gains.kv, gains.inertia_kgm2 * max_bandwidth_rad_s)
+    kv = np.minimum(np.maximum(gains.kv, floor), cap)
+    return ServoGains(kp=gains.kp.copy(), kv=kv, ki=gains.ki * kv / gains.kv, inertia_kgm2=gains.inertia_kgm2.copy())
 
 
 def loop_models(J: float, kp: float, kv: float, ki: float, sample_time_s: float, velocity_samples: int,

@@ -29,9 +29,10 @@ import pinocchio as pin
 from scipy.interpolate import CubicHermiteSpline
 
 from pipeline.control.config import FEEDFORWARD_VARIANTS, ControlConfig
-from pipeline.control.design import ServoGains, design_gains, filter_alpha, reflected_inertia
+from pipeline.control.design import ServoGains, design_gains, filter_alpha, reflected_inertia, stick_slip_gains
 from pipeline.control.elastic_feedforward import ELASTIC_VARIANTS, elastic_feedforward
 from pipeline.errors import ConfigError, InfeasibleError
+from pipeline.robot.friction import has_stribeck, stribeck_slope_Nms_rad
 
 
 @dataclass
@@ -112,9 +113,17 @@ def _interp_rows(t_new: np.ndarray, t: np.ndarray, X: np.ndarray) -> np.ndarray:
 
 
 def servo_gains(model, q_ref: np.ndarray, config: ControlConfig) -> ServoGains:
+    """Gains from ``model``'s reflected inertia at ``q_ref``; with an identified Stribeck term and
+    ``config.stick_slip_margin > 0``, ``Kv`` raised to the stick-slip floor (:mod:`pipeline.control.design`)."""
     J = reflected_inertia(model, q_ref)
-    return design_gains(J, 2 * np.pi * config.position_bandwidth_hz, 2 * np.pi * config.velocity_bandwidth_hz,
-                        config.pi_zero_ratio)
+    gains = design_gains(J, 2 * np.pi * config.position_bandwidth_hz, 2 * np.pi * config.velocity_bandwidth_hz,
+                         config.pi_zero_ratio)
+    act = model.spec.actuation
+    if config.stick_slip_margin > 0 and has_stribeck(act):
+        slope = stribeck_slope_Nms_rad(act.static_friction_excess_Nm, act.stribeck_velocity_rad_s)
+        gains = stick_slip_gains(gains, slope, act.viscous_Nms_rad, config.stick_slip_margin,
+                                 2 * np.pi * config.velocity_filter_hz)
+    return gains
 
 
 def simulate_joint_trajectory(real, model, t_s, q_d, v_d, a_d, config: ControlConfig | None = None,

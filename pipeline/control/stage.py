@@ -19,6 +19,7 @@ desired path in the base frame), ``tcp_error_registered_*`` (after a best-fit ri
 ``_rms_rad`` (axes 1-3), ``max_torque_ratio``, ``saturation`` (first time and joint, with
 ``on_saturation = clip``), ``realtime_factor`` (wall) and ``realtime_factor_cpu``, the speed-up
 against the plain Python loop, ``tcp_error_rms_{nominal,calibrated}_kinematics_m`` (and registered),
+``servo_stick_slip_joints`` (joints whose ``Kv`` the stick-slip floor raised, :mod:`pipeline.control.design`),
 ``improvement`` (none / full_friction ratios), ``elastic_improvement`` (with an elastic variant:
 max TCP tracking error of none and of rigid full_friction over the best elastic variant's, and the
 same for the max path error ``path_error_max_*_over_elastic``), ``joint_stiffness`` (with an elastic
@@ -253,6 +254,9 @@ def _summary(cfg, ref, metrics, main, speed, rms_nominal_kin, calibrated, identi
         "servo_min_phase_margin_deg": {
             "velocity": min(r["velocity"]["phase_margin_deg"] for r in servo),
             "position": min(r["position"]["phase_margin_deg"] for r in servo)},
+        # joints whose Kv the stick-slip floor raised above the bandwidth design (pipeline.control.design)
+        "servo_stick_slip_joints": [r["joint"] for r in servo if r["kv_Nms_rad"]
+                                    > 2 * np.pi * cfg.velocity_bandwidth_hz * r["inertia_kgm2"] * (1 + 1e-9)],
         "reference_time_s": t_ref,
         **speed,
     }
@@ -316,6 +320,10 @@ def _report(summary, metrics, servo) -> str:
              f"{summary['tcp_error_rms_registered_calibrated_kinematics_m'] * 1e3:.3f} mm.",
              "", "| joint | J [kg m²] | Kp [1/s] | Kv [N m s/rad] | vel. PM [deg] | vel. BW [Hz] | pos. PM [deg] | "
              "pos. BW [Hz] |", "|---|---|---|---|---|---|---|---|"]
+    raised = summary["servo_stick_slip_joints"]
+    if raised:
+        rows.insert(len(rows) - 2, f"Kv raised to the stick-slip floor (identified Stribeck slope x "
+                    f"control.stick_slip_margin) on joint(s) {', '.join(map(str, raised))}.\n")
     for r in servo:
         rows.append(f"| {r['joint']} | {r['inertia_kgm2']:.2f} | {r['kp_1_s']:.1f} | {r['kv_Nms_rad']:.0f} | "
                     f"{r['velocity']['phase_margin_deg']:.0f} | {r['velocity_bandwidth_hz']:.1f} | "

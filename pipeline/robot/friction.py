@@ -25,6 +25,17 @@ def stribeck_excess_torque(v: np.ndarray, fs: np.ndarray, vs: np.ndarray, width_
     return np.asarray(fs, float) * np.exp(-((v / np.asarray(vs, float)) ** 2)) * s
 
 
+#: steepest fall of ``exp(-(v / v_s)^2)`` with ``v``, times ``v_s``: ``sqrt(2 / e)`` at ``v = v_s / sqrt(2)``
+STRIBECK_SLOPE_FACTOR = float(np.sqrt(2.0 / np.e))
+
+
+def stribeck_slope_Nms_rad(fs: np.ndarray, vs: np.ndarray) -> np.ndarray:
+    """Steepest negative slope of the Stribeck excess ``fs exp(-(v / vs)^2)`` over ``v`` (N m s/rad):
+    ``sqrt(2 / e) fs / vs``. Friction falling with speed is a negative damping (stick-slip,
+    Armstrong-Hélouvry, Dupont and Canudas de Wit 1994, module docstring)."""
+    return STRIBECK_SLOPE_FACTOR * np.asarray(fs, float) / np.asarray(vs, float)
+
+
 def has_stribeck(act: ActuationSpec) -> bool:
     """The actuation carries an identified Stribeck term (both numbers given)."""
     return act.static_friction_excess_Nm is not None and act.stribeck_velocity_rad_s is not None
