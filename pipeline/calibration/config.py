@@ -121,6 +121,10 @@ class Config:
     working_csv: str | None = None
     #: working configurations sampled in the region (W of the V criterion)
     n_region_configurations: int = 300
+    #: what V weights at the working configurations: tcp+reflector (the TCP, the task's point, and the
+    #: reflector in the tracker frame, what held-out readings verify; docs/calibration_design.md),
+    #: tcp, or reflector
+    design_figure: str = "tcp+reflector"
     #: compare the design with baselines of the same size in the report (predicted TCP RMS; in
     #: simulation also measured on design_table_heldout visible poses of the working region)
     design_table: bool = True

@@ -155,7 +155,7 @@ def index_spec(cfg: Config, robot, mm: em.MeasurementModel, basis: np.ndarray, r
     the working region, :mod:`pipeline.calibration.task_space`)."""
     if cfg.index_name == "V":
         Qw = ts.sample_region(robot, region or ts.default_region(robot), cfg.n_region_configurations, rng)
-        return ts.task_space_spec(mm, Qw, basis), Qw
+        return ts.task_space_spec(mm, Qw, basis, cfg.design_figure), Qw
     if not cfg.index_name.startswith("tcp_A"):
         return ix.IndexSpec(cfg.index_name), None
     chain = cd.chain_from_robot(robot)

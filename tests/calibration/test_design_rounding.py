@@ -8,7 +8,13 @@ import pytest
 from pipeline.calibration import design as ds
 from pipeline.calibration import design_bound as db
 from pipeline.calibration import design_rounding as dr
+from pipeline.calibration import error_model as em
 from pipeline.calibration import indices as ix
+from pipeline.calibration import stage as st
+from pipeline.calibration import task_space as ts
+from pipeline.calibration.config import Config
+from pipeline.errors import ConfigError
+from pipeline.robot.model import RobotModel
 
 
 def _problem(seed: int, N: int = 120, m: int = 3, p: int = 8) -> tuple[np.ndarray, ix.IndexSpec]:
@@ -83,3 +89,39 @@ def test_non_trace_index_gets_plain_remove_and_replace():
     np.testing.assert_array_equal(np.sort(r.selected), np.sort(plain.selected))
     with pytest.raises(ValueError):
         dr.approximate_remove_and_replace(G, spec, 10, np.random.default_rng(1), restarts=-1)
+
+
+@pytest.mark.parametrize(("field", "value"), [("design_start", "best"), ("design_restarts", -1),
+                                              ("design_restarts", 1.5), ("design_restarts", True)])
+def test_bad_design_start_fields_are_config_errors(field, value):
+    with pytest.raises(ConfigError, match=f"calibration.{field}"):
+        Config(**{field: value}).validate()
+    Config().validate()                         # the defaults are valid
+
+
+def test_design_figures_combine_tcp_and_reflector(tx40_setup):
+    mm, basis, Qw = tx40_setup
+    p = basis.shape[1]
+    specs = {f: ts.task_space_spec(mm, Qw, basis, f) for f in ts.DESIGN_FIGURES}
+    W = {f: s.weight_matrix(p) for f, s in specs.items()}
+    tol = 1e-12 * max(np.abs(w).max() for w in W.values())
+    np.testing.assert_allclose(W["tcp+reflector"], 0.5 * (W["tcp"] + W["reflector"]), rtol=0, atol=tol)
+    np.testing.assert_allclose(W["tcp"], ts.task_space_spec(mm, Qw, basis).weight_matrix(p))   # the default: TCP
+    # the reflector rows are the study's held-out figure (geometric basis)
+    np.testing.assert_allclose(W["reflector"], db.reflector_weight(mm.robot, Qw, basis), rtol=0, atol=1e3 * tol)
+    np.testing.assert_allclose(ts.tcp_part(specs["tcp+reflector"], "tcp+reflector").weight_matrix(p), W["tcp"])
+    assert ts.tcp_part(specs["reflector"], "reflector") is None
+    with pytest.raises(ValueError, match="design figure"):
+        ts.task_space_spec(mm, Qw, basis, "flange")
+    with pytest.raises(ConfigError, match="calibration.design_figure"):
+        Config(design_figure="flange").validate()
+
+
+@pytest.fixture(scope="module")
+def tx40_setup():
+    robot = RobotModel.load("staubli_tx40")
+    mm = em.MeasurementModel(robot)
+    cfg = st.Config(candidates="random", n_random_candidates=200, identifiability_samples=60)
+    _, basis = st.identify_parameter_set(robot, mm, cfg, np.random.default_rng(3))
+    Qw = ts.sample_region(robot, ts.default_region(robot), 20, np.random.default_rng(4))
+    return mm, basis, Qw
