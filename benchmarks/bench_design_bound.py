@@ -11,8 +11,9 @@ configurations, all identifiable geometric parameters, the tracker noise model; 
 1. the optimal approximate design (:func:`pipeline.calibration.design_bound.optimal_approximate_design`,
    multiplicative algorithm, equivalence-theorem certificate) gives ``V* / n``, a lower bound on the
    criterion of every design of ``n`` configurations from the pool; printed as predicted RMS
-   ``sqrt(V)`` next to the V design (the stage's default: remove-and-replace from a random start and
-   from the rounded optimal approximate design, :mod:`pipeline.calibration.design_rounding`), every (N/n)-th candidate,
+   ``sqrt(V)`` next to the V design (the stage's default: V on TCP + reflector, remove-and-replace from
+   a random start and from the rounded optimal approximate design, :mod:`pipeline.calibration.design_rounding`),
+   every (N/n)-th candidate,
    a random design and remove-and-replace on O3, with the largest possible expected gain of any
    design over each baseline, ``1 - sqrt(V_bound / V_baseline)``. Two figures: the TCP over the
    working region (the V criterion itself) and the reflector in the tracker frame at the working
@@ -61,13 +62,15 @@ def robot_case(name: str, a: argparse.Namespace) -> dict:
     t0 = time.perf_counter()
     pool = study_pool(name, a.n, True, 13, a.candidates, a.region_poses)
     G, p, rng = pool.cs.G, pool.basis.shape[1], pool.rng
-    spec_v = ts.task_space_spec(pool.mm, pool.Qw, pool.basis)
-    weights = {"TCP over the working region (V)": spec_v.weight_matrix(p),
+    spec_tcp = ts.task_space_spec(pool.mm, pool.Qw, pool.basis, "tcp")
+    spec_v = ts.task_space_spec(pool.mm, pool.Qw, pool.basis, st.Config().design_figure)    # the default design's
+    weights = {"TCP over the working region (V)": spec_tcp.weight_matrix(p),
                "reflector at the working configurations (study's held-out figure)":
                db.reflector_weight(pool.robot, pool.Qw, pool.basis)}
-    # the default design: remove-and-replace from a random start (the stream's first draw, as before) and
-    # from the rounded optimal approximate design, the better one (design_rounding); same stream after it
-    designs = {"V design (default: approximate start)": dr.approximate_remove_and_replace(G, spec_v, a.n, rng,
+    # the default design (V on the stage's default figure, TCP + reflector): remove-and-replace from a random
+    # start (the stream's first draw, as before) and from the rounded optimal approximate design, the better
+    # one (design_rounding); the same stream after it
+    designs = {"V design (default)": dr.approximate_remove_and_replace(G, spec_v, a.n, rng,
                                                                                           positions=pool.cs.Y),
                "every (N/n)-th": ds.linear_scan_design(G, ix.IndexSpec("O3"), a.n),
                "random": ds.random_design(G, ix.IndexSpec("O3"), a.n, rng),
@@ -95,9 +98,9 @@ def robot_case(name: str, a: argparse.Namespace) -> dict:
 
 def _effort_by_criterion(pool, G: np.ndarray, weights: dict, sel: dict, sizes: range, a) -> dict:
     """Configurations each design needs to reach each baseline's ``n``-configuration predicted RMS on
-    each figure: the V design from a random start only (paper 004's start), the default (approximate
-    start), and the same selector on the reflector figure and on TCP + reflector (``W = (W_tcp +
-    W_reflector) / 2``); with the bound of each figure."""
+    each figure: V on the TCP from a random start only (paper 004's start, the previous default), and
+    the default selector (approximate start) on the TCP, on the reflector and on TCP + reflector
+    (``W = (W_tcp + W_reflector) / 2``, the default); with the bound of each figure."""
     n, p = a.n, pool.basis.shape[1]
     Jt = ts.tcp_jacobian(pool.mm, pool.Qw, pool.basis)
     Jr = db.reflector_jacobian(pool.robot, pool.Qw, pool.basis)
@@ -106,16 +109,17 @@ def _effort_by_criterion(pool, G: np.ndarray, weights: dict, sel: dict, sizes: r
                 "reflector": ix.IndexSpec("V", working_jacobian=Jr, n_working=nw),
                 "TCP + reflector": ix.IndexSpec("V", working_jacobian=np.vstack([Jt, Jr]), n_working=2 * nw)}
     runs: dict[str, dict[int, np.ndarray]] = {
-        "V, random start only (paper 004's start)": {k: ds.remove_and_replace(
+        "TCP (V) criterion, random start only (the previous default)": {k: ds.remove_and_replace(
             G, criteria["TCP (V)"], k, np.random.default_rng([7, k, 1]), positions=pool.cs.Y).selected for k in sizes}}
     for cname, spec in criteria.items():
         opt = db.optimal_approximate_design(G, spec.weight_matrix(p), tol=dr.START_TOL,
                                             max_iterations=dr.START_MAX_ITERATIONS)
-        runs[f"{cname} criterion, approximate start" + (" (default)" if cname == "TCP (V)" else "")] = {
+        runs[f"{cname} criterion, approximate start" + (" (default)" if cname == "TCP + reflector" else "")] = {
             k: dr.approximate_remove_and_replace(G, spec, k, np.random.default_rng([7, k, 1]), positions=pool.cs.Y,
                                                  approximate=opt).selected for k in sizes}
     figs = dict(zip(("TCP", "reflector"), weights.values(), strict=True))
     bounds = {f: db.optimal_approximate_design(G, W, tol=a.tol) for f, W in figs.items()}
+    _rounding_table(G, criteria, bounds, figs, [k for k in a.compare_sizes if k in sizes], pool.cs.Y)
     base = {(f, b): db.design_value(G, W, sel[b]) for f, W in figs.items() for b in ("every (N/n)-th",
                                                                                      "O3 remove-and-replace")}
     print(f"\n### measurement effort by criterion: configurations to reach the baseline's {n}-configuration "
@@ -215,6 +219,34 @@ def _figure(wname: str, W: np.ndarray, G: np.ndarray, sel: dict, rr_sizes: dict,
     return {"bound": Vb, "values": V, "probabilities": probs, "effort": effort, "gap": opt.gap}
 
 
+def _rounding_table(G: np.ndarray, criteria: dict, bounds: dict, figs: dict, sizes: list[int], Y) -> None:
+    """Each criterion's own value at a few sizes: remove-and-replace from paper 004's random start,
+    the efficient rounding of the optimal approximate design, that start polished by
+    remove-and-replace, the default (the better of the two runs) and the bound of the criterion."""
+    p = G.shape[2]
+    print("\n### rounding the optimal approximate design: each criterion's predicted RMS sqrt(V) [µm] "
+          "(in brackets V / bound)")
+    print("| criterion | n | bound V*/n | random start | rounded start | rounded + polished "
+          "| default (better of both) |")
+    print("|---|---|---|---|---|---|---|")
+    for cname, spec in criteria.items():
+        W = spec.weight_matrix(p)
+        bound = (bounds["TCP"] if cname == "TCP (V)" else bounds["reflector"] if cname == "reflector"
+                 else db.optimal_approximate_design(G, W, tol=1e-4))
+        opt = db.optimal_approximate_design(G, W, tol=dr.START_TOL, max_iterations=dr.START_MAX_ITERATIONS)
+        for k in sizes:
+            vb = bound.exact_bound(k)
+            plain = ds.remove_and_replace(G, spec, k, np.random.default_rng([7, k, 1]), positions=Y).selected
+            start = dr.rounded_start(opt.weights, k)
+            polished = dr.approximate_remove_and_replace(G, spec, k, np.random.default_rng([7, k, 1]), positions=Y,
+                                                         restarts=0, approximate=opt).selected
+            default = dr.approximate_remove_and_replace(G, spec, k, np.random.default_rng([7, k, 1]), positions=Y,
+                                                        approximate=opt).selected
+            cells = [f"{_um(v)} ({v / vb:.3f})" for v in (db.design_value(G, W, s) for s in (plain, start, polished,
+                                                                                            default))]
+            print(f"| {cname} | {k} | {_um(vb)} | " + " | ".join(cells) + " |")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="bench_design_bound")
     ap.add_argument("--robots", nargs="+", default=["rx130l", "staubli_tx40"])
@@ -227,6 +259,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--samples", type=int, default=200_000)
     ap.add_argument("--tol", type=float, default=1e-4, help="equivalence-theorem gap of the certificate")
+    ap.add_argument("--compare-sizes", type=int, nargs="+", default=[16, 19, 20, 24, 32],
+                    help="sizes of the rounding comparison")
     a = ap.parse_args(argv)
     t0 = time.perf_counter()
     with single_thread_blas():
