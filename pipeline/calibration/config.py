@@ -22,6 +22,9 @@ from pipeline.robot.payload import Payload
 GRID_VALUES_PAPER = 13
 
 SELECTION_METHODS = ("remove_and_replace", "detmax", "bsaa", "random", "gradient")
+#: start of remove-and-replace: the rounded optimal approximate design (pipeline.calibration.design_rounding)
+#: or paper 004's random regular subset
+DESIGN_STARTS = ("approximate", "random")
 CANDIDATE_KINDS = ("grid", "random")
 ERROR_MODELS = ("se3", "mdh_hayati")
 #: indices the gradient design (IPOPT) can optimise
@@ -46,8 +49,14 @@ class Config:
     #: predicted TCP variance over the working region (pipeline.calibration.task_space)
     index_name: str = "V"
     n_configurations: int = 50
-    #: initial subset size of remove-and-replace (None: 2/3 of n_configurations)
+    #: initial subset size of remove-and-replace's random start (None: 2/3 of n_configurations)
     n_initial: int | None = None
+    #: remove-and-replace (and the gradient design's start) on a trace index (V, A, tcp_A): "approximate"
+    #: also polishes the efficient rounding of the optimal approximate design and keeps the better
+    #: design (pipeline.calibration.design_rounding); "random": paper 004's random start only
+    design_start: str = "approximate"
+    #: remove-and-replace runs from random starts next to the rounded start (design_start approximate)
+    design_restarts: int = 1
     #: working configurations for the TCP-covariance criterion (random feasible poses)
     n_working_configurations: int = 5
     #: "se3": 6 errors per joint placement + zero offsets; "mdh_hayati": modified DH + Hayati beta
@@ -112,6 +121,10 @@ class Config:
     working_csv: str | None = None
     #: working configurations sampled in the region (W of the V criterion)
     n_region_configurations: int = 300
+    #: what V weights at the working configurations: tcp+reflector (the TCP, the task's point, and the
+    #: reflector in the tracker frame, what held-out readings verify; docs/calibration_design.md),
+    #: tcp, or reflector
+    design_figure: str = "tcp+reflector"
     #: compare the design with baselines of the same size in the report (predicted TCP RMS; in
     #: simulation also measured on design_table_heldout visible poses of the working region)
     design_table: bool = True
@@ -147,6 +160,11 @@ class Config:
             raise bad("selection_method", f"must be one of {SELECTION_METHODS}, got {self.selection_method!r}")
         if self.index_name not in ix.INDEX_NAMES:
             raise bad("index_name", f"must be one of {ix.INDEX_NAMES}, got {self.index_name!r}")
+        if self.design_start not in DESIGN_STARTS:
+            raise bad("design_start", f"must be one of {DESIGN_STARTS}, got {self.design_start!r}")
+        if isinstance(self.design_restarts, bool) or not isinstance(self.design_restarts, int) \
+                or not 0 <= self.design_restarts <= 100:
+            raise bad("design_restarts", f"must be an integer in [0, 100], got {self.design_restarts!r}")
         if self.error_model not in ERROR_MODELS:
             raise bad("error_model", f"must be one of {ERROR_MODELS}, got {self.error_model!r}")
         for key in ("n_random_candidates", "n_configurations", "n_heldout",

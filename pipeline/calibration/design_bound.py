@@ -195,15 +195,21 @@ def rms_scale_needed(rms_a: np.ndarray, rms_b: np.ndarray, factor: float, n_seed
     return float(np.quantile(factor * rms_b[:k] / rms_a[:k], 1.0 - p_all ** (1.0 / n_seeds)))
 
 
-def reflector_weight(robot, Qw: np.ndarray, basis: np.ndarray) -> np.ndarray:
-    """Weighting of the ``calib-design`` study's held-out figure: the reflector position in the
-    tracker frame at the working configurations ``Qw`` (nominal model and tracker pose),
-    ``W = sum_w J_w^T J_w / n_w`` with ``J_w`` its Jacobian rows wrt the identifiable parameters
+def reflector_jacobian(robot, Qw: np.ndarray, basis: np.ndarray) -> np.ndarray:
+    """Stacked Jacobian rows ``(3 n_w, p)`` of the reflector position in the tracker frame at the
+    working configurations ``Qw`` (nominal model and tracker pose) wrt the identifiable parameters
     (geometric basis ``(7 nq + 21, p)``)."""
     chain = cd.chain_from_robot(robot)
     P = np.asarray(basis, float)
     if P.shape[0] != 7 * chain.nq + 21:
         raise ValueError("reflector_weight needs a geometric parameter basis (no compliance rows)")
     _, J = cd.nominal_jacobian(chain, Qw, robot.tracker.transform_tracker_to_base)
-    Jp = (J @ P).reshape(-1, P.shape[1])
+    return (J @ P).reshape(-1, P.shape[1])
+
+
+def reflector_weight(robot, Qw: np.ndarray, basis: np.ndarray) -> np.ndarray:
+    """Weighting of the ``calib-design`` study's held-out figure: the reflector position in the
+    tracker frame at the working configurations ``Qw``, ``W = sum_w J_w^T J_w / n_w`` with ``J_w``
+    the rows of :func:`reflector_jacobian`."""
+    Jp = reflector_jacobian(robot, Qw, basis)
     return Jp.T @ Jp / len(Qw)

@@ -116,7 +116,7 @@ def markdown(table: dict) -> str:
         return "–" if v is None or not math.isfinite(v) else f"{1e6 * v:.1f}"
 
     lines = [f"Working region: {table['region']} ({table['n_working_configurations']} working configurations). "
-             "Predicted TCP RMS = sqrt(trace(W M⁻¹)), the V criterion."]
+             "Predicted TCP RMS = sqrt(trace(W M⁻¹)) with W on the TCP (the V criterion on the TCP)."]
     if table["n_heldout_region"] is None:
         lines.append("No measured comparison (user data, or no pose of the region visible to the tracker): "
                      "predicted figures only.")
@@ -144,14 +144,16 @@ def for_run(cfg, robot, real, mm: MeasurementModel, basis: np.ndarray, spec: ix.
             measured_Q: np.ndarray, est: Estimate, cs: cd.CandidateSet | None, region: ts.WorkingRegion | None,
             rng: np.random.Generator, geometric_basis: np.ndarray | None = None) -> dict | None:
     """The stage's call: the table of a calibration ``Config`` (None when ``design_table`` is off);
-    ``spec`` the run's index (its working set is reused when it is ``V``); ``geometric_basis``: the
+    ``spec`` the run's index (its TCP rows are reused when it is ``V``); ``geometric_basis``: the
     design's basis (see :func:`design_table`)."""
     geometric_basis = basis if geometric_basis is None else geometric_basis
     if not cfg.design_table:
         return None
     region = region or ts.default_region(robot)
-    spec_v = spec if spec.name == "V" else ts.task_space_spec(
-        mm, ts.sample_region(robot, region, cfg.n_region_configurations, rng), geometric_basis)
+    spec_v = ts.tcp_part(spec, cfg.design_figure) if spec.name == "V" else None
+    if spec_v is None:
+        spec_v = ts.task_space_spec(mm, ts.sample_region(robot, region, cfg.n_region_configurations, rng),
+                                    geometric_basis)
     label = "user file" if real is None and cs is None else f"chosen: {cfg.selection_method} on {cfg.index_name}"
     return design_table(robot, real, mm, basis, spec_v, label, measured_Q, est, cs,
                         region, rng, cfg.design_table_heldout, cfg.max_lm_iterations, geometric_basis)

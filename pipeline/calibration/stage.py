@@ -30,6 +30,7 @@ import numpy as np
 from pipeline.blas import single_thread_blas
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import design as ds
+from pipeline.calibration import design_rounding as dr
 from pipeline.calibration import design_table as dtab
 from pipeline.calibration import error_model as em
 from pipeline.calibration import indices as ix
@@ -154,7 +155,7 @@ def index_spec(cfg: Config, robot, mm: em.MeasurementModel, basis: np.ndarray, r
     the working region, :mod:`pipeline.calibration.task_space`)."""
     if cfg.index_name == "V":
         Qw = ts.sample_region(robot, region or ts.default_region(robot), cfg.n_region_configurations, rng)
-        return ts.task_space_spec(mm, Qw, basis), Qw
+        return ts.task_space_spec(mm, Qw, basis, cfg.design_figure), Qw
     if not cfg.index_name.startswith("tcp_A"):
         return ix.IndexSpec(cfg.index_name), None
     chain = cd.chain_from_robot(robot)
@@ -239,10 +240,12 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress, reg
             n_design = cfg.n_configurations - pilot.n_requested
         t = time.perf_counter()
         method = "remove_and_replace" if cfg.selection_method == "gradient" else cfg.selection_method
-        kw: dict[str, Any] = {}
-        if method == "remove_and_replace":
-            kw["n_initial"] = cfg.n_initial
-        selection = ds.select(method, cs.G, spec, n_design, rng, positions=positions, **kw)
+        if method == "remove_and_replace" and cfg.design_start == "approximate":
+            selection = dr.approximate_remove_and_replace(cs.G, spec, n_design, rng, positions=positions,
+                                                          restarts=cfg.design_restarts, n_initial=cfg.n_initial)
+        else:
+            kw: dict[str, Any] = {"n_initial": cfg.n_initial} if method == "remove_and_replace" else {}
+            selection = ds.select(method, cs.G, spec, n_design, rng, positions=positions, **kw)
         timings["selection_s"] = time.perf_counter() - t
         Q_sel = cs.Q[selection.selected]
         if pilot is not None:

@@ -46,6 +46,9 @@ from pipeline.errors import ConfigError, DataFileError, InfeasibleError
 from pipeline.robot.defaults import iso_or_derived
 
 WORKING_REGIONS = ("iso_cube", "box", "csv")
+#: what V weights over the working configurations (``calibration.design_figure``): the TCP (the task),
+#: the reflector in the tracker frame (what held-out tracker readings verify), or both
+DESIGN_FIGURES = ("tcp+reflector", "tcp", "reflector")
 
 
 @dataclass
@@ -183,9 +186,39 @@ def tcp_jacobian(mm: MeasurementModel, Q: np.ndarray, basis: np.ndarray, frame: 
     return out.reshape(-1, P.shape[1])
 
 
-def task_space_spec(mm: MeasurementModel, Qw: np.ndarray, basis: np.ndarray) -> ix.IndexSpec:
-    """The ``V`` index over the working configurations ``Qw``."""
-    return ix.IndexSpec("V", working_jacobian=tcp_jacobian(mm, Qw, basis), n_working=len(Qw))
+def reflector_jacobian(mm: MeasurementModel, Q: np.ndarray, basis: np.ndarray, T_tb=None) -> np.ndarray:
+    """Stacked Jacobian rows ``(3 n_w, p)`` of the reflector position in the tracker frame (the
+    reading a held-out measurement compares) at the configurations ``Q``, nominal parameters, tracker
+    pose ``T_tb`` (None: robot.yaml's nominal one), wrt ``theta`` (compliances: the gravity
+    deflection of the arm without payload)."""
+    T = mm.robot.tracker.transform_tracker_to_base if T_tb is None else T_tb
+    _, J = mm.jacobian(np.atleast_2d(np.asarray(Q, float)), np.zeros(mm.n), T, basis)
+    return J.reshape(-1, J.shape[2])
+
+
+def task_space_spec(mm: MeasurementModel, Qw: np.ndarray, basis: np.ndarray, figure: str = "tcp") -> ix.IndexSpec:
+    """The ``V`` index over the working configurations ``Qw`` on ``figure`` (:data:`DESIGN_FIGURES`):
+    the TCP, the reflector in the tracker frame, or both (``W = (W_tcp + W_reflector) / 2``, the
+    mean of the two points' predicted variances)."""
+    if figure not in DESIGN_FIGURES:
+        raise ValueError(f"design figure must be one of {DESIGN_FIGURES}, got {figure!r}")
+    rows = []
+    if "tcp" in figure.split("+"):
+        rows.append(tcp_jacobian(mm, Qw, basis))
+    if "reflector" in figure.split("+"):
+        rows.append(reflector_jacobian(mm, Qw, basis))
+    return ix.IndexSpec("V", working_jacobian=np.vstack(rows), n_working=len(rows) * len(Qw))
+
+
+def tcp_part(spec: ix.IndexSpec, figure: str) -> ix.IndexSpec | None:
+    """The TCP-only ``V`` index contained in a :func:`task_space_spec` of ``figure`` (its first
+    ``3 n_w`` rows); None when the figure has no TCP rows."""
+    if figure == "tcp":
+        return spec
+    if figure != "tcp+reflector":
+        return None
+    n_w = spec.n_working // 2
+    return ix.IndexSpec("V", working_jacobian=np.asarray(spec.working_jacobian)[: 3 * n_w], n_working=n_w)
 
 
 def predicted_tcp_rms_m(spec: ix.IndexSpec, M: np.ndarray) -> float:
@@ -202,6 +235,8 @@ def check_task_fields(cfg, source: str = "config") -> None:
     def bad(key: str, problem: str) -> ConfigError:
         return ConfigError(source, f"calibration.{key}", problem)
 
+    if cfg.design_figure not in DESIGN_FIGURES:
+        raise bad("design_figure", f"must be one of {DESIGN_FIGURES}, got {cfg.design_figure!r}")
     if cfg.working_region not in WORKING_REGIONS:
         raise bad("working_region", f"must be one of {WORKING_REGIONS}, got {cfg.working_region!r}")
     if cfg.working_region == "box":
