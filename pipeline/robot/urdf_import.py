@@ -10,8 +10,8 @@ What a URDF lacks is assumed from rules stated here (each becomes a line of
   Coulomb friction ``4 % of the effort limit`` (RX130L: 20 N m s/rad at 550 N m and 3.5 rad/s,
   25 N m at 550 N m);
 * acceleration limits ``5 x velocity limit`` per second (full speed in 0.2 s);
-* TCP at the flange (the tip link), reflector on the flange z axis 10 mm beyond the last link's
-  capsule (at least 30 mm), opening along z;
+* TCP at the flange (the tip link), reflector on the flange z axis on the side facing away from
+  the previous joint, 10 mm beyond the last body's capsules (at least 30 mm), opening outwards;
 * a laser tracker 1.5 reaches in front of the base (x), 0.2 reaches up (DESIGN.md: 2.5 m from an
   arm of 1.66 m reach), with DESIGN.md's noise model;
 * one capsule per moving link fitted to its collision geometry (principal axis of the points,
@@ -220,15 +220,26 @@ def fit_capsules(model: pin.Model, urdf: Path, flange: str, reach_m: float) -> t
     return capsules, how
 
 
-def _reflector_offset_m(model: pin.Model, flange: str, capsules: list[Capsule]) -> float:
-    """Distance along the flange z axis just beyond the last link's capsule (at least REFLECTOR_OFFSET_M)."""
+def reflector_placement(model: pin.Model, flange: str, capsules: list[Capsule]) -> tuple[np.ndarray, np.ndarray]:
+    """(position, opening axis) of the assumed reflector in the flange frame.
+
+    On the flange z axis, on the side facing away from the rest of the arm: ``-z`` when the
+    previous joint's origin lies on the ``+z`` side of the flange (a URDF whose last link frame
+    points back into the wrist, as Kinova's Jaco), else ``+z``; beyond every capsule of the last
+    body (including locked fingers merged into it) by 10 mm, at least ``REFLECTOR_OFFSET_M``
+    from the flange. A reflector inside or behind the wrist would be hidden from the tracker in
+    every pose."""
     flange_frame = model.frames[model.getFrameId(flange)]
+    last = flange_frame.parentJoint
+    previous_origin = flange_frame.placement.actInv(model.jointPlacements[last].inverse().translation)
+    sign = -1.0 if previous_origin[2] > 1e-6 else 1.0
     offset = REFLECTOR_OFFSET_M
     for capsule in capsules:
-        if capsule.frame == str(model.names[flange_frame.parentJoint]):
+        if capsule.frame == str(model.names[last]):
             ends = [flange_frame.placement.actInv(p) for p in (capsule.p0, capsule.p1)]
-            offset = max(offset, max(e[2] for e in ends) + capsule.radius_m + 0.01)
-    return float(offset)
+            offset = max(offset, max(sign * e[2] for e in ends) + capsule.radius_m + 0.01)
+    axis = np.array([0.0, 0.0, sign])
+    return float(offset) * axis, axis
 
 
 def _floor_check_from_joint(model: pin.Model, capsules: list[Capsule], clearance_m: float = 0.06) -> int:
@@ -278,10 +289,10 @@ def assumed_spec(urdf: Path, root: ET.Element, model: pin.Model, tip_link: str) 
     reach = _reach_m(model, tip_link)
     capsules, how = fit_capsules(model, urdf, tip_link, reach)
     tracker = assumed_tracker(reach)
-    reflector_m = _reflector_offset_m(model, tip_link, capsules)
+    reflector_m, reflector_axis = reflector_placement(model, tip_link, capsules)
     spec = RobotSpec(
         path=urdf, name=root.get("name") or urdf.stem, urdf=urdf, flange_frame=tip_link, payload_kg=0.0,
-        tool=ToolSpec(pin.SE3.Identity(), np.array([0.0, 0.0, reflector_m]), np.array([0.0, 0.0, 1.0])),
+        tool=ToolSpec(pin.SE3.Identity(), reflector_m, reflector_axis),
         actuation=ActuationSpec(gear, np.diag(gear), ROTOR_INERTIA_PER_EFFORT_S2 * effort,
                                 VISCOUS_FRACTION * effort / velocity, COULOMB_FRACTION * effort, 0.01),
         acceleration_rad_s2=ACCELERATION_PER_VELOCITY_1_S * velocity, limit_overrides={}, tracker=tracker,
@@ -289,8 +300,10 @@ def assumed_spec(urdf: Path, root: ET.Element, model: pin.Model, tip_link: str) 
     t = tracker.transform_tracker_to_base.translation
     assumptions = [
         f"no robot.yaml: the facts a URDF lacks are assumed (write one to edit: python -m pipeline robot init {urdf})",
-        f"flange = tip link '{tip_link}', TCP at the flange, payload 0 kg, reflector {reflector_m * 1e3:.0f} mm "
-        "along the flange z axis (beyond the last link's capsule, so the beam can reach it)",
+        f"flange = tip link '{tip_link}', TCP at the flange, payload 0 kg, "
+        f"reflector {np.linalg.norm(reflector_m) * 1e3:.0f} mm "
+        f"along the flange {'+' if reflector_axis[2] > 0 else '-'}z axis, facing away from the arm "
+        "(beyond the last body's capsules, so the beam can reach it)",
         f"gear ratios {ARM_GEAR_RATIO:g} (axes 1-3) and {WRIST_GEAR_RATIO:g} (wrist), no coupling",
         f"rotor inertia {ROTOR_INERTIA_PER_EFFORT_S2:g} s² x effort limit, viscous friction {VISCOUS_FRACTION:g} x "
         f"effort/velocity limit, Coulomb friction {COULOMB_FRACTION:.0%} of the effort limit",
