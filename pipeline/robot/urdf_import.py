@@ -11,7 +11,8 @@ What a URDF lacks is assumed from rules stated here (each becomes a line of
   25 N m at 550 N m);
 * acceleration limits ``5 x velocity limit`` per second (full speed in 0.2 s);
 * TCP at the flange (the tip link), reflector on the flange z axis on the side facing away from
-  the previous joint, 10 mm beyond the last body's capsules (at least 30 mm), opening outwards;
+  the arm (the side the last body's tool/gripper geometry lies on, else away from the nearest
+  upstream joint), 10 mm beyond the last body's capsules (at least 30 mm), opening outwards;
 * a laser tracker 1.5 reaches in front of the base (x), 0.2 reaches up (DESIGN.md: 2.5 m from an
   arm of 1.66 m reach), with DESIGN.md's noise model;
 * one capsule per moving link fitted to its collision geometry (principal axis of the points,
@@ -220,24 +221,45 @@ def fit_capsules(model: pin.Model, urdf: Path, flange: str, reach_m: float) -> t
     return capsules, how
 
 
+def _outward_sign(model: pin.Model, flange_frame: pin.Frame, last_body: list[Capsule], tie_m: float = 0.01) -> float:
+    """+1 or -1: the side of the flange z axis facing away from the arm.
+
+    1. The last body's geometry (tool, gripper, locked fingers merged into it): the side its
+       capsules' mean lies on, when that lies beyond their mean radius (a body clearly on one side).
+    2. Else away from the nearest joint origin upstream that is not at the flange's origin
+       (``tie_m`` or more away), in the URDF's zero configuration, when it lies ``tie_m`` or more
+       off the flange's xy plane.
+    3. Else ``+z``."""
+    if last_body:
+        ends = np.array([flange_frame.placement.actInv(p) for c in last_body for p in (c.p0, c.p1)])
+        mean_z, radius = float(ends[:, 2].mean()), float(np.mean([c.radius_m for c in last_body]))
+        if abs(mean_z) > radius:
+            return float(np.sign(mean_z))
+    data = model.createData()
+    pin.forwardKinematics(model, data, pin.neutral(model))
+    flange = data.oMi[flange_frame.parentJoint] * flange_frame.placement
+    for j in range(flange_frame.parentJoint, 0, -1):
+        origin = flange.actInv(data.oMi[j].translation)
+        if np.linalg.norm(origin) >= tie_m:
+            return -1.0 if origin[2] >= tie_m else 1.0
+    return 1.0
+
+
 def reflector_placement(model: pin.Model, flange: str, capsules: list[Capsule]) -> tuple[np.ndarray, np.ndarray]:
     """(position, opening axis) of the assumed reflector in the flange frame.
 
-    On the flange z axis, on the side facing away from the rest of the arm: ``-z`` when the
-    previous joint's origin lies on the ``+z`` side of the flange (a URDF whose last link frame
-    points back into the wrist, as Kinova's Jaco), else ``+z``; beyond every capsule of the last
-    body (including locked fingers merged into it) by 10 mm, at least ``REFLECTOR_OFFSET_M``
-    from the flange. A reflector inside or behind the wrist would be hidden from the tracker in
-    every pose."""
+    On the flange z axis, on the side facing away from the arm (:func:`_outward_sign`: ``-z`` for
+    a URDF whose last link frame points back into the wrist, as Kinova's Jaco or Talos' arm),
+    beyond every capsule of the last body (including locked fingers merged into it) by 10 mm, at
+    least ``REFLECTOR_OFFSET_M`` from the flange. A reflector inside or behind the wrist would be
+    hidden from the tracker in every pose."""
     flange_frame = model.frames[model.getFrameId(flange)]
-    last = flange_frame.parentJoint
-    previous_origin = flange_frame.placement.actInv(model.jointPlacements[last].inverse().translation)
-    sign = -1.0 if previous_origin[2] > 1e-6 else 1.0
+    last_body = [c for c in capsules if c.frame == str(model.names[flange_frame.parentJoint])]
+    sign = _outward_sign(model, flange_frame, last_body)
     offset = REFLECTOR_OFFSET_M
-    for capsule in capsules:
-        if capsule.frame == str(model.names[last]):
-            ends = [flange_frame.placement.actInv(p) for p in (capsule.p0, capsule.p1)]
-            offset = max(offset, max(sign * e[2] for e in ends) + capsule.radius_m + 0.01)
+    for capsule in last_body:
+        ends = [flange_frame.placement.actInv(p) for p in (capsule.p0, capsule.p1)]
+        offset = max(offset, max(sign * e[2] for e in ends) + capsule.radius_m + 0.01)
     axis = np.array([0.0, 0.0, sign])
     return float(offset) * axis, axis
 
