@@ -16,16 +16,19 @@ The branch: IK from each seed to the path's first pose (inside the limits), the 
 joint-speed demand wins; its start configuration is returned so that the stages start on it
 (:func:`pipeline.robot.defaults.ik_seeds_or_derived_rad` puts it first).
 
-Search: candidate centres on a grid of the vertical half-plane in front of the first joint
-(radial distance 0.2..0.85 of the reach from the first joint's axis, height from the floor clearance to
-0.8 reach above the shoulder, the second joint's height); centres whose path cannot fit the reach sphere
-about the shoulder or lies under the floor are discarded by geometry. Each remaining centre is tried
-with a small cube (``MIN_EDGE_REACH`` of the reach); the feasible ones, largest geometric room first,
-get a bisection on the edge (``BISECTION_STEPS`` steps) up to their geometric bound; the largest edge
-wins (ties: the centre tried first). The winner is then checked with the control stage's own reference
-generator (:func:`pipeline.control.reference.cartesian_reference`: jerk-limited profile at the speed, 5 m/s²,
-minimum-norm redundancy resolution, joint limits and speeds) every ``VERIFY_SAMPLE_TIME_S``; while it fails
-the edge shrinks by ``SHRINK``. Deterministic: no random numbers.
+Search: candidate centres on a grid of the vertical half-plane in front of the first joint (radial
+distance 0.2..0.85 of the reach from the first joint's axis, height from the floor clearance to 0.8 reach
+above the shoulder, the second joint's height); centres whose path cannot fit the reach sphere about the
+shoulder or lies under the floor are discarded by geometry. When no centre in front (base +x) is
+feasible, the half-planes to the sides (+y, -y) and behind (-x) are searched in turn (an arm whose first
+joint does not turn about the vertical, e.g. a humanoid's arm raised sideways, works to a side). Each
+remaining centre is tried with a small cube (``MIN_EDGE_REACH`` of the reach); the feasible ones, largest
+geometric room first, get a bisection on the edge (``BISECTION_STEPS`` steps) up to their geometric
+bound; the largest edge wins (ties: the centre tried first). The winner is then checked with the control
+stage's own reference generator (:func:`pipeline.control.reference.cartesian_reference`: jerk-limited
+profile at the speed, 5 m/s², minimum-norm redundancy resolution, joint limits and speeds) every
+``VERIFY_SAMPLE_TIME_S``; while it fails the edge shrinks by ``SHRINK``. Deterministic: no random
+numbers.
 """
 
 from __future__ import annotations
@@ -53,6 +56,8 @@ HEIGHT_REACH = np.linspace(-0.7, 0.8, 7)
 FLOOR_CLEARANCE_REACH = 0.05
 VERIFY_SAMPLE_TIME_S = 4e-3      # the final check runs the control stage's reference at this step
 SHRINK = 0.9                      # edge factor when the final check fails
+#: horizontal directions of the searched half-planes, in the order tried (module docstring)
+SEARCH_DIRECTIONS = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, -1.0, 0.0), (-1.0, 0.0, 0.0))
 
 
 @dataclass
@@ -151,14 +156,25 @@ def search_cube(robot, seeds: np.ndarray, plane: str, rotation: np.ndarray, spee
 
     ``memo``: a dict shared by calls with the same robot, seeds, plane, tool and frame (checks are reused).
     ``ignore_speed``: any finite speed ratio counts as feasible, and the small cube at the centre with the
-    lowest speed demand is returned (to find the speed the arm allows, for the lowered-speed fallback)."""
+    lowest speed demand is returned (to find the speed the arm allows, for the lowered-speed fallback).
+    The half-planes of :data:`SEARCH_DIRECTIONS` are searched in turn; the first with a cube wins."""
+    memo = {} if memo is None else memo      # (edge, centre) -> speed ratio per m/s (linear in the speed)
+    for direction in SEARCH_DIRECTIONS:
+        found = _search_half_plane(robot, seeds, plane, rotation, speed_m_s, frame, ignore_speed, memo,
+                                   np.array(direction))
+        if found is not None:
+            return found
+    return None
+
+
+def _search_half_plane(robot, seeds: np.ndarray, plane: str, rotation: np.ndarray, speed_m_s: float, frame: str,
+                       ignore_speed: bool, memo: dict, direction: np.ndarray) -> tuple[float, np.ndarray, float] | None:
+    """:func:`search_cube` on the vertical half-plane from the first joint along ``direction``."""
     reach = float(robot.summary()["reach_m"])
     base = robot.model.jointPlacements[1].translation
     shoulder = robot.model.jointPlacements[2].translation + base if robot.nq > 1 else base
     floor_z = float(robot.spec.collision.floor_z_m)
     limit = 1e3 if ignore_speed else 1.0
-
-    memo = {} if memo is None else memo      # (edge, centre) -> speed ratio per m/s (linear in the speed)
 
     def ok(edge: float, centre: np.ndarray) -> float | None:
         key = (round(edge, 9), *np.round(centre, 9))
@@ -171,7 +187,7 @@ def search_cube(robot, seeds: np.ndarray, plane: str, rotation: np.ndarray, spee
     candidates = []
     for radial in RADIAL_REACH:
         for height in HEIGHT_REACH:
-            centre = np.array([base[0] + radial * reach, base[1], shoulder[2] + height * reach])
+            centre = np.array([base[0], base[1], shoulder[2] + height * reach]) + radial * reach * direction
             bound = _geometric_edge_bound(centre, shoulder, reach, floor_z, plane)
             if bound >= small:
                 candidates.append((bound, centre))
@@ -197,10 +213,11 @@ def search_cube(robot, seeds: np.ndarray, plane: str, rotation: np.ndarray, spee
                 best = (edge, centre, ratio)
     assert best is not None
     # pattern search: neighbours of the best centre at half, then a quarter of the grid spacing
-    step = np.array([RADIAL_REACH[1] - RADIAL_REACH[0], 0.0, HEIGHT_REACH[1] - HEIGHT_REACH[0]]) * reach
+    radial_step = (RADIAL_REACH[1] - RADIAL_REACH[0]) * reach * direction
+    height_step = np.array([0.0, 0.0, (HEIGHT_REACH[1] - HEIGHT_REACH[0]) * reach])
     for scale in (0.5, 0.25):
-        for direction in ((1, 0, 0), (-1, 0, 0), (0, 0, 1), (0, 0, -1)):
-            centre = best[1] + scale * step * np.array(direction)
+        for step in (radial_step, -radial_step, height_step, -height_step):
+            centre = best[1] + scale * step
             bound = _geometric_edge_bound(centre, shoulder, reach, floor_z, plane)
             edge = best[0] * 1.05
             if bound < edge:

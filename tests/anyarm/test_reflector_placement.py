@@ -60,3 +60,11 @@ def test_tracker_sees_the_reflector_in_a_sizeable_share_of_poses(rel):
     seen, _ = filter_configurations(chain, Q[free])
     assert free.sum() > 100
     assert seen.mean() >= MIN_VISIBLE_SHARE, f"reflector visible in {seen.mean():.2%} of collision-free poses"
+
+
+def test_reflector_goes_to_the_side_the_tool_geometry_lies_on():
+    model = _chain_model(0.1)                             # upstream joint on -z: rule 2 alone says +z
+    gripper = Capsule("link2", "j2", np.array([0.0, 0.0, -0.05]), np.array([0.0, 0.0, -0.2]), 0.03)
+    position, axis = reflector_placement(model, "tip", [gripper])
+    assert axis[2] == -1.0
+    assert -position[2] > 0.2 + gripper.radius_m        # beyond the gripper's end
