@@ -14,7 +14,7 @@ from pipeline.control.reference import cartesian_reference
 from pipeline.errors import InfeasibleError
 from pipeline.robot import defaults
 from pipeline.robot.example_robots import EXAMPLE_ARMS, example_arm_urdf
-from pipeline.robot.iso_search import MIN_EDGE_REACH
+from pipeline.robot.iso_search import MIN_EDGE_REACH, SEARCH_DIRECTIONS
 from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import ik_track, start_configuration
 
@@ -95,7 +95,7 @@ def test_an_arm_whose_wrist_cannot_point_down_gets_a_cube_with_another_tool_orie
         pytest.skip("example-robot-data not installed")
     robot = RobotModel.load(urdf)
     with pytest.raises(InfeasibleError, match="tool down"):
-        defaults.iso_cube(robot, orientation="down")
+        defaults.iso_cube(robot, orientation="down", direction=SEARCH_DIRECTIONS[0])     # in front
     cube = defaults.iso_cube(robot)
     assert cube.orientation in ("plane", "ready") and cube.edge_m > 0
     assert np.allclose(cube.rotation, defaults.iso_rotation(robot, cube.plane, cube.orientation))
