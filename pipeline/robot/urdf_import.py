@@ -116,7 +116,8 @@ def arm_chain(urdf: Path, root: ET.Element, *, base: str | None = None, tip: str
             raise RobotFileError(urdf, "joints", "no movable joint (expected a chain of revolute joints)")
         if len(ends) > 1:
             raise RobotFileError(urdf, "tip", f"several arm chains end {deepest} joints from the root "
-                                 f"({', '.join(sorted(ends))}): choose one with --tip LINK")
+                                 f"({', '.join(sorted(ends))}): choose one (python -m pipeline robot init "
+                                 f"{urdf} --tip LINK --out DIR/robot.yaml, then run with --set robot=DIR)")
         tip = ends.pop()
     path = path_to_root(tip)
     root_link = path[0].find("parent").get("link") if path else tip
