@@ -47,6 +47,8 @@ from pipeline.control.iso9283 import PLANES, iso9283_path
 from pipeline.control.reference import cartesian_reference
 from pipeline.errors import InfeasibleError
 
+#: axes needed to hold a 6-D tool pose (position and orientation) along a Cartesian path
+POSE_AXES = 6
 MAX_CONDITION = 300.0
 LIMIT_MARGIN_RAD = np.deg2rad(5.0)
 VELOCITY_SHARE = 0.9
