@@ -15,6 +15,7 @@ from typing import Any
 from pipeline import config as config_mod
 from pipeline.config import RunConfig
 from pipeline.errors import ConfigError, PipelineError
+from pipeline.robot.iso_search import POSE_AXES
 from pipeline.robot.model import RobotModel
 
 
@@ -46,10 +47,18 @@ def _check_stage_module(name: str, module: ModuleType) -> None:
 
 def unavailable_stages(robot: RobotModel) -> dict[str, str]:
     """Stages the robot cannot run, with the reason: no tracker in robot.yaml -> no calibration
-    (the later stages use the nominal kinematics, and the model stage's report says so)."""
-    return {} if robot.has_tracker else {
-        "calibration": f"robot {robot.name!r} has no tracker section in robot.yaml: no calibration "
-                       "(the later stages use the nominal kinematics)"}
+    (the later stages use the nominal kinematics, and the model stage's report says so); fewer
+    than ``POSE_AXES`` axes -> no control and no trajectory (the ISO 9283 path and the CP path hold
+    a constant tool orientation, which such an arm cannot follow in general)."""
+    out: dict[str, str] = {}
+    if not robot.has_tracker:
+        out["calibration"] = (f"robot {robot.name!r} has no tracker section in robot.yaml: no calibration "
+                              "(the later stages use the nominal kinematics)")
+    if robot.nq < POSE_AXES:
+        for stage, path in (("control", "the ISO 9283 path"), ("trajectory", "the CP path")):
+            out[stage] = (f"robot {robot.name!r} has {robot.nq} axes: {path} holds a 6-D tool pose, which needs "
+                          f"at least {POSE_AXES}; run the stages model, calibration, identification")
+    return out
 
 
 def plan_stages(cfg: RunConfig, unavailable: Mapping[str, str] | None = None) -> list[Plan]:

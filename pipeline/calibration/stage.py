@@ -67,6 +67,7 @@ from pipeline.calibration.robust import robust_estimate
 from pipeline.errors import ConfigError, DataFileError, InfeasibleError, PipelineError
 from pipeline.progress import task
 from pipeline.quality import QualityGates
+from pipeline.robot.iso_search import POSE_AXES
 from pipeline.stage_api import StageResult
 
 NAME = "calibration"
@@ -361,6 +362,9 @@ def check(config: Config, robot) -> None:
                           f"{cfg.identifiability_samples} random configurations give {3 * cfg.identifiability_samples} "
                           f"equations for the {mm.n} model parameters of {robot.name}; need at least {need_samples} "
                           "(default 200)")
+    if cfg.working_region == "iso_cube" and robot.nq < POSE_AXES:
+        raise ConfigError(None, "calibration.working_region", f"iso_cube: the ISO 9283 path holds a 6-D tool pose, "
+                          f"which the {robot.nq} axes of {robot.name} cannot follow; use box (working_box_m) or csv")
     max_inc = math.degrees(robot.tracker.max_incidence_rad)
     if cfg.margin_incidence_deg >= max_inc:
         raise ConfigError(None, "calibration.margin_incidence_deg",

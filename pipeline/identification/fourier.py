@@ -96,6 +96,8 @@ def rest_constraint_matrix(harmonics: int) -> np.ndarray:
 #: a capsule pair whose median clearance over the workspace is below the required margin is close by
 #: construction (a compact wrist, the upper arm over the base): it is held at this share of its median
 CLOSE_PAIR_SHARE = 0.5
+#: random centres drawn for one random trajectory before giving up (random_trajectory)
+CENTRE_DRAWS = 200
 
 
 def pair_clearances_m(robot: RobotModel, self_clearance_m: float) -> np.ndarray:
@@ -241,7 +243,9 @@ def random_trajectory(
 
     Coefficients ~ N(0, 1/l), projected onto the rest-to-rest constraints, each joint scaled by a
     random fraction (0.3..1) of the largest factor its position/velocity/acceleration limits allow
-    and centred at a random point of its range; then scaled down until the nominal torques fit
+    and centred at a random point of its range (up to ``CENTRE_DRAWS`` draws until gravity alone stays
+    below 90 % of the torque limits there: an arm that its own weight loads near its limits around
+    mid-range, e.g. a humanoid's arm held out sideways, needs many); then scaled down until the nominal torques fit
     (and, when ``limits`` bound them, the TCP speed and acceleration). Collisions are not checked
     here (see :func:`random_feasible_trajectories`).
     """
@@ -257,7 +261,7 @@ def random_trajectory(
         tau = np.array([robot.inverse_dynamics(*s) for s in zip(q, v, a, strict=True)])
         return float(np.max(np.abs(tau) / limits.effort_Nm))
 
-    for _ in range(20):
+    for _ in range(CENTRE_DRAWS):
         coef = np.zeros((nq, 2 * L + 1))
         for i in range(nq):
             c = np.concatenate([[0.0], rng.normal(size=L) / ell, rng.normal(size=L) / ell])
@@ -299,7 +303,7 @@ def random_trajectory(
         return FourierTrajectory(coef, base_frequency_hz)
     raise InfeasibleError(
         None, "identification.excitation", "no centre position with static torques below 90 % "
-        "of the (margin-scaled) limits found in 20 random draws"
+        f"of the (margin-scaled) limits found in {CENTRE_DRAWS} random draws"
     )
 
 

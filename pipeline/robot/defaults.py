@@ -28,7 +28,13 @@ import numpy as np
 
 from pipeline.control.iso9283 import TOOL_ORIENTATIONS, tool_rotation
 from pipeline.errors import InfeasibleError
-from pipeline.robot.iso_search import MIN_EDGE_REACH, VELOCITY_SHARE, search_cube, verified_edge
+from pipeline.robot.iso_search import (
+    MIN_EDGE_REACH,
+    SEARCH_DIRECTIONS,
+    VELOCITY_SHARE,
+    search_cube,
+    verified_edge,
+)
 
 N_SAMPLES = 3000
 SLOW_SHARE = 0.8              # lowered ISO speed: this share of the highest speed a small cube allows
@@ -140,7 +146,7 @@ def _cache_key(robot, seeds: np.ndarray, plane: str, orientation: str, speed_m_s
 
 
 def iso_cube(robot, plane: str = "diagonal_x", orientation: str | None = None, speed_m_s: float = 1.0,
-             frame: str | None = None) -> IsoCube:
+             frame: str | None = None, direction: tuple[float, float, float] | None = None) -> IsoCube:
     """The largest ISO 9283 cube whose whole path is feasible, found by a search over the workspace
     (:mod:`pipeline.robot.iso_search`; the IK branch starts from :func:`ik_seeds_rad`, as the stages do),
     with the tool in ``orientation`` (:func:`iso_rotation`); ``None``: the first of
@@ -149,31 +155,45 @@ def iso_cube(robot, plane: str = "diagonal_x", orientation: str | None = None, s
     If no cube is feasible at ``speed_m_s`` (the joint speeds of a small or slow arm), the speed is lowered
     to ``SLOW_SHARE`` of the highest speed a small cube allows, and the largest cube at that speed returned.
     Results are cached per robot model (same model -> same cube).
+
+    ``direction``: the searched half-plane (:data:`~pipeline.robot.iso_search.SEARCH_DIRECTIONS`);
+    ``None``: in front of the base, else (no orientation nor speed has a cube there) beside it, else
+    behind it.
     """
+    if direction is None:
+        front = None
+        for candidate_direction in SEARCH_DIRECTIONS:
+            try:
+                return iso_cube(robot, plane, orientation, speed_m_s, frame, candidate_direction)
+            except InfeasibleError as exc:
+                front = exc.problem if front is None else front
+        raise InfeasibleError(None, "control.iso", f"{front} (nor beside or behind the base)")
     if orientation is None:
         failures = []
         for candidate in TOOL_ORIENTATIONS:
             try:
-                return iso_cube(robot, plane, candidate, speed_m_s, frame)
+                return iso_cube(robot, plane, candidate, speed_m_s, frame, direction)
             except InfeasibleError as exc:
                 failures.append(f"tool {candidate}: {exc.problem}")
         raise InfeasibleError(None, "control.iso", "; ".join(failures))
     frame = frame or robot.frame_reflector
     seeds = ik_seeds_rad(robot)
-    key = _cache_key(robot, seeds, plane, orientation, speed_m_s, frame)
+    key = (*_cache_key(robot, seeds, plane, orientation, speed_m_s, frame), direction)
     if key in _CUBES:
         return copy.deepcopy(_CUBES[key])
     rotation = iso_rotation(robot, plane, orientation)
     reach = float(robot.summary()["reach_m"])
     memo: dict = {}
-    best = search_cube(robot, seeds, plane, rotation, speed_m_s, frame, memo=memo)
+    best = search_cube(robot, seeds, plane, rotation, speed_m_s, frame, memo=memo, direction=direction)
     speed, how = speed_m_s, "largest feasible cube found by search"
     if best is None:
-        slowest = search_cube(robot, seeds, plane, rotation, speed_m_s, frame, ignore_speed=True, memo=memo)
+        slowest = search_cube(robot, seeds, plane, rotation, speed_m_s, frame, ignore_speed=True, memo=memo,
+                              direction=direction)
         if slowest is not None:       # SLOW_SHARE of the highest speed a small cube allows, then the largest cube
             speed = float(np.floor(100 * SLOW_SHARE * speed_m_s / slowest[2]) / 100)
             how = f"no cube is feasible at {speed_m_s:g} m/s (joint speeds); largest cube at {speed:g} m/s"
-            best = search_cube(robot, seeds, plane, rotation, speed, frame, memo=memo) if speed > 0 else None
+            best = (search_cube(robot, seeds, plane, rotation, speed, frame, memo=memo, direction=direction)
+                    if speed > 0 else None)
     found = None if best is None or speed <= 0 else verified_edge(robot, best[0], best[1], plane, rotation, seeds,
                                                                   frame, speed)
     if found is None:

@@ -8,6 +8,9 @@ orientation by one IK branch followed by continuation, with, at every sample,
 * every joint at least ``LIMIT_MARGIN_RAD`` inside its limits,
 * ``cond(J) <= MAX_CONDITION`` for the 6 x n frame Jacobian (away from singularities; ``J`` in the
   base-aligned frame, metres and radians), and
+* the static (gravity) joint torques at most ``GRAVITY_TORQUE_SHARE`` of the torque limits (the rest
+  is for the path's accelerations and the servo; an arm that its own weight loads near its limits,
+  e.g. a humanoid's arm held out sideways, saturates there), and
 * the joint speeds ``J^+ [speed t; 0]`` for the path speed along the unit tangent ``t`` at most
   ``VELOCITY_SHARE`` of their limits (paper 004 §2.3.3: 1 m/s; the accelerations of 5 m/s² are
   reached by the reference generator and not part of this test).
@@ -16,16 +19,20 @@ The branch: IK from each seed to the path's first pose (inside the limits), the 
 joint-speed demand wins; its start configuration is returned so that the stages start on it
 (:func:`pipeline.robot.defaults.ik_seeds_or_derived_rad` puts it first).
 
-Search: candidate centres on a grid of the vertical half-plane in front of the first joint
-(radial distance 0.2..0.85 of the reach from the first joint's axis, height from the floor clearance to
-0.8 reach above the shoulder, the second joint's height); centres whose path cannot fit the reach sphere
-about the shoulder or lies under the floor are discarded by geometry. Each remaining centre is tried
-with a small cube (``MIN_EDGE_REACH`` of the reach); the feasible ones, largest geometric room first,
-get a bisection on the edge (``BISECTION_STEPS`` steps) up to their geometric bound; the largest edge
-wins (ties: the centre tried first). The winner is then checked with the control stage's own reference
-generator (:func:`pipeline.control.reference.cartesian_reference`: jerk-limited profile at the speed, 5 m/s²,
-minimum-norm redundancy resolution, joint limits and speeds) every ``VERIFY_SAMPLE_TIME_S``; while it fails
-the edge shrinks by ``SHRINK``. Deterministic: no random numbers.
+Search: candidate centres on a grid of the vertical half-plane in front of the first joint (radial
+distance 0.2..0.85 of the reach from the first joint's axis, height from the floor clearance to 0.8 reach
+above the shoulder, the second joint's height); centres whose path cannot fit the reach sphere about the
+shoulder or lies under the floor are discarded by geometry. The half-plane is in front of the base
+(+x); :func:`pipeline.robot.defaults.iso_cube` turns to the sides (+y, -y) and behind (-x) in turn when
+no tool orientation has a cube in front (an arm whose first joint does not turn about the vertical,
+e.g. a humanoid's arm raised sideways, works to a side). Each
+remaining centre is tried with a small cube (``MIN_EDGE_REACH`` of the reach); the feasible ones, largest
+geometric room first, get a bisection on the edge (``BISECTION_STEPS`` steps) up to their geometric
+bound; the largest edge wins (ties: the centre tried first). The winner is then checked with the control
+stage's own reference generator (:func:`pipeline.control.reference.cartesian_reference`: jerk-limited
+profile at the speed, 5 m/s², minimum-norm redundancy resolution, joint limits and speeds) every
+``VERIFY_SAMPLE_TIME_S``; while it fails the edge shrinks by ``SHRINK``. Deterministic: no random
+numbers.
 """
 
 from __future__ import annotations
@@ -40,9 +47,12 @@ from pipeline.control.iso9283 import PLANES, iso9283_path
 from pipeline.control.reference import cartesian_reference
 from pipeline.errors import InfeasibleError
 
+#: axes needed to hold a 6-D tool pose (position and orientation) along a Cartesian path
+POSE_AXES = 6
 MAX_CONDITION = 300.0
 LIMIT_MARGIN_RAD = np.deg2rad(5.0)
 VELOCITY_SHARE = 0.9
+GRAVITY_TORQUE_SHARE = 0.7
 SAMPLE_SPACING_EDGES = 0.125       # path sample spacing, in cube edges of arc length
 MIN_EDGE_REACH = 0.1              # the smallest cube tried, as a fraction of the reach
 MAX_EDGE_REACH = 0.6              # the largest cube tried, as a fraction of the reach
@@ -53,6 +63,8 @@ HEIGHT_REACH = np.linspace(-0.7, 0.8, 7)
 FLOOR_CLEARANCE_REACH = 0.05
 VERIFY_SAMPLE_TIME_S = 4e-3      # the final check runs the control stage's reference at this step
 SHRINK = 0.9                      # edge factor when the final check fails
+#: horizontal directions of the searched half-planes, in the order tried (module docstring)
+SEARCH_DIRECTIONS = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, -1.0, 0.0), (-1.0, 0.0, 0.0))
 
 
 @dataclass
@@ -89,6 +101,7 @@ def check_cube(robot, edge_m: float, centre_m: np.ndarray, plane: str, rotation:
     lo, hi = robot.limits.lower_rad, robot.limits.upper_rad
     lo_m, hi_m = lo + LIMIT_MARGIN_RAD, hi - LIMIT_MARGIN_RAD
     vmax = VELOCITY_SHARE * robot.limits.velocity_rad_s
+    tau_max = GRAVITY_TORQUE_SHARE * robot.limits.effort_Nm
     path = iso9283_path(robot, edge_m, centre_m, plane, rotation)
     n = max(int(np.ceil(path.length_m / (SAMPLE_SPACING_EDGES * edge_m))), 2)
     s = np.linspace(0.0, path.length_m, n)
@@ -101,7 +114,7 @@ def check_cube(robot, edge_m: float, centre_m: np.ndarray, plane: str, rotation:
         q, err = _dls(model, data, fid, np.array(seed, float), poses[0], 150, 1e-10)
         if err < 1e-7 and np.all(q >= lo) and np.all(q <= hi) and all(np.abs(q - p).max() > 1e-3 for p in starts):
             starts.append(q)
-            check = _follow(model, data, fid, q, poses, tangents, speed_m_s, lo_m, hi_m, vmax)
+            check = _follow(model, data, fid, q, poses, tangents, speed_m_s, lo_m, hi_m, vmax, tau_max)
             if check.speed_ratio < best.speed_ratio or best.q_start is None:
                 best = check
     return best
@@ -109,7 +122,7 @@ def check_cube(robot, edge_m: float, centre_m: np.ndarray, plane: str, rotation:
 
 def _follow(model: pin.Model, data: pin.Data, fid: int, q_start: np.ndarray, poses: list[pin.SE3],
             tangents: np.ndarray, speed_m_s: float, lo_m: np.ndarray, hi_m: np.ndarray,
-            vmax: np.ndarray) -> CubeCheck:
+            vmax: np.ndarray, tau_max: np.ndarray) -> CubeCheck:
     """Continuation along the sampled path from ``q_start`` with the checks of the module docstring."""
     n = len(poses)
     q, worst = q_start.copy(), 0.0
@@ -119,6 +132,8 @@ def _follow(model: pin.Model, data: pin.Data, fid: int, q_start: np.ndarray, pos
             return CubeCheck(np.inf, f"IK lost at sample {k}/{n}", q_start)
         if np.any(q < lo_m) or np.any(q > hi_m):
             return CubeCheck(np.inf, f"joint limit margin at sample {k}/{n}", q_start)
+        if np.any(np.abs(pin.computeGeneralizedGravity(model, data, q)) > tau_max):
+            return CubeCheck(np.inf, f"gravity torque at sample {k}/{n}", q_start)
         J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
         sv = np.linalg.svd(J, compute_uv=False)
         if sv[0] > MAX_CONDITION * sv[-1]:
@@ -146,19 +161,27 @@ def _geometric_edge_bound(centre: np.ndarray, shoulder: np.ndarray, reach: float
 
 
 def search_cube(robot, seeds: np.ndarray, plane: str, rotation: np.ndarray, speed_m_s: float, frame: str,
-                ignore_speed: bool = False, memo: dict | None = None) -> tuple[float, np.ndarray, float] | None:
-    """(edge, centre, speed ratio) of the largest feasible cube (module docstring), or ``None``.
+                ignore_speed: bool = False, memo: dict | None = None,
+                direction: tuple[float, float, float] = SEARCH_DIRECTIONS[0]) -> tuple[float, np.ndarray, float] | None:
+    """(edge, centre, speed ratio) of the largest feasible cube (module docstring) on the vertical
+    half-plane from the first joint along ``direction`` (one of :data:`SEARCH_DIRECTIONS`), or ``None``.
 
     ``memo``: a dict shared by calls with the same robot, seeds, plane, tool and frame (checks are reused).
     ``ignore_speed``: any finite speed ratio counts as feasible, and the small cube at the centre with the
     lowest speed demand is returned (to find the speed the arm allows, for the lowered-speed fallback)."""
+    memo = {} if memo is None else memo      # (edge, centre) -> speed ratio per m/s (linear in the speed)
+    return _search_half_plane(robot, seeds, plane, rotation, speed_m_s, frame, ignore_speed, memo,
+                              np.asarray(direction, float))
+
+
+def _search_half_plane(robot, seeds: np.ndarray, plane: str, rotation: np.ndarray, speed_m_s: float, frame: str,
+                       ignore_speed: bool, memo: dict, direction: np.ndarray) -> tuple[float, np.ndarray, float] | None:
+    """:func:`search_cube` on the vertical half-plane from the first joint along ``direction``."""
     reach = float(robot.summary()["reach_m"])
     base = robot.model.jointPlacements[1].translation
     shoulder = robot.model.jointPlacements[2].translation + base if robot.nq > 1 else base
     floor_z = float(robot.spec.collision.floor_z_m)
     limit = 1e3 if ignore_speed else 1.0
-
-    memo = {} if memo is None else memo      # (edge, centre) -> speed ratio per m/s (linear in the speed)
 
     def ok(edge: float, centre: np.ndarray) -> float | None:
         key = (round(edge, 9), *np.round(centre, 9))
@@ -171,7 +194,7 @@ def search_cube(robot, seeds: np.ndarray, plane: str, rotation: np.ndarray, spee
     candidates = []
     for radial in RADIAL_REACH:
         for height in HEIGHT_REACH:
-            centre = np.array([base[0] + radial * reach, base[1], shoulder[2] + height * reach])
+            centre = np.array([base[0], base[1], shoulder[2] + height * reach]) + radial * reach * direction
             bound = _geometric_edge_bound(centre, shoulder, reach, floor_z, plane)
             if bound >= small:
                 candidates.append((bound, centre))
@@ -197,10 +220,11 @@ def search_cube(robot, seeds: np.ndarray, plane: str, rotation: np.ndarray, spee
                 best = (edge, centre, ratio)
     assert best is not None
     # pattern search: neighbours of the best centre at half, then a quarter of the grid spacing
-    step = np.array([RADIAL_REACH[1] - RADIAL_REACH[0], 0.0, HEIGHT_REACH[1] - HEIGHT_REACH[0]]) * reach
+    radial_step = (RADIAL_REACH[1] - RADIAL_REACH[0]) * reach * direction
+    height_step = np.array([0.0, 0.0, (HEIGHT_REACH[1] - HEIGHT_REACH[0]) * reach])
     for scale in (0.5, 0.25):
-        for direction in ((1, 0, 0), (-1, 0, 0), (0, 0, 1), (0, 0, -1)):
-            centre = best[1] + scale * step * np.array(direction)
+        for step in (radial_step, -radial_step, height_step, -height_step):
+            centre = best[1] + scale * step
             bound = _geometric_edge_bound(centre, shoulder, reach, floor_z, plane)
             edge = best[0] * 1.05
             if bound < edge:

@@ -10,8 +10,9 @@ What a URDF lacks is assumed from rules stated here (each becomes a line of
   Coulomb friction ``4 % of the effort limit`` (RX130L: 20 N m s/rad at 550 N m and 3.5 rad/s,
   25 N m at 550 N m);
 * acceleration limits ``5 x velocity limit`` per second (full speed in 0.2 s);
-* TCP at the flange (the tip link), reflector on the flange z axis 10 mm beyond the last link's
-  capsule (at least 30 mm), opening along z;
+* TCP at the flange (the tip link), reflector on the flange z axis on the side facing away from
+  the arm (the side the last body's tool/gripper geometry lies on, else away from the nearest
+  upstream joint), 10 mm beyond the last body's capsules (at least 30 mm), opening outwards;
 * a laser tracker 1.5 reaches in front of the base (x), 0.2 reaches up (DESIGN.md: 2.5 m from an
   arm of 1.66 m reach), with DESIGN.md's noise model;
 * one capsule per moving link fitted to its collision geometry (principal axis of the points,
@@ -115,7 +116,8 @@ def arm_chain(urdf: Path, root: ET.Element, *, base: str | None = None, tip: str
             raise RobotFileError(urdf, "joints", "no movable joint (expected a chain of revolute joints)")
         if len(ends) > 1:
             raise RobotFileError(urdf, "tip", f"several arm chains end {deepest} joints from the root "
-                                 f"({', '.join(sorted(ends))}): choose one with --tip LINK")
+                                 f"({', '.join(sorted(ends))}): choose one (python -m pipeline robot init "
+                                 f"{urdf} --tip LINK --out DIR/robot.yaml, then run with --set robot=DIR)")
         tip = ends.pop()
     path = path_to_root(tip)
     root_link = path[0].find("parent").get("link") if path else tip
@@ -220,15 +222,47 @@ def fit_capsules(model: pin.Model, urdf: Path, flange: str, reach_m: float) -> t
     return capsules, how
 
 
-def _reflector_offset_m(model: pin.Model, flange: str, capsules: list[Capsule]) -> float:
-    """Distance along the flange z axis just beyond the last link's capsule (at least REFLECTOR_OFFSET_M)."""
+def _outward_sign(model: pin.Model, flange_frame: pin.Frame, last_body: list[Capsule], tie_m: float = 0.01) -> float:
+    """+1 or -1: the side of the flange z axis facing away from the arm.
+
+    1. The last body's geometry (tool, gripper, locked fingers merged into it): the side its
+       capsules' mean lies on, when that lies beyond their mean radius (a body clearly on one side).
+    2. Else away from the nearest joint origin upstream that is not at the flange's origin
+       (``tie_m`` or more away), in the URDF's zero configuration, when it lies ``tie_m`` or more
+       off the flange's xy plane.
+    3. Else ``+z``."""
+    if last_body:
+        ends = np.array([flange_frame.placement.actInv(p) for c in last_body for p in (c.p0, c.p1)])
+        mean_z, radius = float(ends[:, 2].mean()), float(np.mean([c.radius_m for c in last_body]))
+        if abs(mean_z) > radius:
+            return float(np.sign(mean_z))
+    data = model.createData()
+    pin.forwardKinematics(model, data, pin.neutral(model))
+    flange = data.oMi[flange_frame.parentJoint] * flange_frame.placement
+    for j in range(flange_frame.parentJoint, 0, -1):
+        origin = flange.actInv(data.oMi[j].translation)
+        if np.linalg.norm(origin) >= tie_m:
+            return -1.0 if origin[2] >= tie_m else 1.0
+    return 1.0
+
+
+def reflector_placement(model: pin.Model, flange: str, capsules: list[Capsule]) -> tuple[np.ndarray, np.ndarray]:
+    """(position, opening axis) of the assumed reflector in the flange frame.
+
+    On the flange z axis, on the side facing away from the arm (:func:`_outward_sign`: ``-z`` for
+    a URDF whose last link frame points back into the wrist, as Kinova's Jaco or Talos' arm),
+    beyond every capsule of the last body (including locked fingers merged into it) by 10 mm, at
+    least ``REFLECTOR_OFFSET_M`` from the flange. A reflector inside or behind the wrist would be
+    hidden from the tracker in every pose."""
     flange_frame = model.frames[model.getFrameId(flange)]
+    last_body = [c for c in capsules if c.frame == str(model.names[flange_frame.parentJoint])]
+    sign = _outward_sign(model, flange_frame, last_body)
     offset = REFLECTOR_OFFSET_M
-    for capsule in capsules:
-        if capsule.frame == str(model.names[flange_frame.parentJoint]):
-            ends = [flange_frame.placement.actInv(p) for p in (capsule.p0, capsule.p1)]
-            offset = max(offset, max(e[2] for e in ends) + capsule.radius_m + 0.01)
-    return float(offset)
+    for capsule in last_body:
+        ends = [flange_frame.placement.actInv(p) for p in (capsule.p0, capsule.p1)]
+        offset = max(offset, max(sign * e[2] for e in ends) + capsule.radius_m + 0.01)
+    axis = np.array([0.0, 0.0, sign])
+    return float(offset) * axis, axis
 
 
 def _floor_check_from_joint(model: pin.Model, capsules: list[Capsule], clearance_m: float = 0.06) -> int:
@@ -278,10 +312,10 @@ def assumed_spec(urdf: Path, root: ET.Element, model: pin.Model, tip_link: str) 
     reach = _reach_m(model, tip_link)
     capsules, how = fit_capsules(model, urdf, tip_link, reach)
     tracker = assumed_tracker(reach)
-    reflector_m = _reflector_offset_m(model, tip_link, capsules)
+    reflector_m, reflector_axis = reflector_placement(model, tip_link, capsules)
     spec = RobotSpec(
         path=urdf, name=root.get("name") or urdf.stem, urdf=urdf, flange_frame=tip_link, payload_kg=0.0,
-        tool=ToolSpec(pin.SE3.Identity(), np.array([0.0, 0.0, reflector_m]), np.array([0.0, 0.0, 1.0])),
+        tool=ToolSpec(pin.SE3.Identity(), reflector_m, reflector_axis),
         actuation=ActuationSpec(gear, np.diag(gear), ROTOR_INERTIA_PER_EFFORT_S2 * effort,
                                 VISCOUS_FRACTION * effort / velocity, COULOMB_FRACTION * effort, 0.01),
         acceleration_rad_s2=ACCELERATION_PER_VELOCITY_1_S * velocity, limit_overrides={}, tracker=tracker,
@@ -289,8 +323,10 @@ def assumed_spec(urdf: Path, root: ET.Element, model: pin.Model, tip_link: str) 
     t = tracker.transform_tracker_to_base.translation
     assumptions = [
         f"no robot.yaml: the facts a URDF lacks are assumed (write one to edit: python -m pipeline robot init {urdf})",
-        f"flange = tip link '{tip_link}', TCP at the flange, payload 0 kg, reflector {reflector_m * 1e3:.0f} mm "
-        "along the flange z axis (beyond the last link's capsule, so the beam can reach it)",
+        f"flange = tip link '{tip_link}', TCP at the flange, payload 0 kg, "
+        f"reflector {np.linalg.norm(reflector_m) * 1e3:.0f} mm "
+        f"along the flange {'+' if reflector_axis[2] > 0 else '-'}z axis, facing away from the arm "
+        "(beyond the last body's capsules, so the beam can reach it)",
         f"gear ratios {ARM_GEAR_RATIO:g} (axes 1-3) and {WRIST_GEAR_RATIO:g} (wrist), no coupling",
         f"rotor inertia {ROTOR_INERTIA_PER_EFFORT_S2:g} s² x effort limit, viscous friction {VISCOUS_FRACTION:g} x "
         f"effort/velocity limit, Coulomb friction {COULOMB_FRACTION:.0%} of the effort limit",

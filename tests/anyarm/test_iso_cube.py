@@ -14,7 +14,7 @@ from pipeline.control.reference import cartesian_reference
 from pipeline.errors import InfeasibleError
 from pipeline.robot import defaults
 from pipeline.robot.example_robots import EXAMPLE_ARMS, example_arm_urdf
-from pipeline.robot.iso_search import MIN_EDGE_REACH
+from pipeline.robot.iso_search import GRAVITY_TORQUE_SHARE, MIN_EDGE_REACH, SEARCH_DIRECTIONS
 from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import ik_track, start_configuration
 
@@ -47,6 +47,8 @@ def _check(robot: RobotModel) -> defaults.IsoCube:
     q0 = start_configuration(robot, poses[0], defaults.ik_seeds_or_derived_rad(robot, None), frame)
     q = ik_track(robot, poses, q0, frame)        # raises when a pose is not reached or a limit is crossed
     assert np.all(np.abs(np.diff(q, axis=0)) < 0.2)                        # one branch, continuous
+    gravity = np.array([robot.inverse_dynamics(qk, 0 * qk, 0 * qk) for qk in q[::10]])
+    assert np.all(np.abs(gravity) <= GRAVITY_TORQUE_SHARE * robot.limits.effort_Nm + 1e-6)   # torque room left
     # the control stage's reference (paper's 5 m/s², jerk-limited, at the cube's speed) runs: it raises on a
     # pose not reached, a singular point, a joint limit or a joint speed limit
     ref = cartesian_reference(robot, path, 2e-3, cube.speed_m_s, 5.0, 50.0, q0, frame)
@@ -95,7 +97,7 @@ def test_an_arm_whose_wrist_cannot_point_down_gets_a_cube_with_another_tool_orie
         pytest.skip("example-robot-data not installed")
     robot = RobotModel.load(urdf)
     with pytest.raises(InfeasibleError, match="tool down"):
-        defaults.iso_cube(robot, orientation="down")
+        defaults.iso_cube(robot, orientation="down", direction=SEARCH_DIRECTIONS[0])     # in front
     cube = defaults.iso_cube(robot)
     assert cube.orientation in ("plane", "ready") and cube.edge_m > 0
     assert np.allclose(cube.rotation, defaults.iso_rotation(robot, cube.plane, cube.orientation))

@@ -8,10 +8,11 @@ import pytest
 import yaml
 
 from pipeline.cli import main
-from pipeline.config import load_config
+from pipeline.config import CONFIGS_DIR, load_config
 from pipeline.errors import ConfigError
 from pipeline.robot.example_robots import example_arm_urdf
 from pipeline.robot.model import RobotModel
+from pipeline.runner import prepare_run
 from pipeline.stage_plan import plan_stages, unavailable_stages
 
 
@@ -50,3 +51,24 @@ def test_robot_without_tracker_has_no_calibration_stage(ur5_folder, tmp_path):
     assert all("calibration" not in p.depends and "calibration" not in p.closure for p in plans)
     with pytest.raises(ConfigError, match="no tracker"):
         plan_stages(load_config(None, [f"robot={tmp_path}"], stages="calibration"), unavailable)
+
+
+def test_five_axis_arm_is_refused_with_one_line_before_anything_runs(tmp_path):
+    """A 5-axis arm (a UR5 whose last joint is fixed) cannot follow the 6-D tool pose of the ISO 9283
+    and CP paths: check time names it (stages, calibration's working region), nothing is written."""
+    text = _ur5().read_text().replace('<joint name="wrist_3_joint" type="revolute">',
+                                      '<joint name="wrist_3_joint" type="fixed">')
+    urdf = tmp_path / "ur5_5axis.urdf"
+    urdf.write_text(text)
+    robot = RobotModel.load(urdf)
+    assert robot.nq == 5
+    unavailable = unavailable_stages(robot)
+    assert "5 axes" in unavailable["control"] and "5 axes" in unavailable["trajectory"]
+    out = tmp_path / "runs"
+    with pytest.raises(ConfigError, match="5 axes") as err:       # the quick profile names every stage
+        prepare_run(load_config(CONFIGS_DIR / "quick.yaml", [f"robot={urdf}"]), out_root=out)
+    assert "\n" not in str(err.value)
+    cfg = load_config(None, [f"robot={urdf}"], stages="calibration")
+    with pytest.raises(ConfigError, match="working_region"):
+        prepare_run(cfg, out_root=out)
+    assert not out.exists()

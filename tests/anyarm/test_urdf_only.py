@@ -106,3 +106,17 @@ def test_robot_init_writes_an_editable_yaml_that_loads_back(tmp_path):
     assert [c.name for c in loaded.capsules] == [c.name for c in assumed.capsules]
     q = defaults.ready_pose_rad(assumed)
     assert np.allclose(loaded.fk(q, "reflector").translation, assumed.fk(q, "reflector").translation)
+
+
+def test_two_arm_urdf_asks_for_a_tip_and_says_how(tmp_path):
+    """A URDF with two equally deep arms (a dual-arm robot) names both ends and the command that picks one."""
+    text = _erd("ur_description/urdf/ur5_robot.urdf").read_text()
+    second = text.split("<robot", 1)[1].split(">", 1)[1].rsplit("</robot>", 1)[0]
+    renamed = second.replace('name="', 'name="b_').replace('link="', 'link="b_')   # a second UR5, b_*
+    urdf = tmp_path / "two_ur5.urdf"
+    urdf.write_text(text.rsplit("</robot>", 1)[0] + renamed
+                    + '<joint name="mount_b" type="fixed"><parent link="world"/><child link="b_world"/>'
+                    '<origin xyz="1 0 0"/></joint></robot>')
+    with pytest.raises(RobotFileError, match="robot init .* --tip LINK"):
+        RobotModel.load(urdf)
+    assert RobotModel.load(urdf, tip="b_wrist_3_link").nq == 6
