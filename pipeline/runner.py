@@ -37,7 +37,7 @@ import numpy as np
 import yaml
 
 import pipeline
-from pipeline import artefacts
+from pipeline import artefacts, second_pass
 from pipeline import config as config_mod
 from pipeline import report as report_mod
 from pipeline.config import REPO_ROOT, RunConfig, resolve_robot_dir
@@ -291,16 +291,49 @@ def run_pipeline(
     say = log if log is not None else prog.log
     with handle_termination():
         prep = prepare_run(cfg, out_root, force)
-        run_dir = prep.run_dir
-        try:
-            run_dir.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise ConfigError("--out" if out_root is not None else None, str(run_dir),
-                              f"cannot create the run directory ({exc.strerror or exc})") from None
-        with run_lock(run_dir) as lock:
-            if lock is None:
-                return _reuse_read_only(prep, say)
-            return _run_locked(prep, prog, say)
+        available = [n for n in config_mod.stage_names() if n not in unavailable_stages(prep.nominal)]
+        if second_pass.wanted(cfg, [p.name for p in prep.plans], available):
+            prep = _after_first_pass(prep, force, prog, say)
+        return _run_prepared(prep, out_root, prog, say)
+
+
+def _after_first_pass(prep: Prepared, force: bool | Sequence[str], prog: Progress,
+                      say: Callable[[str], None]) -> Prepared:
+    """Run the first calibration pass (:mod:`pipeline.second_pass`) and prepare this run after it:
+    with the identified inertias as gravity model, or reusing the first pass's stages."""
+    cfg, run_dir = prep.cfg, prep.run_dir
+    first_root = second_pass.first_pass_root(run_dir)
+    say(f"calibration: first pass (calibration and identification) under {first_root / cfg.name}")
+    first_prep = prepare_run(second_pass.first_pass_config(cfg), first_root, force)
+    first = _run_prepared(first_prep, first_root, prog, say)
+    second = second_pass.second_pass_config(cfg, first.outputs, run_dir)
+    share = second_pass.gravity_share(first.outputs)
+    share_text = "not predicted" if share is None else f"{share:.2f}"
+    if second is None:
+        say(f"calibration: gravity model's share of the predicted error {share_text} "
+            f"< {second_pass.GRAVITY_SHARE_FOR_SECOND_PASS}: no second pass, the first pass's stages are reused")
+        second_pass.reuse_first_pass(first.outputs, run_dir)
+        # the first pass's stages ran (or were forced) already
+        rest = [p.name for p in prep.plans] if force is True else list(force or ())
+        return prepare_run(cfg, prep.run_dir.parent, [n for n in rest if n not in first.outputs])
+    say(f"calibration: second pass with the first pass's identified inertias (gravity model's share of the "
+        f"first pass's predicted error {share_text})")
+    return prepare_run(second, prep.run_dir.parent, force)
+
+
+def _run_prepared(prep: Prepared, out_root: str | Path | None, prog: Progress,
+                  say: Callable[[str], None]) -> RunResult:
+    """Create the run directory and run (or reuse) the prepared stages under its lock."""
+    run_dir = prep.run_dir
+    try:
+        run_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError("--out" if out_root is not None else None, str(run_dir),
+                          f"cannot create the run directory ({exc.strerror or exc})") from None
+    with run_lock(run_dir) as lock:
+        if lock is None:
+            return _reuse_read_only(prep, say)
+        return _run_locked(prep, prog, say)
 
 
 def _reuse_read_only(prep: Prepared, say: Callable[[str], None]) -> RunResult:

@@ -32,6 +32,8 @@ GRADIENT_INDICES = ix.TRACE_INDICES
 #: largest candidate set (random candidates or grid points): beyond it the filtering and the
 #: whitened Jacobians of the feasible candidates take too much time and memory
 MAX_CANDIDATES = 20_000_000
+#: calibration.second_pass values (pipeline.second_pass)
+SECOND_PASS_MODES = ("auto", "always", "never")
 
 
 @dataclass
@@ -113,6 +115,11 @@ class Config:
     gravity_model_com_sigma_m: float = 0.02
     #: both sigmas are multiplied by this with an identified gravity model (calibration.gravity_model)
     gravity_model_identified_scale: float = 0.1
+    #: second calibration pass by the runner (pipeline.second_pass): a first pass of calibration and
+    #: identification under ``<run>/first_pass/``, then this run with the identified inertias as
+    #: gravity_model. auto: when the gravity model's share of the first pass's predicted error is
+    #: >= 0.5 (heavy arms with a nominal mass model), always, never; only without a gravity_model
+    second_pass: str = "auto"
 
     # -- task-space criterion and design table (pipeline.calibration.task_space, design_table) --
     #: iso_cube (control.iso) | box (working_box_m) | csv (working_csv: columns q1..qn, rad)
@@ -212,6 +219,8 @@ class Config:
             v = getattr(self, key)
             if isinstance(v, bool) or not isinstance(v, int | float) or not (math.isfinite(v) and 0 <= v <= hi):
                 raise bad(key, f"must be in [0, {hi}], got {v!r}")
+        if self.second_pass not in SECOND_PASS_MODES:
+            raise bad("second_pass", f"must be one of {SECOND_PASS_MODES}, got {self.second_pass!r}")
         if self.cross_validation_folds != 0 and not 2 <= self.cross_validation_folds <= 50:
             raise bad("cross_validation_folds", f"must be 0 (none) or in [2, 50], got {self.cross_validation_folds}")
         if self.position_sigma_m is not None and not (math.isfinite(self.position_sigma_m)

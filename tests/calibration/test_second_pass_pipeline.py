@@ -11,7 +11,7 @@ import json
 import numpy as np
 import pytest
 
-from pipeline.config import load_config
+from pipeline.config import CONFIGS_DIR, load_config
 from pipeline.robot.model import RobotModel
 from pipeline.robot.truth import RealRobot, TruthConfig
 from pipeline.runner import run_pipeline
@@ -24,7 +24,8 @@ HELDOUT_OVER_SIGMA_MAX = 3.5
 @pytest.mark.parametrize(("robot", "seed"), [("rx130l", 0), ("rx130l", 2), ("staubli_tx40", 0)])
 def test_second_pass_with_the_identified_gravity_model(tmp_path, robot, seed):
     quiet = {"out_root": tmp_path, "log": lambda m: None}
-    run_pipeline(load_config(None, [f"robot={robot}", f"seed={seed}", "name=first"], "identification"), **quiet)
+    run_pipeline(load_config(None, [f"robot={robot}", f"seed={seed}", "name=first", "calibration.second_pass=never"],
+                             "identification"), **quiet)
     identified = tmp_path / "first" / "identification" / "robot"
     run_pipeline(load_config(None, [f"robot={robot}", f"seed={seed}", "name=second",
                                     f"calibration.gravity_model={identified}"], "calibration"), **quiet)
@@ -41,3 +42,20 @@ def test_second_pass_with_the_identified_gravity_model(tmp_path, robot, seed):
     compliance = 1.0 / np.asarray(second["joint_stiffness_Nm_rad"])
     z = (compliance - 1.0 / hidden)[identified_joints] / results["joint_compliance_std"][identified_joints]
     assert np.all(np.abs(z) <= 3.0), z
+
+
+@pytest.mark.slow
+def test_the_runner_runs_the_second_pass_when_the_gravity_model_dominates(tmp_path):
+    """One command (quick profile, RX130L, whose own weight dominates the first pass's predicted
+    error): the first pass under ``first_pass/``, this run calibrated with its identified robot, and a
+    repeated command reuses every stage of both."""
+    logs: list[str] = []
+    cfg = load_config(CONFIGS_DIR / "quick.yaml", ["name=one"])
+    run_pipeline(cfg, out_root=tmp_path, log=logs.append)
+    first = json.loads((tmp_path / "one" / "first_pass" / "one" / "calibration" / "summary.json").read_text())
+    second = json.loads((tmp_path / "one" / "calibration" / "summary.json").read_text())
+    assert first["gravity_model_share"] >= 0.5 > second["gravity_model_share"]
+    assert second["rms_after_over_sigma"] <= HELDOUT_OVER_SIGMA_MAX < first["rms_after_over_sigma"]
+    assert "first_pass/gravity_model-" in second["gravity_pass"]["gravity_model"]
+    again = run_pipeline(cfg, out_root=tmp_path, log=lambda m: None)
+    assert again.ran == [] and set(again.reused) == set(again.outputs)
