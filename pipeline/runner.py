@@ -28,7 +28,7 @@ import errno
 import hashlib
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from types import ModuleType
 from typing import Any
@@ -292,15 +292,21 @@ def run_pipeline(
     with handle_termination():
         prep = prepare_run(cfg, out_root, force)
         available = [n for n in config_mod.stage_names() if n not in unavailable_stages(prep.nominal)]
+        copied: list[str] = []
         if second_pass.wanted(cfg, [p.name for p in prep.plans], available):
-            prep = _after_first_pass(prep, force, prog, say)
-        return _run_prepared(prep, out_root, prog, say)
+            prep, copied = _after_first_pass(prep, force, prog, say)
+        result = _run_prepared(prep, out_root, prog, say)
+        if copied:   # stages the first pass computed in this call and this run took over
+            ran = [n for n in result.outputs if n in copied or n in result.ran]
+            result = replace(result, ran=ran, reused=[n for n in result.reused if n not in ran])
+        return result
 
 
 def _after_first_pass(prep: Prepared, force: bool | Sequence[str], prog: Progress,
-                      say: Callable[[str], None]) -> Prepared:
+                      say: Callable[[str], None]) -> tuple[Prepared, list[str]]:
     """Run the first calibration pass (:mod:`pipeline.second_pass`) and prepare this run after it:
-    with the identified inertias as gravity model, or reusing the first pass's stages."""
+    with the identified inertias as gravity model, or reusing the first pass's stages. Also returns
+    the stages the first pass computed in this call that this run takes over."""
     cfg, run_dir = prep.cfg, prep.run_dir
     first_root = second_pass.first_pass_root(run_dir)
     say(f"calibration: first pass (calibration and identification) under {first_root / cfg.name}")
@@ -312,13 +318,14 @@ def _after_first_pass(prep: Prepared, force: bool | Sequence[str], prog: Progres
     if second is None:
         say(f"calibration: gravity model's share of the predicted error {share_text} "
             f"< {second_pass.GRAVITY_SHARE_FOR_SECOND_PASS}: no second pass, the first pass's stages are reused")
-        second_pass.reuse_first_pass(first.outputs, run_dir)
+        copied = second_pass.reuse_first_pass(first.outputs, run_dir)
         # the first pass's stages ran (or were forced) already
         rest = [p.name for p in prep.plans] if force is True else list(force or ())
-        return prepare_run(cfg, prep.run_dir.parent, [n for n in rest if n not in first.outputs])
+        return (prepare_run(cfg, prep.run_dir.parent, [n for n in rest if n not in first.outputs]),
+                [n for n in copied if n in first.ran])
     say(f"calibration: second pass with the first pass's identified inertias (gravity model's share of the "
         f"first pass's predicted error {share_text})")
-    return prepare_run(second, prep.run_dir.parent, force)
+    return prepare_run(second, prep.run_dir.parent, force), []
 
 
 def _run_prepared(prep: Prepared, out_root: str | Path | None, prog: Progress,

@@ -85,15 +85,17 @@ def second_pass_config(cfg: RunConfig, outputs: dict[str, StageOutput], run_dir:
     return replace(cfg, sections=sections)
 
 
-def reuse_first_pass(outputs: dict[str, StageOutput], run_dir: Path) -> None:
+def reuse_first_pass(outputs: dict[str, StageOutput], run_dir: Path) -> list[str]:
     """Copy the first pass's stage folders into ``run_dir`` (same inputs: the runner reuses them)
     where this run has none with the same inputs hash; a replaced folder is moved aside first
-    (``.<stage>.old-*``, removed by the runner's clean-up)."""
+    (``.<stage>.old-*``, removed by the runner's clean-up). Returns the stages copied."""
     run_dir.mkdir(parents=True, exist_ok=True)
+    copied = []
     for name, out in outputs.items():
         target = run_dir / name
         if target.exists() and artefacts.read_inputs_hash(target) == artefacts.read_inputs_hash(out.path):
             continue
+        copied.append(name)
         partial = run_dir / f".{name}.partial-first-pass"
         shutil.rmtree(partial, ignore_errors=True)
         shutil.copytree(out.path, partial)
@@ -105,3 +107,4 @@ def reuse_first_pass(outputs: dict[str, StageOutput], run_dir: Path) -> None:
             shutil.rmtree(old, ignore_errors=True)
         else:
             partial.rename(target)
+    return copied

@@ -58,11 +58,11 @@ def test_second_pass_config_follows_the_gravity_share(tmp_path, mode, share, sec
 def test_reuse_copies_the_first_pass_and_replaces_only_other_inputs(tmp_path):
     run_dir = tmp_path / "run"
     outputs = {"calibration": _output(tmp_path / "c", {}, "h1")}
-    second_pass.reuse_first_pass(outputs, run_dir)
+    assert second_pass.reuse_first_pass(outputs, run_dir) == ["calibration"]
     assert artefacts.read_inputs_hash(run_dir / "calibration") == "h1"
     marker = run_dir / "calibration" / "kept"
     marker.write_text("same inputs: left alone")
-    second_pass.reuse_first_pass(outputs, run_dir)
+    assert second_pass.reuse_first_pass(outputs, run_dir) == []
     assert marker.exists()
     outputs = {"calibration": _output(tmp_path / "c2", {}, "h2")}
     second_pass.reuse_first_pass(outputs, run_dir)

@@ -56,6 +56,6 @@ def test_the_runner_runs_the_second_pass_when_the_gravity_model_dominates(tmp_pa
     second = json.loads((tmp_path / "one" / "calibration" / "summary.json").read_text())
     assert first["gravity_model_share"] >= 0.5 > second["gravity_model_share"]
     assert second["rms_after_over_sigma"] <= HELDOUT_OVER_SIGMA_MAX < first["rms_after_over_sigma"]
-    assert "first_pass/gravity_model-" in second["gravity_pass"]["gravity_model"]
+    assert f"{tmp_path}/.gravity_models/" in second["gravity_pass"]["gravity_model"]
     again = run_pipeline(cfg, out_root=tmp_path, log=lambda m: None)
     assert again.ran == [] and set(again.reused) == set(again.outputs)
