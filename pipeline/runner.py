@@ -296,7 +296,7 @@ def run_pipeline(
         if second_pass.wanted(cfg, [p.name for p in prep.plans], available):
             prep, copied = _after_first_pass(prep, force, prog, say)
         result = _run_prepared(prep, out_root, prog, say)
-        if copied:   # stages the first pass computed in this call and this run took over
+        if copied:   # stages this run took over from the first pass: written in this call
             ran = [n for n in result.outputs if n in copied or n in result.ran]
             result = replace(result, ran=ran, reused=[n for n in result.reused if n not in ran])
         return result
@@ -306,7 +306,7 @@ def _after_first_pass(prep: Prepared, force: bool | Sequence[str], prog: Progres
                       say: Callable[[str], None]) -> tuple[Prepared, list[str]]:
     """Run the first calibration pass (:mod:`pipeline.second_pass`) and prepare this run after it:
     with the identified inertias as gravity model, or reusing the first pass's stages. Also returns
-    the stages the first pass computed in this call that this run takes over."""
+    the stages this run takes over from the first pass (their folders are written in this call)."""
     cfg, run_dir = prep.cfg, prep.run_dir
     first_root = second_pass.first_pass_root(run_dir)
     say(f"calibration: first pass (calibration and identification) under {first_root / cfg.name}")
@@ -318,11 +318,11 @@ def _after_first_pass(prep: Prepared, force: bool | Sequence[str], prog: Progres
     if second is None:
         say(f"calibration: gravity model's share of the predicted error {share_text} "
             f"< {second_pass.GRAVITY_SHARE_FOR_SECOND_PASS}: no second pass, the first pass's stages are reused")
-        copied = second_pass.reuse_first_pass(first.outputs, run_dir)
+        planned = [p.name for p in prep.plans]
+        copied = second_pass.reuse_first_pass({n: o for n, o in first.outputs.items() if n in planned}, run_dir)
         # the first pass's stages ran (or were forced) already
-        rest = [p.name for p in prep.plans] if force is True else list(force or ())
-        return (prepare_run(cfg, prep.run_dir.parent, [n for n in rest if n not in first.outputs]),
-                [n for n in copied if n in first.ran])
+        rest = planned if force is True else list(force or ())
+        return prepare_run(cfg, prep.run_dir.parent, [n for n in rest if n not in first.outputs]), copied
     say(f"calibration: second pass with the first pass's identified inertias (gravity model's share of the "
         f"first pass's predicted error {share_text})")
     return prepare_run(second, prep.run_dir.parent, force), []
