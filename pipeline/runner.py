@@ -78,7 +78,7 @@ class RunResult:
     run_dir: Path
     report: Path
     outputs: dict[str, StageOutput]       # every stage of this run, in order
-    ran: list[str]                        # stages whose run() was called
+    ran: list[str]                        # stages written by this call (run, or taken over from its first pass)
     reused: list[str]                     # stages loaded from disk
 
 
