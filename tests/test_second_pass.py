@@ -37,7 +37,7 @@ def test_wanted_needs_calibration_an_identification_stage_a_mode_and_no_user_gra
     assert second_pass.first_pass_config(_cfg()).stages == ["identification"]
 
 
-@pytest.mark.parametrize(("mode", "share", "second"), [("auto", 0.7, True), ("auto", 0.3, False),
+@pytest.mark.parametrize(("mode", "share", "second"), [("auto", 0.7, True), ("auto", 0.2, False),
                                                        ("auto", None, False), ("always", 0.1, True)])
 def test_second_pass_config_follows_the_gravity_share(tmp_path, mode, share, second):
     run_dir = tmp_path / "run"

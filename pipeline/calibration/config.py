@@ -118,7 +118,8 @@ class Config:
     #: second calibration pass by the runner (pipeline.second_pass): a first pass of calibration and
     #: identification under ``<run>/first_pass/``, then this run with the identified inertias as
     #: gravity_model. auto: when the gravity model's share of the first pass's predicted error is
-    #: >= 0.5 (heavy arms with a nominal mass model), always, never; only without a gravity_model
+    #: >= 0.25 (arms with a nominal mass model that gravity twists), always, never; only without a
+    #: gravity_model
     second_pass: str = "auto"
 
     # -- task-space criterion and design table (pipeline.calibration.task_space, design_table) --

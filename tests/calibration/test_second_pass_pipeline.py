@@ -15,6 +15,7 @@ from pipeline.config import CONFIGS_DIR, load_config
 from pipeline.robot.model import RobotModel
 from pipeline.robot.truth import RealRobot, TruthConfig
 from pipeline.runner import run_pipeline
+from pipeline.second_pass import GRAVITY_SHARE_FOR_SECOND_PASS
 
 #: 3 sigma of the tracker plus the unmodelled remainder (3 µrad cyclic gear error at ~1.5 m: < 0.5 sigma)
 HELDOUT_OVER_SIGMA_MAX = 3.5
@@ -54,7 +55,7 @@ def test_the_runner_runs_the_second_pass_when_the_gravity_model_dominates(tmp_pa
     run_pipeline(cfg, out_root=tmp_path, log=logs.append)
     first = json.loads((tmp_path / "one" / "first_pass" / "one" / "calibration" / "summary.json").read_text())
     second = json.loads((tmp_path / "one" / "calibration" / "summary.json").read_text())
-    assert first["gravity_model_share"] >= 0.5 > second["gravity_model_share"]
+    assert first["gravity_model_share"] >= GRAVITY_SHARE_FOR_SECOND_PASS > second["gravity_model_share"]
     assert second["rms_after_over_sigma"] <= HELDOUT_OVER_SIGMA_MAX < first["rms_after_over_sigma"]
     assert f"{tmp_path}/.gravity_models/" in second["gravity_pass"]["gravity_model"]
     again = run_pipeline(cfg, out_root=tmp_path, log=lambda m: None)
