@@ -135,13 +135,15 @@ def iso_rotation(robot, plane: str, orientation: str) -> np.ndarray:
 
 
 def _cache_key(robot, seeds: np.ndarray, plane: str, orientation: str, speed_m_s: float, frame: str) -> tuple:
-    """The robot's name plus everything of the model the search reads (the search is a pure function)."""
+    """The robot's name plus everything of the model the search reads (the search is a pure function):
+    kinematics, limits, and the inertias and torque limits of its gravity check."""
     placements = np.array([robot.model.jointPlacements[i].homogeneous for i in range(1, robot.model.njoints)])
     frame_placement = robot.model.frames[robot.frame_id(frame)].placement.homogeneous
+    inertias = np.array([robot.model.inertias[i].toDynamicParameters() for i in range(1, robot.model.njoints)])
     lim = robot.limits
     model_bytes = b"".join(np.ascontiguousarray(a, float).tobytes() for a in (
-        placements, frame_placement, lim.lower_rad, lim.upper_rad, lim.velocity_rad_s, seeds,
-        [robot.spec.collision.floor_z_m]))
+        placements, frame_placement, lim.lower_rad, lim.upper_rad, lim.velocity_rad_s, lim.effort_Nm, seeds,
+        inertias, robot.model.gravity.linear, [robot.spec.collision.floor_z_m]))
     return (robot.name, hash(model_bytes), plane, orientation, float(speed_m_s), frame)
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 import pytest
 
 from pipeline.control.config import IsoPathConfig
@@ -13,6 +14,7 @@ from pipeline.control.iso9283 import iso9283_path
 from pipeline.control.reference import cartesian_reference
 from pipeline.errors import InfeasibleError
 from pipeline.robot import defaults
+from pipeline.robot.defaults import _cache_key, ik_seeds_rad
 from pipeline.robot.example_robots import EXAMPLE_ARMS, example_arm_urdf
 from pipeline.robot.iso_search import GRAVITY_TORQUE_SHARE, MIN_EDGE_REACH, SEARCH_DIRECTIONS
 from pipeline.robot.model import RobotModel
@@ -103,3 +105,20 @@ def test_an_arm_whose_wrist_cannot_point_down_gets_a_cube_with_another_tool_orie
     assert np.allclose(cube.rotation, defaults.iso_rotation(robot, cube.plane, cube.orientation))
     iso = defaults.iso_or_derived(robot, IsoPathConfig())
     assert iso.tool_orientation == cube.orientation and iso.edge_m == pytest.approx(cube.edge_m)
+
+
+def test_cube_cache_tells_apart_models_whose_gravity_differs():
+    """The search's gravity check reads the inertias and torque limits: a model with the same
+    kinematics but other masses (the identified robot after the nominal one) is not served the
+    nominal model's cached cube."""
+    urdf = example_arm_urdf("ur5")
+    if urdf is None:
+        pytest.skip("example-robot-data not installed")
+    robot = RobotModel.load(urdf)
+    seeds = ik_seeds_rad(robot)
+    heavier = robot.copy()
+    heavier.model.inertias[2] = pin.Inertia(2.0 * robot.model.inertias[2].mass, robot.model.inertias[2].lever,
+                                            robot.model.inertias[2].inertia)
+    key = _cache_key(robot, seeds, "diagonal_x", "down", 1.0, robot.frame_reflector)
+    assert key == _cache_key(robot.copy(), seeds, "diagonal_x", "down", 1.0, robot.frame_reflector)
+    assert key != _cache_key(heavier, seeds, "diagonal_x", "down", 1.0, robot.frame_reflector)
