@@ -48,23 +48,20 @@ from types import SimpleNamespace
 from unittest import mock
 
 import numpy as np
-import yaml
+from bench_elastic_gap import load_run_models
 from scipy.signal import savgol_filter
 
-from pipeline.config import load_config
 from pipeline.control import simulate
 from pipeline.control.config import ControlConfig
 from pipeline.control.design import ServoGains, filter_alpha, servo_report, stick_slip_gains
 from pipeline.control.elastic_feedforward import link_torque
-from pipeline.control.joint_stiffness import feedforward_stiffness
 from pipeline.control.plant import Plant
 from pipeline.control.simulate import servo_gains, simulate_joint_trajectory
 from pipeline.control.stage import iso_reference
 from pipeline.robot.friction import stribeck_slope_Nms_rad
 from pipeline.robot.model import RobotModel
-from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 from pipeline.robot.transmission import Transmission
-from pipeline.robot.truth import RealRobot, TruthConfig
+from pipeline.robot.truth import RealRobot
 from pipeline.runner import stage_rng
 
 
@@ -140,18 +137,8 @@ class Case:
 
 def main(run_dir: str = "data/runs/default") -> None:
     run = Path(run_dir)
-    raw = yaml.safe_load((run / "config.yaml").read_text())
-    seed, robot_name = int(raw.get("seed", 0)), str(raw.get("robot", "rx130l"))
-    truth_cfg = TruthConfig(**raw.get("truth", {}))
-    cfg = load_config(values={"robot": robot_name, "seed": seed, "control.on_saturation": "clip"}).control
-    nominal = RobotModel.load(robot_name)
-    handed_on = RobotModel.load(run / "identification" / "robot")
-    with np.load(run / "calibration" / "results.npz") as z:
-        cal_arrays = {k: z[k] for k in z.files}
-    choice = feedforward_stiffness(handed_on, cal_arrays, True, nominal_joint_stiffness_Nm_rad(nominal))  # as the stage
-    pipe = handed_on.copy()
-    pipe.spec.actuation.joint_stiffness_Nm_rad = choice.stiffness_Nm_rad
-    real = RealRobot.create(nominal, seed, truth_cfg)
+    m = load_run_models(run)
+    seed, robot_name, cfg, pipe, real = m.seed, m.robot_name, m.config, m.pipe, m.real
     tr = real.transmission
     t0 = time.perf_counter()
     ref, _, frame, _, _ = iso_reference(pipe, cfg)
@@ -213,7 +200,7 @@ def main(run_dir: str = "data/runs/default") -> None:
     print(f"stage's Kv (identified Stribeck)      {stage_gains.kv}  (bandwidth design {gains.kv})")
 
     def run_case(c: Case) -> tuple[float, float, np.ndarray]:
-        plant = Plant(real.truth, **({"encoder_noise_rad": truth_cfg.encoder_noise_rad} | c.plant),
+        plant = Plant(real.truth, **({"encoder_noise_rad": real.config.encoder_noise_rad} | c.plant),
                       transmission=c.transmission)
         hidden = SimpleNamespace(plant=plant)       # what simulate_joint_trajectory uses of a RealRobot
         model = exact_model(real, c.transmission) if c.model is None else c.model

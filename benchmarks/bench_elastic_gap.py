@@ -32,12 +32,14 @@ from __future__ import annotations
 
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import yaml
 
 from pipeline.config import load_config
+from pipeline.control.config import ControlConfig
 from pipeline.control.joint_stiffness import StiffnessChoice, feedforward_stiffness
 from pipeline.control.simulate import servo_gains, simulate_joint_trajectory
 from pipeline.control.stage import iso_reference
@@ -126,7 +128,22 @@ def cases(pipe: RobotModel, handed_on: RobotModel, choice: StiffnessChoice, real
     return out
 
 
-def main(run_dir: str = "data/runs/default") -> None:
+@dataclass
+class RunModels:
+    """What a run through identification hands the control stage, rebuilt from its folder."""
+
+    seed: int
+    robot_name: str
+    config: ControlConfig                 # the run's control settings, saturation clipped
+    nominal: RobotModel
+    handed_on: RobotModel                 # <run>/identification/robot
+    choice: StiffnessChoice               # the stiffness the control stage uses
+    pipe: RobotModel                      # handed_on with that stiffness
+    real: RealRobot                       # the run's hidden robot
+
+
+def load_run_models(run_dir: str | Path) -> RunModels:
+    """The run's robot, seed and truth read from ``run_dir`` and its models built as the stage does."""
     run = Path(run_dir)
     raw = yaml.safe_load((run / "config.yaml").read_text())
     seed, robot_name = int(raw.get("seed", 0)), str(raw.get("robot", "rx130l"))
@@ -139,6 +156,14 @@ def main(run_dir: str = "data/runs/default") -> None:
     choice = feedforward_stiffness(handed_on, cal_arrays, True, nominal_joint_stiffness_Nm_rad(nominal))  # as the stage
     pipe = with_stiffness(handed_on, choice.stiffness_Nm_rad)
     real = RealRobot.create(nominal, seed, truth_cfg)
+    return RunModels(seed, robot_name, cfg, nominal, handed_on, choice, pipe, real)
+
+
+def main(run_dir: str = "data/runs/default") -> None:
+    run = Path(run_dir)
+    m = load_run_models(run)
+    seed, robot_name, cfg, nominal, handed_on, choice, pipe, real = (
+        m.seed, m.robot_name, m.config, m.nominal, m.handed_on, m.choice, m.pipe, m.real)
     t0 = time.perf_counter()
     ref, _, frame, _, _ = iso_reference(pipe, cfg)
     gains = servo_gains(pipe, np.mean(ref.q_d, axis=0), cfg)
