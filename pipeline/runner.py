@@ -67,7 +67,7 @@ __all__ = [
     "ArtefactWriteError", "EXIT_BAD_INPUT", "EXIT_QUALITY_GATE", "EXIT_INTERRUPTED",
 ]
 
-#: exit codes of ``python -m pipeline`` (README, "Exit codes")
+#: exit codes of ``python -m pipeline`` (docs/runner.md, "Exit codes")
 EXIT_BAD_INPUT = 2          # a PipelineError: bad config/robot/data, a fault writing files, a locked run
 EXIT_QUALITY_GATE = 3       # a stage failed its quality gate (result kept in <run>/<stage>.rejected/)
 EXIT_INTERRUPTED = 130      # SIGINT / SIGTERM

@@ -64,7 +64,7 @@ def test_smooth_ptp_settles_faster_on_the_elastic_truth(rx130l, ptp_problem, qui
     plan = plan_ptp(pm, build_ptp_problem(pm, rx130l, cfg), q0, q1, cfg)
     # the run's seed with the default truth (elastic joints, Stribeck friction), and a truth without the
     # Stribeck and load-dependent friction: their stick-slip creep of the wrist can set the last 0.1 mrad
-    # on other seeds (seed 3: smooth 1.12 s vs 0.63 s; README "Move and settle"), the gear ringing never
+    # on other seeds (seed 3: smooth 1.12 s vs 0.63 s; docs/stages/trajectory.md), the gear ringing never
     truths = [(quick_config.seed, TruthConfig()),
               (3, TruthConfig(stribeck_excess_relative=0.0, coulomb_load_coefficient=0.0))]
     for seed, truth in truths:
