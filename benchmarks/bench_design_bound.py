@@ -6,7 +6,7 @@ Run: ``.venv/bin/python benchmarks/bench_design_bound.py [--robots rx130l staubl
 Per robot, on the pool of the ``calib-design`` study as documented in ``docs/calibration_design.md``
 (``--quick``: 1500 random feasible candidates, the robot's ISO 9283 cube with 300 working
 configurations, all identifiable geometric parameters, the tracker noise model; built by
-:func:`pipeline.calibration.design_study.study_pool`, same stream, so the same pool):
+:func:`pipeline.papers.calib_design.study_pool`, same stream, so the same pool):
 
 1. the optimal approximate design (:func:`pipeline.calibration.design_bound.optimal_approximate_design`,
    multiplicative algorithm, equivalence-theorem certificate) gives ``V* / n``, a lower bound on the
@@ -47,7 +47,7 @@ from pipeline.calibration import design_rounding as dr
 from pipeline.calibration import indices as ix
 from pipeline.calibration import stage as st
 from pipeline.calibration import task_space as ts
-from pipeline.calibration.design_study import study_pool
+from pipeline.papers.calib_design import study_pool
 
 GAIN_FACTOR = 0.85        # the acceptance: >= 15 % lower RMS
 PREDICTION_FACTOR = 1.2   # the acceptance's predicted/actual bound

@@ -32,8 +32,8 @@ and then slips by a fraction of a milliradian. The table per joint prints that s
 and the largest link error of the ``elastic_flat`` run.
 
 Printed per case: the max TCP tracking error (measured TCP vs the hidden robot standing at the
-reference joints) without feedforward and with ``elastic_flat``, and their ratio (the issue's
-target: >= 10). The denominator changes with the case too.
+reference joints) without feedforward and with ``elastic_flat``, and their ratio (the target of
+``tests/control/test_targets_slow.py``: >= 10). The denominator changes with the case too.
 """
 
 from __future__ import annotations

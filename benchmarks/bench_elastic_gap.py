@@ -25,7 +25,8 @@ model and the stage's encoder-noise stream, for the ``elastic_flat`` feedforward
 
 Printed per case: the max TCP tracking error (measured TCP vs the hidden robot standing at the
 reference joints, the stage's ``tcp_tracking_error_max_m``) and its ratio ``none / case`` (the
-issue's target: >= 10). The damping of the joints is not in any model (the inverse neglects it).
+target of ``tests/control/test_targets_slow.py``: >= 10). The damping of the joints is not in any
+model (the inverse neglects it).
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ paper's 500 of 583 scaled down so that the baselines finish in a minute on a sha
 Baseline: :func:`pipeline.calibration.design.bsaa` / :func:`~pipeline.calibration.design.detmax`
 (index from the information matrix after each move; Od recomputed from the selected points for
 every candidate) on the same Jacobian blocks and points. Ours:
-:mod:`pipeline.calibration.paper_003_search` (rank-3 updates of M, log-determinants for O1, pruned
+:mod:`pipeline.papers.calib_003_search` (rank-3 updates of M, log-determinants for O1, pruned
 eigenvalues for O3, K-nearest-neighbour rows updated in O(n) per move). Both run the paper's
 schedule (T 1e20 -> 1e-50, cooling 0.98: 7979 moves) or Mitchell's excursions; the O3 values reached
 are printed as a check (same index definition in both).
@@ -21,7 +21,7 @@ import numpy as np
 
 from pipeline.calibration import design as ds
 from pipeline.calibration import indices as ix
-from pipeline.calibration import paper_003_search as ps
+from pipeline.papers import calib_003_search as ps
 
 
 def main() -> None:

@@ -3,9 +3,9 @@
 Run: ``.venv/bin/python benchmarks/bench_six_d.py [--quick]`` (about 40 s; ``--quick``: two seeds).
 
 For each seed of the default hidden robot (joint elasticity, masses, gear error; RX130L seeds
-8-12 and one TX40 seed) a random 6-D record (:func:`pipeline.calibration.mocap.simulate_six_d_record`)
+8-12 and one TX40 seed) a random 6-D record (:func:`pipeline.papers.calib_six_d.simulate_six_d_record`)
 is calibrated with ``all`` parameters through the stage, read as a user file
-(:func:`pipeline.calibration.mocap.six_d_trial`), and validated on 200 exact poses. Settings:
+(:func:`pipeline.papers.calib_six_d.six_d_trial`), and validated on 200 exact poses. Settings:
 
 * ``23 @ 1 mrad``: 23 poses, 0.1 mm / 1 mrad per axis (mocap-like);
 * ``23 @ 0.3 mrad``: the same poses' count with a 0.3 mrad orientation noise;
@@ -40,7 +40,7 @@ import numpy as np
 
 from pipeline.calibration import validate as va
 from pipeline.calibration.elastostatic import measurement_model
-from pipeline.calibration.mocap import SixDTrial, six_d_trial
+from pipeline.papers.calib_six_d import SixDTrial, six_d_trial
 from pipeline.robot.model import RobotModel
 from pipeline.robot.truth import RealRobot
 

@@ -1,4 +1,4 @@
-"""Stage 4 targets, measured in one run (issue 6, paper 004 §5).
+"""Stage 4 targets, measured in one run (paper 004 §5).
 
 Run: ``.venv/bin/python benchmarks/bench_trajectory.py [robot] [cp_segment] [torque_reserve] [energy_starts]``
 (default profile). ``robot`` is a built-in name (default ``rx130l``: NOMINAL dynamics) or a robot

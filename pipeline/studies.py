@@ -1,9 +1,10 @@
 """Registry of studies: ``python -m pipeline study <name> [args...]``.
 
 A study is a longer experiment (a paper reproduction, a benchmark sweep) that is not part of
-the pipeline run. Stage owners register theirs by adding one line to :data:`STUDIES`::
+the pipeline run. Its code lives in :mod:`pipeline.papers` (never in a stage package), and it is
+registered by adding one line to :data:`STUDIES`::
 
-    "calibration-kpi": "pipeline.calibration.studies:kpi_study",
+    "calib-kpi": "pipeline.papers.calib_kpi:kpi_study",
 
 The function is imported only when its study is run. It is called as ``fn(argv)`` with the
 remaining command-line arguments (a list of strings; parse them with argparse) and returns an
@@ -20,19 +21,16 @@ from pathlib import Path
 from pipeline.config import REPO_ROOT
 from pipeline.errors import PipelineError
 
-#: study name -> "module:function". Stage owners append their entries here.
+#: study name -> "module:function" (modules in :mod:`pipeline.papers`).
 STUDIES: dict[str, str] = {
     # calibration
-    "calib-004": "pipeline.calibration.paper_004:study_004",
-    "calib-000": "pipeline.calibration.paper_000:study",
-    "calib-002": "pipeline.calibration.paper_002:study_002",
-    "calib-003": "pipeline.calibration.paper_003:study_003",
-    "calib-design": "pipeline.calibration.design_study:study_design",
+    "calib-004": "pipeline.papers.calib_004:study_004",
+    "calib-000": "pipeline.papers.calib_000:study",
+    "calib-002": "pipeline.papers.calib_002:study_002",
+    "calib-003": "pipeline.papers.calib_003:study_003",
+    "calib-design": "pipeline.papers.calib_design:study_design",
     # whole-chain paper reproductions
-    "paper-004": "pipeline.papers.paper_004:study_paper_004",
-    # identification
-    # control
-    # trajectory
+    "paper-004": "pipeline.papers.chain_004:study_paper_004",
 }
 
 

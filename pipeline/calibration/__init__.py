@@ -16,8 +16,6 @@ Public entry points:
 - :mod:`~pipeline.calibration.gradient_design`: CasADi/IPOPT design of n configurations.
 - :mod:`~pipeline.calibration.measure`: simulated tracker or CSV files; :mod:`.estimate`:
   registration, Levenberg-Marquardt, covariance, ``calibrated_robot``; :mod:`.validate`.
-- :mod:`~pipeline.calibration.paper_004`, :mod:`~pipeline.calibration.paper_000`,
-  :mod:`~pipeline.calibration.paper_002`, :mod:`~pipeline.calibration.paper_003` (searches:
-  :mod:`~pipeline.calibration.paper_003_search`): ``python -m pipeline study calib-004|calib-000|calib-002|calib-003``
-  (shared helpers: :mod:`~pipeline.calibration.studies`).
+- The calibration studies (paper reproductions, ``python -m pipeline study calib-...``) live in
+  :mod:`pipeline.papers` (``calib_000`` ... ``calib_design``).
 """

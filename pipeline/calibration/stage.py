@@ -1,6 +1,6 @@
 """Stage ``calibration``: optimal measurement configurations and geometric calibration.
 
-Pipeline (issue 3; papers 004 §3, 000, 002, 003):
+Pipeline (papers 004 §3, 000, 002, 003):
 
 1. identifiable parameter set of the tracker measurement model (SVD + ordered QR, report);
 2. candidates: the joint grid (13 per axis) or random configurations, filtered by limits,

@@ -1,4 +1,4 @@
-"""Stage 2: dynamic identification with optimal Fourier excitation (paper 004 §4; issue 4).
+"""Stage 2: dynamic identification with optimal Fourier excitation (paper 004 §4).
 
 Public entry points:
 

@@ -81,7 +81,7 @@ class Config:
     # e.g. TX40 5/6), "none" = diagonal joint-side (RobotModel, SymbolicRobot and the hidden robot),
     # "auto" = gear for a data_file (a real drive train), none for the simulated hidden robot
     actuator_coupling: str = "auto"
-    # quality gates (pipeline.quality; issue 13): data must excite the model (hard error) ...
+    # quality gates (pipeline.quality): data must excite the model (hard error) ...
     min_joint_motion_rad: float = 0.05  # peak to peak, every joint
     max_cond_base_regressor_data: float = 1e6
     # ... and the result must vouch for itself (QualityGateError unless --accept-poor)

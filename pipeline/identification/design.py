@@ -469,7 +469,7 @@ def _optimize_excitation_impl(
         ok = feas.feasible and is_success(st["return_status"])
         if ok and (best is None or score < best[3]):
             best = (condk, traj, feas, score)
-    # never worse than the best random feasible trajectory (quality gate, issue 13)
+    # never worse than the best random feasible trajectory (quality gate)
     i0 = int(order[0])
     score0 = float(score_random[i0])
     source, reason = "optimised", ""

@@ -1,4 +1,4 @@
-"""Quality gates of the identification stage (issue 13; :mod:`pipeline.quality`).
+"""Quality gates of the identification stage (:mod:`pipeline.quality`).
 
 * :func:`check_data_excites` (a hard error, before any fit): every joint must move by at least
   ``min_joint_motion_rad`` (peak to peak) in the record, and the base regressor on the data must

@@ -1,5 +1,5 @@
 """Stage ``identification``: optimal Fourier excitation, measurement, estimation, validation,
-and the real Stäubli TX40 record (paper ``004_abbe750b8bbcc3aa.txt`` §4; issue 4).
+and the real Stäubli TX40 record (paper ``004_abbe750b8bbcc3aa.txt`` §4).
 
 1. Regressor of the current model (calibrated kinematics when the run has a calibration) and the
    structural base set, decided on the nominal robot and kept for the current one

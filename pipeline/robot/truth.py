@@ -9,7 +9,7 @@ degrees away from its nominal pose; inertial parameters 10–20 % (mass log-norm
 mass shifted, second moments scaled and rotated so every link stays physically consistent),
 rotor inertia and friction 20 %.
 
-Beyond the calibrated parameters (issue "calibration for real arms"; paper 000 Outlook), each
+Beyond the calibrated parameters (what a real arm adds; paper 000 Outlook), each
 settable to 0 to get the ideal robot back bit for bit:
 
 - joint elasticity: per-joint torsional stiffness ``k_i = k_nom_i exp(s z_i) / scale``

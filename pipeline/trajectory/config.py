@@ -57,10 +57,11 @@ class TrajectoryConfig:
     ptp_jit: bool = True
     ptp_jit_flags: list[str] = field(default_factory=lambda: ["-O1"])   # gcc optimisation of the NLP code
     # Coulomb-width continuation of the time-optimal solve, then the model's width: [1.0, 0.1] needs
-    # fewer IPOPT iterations than [0.1] (measured at IPOPT tol 1e-6: issue-6 move 88 vs 123; 9 random
+    # fewer IPOPT iterations than [0.1] (measured at IPOPT tol 1e-6 on the RX130L's robot.yaml PtP move
+    # (-45, 20, 30, 0, 40, 0) -> (45, 60, -20, 30, 50, 60) deg: 88 vs 123; 9 random
     # moves on the nominal and the identified RX130L: 3-10 % fewer iterations in all)
     ptp_coulomb_widths_rad_s: list[float] = field(default_factory=lambda: [1.0, 0.1])
-    # continuation of the fixed-duration energy solve (at ruckig's duration): on the issue-6 move it
+    # continuation of the fixed-duration energy solve (at ruckig's duration): on that RX130L move it
     # lands in a slightly better local optimum than [0.1] and needs fewer iterations (nominal RX130L
     # ratio 0.7017 vs 0.7021 in 1.5 s vs 2.9 s; identified 0.735 vs 0.741 in 1.9 s vs 2.9 s); [0.3]
     # alone is worse (0.761 identified). Multi-starts (time-optimal stretched, ruckig resampled, via a

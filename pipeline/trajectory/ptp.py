@@ -191,7 +191,7 @@ class PtpProblem:
             self.compile_time_s = time.perf_counter() - t1
         self.solver = solver
         # the same NLP for re-solves near a known solution: IPOPT starts from its multipliers too
-        # (a fine-grid tightening re-solve of the issue-6 move: 45 instead of 75 iterations)
+        # (a fine-grid tightening re-solve of the RX130L's robot.yaml PtP move: 45 instead of 75 iterations)
         self.solver_warm = ca.nlpsol(name, "ipopt", source, {**opts, "ipopt.warm_start_init_point": "yes"})
 
     # ----------------------------------------------------------------------------------------

@@ -110,7 +110,7 @@ def test_reflector_weight_is_the_studys_predicted_figure(tx40_pool):
     W = db.reflector_weight(robot, Qw, basis)
     C = np.linalg.inv(db.exact_information(cs.G, np.arange(30)))
     _, J = mm.jacobian(Qw, np.zeros(mm.n), robot.tracker.transform_tracker_to_base, basis)
-    study = np.mean(np.einsum("nip,pq,niq->n", J, C, J))          # design_study.evaluate_seed's prediction
+    study = np.mean(np.einsum("nip,pq,niq->n", J, C, J))          # calib_design.evaluate_seed's prediction
     assert np.trace(W @ C) == pytest.approx(study, rel=1e-6)
     with pytest.raises(ValueError, match="geometric"):
         db.reflector_weight(robot, Qw, np.vstack([basis, np.zeros((robot.nq, basis.shape[1]))]))

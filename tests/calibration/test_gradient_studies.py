@@ -1,4 +1,4 @@
-"""Gradient-based design (paper 000) and the paper studies (slow ones behind the marker)."""
+"""Gradient-based design (paper 000): the CasADi segment distance and the IPOPT design of n configurations."""
 
 from __future__ import annotations
 

@@ -13,9 +13,9 @@ from pipeline.calibration import measure as ms
 from pipeline.calibration import stage as st
 from pipeline.calibration import validate as va
 from pipeline.calibration.estimate import estimate, register_points
-from pipeline.calibration.mocap import simulate_six_d_record
 from pipeline.calibration.robust import robust_estimate
 from pipeline.errors import ConfigError, DataFileError, QualityGateError
+from pipeline.papers.calib_six_d import simulate_six_d_record
 from pipeline.robot.model import RobotModel
 from pipeline.robot.truth import RealRobot, TruthConfig
 
@@ -193,7 +193,7 @@ def test_23_six_d_poses_calibrate_all_parameters(robot, tmp_path):
     assert "5-fold cross-validation" in st.report_markdown(out, cfg, robot)
     # orientation: 23 poses at 1 mrad leave ~0.5 mrad of estimation noise against a ~2.5 mrad nominal
     # error; the Cramer-Rao bound of this record allows ~4x, not 5x (benchmarks/bench_six_d.py;
-    # tests/calibration/test_six_d.py checks that the remainder is estimation noise)
+    # tests/papers/test_calib_six_d.py checks that the remainder is estimation noise)
     assert v["after"]["orientation_rad"]["rms"] * 3 <= v["before"]["orientation_rad"]["rms"]
     # 6 independent equations per 6-D row: 7 rows carry the 34 parameters as 6-D data, not as positions
     few = ms.read_csv(fit, robot)

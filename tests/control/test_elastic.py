@@ -148,7 +148,7 @@ def iso_ref(rx130l):
 
 
 def test_elastic_feedforward_on_the_iso_path(real, iso_ref):
-    """Issue acceptance with the exact (identified) model: rigid full_friction leaves >= 3x the max TCP
+    """The elastic feedforward target with the exact (identified) model: rigid full_friction leaves >= 3x the max TCP
     path error of the elastic feedforward, which cuts it >= 10x against no feedforward."""
     ref = iso_ref
     cfg = ControlConfig(settle_time_s=0.2)

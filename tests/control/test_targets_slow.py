@@ -1,4 +1,5 @@
-"""Issue 5 and 12 targets on the default profile (model -> calibration -> identification -> control). Slow."""
+"""Feedforward targets (rigid and elastic-joint truth) on the default profile
+(model -> calibration -> identification -> control). Slow."""
 
 from __future__ import annotations
 
@@ -24,7 +25,8 @@ def _control_summary(tmp_path, values: dict) -> dict:
 
 @pytest.mark.slow
 def test_feedforward_targets_on_the_rigid_arm(tmp_path):
-    """Issue 5 figures with elasticity and Stribeck friction set to 0 in the truth."""
+    """Rigid feedforward figures (>= 5x smaller TCP and lag errors, real-time factor >= 10) with elasticity
+    and Stribeck friction set to 0 in the truth."""
     if "joint_compliance_scale" not in {f.name for f in dataclasses.fields(TruthConfig)}:
         pytest.skip("truth.joint_compliance_scale (the calibration's stiffness block) is not in TruthConfig")
     s = _control_summary(tmp_path, RIGID)
@@ -41,7 +43,7 @@ def test_feedforward_targets_on_the_rigid_arm(tmp_path):
 
 @pytest.mark.slow
 def test_elastic_feedforward_targets(tmp_path):
-    """Issue 12: on the elastic, Stribeck truth the elastic-joint feedforward beats rigid full_friction >= 3x
+    """On the elastic, Stribeck truth the elastic-joint feedforward beats rigid full_friction >= 3x
     and no feedforward >= 10x in max TCP tracking error on the ISO path."""
     s = _control_summary(tmp_path, {})
     e = s["tcp_tracking_error_max_m"]

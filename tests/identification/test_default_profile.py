@@ -1,4 +1,5 @@
-"""Issue 4 targets in the default profile (slow: about 1-2 min per seed on 2 cores)."""
+"""Identification targets in the default profile: condition number, z-scores of the base parameters,
+validation torque RMS, the TX40 record (slow: about 1-2 min per seed on 2 cores)."""
 
 from __future__ import annotations
 

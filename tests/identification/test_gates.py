@@ -1,4 +1,4 @@
-"""Quality gates of the identification (issue 13): data that do not excite the model end with a
+"""Quality gates of the identification: data that do not excite the model end with a
 clear error; validation residual and predicted torques gated; an interrupted IPOPT solve is a
 KeyboardInterrupt, never a stored result."""
 

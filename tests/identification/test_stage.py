@@ -30,7 +30,7 @@ def quick_run(tmp_path_factory):
     return ctx, real, stage.run(ctx)
 
 
-def test_summary_has_the_issue_keys_and_is_json(quick_run):
+def test_summary_has_the_documented_keys_and_is_json(quick_run):
     _, _, res = quick_run
     for key in SUMMARY_KEYS:
         assert key in res.summary, key

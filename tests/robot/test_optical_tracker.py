@@ -10,8 +10,8 @@ import pytest
 import yaml
 
 from pipeline.calibration import candidates as cd
-from pipeline.calibration import optical as op
 from pipeline.errors import RobotFileError
+from pipeline.papers import calib_004_optical as op
 from pipeline.robot import optical_tracker as ot
 from pipeline.robot.model import RobotModel
 from pipeline.robot.spec import load_robot_spec

@@ -1,4 +1,4 @@
-"""Tables of the paper-000 study next to the paper's numbers (:mod:`pipeline.calibration.paper_000`).
+"""Tables of the paper-000 study next to the paper's numbers (:mod:`pipeline.papers.calib_000`).
 
 Gains are reported both ways: ``1 - V_a / V_b`` on the mean TCP variance and
 ``1 - sqrt(V_a / V_b)`` on its square root (standard deviation). The paper's percentages are
@@ -20,7 +20,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from pipeline.calibration import paper_000_elastic as el
+from pipeline.papers import calib_000_elastic as el
 from pipeline.studies import study_dir
 
 PAPER_KUKA = {"kuka_kr15": (0.44, 0.17), "kuka_kr300": (0.40, 0.10), "kuka_kr500": (0.43, 0.12)}

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from pipeline.calibration import indices as ix
-from pipeline.calibration import paper_003 as p3
-from pipeline.calibration import paper_003_search as ps
+from pipeline.papers import calib_003 as p3
+from pipeline.papers import calib_003_search as ps
 
 
 def _pool(seed: int = 0, N: int = 120, p: int = 12) -> tuple[np.ndarray, np.ndarray]:

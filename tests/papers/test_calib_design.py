@@ -7,21 +7,20 @@ import math
 
 import pytest
 
-from pipeline.calibration import design_study
+from pipeline import studies
+from pipeline.papers import calib_design
 
 
 @pytest.mark.slow
 def test_quick_calib_design_study_compares_every_index(tmp_path, monkeypatch, capsys):
-    import pipeline.studies
-
-    monkeypatch.setattr(pipeline.studies, "study_dir", lambda name, root=None: tmp_path)
-    assert design_study.study_design(["--quick", "--robots", "rx130l", "--seeds", "0", "--n", "24",
+    monkeypatch.setattr(studies, "study_dir", lambda name, root=None: tmp_path)
+    assert calib_design.study_design(["--quick", "--robots", "rx130l", "--seeds", "0", "--n", "24",
                                       "--curve", "20", "--candidates", "400", "--region-poses", "60"]) == 0
     out = capsys.readouterr().out
     assert "winner at 24 configurations" in out and "measurement-effort curve" in out
     res = json.loads((tmp_path / "result.json").read_text())["robots"]["rx130l"]
     table = res["table"]
-    for name in design_study.INDICES:
+    for name in calib_design.INDICES:
         row = table[f"remove_and_replace/{name}/24"]
         assert 0 < row["actual_rms_m"] < 1e-3 and 0 < row["predicted_rms_m"] < 1e-3
     for key in ("every_kth/-/24", "random/-/24", "remove_and_replace/V/20", "every_kth/-/20"):

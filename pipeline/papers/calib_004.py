@@ -16,14 +16,14 @@ What this study does, per seed of the hidden robot:
 1. the 13^6 grid filtered by limits, collisions and the optical tracker's predicted visibility
    (``optical_tracker`` of robot.yaml, :mod:`pipeline.robot.optical_tracker`; nominal model and
    camera pose, no margin: the count next to the paper's ~4000); the camera pose registered from 8
-   pilot readings of that set on the hidden robot (:func:`pipeline.calibration.optical.register_camera`),
+   pilot readings of that set on the hidden robot (:func:`pipeline.papers.calib_004_optical.register_camera`),
    and the candidates = the configurations still visible at the registered pose with
    :class:`~pipeline.robot.optical_tracker.OpticalMargins` (a configuration the hidden robot might
    hide is never a candidate; those it hides anyway are counted as lost);
-2. 6-D design blocks (:mod:`pipeline.calibration.optical`); 32 configurations by remove-and-replace
+2. 6-D design blocks (:mod:`pipeline.papers.calib_004_optical`); 32 configurations by remove-and-replace
    on O3 (= on B: same order); the paper's index ``B = O3^2`` and ``cond(Lambda)`` of every design;
 3. the baselines, each a literal reading of "a linear scan of the workspace"
-   (:mod:`pipeline.calibration.scan_designs`): every (N/n)-th visible grid configuration in grid
+   (:mod:`pipeline.papers.calib_004_scans`): every (N/n)-th visible grid configuration in grid
    order; 32 equally spaced poses on the joint-space diagonal (only the visible ones measured); 32
    equally spaced among the visible points of that diagonal; each joint swept in turn; a Cartesian
    raster traversed line by line with the probe facing the cameras; plus a random visible subset.
@@ -35,12 +35,12 @@ What this study does, per seed of the hidden robot:
    error of each design next to the measured one, remove-and-replace on other criteria
    (``--criteria D A``), the same designs on the ideal (rigid, no gear error) hidden robot
    (``--truth ideal``), and the laser-tracker set-up of the study's earlier version
-   (:mod:`pipeline.calibration.paper_004_laser`, ``--laser-grid``).
+   (:mod:`pipeline.papers.calib_004_laser`, ``--laser-grid``).
 
 Run time (``python -m pipeline study calib-004 --jobs 1``, defaults: seeds 1 2 3, 13^6 grid, 300
 held-out poses, criteria O3 D A, both truths, laser experiment on the 9^6 grid): 1011 s measured on
 the shared 2-core machine with other jobs running (the grid filter alone about 90 s); results in
-docs/papers/paper_004_calibration.md. The quick variant is tests/calibration/test_paper_004.py.
+docs/papers/paper_004_calibration.md. The quick variant is tests/papers/test_calib_004.py.
 """
 
 from __future__ import annotations
@@ -55,12 +55,12 @@ from pipeline.blas import single_thread_blas
 from pipeline.calibration import design as ds
 from pipeline.calibration import error_model as em
 from pipeline.calibration import indices as ix
-from pipeline.calibration import optical as op
-from pipeline.calibration import paper_004_laser as lz
-from pipeline.calibration import scan_designs as sd
 from pipeline.calibration import stage as st
-from pipeline.calibration.studies import _parallel, _save
 from pipeline.errors import SolverError
+from pipeline.papers import calib_004_laser as lz
+from pipeline.papers import calib_004_optical as op
+from pipeline.papers import calib_004_scans as sd
+from pipeline.papers.calib_common import run_parallel, save_result
 from pipeline.robot.model import RobotModel
 from pipeline.robot.optical_tracker import OpticalMargins
 from pipeline.robot.truth import RealRobot, TruthConfig
@@ -291,7 +291,7 @@ def study_004(argv: list[str]) -> int:
           f"({a.margin_angle_deg} deg, {a.margin_occlusion_m} m) at the nominal camera pose: "
           f"{grid['n_candidates_nominal']} [{grid['time_s']:.0f} s]")
     jobs = [(a.robot, s, t, grid, a.n, a.heldout, a.criteria, margins, a.camera) for t in a.truth for s in a.seeds]
-    rows = _parallel(_seed, jobs, a.jobs)
+    rows = run_parallel(_seed, jobs, a.jobs)
     print(f"candidates per seed (visible with the margins at the {a.camera} camera pose): "
           + ", ".join(f"seed {r['seed']} {r['n_candidates']} ({r['n_pilot']} pilot poses)" for r in rows
                       if r["truth"] == rows[0]["truth"]))
@@ -309,12 +309,12 @@ def study_004(argv: list[str]) -> int:
     laser: dict = {}
     if a.laser_grid:
         Ql = lz.laser_grid(a.robot, a.laser_grid)
-        laser_rows = _parallel(lz.laser_seed, [(a.robot, s, t, Ql, a.n, a.heldout) for t in a.truth for s in a.seeds],
-                               a.jobs)
+        laser_jobs = [(a.robot, s, t, Ql, a.n, a.heldout) for t in a.truth for s in a.seeds]
+        laser_rows = run_parallel(lz.laser_seed, laser_jobs, a.jobs)
         laser = {"grid": a.laser_grid, "rows": laser_rows, "summary": lz.print_laser(laser_rows)}
     elapsed = time.perf_counter() - t0
     print(f"study time {elapsed:.0f} s")
-    _save("calib-004", {"args": vars(a), "grid": {k: v for k, v in grid.items() if k not in ("Q", "flat")},
+    save_result("calib-004", {"args": vars(a), "grid": {k: v for k, v in grid.items() if k not in ("Q", "flat")},
                         "rows": rows, "summary": summary, "factors_B": factors, "paper": PAPER,
                         "laser_experiment": laser, "time_s": elapsed})
     return 0

@@ -24,9 +24,9 @@ over-excites the joints, which is the paper's own argument (§5) for jerk-contin
 The control stage itself runs the feedforward variants (none, gravity, full, full + friction,
 elastic) and the nominal-model feedforward beside the identified one.
 
-Output: the table of :mod:`pipeline.papers.paper_004_rows` (paper, ours, verdict) on stdout and
+Output: the table of :mod:`pipeline.papers.chain_004_rows` (paper, ours, verdict) on stdout and
 ``<study dir>/result.json``. ``--quick`` uses ``configs/quick.yaml`` sizes with the same paper
-settings (the test ``tests/papers/test_paper_004_chain.py``).
+settings (the test ``tests/papers/test_chain_004.py``).
 
 Run time on the shared 2-core box (loaded by other jobs), measured once: the full study (seeds
 1-3) 42 min (2494 s); ``--quick`` (seed 1) about 3-4 min; ``--report`` (the table from the stored
@@ -46,7 +46,7 @@ from typing import Any
 
 from pipeline.config import CONFIGS_DIR, RunConfig, load_config
 from pipeline.errors import PipelineError
-from pipeline.papers.paper_004_rows import Row, Run, all_rows, markdown
+from pipeline.papers.chain_004_rows import Row, Run, all_rows, markdown
 from pipeline.progress import Progress
 from pipeline.robot.truth import TruthConfig
 from pipeline.runner import run_pipeline

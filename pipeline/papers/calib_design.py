@@ -48,6 +48,7 @@ from pipeline.calibration import measure as ms
 from pipeline.calibration import stage as st
 from pipeline.calibration import task_space as ts
 from pipeline.calibration.estimate import calibrated_robot, estimate, register_points
+from pipeline.papers.calib_common import run_parallel, save_result
 from pipeline.robot.model import RobotModel
 from pipeline.robot.truth import RealRobot, TruthConfig
 
@@ -243,8 +244,6 @@ def _headline(rows: list[dict], d: dict, n: int, field: str, pred: str) -> dict:
 
 
 def study_design(argv: list[str]) -> int:
-    from pipeline.calibration.studies import _parallel, _save
-
     ap = argparse.ArgumentParser(prog="study calib-design")
     ap.add_argument("--robots", nargs="+", default=["rx130l", "staubli_tx40"])
     ap.add_argument("--seeds", type=int, nargs="+", default=list(range(10)))
@@ -261,7 +260,7 @@ def study_design(argv: list[str]) -> int:
     for name in a.robots:
         bundle = robot_designs(name, a.n, a.curve, a.quick, a.grid, a.candidates, a.region_poses, a.kpi_poses,
                                not a.quick)
-        rows = _parallel(lambda s, b=bundle, rn=name: evaluate_seed(rn, s, b), a.seeds, a.jobs)
+        rows = run_parallel(lambda s, b=bundle, rn=name: evaluate_seed(rn, s, b), a.seeds, a.jobs)
         result["robots"][name] = report(name, bundle, rows, a.n, a.curve) | {"rows": rows}
-    _save("calib-design", result)
+    save_result("calib-design", result)
     return 0

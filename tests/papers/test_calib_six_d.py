@@ -8,7 +8,7 @@ from scipy.spatial.transform import Rotation
 
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import stage as st
-from pipeline.calibration.mocap import simulate_six_d_record, six_d_trial
+from pipeline.papers.calib_six_d import simulate_six_d_record, six_d_trial
 from pipeline.robot.model import RobotModel
 from pipeline.robot.truth import RealRobot
 

@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 
-from pipeline.calibration import paper_002 as p2
+from pipeline.papers import calib_002 as p2
 
 
 def test_paper_table_has_rank_23_with_two_couplings_in_the_last_joint():

@@ -13,8 +13,8 @@ import math
 import pytest
 
 from pipeline.config import load_config
-from pipeline.papers import paper_004 as study
-from pipeline.papers import paper_004_rows as rows_mod
+from pipeline.papers import chain_004 as study
+from pipeline.papers import chain_004_rows as rows_mod
 from pipeline.robot.truth import TruthConfig
 from pipeline.studies import resolve
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.calibration import optical as op
-from pipeline.calibration import paper_004 as p4
+from pipeline.papers import calib_004 as p4
+from pipeline.papers import calib_004_optical as op
 from pipeline.robot.model import RobotModel
 from pipeline.robot.optical_tracker import OpticalMargins
 

@@ -11,7 +11,7 @@ uniform in [-1.5, 1.5] (read here as mm for positions and mrad for directions; n
 readings with uniform noise in [-0.01, 0.01] mm, 50 validation sets "generated using the same method";
 Table 2: mean / RMSE / max positioning error for none, DETMAX x {O1, O2, O3, Oc} and BSAA x {O1, O2,
 O3, Oc}. The simulation's pool and subset sizes are not given; the real experiment (§4.3) selects 500
-of 583 poses, which is used here. Indices and searches: :mod:`pipeline.calibration.paper_003_search`.
+of 583 poses, which is used here. Indices and searches: :mod:`pipeline.papers.calib_003_search`.
 
 Set-up: the UR10 of example-robot-data (its DH lengths are the paper's Table 3 values, e.g. flange at
 (1184.3, 163.9, 11.6) mm at zero), the pipeline's complete error model (joint placements, zero
@@ -26,7 +26,7 @@ where the paper has 0.36-0.49 mm; (2) the magnitude sweep: the hidden robot's un
 error), which level brings "none" to the paper's 0.485 mm; (3) Table 2 with that truth, the index
 value each search reaches and the poses it shares with the random design; (4) Oc searched in the
 paper's units against Oc normalised by reference values
-(:class:`~pipeline.calibration.paper_003_search.OcScale`); (5) the same searches for 30 of the 583
+(:class:`~pipeline.papers.calib_003_search.OcScale`); (5) the same searches for 30 of the 583
 poses, where the choice matters; (6) the spread of each term of Oc over random designs (which term
 can steer the search).
 """
@@ -47,10 +47,10 @@ from pipeline.artefacts import write_json
 from pipeline.blas import single_thread_blas
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import error_model as em
-from pipeline.calibration import paper_003_search as ps
 from pipeline.calibration import stage as st
 from pipeline.calibration.estimate import estimate, register_points
 from pipeline.errors import DataFileError, SolverError
+from pipeline.papers import calib_003_search as ps
 from pipeline.robot.model import RobotModel
 from pipeline.robot.spec import TrackerSpec
 from pipeline.robot.truth import RealRobot, TruthConfig

@@ -9,10 +9,10 @@ import pinocchio as pin
 import pytest
 
 from pipeline.calibration import error_model as em
-from pipeline.calibration import paper_000 as p0
-from pipeline.calibration import paper_000_elastic as el
-from pipeline.calibration import paper_000_report as rp
-from pipeline.calibration import paper_000_scene as sc
+from pipeline.papers import calib_000 as p0
+from pipeline.papers import calib_000_elastic as el
+from pipeline.papers import calib_000_report as rp
+from pipeline.papers import calib_000_scene as sc
 from pipeline.robot.model import RobotModel
 
 

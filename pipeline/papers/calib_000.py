@@ -32,9 +32,9 @@ Designs: remove-and-replace (:func:`pipeline.calibration.design.remove_and_repla
 of feasible random candidates, then the gradient-based refinement of all joint angles with IPOPT
 (:func:`pipeline.calibration.gradient_design.gradient_design`, the paper's SQP analogue) with the
 cell's obstacles (CA) or with limits and incidence only (no CA). Cell, baselines and notional arms:
-:mod:`pipeline.calibration.paper_000_scene`. Tables: :mod:`pipeline.calibration.paper_000_report`.
+:mod:`pipeline.papers.calib_000_scene`. Tables: :mod:`pipeline.papers.calib_000_report`.
 
-The paper's outlook measured (:mod:`pipeline.calibration.paper_000_elastic`): each arm's
+The paper's outlook measured (:mod:`pipeline.papers.calib_000_elastic`): each arm's
 ``tcp_ca`` design is measured on the default elastic hidden robot (``--elastic-seeds`` seeds, 3;
 notional arms ``--notional-elastic-seeds``, 1) and calibrated with the geometric and with the
 compliance-aware model; the TCP error at the working configuration of both and the gain of
@@ -72,12 +72,12 @@ from pipeline.calibration import candidates as cd
 from pipeline.calibration import design as ds
 from pipeline.calibration import error_model as em
 from pipeline.calibration import indices as ix
-from pipeline.calibration import paper_000_elastic as el
-from pipeline.calibration import paper_000_report as rp
-from pipeline.calibration import paper_000_scene as sc
 from pipeline.calibration import stage as st
 from pipeline.calibration.gradient_design import GradientDesignConfig, feasible_configurations, gradient_design
 from pipeline.dispatch import map_tasks
+from pipeline.papers import calib_000_elastic as el
+from pipeline.papers import calib_000_report as rp
+from pipeline.papers import calib_000_scene as sc
 from pipeline.progress import Progress
 from pipeline.robot.model import RobotModel
 
@@ -102,7 +102,7 @@ class Settings:
     #: a list of DH/Hayati names leaves out the legacy (SE(3)) criterion
     parameters: str | list[str] = "geometric"
     #: hidden robots (seeds 0..k-1) of the elasticity experiment on the tcp_ca design
-    #: (:mod:`pipeline.calibration.paper_000_elastic`; 0: off)
+    #: (:mod:`pipeline.papers.calib_000_elastic`; 0: off)
     elastic_seeds: int = 3
 
 
