@@ -1,6 +1,7 @@
 # Two entry points for a new user:
 #   make run    create .venv, install the package, run the whole pipeline (python -m pipeline run)
 #   make test   create .venv, install with dev extras (+ chromium for the viewer test), run pytest
+#   make lint   check the package's layers (import-linter contracts in pyproject.toml)
 # Options: make run ARGS="--config configs/quick.yaml --set seed=3"   make test PYTEST_ARGS="tests/test_cli.py -x"
 # Installs are redone only when pyproject.toml changes (stamp files in .venv/).
 
@@ -13,10 +14,13 @@ PYTEST_ARGS ?=
 export OPENBLAS_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
 
-.PHONY: run test
+.PHONY: run test lint
 
 run: $(VENV)/.stamp-run
 	$(PY) -m pipeline run $(ARGS)
+
+lint: $(VENV)/.stamp-dev
+	$(VENV)/bin/lint-imports
 
 test: $(VENV)/.stamp-dev
 	@command -v chromium >/dev/null 2>&1 || [ -x /usr/bin/chromium ] || { \

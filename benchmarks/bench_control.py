@@ -20,13 +20,13 @@ import pinocchio as pin
 
 from pipeline.config import load_config
 from pipeline.control.config import ControlConfig
-from pipeline.control.iso9283 import iso9283_path
-from pipeline.control.reference import cartesian_reference
 from pipeline.control.simulate import simulate_joint_trajectory
 from pipeline.robot.defaults import ik_seeds_or_derived_rad, iso_or_derived
+from pipeline.robot.iso9283 import iso9283_path
 from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import start_configuration
-from pipeline.robot.truth import RealRobot, TruthConfig
+from pipeline.robot.reference import cartesian_reference
+from pipeline.sim.truth import RealRobot, TruthConfig
 
 
 def main(robot_name: str = "rx130l", python_seconds: float = 1.0) -> None:

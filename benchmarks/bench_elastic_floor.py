@@ -55,14 +55,14 @@ from pipeline.control import simulate
 from pipeline.control.config import ControlConfig
 from pipeline.control.design import ServoGains, filter_alpha, servo_report, stick_slip_gains
 from pipeline.control.elastic_feedforward import link_torque
-from pipeline.control.plant import Plant
 from pipeline.control.simulate import servo_gains, simulate_joint_trajectory
 from pipeline.control.stage import iso_reference
 from pipeline.robot.friction import stribeck_slope_Nms_rad
 from pipeline.robot.model import RobotModel
-from pipeline.robot.transmission import Transmission
-from pipeline.robot.truth import RealRobot
-from pipeline.runner import stage_rng
+from pipeline.sim.plant import Plant
+from pipeline.sim.transmission import Transmission
+from pipeline.sim.truth import RealRobot
+from pipeline.stage_api import stage_rng
 
 
 def true_slope_Nms_rad(tr: Transmission) -> np.ndarray:

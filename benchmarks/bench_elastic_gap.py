@@ -46,8 +46,8 @@ from pipeline.control.simulate import servo_gains, simulate_joint_trajectory
 from pipeline.control.stage import iso_reference
 from pipeline.robot.model import RobotModel
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
-from pipeline.robot.truth import RealRobot, TruthConfig
-from pipeline.runner import stage_rng
+from pipeline.sim.truth import RealRobot, TruthConfig
+from pipeline.stage_api import stage_rng
 
 
 def with_stiffness(robot: RobotModel, k_Nm_rad: np.ndarray) -> RobotModel:

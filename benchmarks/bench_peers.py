@@ -49,8 +49,8 @@ from pipeline.identification.measure import process_record
 from pipeline.identification.regressor import RegressorModel
 from pipeline.identification.tx40 import Tx40Config, load_tx40_record, run_tx40
 from pipeline.robot.model import RobotModel
-from pipeline.robot.truth import RealRobot
-from pipeline.runner import stage_rng
+from pipeline.sim.truth import RealRobot
+from pipeline.stage_api import stage_rng
 
 HAVE_FIGAROH = importlib.util.find_spec("figaroh") is not None
 if HAVE_FIGAROH:

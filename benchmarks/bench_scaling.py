@@ -36,7 +36,7 @@ from pipeline.identification import estimate as E
 from pipeline.identification.regressor import RegressorModel, standard_parameters
 from pipeline.progress import Progress
 from pipeline.robot.model import RobotModel
-from pipeline.robot.truth import RealRobot, TruthConfig
+from pipeline.sim.truth import RealRobot, TruthConfig
 
 
 def fitted_exponent(sizes: Sequence[float], times_s: Sequence[float]) -> float:

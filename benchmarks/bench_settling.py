@@ -34,7 +34,7 @@ from pipeline.config import load_config
 from pipeline.control.config import ControlConfig
 from pipeline.robot import defaults
 from pipeline.robot.model import RobotModel
-from pipeline.robot.truth import RealRobot, TruthConfig
+from pipeline.sim.truth import RealRobot, TruthConfig
 from pipeline.trajectory import settling
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.solve import plan_ptp, ptp_problem

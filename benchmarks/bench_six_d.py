@@ -42,7 +42,7 @@ from pipeline.calibration import validate as va
 from pipeline.calibration.elastostatic import measurement_model
 from pipeline.papers.calib_six_d import SixDTrial, six_d_trial
 from pipeline.robot.model import RobotModel
-from pipeline.robot.truth import RealRobot
+from pipeline.sim.truth import RealRobot
 
 SETTINGS = (("23 @ 1 mrad", 23, 1e-3), ("23 @ 0.3 mrad", 23, 3e-4), ("92 @ 1 mrad", 92, 1e-3))
 POSITION_SIGMA_M = 1e-4

@@ -1,18 +1,11 @@
-"""Atomic artefact files and stage directories.
+"""Atomic artefact files and the hashes of files and trees.
 
 * Every file is written to a temporary file in the same directory, flushed, ``fsync``-ed and
   moved into place with ``os.replace`` (atomic on POSIX): a reader never sees half a file.
-* A stage writes everything into ``<run>/.<stage>.partial-XXXX/`` and the directory is renamed
-  to ``<run>/<stage>/`` only when complete (:func:`commit_stage_dir`); an old ``<stage>/`` is
-  moved aside first and deleted afterwards. A stage that fails leaves no ``<stage>/``.
-* ``inputs.sha256`` (written last) holds the hash of everything the stage's result depends on
-  (:func:`inputs_hash`); the runner reuses a stage whose stored hash equals the new one.
+* :func:`stable_json`, :func:`hash_files` and :func:`hash_tree` give content hashes that do not
+  depend on dict order or file listing order.
 
-Layout of a stage directory::
-
-    summary.json   headline figures      results.npz   arrays      results.json  details
-    *.png          figures               report.md     markdown    robot/        URDF + robot.yaml
-    manifest.json  stage, hash, figures, timing          inputs.sha256
+Stage directories (layout, staging and commit, the inputs hash) are in :mod:`pipeline.stage_io`.
 """
 
 from __future__ import annotations
@@ -24,23 +17,13 @@ import io
 import json
 import math
 import os
-import shutil
 import tempfile
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
+import matplotlib.pyplot as plt
 import numpy as np
-
-from pipeline.stage_api import StageOutput as StageOutput  # re-exported (tests import it from here)
-
-SUMMARY = "summary.json"
-RESULTS_NPZ = "results.npz"
-RESULTS_JSON = "results.json"
-REPORT_MD = "report.md"
-MANIFEST = "manifest.json"
-INPUTS_HASH = "inputs.sha256"
-ROBOT_DIR = "robot"
 
 
 # --------------------------------------------------------------------------------------------
@@ -52,10 +35,10 @@ def _current_umask() -> int:
     return mask
 
 
-_UMASK = _current_umask()
+UMASK = _current_umask()
 
 
-def _fsync_dir(path: Path) -> None:
+def fsync_dir(path: Path) -> None:
     with contextlib.suppress(OSError):
         fd = os.open(path, os.O_RDONLY)
         try:
@@ -72,7 +55,7 @@ def atomic_open(path: str | Path, mode: str = "wb") -> Iterator[Any]:
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         kwargs = {"encoding": "utf-8", "newline": "\n"} if "b" not in mode else {}
-        os.chmod(tmp, 0o666 & ~_UMASK)          # mkstemp makes 0600; use the usual permissions
+        os.chmod(tmp, 0o666 & ~UMASK)          # mkstemp makes 0600; use the usual permissions
         with os.fdopen(fd, mode, **kwargs) as fh:
             yield fh
             fh.flush()
@@ -82,7 +65,7 @@ def atomic_open(path: str | Path, mode: str = "wb") -> Iterator[Any]:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
         raise
-    _fsync_dir(path.parent)
+    fsync_dir(path.parent)
 
 
 def write_bytes(path: str | Path, data: bytes) -> Path:
@@ -151,60 +134,8 @@ def save_figure(path: str | Path, fig: Any, dpi: int = 120, close: bool = True) 
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
     if close:
-        import matplotlib.pyplot as plt
-
         plt.close(fig)
     return write_bytes(path, buf.getvalue())
-
-
-# --------------------------------------------------------------------------------------------
-# Stage directories
-# --------------------------------------------------------------------------------------------
-def new_stage_dir(run_dir: str | Path, stage: str) -> Path:
-    """Create the staging directory ``<run_dir>/.<stage>.partial-XXXX/``."""
-    run_dir = Path(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    path = Path(tempfile.mkdtemp(dir=run_dir, prefix=f".{stage}.partial-"))
-    os.chmod(path, 0o777 & ~_UMASK)
-    return path
-
-
-def commit_stage_dir(staging: str | Path, final: str | Path) -> Path:
-    """Rename the complete ``staging`` directory to ``final``, replacing an old one."""
-    staging, final = Path(staging), Path(final)
-    old: Path | None = None
-    if final.exists():
-        old = Path(tempfile.mkdtemp(dir=final.parent, prefix=f".{final.name}.old-"))
-        os.rmdir(old)
-        os.replace(final, old)
-    os.replace(staging, final)
-    _fsync_dir(final.parent)
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
-    return final
-
-
-def discard_stage_dir(staging: str | Path) -> None:
-    shutil.rmtree(staging, ignore_errors=True)
-
-
-def clean_leftovers(run_dir: str | Path) -> None:
-    """Remove ``.<stage>.partial-*`` / ``.<stage>.old-*`` directories left by a killed run."""
-    run_dir = Path(run_dir)
-    if not run_dir.is_dir():
-        return
-    for p in run_dir.iterdir():
-        if p.is_dir() and p.name.startswith(".") and (".partial-" in p.name or ".old-" in p.name):
-            shutil.rmtree(p, ignore_errors=True)
-
-
-def read_inputs_hash(stage_dir: str | Path) -> str | None:
-    """The stored inputs hash of a finished stage directory, or None."""
-    p = Path(stage_dir) / INPUTS_HASH
-    try:
-        return p.read_text(encoding="utf-8").strip() or None
-    except OSError:
-        return None
 
 
 # --------------------------------------------------------------------------------------------
@@ -238,29 +169,3 @@ def hash_tree(folder: str | Path, suffixes: tuple[str, ...] | None = None) -> st
         and (suffixes is None or p.suffix in suffixes)
     ]
     return hash_files(files, folder)
-
-
-def inputs_hash(
-    stage: str,
-    stage_config: Any,
-    run: Mapping[str, Any],
-    robot_files_sha256: str,
-    upstream: Mapping[str, str],
-    package_version: str,
-    code_sha256: str = "",
-) -> str:
-    """sha256 of everything a stage's result depends on.
-
-    ``run``: run-level settings that matter (seed, robot, truth section); ``upstream``: stage
-    name -> its inputs hash; ``code_sha256``: hash of the stage's source files (optional).
-    """
-    payload = {
-        "stage": stage,
-        "config": stage_config,
-        "run": run,
-        "robot_files": robot_files_sha256,
-        "upstream": dict(sorted(upstream.items())),
-        "version": package_version,
-        "code": code_sha256,
-    }
-    return hashlib.sha256(stable_json(payload).encode()).hexdigest()

@@ -6,7 +6,7 @@ validated against a dataclass:
 
 * stage ``<stage>``: ``Config`` in the stage module (``STAGES[stage]``, e.g.
   ``pipeline.calibration.stage.Config``), imported lazily;
-* ``truth``: ``pipeline.robot.truth.TruthConfig``.
+* ``truth``: ``pipeline.sim.truth.TruthConfig``.
 
 Merging order (later wins): dataclass defaults < the robot's ``run_defaults`` (a section of its
 ``robot.yaml``: where the test path sits and which moves fit that arm) < YAML file < ``--set``
@@ -43,7 +43,7 @@ from pipeline.typed_config import build_dataclass, describe, with_source
 #: Stage registry, in run order: stage name -> module path (or a module-like object exposing
 #: ``NAME``, ``DEPENDS``, ``Config`` and ``run``; tests put fake stages here).
 STAGES: dict[str, Any] = {
-    "model": "pipeline.robot.stage",
+    "model": "pipeline.model.stage",
     "calibration": "pipeline.calibration.stage",
     "identification": "pipeline.identification.stage",
     "control": "pipeline.control.stage",
@@ -52,7 +52,7 @@ STAGES: dict[str, Any] = {
 
 #: Sections that are not stages: section name -> "module:ClassName" of their dataclass.
 EXTRA_SECTIONS: dict[str, str] = {
-    "truth": "pipeline.robot.truth:TruthConfig",
+    "truth": "pipeline.sim.truth:TruthConfig",
 }
 
 TOP_LEVEL_KEYS = ("name", "seed", "robot", "profile", "stages")
@@ -60,6 +60,13 @@ PROFILES = ("full", "quick")
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 CONFIGS_DIR = REPO_ROOT / "configs"
+
+
+def default_runs_dir() -> Path:
+    """``<repo>/data/runs`` in a source checkout, else ``./data/runs``."""
+    if (REPO_ROOT / "pyproject.toml").exists():
+        return REPO_ROOT / "data" / "runs"
+    return Path.cwd() / "data" / "runs"
 
 
 class StageUnavailableError(PipelineError):

@@ -20,6 +20,17 @@ import sys
 from collections.abc import Iterable, Iterator
 from typing import Any, TypeVar
 
+from rich.console import Console
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    SpinnerColumn,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
+from rich.progress import Progress as RichProgress
+
 T = TypeVar("T")
 
 _ACTIVE: Progress | None = None
@@ -62,17 +73,6 @@ class Progress:
         global _ACTIVE
         if self._depth == 0:
             if self.enabled:
-                from rich.console import Console
-                from rich.progress import (
-                    BarColumn,
-                    MofNCompleteColumn,
-                    SpinnerColumn,
-                    TextColumn,
-                    TimeElapsedColumn,
-                    TimeRemainingColumn,
-                )
-                from rich.progress import Progress as RichProgress
-
                 self._rich = RichProgress(
                     SpinnerColumn(),
                     TextColumn("[progress.description]{task.description}"),

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 import pipeline
-from pipeline import artefacts
+from pipeline import artefacts, stage_io
 from pipeline import config as config_mod
 from pipeline.config import RunConfig
 from pipeline.errors import PipelineError
@@ -54,7 +54,7 @@ def summary_table(summary: dict) -> str:
 
 
 def _summary(stage_dir: Path) -> dict:
-    path = stage_dir / artefacts.SUMMARY
+    path = stage_dir / stage_io.SUMMARY
     try:
         data = artefacts.read_json(path) if path.exists() else {}
     except (OSError, ValueError):
@@ -105,31 +105,31 @@ def write_report(run_dir: Path, cfg: RunConfig | None = None, current: Sequence[
     if cfg is not None:
         lines += [f"robot `{cfg.robot}` · seed {cfg.seed} · profile `{cfg.profile}` · "
                   f"pipeline {pipeline.__version__} · config in `config.yaml`", ""]
-    names = [s for s in config_mod.stage_names() if (run_dir / s / artefacts.INPUTS_HASH).exists()]
+    names = [s for s in config_mod.stage_names() if (run_dir / s / stage_io.INPUTS_HASH).exists()]
     poor = [s for s in names if _summary(run_dir / s).get("accepted_poor")]
     if poor:
         lines += [f"**Results accepted with `--accept-poor`** (failed quality gates, handed on knowingly): "
                   f"{', '.join(f'`{s}`' for s in poor)}", ""]
     extra = sorted(p.name for p in run_dir.iterdir()
                    if p.is_dir() and not p.name.startswith(".") and p.name not in names
-                   and (p / artefacts.INPUTS_HASH).exists())
+                   and (p / stage_io.INPUTS_HASH).exists())
     for name in [*names, *extra]:
         d = run_dir / name
-        manifest = artefacts.read_json(d / artefacts.MANIFEST) if (d / artefacts.MANIFEST).exists() else {}
+        manifest = artefacts.read_json(d / stage_io.MANIFEST) if (d / stage_io.MANIFEST).exists() else {}
         lines += [f"## {name}", ""]
         if current and name not in current:
             lines += ["_from an earlier run: not part of this run, its inputs may differ_", ""]
         elif failure is not None and name == failure[0]:
             lines += ["_stale: this stage FAILED in this run; the results below are from an earlier run_", ""]
-        elif name in expected and artefacts.read_inputs_hash(d) != expected[name]:
+        elif name in expected and stage_io.read_inputs_hash(d) != expected[name]:
             lines += ["_stale: from an earlier run with different inputs (not re-run in this run)_", ""]
         if manifest.get("finished_utc"):
             lines += [f"finished {manifest['finished_utc']} in {manifest.get('duration_s', 0):.1f} s", ""]
-        summary = artefacts.read_json(d / artefacts.SUMMARY) if (d / artefacts.SUMMARY).exists() else {}
+        summary = artefacts.read_json(d / stage_io.SUMMARY) if (d / stage_io.SUMMARY).exists() else {}
         if isinstance(summary, dict) and summary.get("accepted_poor"):
             lines += [f"**ACCEPTED POOR (`--accept-poor`)**: failed quality gate(s): {_failed_gates(summary)}; "
                       "handed on knowingly", ""]
-        report_md = d / artefacts.REPORT_MD
+        report_md = d / stage_io.REPORT_MD
         stage_md = report_md.read_text(encoding="utf-8").rstrip() if report_md.exists() else ""
         if stage_md:  # the stage's own tables first; every headline figure folded below them
             lines += [stage_md, "", f"<details><summary>all figures of <code>{name}/summary.json</code></summary>",

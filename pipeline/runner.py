@@ -25,7 +25,6 @@ correctness beats reuse) plus the stage module's own folder when it lives outsid
 from __future__ import annotations
 
 import errno
-import hashlib
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -33,24 +32,22 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-import numpy as np
 import yaml
 
 import pipeline
-from pipeline import artefacts, second_pass
+from pipeline import artefacts, second_pass, stage_io
 from pipeline import config as config_mod
 from pipeline import report as report_mod
-from pipeline.config import REPO_ROOT, RunConfig, resolve_robot_dir
+from pipeline.config import RunConfig, default_runs_dir, resolve_robot_dir
 from pipeline.errors import ArtefactWriteError, ConfigError, QualityGateError
 from pipeline.interrupts import handle_termination
 from pipeline.locking import run_lock
 from pipeline.progress import Progress
 from pipeline.robot.model import RobotModel
-from pipeline.robot.truth import RealRobot, TruthConfig
-from pipeline.stage_api import StageContext, StageOutput, StageResult
+from pipeline.sim.truth import RealRobot, TruthConfig
+from pipeline.stage_api import StageContext, StageOutput, StageResult, stage_rng
 from pipeline.stage_io import (
     REJECTED_SUFFIX,
-    load_run,
     load_stage_output,
     run_key_sha256,
     stage_problem,
@@ -61,10 +58,8 @@ from pipeline.stage_plan import Plan as _Plan
 from pipeline.stage_plan import plan_stages, unavailable_stages
 
 __all__ = [
-    "StageContext", "StageResult", "StageOutput", "RunResult", "run_pipeline", "load_run",
-    "load_stage_output", "default_runs_dir", "resolve_robot_dir", "stage_rng", "stable_stage_hash",
-    "stage_inputs_hashes", "package_code_hash", "config_reads", "write_stage_result", "plan_stages",
-    "ArtefactWriteError", "EXIT_BAD_INPUT", "EXIT_QUALITY_GATE", "EXIT_INTERRUPTED",
+    "RunResult", "run_pipeline", "prepare_run", "stage_inputs_hashes", "package_code_hash", "config_reads",
+    "EXIT_BAD_INPUT", "EXIT_QUALITY_GATE", "EXIT_INTERRUPTED",
 ]
 
 #: exit codes of ``python -m pipeline`` (docs/runner.md, "Exit codes")
@@ -85,23 +80,6 @@ class RunResult:
 # --------------------------------------------------------------------------------------------
 # Helpers
 # --------------------------------------------------------------------------------------------
-def default_runs_dir() -> Path:
-    """``<repo>/data/runs`` in a source checkout, else ``./data/runs``."""
-    if (REPO_ROOT / "pyproject.toml").exists():
-        return REPO_ROOT / "data" / "runs"
-    return Path.cwd() / "data" / "runs"
-
-
-def stable_stage_hash(name: str) -> int:
-    """32-bit integer from sha256(name): stable across processes (unlike ``hash()``)."""
-    return int.from_bytes(hashlib.sha256(name.encode()).digest()[:4], "little")
-
-
-def stage_rng(seed: int, stage: str) -> np.random.Generator:
-    """``np.random.default_rng([seed, stable_stage_hash(stage)])``."""
-    return np.random.default_rng([seed, stable_stage_hash(stage)])
-
-
 def _make_real(nominal: RobotModel, cfg: RunConfig) -> RealRobot:
     truth_cfg = cfg.sections.get("truth")
     if not isinstance(truth_cfg, TruthConfig):
@@ -168,7 +146,7 @@ def stage_inputs_hashes(cfg: RunConfig, plans: Sequence[_Plan], robot_dir: Path)
     for plan in plans:
         reads = config_reads(cfg, plan.module)
         key = {**run_key, "config_reads": reads} if reads else run_key
-        plan.inputs_sha256 = artefacts.inputs_hash(
+        plan.inputs_sha256 = stage_io.inputs_hash(
             plan.name, config_mod.to_plain(plan.config), key, robot_sha,
             {d: by_name[d].inputs_sha256 for d in plan.closure}, pipeline.__version__,
             _code_hash(plan.module, code_sha),
@@ -201,7 +179,7 @@ def _why_not_reuse(plan: _Plan, stage_dir: Path, forced: set[str], cfg: RunConfi
     """Why stage ``plan`` must run (a short reason), or None when ``stage_dir`` can be reused."""
     if plan.name in forced:
         return "--force"
-    stored = artefacts.read_inputs_hash(stage_dir)
+    stored = stage_io.read_inputs_hash(stage_dir)
     if stored is None:
         return "not run yet"
     if stored != plan.inputs_sha256:
@@ -218,7 +196,7 @@ def _why_not_reuse(plan: _Plan, stage_dir: Path, forced: set[str], cfg: RunConfi
 
 def _accepted_poor(stage_dir: Path) -> bool:
     try:
-        return bool(artefacts.read_json(stage_dir / artefacts.SUMMARY).get("accepted_poor"))
+        return bool(artefacts.read_json(stage_dir / stage_io.SUMMARY).get("accepted_poor"))
     except (OSError, ValueError, AttributeError):
         return False
 
@@ -357,7 +335,7 @@ def _reuse_read_only(prep: Prepared, say: Callable[[str], None]) -> RunResult:
 
 def _run_locked(prep: Prepared, prog: Progress, say: Callable[[str], None]) -> RunResult:
     cfg, run_dir = prep.cfg, prep.run_dir
-    artefacts.clean_leftovers(run_dir)
+    stage_io.clean_leftovers(run_dir)
     # decide again under the lock (another run may have finished a stage meanwhile)
     reasons = {p.name: _why_not_reuse(p, run_dir / p.name, prep.forced, cfg, verify=True) for p in prep.plans}
     _run_checks([p for p in prep.plans if reasons[p.name] is not None and prep.reasons[p.name] is None],
@@ -423,7 +401,7 @@ def _run_one(plan: _Plan, prep: Prepared, outputs: dict[str, StageOutput], hande
         if up in handed_robot:
             robot = handed_robot[up]
     try:
-        staging = artefacts.new_stage_dir(run_dir, plan.name)
+        staging = stage_io.new_stage_dir(run_dir, plan.name)
     except OSError as exc:
         raise _write_error(exc, run_dir) from None
     # a fresh hidden robot per stage: its sensors draw noise from generators seeded by the run, so a
@@ -438,7 +416,7 @@ def _run_one(plan: _Plan, prep: Prepared, outputs: dict[str, StageOutput], hande
         result = _check_result(plan.name, plan.module.run(ctx))
         duration = time.perf_counter() - t0
         write_stage_result(staging, plan.name, result, plan.inputs_sha256, duration, key)
-        final = artefacts.commit_stage_dir(staging, run_dir / plan.name)
+        final = stage_io.commit_stage_dir(staging, run_dir / plan.name)
     except QualityGateError as exc:
         if isinstance(exc.result, StageResult):
             try:
@@ -446,19 +424,19 @@ def _run_one(plan: _Plan, prep: Prepared, outputs: dict[str, StageOutput], hande
                 say(f"{plan.name}: quality gate failed; its result is kept for inspection in {rejected} "
                     "(not handed on)")
             except OSError:
-                artefacts.discard_stage_dir(staging)
+                stage_io.discard_stage_dir(staging)
         else:
-            artefacts.discard_stage_dir(staging)
+            stage_io.discard_stage_dir(staging)
         raise
     except OSError as exc:
-        artefacts.discard_stage_dir(staging)
+        stage_io.discard_stage_dir(staging)
         if exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.EFBIG):
             raise _write_error(exc, staging) from None
         raise
     except BaseException:
-        artefacts.discard_stage_dir(staging)
+        stage_io.discard_stage_dir(staging)
         raise
-    artefacts.discard_stage_dir(rejected)       # an older rejected result is out of date now
+    stage_io.discard_stage_dir(rejected)       # an older rejected result is out of date now
     say(f"{plan.name}: done in {duration:.1f} s")
     # hand on what is on disk (the robot read back exactly): later stages then see the same
     # inputs whether this stage ran in this process or is reused in another one

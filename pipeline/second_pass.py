@@ -30,7 +30,7 @@ import shutil
 from dataclasses import replace
 from pathlib import Path
 
-from pipeline import artefacts
+from pipeline import artefacts, stage_io
 from pipeline.calibration.config import Config as CalibrationConfig
 from pipeline.config import RunConfig
 from pipeline.stage_api import StageOutput
@@ -94,7 +94,7 @@ def reuse_first_pass(outputs: dict[str, StageOutput], run_dir: Path) -> list[str
     copied = []
     for name, out in outputs.items():
         target = run_dir / name
-        if target.exists() and artefacts.read_inputs_hash(target) == artefacts.read_inputs_hash(out.path):
+        if target.exists() and stage_io.read_inputs_hash(target) == stage_io.read_inputs_hash(out.path):
             continue
         copied.append(name)
         partial = run_dir / f".{name}.partial-first-pass"

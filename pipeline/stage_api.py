@@ -2,27 +2,25 @@
 
 ``StageContext`` (inputs of ``run``), ``StageResult`` (its return value, written to the stage
 directory by :mod:`pipeline.stage_io`) and ``StageOutput`` (a finished stage loaded back).
-:mod:`pipeline.runner` re-exports all three (docs/ARCHITECTURE.md, "Stages and the runner").
+Every stage imports them from here, never from :mod:`pipeline.runner` (docs/ARCHITECTURE.md, "Layers").
 """
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
+from matplotlib.figure import Figure
 
 from pipeline.config import RunConfig
 from pipeline.progress import Progress
+from pipeline.robot.model import RobotModel
+from pipeline.sim.truth import RealRobot
 
-if TYPE_CHECKING:          # type names only: the robot layer imports pipeline.artefacts
-    from matplotlib.figure import Figure
-
-    from pipeline.robot.model import RobotModel
-    from pipeline.robot.truth import RealRobot
-
-__all__ = ["StageContext", "StageResult", "StageOutput"]
+__all__ = ["StageContext", "StageResult", "StageOutput", "stage_rng", "stable_stage_hash"]
 
 
 @dataclass
@@ -56,3 +54,13 @@ class StageOutput:
     data: dict
     robot: RobotModel | None             # from ``<stage>/robot/`` (exact, see pipeline.robot.exact)
     path: Path
+
+
+def stable_stage_hash(name: str) -> int:
+    """32-bit integer from sha256(name): stable across processes (unlike ``hash()``)."""
+    return int.from_bytes(hashlib.sha256(name.encode()).digest()[:4], "little")
+
+
+def stage_rng(seed: int, stage: str) -> np.random.Generator:
+    """``np.random.default_rng([seed, stable_stage_hash(stage)])``."""
+    return np.random.default_rng([seed, stable_stage_hash(stage)])

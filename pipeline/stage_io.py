@@ -1,24 +1,40 @@
-"""Stage directories on disk: writing a result, checking its integrity, loading it back.
+"""Stage directories on disk: staging and committing, writing a result, checking its integrity,
+loading it back.
 
+* A stage writes everything into ``<run>/.<stage>.partial-XXXX/`` and the directory is renamed
+  to ``<run>/<stage>/`` only when complete (:func:`commit_stage_dir`); an old ``<stage>/`` is
+  moved aside first and deleted afterwards. A stage that fails leaves no ``<stage>/``. Files are
+  written atomically (:mod:`pipeline.artefacts`).
 * :func:`write_stage_result` writes a :class:`~pipeline.stage_api.StageResult` into a staging
   directory; ``manifest.json`` records the SHA-256 of every file the stage wrote (its extra
   files too) and the hash of the run-level settings (:func:`run_key_sha256`); ``inputs.sha256``
-  comes last.
+  comes last: the hash of everything the stage's result depends on (:func:`inputs_hash`); the
+  runner reuses a stage whose stored hash equals the new one.
 * :func:`stage_problem` says why a finished stage directory cannot be trusted (a file missing,
   truncated or edited, no manifest), or None; reuse and :func:`load_stage_output` both use it.
 * :func:`write_rejected` keeps a result that failed a quality gate in ``<run>/<stage>.rejected/``
   for inspection: no ``inputs.sha256``, so it is never reused or loaded as a stage.
 * A handed-on robot is saved losslessly (:mod:`pipeline.robot.exact`).
+
+Layout of a stage directory::
+
+    summary.json   headline figures      results.npz   arrays      results.json  details
+    *.png          figures               report.md     markdown    robot/        URDF + robot.yaml
+    manifest.json  stage, hash, figures, timing          inputs.sha256
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import os
+import shutil
+import tempfile
 import zipfile
 from collections.abc import Mapping
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any
 
 import yaml
 
@@ -31,8 +47,16 @@ from pipeline.robot.exact import load_exact_robot, save_exact_robot
 from pipeline.robot.model import RobotModel
 from pipeline.stage_api import StageOutput, StageResult
 
+SUMMARY = "summary.json"
+RESULTS_NPZ = "results.npz"
+RESULTS_JSON = "results.json"
+REPORT_MD = "report.md"
+MANIFEST = "manifest.json"
+INPUTS_HASH = "inputs.sha256"
+ROBOT_DIR = "robot"
+
 #: files of a stage directory that are not covered by the manifest's SHA-256 list
-UNHASHED = (artefacts.MANIFEST, artefacts.INPUTS_HASH)
+UNHASHED = (MANIFEST, INPUTS_HASH)
 REJECTED_SUFFIX = ".rejected"
 
 
@@ -52,23 +76,23 @@ def directory_hashes(folder: Path) -> dict[str, str]:
 
 def run_key_sha256(seed: int, robot: str, truth: object) -> str:
     """Hash of the run-level settings every stage shares (seed, robot, ``truth`` section): stage
-    directories with different values come from different runs (:func:`pipeline.runner.load_run`)."""
+    directories with different values come from different runs (:func:`load_run`)."""
     payload = {"seed": seed, "robot": str(robot), "truth": to_plain(truth) or {}}
     return hashlib.sha256(artefacts.stable_json(payload).encode()).hexdigest()
 
 
 def _write_payload(stage_dir: Path, result: StageResult) -> list[str]:
-    artefacts.write_json(stage_dir / artefacts.SUMMARY, result.summary)
-    artefacts.write_npz(stage_dir / artefacts.RESULTS_NPZ, result.arrays)
-    artefacts.write_json(stage_dir / artefacts.RESULTS_JSON, result.data)
+    artefacts.write_json(stage_dir / SUMMARY, result.summary)
+    artefacts.write_npz(stage_dir / RESULTS_NPZ, result.arrays)
+    artefacts.write_json(stage_dir / RESULTS_JSON, result.data)
     figures = []
     for key, fig in result.figures.items():
         artefacts.save_figure(stage_dir / f"{key}.png", fig)
         figures.append(f"{key}.png")
     if result.report_md:
-        artefacts.write_text(stage_dir / artefacts.REPORT_MD, result.report_md.rstrip() + "\n")
+        artefacts.write_text(stage_dir / REPORT_MD, result.report_md.rstrip() + "\n")
     if result.robot is not None:
-        save_exact_robot(result.robot, stage_dir / artefacts.ROBOT_DIR)
+        save_exact_robot(result.robot, stage_dir / ROBOT_DIR)
     return figures
 
 
@@ -76,7 +100,7 @@ def write_stage_result(stage_dir: Path, name: str, result: StageResult, inputs_s
                        duration_s: float, run_key: str = "") -> None:
     """Write a StageResult into a (staging) directory; manifest with file hashes, ``inputs.sha256`` last."""
     figures = _write_payload(stage_dir, result)
-    artefacts.write_json(stage_dir / artefacts.MANIFEST, {
+    artefacts.write_json(stage_dir / MANIFEST, {
         "stage": name,
         "inputs_sha256": inputs_sha256,
         "run_key_sha256": run_key,
@@ -87,24 +111,24 @@ def write_stage_result(stage_dir: Path, name: str, result: StageResult, inputs_s
         "package_version": pipeline.__version__,
         "files_sha256": directory_hashes(stage_dir),
     })
-    artefacts.write_text(stage_dir / artefacts.INPUTS_HASH, inputs_sha256 + "\n")
+    artefacts.write_text(stage_dir / INPUTS_HASH, inputs_sha256 + "\n")
 
 
 def write_rejected(staging: Path, final: Path, name: str, result: StageResult, reason: str) -> Path:
     """Keep a result that failed its quality gate in ``final`` (``<run>/<stage>.rejected/``)."""
     figures = _write_payload(staging, result)
-    artefacts.write_json(staging / artefacts.MANIFEST, {
+    artefacts.write_json(staging / MANIFEST, {
         "stage": name, "rejected": True, "reason": reason, "figures": figures,
         "finished_utc": datetime.now(UTC).isoformat(timespec="seconds"),
         "package_version": pipeline.__version__, "files_sha256": directory_hashes(staging),
     })
-    return artefacts.commit_stage_dir(staging, final)
+    return commit_stage_dir(staging, final)
 
 
 def read_manifest(stage_dir: Path) -> dict:
     """``manifest.json`` of a stage directory ({} when absent or unreadable)."""
     try:
-        data = json.loads((stage_dir / artefacts.MANIFEST).read_text(encoding="utf-8"))
+        data = json.loads((stage_dir / MANIFEST).read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return {}
     return data if isinstance(data, dict) else {}
@@ -112,13 +136,13 @@ def read_manifest(stage_dir: Path) -> dict:
 
 def stage_problem(stage_dir: Path) -> str | None:
     """Why the finished stage directory cannot be trusted, or None (all recorded files intact)."""
-    if artefacts.read_inputs_hash(stage_dir) is None:
+    if read_inputs_hash(stage_dir) is None:
         return "not a finished stage directory (no inputs.sha256)"
     manifest = read_manifest(stage_dir)
     files = manifest.get("files_sha256")
     if not isinstance(files, Mapping):
         return "manifest.json is missing, unreadable or records no file checksums"
-    if manifest.get("inputs_sha256") != artefacts.read_inputs_hash(stage_dir):
+    if manifest.get("inputs_sha256") != read_inputs_hash(stage_dir):
         return "inputs.sha256 differs from the manifest"
     for rel, digest in files.items():
         path = stage_dir / rel
@@ -140,16 +164,16 @@ def load_stage_output(stage_dir: str | Path, robot: RobotModel | None = None, ve
     problem = stage_problem(d) if verify else None
     if problem is not None:
         raise PipelineError(d, None, problem)
-    if not (d / artefacts.INPUTS_HASH).exists():
+    if not (d / INPUTS_HASH).exists():
         raise PipelineError(d, None, "not a finished stage directory (no inputs.sha256)")
     try:
-        summary = artefacts.read_json(d / artefacts.SUMMARY) if (d / artefacts.SUMMARY).exists() else {}
-        arrays = artefacts.read_npz(d / artefacts.RESULTS_NPZ) if (d / artefacts.RESULTS_NPZ).exists() else {}
-        data = artefacts.read_json(d / artefacts.RESULTS_JSON) if (d / artefacts.RESULTS_JSON).exists() else {}
+        summary = artefacts.read_json(d / SUMMARY) if (d / SUMMARY).exists() else {}
+        arrays = artefacts.read_npz(d / RESULTS_NPZ) if (d / RESULTS_NPZ).exists() else {}
+        data = artefacts.read_json(d / RESULTS_JSON) if (d / RESULTS_JSON).exists() else {}
     except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
         raise PipelineError(d, None, f"cannot read the stage's files ({' '.join(str(exc).split())})") from None
-    if robot is None and (d / artefacts.ROBOT_DIR).is_dir():
-        robot = load_exact_robot(d / artefacts.ROBOT_DIR)
+    if robot is None and (d / ROBOT_DIR).is_dir():
+        robot = load_exact_robot(d / ROBOT_DIR)
     return StageOutput(summary=summary, arrays=arrays, data=data, robot=robot, path=d)
 
 
@@ -162,9 +186,9 @@ def load_run(run_dir: str | Path) -> dict[str, StageOutput]:
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise PipelineError(run_dir, None, "run directory not found")
-    names = [s for s in config_mod.stage_names() if (run_dir / s / artefacts.INPUTS_HASH).exists()]
+    names = [s for s in config_mod.stage_names() if (run_dir / s / INPUTS_HASH).exists()]
     names += sorted(p.name for p in run_dir.iterdir() if p.is_dir() and not p.name.startswith(".")
-                    and p.name not in names and (p / artefacts.INPUTS_HASH).exists())
+                    and p.name not in names and (p / INPUTS_HASH).exists())
     expected = _config_run_key(run_dir / "config.yaml")
     for name in names:
         recorded = read_manifest(run_dir / name).get("run_key_sha256")
@@ -186,3 +210,82 @@ def _config_run_key(path: Path) -> str | None:
         raise PipelineError(path, None, "not a run configuration")
     robot = str(data.get("robot", ""))
     return run_key_sha256(data.get("seed", 0), Path(robot).name or robot, data.get("truth") or {})
+
+
+# --------------------------------------------------------------------------------------------
+# Stage directories
+# --------------------------------------------------------------------------------------------
+def new_stage_dir(run_dir: str | Path, stage: str) -> Path:
+    """Create the staging directory ``<run_dir>/.<stage>.partial-XXXX/``."""
+    run_dir = Path(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    path = Path(tempfile.mkdtemp(dir=run_dir, prefix=f".{stage}.partial-"))
+    os.chmod(path, 0o777 & ~artefacts.UMASK)
+    return path
+
+
+def commit_stage_dir(staging: str | Path, final: str | Path) -> Path:
+    """Rename the complete ``staging`` directory to ``final``, replacing an old one."""
+    staging, final = Path(staging), Path(final)
+    old: Path | None = None
+    if final.exists():
+        old = Path(tempfile.mkdtemp(dir=final.parent, prefix=f".{final.name}.old-"))
+        os.rmdir(old)
+        os.replace(final, old)
+    os.replace(staging, final)
+    artefacts.fsync_dir(final.parent)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+    return final
+
+
+def discard_stage_dir(staging: str | Path) -> None:
+    shutil.rmtree(staging, ignore_errors=True)
+
+
+def clean_leftovers(run_dir: str | Path) -> None:
+    """Remove ``.<stage>.partial-*`` / ``.<stage>.old-*`` directories left by a killed run."""
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        return
+    for p in run_dir.iterdir():
+        if p.is_dir() and p.name.startswith(".") and (".partial-" in p.name or ".old-" in p.name):
+            shutil.rmtree(p, ignore_errors=True)
+
+
+def read_inputs_hash(stage_dir: str | Path) -> str | None:
+    """The stored inputs hash of a finished stage directory, or None."""
+    p = Path(stage_dir) / INPUTS_HASH
+    try:
+        return p.read_text(encoding="utf-8").strip() or None
+    except OSError:
+        return None
+
+
+# --------------------------------------------------------------------------------------------
+# Inputs hash
+# --------------------------------------------------------------------------------------------
+def inputs_hash(
+    stage: str,
+    stage_config: Any,
+    run: Mapping[str, Any],
+    robot_files_sha256: str,
+    upstream: Mapping[str, str],
+    package_version: str,
+    code_sha256: str = "",
+) -> str:
+    """sha256 of everything a stage's result depends on.
+
+    ``run``: run-level settings that matter (seed, robot, truth section); ``upstream``: stage
+    name -> its inputs hash; ``code_sha256``: hash of the stage's source files (optional).
+    """
+    payload = {
+        "stage": stage,
+        "config": stage_config,
+        "run": run,
+        "robot_files": robot_files_sha256,
+        "upstream": dict(sorted(upstream.items())),
+        "version": package_version,
+        "code": code_sha256,
+    }
+    return hashlib.sha256(artefacts.stable_json(payload).encode()).hexdigest()

@@ -13,7 +13,7 @@ address such as ``tcp://host:8786``, or a ``distributed.Client``), to a Dask dis
 (:func:`pipeline.dispatch.map_tasks`):
 its workers need this package installed, the robot and config files at the same paths and the
 output directory on a shared file system. A run is a pure function of its configuration (every
-random number comes from a generator seeded by it, :func:`pipeline.runner.stage_rng`), so the
+random number comes from a generator seeded by it, :func:`pipeline.stage_api.stage_rng`), so the
 table does not depend on where the runs went, apart from wall-clock timings.
 
 Every configuration is loaded (and so validated) before the first run starts: bad input is one

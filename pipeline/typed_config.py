@@ -16,6 +16,8 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from pipeline.errors import ConfigError, PipelineError
 
 
@@ -116,8 +118,6 @@ def coerce(value: Any, tp: Any, where: str, source: str) -> Any:
         return {coerce(k, k_tp, where, source): coerce(v, v_tp, f"{where}.{k}", source)
                 for k, v in value.items()}
     if getattr(tp, "__name__", "") == "ndarray":
-        import numpy as np
-
         try:
             arr = np.asarray(value, dtype=float)
         except (TypeError, ValueError):

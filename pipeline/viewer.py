@@ -39,12 +39,12 @@ import yaml
 from meshcat.animation import Animation
 from pinocchio.visualize import MeshcatVisualizer
 
-from pipeline.artefacts import MANIFEST, RESULTS_NPZ, read_npz
-from pipeline.config import RunConfig, resolve_robot_dir, stage_names
+from pipeline.artefacts import read_npz
+from pipeline.config import RunConfig, default_runs_dir, resolve_robot_dir, stage_names
 from pipeline.errors import PipelineError
 from pipeline.robot.model import RobotModel
 from pipeline.robot.urdf_import import package_dirs
-from pipeline.runner import default_runs_dir, load_run
+from pipeline.stage_io import MANIFEST, RESULTS_NPZ, load_run
 
 TRAJECTORY_RE = re.compile(r"^trajectory_(?P<name>.+)_t$")
 CONFIGURATIONS_PREFIX = "configurations_"

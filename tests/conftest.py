@@ -59,7 +59,7 @@ class FakeStages:
         def run(ctx: Any) -> Any:
             from matplotlib.figure import Figure
 
-            from pipeline.runner import StageResult
+            from pipeline.stage_api import StageResult
 
             self.calls.append(name)
             self.contexts[name] = ctx

@@ -7,9 +7,11 @@ import json
 import numpy as np
 import pytest
 
-from pipeline import artefacts
+from pipeline import artefacts, stage_io
 from pipeline.config import load_config
-from pipeline.runner import load_run, run_pipeline, stage_rng
+from pipeline.runner import run_pipeline
+from pipeline.stage_api import stage_rng
+from pipeline.stage_io import load_run
 
 
 # ------------------------------------------------------------------------------ atomic files
@@ -42,10 +44,10 @@ def test_commit_replaces_old_stage_dir(tmp_path):
     old = tmp_path / "s"
     old.mkdir()
     (old / "old.txt").write_text("old")
-    staging = artefacts.new_stage_dir(tmp_path, "s")
+    staging = stage_io.new_stage_dir(tmp_path, "s")
     assert staging.name.startswith(".s.partial-")
     (staging / "new.txt").write_text("new")
-    artefacts.commit_stage_dir(staging, old)
+    stage_io.commit_stage_dir(staging, old)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s"]
     assert [p.name for p in old.iterdir()] == ["new.txt"]
 
@@ -53,11 +55,11 @@ def test_commit_replaces_old_stage_dir(tmp_path):
 def test_inputs_hash_depends_on_every_input():
     base = dict(stage="a", stage_config={"n": 1}, run={"seed": 0}, robot_files_sha256="r",
                 upstream={"x": "h"}, package_version="1")
-    h0 = artefacts.inputs_hash(**base)
-    assert h0 == artefacts.inputs_hash(**base)
+    h0 = stage_io.inputs_hash(**base)
+    assert h0 == stage_io.inputs_hash(**base)
     for key, value in [("stage", "b"), ("stage_config", {"n": 2}), ("run", {"seed": 1}),
                        ("robot_files_sha256", "r2"), ("upstream", {"x": "h2"}), ("package_version", "2")]:
-        assert artefacts.inputs_hash(**{**base, key: value}) != h0, key
+        assert stage_io.inputs_hash(**{**base, key: value}) != h0, key
 
 
 # ------------------------------------------------------------------------------------ runner
@@ -196,15 +198,16 @@ def test_code_change_in_any_subpackage_reruns_every_stage(fake_stages, tmp_path,
     run_pipeline(load_config(None, ["name=r"]), **quiet)
     fake_stages.calls.clear()
     assert run_pipeline(load_config(None, ["name=r"]), **quiet).reused == ["a", "b", "c"]
-    iso = copy / "control" / "iso9283.py"              # a module of another stage's subpackage
-    iso.write_text(iso.read_text() + "\n# edited\n")
+    edited = copy / "control" / "simulate.py"             # a module of another stage's subpackage
+    edited.write_text(edited.read_text() + "\n# edited\n")
     again = run_pipeline(load_config(None, ["name=r"]), **quiet)
     assert fake_stages.calls == ["a", "b", "c"] and again.reused == []
 
 
 def test_every_real_stage_hash_covers_the_whole_package(tmp_path, monkeypatch):
     from pipeline.config import resolve_robot_dir
-    from pipeline.runner import plan_stages, stage_inputs_hashes
+    from pipeline.runner import stage_inputs_hashes
+    from pipeline.stage_plan import plan_stages
 
     copy = _package_copy(tmp_path, monkeypatch)
     cfg = load_config()
@@ -212,7 +215,8 @@ def test_every_real_stage_hash_covers_the_whole_package(tmp_path, monkeypatch):
     robot_dir = resolve_robot_dir(cfg)
     before = stage_inputs_hashes(cfg, plans, robot_dir)
     assert before == stage_inputs_hashes(cfg, plans, robot_dir)
-    for edited in (copy / "control" / "iso9283.py", copy / "trajectory" / "ptp.py", copy / "plotting.py"):
+    for edited in (copy / "robot" / "iso9283.py", copy / "sim" / "plant.py", copy / "trajectory" / "ptp.py",
+                   copy / "plotting.py"):
         edited.write_text(edited.read_text() + "\n# edited\n")
         after = stage_inputs_hashes(cfg, plans, robot_dir)
         assert set(after) == {"model", "calibration", "identification", "control", "trajectory"}

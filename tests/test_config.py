@@ -150,7 +150,7 @@ def test_quick_profile_loads(quick_config):
 
 # ---------------------------------------------------------------- robot run_defaults layer
 def test_robot_run_defaults_sit_between_defaults_and_file(tmp_path):
-    from pipeline.control.config import IsoPathConfig
+    from pipeline.robot.iso9283 import IsoPathConfig
 
     builtin = IsoPathConfig().centre_m
     tx40 = load_config(values={"robot": "staubli_tx40"})

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from pipeline import artefacts, second_pass
+from pipeline import second_pass, stage_io
 from pipeline.calibration.config import Config as CalibrationConfig
 from pipeline.config import RunConfig
 from pipeline.errors import ConfigError
@@ -17,7 +17,7 @@ from pipeline.stage_api import StageOutput
 def _output(path: Path, summary: dict, inputs_hash: str = "abc") -> StageOutput:
     (path / "robot").mkdir(parents=True, exist_ok=True)
     (path / "robot" / "robot.yaml").write_text(f"name: x\nhash: {inputs_hash}\n")
-    (path / artefacts.INPUTS_HASH).write_text(inputs_hash)
+    (path / stage_io.INPUTS_HASH).write_text(inputs_hash)
     return StageOutput(summary, {}, {}, None, path)
 
 
@@ -59,14 +59,14 @@ def test_reuse_copies_the_first_pass_and_replaces_only_other_inputs(tmp_path):
     run_dir = tmp_path / "run"
     outputs = {"calibration": _output(tmp_path / "c", {}, "h1")}
     assert second_pass.reuse_first_pass(outputs, run_dir) == ["calibration"]
-    assert artefacts.read_inputs_hash(run_dir / "calibration") == "h1"
+    assert stage_io.read_inputs_hash(run_dir / "calibration") == "h1"
     marker = run_dir / "calibration" / "kept"
     marker.write_text("same inputs: left alone")
     assert second_pass.reuse_first_pass(outputs, run_dir) == []
     assert marker.exists()
     outputs = {"calibration": _output(tmp_path / "c2", {}, "h2")}
     second_pass.reuse_first_pass(outputs, run_dir)
-    assert artefacts.read_inputs_hash(run_dir / "calibration") == "h2" and not marker.exists()
+    assert stage_io.read_inputs_hash(run_dir / "calibration") == "h2" and not marker.exists()
     assert sorted(p.name for p in run_dir.iterdir()) == ["calibration"]
 
 

@@ -41,9 +41,7 @@ import numpy as np
 import pinocchio as pin
 
 from pipeline.robot.collision import segment_distances
-
-#: the beam is checked up to this distance before the reflector (as pipeline.robot.sensors does)
-BEAM_END_CLEARANCE_M = 0.02
+from pipeline.robot.instruments import BEAM_END_CLEARANCE_M
 
 
 @dataclass
@@ -266,7 +264,7 @@ def filter_grid(chain: Chain, n_per_axis: int | list[int] = 13, margins: FilterM
     for the remaining pairs, floor and visibility. ``progress``: an optional
     :class:`pipeline.progress.TaskHandle` advanced over the collision-free prefixes.
     ``visibility(kinematics, capsule_segments) -> mask``: another sensor's line of sight (e.g. the
-    optical 6-D tracker, :mod:`pipeline.robot.optical_tracker`) instead of the laser tracker's.
+    optical 6-D tracker, :mod:`pipeline.sim.optical_tracker`) instead of the laser tracker's.
     """
     t0 = time.perf_counter()
     margins = margins or FilterMargins()

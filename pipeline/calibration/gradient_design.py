@@ -25,7 +25,7 @@ kinematic parameters (``p_kin = 0``), i.e. the same model as the numeric filters
 
 Solved by IPOPT (limited-memory Hessian) warm-started from a discrete design (remove-and-replace).
 Every configuration of the result is re-checked with the numeric rules (Pinocchio capsules,
-:func:`pipeline.robot.sensors.tracker_visibility`, joint limits, obstacles; no margins); a
+:func:`pipeline.robot.instruments.tracker_visibility`, joint limits, obstacles; no margins); a
 configuration that fails is replaced by its warm start, so the result is never less feasible than
 the start.
 """
@@ -43,8 +43,8 @@ from pipeline.calibration import indices as ix
 from pipeline.calibration.error_model import MeasurementModel, se3_to_vector
 from pipeline.robot.collision import segment_distances
 from pipeline.robot.collision_sx import capsule_clearance_function, segment_distance_sx
+from pipeline.robot.instruments import BEAM_END_CLEARANCE_M, tracker_visibility
 from pipeline.robot.parameters import pinocchio_dynamic_parameters
-from pipeline.robot.sensors import BEAM_END_CLEARANCE_M, tracker_visibility
 
 
 @dataclass
@@ -94,7 +94,7 @@ class GradientDesignResult:
 
 def feasible_configurations(robot, Q: np.ndarray, transform_tracker_to_base, obstacles=()) -> np.ndarray:
     """Mask of the rows of ``Q`` inside the joint limits, free of self/floor collision
-    (``RobotModel.capsule_clearances >= 0``), measurable (:func:`pipeline.robot.sensors.tracker_visibility`)
+    (``RobotModel.capsule_clearances >= 0``), measurable (:func:`pipeline.robot.instruments.tracker_visibility`)
     and with the beam and the moving capsules clear of the obstacle capsules ``(p0, p1, radius_m)``."""
     Q = np.atleast_2d(np.asarray(Q, float))
     ok = np.all((Q >= robot.limits.lower_rad) & (Q <= robot.limits.upper_rad), axis=1)

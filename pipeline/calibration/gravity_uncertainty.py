@@ -16,7 +16,7 @@ COM error ``sigma_c``): ``d m = s m eps``, ``d(m c) = c d m + m d c``, i.e. the 
 absolute floor of first moments whose nominal value is ~0 (a centred COM). Defaults
 (``calibration.gravity_model_relative_sigma`` 0.15, ``gravity_model_com_sigma_m`` 0.02 m) are the
 typical data-sheet/CAD uncertainty of a robot's inertial parameters (DESIGN.md: "inertial
-parameters 10-20 %"; the simulated truth draws the same magnitudes, pipeline.robot.truth). With
+parameters 10-20 %"; the simulated truth draws the same magnitudes, pipeline.sim.truth). With
 an identified gravity model (``calibration.gravity_model``) both are multiplied by
 ``gravity_model_identified_scale``. The payload is known (config) and adds no uncertainty.
 

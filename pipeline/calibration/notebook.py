@@ -18,8 +18,8 @@ from IPython.display import Markdown, display
 
 from pipeline.config import quick_config
 from pipeline.robot.model import RobotModel
-from pipeline.robot.truth import RealRobot
-from pipeline.runner import stage_rng
+from pipeline.sim.truth import RealRobot
+from pipeline.stage_api import stage_rng
 from pipeline.calibration import stage as st, design as ds, indices as ix, validate as va, plots
 
 run = quick_config()
@@ -63,7 +63,7 @@ if SHOW_VIEWER:
 
 
 def build():
-    import nbformat
+    import nbformat  # optional: the dev extra (writing notebooks is a developer task)
 
     nb = nbformat.v4.new_notebook()
     nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
@@ -73,7 +73,7 @@ def build():
 
 
 def write(path: str | Path) -> Path:
-    import nbformat
+    import nbformat  # optional: the dev extra (writing notebooks is a developer task)
 
     path = Path(path)
     nbformat.write(build(), path)

@@ -41,9 +41,9 @@ import yaml
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import indices as ix
 from pipeline.calibration.error_model import MeasurementModel
-from pipeline.control.config import IsoPathConfig
 from pipeline.errors import ConfigError, DataFileError, InfeasibleError
 from pipeline.robot.defaults import iso_or_derived
+from pipeline.robot.iso9283 import IsoPathConfig
 
 WORKING_REGIONS = ("iso_cube", "box", "csv")
 #: what V weights over the working configurations (``calibration.design_figure``): the TCP (the task),

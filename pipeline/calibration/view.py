@@ -4,19 +4,18 @@ from __future__ import annotations
 
 from typing import Any
 
+import meshcat.geometry as g
+import meshcat.transformations as tf
 import numpy as np
 import pinocchio as pin
+
+from pipeline.viewer import Viewer
 
 
 def show_calibration(robot, Q: np.ndarray, transform_tracker_to_base: pin.SE3 | None = None,
                      viewer: Any = None, seconds_each: float = 1.0) -> Any:
     """Open (or reuse) a :class:`pipeline.viewer.Viewer`, draw the configurations ``Q`` (reflector
     points + an animation through them), the tracker as a sphere and a beam to every point."""
-    import meshcat.geometry as g
-    import meshcat.transformations as tf
-
-    from pipeline.viewer import Viewer
-
     v = viewer if viewer is not None else Viewer(robot)
     T = transform_tracker_to_base if transform_tracker_to_base is not None else \
         robot.tracker.transform_tracker_to_base

@@ -1,6 +1,6 @@
 """Feedforward for elastic joints: command the motors so that the *links* follow the path.
 
-Two-mass model per joint (joint side; :mod:`pipeline.control.elastic_dynamics`): link torque
+Two-mass model per joint (joint side; :mod:`pipeline.sim.elastic_dynamics`): link torque
 ``tau_l = M_l(q) qdd + h_l(q, qd)`` (rigid-body dynamics of the link chain without rotor inertia)
 is carried by the spring, ``tau_l = k (theta - q)``, so the motor must lead the link by the
 deflection. Variants (paper ``004_abbe750b8bbcc3aa.txt`` §2.3 and §5; flatness of the elastic-joint

@@ -33,12 +33,11 @@ import time
 
 import numpy as np
 
+from pipeline.config import resolve_robot_dir
 from pipeline.control.config import ControlConfig
 from pipeline.control.design import filter_alpha, loop_models, servo_report
 from pipeline.control.elastic_feedforward import ELASTIC_VARIANTS
-from pipeline.control.iso9283 import iso9283_path
 from pipeline.control.joint_stiffness import deflection_budget, feedforward_stiffness, stiffness_markdown
-from pipeline.control.reference import cartesian_reference
 from pipeline.control.simulate import first_saturation, servo_gains, simulate_joint_trajectory
 from pipeline.control.validate import (
     bode_figure,
@@ -50,9 +49,12 @@ from pipeline.control.validate import (
 )
 from pipeline.errors import ConfigError, InfeasibleError, PipelineError
 from pipeline.robot.defaults import ik_seeds_or_derived_rad, iso_or_derived, iso_rotation
+from pipeline.robot.iso9283 import iso9283_path
+from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import start_configuration
+from pipeline.robot.reference import cartesian_reference
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
-from pipeline.runner import StageContext, StageResult
+from pipeline.stage_api import StageContext, StageResult
 
 NAME = "control"
 DEPENDS: tuple[str, ...] = ("model", "calibration", "identification")
@@ -70,9 +72,6 @@ def check(config: ControlConfig, robot) -> None:
 
 
 def _nominal_robot(ctx: StageContext):
-    from pipeline.robot.model import RobotModel
-    from pipeline.runner import resolve_robot_dir
-
     return RobotModel.load(resolve_robot_dir(ctx.run))
 
 
@@ -122,7 +121,7 @@ def iso_reference(robot, cfg: ControlConfig):
 def run(ctx: StageContext) -> StageResult:
     cfg: ControlConfig = ctx.config
     if ctx.real is None:
-        raise PipelineError(None, "control", "the hidden robot (pipeline.robot.truth) is not available")
+        raise PipelineError(None, "control", "the hidden robot (pipeline.sim.truth) is not available")
     robot = ctx.robot
     nominal = _nominal_robot(ctx)
     calibrated = _upstream_robot(ctx, "calibration") is not None

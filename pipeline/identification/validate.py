@@ -19,13 +19,13 @@ from typing import Any
 import numpy as np
 
 from pipeline.control.config import ControlConfig
-from pipeline.control.iso9283 import iso9283_path
-from pipeline.control.reference import cartesian_reference
 from pipeline.errors import PipelineError
 from pipeline.identification.regressor import BaseParameters
 from pipeline.robot.defaults import ik_seeds_or_derived_rad, iso_or_derived, iso_rotation
+from pipeline.robot.iso9283 import iso9283_path
 from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import start_configuration
+from pipeline.robot.reference import cartesian_reference
 
 
 @dataclass

@@ -15,7 +15,7 @@ import numpy as np
 from pipeline.errors import ConfigError
 from pipeline.plotting import robot_figure
 from pipeline.robot.defaults import ready_pose_rad
-from pipeline.runner import StageContext, StageResult
+from pipeline.stage_api import StageContext, StageResult
 
 NAME = "model"
 DEPENDS: tuple[str, ...] = ()

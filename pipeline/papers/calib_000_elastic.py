@@ -6,7 +6,7 @@ by incorporating [...] nongeometric errors like joint mobilities or elasticities
 no number for it ("outlook, not measured"). This experiment measures it on the study's own
 TCP-criterion design (``tcp_ca``, same configurations) for an arm in its cell:
 
-1. the design is measured on the default hidden robot (:class:`pipeline.robot.truth.RealRobot`,
+1. the design is measured on the default hidden robot (:class:`pipeline.sim.truth.RealRobot`,
    ``TruthConfig()``: elastic joints with a per-seed stiffness spread, gear transmission error,
    tracker noise) with the simulated tracker, for ``seeds`` hidden robots;
 2. the readings are calibrated (the stage's robust estimator,
@@ -44,7 +44,7 @@ from pipeline.calibration.estimate import Estimate, calibrated_robot
 from pipeline.calibration.gravity_uncertainty import GravityCovariance
 from pipeline.calibration.robust import robust_estimate
 from pipeline.robot.model import RobotModel
-from pipeline.robot.truth import RealRobot, TruthConfig
+from pipeline.sim.truth import RealRobot, TruthConfig
 
 MODELS = ("geometric", "all")
 #: the reference: the geometric model on the rigid hidden robot (``TruthConfig.ideal()``), the

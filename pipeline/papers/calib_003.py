@@ -22,7 +22,7 @@ Estimation: closed-form registration + Levenberg-Marquardt (:mod:`pipeline.calib
 
 Experiments printed: (1) the literal simulation (geometric truth only): errors of micrometres,
 where the paper has 0.36-0.49 mm; (2) the magnitude sweep: the hidden robot's unmodelled effects
-(:class:`pipeline.robot.truth.TruthConfig`: joint compliance under gravity, cyclic gear transmission
+(:class:`pipeline.sim.truth.TruthConfig`: joint compliance under gravity, cyclic gear transmission
 error), which level brings "none" to the paper's 0.485 mm; (3) Table 2 with that truth, the index
 value each search reaches and the poses it shares with the random design; (4) Oc searched in the
 paper's units against Oc normalised by reference values
@@ -53,7 +53,7 @@ from pipeline.errors import DataFileError, SolverError
 from pipeline.papers import calib_003_search as ps
 from pipeline.robot.model import RobotModel
 from pipeline.robot.spec import TrackerSpec
-from pipeline.robot.truth import RealRobot, TruthConfig
+from pipeline.sim.truth import RealRobot, TruthConfig
 from pipeline.studies import study_dir
 
 #: paper 003 Table 2 (simulation): mean, RMSE, max positioning error [mm]

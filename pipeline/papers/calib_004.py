@@ -14,11 +14,11 @@ and after calibration.
 What this study does, per seed of the hidden robot:
 
 1. the 13^6 grid filtered by limits, collisions and the optical tracker's predicted visibility
-   (``optical_tracker`` of robot.yaml, :mod:`pipeline.robot.optical_tracker`; nominal model and
+   (``optical_tracker`` of robot.yaml, :mod:`pipeline.sim.optical_tracker`; nominal model and
    camera pose, no margin: the count next to the paper's ~4000); the camera pose registered from 8
    pilot readings of that set on the hidden robot (:func:`pipeline.papers.calib_004_optical.register_camera`),
    and the candidates = the configurations still visible at the registered pose with
-   :class:`~pipeline.robot.optical_tracker.OpticalMargins` (a configuration the hidden robot might
+   :class:`~pipeline.robot.instruments.OpticalMargins` (a configuration the hidden robot might
    hide is never a candidate; those it hides anyway are counted as lost);
 2. 6-D design blocks (:mod:`pipeline.papers.calib_004_optical`); 32 configurations by remove-and-replace
    on O3 (= on B: same order); the paper's index ``B = O3^2`` and ``cond(Lambda)`` of every design;
@@ -61,9 +61,9 @@ from pipeline.papers import calib_004_laser as lz
 from pipeline.papers import calib_004_optical as op
 from pipeline.papers import calib_004_scans as sd
 from pipeline.papers.calib_common import run_parallel, save_result
+from pipeline.robot.instruments import OpticalMargins, optical_spec
 from pipeline.robot.model import RobotModel
-from pipeline.robot.optical_tracker import OpticalMargins
-from pipeline.robot.truth import RealRobot, TruthConfig
+from pipeline.sim.truth import RealRobot, TruthConfig
 
 PAPER = {"grid": 13, "visible": 4000, "n": 32, "factor": 18.5,
          # Table 2: maximum uncal./cal. and half peak-to-peak uncal./cal.; mm and deg
@@ -113,7 +113,7 @@ def visible_grid(robot_name: str, grid: int, margins: OpticalMargins) -> dict:
 def baseline_configurations(robot: RobotModel, Qc: np.ndarray, n: int, visible, camera: pin.SE3
                             ) -> dict[str, np.ndarray]:
     """Commanded configurations of the literal scan readings (module docstring, step 3)."""
-    spec = op.spec_of(robot)
+    spec = optical_spec(robot)
     o_fl, _ = robot.poses(Qc, robot.frame_flange)
     lo, hi = np.percentile(o_fl, 10, axis=0), np.percentile(o_fl, 90, axis=0)
     centre = 0.5 * (lo + hi)
@@ -141,7 +141,7 @@ def _seed(args: tuple) -> dict:
         _, basis = st.identify_parameter_set(robot, mm, st.Config(), rng)
         # the camera pose registered from pilot readings decides what the design may use (step 1)
         T_cam, n_pilot = (op.register_camera(robot, real, grid_data["Q"], rng) if camera == "registered"
-                          else (op.spec_of(robot).transform_camera_to_base, 0))
+                          else (optical_spec(robot).transform_camera_to_base, 0))
         keep = op.visible_mask(robot, grid_data["Q"], T_cam, margins)
         Qc = grid_data["Q"][keep]
         _, sig_rad = op.nominal_sigmas(robot, Qc, T_cam)

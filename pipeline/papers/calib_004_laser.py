@@ -9,7 +9,7 @@ Two candidate causes are separated here, each by a printed column:
   error over the held-out poses (``predicted model RMS``, the noise-driven part of the error, paper
   000 eq. 16) can be no better, or worse, for the O3 design although its B is larger;
 - the default hidden robot has effects the geometric model does not have (elastic joints under
-  gravity, a cyclic gear error: :class:`pipeline.robot.truth.TruthConfig`); an O3 design spreads the
+  gravity, a cyclic gear error: :class:`pipeline.sim.truth.TruthConfig`); an O3 design spreads the
   poses to the extremes of the workspace, where the gravity deflections are largest. On the ideal
   hidden robot (``TruthConfig.ideal()``) this part vanishes, so the measured error must approach the
   predicted one for every design.
@@ -33,7 +33,7 @@ from pipeline.calibration import stage as st
 from pipeline.calibration import validate as va
 from pipeline.calibration.estimate import estimate
 from pipeline.robot.model import RobotModel
-from pipeline.robot.truth import RealRobot, TruthConfig
+from pipeline.sim.truth import RealRobot, TruthConfig
 
 
 def laser_grid(robot_name: str, grid: int) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""Calibration with the optical 6-D tracker (:mod:`pipeline.robot.optical_tracker`).
+"""Calibration with the optical 6-D tracker (:mod:`pipeline.sim.optical_tracker`).
 
 Any robot whose robot.yaml declares ``optical_tracker`` can be calibrated from its 6-D readings:
 
@@ -31,49 +31,44 @@ from pipeline.calibration import candidates as cd
 from pipeline.calibration import measure as ms
 from pipeline.calibration.error_model import MeasurementModel
 from pipeline.calibration.estimate import Estimate, estimate, register_points
-from pipeline.robot import optical_tracker as ot
+from pipeline.robot import instruments as inst
 from pipeline.robot.model import RobotModel
-from pipeline.robot.spec import OpticalTrackerSpec
 
 #: the three marker points of a 6-D reading (origin, lever along x, lever along y), marker frame
 MARKER_OFFSETS_M = ms.MARKER_LEVER_M * np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 
 
-def spec_of(robot: RobotModel) -> OpticalTrackerSpec:
-    if robot.spec.optical_tracker is None:
-        raise ValueError(f"{robot.name}: robot.yaml declares no optical_tracker")
-    return robot.spec.optical_tracker
-
-
 def chain_visibility(robot: RobotModel, chain: cd.Chain, transform_camera_to_base: pin.SE3,
-                     margins: ot.OpticalMargins = ot.NO_MARGINS):
+                     margins: inst.OpticalMargins = inst.NO_MARGINS):
     """``visibility(kinematics, segments) -> mask`` for :func:`candidates.filter_grid`."""
-    spec = spec_of(robot)
-    occluders = ot.probe_occluders(robot)
+    spec = inst.optical_spec(robot)
+    occluders = inst.probe_occluders(robot)
     frames = robot.model.frames
     R_rel = (frames[robot.frame_id(robot.frame_flange)].placement.inverse()
              * frames[robot.frame_id(robot.frame_reflector)].placement).rotation   # marker axes in the flange
 
     def visible(kin: cd.Kinematics, seg: np.ndarray) -> np.ndarray:
-        diodes, axis = ot.probe_points(spec, kin.p_reflector, kin.R_flange @ R_rel)
-        return ot.diode_visibility(spec, transform_camera_to_base, diodes, axis, seg, chain.capsule_r, occluders,
+        diodes, axis = inst.probe_points(spec, kin.p_reflector, kin.R_flange @ R_rel)
+        return inst.diode_visibility(spec, transform_camera_to_base, diodes, axis, seg, chain.capsule_r, occluders,
                                    margins).visible
     return visible
 
 
-def visible_grid(robot: RobotModel, n_per_axis: int, margins: ot.OpticalMargins = ot.NO_MARGINS,
+def visible_grid(robot: RobotModel, n_per_axis: int, margins: inst.OpticalMargins = inst.NO_MARGINS,
                  collision_margin_m: float = 0.01) -> tuple[np.ndarray, np.ndarray, dict]:
     """Grid configurations (grid order) the nominal optical tracker sees, their flat grid indices, counts."""
     chain = cd.chain_from_robot(robot)
+    camera = inst.optical_spec(robot).transform_camera_to_base
     return cd.filter_grid(chain, n_per_axis, cd.FilterMargins(collision_m=collision_margin_m),
-                          visibility=chain_visibility(robot, chain, spec_of(robot).transform_camera_to_base, margins))
+                          visibility=chain_visibility(robot, chain, camera, margins))
 
 
 def visible_mask(robot: RobotModel, Q: np.ndarray, transform_camera_to_base: pin.SE3 | None = None,
-                 margins: ot.OpticalMargins = ot.NO_MARGINS, collision_margin_m: float = 0.01) -> np.ndarray:
+                 margins: inst.OpticalMargins = inst.NO_MARGINS, collision_margin_m: float = 0.01) -> np.ndarray:
     """Configurations inside the limits, collision-free and predicted visible (numpy chain)."""
     chain = cd.chain_from_robot(robot)
-    T = transform_camera_to_base if transform_camera_to_base is not None else spec_of(robot).transform_camera_to_base
+    T = (transform_camera_to_base if transform_camera_to_base is not None
+         else inst.optical_spec(robot).transform_camera_to_base)
     Q = np.atleast_2d(np.asarray(Q, float))
     ok, _ = cd.filter_configurations(chain, Q, cd.FilterMargins(collision_m=collision_margin_m), visibility=False)
     idx = np.flatnonzero(ok)
@@ -86,11 +81,11 @@ def visible_mask(robot: RobotModel, Q: np.ndarray, transform_camera_to_base: pin
 def nominal_sigmas(robot: RobotModel, Q: np.ndarray, transform_camera_to_base: pin.SE3
                    ) -> tuple[np.ndarray, np.ndarray]:
     """Stated ``(sigma_m, sigma_rad)`` of readings at ``Q`` (nominal model, every diode seen)."""
-    spec = spec_of(robot)
+    spec = inst.optical_spec(robot)
     origin, _ = robot.poses(np.atleast_2d(Q), robot.frame_reflector)
     dist = np.linalg.norm(origin - transform_camera_to_base.translation, axis=1)
     sigma_d = spec.noise_const_m + spec.noise_per_m * dist
-    return ot.stated_sigmas(spec, np.ones((len(Q), len(spec.probe_diodes_m)), bool), sigma_d)
+    return inst.stated_sigmas(spec, np.ones((len(Q), len(spec.probe_diodes_m)), bool), sigma_d)
 
 
 def design_blocks(mm: MeasurementModel, robot: RobotModel, Q: np.ndarray, basis: np.ndarray,
@@ -178,7 +173,7 @@ def pose_errors(mm: MeasurementModel, x: np.ndarray, transform_camera_to_base: p
 
 
 def heldout(robot: RobotModel, real, transform_camera_to_base: pin.SE3, n: int, rng: np.random.Generator,
-            margins: ot.OpticalMargins = ot.NO_MARGINS) -> ms.Measurements:
+            margins: inst.OpticalMargins = inst.NO_MARGINS) -> ms.Measurements:
     """``n`` random configurations predicted visible with the camera pose ``transform_camera_to_base``
     (nominal or identified), read on the hidden robot (visible rows kept, drawn until ``n``)."""
     chain = cd.chain_from_robot(robot)

@@ -50,7 +50,7 @@ from pipeline.calibration import task_space as ts
 from pipeline.calibration.estimate import calibrated_robot, estimate, register_points
 from pipeline.papers.calib_common import run_parallel, save_result
 from pipeline.robot.model import RobotModel
-from pipeline.robot.truth import RealRobot, TruthConfig
+from pipeline.sim.truth import RealRobot, TruthConfig
 
 INDICES = ("O1", "O2", "O3", "O4", "O5", "D", "A", "E", "Od", "Oc", "tcp_A", "V", "V_refl", "V_tcp_refl")
 #: the V criterion on other figures of the working region (study only): the reflector in the tracker

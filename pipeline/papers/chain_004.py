@@ -48,8 +48,8 @@ from pipeline.config import CONFIGS_DIR, RunConfig, load_config
 from pipeline.errors import PipelineError
 from pipeline.papers.chain_004_rows import Row, Run, all_rows, markdown
 from pipeline.progress import Progress
-from pipeline.robot.truth import TruthConfig
 from pipeline.runner import run_pipeline
+from pipeline.sim.truth import TruthConfig
 from pipeline.stage_io import load_run
 from pipeline.studies import study_dir
 

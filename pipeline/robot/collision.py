@@ -11,7 +11,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import coal
 import numpy as np
+import pinocchio as pin
 
 
 @dataclass
@@ -75,9 +77,6 @@ def point_segment_distances(point: np.ndarray, p0: np.ndarray, p1: np.ndarray) -
 def coal_capsule_distance(a0: np.ndarray, a1: np.ndarray, radius_a: float,
                           b0: np.ndarray, b1: np.ndarray, radius_b: float) -> float:
     """Signed distance between two world-frame capsules computed by coal (reference)."""
-    import coal
-    import pinocchio as pin
-
     def placed(p0: np.ndarray, p1: np.ndarray, radius: float) -> tuple[coal.Capsule, coal.Transform3s]:
         axis = p1 - p0
         length = float(np.linalg.norm(axis))

@@ -26,8 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.control.iso9283 import TOOL_ORIENTATIONS, tool_rotation
 from pipeline.errors import InfeasibleError
+from pipeline.robot.iso9283 import TOOL_ORIENTATIONS, IsoPathConfig, tool_rotation
 from pipeline.robot.iso_search import (
     MIN_EDGE_REACH,
     SEARCH_DIRECTIONS,
@@ -152,7 +152,7 @@ def iso_cube(robot, plane: str = "diagonal_x", orientation: str | None = None, s
     """The largest ISO 9283 cube whose whole path is feasible, found by a search over the workspace
     (:mod:`pipeline.robot.iso_search`; the IK branch starts from :func:`ik_seeds_rad`, as the stages do),
     with the tool in ``orientation`` (:func:`iso_rotation`); ``None``: the first of
-    :data:`~pipeline.control.iso9283.TOOL_ORIENTATIONS` that has a cube.
+    :data:`~pipeline.robot.iso9283.TOOL_ORIENTATIONS` that has a cube.
 
     If no cube is feasible at ``speed_m_s`` (the joint speeds of a small or slow arm), the speed is lowered
     to ``SLOW_SHARE`` of the highest speed a small cube allows, and the largest cube at that speed returned.
@@ -225,7 +225,7 @@ def ik_seeds_or_derived_rad(robot, seeds_deg: list | None) -> np.ndarray:
     return np.radians(np.atleast_2d(np.asarray(seeds_deg, float)))
 
 
-def iso_or_derived(robot, iso):  # noqa: ANN001, ANN201 - IsoPathConfig in, a copy out (control layer type)
+def iso_or_derived(robot, iso: IsoPathConfig) -> IsoPathConfig:  # noqa: ANN001 - a RobotModel
     """A copy of the ISO path settings with ``centre_m`` / ``edge_m`` / ``speed_m_s`` /
     ``tool_orientation`` left ``None`` filled from :func:`iso_cube` (the search runs only when the cube
     is missing; a given cube keeps the tool down unless told otherwise)."""

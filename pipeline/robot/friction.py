@@ -8,7 +8,7 @@ compensation methods for the control of machines with friction", Automatica 30(7
 steady-state "Stribeck" curve; ``w`` the Coulomb smoothing width of DESIGN.md). ``f_s`` and
 ``v_s`` are ``actuation.static_friction_excess_Nm`` and ``actuation.stribeck_velocity_rad_s``
 (written by the identification with ``friction_model: stribeck``); without them the model is
-viscous + Coulomb. The hidden robot's own friction is :class:`pipeline.robot.transmission.Transmission`.
+viscous + Coulomb. The hidden robot's own friction is :class:`pipeline.sim.transmission.Transmission`.
 """
 
 from __future__ import annotations

@@ -14,10 +14,13 @@ transition to the small circle (0.1 L), the small circle.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
+from pipeline.config_checks import check_choice, check_number, check_unique, check_vector
 from pipeline.errors import ConfigError
 from pipeline.robot.paths import CartesianPath, CirclePath, LinePath, rectangle
 
@@ -72,6 +75,56 @@ class IsoPath(CartesianPath):
 #: constant tool orientations of the path (pipeline.robot.defaults.iso_rotation), in the order a derived
 #: cube tries them
 TOOL_ORIENTATIONS = ("down", "plane", "ready")
+ISO_PLANES = ("diagonal_x", "diagonal_y", "horizontal")        # keys of PLANES
+ISO_SEGMENTS = ("line", "rectangle", "circle_large", "circle_small")
+
+
+@dataclass
+class IsoPathConfig:
+    """EN ISO 9283 test path (DESIGN.md): cube of edge L, centre, diagonal plane, speeds."""
+
+    #: None = derived from the robot: the largest feasible cube (pipeline.robot.defaults.iso_cube)
+    edge_m: float | None = None
+    centre_m: list[float] | None = None
+    plane: str = "diagonal_x"          # diagonal_x | diagonal_y | horizontal
+    #: constant TCP orientation: down | plane (normal to the plane, away from the base) | ready (as at the
+    #: robot's ready pose); None = derived: down, else plane, else ready, the first with a feasible cube
+    tool_orientation: str | None = None
+    speed_m_s: float = 1.0
+    acceleration_m_s2: float = 5.0
+    jerk_m_s3: float = 50.0
+    corner_fraction: float = 0.1       # P2..P5 at this fraction of the diagonal from the corners
+    large_circle_fraction: float = 0.8  # circle diameters as fractions of the edge (ISO: 80 % and 10 %)
+    small_circle_fraction: float = 0.1
+    segments: list[str] = field(default_factory=lambda: list(ISO_SEGMENTS))
+
+    def __post_init__(self) -> None:
+        self.validate(None)
+
+    def validate(self, source: Any = None, where: str = "control.iso") -> None:
+        """Robot-independent checks; ConfigError naming ``<where>.<field>``."""
+        if self.edge_m is not None:
+            check_number(source, f"{where}.edge_m", self.edge_m, gt=0, unit="m")
+        if self.centre_m is not None:
+            check_vector(source, f"{where}.centre_m", self.centre_m, 3, "m")
+        check_choice(source, f"{where}.plane", self.plane, ISO_PLANES)
+        if self.tool_orientation is not None:
+            check_choice(source, f"{where}.tool_orientation", self.tool_orientation, TOOL_ORIENTATIONS)
+        check_number(source, f"{where}.speed_m_s", self.speed_m_s, gt=0, unit="m/s")
+        check_number(source, f"{where}.acceleration_m_s2", self.acceleration_m_s2, gt=0, unit="m/s^2")
+        check_number(source, f"{where}.jerk_m_s3", self.jerk_m_s3, gt=0, unit="m/s^3")
+        check_number(source, f"{where}.corner_fraction", self.corner_fraction, gt=0, lt=0.5,
+                     why=" (P2..P5 lie this fraction of the diagonal in from the corners)")
+        # the circles are centred on P1 inside the L x L (or L x sqrt(2) L) rectangle of the plane
+        for name in ("large_circle_fraction", "small_circle_fraction"):
+            check_number(source, f"{where}.{name}", getattr(self, name), gt=0, le=1,
+                         why=" (circle diameter as a fraction of the cube edge)")
+        if not isinstance(self.segments, (list, tuple)) or not self.segments:
+            raise ConfigError(source, f"{where}.segments",
+                              f"expected a non-empty list of {', '.join(ISO_SEGMENTS)}, got {self.segments!r}")
+        for i, s in enumerate(self.segments):
+            check_choice(source, f"{where}.segments[{i}]", s, ISO_SEGMENTS)
+        check_unique(source, f"{where}.segments", self.segments)
 
 
 def tool_rotation(plane: str, tool_down: bool = True) -> np.ndarray:

@@ -1,7 +1,7 @@
 """Search of the workspace for the largest feasible EN ISO 9283 cube (DESIGN.md "EN ISO 9283 test path").
 
 A cube (edge ``L``, centre ``c``) is *feasible* when its whole test path (every segment the control
-stage runs: line, rectangle, transitions, both circles; :func:`pipeline.control.iso9283.iso9283_path`),
+stage runs: line, rectangle, transitions, both circles; :func:`pipeline.robot.iso9283.iso9283_path`),
 sampled every ``SAMPLE_SPACING_EDGES`` edges of arc length, is reachable at the constant tool
 orientation by one IK branch followed by continuation, with, at every sample,
 
@@ -29,7 +29,7 @@ e.g. a humanoid's arm raised sideways, works to a side). Each
 remaining centre is tried with a small cube (``MIN_EDGE_REACH`` of the reach); the feasible ones, largest
 geometric room first, get a bisection on the edge (``BISECTION_STEPS`` steps) up to their geometric
 bound; the largest edge wins (ties: the centre tried first). The winner is then checked with the control
-stage's own reference generator (:func:`pipeline.control.reference.cartesian_reference`: jerk-limited
+stage's own reference generator (:func:`pipeline.robot.reference.cartesian_reference`: jerk-limited
 profile at the speed, 5 m/s², minimum-norm redundancy resolution, joint limits and speeds) every
 ``VERIFY_SAMPLE_TIME_S``; while it fails the edge shrinks by ``SHRINK``. Deterministic: no random
 numbers.
@@ -43,9 +43,9 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from pipeline.control.iso9283 import PLANES, iso9283_path
-from pipeline.control.reference import cartesian_reference
 from pipeline.errors import InfeasibleError
+from pipeline.robot.iso9283 import PLANES, iso9283_path
+from pipeline.robot.reference import cartesian_reference
 
 #: axes needed to hold a 6-D tool pose (position and orientation) along a Cartesian path
 POSE_AXES = 6

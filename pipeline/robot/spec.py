@@ -72,7 +72,7 @@ class TrackerSpec:
 class OpticalTrackerSpec:
     """A camera-based 6-D tracker: a probe of infrared diodes on the tool seen by several cameras
     (paper 004 §3.4: 3D-Creator, 4 diodes, three CCD cameras, pose by stereovision). Model in
-    :mod:`pipeline.robot.optical_tracker`; numbers of a particular system go in its robot.yaml.
+    :mod:`pipeline.sim.optical_tracker`; numbers of a particular system go in its robot.yaml.
 
     Camera-bar frame: ``p_base = transform_camera_to_base p_bar``; every camera looks along the bar's
     +z axis. Probe: diode positions in the marker frame (the reflector frame of ``tool``: flange

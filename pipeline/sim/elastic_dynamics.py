@@ -7,10 +7,10 @@ without rotor inertia; paper ``004_abbe750b8bbcc3aa.txt`` §2.3, §5 "gear elast
     qdd    = ABA_link(q, v, tau_s)                                  link side (armature 0)
     J_m omega_dot = sat(tau_cmd) - tau_s - f(omega, tau_s)          motor side, friction on the motor
 
-with ``f`` the Stribeck friction of :mod:`pipeline.robot.transmission`. One semi-implicit
+with ``f`` the Stribeck friction of :mod:`pipeline.sim.transmission`. One semi-implicit
 (symplectic) Euler substep of length ``h`` updates the velocities first and the positions with the
 new velocities; it is stable for ``h omega_n < 2`` on the undamped resonances ``omega_n`` (the plant
-picks ``h`` for ``h omega_max <= 1``, :meth:`pipeline.control.plant.Plant.substeps_for`).
+picks ``h`` for ``h omega_max <= 1``, :meth:`pipeline.sim.plant.Plant.substeps_for`).
 Transmission numbers per joint in the loop parameter vector: ``(J_m, k, d, F_s - F_c, w_s, mu)``.
 """
 
@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import casadi as ca
 
-from pipeline.control import dynamics
-from pipeline.control.dynamics import ChainStructure
+from pipeline.sim import dynamics
+from pipeline.sim.dynamics import ChainStructure
 
 TRANSMISSION_PARAMS_PER_JOINT = 6
 

@@ -12,7 +12,7 @@ One call of ``step`` covers one position-loop sample ``T_p`` (paper 004 §2.3: 4
         tau_cmd = tau_ff[j] + Kv e_v + I                          ideal current loop
     plant: n_sub semi-implicit Euler substeps of  qdd = ABA(q, v, sat(tau_cmd) - friction(v))
            (``stribeck``: the truth's Stribeck + load-dependent friction; ``elastic``: the two-mass
-           model of :mod:`pipeline.control.elastic_dynamics`, the encoders on the motor side)
+           model of :mod:`pipeline.sim.elastic_dynamics`, the encoders on the motor side)
 
 ``q_d_fb`` is the setpoint aligned with the delayed measurement (the drive keeps the setpoint
 history), so the measurement delay only acts on the feedback, not as a lag.
@@ -35,9 +35,9 @@ import numpy as np
 import pinocchio as pin
 
 from pipeline import codegen
-from pipeline.control import dynamics, elastic_dynamics
-from pipeline.control.dynamics import ChainStructure
-from pipeline.control.elastic_dynamics import TRANSMISSION_PARAMS_PER_JOINT
+from pipeline.sim import dynamics, elastic_dynamics
+from pipeline.sim.dynamics import ChainStructure
+from pipeline.sim.elastic_dynamics import TRANSMISSION_PARAMS_PER_JOINT
 
 
 @dataclass(frozen=True)

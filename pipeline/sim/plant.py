@@ -9,8 +9,8 @@ points in and gets sensor records out; it never sees the model inside.
 
 Dynamics (paper 004 §2.3, DESIGN.md "Control"): ``qdd = ABA(q, v, sat(tau) - friction(v))`` with
 rotor inertia in ``model.armature``, integrated by semi-implicit Euler substeps. With a
-:class:`~pipeline.robot.transmission.Transmission` of finite stiffness the joints are two-mass
-systems (:mod:`pipeline.control.elastic_dynamics`): the rotor (armature) drives the link through a
+:class:`~pipeline.sim.transmission.Transmission` of finite stiffness the joints are two-mass
+systems (:mod:`pipeline.sim.elastic_dynamics`): the rotor (armature) drives the link through a
 spring and damper, friction acts on the rotor, the encoders read the rotor and the tracker sees the
 links. The substep is chosen so that ``h omega_max <= 1`` for the fastest joint resonance
 ``omega_max^2 = k (1/J_m + 1/(J_l/2))`` (``J_l = M_ii(0)`` of the link chain, halved for the poses
@@ -27,9 +27,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
-from pipeline.control import dynamics, loop
 from pipeline.errors import ConfigError
-from pipeline.robot.transmission import Transmission, link_inertia_kgm2
+from pipeline.sim import dynamics, loop
+from pipeline.sim.transmission import Transmission, link_inertia_kgm2
 
 
 @dataclass

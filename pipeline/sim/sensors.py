@@ -13,8 +13,8 @@ The tracker sees the link-side pose: ``link_angles(Q, payload)`` maps the comman
 angles to the deflected arm's angles (joint elasticity, transmission error; the identity for the
 ideal robot).
 
-The visibility test is a function of a robot model and a tracker placement, so planners use
-it with the nominal model and the estimated tracker pose, and the real tracker with the truth.
+What the tracker can see (incidence, beam blockage) is
+:func:`pipeline.robot.instruments.tracker_visibility`, shared with the planners.
 """
 
 from __future__ import annotations
@@ -25,12 +25,9 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from pipeline.robot.collision import segment_distances
+from pipeline.robot.instruments import tracker_visibility
 from pipeline.robot.model import RobotModel
 from pipeline.robot.payload import Payload
-
-#: the beam is checked for blockage up to this distance before the reflector (its holder)
-BEAM_END_CLEARANCE_M = 0.02
 
 
 @dataclass
@@ -75,44 +72,6 @@ class GrossErrors:
                 stale[k] = False
             previous = k
         return outlier | stale
-
-
-@dataclass
-class Visibility:
-    """Why a configuration can or cannot be measured."""
-
-    visible: np.ndarray  # (N,) bool
-    incidence_rad: np.ndarray  # (N,)
-    beam_clearance_m: np.ndarray  # (N,) smallest capsule clearance to the beam (negative: blocked)
-    range_m: np.ndarray  # (N,)
-
-
-def tracker_visibility(robot: RobotModel, transform_tracker_to_base: pin.SE3, Q: np.ndarray,
-                       max_incidence_rad: float | None = None) -> Visibility:
-    """Incidence angle, beam blockage and range of the reflector seen from the tracker.
-
-    Incidence: angle between the reflector's opening axis (``robot.reflector_axis`` in the
-    flange frame, rotated to the base) and the direction reflector -> tracker. Blockage: the
-    beam segment (tracker -> a point ``BEAM_END_CLEARANCE_M`` before the reflector) against
-    every link capsule.
-    """
-    Q = np.atleast_2d(np.asarray(Q, float))
-    max_incidence = robot.tracker.max_incidence_rad if max_incidence_rad is None else max_incidence_rad
-    positions, rotations = robot.poses(Q, robot.frame_reflector)
-    tracker_position = transform_tracker_to_base.translation
-    beam = tracker_position - positions
-    range_m = np.linalg.norm(beam, axis=1)
-    direction = beam / range_m[:, None]
-    axis_world = rotations @ robot.reflector_axis
-    incidence = np.arccos(np.clip(np.einsum("ij,ij->i", axis_world, direction), -1.0, 1.0))
-    segments = robot.capsule_segments(Q)
-    radii = np.array([c.radius_m for c in robot.capsules])
-    beam_end = positions + BEAM_END_CLEARANCE_M * direction
-    start = np.broadcast_to(tracker_position, beam_end.shape)
-    clearance = segment_distances(start[:, None, :], beam_end[:, None, :], segments[:, :, 0], segments[:, :, 1])
-    clearance = (clearance - radii).min(axis=1) if radii.size else np.full(len(Q), np.inf)
-    visible = (incidence <= max_incidence) & (clearance > 0.0)
-    return Visibility(visible, incidence, clearance, range_m)
 
 
 class LinkSideSensor:

@@ -25,7 +25,7 @@ settable to 0 to get the ideal robot back bit for bit:
 
 These draws come from a second stream (salt + 1) so the first stream, and therefore every
 geometric and inertial deviation, is the same as for the ideal robot. A robot whose robot.yaml
-declares an ``optical_tracker`` (:mod:`pipeline.robot.optical_tracker`) gets one at a camera pose
+declares an ``optical_tracker`` (:mod:`pipeline.sim.optical_tracker`) gets one at a camera pose
 perturbed with the tracker sigmas, drawn from a third stream (salt + 2): nothing else changes.
 
 Stage code may use only :attr:`RealRobot.tracker`, :attr:`RealRobot.encoders`,
@@ -44,12 +44,18 @@ from scipy.linalg import expm
 
 from pipeline.errors import ConfigError
 from pipeline.robot.model import RobotModel
-from pipeline.robot.optical_tracker import OpticalTracker
-from pipeline.robot.parameters import KinematicLayout, apply_kinematic_errors, joint_infos
+from pipeline.robot.parameters import (
+    KinematicLayout,
+    apply_kinematic_errors,
+    joint_infos,
+    pinocchio_dynamic_parameters,
+)
 from pipeline.robot.payload import Payload, gravity_torques_Nm, with_payload
-from pipeline.robot.sensors import Encoders, GrossErrors, LaserTracker, TorqueSensor
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
-from pipeline.robot.transmission import Transmission, create_transmission
+from pipeline.sim.optical_tracker import OpticalTracker
+from pipeline.sim.plant import Plant
+from pipeline.sim.sensors import Encoders, GrossErrors, LaserTracker, TorqueSensor
+from pipeline.sim.transmission import Transmission, create_transmission
 
 #: fixed salt so the truth stream is independent of every stage's stream
 _TRUTH_SALT = 0x74727574
@@ -88,7 +94,7 @@ class TruthConfig:
     #: fraction of tracker readings that repeat the previous reading (blocked beam)
     tracker_stale_rate: float = 0.0
 
-    # --- transmission block (pipeline/robot/transmission.py): Stribeck friction, load-dependent
+    # --- transmission block (pipeline/sim/transmission.py): Stribeck friction, load-dependent
     # Coulomb friction and the damping of the elastic joints; every value 0 -> today's friction
     stribeck_excess_relative: float = 0.4   # static friction = Coulomb (1 + x) (Armstrong-Helouvry 1994: 1.2-2)
     stribeck_velocity_rad_s: float = 0.05   # joint side (a few rad/s on the motor through a gear of 50-100)
@@ -180,7 +186,7 @@ class RealRobot:
         self._phase = np.zeros(nq) if transmission_phase_rad is None else np.asarray(transmission_phase_rad, float)
         gross = GrossErrors(config.tracker_outlier_rate, config.tracker_outlier_magnitude_m, config.tracker_stale_rate)
         self.tracker = LaserTracker(truth, transform_tracker_to_base, self.link_angles, gross)
-        #: the optical 6-D tracker when robot.yaml declares one (pipeline.robot.optical_tracker), else None
+        #: the optical 6-D tracker when robot.yaml declares one (pipeline.sim.optical_tracker), else None
         self.optical_tracker = (OpticalTracker(truth, transform_camera_to_base, self.link_angles)
                                 if transform_camera_to_base is not None else None)
         self.encoders = Encoders(config.encoder_noise_rad)
@@ -270,11 +276,9 @@ class RealRobot:
                                 self.encoders.noise_rad)
 
     @property
-    def plant(self):  # noqa: ANN201 - pipeline.control.plant.Plant
+    def plant(self) -> Plant:
         """The physical arm behind the drives (closed-loop simulation, stage 3)."""
         if self._plant is None:
-            from pipeline.control.plant import Plant
-
             self._plant = Plant(self._truth, encoder_noise_rad=self.config.encoder_noise_rad,
                                 transmission=self.transmission)
         return self._plant
@@ -343,7 +347,5 @@ class RealRobot:
     @property
     def dynamic_parameters(self) -> np.ndarray:
         """Tests only: the true ``p_dyn`` (SymbolicRobot layout, offsets zero)."""
-        from pipeline.robot.parameters import pinocchio_dynamic_parameters
-
         act = self._truth.actuation
         return pinocchio_dynamic_parameters(self._truth.model, act.viscous_Nms_rad, act.coulomb_Nm)

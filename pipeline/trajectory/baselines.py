@@ -16,6 +16,12 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+import pinocchio as pin
+import toppra
+import toppra.algorithm as algo
+import toppra.constraint as constraint
+from ruckig import InputParameter, Result, Ruckig, Trajectory
+from scipy.optimize import minimize
 
 from pipeline.errors import InfeasibleError, SolverError
 from pipeline.trajectory.cp import CPProfile
@@ -25,8 +31,6 @@ from pipeline.trajectory.trajectories import JointTrajectory, check_trajectory
 
 
 def _toppra_path(path: JointPath):
-    import toppra
-
     class _Path(toppra.interpolator.AbstractGeometricPath):
         def __call__(self, s, order=0):
             out = path(np.asarray(s, float), order)
@@ -49,11 +53,6 @@ def toppra_cp(pm: PlanningModel, path: JointPath, n_grid: int = 400, coulomb: bo
               name: str = "cp_toppra", acceleration_limits: bool = False) -> CPProfile:
     """toppra time-optimal profile on the same grid (collocation), velocity + torque limits
     (+ ``JointAccelerationConstraint`` at ``pm.acceleration_rad_s2`` with ``acceleration_limits``)."""
-    import pinocchio as pin
-    import toppra
-    import toppra.algorithm as algo
-    import toppra.constraint as constraint
-
     toppra.setup_logging("WARNING")
     t0 = time.perf_counter()
     data = pm.model.createData()
@@ -98,7 +97,6 @@ class RuckigResult:
 
 
 def _ruckig_input(q0, q1, vmax, amax, jmax, amin=None):
-    from ruckig import InputParameter
 
     n = len(q0)
     inp = InputParameter(n)
@@ -113,7 +111,6 @@ def _ruckig_input(q0, q1, vmax, amax, jmax, amin=None):
 
 def _ruckig_sample(q0: np.ndarray, q1: np.ndarray, vmax: np.ndarray, amax: np.ndarray,
                    jmax: np.ndarray, dt_s: float, amin: np.ndarray | None = None) -> JointTrajectory | None:
-    from ruckig import Result, Ruckig, Trajectory
 
     n = len(q0)
     traj = Trajectory(n)
@@ -245,7 +242,6 @@ def _ruckig_result(tr: JointTrajectory, r: float, alpha: np.ndarray, ratio: floa
 def _refine(start: RuckigResult, limits, q0: np.ndarray, q1: np.ndarray, pm: PlanningModel, check_dt_s: float,
             search_dt_s: float, max_evaluations: int, tol: float) -> tuple[RuckigResult | None, int]:
     """Nelder-Mead over log(alpha) (see :func:`ruckig_torque_feasible`); returns (result or None, evals)."""
-    from scipy.optimize import minimize
 
     ratio = start.jerk_ratio_1_s
     count = 0
@@ -304,7 +300,6 @@ def _refine(start: RuckigResult, limits, q0: np.ndarray, q1: np.ndarray, pm: Pla
 
 
 def _independent_durations(q0, q1, vmax, amax, jmax, amin=None) -> np.ndarray:
-    from ruckig import Ruckig, Trajectory
 
     n = len(q0)
     traj = Trajectory(n)

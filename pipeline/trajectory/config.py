@@ -6,8 +6,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from pipeline.config_checks import check_choice, check_count, check_number, check_vector
-from pipeline.control.config import ISO_PLANES
 from pipeline.errors import ConfigError
+from pipeline.robot.iso9283 import ISO_PLANES
 
 CP_SEGMENTS = ("line", "circle_large", "circle_small", "spline")   # smooth pieces of the ISO path, or a spline
 PTP_ENERGIES = ("torque", "normalised", "electrical")

@@ -9,7 +9,7 @@ a little motion time for less vibration. Here:
 * **lowest elastic mode** :func:`lowest_mode_hz`: with the motor held by the position loop, the link
   chain vibrates against the gear springs, ``K x = omega^2 M_l(q) x`` (``M_l`` the link chain's joint
   inertia without rotor inertia, ``K = diag(k)`` the model's nominal joint stiffness,
-  :func:`pipeline.robot.transmission.nominal_joint_stiffness_Nm_rad`); the lowest ``omega`` at the
+  :func:`pipeline.sim.transmission.nominal_joint_stiffness_Nm_rad`); the lowest ``omega`` at the
   goal is the slowest ringing;
 * **smooth PtP** :func:`smooth_trajectory`: the time-optimal plan filtered by a moving average of
   length ``T_f`` (q, qdot and qddot alike: the filter commutes with differentiation, starts and

@@ -14,9 +14,9 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.control.iso9283 import iso9283_path, tool_rotation
 from pipeline.errors import InfeasibleError, SolverError
 from pipeline.robot.defaults import iso_cube, ready_pose_rad
+from pipeline.robot.iso9283 import iso9283_path, tool_rotation
 from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import SplinePath
 from pipeline.robot.symbolic import SymbolicRobot

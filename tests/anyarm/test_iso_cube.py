@@ -9,16 +9,15 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from pipeline.control.config import IsoPathConfig
-from pipeline.control.iso9283 import iso9283_path
-from pipeline.control.reference import cartesian_reference
 from pipeline.errors import InfeasibleError
 from pipeline.robot import defaults
 from pipeline.robot.defaults import _cache_key, ik_seeds_rad
 from pipeline.robot.example_robots import EXAMPLE_ARMS, example_arm_urdf
+from pipeline.robot.iso9283 import IsoPathConfig, iso9283_path
 from pipeline.robot.iso_search import GRAVITY_TORQUE_SHARE, MIN_EDGE_REACH, SEARCH_DIRECTIONS
 from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import ik_track, start_configuration
+from pipeline.robot.reference import cartesian_reference
 
 
 def _erd(name: str) -> Path:
@@ -66,7 +65,7 @@ def test_derived_iso_cube_path_is_feasible(name):
 
 Z1_TOOL_AXIS = pytest.mark.xfail(strict=True, raises=InfeasibleError, reason=(
     "the Z1 URDF's flange approaches along its x axis: the ISO path's 'tool z down' orientation "
-    "(control.iso9283.tool_rotation) is out of its wrist's reach; needs a tool frame with z as approach axis"))
+    "(robot.iso9283.tool_rotation) is out of its wrist's reach; needs a tool frame with z as approach axis"))
 
 
 @pytest.mark.slow

@@ -7,11 +7,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline.control.reference import resolved_rate
 from pipeline.errors import RobotFileError
 from pipeline.robot import defaults
 from pipeline.robot.example_robots import example_arm_urdf
 from pipeline.robot.model import RobotModel
+from pipeline.robot.reference import resolved_rate
 
 
 def _erd(name: str) -> Path:

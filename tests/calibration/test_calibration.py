@@ -70,7 +70,7 @@ def test_numpy_kinematics_and_jacobian_match_pinocchio_and_casadi(robot, mm):
 
 
 def test_filter_is_conservative_against_the_sensor_rule(robot):
-    from pipeline.robot.sensors import tracker_visibility
+    from pipeline.robot.instruments import tracker_visibility
 
     ch = cd.chain_from_robot(robot)
     Q = em.random_configurations(robot, 60000, np.random.default_rng(4))
@@ -187,7 +187,7 @@ def test_bad_csv_through_runner_writes_nothing(tmp_path):
 
 
 def test_csv_round_trip_gives_the_same_calibration(robot, tmp_path):
-    from pipeline.robot.truth import RealRobot
+    from pipeline.sim.truth import RealRobot
 
     real = RealRobot.create(robot, 11)
     rng = np.random.default_rng(11)
@@ -227,8 +227,8 @@ def _truth_gap(robot_a, robot_b, Q, frame="reflector"):
 def test_quick_profile_stage_through_runner(tmp_path):
     from pipeline.config import quick_config
     from pipeline.robot.model import RobotModel
-    from pipeline.robot.truth import RealRobot, TruthConfig
     from pipeline.runner import run_pipeline
+    from pipeline.sim.truth import RealRobot, TruthConfig
 
     cfg = quick_config(**{"stages": ["model", "calibration"], "name": "calq"})
     cfg.sections["truth"] = TruthConfig.ideal()   # last turn's geometric-only acceptance
@@ -261,7 +261,7 @@ def test_quick_profile_stage_through_runner(tmp_path):
 @pytest.mark.parametrize("name,seed", [("staubli_tx40", 3), ("rx130l", 4)])
 def test_targets_hold_for_other_robots_and_seeds(name, seed):
     from pipeline.robot.model import RobotModel
-    from pipeline.robot.truth import RealRobot, TruthConfig
+    from pipeline.sim.truth import RealRobot, TruthConfig
 
     robot = RobotModel.load(name)
     real = RealRobot.create(robot, seed, TruthConfig.ideal())
@@ -321,7 +321,7 @@ class _Ctx:
 @pytest.fixture(scope="module")
 def tracker_files(robot, tmp_path_factory):
     """Calibration and validation CSVs written from simulated measurements of one hidden robot."""
-    from pipeline.robot.truth import RealRobot, TruthConfig
+    from pipeline.sim.truth import RealRobot, TruthConfig
 
     real = RealRobot.create(robot, 21, TruthConfig.ideal())
     rng = np.random.default_rng(21)

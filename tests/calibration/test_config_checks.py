@@ -111,7 +111,7 @@ def test_cli_too_few_configurations_is_reported_before_anything_is_written(tmp_p
 
 
 def test_too_few_feasible_candidates_speaks_in_the_users_fields(robot):
-    from pipeline.robot.truth import RealRobot
+    from pipeline.sim.truth import RealRobot
 
     cfg = _load("calibration.candidates=grid", "calibration.grid_per_axis=3").calibration
     cfg.figures = False
@@ -127,7 +127,7 @@ def test_too_few_feasible_candidates_speaks_in_the_users_fields(robot):
 @pytest.fixture(scope="module")
 def measured(robot):
     """Simulated readings of the hidden robot (its tracker pose differs from the nominal one)."""
-    from pipeline.robot.truth import RealRobot
+    from pipeline.sim.truth import RealRobot
 
     rng = np.random.default_rng(0)
     Q, _ = cd.random_candidates(cd.chain_from_robot(robot), 40, rng)

@@ -87,7 +87,7 @@ def test_selectors_improve_v_over_random(setup, method):
 
 
 def test_design_table_rows_and_user_mode(robot, setup):
-    from pipeline.robot.truth import RealRobot
+    from pipeline.sim.truth import RealRobot
 
     mm, basis, cs, region, Qw = setup
     spec = ts.task_space_spec(mm, Qw, basis)

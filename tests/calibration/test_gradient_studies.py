@@ -28,8 +28,8 @@ def test_squared_casadi_segment_distance_matches_numpy():
 
 
 def test_gradient_design_improves_and_stays_feasible():
+    from pipeline.robot.instruments import tracker_visibility
     from pipeline.robot.model import RobotModel
-    from pipeline.robot.sensors import tracker_visibility
 
     robot = RobotModel.load("rx130l")
     mm = em.MeasurementModel(robot)

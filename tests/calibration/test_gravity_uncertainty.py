@@ -13,7 +13,7 @@ from pipeline.calibration.gravity_uncertainty import GravityCovariance, GravityP
 from pipeline.calibration.robust import robust_estimate
 from pipeline.robot.model import RobotModel
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
-from pipeline.robot.truth import RealRobot, TruthConfig
+from pipeline.sim.truth import RealRobot, TruthConfig
 
 PRIOR = GravityPrior(0.15, 0.02)
 

@@ -17,7 +17,7 @@ from pipeline.calibration.robust import robust_estimate
 from pipeline.errors import ConfigError, DataFileError, QualityGateError
 from pipeline.papers.calib_six_d import simulate_six_d_record
 from pipeline.robot.model import RobotModel
-from pipeline.robot.truth import RealRobot, TruthConfig
+from pipeline.sim.truth import RealRobot, TruthConfig
 
 
 @pytest.fixture(scope="module")

@@ -13,9 +13,9 @@ import pytest
 
 from pipeline.config import CONFIGS_DIR, load_config
 from pipeline.robot.model import RobotModel
-from pipeline.robot.truth import RealRobot, TruthConfig
 from pipeline.runner import run_pipeline
 from pipeline.second_pass import GRAVITY_SHARE_FOR_SECOND_PASS
+from pipeline.sim.truth import RealRobot, TruthConfig
 
 #: 3 sigma of the tracker plus the unmodelled remainder (3 µrad cyclic gear error at ~1.5 m: < 0.5 sigma)
 HELDOUT_OVER_SIGMA_MAX = 3.5

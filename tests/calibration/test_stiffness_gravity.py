@@ -9,7 +9,7 @@ from pipeline.calibration import stage as st
 from pipeline.control.joint_stiffness import feedforward_stiffness
 from pipeline.robot.model import RobotModel
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
-from pipeline.robot.truth import RealRobot
+from pipeline.sim.truth import RealRobot
 
 
 @pytest.fixture(scope="module")

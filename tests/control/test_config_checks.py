@@ -9,8 +9,9 @@ import pytest
 
 from pipeline.config import CONFIGS_DIR, load_config
 from pipeline.control import stage
-from pipeline.control.config import ISO_PLANES, ISO_SEGMENTS, ControlConfig, IsoPathConfig
+from pipeline.control.config import ControlConfig
 from pipeline.errors import ConfigError
+from pipeline.robot.iso9283 import ISO_PLANES, ISO_SEGMENTS, IsoPathConfig
 
 BAD = [
     # (dotted key, bad value, field named by the error)
@@ -109,7 +110,7 @@ def test_direct_construction_is_checked():
 
 def test_allowed_sets_match_the_path_builder():
     pytest.importorskip("pinocchio")
-    from pipeline.control import iso9283
+    from pipeline.robot import iso9283
 
     assert set(ISO_PLANES) == set(iso9283.PLANES)
     # the builder knows every segment the config allows

@@ -11,15 +11,15 @@ import pytest
 from pipeline.config import load_config
 from pipeline.control.config import ControlConfig
 from pipeline.control.elastic_feedforward import elastic_feedforward, link_torque
-from pipeline.control.iso9283 import iso9283_path
-from pipeline.control.plant import Plant
-from pipeline.control.reference import cartesian_reference
 from pipeline.control.simulate import feedforward_torque, simulate_joint_trajectory
 from pipeline.control.validate import settling_time
 from pipeline.robot.defaults import ik_seeds_or_derived_rad, iso_or_derived
+from pipeline.robot.iso9283 import iso9283_path
 from pipeline.robot.paths import start_configuration
+from pipeline.robot.reference import cartesian_reference
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
-from pipeline.robot.truth import RealRobot, TruthConfig
+from pipeline.sim.plant import Plant
+from pipeline.sim.truth import RealRobot, TruthConfig
 
 DOWN = pin.utils.rotate("x", np.pi)
 Q0 = np.array([0.1, 0.3, 1.5, 0.2, 1.0, -0.3])

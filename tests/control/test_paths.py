@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.control.iso9283 import iso9283_path
 from pipeline.errors import ConfigError
+from pipeline.robot.iso9283 import iso9283_path
 from pipeline.robot.paths import CirclePath, LinePath, PolylinePath, SplinePath, rectangle
 
 

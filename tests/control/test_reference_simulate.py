@@ -7,12 +7,12 @@ import pinocchio as pin
 import pytest
 
 from pipeline.control.config import ControlConfig
-from pipeline.control.iso9283 import iso9283_path
-from pipeline.control.reference import cartesian_reference
 from pipeline.control.simulate import simulate_joint_trajectory
 from pipeline.errors import InfeasibleError
+from pipeline.robot.iso9283 import iso9283_path
 from pipeline.robot.paths import CirclePath, LinePath, start_configuration
-from pipeline.robot.truth import RealRobot, TruthConfig
+from pipeline.robot.reference import cartesian_reference
+from pipeline.sim.truth import RealRobot, TruthConfig
 
 DOWN = pin.utils.rotate("x", np.pi)
 SEEDS = np.radians([[0.0, 17.0, 86.0, 0.0, 75.0, 0.0]])

@@ -7,11 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline.artefacts import StageOutput
 from pipeline.control import stage
 from pipeline.progress import Progress
-from pipeline.robot.truth import RealRobot, TruthConfig
-from pipeline.runner import StageContext, stage_rng
+from pipeline.sim.truth import RealRobot, TruthConfig
+from pipeline.stage_api import StageContext, StageOutput, stage_rng
 
 REQUIRED = ("sample_time_s", "delay_samples", "tcp_error_max_m", "tcp_error_rms_m", "lag_error_max_rad",
             "realtime_factor", "tcp_error_rms_nominal_kinematics_m", "tcp_error_rms_calibrated_kinematics_m")

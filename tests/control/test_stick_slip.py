@@ -10,7 +10,7 @@ from pipeline.control.design import design_gains, reflected_inertia, stick_slip_
 from pipeline.control.simulate import servo_gains, simulate_joint_trajectory
 from pipeline.errors import ConfigError
 from pipeline.robot.friction import stribeck_excess_torque, stribeck_slope_Nms_rad
-from pipeline.robot.truth import RealRobot, TruthConfig
+from pipeline.sim.truth import RealRobot, TruthConfig
 
 Q0 = np.array([0.1, 0.3, 1.5, 0.2, 1.0, -0.3])
 

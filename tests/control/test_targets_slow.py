@@ -10,8 +10,8 @@ import pytest
 
 from pipeline.config import load_config
 from pipeline.progress import Progress
-from pipeline.robot.truth import TruthConfig
 from pipeline.runner import run_pipeline
+from pipeline.sim.truth import TruthConfig
 
 RIGID = {"truth.joint_compliance_scale": 0.0, "truth.stribeck_excess_relative": 0.0,
          "truth.coulomb_load_coefficient": 0.0}

@@ -15,8 +15,8 @@ from pipeline.config import CONFIGS_DIR, load_config
 from pipeline.progress import Progress
 from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import apply_kinematic_errors
-from pipeline.robot.truth import RealRobot, TruthConfig
-from pipeline.runner import StageContext, stage_rng
+from pipeline.sim.truth import RealRobot, TruthConfig
+from pipeline.stage_api import StageContext, stage_rng
 
 
 def calibrated_robot(nominal: RobotModel, real: RealRobot) -> RobotModel:

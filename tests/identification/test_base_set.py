@@ -10,7 +10,7 @@ import pytest
 from pipeline.identification.base_set import structural_base_parameters
 from pipeline.identification.regressor import RegressorModel, base_parameters
 from pipeline.robot.model import RobotModel
-from pipeline.robot.truth import RealRobot
+from pipeline.sim.truth import RealRobot
 
 from .helpers import calibrated_robot
 

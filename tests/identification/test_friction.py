@@ -16,7 +16,7 @@ from pipeline.identification.friction import MIN_CHI2_GAIN, StribeckFit, fit_str
 from pipeline.identification.regressor import RegressorModel, base_parameters, standard_parameters
 from pipeline.robot.exact import load_exact_robot, robots_equal, save_exact_robot
 from pipeline.robot.model import RobotModel
-from pipeline.robot.truth import RealRobot, TruthConfig
+from pipeline.sim.truth import RealRobot, TruthConfig
 
 from .helpers import calibrated_robot, quick_context
 

@@ -9,7 +9,7 @@ import pytest
 
 from pipeline.config import load_config
 from pipeline.errors import ConfigError
-from pipeline.robot import stage
+from pipeline.model import stage
 
 
 def test_default_settings_pass(rx130l):

@@ -7,8 +7,8 @@ import pytest
 
 from pipeline.papers import calib_004 as p4
 from pipeline.papers import calib_004_optical as op
+from pipeline.robot.instruments import OpticalMargins
 from pipeline.robot.model import RobotModel
-from pipeline.robot.optical_tracker import OpticalMargins
 
 MARGINS = OpticalMargins(np.radians(1.0), 0.05, 0.01)
 

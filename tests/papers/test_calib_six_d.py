@@ -10,7 +10,7 @@ from pipeline.calibration import candidates as cd
 from pipeline.calibration import stage as st
 from pipeline.papers.calib_six_d import simulate_six_d_record, six_d_trial
 from pipeline.robot.model import RobotModel
-from pipeline.robot.truth import RealRobot
+from pipeline.sim.truth import RealRobot
 
 
 @pytest.fixture(scope="module")

@@ -10,14 +10,15 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from pipeline import artefacts, cli
+from pipeline import cli, stage_io
 from pipeline.config import load_config
 from pipeline.errors import PipelineError, QualityGateError
 from pipeline.interrupts import INTERRUPT_STATUSES, raise_if_interrupted
 from pipeline.locking import RunLockedError, run_lock
 from pipeline.quality import QualityGates
-from pipeline.runner import load_run, run_pipeline
+from pipeline.runner import run_pipeline
 from pipeline.stage_api import StageResult
+from pipeline.stage_io import load_run
 
 QUIET = {"log": lambda m: None}
 
@@ -196,7 +197,7 @@ def test_unwritable_run_dir_is_one_line(gate_stages, tmp_path, monkeypatch):
     def full(*args, **kwargs):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(artefacts, "new_stage_dir", full)
+    monkeypatch.setattr(stage_io, "new_stage_dir", full)
     before = (tmp_path / "r" / "c" / "summary.json").read_bytes()
     with pytest.raises(PipelineError, match="No space left on device"):
         run_pipeline(load_config(None, ["name=r", "c.n=5"]), out_root=tmp_path, **QUIET)

@@ -6,9 +6,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from pipeline.control import dynamics, loop
-from pipeline.control.plant import Plant
-from pipeline.robot.truth import RealRobot, TruthConfig
+from pipeline.sim import dynamics, loop
+from pipeline.sim.plant import Plant
+from pipeline.sim.truth import RealRobot, TruthConfig
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""The optical 6-D tracker sensor kind (pipeline/robot/optical_tracker.py, robot.yaml optical_tracker)."""
+"""The optical 6-D tracker sensor kind (pipeline/sim/optical_tracker.py, robot.yaml optical_tracker)."""
 
 from __future__ import annotations
 
@@ -12,10 +12,11 @@ import yaml
 from pipeline.calibration import candidates as cd
 from pipeline.errors import RobotFileError
 from pipeline.papers import calib_004_optical as op
-from pipeline.robot import optical_tracker as ot
+from pipeline.robot import instruments
 from pipeline.robot.model import RobotModel
 from pipeline.robot.spec import load_robot_spec
-from pipeline.robot.truth import RealRobot, TruthConfig
+from pipeline.sim import optical_tracker as ot
+from pipeline.sim.truth import RealRobot, TruthConfig
 
 
 @pytest.fixture(scope="module")
@@ -68,10 +69,10 @@ def test_invisible_rows_are_nan_and_margins_are_conservative(robot):
     Q, _ = cd.random_candidates(chain, 400, rng, visibility=False)
     Q = np.concatenate([Q, _visible_configurations(robot, 40, 5)])
     T = robot.spec.optical_tracker.transform_camera_to_base
-    exact = ot.optical_visibility(robot, T, Q).visible
+    exact = instruments.optical_visibility(robot, T, Q).visible
     fast = op.visible_mask(robot, Q, collision_margin_m=-1.0)   # no extra collision margin
     assert np.array_equal(exact, fast)
-    margin = op.visible_mask(robot, Q, margins=ot.OpticalMargins(np.radians(2.0), 0.05, 0.02))
+    margin = op.visible_mask(robot, Q, margins=instruments.OpticalMargins(np.radians(2.0), 0.05, 0.02))
     assert np.all(exact[margin]) and margin.sum() < exact.sum()
     reading = ot.OpticalTracker(robot, T).measure(Q, rng)
     assert np.array_equal(reading.visible, exact)
@@ -83,10 +84,10 @@ def test_a_diode_outside_the_field_of_view_or_emission_cone_is_not_seen(robot):
     Q = _visible_configurations(robot, 5)
     T = spec.transform_camera_to_base
     narrow = dataclasses.replace(spec, field_of_view_half_angle_rad=np.radians(0.5))
-    assert not ot.optical_visibility(robot, T, Q, spec=narrow).visible.any()
+    assert not instruments.optical_visibility(robot, T, Q, spec=narrow).visible.any()
     blind = dataclasses.replace(spec, emission_half_angle_rad=np.radians(0.5))
-    assert not ot.optical_visibility(robot, T, Q, spec=blind).visible.any()
-    assert ot.optical_visibility(robot, T, Q).visible.all()
+    assert not instruments.optical_visibility(robot, T, Q, spec=blind).visible.any()
+    assert instruments.optical_visibility(robot, T, Q).visible.all()
 
 
 def test_robot_yaml_section_round_trips_and_is_checked(robot, tmp_path):

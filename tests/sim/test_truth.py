@@ -7,12 +7,13 @@ import pinocchio as pin
 import pytest
 
 from pipeline.errors import ConfigError
+from pipeline.robot.instruments import tracker_visibility
 from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import KinematicLayout, dynamic_parameter_problems
 from pipeline.robot.payload import Payload, gravity_torques_Nm, with_payload
-from pipeline.robot.sensors import LaserTracker, tracker_visibility
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
-from pipeline.robot.truth import RealRobot, TruthConfig
+from pipeline.sim.sensors import LaserTracker
+from pipeline.sim.truth import RealRobot, TruthConfig
 
 IDEAL = dict(joint_compliance_scale=0.0, transmission_error_amplitude_rad=0.0, tracker_outlier_rate=0.0,
              tracker_stale_rate=0.0)

@@ -127,7 +127,7 @@ def test_bad_robot_run_defaults_names_robot_yaml(tmp_path):
 def test_allowed_sets_match_the_planner(pm):
     import numpy as np
 
-    from pipeline.control.config import ISO_SEGMENTS
+    from pipeline.robot.iso9283 import ISO_SEGMENTS
     from pipeline.trajectory.ptp import energy_weights
 
     assert set(CP_SEGMENTS) - {"spline"} <= set(ISO_SEGMENTS)    # smooth pieces the ISO path builder draws

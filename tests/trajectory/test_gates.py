@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from pipeline.errors import QualityGateError
-from pipeline.runner import StageResult
+from pipeline.stage_api import StageResult
 from pipeline.trajectory.config import TrajectoryConfig
 from pipeline.trajectory.stage import quality_gates
 from pipeline.trajectory.trajectories import TorqueCheck

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
-from pipeline.robot.truth import RealRobot, TruthConfig
+from pipeline.sim.truth import RealRobot, TruthConfig
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.settling import (
     add_smooth_ptp,

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from pipeline.progress import Progress
-from pipeline.robot.truth import RealRobot, TruthConfig
-from pipeline.runner import StageContext, stage_rng
+from pipeline.sim.truth import RealRobot, TruthConfig
+from pipeline.stage_api import StageContext, stage_rng
 from pipeline.trajectory import stage
 
 REQUIRED = ("cp_duration_s", "cp_toppra_duration_s", "cp_fine_violation", "cp_toppra_fine_violation_full_friction",

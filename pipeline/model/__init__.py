@@ -1,0 +1,1 @@
+"""Stage ``model``: the robot the later stages start from (:mod:`pipeline.model.stage`)."""
