@@ -30,6 +30,7 @@ from pipeline.errors import PipelineError
 from pipeline.robot.exact import load_exact_robot, save_exact_robot
 from pipeline.robot.model import RobotModel
 from pipeline.stage_api import StageOutput, StageResult
+from pipeline.yaml12 import load_yaml
 
 #: files of a stage directory that are not covered by the manifest's SHA-256 list
 UNHASHED = (artefacts.MANIFEST, artefacts.INPUTS_HASH)
@@ -179,7 +180,7 @@ def _config_run_key(path: Path) -> str | None:
     if not path.is_file():
         return None
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+        data = load_yaml(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
         raise PipelineError(path, None, f"cannot read ({' '.join(str(exc).split())})") from None
     if not isinstance(data, Mapping):
