@@ -88,7 +88,7 @@ def read_working_csv(path: str, robot) -> np.ndarray:
     """Joint configurations ``q1..qn`` (rad) of the user's working poses, inside the joint limits."""
     cols = [f"q{i + 1}" for i in range(robot.nq)]
     try:
-        with open(path) as f:
+        with open(path, encoding="utf-8-sig") as f:
             header = [h.strip() for h in f.readline().split(",")]
         data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
     except OSError as exc:
