@@ -64,11 +64,10 @@ def robot_yaml(tmp_path):
 
 def test_robot_yaml_duplicate_key_names_both_lines(robot_yaml):
     lines = robot_yaml.read_text().splitlines()
-    top = next(i for i, line in enumerate(lines) if line and not line[0].isspace() and not line.startswith("#"))
-    lines.append(lines[top] if lines[top].rstrip().endswith(":") is False else lines[top] + " {}")
-    robot_yaml.write_text("\n".join(lines) + "\n")
-    key = lines[top].split(":")[0]
-    with pytest.raises(RobotFileError, match=rf"robot\.yaml: {key}: duplicate key \(lines {top + 1} and {len(lines)}\)"):
+    first = next(i for i, line in enumerate(lines) if line.startswith("tool:")) + 1
+    robot_yaml.write_text("\n".join([*lines, "tool: {}"]) + "\n")
+    pattern = rf"robot\.yaml: tool: duplicate key \(lines {first} and {len(lines) + 1}\)"
+    with pytest.raises(RobotFileError, match=pattern):
         load_robot_spec(robot_yaml)
 
 
