@@ -50,8 +50,10 @@ from pipeline.robot.truth import RealRobot, TruthConfig
 from pipeline.stage_api import StageContext, StageOutput, StageResult
 from pipeline.stage_io import (
     REJECTED_SUFFIX,
+    changed_inputs,
     load_run,
     load_stage_output,
+    read_manifest,
     run_key_sha256,
     stage_problem,
     write_rejected,
@@ -183,11 +185,13 @@ def stage_inputs_hashes(cfg: RunConfig, plans: Sequence[_Plan], robot_dir: Path)
     for plan in plans:
         reads = config_reads(cfg, plan.module)
         key = {**run_key, "config_reads": reads} if reads else run_key
-        plan.inputs_sha256 = artefacts.inputs_hash(
-            plan.name, content_keyed(config_mod.to_plain(plan.config), plan.module), key, robot_sha,
-            {d: by_name[d].inputs_sha256 for d in plan.closure}, pipeline.__version__,
-            _code_hash(plan.module, code_sha),
-        )
+        config = content_keyed(config_mod.to_plain(plan.config), plan.module)
+        upstream = {d: by_name[d].inputs_sha256 for d in plan.closure}
+        code = _code_hash(plan.module, code_sha)
+        plan.inputs_sha256 = artefacts.inputs_hash(plan.name, config, key, robot_sha, upstream,
+                                                   pipeline.__version__, code)
+        plan.inputs = {"config": config, "run": key, "robot_files": robot_sha, "upstream": upstream,
+                       "version": pipeline.__version__, "code": code}
         by_name[plan.name] = plan
     return {name: plan.inputs_sha256 for name, plan in by_name.items()}
 
@@ -220,7 +224,7 @@ def _why_not_reuse(plan: _Plan, stage_dir: Path, forced: set[str], cfg: RunConfi
     if stored is None:
         return "not run yet"
     if stored != plan.inputs_sha256:
-        return "inputs changed"
+        return "inputs changed" + changed_inputs(read_manifest(stage_dir).get("inputs"), plan.inputs, plan.name)
     if not verify:
         return None
     problem = stage_problem(stage_dir)
@@ -457,7 +461,7 @@ def _run_one(plan: _Plan, prep: Prepared, outputs: dict[str, StageOutput], hande
         if interrupted():             # the stage swallowed the signal: never commit its result
             raise KeyboardInterrupt(f"stage {plan.name} interrupted")
         duration = time.perf_counter() - t0
-        write_stage_result(staging, plan.name, result, plan.inputs_sha256, duration, key)
+        write_stage_result(staging, plan.name, result, plan.inputs_sha256, duration, key, plan.inputs)
         final = artefacts.commit_stage_dir(staging, run_dir / plan.name)
     except QualityGateError as exc:
         if isinstance(exc.result, StageResult):

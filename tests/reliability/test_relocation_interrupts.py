@@ -46,7 +46,8 @@ def test_file_inputs_enter_the_hash_by_content_not_path(fake_stages, tmp_path, m
     edited = run_pipeline(load_config(None, ["name=r", f"a.label={tmp_path / 'y' / 'data.csv'}"]),
                           out_root=tmp_path, log=logs.append)
     assert edited.ran == ["a", "b", "c"]                     # same path, new content: re-run
-    assert "a: re-running because inputs changed" in logs
+    assert "a: re-running because inputs changed: a.label" in logs
+    assert "b: re-running because inputs changed: upstream stage a" in logs
 
 
 def test_check_reports_the_plan_run_follows(fake_stages, tmp_path):
