@@ -27,7 +27,8 @@ from pipeline.config import load_config
 from pipeline.errors import PipelineError, QualityGateError
 from pipeline.interrupts import handle_termination
 from pipeline.robot.yaml_init import write_robot_yaml
-from pipeline.runner import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_QUALITY_GATE, prepare_run, run_pipeline
+from pipeline.run_check import check_run
+from pipeline.runner import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_QUALITY_GATE, run_pipeline
 from pipeline.viewer import view_run
 
 
@@ -106,7 +107,7 @@ def _cmd_run(ns: argparse.Namespace) -> int:
 def _cmd_check(ns: argparse.Namespace) -> int:
     cfg = load_config(ns.config, ns.overrides, ns.stages)
     cfg.accept_poor = ns.accept_poor
-    prep = prepare_run(cfg, out_root=ns.out, force=ns.force)
+    prep = check_run(cfg, out_root=ns.out, force=ns.force)
     print(f"ok: {cfg.source}, robot {cfg.robot}, run directory {prep.run_dir}")
     for plan in prep.plans:
         reason = prep.reasons[plan.name]

@@ -38,7 +38,8 @@ from pipeline.config_layers import (
     to_plain,
 )
 from pipeline.errors import ConfigError, PipelineError
-from pipeline.typed_config import build_dataclass, describe, with_source
+from pipeline.typed_config import build_dataclass, describe, unknown_key, with_source
+from pipeline.yaml12 import load_yaml
 
 #: Stage registry, in run order: stage name -> module path (or a module-like object exposing
 #: ``NAME``, ``DEPENDS``, ``Config`` and ``run``; tests put fake stages here).
@@ -270,7 +271,7 @@ def load_config(
     for src, layer in layers:
         for key, value in layer.items():
             if key not in known:
-                raise ConfigError(src, str(key), f"unknown key (known keys: {', '.join(sorted(known))})")
+                raise ConfigError(src, str(key), unknown_key(key, sorted(known)))
             if key in TOP_LEVEL_KEYS:
                 top[key] = (src, value)
             else:
@@ -387,7 +388,7 @@ def robot_run_defaults(cfg: RunConfig) -> tuple[str, Mapping[str, Any]] | None:
     if not robot_yaml.is_file():
         return None
     try:
-        data = yaml.safe_load(robot_yaml.read_text(encoding="utf-8"))
+        data = load_yaml(robot_yaml.read_text(encoding="utf-8"))
     except (OSError, yaml.YAMLError):
         return None                      # the robot loader reports a broken robot.yaml
     if not isinstance(data, dict) or data.get("run_defaults") is None:

@@ -15,6 +15,7 @@ import yaml
 
 from pipeline.errors import ConfigError
 from pipeline.typed_config import one_line
+from pipeline.yaml12 import load_yaml, yaml_problem
 
 
 def field_path(dotted: str) -> tuple[str, ...]:
@@ -82,7 +83,7 @@ def parse_set(item: str) -> tuple[list[str], Any]:
     if not key or any(not part for part in key.split(".")):
         raise ConfigError("--set", item, "empty key")
     try:
-        value = yaml.safe_load(text) if text.strip() else ""
+        value = load_yaml(text) if text.strip() else ""
     except yaml.YAMLError as exc:
         raise ConfigError("--set", key, f"cannot parse value {text!r}: {one_line(exc)}") from None
     return key.split("."), value
@@ -111,12 +112,9 @@ def read_yaml(path: Path) -> dict[str, Any]:
     if "\0" in text:
         raise ConfigError(path, None, "contains NUL bytes (a binary file?); expected a YAML run configuration")
     try:
-        data = yaml.safe_load(text)
+        data = load_yaml(text)
     except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"line {mark.line + 1}" if mark is not None else None
-        problem = getattr(exc, "problem", None) or one_line(exc)
-        raise ConfigError(path, where, f"invalid YAML: {problem}") from None
+        raise ConfigError(path, *yaml_problem(exc)) from None
     if data is None:
         raise ConfigError(path, None, "the config file is empty; leave out --config to run the "
                           "built-in defaults (full profile), or write e.g. 'profile: full'")

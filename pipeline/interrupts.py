@@ -38,6 +38,21 @@ def interrupted() -> bool:
     return bool(_received)
 
 
+def caused_by_interrupt(exc: BaseException) -> bool:
+    """``exc`` is, or came from, an interrupt: a KeyboardInterrupt in its chain (``__cause__`` /
+    ``__context__``), or any error raised after a SIGINT/SIGTERM arrived. CasADi's SWIG wrappers
+    turn the signal handler's KeyboardInterrupt inside ``DM.__array__`` into ``SystemError: ...
+    returned a result with an exception set``."""
+    seen: set[int] = set()
+    chained: BaseException | None = exc
+    while chained is not None and id(chained) not in seen:
+        if isinstance(chained, KeyboardInterrupt):
+            return True
+        seen.add(id(chained))
+        chained = chained.__cause__ or chained.__context__
+    return interrupted()
+
+
 def raise_if_interrupted(stats: Mapping[str, object] | str | None, what: str = "solver") -> None:
     """Raise KeyboardInterrupt when a solver was stopped by an interrupt.
 
@@ -59,6 +74,10 @@ def handle_termination() -> Iterator[None]:
     old = {sig: signal.signal(sig, _on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         yield
+    except Exception as exc:    # an error an interrupt caused is the interrupt
+        if caused_by_interrupt(exc):
+            raise KeyboardInterrupt(f"interrupted ({type(exc).__name__})") from exc
+        raise
     finally:
         for sig, handler in old.items():
             signal.signal(sig, handler)

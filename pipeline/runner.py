@@ -40,15 +40,17 @@ from pipeline import config as config_mod
 from pipeline import report as report_mod
 from pipeline.config import RunConfig, default_runs_dir, resolve_robot_dir
 from pipeline.errors import ArtefactWriteError, ConfigError, QualityGateError
-from pipeline.interrupts import handle_termination
-from pipeline.locking import run_lock
+from pipeline.interrupts import caused_by_interrupt, handle_termination, interrupted
+from pipeline.locking import RunLockedError, run_lock
 from pipeline.progress import Progress
 from pipeline.robot.model import RobotModel
 from pipeline.sim.truth import RealRobot, TruthConfig
 from pipeline.stage_api import StageContext, StageOutput, StageResult, stage_rng
 from pipeline.stage_io import (
     REJECTED_SUFFIX,
+    changed_inputs,
     load_stage_output,
+    read_manifest,
     run_key_sha256,
     stage_problem,
     write_rejected,
@@ -133,6 +135,21 @@ def config_reads(cfg: RunConfig, module: ModuleType) -> dict[str, Any]:
     return out
 
 
+def content_keyed(plain: dict[str, Any], module: ModuleType) -> dict[str, Any]:
+    """The stage's plain config with each file or folder its ``FILE_INPUTS`` fields name replaced by
+    the sha256 of its content: the inputs hash never holds a path (a moved or copied run is reused)."""
+    out = dict(plain)
+    for name in tuple(getattr(module, "FILE_INPUTS", ()) or ()):
+        value = out.get(name)
+        if isinstance(value, str) and value:
+            path = Path(value)
+            if path.is_dir():
+                out[name] = "sha256:" + artefacts.hash_tree(path)
+            elif path.is_file():
+                out[name] = "sha256:" + hashlib.sha256(path.read_bytes()).hexdigest()
+    return out
+
+
 def stage_inputs_hashes(cfg: RunConfig, plans: Sequence[_Plan], robot_dir: Path) -> dict[str, str]:
     """Inputs hash of every planned stage (also stored in ``plan.inputs_sha256``)."""
     robot_sha = artefacts.hash_tree(robot_dir)
@@ -146,11 +163,13 @@ def stage_inputs_hashes(cfg: RunConfig, plans: Sequence[_Plan], robot_dir: Path)
     for plan in plans:
         reads = config_reads(cfg, plan.module)
         key = {**run_key, "config_reads": reads} if reads else run_key
-        plan.inputs_sha256 = stage_io.inputs_hash(
-            plan.name, config_mod.to_plain(plan.config), key, robot_sha,
-            {d: by_name[d].inputs_sha256 for d in plan.closure}, pipeline.__version__,
-            _code_hash(plan.module, code_sha),
-        )
+        config = content_keyed(config_mod.to_plain(plan.config), plan.module)
+        upstream = {d: by_name[d].inputs_sha256 for d in plan.closure}
+        code = _code_hash(plan.module, code_sha)
+        plan.inputs_sha256 = stage_io.inputs_hash(plan.name, config, key, robot_sha, upstream,
+                                                   pipeline.__version__, code)
+        plan.inputs = {"config": config, "run": key, "robot_files": robot_sha, "upstream": upstream,
+                       "version": pipeline.__version__, "code": code}
         by_name[plan.name] = plan
     return {name: plan.inputs_sha256 for name, plan in by_name.items()}
 
@@ -183,7 +202,7 @@ def _why_not_reuse(plan: _Plan, stage_dir: Path, forced: set[str], cfg: RunConfi
     if stored is None:
         return "not run yet"
     if stored != plan.inputs_sha256:
-        return "inputs changed"
+        return "inputs changed" + changed_inputs(read_manifest(stage_dir).get("inputs"), plan.inputs, plan.name)
     if not verify:
         return None
     problem = stage_problem(stage_dir)
@@ -289,7 +308,10 @@ def _after_first_pass(prep: Prepared, force: bool | Sequence[str], prog: Progres
     first_root = second_pass.first_pass_root(run_dir)
     say(f"calibration: first pass (calibration and identification) under {first_root / cfg.name}")
     first_prep = prepare_run(second_pass.first_pass_config(cfg), first_root, force)
-    first = _run_prepared(first_prep, first_root, prog, say)
+    try:
+        first = _run_prepared(first_prep, first_root, prog, say)
+    except RunLockedError as exc:     # name the run directory the user gave, not its first pass
+        raise RunLockedError(run_dir, None, exc.problem) from None
     second = second_pass.second_pass_config(cfg, first.outputs, run_dir)
     share = second_pass.gravity_share(first.outputs)
     share_text = "not predicted" if share is None else f"{share:.2f}"
@@ -369,7 +391,7 @@ def _run_locked(prep: Prepared, prog: Progress, say: Callable[[str], None]) -> R
                     reused.append(plan.name)
                     say(f"{plan.name}: reused ({stage_dir})")
                 else:
-                    if reason not in ("not run yet", "inputs changed", "--force"):
+                    if reason != "not run yet":
                         say(f"{plan.name}: re-running because {reason}")
                     outputs[plan.name] = _run_one(plan, prep, outputs, handed_robot, key, prog, say)
                     ran.append(plan.name)
@@ -414,8 +436,10 @@ def _run_one(plan: _Plan, prep: Prepared, outputs: dict[str, StageOutput], hande
     rejected = run_dir / f"{plan.name}{REJECTED_SUFFIX}"
     try:
         result = _check_result(plan.name, plan.module.run(ctx))
+        if interrupted():             # the stage swallowed the signal: never commit its result
+            raise KeyboardInterrupt(f"stage {plan.name} interrupted")
         duration = time.perf_counter() - t0
-        write_stage_result(staging, plan.name, result, plan.inputs_sha256, duration, key)
+        write_stage_result(staging, plan.name, result, plan.inputs_sha256, duration, key, plan.inputs)
         final = stage_io.commit_stage_dir(staging, run_dir / plan.name)
     except QualityGateError as exc:
         if isinstance(exc.result, StageResult):
@@ -433,8 +457,10 @@ def _run_one(plan: _Plan, prep: Prepared, outputs: dict[str, StageOutput], hande
         if exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.EFBIG):
             raise _write_error(exc, staging) from None
         raise
-    except BaseException:
+    except BaseException as exc:
         stage_io.discard_stage_dir(staging)
+        if not isinstance(exc, KeyboardInterrupt) and caused_by_interrupt(exc):
+            raise KeyboardInterrupt(f"stage {plan.name} interrupted") from exc
         raise
     stage_io.discard_stage_dir(rejected)       # an older rejected result is out of date now
     say(f"{plan.name}: done in {duration:.1f} s")

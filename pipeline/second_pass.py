@@ -67,14 +67,19 @@ def gravity_share(outputs: dict[str, StageOutput]) -> float | None:
     return None if value is None else float(value)
 
 
-def second_pass_config(cfg: RunConfig, outputs: dict[str, StageOutput], run_dir: Path) -> RunConfig | None:
+def second_pass_config(cfg: RunConfig, outputs: dict[str, StageOutput], run_dir: Path,
+                       write: bool = True) -> RunConfig | None:
     """This run's configuration with the first pass's identified robot as gravity model, or None
-    when ``auto`` finds the gravity model's share below :data:`GRAVITY_SHARE_FOR_SECOND_PASS`."""
+    when ``auto`` finds the gravity model's share below :data:`GRAVITY_SHARE_FOR_SECOND_PASS`.
+    ``write=False`` (``check``) names the first pass's robot folder itself: the same content,
+    hence the same inputs hash (the runner hashes the gravity model's files, not its path)."""
     cal = cfg.sections["calibration"]
     share = gravity_share(outputs)
     if cal.second_pass == "auto" and (share is None or share < GRAVITY_SHARE_FOR_SECOND_PASS):
         return None
     robot = outputs["identification"].path / "robot"
+    if not write:
+        return replace(cfg, sections={**cfg.sections, "calibration": replace(cal, gravity_model=str(robot))})
     target = (run_dir.parent / GRAVITY_MODELS_FOLDER / artefacts.hash_tree(robot)[:16]).resolve()
     target.parent.mkdir(parents=True, exist_ok=True)
     if not target.is_dir():

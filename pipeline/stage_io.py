@@ -46,6 +46,7 @@ from pipeline.errors import PipelineError
 from pipeline.robot.exact import load_exact_robot, save_exact_robot
 from pipeline.robot.model import RobotModel
 from pipeline.stage_api import StageOutput, StageResult
+from pipeline.yaml12 import load_yaml
 
 SUMMARY = "summary.json"
 RESULTS_NPZ = "results.npz"
@@ -97,7 +98,7 @@ def _write_payload(stage_dir: Path, result: StageResult) -> list[str]:
 
 
 def write_stage_result(stage_dir: Path, name: str, result: StageResult, inputs_sha256: str,
-                       duration_s: float, run_key: str = "") -> None:
+                       duration_s: float, run_key: str = "", inputs: Mapping | None = None) -> None:
     """Write a StageResult into a (staging) directory; manifest with file hashes, ``inputs.sha256`` last."""
     figures = _write_payload(stage_dir, result)
     artefacts.write_json(stage_dir / MANIFEST, {
@@ -110,8 +111,27 @@ def write_stage_result(stage_dir: Path, name: str, result: StageResult, inputs_s
         "duration_s": round(duration_s, 3),
         "package_version": pipeline.__version__,
         "files_sha256": directory_hashes(stage_dir),
+        **({"inputs": to_plain(inputs)} if inputs else {}),
     })
     artefacts.write_text(stage_dir / INPUTS_HASH, inputs_sha256 + "\n")
+
+
+def changed_inputs(old: object, new: Mapping, stage: str) -> str:
+    """``": <what>"`` naming the inputs that differ between a stage's recorded inputs (its
+    manifest's ``inputs``) and the new ones: settings of its section, run settings, robot files,
+    upstream stages, package version, source code; "" when nothing was recorded."""
+    if not isinstance(old, Mapping) or not new:
+        return ""
+    what: list[str] = []
+    old_cfg, new_cfg = old.get("config") or {}, new.get("config") or {}
+    if isinstance(old_cfg, Mapping) and isinstance(new_cfg, Mapping):
+        what += [f"{stage}.{k}" for k in sorted(set(old_cfg) | set(new_cfg)) if old_cfg.get(k) != new_cfg.get(k)]
+    old_up, new_up = old.get("upstream") or {}, new.get("upstream") or {}
+    what += [f"upstream stage {s}" for s in sorted(set(old_up) | set(new_up)) if old_up.get(s) != new_up.get(s)]
+    names = {"run": "run settings (seed, robot, truth, settings read from other sections)",
+             "robot_files": "robot files", "version": "package version", "code": "source code"}
+    what += [text for key, text in names.items() if to_plain(old.get(key)) != to_plain(new.get(key))]
+    return f": {', '.join(what)}" if what else ""
 
 
 def write_rejected(staging: Path, final: Path, name: str, result: StageResult, reason: str) -> Path:
@@ -203,7 +223,7 @@ def _config_run_key(path: Path) -> str | None:
     if not path.is_file():
         return None
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+        data = load_yaml(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
         raise PipelineError(path, None, f"cannot read ({' '.join(str(exc).split())})") from None
     if not isinstance(data, Mapping):

@@ -8,7 +8,7 @@ without a tracker) is left out with its reason (:func:`unavailable_stages`).
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import ModuleType
 from typing import Any
 
@@ -27,6 +27,7 @@ class Plan:
     depends: tuple[str, ...]
     closure: list[str]            # all upstream stages (transitive), in run order
     inputs_sha256: str = ""
+    inputs: dict[str, Any] = field(default_factory=dict)   # what the inputs hash covers (manifest)
 
 
 def _check_stage_module(name: str, module: ModuleType) -> None:

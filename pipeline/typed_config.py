@@ -10,6 +10,7 @@ and a problem raises :class:`pipeline.errors.ConfigError` naming ``source`` (the
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import types
 import typing
 from collections.abc import Mapping, Sequence
@@ -23,6 +24,15 @@ from pipeline.errors import ConfigError, PipelineError
 
 def one_line(exc: BaseException) -> str:
     return " ".join(str(exc).split())
+
+
+def unknown_key(key: str, known: Sequence[str]) -> str:
+    """The problem text of an unknown key: the closest known key (``difflib``, similarity >= 0.6),
+    else every known key."""
+    close = difflib.get_close_matches(str(key), [str(k) for k in known], n=1)
+    if close:
+        return f"unknown key; did you mean {close[0]!r}?"
+    return f"unknown key (known keys: {', '.join(sorted(map(str, known))) or 'none'})"
 
 
 def _type_name(tp: Any) -> str:
@@ -141,8 +151,7 @@ def build_dataclass(cls: type, values: Mapping[str, Any], where: str, source: st
     for key, value in values.items():
         dotted = f"{where}.{key}" if where else str(key)
         if key not in fields:
-            known = ", ".join(fields) or "none"
-            raise ConfigError(source, dotted, f"unknown key (known keys: {known})")
+            raise ConfigError(source, dotted, unknown_key(key, list(fields)))
         kwargs[key] = coerce(value, hints.get(key, Any), dotted, source)
     try:
         instance = cls(**kwargs)

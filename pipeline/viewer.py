@@ -35,7 +35,6 @@ import meshcat
 import meshcat.geometry as mg
 import numpy as np
 import pinocchio as pin
-import yaml
 from meshcat.animation import Animation
 from pinocchio.visualize import MeshcatVisualizer
 
@@ -45,6 +44,7 @@ from pipeline.errors import PipelineError
 from pipeline.robot.model import RobotModel
 from pipeline.robot.urdf_import import package_dirs
 from pipeline.stage_io import MANIFEST, RESULTS_NPZ, load_run
+from pipeline.yaml12 import load_yaml
 
 TRAJECTORY_RE = re.compile(r"^trajectory_(?P<name>.+)_t$")
 CONFIGURATIONS_PREFIX = "configurations_"
@@ -326,7 +326,7 @@ def robot_of_run(run_dir: Path) -> Any:
     cfg_file = run_dir / "config.yaml"
     robot = "rx130l"
     if cfg_file.exists():
-        robot = (yaml.safe_load(cfg_file.read_text()) or {}).get("robot", robot)
+        robot = (load_yaml(cfg_file.read_text(encoding="utf-8")) or {}).get("robot", robot)
     return RobotModel.load(resolve_robot_dir(RunConfig(robot=str(robot), source=str(cfg_file))))
 
 

@@ -41,6 +41,7 @@ import numpy as np
 
 from pipeline.calibration import indices as ix
 from pipeline.calibration.error_model import MeasurementModel, se3_to_vector
+from pipeline.interrupts import raise_if_interrupted
 from pipeline.robot.collision import segment_distances
 from pipeline.robot.collision_sx import capsule_clearance_function, segment_distance_sx
 from pipeline.robot.instruments import BEAM_END_CLEARANCE_M, tracker_visibility
@@ -218,6 +219,7 @@ def gradient_design(robot, mm: MeasurementModel, basis: np.ndarray, Q_start: np.
     sol = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=np.tile(lb, n), ubg=np.full(n * n_g, np.inf))
     stats = solver.stats()
     status = str(stats.get("return_status", ""))
+    raise_if_interrupted(status, "calibration design IPOPT")
     Q = np.asarray(sol["x"]).reshape(n, nq)
     fallback = None
     if not stats.get("success", False):   # a non-success status is never the design

@@ -135,7 +135,7 @@ def read_csv(path: str | Path, robot, min_rows: int = 1, min_rows_field: str | N
         raise DataFileError(path, "file", "does not exist" if not path.exists() else "is not a file")
     rows: list[tuple[int, list[str]]] = []   # (file line, cells), blank lines skipped
     try:
-        with path.open(newline="", encoding="utf-8") as fh:
+        with path.open(newline="", encoding="utf-8-sig") as fh:
             reader = csv.reader(fh)
             first = 1
             for r in reader:

@@ -73,6 +73,8 @@ from pipeline.stage_api import StageResult
 NAME = "calibration"
 DEPENDS: tuple[str, ...] = ("model",)
 CONFIG_READS: tuple[str, ...] = ("control.iso",)
+#: fields naming files or folders: the inputs hash covers their content, not their path
+FILE_INPUTS: tuple[str, ...] = ("gravity_model", "measurements_csv", "validation_csv", "working_csv")
 
 def identify_parameter_set(robot, mm: em.MeasurementModel, cfg: Config, rng: np.random.Generator
                            ) -> tuple[em.IdentifiabilityReport, np.ndarray]:

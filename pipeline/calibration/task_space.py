@@ -44,6 +44,7 @@ from pipeline.calibration.error_model import MeasurementModel
 from pipeline.errors import ConfigError, DataFileError, InfeasibleError
 from pipeline.robot.defaults import iso_or_derived
 from pipeline.robot.iso9283 import IsoPathConfig
+from pipeline.yaml12 import load_yaml
 
 WORKING_REGIONS = ("iso_cube", "box", "csv")
 #: what V weights over the working configurations (``calibration.design_figure``): the TCP (the task),
@@ -87,7 +88,7 @@ def read_working_csv(path: str, robot) -> np.ndarray:
     """Joint configurations ``q1..qn`` (rad) of the user's working poses, inside the joint limits."""
     cols = [f"q{i + 1}" for i in range(robot.nq)]
     try:
-        with open(path) as f:
+        with open(path, encoding="utf-8-sig") as f:
             header = [h.strip() for h in f.readline().split(",")]
         data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
     except OSError as exc:
@@ -262,7 +263,7 @@ def default_region(robot) -> WorkingRegion:
     iso = IsoPathConfig()
     centre, edge = iso.centre_m, iso.edge_m
     try:
-        data = yaml.safe_load(Path(robot.spec.path).read_text(encoding="utf-8")) or {}
+        data = load_yaml(Path(robot.spec.path).read_text(encoding="utf-8")) or {}
         section = ((data.get("run_defaults") or {}).get("control") or {}).get("iso") or {}
         centre, edge = section.get("centre_m", centre), section.get("edge_m", edge)
     except (OSError, AttributeError, yaml.YAMLError):

@@ -102,7 +102,7 @@ def read_csv_table(path: str | Path) -> tuple[list[str], np.ndarray, np.ndarray]
     if not path.is_file():
         raise DataFileError(path, None, "file not found")
     try:
-        lines = path.read_text(encoding="utf-8").splitlines()
+        lines = path.read_text(encoding="utf-8-sig").splitlines()
     except (OSError, UnicodeDecodeError) as exc:
         raise DataFileError(path, None, f"cannot read: {exc}") from None
     numbered = [(i + 1, ln) for i, ln in enumerate(lines) if ln.strip()]

@@ -70,6 +70,8 @@ from pipeline.stage_api import StageContext, StageResult
 
 NAME = "identification"
 DEPENDS: tuple[str, ...] = ("model", "calibration")
+#: fields naming files: the inputs hash covers their content, not their path
+FILE_INPUTS: tuple[str, ...] = ("data_file",)
 #: settings of other sections this stage reads (the runner adds them to its inputs hash): the
 #: validation path is the run's EN ISO 9283 path (robot ``run_defaults`` included)
 CONFIG_READS: tuple[str, ...] = ("control.iso", "control.ik_seeds_deg", "control.ik_tolerance_m",

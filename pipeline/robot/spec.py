@@ -16,6 +16,8 @@ import pinocchio as pin
 import yaml
 
 from pipeline.errors import RobotFileError
+from pipeline.typed_config import unknown_key
+from pipeline.yaml12 import DuplicateKeyError, load_yaml, yaml_problem
 
 
 @dataclass
@@ -164,7 +166,7 @@ class _Reader:
     def check_keys(self, allowed: set[str], required: set[str] = frozenset()) -> None:
         for key in self.data:
             if key not in allowed:
-                raise self.error(str(key), f"unknown key (allowed: {', '.join(sorted(allowed))})")
+                raise self.error(str(key), unknown_key(key, sorted(allowed)))
         for key in sorted(required):
             if key not in self.data:
                 raise self.error(key, "missing")
@@ -244,7 +246,9 @@ def load_robot_spec(path: Path, nq: int | None = None) -> RobotSpec:
     if not path.is_file():
         raise RobotFileError(path, "robot.yaml", "file not found")
     try:
-        data = yaml.safe_load(path.read_text())
+        data = load_yaml(path.read_text(encoding="utf-8"))
+    except DuplicateKeyError as exc:
+        raise RobotFileError(path, *yaml_problem(exc)) from None
     except yaml.YAMLError as exc:
         raise RobotFileError(path, "yaml", f"not valid YAML ({exc})".replace("\n", " ")) from None
     if not isinstance(data, dict):

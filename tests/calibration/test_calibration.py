@@ -16,6 +16,7 @@ from pipeline.calibration import stage as st
 from pipeline.calibration.elastostatic import design_basis, design_blocks, measurement_model
 from pipeline.calibration.estimate import estimate, register_points
 from pipeline.errors import DataFileError, InfeasibleError, PipelineError, SolverError
+from pipeline.robot.truth import RealRobot
 
 
 @pytest.fixture(scope="module")
@@ -206,6 +207,18 @@ def test_csv_round_trip_gives_the_same_calibration(robot, tmp_path):
 
 
 # ------------------------------------------------------------------ end-to-end targets
+def test_csv_with_a_utf8_bom_reads_like_without(robot, tmp_path):
+    """Excel's "CSV UTF-8" starts with a byte-order mark, invisible in a terminal."""
+    rng = np.random.default_rng(3)
+    Q, _ = cd.random_candidates(cd.chain_from_robot(robot), 5, rng)
+    meas = ms.measure_simulated(RealRobot.create(robot, 3), Q, rng)
+    plain = ms.write_csv(tmp_path / "plain.csv", meas)
+    bom = tmp_path / "bom.csv"
+    bom.write_bytes(b"\xef\xbb\xbf" + plain.read_bytes())
+    a, b = ms.read_csv(plain, robot), ms.read_csv(bom, robot)
+    assert np.array_equal(a.Q, b.Q) and np.array_equal(a.Y, b.Y)
+
+
 def _check_targets(summary):
     assert summary["n_configurations"] <= 50
     assert summary["heldout_n_poses"] >= 1000

@@ -7,12 +7,14 @@ is within 3 of its standard deviations of the hidden one."""
 from __future__ import annotations
 
 import json
+import shutil
 
 import numpy as np
 import pytest
 
 from pipeline.config import CONFIGS_DIR, load_config
 from pipeline.robot.model import RobotModel
+from pipeline.run_check import check_run
 from pipeline.runner import run_pipeline
 from pipeline.second_pass import GRAVITY_SHARE_FOR_SECOND_PASS
 from pipeline.sim.truth import RealRobot, TruthConfig
@@ -60,3 +62,20 @@ def test_the_runner_runs_the_second_pass_when_the_gravity_model_dominates(tmp_pa
     assert f"{tmp_path}/.gravity_models/" in second["gravity_pass"]["gravity_model"]
     again = run_pipeline(cfg, out_root=tmp_path, log=lambda m: None)
     assert again.ran == [] and set(again.reused) == set(again.outputs)
+
+
+@pytest.mark.slow
+def test_a_copied_run_with_its_second_pass_is_reused_elsewhere(tmp_path):
+    """The second pass's gravity model enters calibration's inputs by content: a run copied to
+    another runs folder is reused there, stage by stage, and ``check`` says so beforehand."""
+    small = ["name=q", "calibration.n_random_candidates=400", "calibration.n_configurations=24",
+             "calibration.n_heldout=100", "calibration.second_pass=always"]
+    cfg = load_config(CONFIGS_DIR / "quick.yaml", small, "calibration")
+    run_pipeline(cfg, out_root=tmp_path / "a", log=lambda m: None)
+    shutil.copytree(tmp_path / "a" / "q", tmp_path / "b" / "q")
+    manifests = {p.relative_to(tmp_path / "b"): p.read_bytes() for p in (tmp_path / "b").rglob("manifest.json")}
+    cfg = load_config(CONFIGS_DIR / "quick.yaml", small, "calibration")
+    assert set(check_run(cfg, out_root=tmp_path / "b").reasons.values()) == {None}
+    again = run_pipeline(cfg, out_root=tmp_path / "b", log=lambda m: None)
+    assert again.ran == [] and set(again.reused) == {"model", "calibration"}
+    assert {p.relative_to(tmp_path / "b"): p.read_bytes() for p in (tmp_path / "b").rglob("manifest.json")} == manifests

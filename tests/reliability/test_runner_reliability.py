@@ -177,7 +177,7 @@ def test_check_writes_nothing_and_lists_run_or_reuse(gate_stages, tmp_path, caps
     run_pipeline(load_config(None, ["name=r"]), out_root=tmp_path, **QUIET)
     assert cli.main(["check", "--set", "name=r", "--set", "c.n=4", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    assert "a: reuse" in out and "b: reuse" in out and "c: run (inputs changed)" in out
+    assert "a: reuse" in out and "b: reuse" in out and "c: run (inputs changed: c.n)" in out
     assert cli.main(["check", "--set", "name=r", "--set", "c.n=x", "--out", str(tmp_path)]) == 2
 
 

@@ -1,0 +1,104 @@
+"""Relocatable runs, ``check`` agreeing with ``run``, and interrupts that surface as other errors
+(fake stages: fast)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import signal
+
+import pytest
+
+from pipeline import cli, interrupts
+from pipeline.config import load_config
+from pipeline.run_check import check_run
+from pipeline.runner import run_pipeline
+
+QUIET = {"log": lambda m: None}
+
+
+def _manifests(run_dir):
+    return {p.parent.name: json.loads(p.read_text()) for p in sorted(run_dir.glob("*/manifest.json"))}
+
+
+def test_copied_run_reuses_every_stage_with_identical_artefacts(fake_stages, tmp_path):
+    run_pipeline(load_config(None, ["name=r"]), out_root=tmp_path / "one", **QUIET)
+    shutil.copytree(tmp_path / "one", tmp_path / "elsewhere" / "two")
+    before = _manifests(tmp_path / "elsewhere" / "two" / "r")
+    again = run_pipeline(load_config(None, ["name=r"]), out_root=tmp_path / "elsewhere" / "two", **QUIET)
+    assert again.ran == [] and again.reused == ["a", "b", "c"]
+    assert _manifests(tmp_path / "elsewhere" / "two" / "r") == before
+
+
+def test_file_inputs_enter_the_hash_by_content_not_path(fake_stages, tmp_path, monkeypatch):
+    from pipeline import config
+
+    monkeypatch.setattr(config.STAGES["a"], "FILE_INPUTS", ("label",), raising=False)
+    for folder in ("x", "y"):
+        (tmp_path / folder).mkdir()
+        (tmp_path / folder / "data.csv").write_text("q1\n0.1\n")
+    run_pipeline(load_config(None, ["name=r", f"a.label={tmp_path / 'x' / 'data.csv'}"]), out_root=tmp_path, **QUIET)
+    moved = run_pipeline(load_config(None, ["name=r", f"a.label={tmp_path / 'y' / 'data.csv'}"]),
+                         out_root=tmp_path, **QUIET)
+    assert moved.ran == []                                   # same content elsewhere: reused
+    (tmp_path / "y" / "data.csv").write_text("q1\n0.2\n")
+    logs: list[str] = []
+    edited = run_pipeline(load_config(None, ["name=r", f"a.label={tmp_path / 'y' / 'data.csv'}"]),
+                          out_root=tmp_path, log=logs.append)
+    assert edited.ran == ["a", "b", "c"]                     # same path, new content: re-run
+    assert "a: re-running because inputs changed: a.label" in logs
+    assert "b: re-running because inputs changed: upstream stage a" in logs
+
+
+def test_check_reports_the_plan_run_follows(fake_stages, tmp_path):
+    cfg = load_config(None, ["name=r"])
+    fresh = check_run(cfg, out_root=tmp_path)
+    assert fresh.reasons == {"a": "not run yet", "b": "not run yet", "c": "not run yet"}
+    assert not (tmp_path / "r").exists()                     # check writes nothing
+    run_pipeline(cfg, out_root=tmp_path, **QUIET)
+    assert check_run(load_config(None, ["name=r"]), out_root=tmp_path).reasons == {"a": None, "b": None, "c": None}
+
+
+def _interrupting_stage(fake_stages, monkeypatch, swallow: bool):
+    """Stage b's run sends SIGINT to the process from inside its loop; the handler's KeyboardInterrupt
+    then surfaces as CasADi's SWIG wrappers report it (a SystemError), or is swallowed."""
+    from pipeline import config
+
+    inner = config.STAGES["b"].run
+
+    def run(ctx):
+        for i in range(10):
+            if i == 3:
+                try:
+                    signal.raise_signal(signal.SIGINT)
+                except KeyboardInterrupt as exc:
+                    if not swallow:
+                        raise SystemError("<function DM.__array__> returned a result with an exception set") from exc
+        return inner(ctx)
+
+    monkeypatch.setattr(config.STAGES["b"], "run", run)
+
+
+@pytest.mark.parametrize("swallow", [False, True])
+def test_interrupt_inside_a_stage_loop_exits_130_and_commits_nothing(fake_stages, tmp_path, monkeypatch, capsys,
+                                                                      swallow):
+    _interrupting_stage(fake_stages, monkeypatch, swallow)
+    code = cli.main(["run", "--set", "name=r", "--out", str(tmp_path)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 130
+    assert err[-1].startswith("interrupted:") and "Traceback" not in "\n".join(err)
+    assert (tmp_path / "r" / "a" / "inputs.sha256").exists()
+    assert not (tmp_path / "r" / "b").exists() and not (tmp_path / "r" / "c").exists()
+    assert not [p for p in (tmp_path / "r").iterdir() if p.name.startswith(".b")]    # no staging left
+    assert not interrupts.interrupted()
+
+
+def test_caused_by_interrupt_follows_the_exception_chain():
+    try:
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as ki:
+            raise SystemError("returned a result with an exception set") from ki
+    except SystemError as exc:
+        assert interrupts.caused_by_interrupt(exc)
+    assert not interrupts.caused_by_interrupt(ValueError("a plain error"))
