@@ -125,7 +125,12 @@ def _model_rows(s: dict) -> list[Row]:
 
 
 def _calibration_rows(s: dict) -> list[Row]:
-    after = _finite(s.get("heldout_rms_position_error_after_m"))
+    """Held-out error (simulated validation poses), else the k-fold cross-validated error of a
+    recorded file, against the tracker noise and the predicted error."""
+    after, label = _finite(s.get("heldout_rms_position_error_after_m")), "held-out TCP error RMS"
+    if after is None:
+        after = _finite(_get(s, "cross_validation.rms_position_error_m"))
+        label = f"{_get(s, 'cross_validation.folds')}-fold cross-validated TCP error RMS"
     if after is None:
         return []
     before = _finite(s.get("heldout_rms_position_error_before_m"))
@@ -134,11 +139,11 @@ def _calibration_rows(s: dict) -> list[Row]:
     rows = []
     sigma = _finite(s.get("tracker_noise_sigma_m"))
     if sigma:
-        rows.append(Row("calibration", "held-out TCP error RMS / tracker noise", value,
-                        f"noise σ {length(sigma)}", ratio(after / sigma), source))
+        rows.append(Row("calibration", f"{label} / tracker noise", value, f"noise σ {length(sigma)}",
+                        ratio(after / sigma), source))
     predicted = _finite(s.get("predicted_rms_position_error_m"))
     if predicted:
-        rows.append(Row("calibration", "held-out TCP error RMS, actual / predicted", length(after),
+        rows.append(Row("calibration", f"{label}, actual / predicted", length(after),
                         f"predicted {length(predicted)}", ratio(after / predicted), source))
     return rows
 

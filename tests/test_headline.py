@@ -133,3 +133,11 @@ def test_run_prints_the_headline_before_the_report_path(model_like_stage, tmp_pa
     assert out.rstrip().splitlines()[-1] == str(report)
     assert "Run r: headline" in out and "robot arm" in out and "warning: moving mass 12 kg is light" in out
     assert "## Headline" in report.read_text().split("\n## model")[0]
+
+
+def test_recorded_calibration_stands_on_its_cross_validation(tmp_path):
+    summary = {"cross_validation": {"folds": 5, "rms_position_error_m": 40e-6}, "tracker_noise_sigma_m": 20e-6,
+               "measurement_source": "/data/tracker_readings.csv", "heldout_rms_position_error_after_m": None}
+    (row,) = hl.stage_rows("calibration", summary)
+    assert row.figure.startswith("5-fold cross-validated") and row.verdict == hl.ratio(2.0)
+    assert row.source == "recorded (tracker_readings.csv)"
