@@ -1,6 +1,6 @@
 """What caps the elastic-joint feedforward when the model is exact: its approximations or the servo?
 
-Run: ``.venv/bin/python benchmarks/bench_elastic_floor.py [RUN_DIR]`` (default ``data/runs/default``,
+Run: ``.venv/bin/python benchmarks/bench_elastic_floor.py [RUN_DIR]`` (default ``data/runs/rx130l``,
 a run through ``identification``; its robot, seed and truth are read from ``RUN_DIR``, the servo
 gains come from its identified model as in the control stage). Companion of
 ``bench_elastic_gap.py`` (which swaps model ingredients): here the ``elastic_flat`` feedforward
@@ -135,7 +135,7 @@ class Case:
     model: RobotModel | None = None                            # None: the exact hidden robot with ``transmission``
 
 
-def main(run_dir: str = "data/runs/default") -> None:
+def main(run_dir: str = "data/runs/rx130l") -> None:
     run = Path(run_dir)
     m = load_run_models(run)
     seed, robot_name, cfg, pipe, real = m.seed, m.robot_name, m.config, m.pipe, m.real

@@ -1,6 +1,6 @@
 """What limits the elastic-joint feedforward of the pipeline on the EN ISO 9283 path (stage 3).
 
-Run: ``.venv/bin/python benchmarks/bench_elastic_gap.py [RUN_DIR]`` (default ``data/runs/default``,
+Run: ``.venv/bin/python benchmarks/bench_elastic_gap.py [RUN_DIR]`` (default ``data/runs/rx130l``,
 a run of the default configuration through ``identification``: ``python -m pipeline run --stages
 identification``). The run's robot, seed and truth configuration are read from ``RUN_DIR``.
 
@@ -160,7 +160,7 @@ def load_run_models(run_dir: str | Path) -> RunModels:
     return RunModels(seed, robot_name, cfg, nominal, handed_on, choice, pipe, real)
 
 
-def main(run_dir: str = "data/runs/default") -> None:
+def main(run_dir: str = "data/runs/rx130l") -> None:
     run = Path(run_dir)
     m = load_run_models(run)
     seed, robot_name, cfg, nominal, handed_on, choice, pipe, real = (

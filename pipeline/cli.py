@@ -2,11 +2,14 @@
 
 * ``run [--config FILE] [--set key=value ...] [--stages a,b] [--out DIR] [--force] [--accept-poor]``
 * ``check`` (same options as ``run``): validate what ``run`` would validate, write nothing, and
-  print which stages would run or be reused
+  print which stages would run or be reused, and the robot's plausibility warnings
 * ``view [RUN_DIR] [--robot NAME] [--configurations NAME] [--trajectory NAME] [--open]``
 * ``study [NAME [ARGS...]]`` (no name: list the registered studies)
 * ``robot init ARM.urdf [--base LINK] [--tip LINK] [--out FILE]``: a commented robot.yaml
 * ``sweep [--seeds 0-19] [--robots A,B] [--config FILE] [--set k=v] [--vary k=[a,b]] [--scheduler ADDR]``
+
+``run`` ends with the headline table (:mod:`pipeline.headline`) and the path of ``report.md``.
+A run directory made with another robot is refused (exit 2) unless ``--force``.
 
 Exit codes: 0 done; 2 a :class:`pipeline.errors.PipelineError` (bad input, a fault writing
 files, the run directory locked by another run), one line on stderr, no traceback; 3 a stage
@@ -25,7 +28,9 @@ from pipeline import config as config_mod
 from pipeline import studies, sweep
 from pipeline.config import load_config
 from pipeline.errors import PipelineError, QualityGateError
+from pipeline.headline import print_headline, read_headline
 from pipeline.interrupts import handle_termination
+from pipeline.robot.plausibility import robot_warnings
 from pipeline.robot.yaml_init import write_robot_yaml
 from pipeline.run_check import check_run
 from pipeline.runner import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_QUALITY_GATE, run_pipeline
@@ -44,7 +49,8 @@ def _add_run_options(r: argparse.ArgumentParser) -> None:
                         "--set seed=3 --set calibration.n_configurations=40")
     r.add_argument("--stages", metavar="A,B", help="stages to run (their upstream stages are added)")
     r.add_argument("--out", metavar="DIR", help="directory holding the runs (default data/runs)")
-    r.add_argument("--force", action="store_true", help="re-run the stages even when reusable")
+    r.add_argument("--force", action="store_true",
+                   help="re-run the stages even when reusable (and replace a run of another robot)")
     r.add_argument("--accept-poor", action="store_true",
                    help="hand on results that fail a stage's quality gate (the report says so)")
 
@@ -100,6 +106,7 @@ def _cmd_run(ns: argparse.Namespace) -> int:
     cfg = load_config(ns.config, ns.overrides, ns.stages)
     cfg.accept_poor = ns.accept_poor
     result = run_pipeline(cfg, out_root=ns.out, force=ns.force)
+    print_headline(read_headline(result.run_dir, list(result.outputs)))
     print(result.report)
     return 0
 
@@ -112,6 +119,8 @@ def _cmd_check(ns: argparse.Namespace) -> int:
     for plan in prep.plans:
         reason = prep.reasons[plan.name]
         print(f"  {plan.name}: " + ("reuse" if reason is None else f"run ({reason})"))
+    for warning in robot_warnings(prep.nominal):      # placeholder data: warnings, not errors
+        print(f"warning: robot {prep.nominal.name}: {warning}")
     return 0
 
 

@@ -38,6 +38,7 @@ from pipeline.config_layers import (
     to_plain,
 )
 from pipeline.errors import ConfigError, PipelineError
+from pipeline.run_names import default_run_name
 from pipeline.typed_config import build_dataclass, describe, unknown_key, with_source
 from pipeline.yaml12 import load_yaml
 
@@ -151,7 +152,7 @@ class RunConfig:
     Sections are also reachable as attributes: ``cfg.calibration.n_configurations``.
     """
 
-    name: str = "default"
+    name: str = "rx130l"                # without a name: default_run_name(robot, profile)
     seed: int = 0
     robot: str = "rx130l"
     profile: str = "full"
@@ -306,6 +307,8 @@ def load_config(
             cfg.profile = value
         elif key == "stages":
             cfg.stages = _parse_stages(value, src)
+    if "name" not in top:        # named after the robot and profile: runs of two robots never collide
+        cfg.name = default_run_name(cfg.robot, cfg.profile)
 
     robot_layer = robot_run_defaults(cfg)
     if robot_layer is not None:

@@ -1,8 +1,10 @@
 """``report.md`` of a run: every finished stage directory gathered in stage order.
 
-Each stage's own tables (``report.md`` of the stage) come first, its raw ``summary.json`` folded
-below them, then its figures linked relatively; stages that are stale (from an earlier run, or
-failed in this one) are marked as such, and a failed run says so at the top.
+The headline (:mod:`pipeline.headline`: the figures that matter against their gates, the
+assumptions still in force, the warnings) opens it. Below it, each stage's own tables
+(``report.md`` of the stage) come first, its raw ``summary.json`` folded below them, then its
+figures linked relatively; stages that are stale (from an earlier run, or failed in this one) are
+marked as such, and a failed run says so at the top.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from pipeline import artefacts, stage_io
 from pipeline import config as config_mod
 from pipeline.config import RunConfig
 from pipeline.errors import PipelineError
+from pipeline.headline import headline_markdown, read_headline
 
 
 def _fmt(value: Any) -> str:
@@ -79,6 +82,19 @@ def one_line_error(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
+def _stale_note(stage_dir: Path, current: Sequence[str], expected: Mapping[str, str],
+                failure: tuple[str, str] | None) -> str | None:
+    """Why the results in ``stage_dir`` are not this run's (an italic note), or None."""
+    name = stage_dir.name
+    if current and name not in current:
+        return "_from an earlier run: not part of this run, its inputs may differ_"
+    if failure is not None and name == failure[0]:
+        return "_stale: this stage FAILED in this run; the results below are from an earlier run_"
+    if name in expected and stage_io.read_inputs_hash(stage_dir) != expected[name]:
+        return "_stale: from an earlier run with different inputs (not re-run in this run)_"
+    return None
+
+
 def write_report(run_dir: Path, cfg: RunConfig | None = None, current: Sequence[str] = (),
                  expected: Mapping[str, str] | None = None, failure: tuple[str, str] | None = None) -> Path:
     """Gather every finished stage directory of ``run_dir`` into ``report.md``.
@@ -113,16 +129,14 @@ def write_report(run_dir: Path, cfg: RunConfig | None = None, current: Sequence[
     extra = sorted(p.name for p in run_dir.iterdir()
                    if p.is_dir() and not p.name.startswith(".") and p.name not in names
                    and (p / stage_io.INPUTS_HASH).exists())
-    for name in [*names, *extra]:
+    notes = {name: _stale_note(run_dir / name, current, expected, failure) for name in [*names, *extra]}
+    lines += [headline_markdown(read_headline(run_dir, list(notes), [n for n, note in notes.items() if note])), ""]
+    for name, note in notes.items():
         d = run_dir / name
         manifest = artefacts.read_json(d / stage_io.MANIFEST) if (d / stage_io.MANIFEST).exists() else {}
         lines += [f"## {name}", ""]
-        if current and name not in current:
-            lines += ["_from an earlier run: not part of this run, its inputs may differ_", ""]
-        elif failure is not None and name == failure[0]:
-            lines += ["_stale: this stage FAILED in this run; the results below are from an earlier run_", ""]
-        elif name in expected and stage_io.read_inputs_hash(d) != expected[name]:
-            lines += ["_stale: from an earlier run with different inputs (not re-run in this run)_", ""]
+        if note:
+            lines += [note, ""]
         if manifest.get("finished_utc"):
             lines += [f"finished {manifest['finished_utc']} in {manifest.get('duration_s', 0):.1f} s", ""]
         summary = artefacts.read_json(d / stage_io.SUMMARY) if (d / stage_io.SUMMARY).exists() else {}

@@ -44,6 +44,7 @@ from pipeline.interrupts import caused_by_interrupt, handle_termination, interru
 from pipeline.locking import RunLockedError, run_lock
 from pipeline.progress import Progress
 from pipeline.robot.model import RobotModel
+from pipeline.run_names import check_run_robot
 from pipeline.sim.truth import RealRobot, TruthConfig
 from pipeline.stage_api import StageContext, StageOutput, StageResult, stage_rng
 from pipeline.stage_io import (
@@ -251,7 +252,8 @@ class Prepared:
 def prepare_run(cfg: RunConfig, out_root: str | Path | None = None,
                 force: bool | Sequence[str] = False) -> Prepared:
     """Validate everything a run needs (robot, stage modules, the hidden robot, every check()
-    of a stage that would run) without writing anything."""
+    of a stage that would run, a run directory of another robot refused unless ``force`` is
+    True) without writing anything."""
     robot_dir = resolve_robot_dir(cfg)         # user input first: the robot, then the stage modules
     nominal = RobotModel.load(robot_dir)
     plans = plan_stages(cfg, unavailable_stages(nominal))
@@ -259,6 +261,7 @@ def prepare_run(cfg: RunConfig, out_root: str | Path | None = None,
     hashes = stage_inputs_hashes(cfg, plans, robot_dir)
     forced = set(hashes) if force is True else set(force or ())
     run_dir = (Path(out_root) if out_root is not None else default_runs_dir()) / cfg.name
+    check_run_robot(run_dir, cfg.robot, force=force is True)     # never replace another robot's run
     reasons = {p.name: _why_not_reuse(p, run_dir / p.name, forced, cfg, verify=True) for p in plans}
     _run_checks([p for p in plans if reasons[p.name] is not None], cfg, nominal)
     return Prepared(cfg, plans, nominal, real, run_dir, forced, reasons)

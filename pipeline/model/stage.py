@@ -1,7 +1,8 @@
 """Stage ``model``: record the robot that the later stages start from.
 
 Summary: DOF, reach (axis 1 to flange), moving mass, payload, joint limits
-(:meth:`RobotModel.summary`); arrays: the limits in SI units; figures: a matplotlib picture of
+(:meth:`RobotModel.summary`), the assumptions still in force and the plausibility warnings
+(:mod:`pipeline.robot.plausibility`); arrays: the limits in SI units; figures: a matplotlib picture of
 the robot (kinematic chain and collision capsules) at the configured pose.
 """
 
@@ -15,7 +16,7 @@ import numpy as np
 from pipeline.errors import ConfigError
 from pipeline.plotting import robot_figure
 from pipeline.robot.defaults import ready_pose_rad
-from pipeline.stage_api import StageContext, StageResult
+from pipeline.robot.plausibility import robot_warnings
 
 NAME = "model"
 DEPENDS: tuple[str, ...] = ()
@@ -132,7 +133,14 @@ def run(ctx: StageContext) -> StageResult:
                  "them to a robot.yaml to edit):", ""] + [f"* {a}" for a in robot.assumptions]
     if not robot.has_tracker:
         rows += ["", "No tracker in robot.yaml: no calibration; later stages use the nominal kinematics."]
+    warnings = robot_warnings(robot, summary)
+    for warning in warnings:
+        ctx.progress.log(f"model: warning: {warning}")
+    if warnings:
+        rows += ["", "**Plausibility warnings** (against data-sheet scaling of serial arms, "
+                 "`pipeline.robot.plausibility`):", ""] + [f"* {w}" for w in warnings]
     summary["assumptions"] = list(robot.assumptions)
+    summary["plausibility_warnings"] = warnings
     summary["has_tracker"] = bool(robot.has_tracker)
     return StageResult(summary=summary, arrays=arrays, figures={"robot": fig},
                        data={"pose_deg": np.rad2deg(q)}, report_md="\n".join(rows))
