@@ -1,7 +1,8 @@
 # Two entry points for a new user:
 #   make run    create .venv, install the package, run the whole pipeline (python -m pipeline run)
 #   make test   create .venv, install with dev extras (+ chromium for the viewer test), run pytest
-#   make test-slow   the checks behind the `slow` marker (whole-pipeline runs, paper studies; CI runs both)
+#   make test-slow   the checks behind the `slow` marker (whole-pipeline runs, paper studies; CI runs both);
+#                    the paper-scale `study` set is left out: .venv/bin/python -m pytest -m study
 # Options: make run ARGS="--config configs/quick.yaml --set seed=3"   make test PYTEST_ARGS="tests/test_cli.py -x"
 # Installs are redone only when pyproject.toml changes (stamp files in .venv/).
 
@@ -32,7 +33,7 @@ test: $(VENV)/.stamp-dev
 	$(PY) -m pytest $(PYTEST_ARGS)
 
 test-slow: $(VENV)/.stamp-dev
-	$(PY) -m pytest -m slow $(PYTEST_ARGS)
+	$(PY) -m pytest -m 'slow and not study' $(PYTEST_ARGS)
 
 $(PY):
 	@$(PYTHON) -c 'import sys; sys.exit(sys.version_info < (3, 11))' \
