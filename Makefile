@@ -2,6 +2,8 @@
 #   make run    create .venv, install the package, run the whole pipeline (python -m pipeline run)
 #   make test   create .venv, install with dev extras (+ chromium for the viewer test), run pytest
 #   make lint   check the package's layers (import-linter contracts in pyproject.toml)
+#   make test-slow   the checks behind the `slow` marker (whole-pipeline runs, paper studies; CI runs both);
+#                    the paper-scale `study` set is left out: .venv/bin/python -m pytest -m study
 # Options: make run ARGS="--config configs/quick.yaml --set seed=3"   make test PYTEST_ARGS="tests/test_cli.py -x"
 # Installs are redone only when pyproject.toml changes (stamp files in .venv/).
 
@@ -14,7 +16,7 @@ PYTEST_ARGS ?=
 export OPENBLAS_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
 
-.PHONY: run test lint
+.PHONY: run test test-slow lint
 
 run: $(VENV)/.stamp-run
 	$(PY) -m pipeline run $(ARGS)
@@ -33,6 +35,9 @@ test: $(VENV)/.stamp-dev
 	      || echo "warning: could not install chromium; the viewer screenshot test will be skipped"; \
 	  else echo "warning: no chromium and no root/apt; the viewer screenshot test will be skipped"; fi; }
 	$(PY) -m pytest $(PYTEST_ARGS)
+
+test-slow: $(VENV)/.stamp-dev
+	$(PY) -m pytest -m 'slow and not study' $(PYTEST_ARGS)
 
 $(PY):
 	@$(PYTHON) -c 'import sys; sys.exit(sys.version_info < (3, 11))' \

@@ -63,14 +63,8 @@ def test_derived_iso_cube_path_is_feasible(name):
     _check(_load(name))
 
 
-Z1_TOOL_AXIS = pytest.mark.xfail(strict=True, raises=InfeasibleError, reason=(
-    "the Z1 URDF's flange approaches along its x axis: the ISO path's 'tool z down' orientation "
-    "(robot.iso9283.tool_rotation) is out of its wrist's reach; needs a tool frame with z as approach axis"))
-
-
 @pytest.mark.slow
-@pytest.mark.parametrize("name", [pytest.param(n, marks=Z1_TOOL_AXIS) if n == "z1" else n
-                                  for n in sorted((set(ERD) | {"rx130l"}) - set(FAST))])
+@pytest.mark.parametrize("name", sorted((set(ERD) | {"rx130l"}) - set(FAST)))
 def test_derived_iso_cube_path_is_feasible_other_arms(name):
     _check(_load(name))
 

@@ -9,6 +9,7 @@ import warnings
 import numpy as np
 import pytest
 
+from pipeline.config import CONFIGS_DIR, load_config, to_plain
 from pipeline.errors import DataFileError, PipelineError
 from pipeline.identification import stage
 from pipeline.identification.estimate import is_physically_consistent
@@ -184,7 +185,11 @@ def test_bad_data_files_raise_and_write_nothing(tmp_path, problem):
 def test_infeasible_excitation_limits_raise(tmp_path):
     # 5 % of the torque limits: no excitation moves the arm enough; the stage stops naming
     # identification.excitation (no feasible centre, or a random start the motion gate refuses)
-    ctx, _ = quick_context(tmp_path, overrides={"run_tx40": False, "excitation": {"torque_margin": 0.05}})
+    # the quick profile's small excitation problem with only the margin changed (a bare
+    # {"torque_margin": ...} section would fall back to the default-profile excitation sizes)
+    quick_excitation = to_plain(load_config(CONFIGS_DIR / "quick.yaml").identification.excitation)
+    ctx, _ = quick_context(tmp_path, overrides={"run_tx40": False,
+                                                "excitation": {**quick_excitation, "torque_margin": 0.05}})
     with pytest.raises(PipelineError, match="identification.excitation"):
         stage.run(ctx)
     assert not any(ctx.out_dir.iterdir())
