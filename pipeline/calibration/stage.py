@@ -33,9 +33,9 @@ from pipeline.calibration import design as ds
 from pipeline.calibration import design_rounding as dr
 from pipeline.calibration import design_table as dtab
 from pipeline.calibration import error_model as em
+from pipeline.calibration import grid_cache, plots, subsets
 from pipeline.calibration import indices as ix
 from pipeline.calibration import measure as ms
-from pipeline.calibration import plots, subsets
 from pipeline.calibration import task_space as ts
 from pipeline.calibration import validate as va
 from pipeline.calibration.config import MAX_CANDIDATES, Config
@@ -119,7 +119,7 @@ def build_candidates(robot, cfg: Config, basis: np.ndarray, rng: np.random.Gener
     if cfg.candidates == "grid":
         per_axis = cfg.grid_points_per_axis(robot.nq)
         with task(f"calibration: filtering the {per_axis}^{robot.nq} grid") as bar:
-            Q, grid_index, counts = cd.filter_grid(chain, per_axis, margins, progress=bar)
+            Q, grid_index, counts = grid_cache.filter_grid(chain, per_axis, margins, progress=bar)
     else:
         Q, counts = cd.random_candidates(chain, cfg.n_random_candidates, rng, margins)
     if len(Q) == 0:
