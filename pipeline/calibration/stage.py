@@ -33,6 +33,7 @@ from pipeline.calibration import design as ds
 from pipeline.calibration import design_rounding as dr
 from pipeline.calibration import design_table as dtab
 from pipeline.calibration import error_model as em
+from pipeline.calibration import feasibility as fz
 from pipeline.calibration import indices as ix
 from pipeline.calibration import measure as ms
 from pipeline.calibration import plots, subsets
@@ -114,6 +115,10 @@ def build_candidates(robot, cfg: Config, basis: np.ndarray, rng: np.random.Gener
     chain = cd.chain_from_robot(robot)
     margins = cd.FilterMargins(cfg.margin_collision_m, math.radians(cfg.margin_incidence_deg), cfg.margin_beam_m)
     grid_index = None
+    # a first 1 % of random configurations: none feasible -> stop with the cause, not after minutes
+    first = fz.probe(chain, margins, [c.name for c in robot.capsules])
+    if first.n_feasible == 0:
+        raise fz.infeasible_error(first, robot.spec.path)
     if cfg.candidates == "grid":
         per_axis = cfg.grid_points_per_axis(robot.nq)
         with task(f"calibration: filtering the {per_axis}^{robot.nq} grid") as bar:
