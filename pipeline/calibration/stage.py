@@ -74,6 +74,8 @@ from pipeline.stage_api import StageResult
 NAME = "calibration"
 DEPENDS: tuple[str, ...] = ("model",)
 CONFIG_READS: tuple[str, ...] = ("control.iso",)
+#: at most about this many candidates are saved for the viewer (every k-th)
+VIEWER_CANDIDATES = 2000
 
 def identify_parameter_set(robot, mm: em.MeasurementModel, cfg: Config, rng: np.random.Generator
                            ) -> tuple[em.IdentifiabilityReport, np.ndarray]:
@@ -301,6 +303,8 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress, reg
         held = heldout_measurements(robot, real, est, cfg, rng)
     validation = (va.validate(mm, est, held, cfg.outlier_confidence, gravity, cfg.orientation_sigma_rad)
                   if held is not None else None)
+    if held is not None:
+        notes["heldout_configurations"] = held.Q      # drawn by the viewer
     timings["validate_s"] = time.perf_counter() - t
     if spec is None:
         spec, Qw = index_spec(cfg, robot, mm, dbasis, rng, region)
@@ -437,6 +441,10 @@ def run(ctx) -> Any:
         arrays["heldout_errors_after_m"] = out.validation["errors_after_m"]
         arrays["heldout_predicted_std_m"] = out.validation["predicted_std_m"]
     arrays.update(out.notes.get("static_torques", {}))   # elastostatic model: for later gravity models
+    if out.notes.get("heldout_configurations") is not None:   # for the viewer's layers
+        arrays["configurations_heldout"] = out.notes["heldout_configurations"]
+    if out.candidates is not None and len(out.candidates):
+        arrays["configurations_candidates"] = out.candidates.Q[:: max(1, len(out.candidates) // VIEWER_CANDIDATES)]
     if out.selection is not None:
         arrays["index_history"] = np.array(out.selection.history, float).reshape(-1, 2)
 
