@@ -46,7 +46,18 @@ from pipeline.errors import PipelineError
 from pipeline.robot.model import RobotModel
 from pipeline.robot.urdf_import import package_dirs
 from pipeline.runner import default_runs_dir, load_run
-from pipeline.viewer_scene import LAYERS, camera_view, colour_name, layer_of, translation, workspace_box
+from pipeline.viewer_scene import (
+    HALF_VIEW_TAN,
+    LAYERS,
+    LEGEND_DISTANCE_M,
+    LEGEND_LINE_SHARE,
+    camera_view,
+    colour_name,
+    layer_of,
+    legend_png,
+    translation,
+    workspace_box,
+)
 
 TRAJECTORY_RE = re.compile(r"^trajectory_(?P<name>.+)_t$")
 CONFIGURATIONS_PREFIX = "configurations_"
@@ -187,6 +198,7 @@ class Viewer:
         self.vis["floor"]["grid"].set_object(mg.LineSegments(mg.PointsGeometry(lines.T),
                                                              mg.LineBasicMaterial(color=0x808080)))
         self.legend["floor"] = (0xD9D9D9, f"floor at z = {z:g} m (collision.floor_z_m), grid {step:g} m")
+        self.show_legend()
 
     def show(self, q: np.ndarray) -> None:
         """Place the robot at configuration ``q``."""
@@ -242,6 +254,20 @@ class Viewer:
         if layer in self.legend and meaning is None:
             text = f"{self.legend[layer][1]}; {text}"
         self.legend[layer] = (color, text if meaning is None else f"{meaning} ({text})")
+        self.show_legend()
+
+    def show_legend(self) -> None:
+        """The legend as a picture fixed in the top left corner of the view (a child of the camera,
+        ``LEGEND_DISTANCE_M`` in front of it, so it stays in place while the view turns)."""
+        png, aspect = legend_png(self.legend)
+        height = LEGEND_LINE_SHARE * (len(self.legend) + 0.6) * 2 * HALF_VIEW_TAN * LEGEND_DISTANCE_M
+        width = aspect * height
+        edge = HALF_VIEW_TAN * LEGEND_DISTANCE_M        # top and (aspect >= 1) left edge of the view
+        node = self.vis["/Cameras/default/rotated/<object>/legend"]
+        node.set_object(mg.Box([width, height, 1e-4]),
+                        mg.MeshBasicMaterial(map=mg.ImageTexture(mg.PngImage(png)), transparent=True,
+                                             depthTest=False, side=0))     # front face only
+        node.set_transform(translation([-0.97 * edge + width / 2, 0.97 * edge - height / 2, -LEGEND_DISTANCE_M]))
 
     def show_configurations(self, Q: np.ndarray, name: str = "configurations", *, frame: str = "tcp",
                             seconds_each: float = 1.0, color: int = 0xE6550D, animate: bool = True) -> Any:

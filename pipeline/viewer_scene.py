@@ -9,10 +9,13 @@ the scene so that centre sits at the page's origin.
 
 from __future__ import annotations
 
+import io
 from typing import Any
 
 import numpy as np
 import pinocchio as pin
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
 
 #: named layers (meshcat scene tree paths, each toggled in the page's Controls panel): colour, meaning
 LAYERS: dict[str, tuple[int, str]] = {
@@ -30,6 +33,11 @@ COLOUR_NAMES = {0xE6550D: "orange", 0x3182BD: "blue", 0x31A354: "green", 0x756BB
 CAMERA_FOV_DEG = 75.0
 #: direction from the target to the camera: a three-quarter view from the front left, slightly above
 VIEW_DIRECTION = np.array([0.75, -1.0, 0.55])
+#: tan of half the vertical field of view
+HALF_VIEW_TAN = float(np.tan(np.radians(CAMERA_FOV_DEG) / 2))
+#: the legend picture: distance in front of the camera, height of one line as a share of the view's
+LEGEND_DISTANCE_M = 0.5
+LEGEND_LINE_SHARE = 0.035
 #: camera distance as a share of the one at which the reachable box's bounding sphere spans the view
 FRAME_SHARE = 0.8
 #: random configurations whose joint and frame origins give the arm's reachable box
@@ -86,3 +94,21 @@ def translation(p: Any) -> np.ndarray:
 
 def colour_name(color: int) -> str:
     return COLOUR_NAMES.get(color, f"#{color:06x}")
+
+
+def legend_png(legend: dict[str, tuple[int, str]]) -> tuple[bytes, float]:
+    """The legend (layer -> colour, meaning) as a PNG with a white, half-transparent background, and
+    its width / height."""
+    lines = max(len(legend), 1)
+    longest = max((len(layer) + len(text) for layer, (_, text) in legend.items()), default=10)
+    width_in, height_in = 0.05 * (longest + 6), 0.22 * (lines + 0.6)
+    fig = Figure(figsize=(width_in, height_in), dpi=150)
+    fig.patch.set_facecolor((1.0, 1.0, 1.0, 0.75))
+    FigureCanvasAgg(fig)
+    for k, (layer, (color, text)) in enumerate(legend.items()):
+        y = 1.0 - (k + 0.8) / (lines + 0.6)
+        fig.text(0.08 / width_in, y, "\u25a0", color=f"#{color:06x}", fontsize=9, va="center")
+        fig.text(0.25 / width_in, y, f"{layer}: {text}", fontsize=7, va="center")
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", facecolor=fig.get_facecolor())
+    return buffer.getvalue(), width_in / height_in

@@ -180,6 +180,10 @@ def test_primitive_arm_is_framed_with_its_floor(rx130l, tmp_path):
     assert viewer.drawn_as == "meshes"            # the URDF's own primitives (cylinders, boxes)
     assert_framed(with_robot, without)
     assert "floor" in viewer.legend and "collision.floor_z_m" in viewer.legend_text()
+    # the legend picture in the top left corner: pale, with dark text
+    h, w = with_robot.shape[:2]
+    corner = with_robot[int(0.02 * h):int(0.08 * h), int(0.15 * w):int(0.45 * w)]
+    assert corner.mean() > 0.75 and (corner.max(axis=-1) < 0.5).mean() > 0.003
 
 
 def test_layers_are_named_and_explained(rx130l):
