@@ -100,8 +100,8 @@ CHECKS: dict[str, Callable[[Any, Any], None]] = {
 
 def preflight(prep: Prepared) -> Iterator[PipelineError]:
     """The problems of the stages that would run (not reused), one error each, in stage order,
-    yielded as found (the caller prints each at once); a ConfigError without a file names the file
-    (or ``--set``) the setting came from."""
+    yielded as found (the caller prints each at once). An error without a file names the file (or
+    ``--set``) its setting came from, or the stage when its field is not a setting."""
     for plan in prep.plans:
         check = CHECKS.get(plan.name)
         if check is None or prep.reasons.get(plan.name) is None:
@@ -109,6 +109,8 @@ def preflight(prep: Prepared) -> Iterator[PipelineError]:
         try:
             check(prep.nominal, plan.config)
         except PipelineError as exc:
-            if exc.file is None and exc.field:
+            if exc.file is None and exc.field and exc.field.split(".")[0] in prep.cfg.sections:
                 exc = type(exc)(prep.cfg.source_of(exc.field), exc.field, exc.problem)
+            elif exc.file is None:          # not a setting (e.g. the IK of a path point): name the stage
+                exc = type(exc)(f"stage {plan.name}", exc.field, exc.problem)
             yield exc
