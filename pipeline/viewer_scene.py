@@ -51,7 +51,7 @@ def workspace_box(model: pin.Model, floor_z_m: float = 0.0) -> np.ndarray:
     lo = np.clip(model.lowerPositionLimit, -np.pi, np.pi)
     hi = np.clip(model.upperPositionLimit, -np.pi, np.pi)
     data = model.createData()
-    points = []
+    points: list[np.ndarray] = []
     for q in np.random.default_rng(0).uniform(lo, hi, (WORKSPACE_SAMPLES, model.nq)):
         pin.framesForwardKinematics(model, data, q)
         points.extend(f.translation.copy() for f in data.oMf)
