@@ -231,15 +231,17 @@ class Viewer:
     def show_points(self, points: np.ndarray, name: str, color: int = 0xE6550D, size_m: float | None = None,
                     layer: str = "points") -> None:
         """Draw ``(N, 3)`` points as a point cloud under ``<layer>/<name>`` (``size_m`` None: 1 % of
-        the arm's reachable box)."""
+        the diagonal of the arm's reachable box for up to 100 points, smaller as 1 / sqrt(N) for more,
+        at least 0.3 %)."""
 
         P = np.atleast_2d(np.asarray(points, float))
         if size_m is None:
-            size_m = max(0.01, 0.01 * float(np.linalg.norm(np.ptp(self.workspace_box_m, axis=0))))
+            diagonal = float(np.linalg.norm(np.ptp(self.workspace_box_m, axis=0)))
+            size_m = diagonal * max(0.003, 0.01 * min(1.0, float(np.sqrt(100.0 / len(P)))))
         rgb = np.array([(color >> 16) & 255, (color >> 8) & 255, color & 255], float) / 255.0
         colors = np.tile(rgb[:, None], (1, len(P)))
         self.vis[layer][name].set_object(mg.PointCloud(P.T, colors, size=size_m))
-        self._add_legend(layer, color, f"{len(P)} TCP points" + ("" if layer in LAYERS else f" ({name})"))
+        self._add_legend(layer, color, f"{len(P)} points" + ("" if layer in LAYERS else f" ({name})"))
 
     def show_path(self, points: np.ndarray, name: str, color: int = 0x3182BD, layer: str = "paths") -> None:
         """Draw ``(N, 3)`` points as a polyline under ``<layer>/<name>``."""
@@ -247,13 +249,13 @@ class Viewer:
         P = np.atleast_2d(np.asarray(points, float))
         self.vis[layer][name].set_object(
             mg.Line(mg.PointsGeometry(P.T), mg.LineBasicMaterial(color=color, linewidth=2)))
-        self._add_legend(layer, color, "TCP path" + ("" if layer in LAYERS else f" ({name})"))
+        self._add_legend(layer, color, "" if layer in LAYERS else f"TCP path ({name})")
 
     def _add_legend(self, layer: str, color: int, text: str) -> None:
         meaning = LAYERS[layer][1] if layer in LAYERS else None
         if layer in self.legend and meaning is None:
             text = f"{self.legend[layer][1]}; {text}"
-        self.legend[layer] = (color, text if meaning is None else f"{meaning} ({text})")
+        self.legend[layer] = (color, text if meaning is None else f"{meaning} ({text})" if text else meaning)
         self.show_legend()
 
     def show_legend(self) -> None:

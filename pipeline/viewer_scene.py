@@ -19,16 +19,17 @@ from matplotlib.figure import Figure
 
 #: named layers (meshcat scene tree paths, each toggled in the page's Controls panel): colour, meaning
 LAYERS: dict[str, tuple[int, str]] = {
-    "candidates": (0x9E9E9E, "candidate configurations of the calibration design"),
-    "chosen poses": (0xE6550D, "configurations the calibration chose and measured"),
-    "held-out poses": (0x31A354, "held-out poses of the calibration's validation"),
-    "ISO path": (0x3182BD, "EN ISO 9283 test path of the control stage"),
-    "CP path": (0x756BB1, "continuous-path trajectory"),
-    "PtP path": (0xD62728, "point-to-point move"),
-    "excitation path": (0x8C564B, "excitation trajectory of the identification"),
+    "candidates": (0x9E9E9E, "calibration candidates"),
+    "chosen poses": (0xE6550D, "measured by the calibration"),
+    "not visible poses": (0x252525, "chosen, not seen by the tracker"),
+    "held-out poses": (0x31A354, "calibration validation"),
+    "ISO path": (0x3182BD, "EN ISO 9283 path (control)"),
+    "CP path": (0x756BB1, "continuous path (trajectory)"),
+    "PtP path": (0xD62728, "point-to-point move (trajectory)"),
+    "excitation path": (0x8C564B, "identification excitation"),
 }
 COLOUR_NAMES = {0xE6550D: "orange", 0x3182BD: "blue", 0x31A354: "green", 0x756BB1: "purple", 0xD62728: "red",
-                0x8C564B: "brown", 0x9E9E9E: "grey", 0xD9D9D9: "light grey"}
+                0x8C564B: "brown", 0x9E9E9E: "grey", 0xD9D9D9: "light grey", 0x252525: "black"}
 #: meshcat's default camera: vertical field of view (three.js PerspectiveCamera(75, ...))
 CAMERA_FOV_DEG = 75.0
 #: direction from the target to the camera: a three-quarter view from the front left, slightly above
@@ -37,7 +38,7 @@ VIEW_DIRECTION = np.array([0.75, -1.0, 0.55])
 HALF_VIEW_TAN = float(np.tan(np.radians(CAMERA_FOV_DEG) / 2))
 #: the legend picture: distance in front of the camera, height of one line as a share of the view's
 LEGEND_DISTANCE_M = 0.5
-LEGEND_LINE_SHARE = 0.035
+LEGEND_LINE_SHARE = 0.03
 #: camera distance as a share of the one at which the reachable box's bounding sphere spans the view
 FRAME_SHARE = 0.8
 #: random configurations whose joint and frame origins give the arm's reachable box
@@ -83,7 +84,8 @@ def layer_of(key: str, trajectory: bool) -> str:
             if name.startswith(prefix):
                 return layer
         return "paths"
-    return {"selected": "chosen poses", "heldout": "held-out poses", "candidates": "candidates"}.get(name, "poses")
+    return {"selected": "chosen poses", "heldout": "held-out poses", "candidates": "candidates",
+            "not_visible": "not visible poses"}.get(name, "poses")
 
 
 def translation(p: Any) -> np.ndarray:
@@ -101,7 +103,7 @@ def legend_png(legend: dict[str, tuple[int, str]]) -> tuple[bytes, float]:
     its width / height."""
     lines = max(len(legend), 1)
     longest = max((len(layer) + len(text) for layer, (_, text) in legend.items()), default=10)
-    width_in, height_in = 0.05 * (longest + 6), 0.22 * (lines + 0.6)
+    width_in, height_in = 0.06 * (longest + 8), 0.22 * (lines + 0.6)
     fig = Figure(figsize=(width_in, height_in), dpi=150)
     fig.patch.set_facecolor((1.0, 1.0, 1.0, 0.75))
     FigureCanvasAgg(fig)

@@ -208,8 +208,7 @@ def test_layers_are_named_and_explained(rx130l):
         vis.window.server_proc.kill()
         vis.window.server_proc.wait(timeout=10)
     lines = text.splitlines()
-    assert any(line.startswith("  candidates: grey, candidate configurations") and "2 TCP points" in line
-               for line in lines)
+    assert any(line.startswith("  candidates: grey, calibration candidates (2 points)") for line in lines)
     assert any(line.startswith("  PtP path: red, point-to-point move") for line in lines)
     assert "PtP path" in cell.data and "<iframe" in cell.data
 
