@@ -241,7 +241,7 @@ class Viewer:
         rgb = np.array([(color >> 16) & 255, (color >> 8) & 255, color & 255], float) / 255.0
         colors = np.tile(rgb[:, None], (1, len(P)))
         self.vis[layer][name].set_object(mg.PointCloud(P.T, colors, size=size_m))
-        self._add_legend(layer, color, f"{len(P)} points" + ("" if layer in LAYERS else f" ({name})"))
+        self.add_legend(layer, color, f"{len(P)} points" + ("" if layer in LAYERS else f" ({name})"))
 
     def show_path(self, points: np.ndarray, name: str, color: int = 0x3182BD, layer: str = "paths") -> None:
         """Draw ``(N, 3)`` points as a polyline under ``<layer>/<name>``."""
@@ -249,9 +249,10 @@ class Viewer:
         P = np.atleast_2d(np.asarray(points, float))
         self.vis[layer][name].set_object(
             mg.Line(mg.PointsGeometry(P.T), mg.LineBasicMaterial(color=color, linewidth=2)))
-        self._add_legend(layer, color, "" if layer in LAYERS else f"TCP path ({name})")
+        self.add_legend(layer, color, "" if layer in LAYERS else f"TCP path ({name})")
 
-    def _add_legend(self, layer: str, color: int, text: str) -> None:
+    def add_legend(self, layer: str, color: int, text: str) -> None:
+        """Name what layer ``layer`` shows in the legend (a named layer keeps its own meaning first)."""
         meaning = LAYERS[layer][1] if layer in LAYERS else None
         if layer in self.legend and meaning is None:
             text = f"{self.legend[layer][1]}; {text}"
@@ -272,12 +273,14 @@ class Viewer:
         node.set_transform(translation([-0.97 * edge + width / 2, 0.97 * edge - height / 2, -LEGEND_DISTANCE_M]))
 
     def show_configurations(self, Q: np.ndarray, name: str = "configurations", *, frame: str = "tcp",
-                            seconds_each: float = 1.0, color: int = 0xE6550D, animate: bool = True) -> Any:
+                            seconds_each: float = 1.0, color: int = 0xE6550D, animate: bool = True,
+                            layer: str = "points") -> Any:
         """Show a configuration set: its TCP points, the robot at ``Q[0]``, and (``animate``)
         an animation that moves through the set, ``seconds_each`` per configuration (queued
         after earlier clips; :meth:`clear_animation` starts afresh). Returns the Animation."""
         Q = self._check_q(Q, name)
-        self.show_points(self._tcp_points(Q, frame if self.model.existFrame(frame) else "flange"), name, color)
+        self.show_points(self._tcp_points(Q, frame if self.model.existFrame(frame) else "flange"), name, color,
+                         layer=layer)
         self.show(Q[0])
         t = np.arange(len(Q), dtype=float) * seconds_each
         if animate:

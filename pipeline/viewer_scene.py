@@ -29,7 +29,7 @@ LAYERS: dict[str, tuple[int, str]] = {
     "excitation path": (0x8C564B, "identification excitation"),
 }
 COLOUR_NAMES = {0xE6550D: "orange", 0x3182BD: "blue", 0x31A354: "green", 0x756BB1: "purple", 0xD62728: "red",
-                0x8C564B: "brown", 0x9E9E9E: "grey", 0xD9D9D9: "light grey", 0x252525: "black"}
+                0x8C564B: "brown", 0x9E9E9E: "grey", 0xD9D9D9: "light grey", 0x252525: "black", 0x444444: "dark grey"}
 #: meshcat's default camera: vertical field of view (three.js PerspectiveCamera(75, ...))
 CAMERA_FOV_DEG = 75.0
 #: direction from the target to the camera: a three-quarter view from the front left, slightly above
