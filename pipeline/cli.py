@@ -1,8 +1,9 @@
 """Command line: ``python -m pipeline run | check | view | study | sweep | robot init``.
 
 * ``run [--config FILE] [--set key=value ...] [--stages a,b] [--out DIR] [--force] [--accept-poor]``
-* ``check`` (same options as ``run``): validate what ``run`` would validate, write nothing, and
-  print which stages would run or be reused, and the robot's plausibility warnings
+* ``check`` (same options as ``run``): validate what ``run`` would validate, try a quick sample of
+  each stage's poses (:mod:`pipeline.preflight`), write nothing, and print which stages would run
+  or be reused, and the robot's plausibility warnings
 * ``view [RUN_DIR] [--robot NAME] [--configurations NAME] [--trajectory NAME] [--open]``
 * ``study [NAME [ARGS...]]`` (no name: list the registered studies)
 * ``robot init ARM.urdf [--base LINK] [--tip LINK] [--out FILE]``: a commented robot.yaml
@@ -30,6 +31,7 @@ from pipeline.config import load_config
 from pipeline.errors import PipelineError, QualityGateError
 from pipeline.headline import print_headline, read_headline
 from pipeline.interrupts import handle_termination
+from pipeline.preflight import preflight
 from pipeline.robot.plausibility import robot_warnings
 from pipeline.robot.yaml_init import write_robot_yaml
 from pipeline.run_check import check_run
@@ -70,8 +72,9 @@ def _parser() -> argparse.ArgumentParser:
     c = sub.add_parser("check", help="validate config, robot and data files; write nothing",
                        epilog=stages_robots, description=(
                            "Validate exactly what `run` validates before writing (configuration, robot, "
-                           "the data files of every stage that would run) and print which stages would "
-                           "run or be reused. Writes nothing."))
+                           "the data files of every stage that would run), try a quick sample of poses for "
+                           "each such stage (reflector visible, ISO cube, moves, IK seeds) and print which "
+                           "stages would run or be reused. Writes nothing."))
     _add_run_options(c)
 
     v = sub.add_parser("view", help="show the robot, saved configurations and trajectories in meshcat")
@@ -115,6 +118,12 @@ def _cmd_check(ns: argparse.Namespace) -> int:
     cfg = load_config(ns.config, ns.overrides, ns.stages)
     cfg.accept_poor = ns.accept_poor
     prep = check_run(cfg, out_root=ns.out, force=ns.force)
+    problems = 0
+    for exc in preflight(prep):
+        print("error: " + " ".join(exc.one_line().split()), file=sys.stderr, flush=True)
+        problems += 1
+    if problems:
+        return EXIT_BAD_INPUT
     print(f"ok: {cfg.source}, robot {cfg.robot}, run directory {prep.run_dir}")
     for plan in prep.plans:
         reason = prep.reasons[plan.name]

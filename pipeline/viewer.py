@@ -22,6 +22,7 @@ The visual model comes from the URDF's ``<visual>`` primitives, attached to the 
 
 from __future__ import annotations
 
+import html
 import re
 import signal
 import sys
@@ -44,13 +45,23 @@ from pipeline.errors import PipelineError
 from pipeline.robot.model import RobotModel
 from pipeline.robot.urdf_import import package_dirs
 from pipeline.stage_io import MANIFEST, RESULTS_NPZ, load_run
+from pipeline.viewer_scene import (
+    HALF_VIEW_TAN,
+    LAYERS,
+    LEGEND_DISTANCE_M,
+    LEGEND_LINE_SHARE,
+    camera_view,
+    colour_name,
+    layer_of,
+    legend_png,
+    translation,
+    workspace_box,
+)
 from pipeline.yaml12 import load_yaml
 
 TRAJECTORY_RE = re.compile(r"^trajectory_(?P<name>.+)_t$")
 CONFIGURATIONS_PREFIX = "configurations_"
 COLORS = (0xE6550D, 0x3182BD, 0x31A354, 0x756BB1, 0xD62728, 0x8C564B)
-
-
 def capsule_geometry(robot: Any) -> pin.GeometryModel:
     """The robot's collision capsules as a Pinocchio geometry model (drawn when meshes are missing)."""
     geometry = pin.GeometryModel()
@@ -122,12 +133,18 @@ class Viewer:
                   "capsules", file=sys.stderr)
         self.viz = MeshcatVisualizer(self.model, geometry, geometry)
         self.viz.initViewer(viewer=viewer, open=open_browser)
+        spec = getattr(robot, "spec", None)
+        self.floor_z_m = float(spec.collision.floor_z_m) if spec is not None else 0.0
+        self.legend: dict[str, tuple[int, str]] = {}                     # layer -> (colour, meaning)
+        self.workspace_box_m = workspace_box(self.model, self.floor_z_m)
+        # camera and floor first: a large mesh scene sent before them can delay them in the browser
+        self.set_camera()
+        self.draw_floor()
         self.root = root or str(getattr(robot, "name", "robot"))
         self.viz.loadViewerModel(rootNodeName=self.root)
         self._data = self.model.createData()
         self._clips: list[tuple[str, np.ndarray, np.ndarray]] = []     # (name, t, q) queued for animate()
         self.show(np.zeros(self.model.nq))
-        self.set_camera()
 
     # ------------------------------------------------------------------------ basics
     @property
@@ -135,21 +152,53 @@ class Viewer:
         return self.vis.url()
 
     def jupyter_cell(self, height: int = 400) -> Any:
-        return self.vis.jupyter_cell(height=height)
+        """The viewer in a notebook cell, with the legend of its layers above it."""
+        cell = self.vis.jupyter_cell(height=height)
+        items = "".join(f'<span style="margin-right:1em"><span style="color:#{color:06x}">&#9632;</span> '
+                        f"<b>{html.escape(layer)}</b>: {html.escape(text)}</span>"
+                        for layer, (color, text) in self.legend.items())
+        return type(cell)(f'<div style="font-size:small">{items}</div>' + cell.data)
 
-    def set_camera(self, position_m: np.ndarray | None = None) -> None:
-        """Put the camera at ``position_m`` (world frame, z up); it looks at the origin
-        (meshcat's orbit target). Default: a three-quarter view from the front left, at a
-        distance that scales with the robot's height at q = 0."""
-        if position_m is None:
-            data = self.model.createData()
-            pin.framesForwardKinematics(self.model, data, np.zeros(self.model.nq))
-            height = max(0.3, float(max(f.translation[2] for f in data.oMf)))
-            position_m = height * np.array([0.75, -1.0, 0.55])
-        p = np.asarray(position_m, float)
-        # meshcat's camera lives in a y-up frame: (x, y, z)_world -> (x, z, -y)
-        self.vis["/Cameras/default/rotated/<object>"].set_property(
-            "position", [float(p[0]), float(p[2]), float(-p[1])])
+    def legend_text(self) -> str:
+        """The layers drawn (meshcat scene tree paths, toggled in the page's Controls panel) and what
+        each shows, one per line."""
+        return "\n".join(f"  {layer}: {colour_name(color)}, {text}" for layer, (color, text) in self.legend.items())
+
+    def set_camera(self, position_m: np.ndarray | None = None, target_m: np.ndarray | None = None) -> None:
+        """Put the camera at ``position_m`` looking at ``target_m`` (world frame, z up; the page's
+        orbit controls turn about the target). Default: :func:`camera_view`, the arm's reachable
+        region framed."""
+        if position_m is None or target_m is None:
+            target, position = camera_view(self.model, self.floor_z_m)
+            position_m = position if position_m is None else position_m
+            target_m = target if target_m is None else target_m
+        p, t = np.asarray(position_m, float), np.asarray(target_m, float)
+        # meshcat's orbit controls always look at the page's origin: the scene (this viewer's
+        # path, meshcat's grid and axes) is shifted by -target instead. The server replays its tree
+        # to a new page in the order the paths were created: camera and grid before the meshes.
+        self.target_m = t
+        d = p - t       # the camera lives in a y-up frame: (x, y, z)_world -> (x, z, -y)
+        self.vis["/Cameras/default/rotated/<object>"].set_property("position", [float(d[0]), float(d[2]), float(-d[1])])
+        self.vis["/Grid"].set_property("visible", False)        # fixed at z = 0: draw_floor draws its own
+        self.vis["/Axes"].set_transform(translation(-t))
+        self.vis.set_transform(translation(-t))
+
+    def draw_floor(self) -> None:
+        """The floor at ``collision.floor_z_m`` under the arm's reach: a pale plate with a grid of
+        round spacing (layer ``floor``)."""
+        half = 1.2 * float(np.max(np.abs(self.workspace_box_m[:, :2])))
+        step = next(s for s in (0.1, 0.25, 0.5, 1.0, 2.0, 5.0) if half / s <= 12)
+        z = self.floor_z_m
+        self.vis["floor"]["plate"].set_object(mg.Box([2 * half, 2 * half, 0.002]),
+                                              mg.MeshLambertMaterial(color=0xD9D9D9, opacity=0.5, transparent=True))
+        self.vis["floor"]["plate"].set_transform(translation([0.0, 0.0, z - 0.002]))
+        ticks = np.arange(-np.floor(half / step), np.floor(half / step) + 1) * step
+        ends = [[(x, -half, z), (x, half, z), (-half, x, z), (half, x, z)] for x in ticks]
+        lines = np.array(ends, float).reshape(-1, 3)
+        self.vis["floor"]["grid"].set_object(mg.LineSegments(mg.PointsGeometry(lines.T),
+                                                             mg.LineBasicMaterial(color=0x808080)))
+        self.legend["floor"] = (0xD9D9D9, f"floor at z = {z:g} m (collision.floor_z_m), grid {step:g} m")
+        self.show_legend()
 
     def show(self, q: np.ndarray) -> None:
         """Place the robot at configuration ``q``."""
@@ -179,28 +228,59 @@ class Viewer:
             out.append(self._data.oMf[fid].translation.copy())
         return np.array(out)
 
-    def show_points(self, points: np.ndarray, name: str, color: int = 0xE6550D, size_m: float = 0.02) -> None:
-        """Draw ``(N, 3)`` points as a point cloud under ``points/<name>``."""
+    def show_points(self, points: np.ndarray, name: str, color: int = 0xE6550D, size_m: float | None = None,
+                    layer: str = "points") -> None:
+        """Draw ``(N, 3)`` points as a point cloud under ``<layer>/<name>`` (``size_m`` None: 1 % of
+        the diagonal of the arm's reachable box for up to 100 points, smaller as 1 / sqrt(N) for more,
+        at least 0.3 %)."""
 
         P = np.atleast_2d(np.asarray(points, float))
+        if size_m is None:
+            diagonal = float(np.linalg.norm(np.ptp(self.workspace_box_m, axis=0)))
+            size_m = diagonal * max(0.003, 0.01 * min(1.0, float(np.sqrt(100.0 / len(P)))))
         rgb = np.array([(color >> 16) & 255, (color >> 8) & 255, color & 255], float) / 255.0
         colors = np.tile(rgb[:, None], (1, len(P)))
-        self.vis["points"][name].set_object(mg.PointCloud(P.T, colors, size=size_m))
+        self.vis[layer][name].set_object(mg.PointCloud(P.T, colors, size=size_m))
+        self.add_legend(layer, color, f"{len(P)} points" + ("" if layer in LAYERS else f" ({name})"))
 
-    def show_path(self, points: np.ndarray, name: str, color: int = 0x3182BD) -> None:
-        """Draw ``(N, 3)`` points as a polyline under ``paths/<name>``."""
+    def show_path(self, points: np.ndarray, name: str, color: int = 0x3182BD, layer: str = "paths") -> None:
+        """Draw ``(N, 3)`` points as a polyline under ``<layer>/<name>``."""
 
         P = np.atleast_2d(np.asarray(points, float))
-        self.vis["paths"][name].set_object(
+        self.vis[layer][name].set_object(
             mg.Line(mg.PointsGeometry(P.T), mg.LineBasicMaterial(color=color, linewidth=2)))
+        self.add_legend(layer, color, "" if layer in LAYERS else f"TCP path ({name})")
+
+    def add_legend(self, layer: str, color: int, text: str) -> None:
+        """Name what layer ``layer`` shows in the legend (a named layer keeps its own meaning first)."""
+        meaning = LAYERS[layer][1] if layer in LAYERS else None
+        if layer in self.legend and meaning is None:
+            text = f"{self.legend[layer][1]}; {text}"
+        self.legend[layer] = (color, text if meaning is None else f"{meaning} ({text})" if text else meaning)
+        self.show_legend()
+
+    def show_legend(self) -> None:
+        """The legend as a picture fixed in the top left corner of the view (a child of the camera,
+        ``LEGEND_DISTANCE_M`` in front of it, so it stays in place while the view turns)."""
+        png, aspect = legend_png(self.legend)
+        height = LEGEND_LINE_SHARE * (len(self.legend) + 0.6) * 2 * HALF_VIEW_TAN * LEGEND_DISTANCE_M
+        width = aspect * height
+        edge = HALF_VIEW_TAN * LEGEND_DISTANCE_M        # top and (aspect >= 1) left edge of the view
+        node = self.vis["/Cameras/default/rotated/<object>/legend"]
+        node.set_object(mg.Box([width, height, 1e-4]),
+                        mg.MeshBasicMaterial(map=mg.ImageTexture(mg.PngImage(png)), transparent=True,
+                                             depthTest=False, side=0))     # front face only
+        node.set_transform(translation([-0.97 * edge + width / 2, 0.97 * edge - height / 2, -LEGEND_DISTANCE_M]))
 
     def show_configurations(self, Q: np.ndarray, name: str = "configurations", *, frame: str = "tcp",
-                            seconds_each: float = 1.0, color: int = 0xE6550D, animate: bool = True) -> Any:
+                            seconds_each: float = 1.0, color: int = 0xE6550D, animate: bool = True,
+                            layer: str = "points") -> Any:
         """Show a configuration set: its TCP points, the robot at ``Q[0]``, and (``animate``)
         an animation that moves through the set, ``seconds_each`` per configuration (queued
         after earlier clips; :meth:`clear_animation` starts afresh). Returns the Animation."""
         Q = self._check_q(Q, name)
-        self.show_points(self._tcp_points(Q, frame if self.model.existFrame(frame) else "flange"), name, color)
+        self.show_points(self._tcp_points(Q, frame if self.model.existFrame(frame) else "flange"), name, color,
+                         layer=layer)
         self.show(Q[0])
         t = np.arange(len(Q), dtype=float) * seconds_each
         if animate:
@@ -368,17 +448,23 @@ def view_run(run_dir: str | Path | None = None, *, robot: str | None = None, con
     viewer = Viewer(model, open_browser=open_browser)
     for k, (name, Q) in enumerate(sets.items()):
         if Q.ndim == 2 and Q.shape[1] == model.nq:
-            viewer._clips.append((name, np.arange(len(Q), dtype=float), Q))
-            viewer.show_points(viewer._tcp_points(Q, "tcp"), name, COLORS[k % len(COLORS)])
+            layer = layer_of(name, trajectory=False)
+            color = LAYERS[layer][0] if layer in LAYERS else COLORS[k % len(COLORS)]
+            if layer not in ("candidates", "held-out poses"):     # many poses: points only, no clip
+                viewer._clips.append((name, np.arange(len(Q), dtype=float), Q))
+            viewer.show_points(viewer._tcp_points(Q, "tcp"), name, color, layer=layer)
     for k, (name, (t, q)) in enumerate(trajs.items()):
         if q.ndim == 2 and q.shape[1] == model.nq and len(t) == len(q):
+            layer = layer_of(name, trajectory=True)
+            color = LAYERS[layer][0] if layer in LAYERS else COLORS[(k + 3) % len(COLORS)]
             viewer._clips.append((name, np.asarray(t, float), q))
-            viewer.show_path(viewer._tcp_points(q[:: max(1, len(q) // 500)], "tcp"), name,
-                             COLORS[(k + 3) % len(COLORS)])
+            viewer.show_path(viewer._tcp_points(q[:: max(1, len(q) // 500)], "tcp"), name, color, layer=layer)
     viewer.animate()
     what = ", ".join([*(f"configurations {n}" for n in sets), *(f"trajectory {n}" for n in trajs)])
     print(f"robot {model.name} from {path or 'robots/'}; showing: {what or 'the robot only'}", file=sys.stderr)
     print(f"open {viewer.url}", flush=True)
+    print("layers (scene tree of the page's Controls panel, each can be hidden):\n" + viewer.legend_text(),
+          flush=True)
     if wait:
         print("press Ctrl-C to stop the viewer", file=sys.stderr)
 

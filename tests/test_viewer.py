@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 
 from pipeline.config import load_config
+from pipeline.robot.example_robots import example_arm_urdf
+from pipeline.robot.model import RobotModel
 from pipeline.runner import run_pipeline
 from pipeline.viewer import Viewer, find_saved_motions
 
@@ -104,6 +106,7 @@ def test_view_command_on_a_run(fake_stages, tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert "http://127.0.0.1:" in proc.stdout
     assert "configurations a/test" in proc.stderr and "trajectory c/move" in proc.stderr
+    assert "layers (" in proc.stdout and "  floor: " in proc.stdout
     bad = subprocess.run([sys.executable, "-m", "pipeline", "view", str(tmp_path / "nope")],
                          capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2 and "run directory not found" in bad.stderr and "Traceback" not in bad.stderr
@@ -124,3 +127,102 @@ def test_view_refuses_a_folder_that_is_not_a_run(tmp_path, capsys):
     (folder / "model" / "manifest.json").unlink()
     (folder / "config.yaml").write_text("name: x\n")
     assert is_run_dir(folder)
+
+
+def robot_box(with_robot: np.ndarray, without_robot: np.ndarray, threshold: float = 0.1) -> tuple[float, ...]:
+    """Bounding box (top, bottom, left, right) of the pixels the robot changes, as shares of the
+    picture's height and width."""
+    rows, cols = np.nonzero(np.abs(with_robot - without_robot).max(axis=-1) > threshold)
+    assert rows.size > 100, "the robot changed almost no pixel"
+    h, w = with_robot.shape[:2]
+    return rows.min() / h, (rows.max() + 1) / h, cols.min() / w, (cols.max() + 1) / w
+
+
+def framed_screenshots(robot, q: np.ndarray, tmp_path: Path) -> tuple[np.ndarray, np.ndarray, Viewer]:
+    """Screenshots of the viewer with ``robot`` at ``q`` and with the robot hidden (up to three
+    tries while a heavy mesh scene has not reached the browser)."""
+    import meshcat
+
+    vis = meshcat.Visualizer()
+    try:
+        viewer = Viewer(robot, viewer=vis)
+        viewer.show(q)
+        for attempt in range(3):
+            with_robot = screenshot(vis.url(), tmp_path / f"robot{attempt}.png", tmp_path)
+            vis[viewer.root].set_property("visible", False)
+            without = screenshot(vis.url(), tmp_path / f"hidden{attempt}.png", tmp_path)
+            vis[viewer.root].set_property("visible", True)
+            if changed_fraction(with_robot, without) > 0.005:
+                break
+    finally:
+        vis.window.server_proc.kill()
+        vis.window.server_proc.wait(timeout=10)
+    return with_robot, without, viewer
+
+
+#: the framed arm spans this share of the picture's height, and stays this far inside its edges
+FRAMED_HEIGHT_SHARE = (0.2, 0.9)
+EDGE_SHARE = 0.01
+
+
+def assert_framed(with_robot: np.ndarray, without: np.ndarray) -> None:
+    top, bottom, left, right = robot_box(with_robot, without)
+    assert FRAMED_HEIGHT_SHARE[0] <= bottom - top <= FRAMED_HEIGHT_SHARE[1], (top, bottom)
+    assert top > EDGE_SHARE and bottom < 1 - EDGE_SHARE and left > EDGE_SHARE and right < 1 - EDGE_SHARE, \
+        (top, bottom, left, right)
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="chromium not installed (make test installs it via apt)")
+def test_primitive_arm_is_framed_with_its_floor(rx130l, tmp_path):
+    from pipeline.robot.defaults import ready_pose_rad
+
+    with_robot, without, viewer = framed_screenshots(rx130l, ready_pose_rad(rx130l), tmp_path)
+    assert viewer.drawn_as == "meshes"            # the URDF's own primitives (cylinders, boxes)
+    assert_framed(with_robot, without)
+    assert "floor" in viewer.legend and "collision.floor_z_m" in viewer.legend_text()
+    # the legend picture in the top left corner: pale, with dark text
+    h, w = with_robot.shape[:2]
+    corner = with_robot[int(0.02 * h):int(0.08 * h), int(0.15 * w):int(0.45 * w)]
+    assert corner.mean() > 0.75 and (corner.max(axis=-1) < 0.5).mean() > 0.003
+
+
+def test_layers_are_named_and_explained(rx130l):
+    import meshcat
+
+    from pipeline.viewer import LAYERS, layer_of
+
+    assert layer_of("calibration/selected", False) == "chosen poses"
+    assert layer_of("calibration/heldout", False) == "held-out poses"
+    assert layer_of("calibration/candidates", False) == "candidates"
+    assert layer_of("control/iso_desired", True) == "ISO path"
+    assert layer_of("trajectory/cp_smooth", True) == "CP path" and layer_of("trajectory/ptp", True) == "PtP path"
+    vis = meshcat.Visualizer()
+    try:
+        v = Viewer(rx130l, viewer=vis)
+        Q = np.deg2rad([[0, 0, 0, 0, 0, 0], [30, 20, 40, 0, 30, 0]])
+        v.show_points(v._tcp_points(Q, "tcp"), "calibration/candidates", LAYERS["candidates"][0], layer="candidates")
+        v.show_path(v._tcp_points(Q, "tcp"), "trajectory/ptp", LAYERS["PtP path"][0], layer="PtP path")
+        text = v.legend_text()
+        cell = v.jupyter_cell()
+    finally:
+        vis.window.server_proc.kill()
+        vis.window.server_proc.wait(timeout=10)
+    lines = text.splitlines()
+    assert any(line.startswith("  candidates: grey, calibration candidates (2 points)") for line in lines)
+    assert any(line.startswith("  PtP path: red, point-to-point move") for line in lines)
+    assert "PtP path" in cell.data and "<iframe" in cell.data
+
+
+def test_camera_frames_the_reach_of_small_and_large_arms(rx130l):
+    from pipeline.viewer import camera_view, workspace_box
+
+    small = RobotModel.load(example_arm_urdf("ur_description/urdf/ur3_robot.urdf") or pytest.skip("no example arms"))
+    for robot in (rx130l, small):
+        box = workspace_box(robot.model, robot.spec.collision.floor_z_m)
+        target, position = camera_view(robot.model, robot.spec.collision.floor_z_m)
+        assert np.all(box[0] <= target) and np.all(target <= box[1])
+        assert box[0, 2] >= robot.spec.collision.floor_z_m
+        size = np.linalg.norm(box[1] - box[0])
+        # the camera stands outside the box, at a distance that scales with the arm
+        assert np.any(position < box[0]) or np.any(position > box[1])
+        assert 0.5 * size < np.linalg.norm(position - target) < 2.0 * size

@@ -200,22 +200,38 @@ def _collision_ok(chain: Chain, seg: np.ndarray, margins: FilterMargins, pairs: 
     return ok
 
 
-def _visibility_ok(chain: Chain, kin: Kinematics, seg: np.ndarray, margins: FilterMargins) -> np.ndarray:
+def incidence_ok(chain: Chain, kin: Kinematics, margins: FilterMargins) -> np.ndarray:
+    """Incidence angle between the reflector axis and the beam ``<= max_incidence - margin``."""
     beam = chain.tracker_t[None] - kin.p_reflector
     dist = np.linalg.norm(beam, axis=1)
     cosang = np.einsum("ni,ni->n", kin.reflector_axis, beam) / np.maximum(dist, 1e-12)
-    ok = cosang >= np.cos(max(chain.max_incidence_rad - margins.incidence_rad, 0.0))
+    return cosang >= np.cos(max(chain.max_incidence_rad - margins.incidence_rad, 0.0))
+
+
+def beam_blockers(chain: Chain, kin: Kinematics, seg: np.ndarray, margins: FilterMargins,
+                  idx: np.ndarray) -> np.ndarray:
+    """(len(idx), nc) mask: capsule c blocks the beam of configuration ``idx[k]``.
+
+    Like the sensor: the beam from the tracker to a point ``BEAM_END_CLEARANCE_M`` before the
+    reflector, clear of each capsule by ``margins.beam_m`` (no margin for the reflector's own link:
+    rigid, known geometry)."""
+    beam = chain.tracker_t[None] - kin.p_reflector[idx]
+    dist = np.linalg.norm(beam, axis=1)
+    p0 = kin.p_reflector[idx] + BEAM_END_CLEARANCE_M * (beam / np.maximum(dist, 1e-12)[:, None])
+    p1 = np.broadcast_to(chain.tracker_t, p0.shape)
+    out = np.zeros((len(idx), seg.shape[1]), bool)
+    for c in range(seg.shape[1]):
+        d = segment_distances(p0, p1, seg[idx, c, 0], seg[idx, c, 1])
+        margin = 0.0 if chain.capsule_joint[c] == chain.nq else margins.beam_m
+        out[:, c] = d - chain.capsule_r[c] < margin
+    return out
+
+
+def _visibility_ok(chain: Chain, kin: Kinematics, seg: np.ndarray, margins: FilterMargins) -> np.ndarray:
+    ok = incidence_ok(chain, kin, margins)
     idx = np.flatnonzero(ok)
     if idx.size:
-        # like the sensor: the beam from the tracker to a point BEAM_END_CLEARANCE_M before the reflector
-        p0 = kin.p_reflector[idx] + BEAM_END_CLEARANCE_M * (beam[idx] / dist[idx, None])
-        p1 = np.broadcast_to(chain.tracker_t, p0.shape)
-        for c in range(seg.shape[1]):
-            d = segment_distances(p0, p1, seg[idx, c, 0], seg[idx, c, 1])
-            # the reflector's own link: rigid, known geometry, so no margin
-            margin = 0.0 if chain.capsule_joint[c] == chain.nq else margins.beam_m
-            bad = d - chain.capsule_r[c] < margin
-            ok[idx[bad]] = False
+        ok[idx[beam_blockers(chain, kin, seg, margins, idx).any(axis=1)]] = False
     return ok
 
 

@@ -33,6 +33,7 @@ from pipeline.calibration import design as ds
 from pipeline.calibration import design_rounding as dr
 from pipeline.calibration import design_table as dtab
 from pipeline.calibration import error_model as em
+from pipeline.calibration import feasibility as fz
 from pipeline.calibration import grid_cache, plots, subsets
 from pipeline.calibration import indices as ix
 from pipeline.calibration import measure as ms
@@ -75,6 +76,8 @@ DEPENDS: tuple[str, ...] = ("model",)
 CONFIG_READS: tuple[str, ...] = ("control.iso",)
 #: fields naming files or folders: the inputs hash covers their content, not their path
 FILE_INPUTS: tuple[str, ...] = ("gravity_model", "measurements_csv", "validation_csv", "working_csv")
+#: at most about this many candidates are saved for the viewer (every k-th)
+VIEWER_CANDIDATES = 2000
 
 def identify_parameter_set(robot, mm: em.MeasurementModel, cfg: Config, rng: np.random.Generator
                            ) -> tuple[em.IdentifiabilityReport, np.ndarray]:
@@ -116,6 +119,10 @@ def build_candidates(robot, cfg: Config, basis: np.ndarray, rng: np.random.Gener
     chain = cd.chain_from_robot(robot)
     margins = cd.FilterMargins(cfg.margin_collision_m, math.radians(cfg.margin_incidence_deg), cfg.margin_beam_m)
     grid_index = None
+    # a first 1 % of random configurations: none feasible -> stop with the cause, not after minutes
+    first = fz.probe(chain, margins, [c.name for c in robot.capsules])
+    if first.n_feasible == 0:
+        raise fz.infeasible_error(first, robot.spec.path)
     if cfg.candidates == "grid":
         per_axis = cfg.grid_points_per_axis(robot.nq)
         with task(f"calibration: filtering the {per_axis}^{robot.nq} grid") as bar:
@@ -298,6 +305,8 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress, reg
         held = heldout_measurements(robot, real, est, cfg, rng)
     validation = (va.validate(mm, est, held, cfg.outlier_confidence, gravity, cfg.orientation_sigma_rad)
                   if held is not None else None)
+    if held is not None:
+        notes["heldout_configurations"] = held.Q      # drawn by the viewer
     timings["validate_s"] = time.perf_counter() - t
     if spec is None:
         spec, Qw = index_spec(cfg, robot, mm, dbasis, rng, region)
@@ -434,6 +443,10 @@ def run(ctx) -> Any:
         arrays["heldout_errors_after_m"] = out.validation["errors_after_m"]
         arrays["heldout_predicted_std_m"] = out.validation["predicted_std_m"]
     arrays.update(out.notes.get("static_torques", {}))   # elastostatic model: for later gravity models
+    if out.notes.get("heldout_configurations") is not None:   # for the viewer's layers
+        arrays["configurations_heldout"] = out.notes["heldout_configurations"]
+    if out.candidates is not None and len(out.candidates):
+        arrays["configurations_candidates"] = out.candidates.Q[:: max(1, len(out.candidates) // VIEWER_CANDIDATES)]
     if out.selection is not None:
         arrays["index_history"] = np.array(out.selection.history, float).reshape(-1, 2)
 

@@ -10,6 +10,7 @@ import numpy as np
 import pinocchio as pin
 
 from pipeline.viewer import Viewer
+from pipeline.viewer_scene import LAYERS
 
 
 def show_calibration(robot, Q: np.ndarray, transform_tracker_to_base: pin.SE3 | None = None,
@@ -27,5 +28,8 @@ def show_calibration(robot, Q: np.ndarray, transform_tracker_to_base: pin.SE3 | 
     segs[:, 1::2] = P.T
     v.vis["beams"].set_object(g.LineSegments(g.PointsGeometry(segs),
                                              g.LineBasicMaterial(color=0xD62728, linewidth=1)))
-    v.show_configurations(Q, "calibration", frame=robot.frame_reflector, seconds_each=seconds_each)
+    v.add_legend("tracker", 0x444444, "the laser tracker (nominal pose)")
+    v.add_legend("beams", 0xD62728, "beams from the tracker to the reflector")
+    v.show_configurations(Q, "calibration", frame=robot.frame_reflector, seconds_each=seconds_each,
+                          layer="chosen poses", color=LAYERS["chosen poses"][0])
     return v

@@ -11,7 +11,7 @@ from pipeline.robot.defaults import ready_pose_rad
 from pipeline.robot.model import RobotModel
 from pipeline.viewer import Viewer, visual_model
 from tests.anyarm.test_urdf_only import _erd
-from tests.test_viewer import CHROMIUM, changed_fraction, screenshot
+from tests.test_viewer import CHROMIUM, assert_framed, changed_fraction, framed_screenshots, screenshot
 
 
 def _ur5_without_meshes(tmp_path):
@@ -57,3 +57,13 @@ def test_real_urdf_is_drawn(meshes, tmp_path):
         proc.wait(timeout=10)
     assert changed_fraction(empty, drawn) > 0.01
     assert np.isfinite(drawn).all()
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="chromium not installed (make test installs it via apt)")
+# the UR5's meshes are several MB (see test_real_urdf_is_drawn): that case runs with the slow tests
+@pytest.mark.parametrize("meshes", [pytest.param(True, marks=pytest.mark.slow), False])
+def test_urdf_arm_is_framed(meshes, tmp_path):
+    robot = RobotModel.load(_erd("ur_description/urdf/ur5_robot.urdf")) if meshes else _ur5_without_meshes(tmp_path)
+    with_robot, without, viewer = framed_screenshots(robot, ready_pose_rad(robot), tmp_path)
+    assert viewer.drawn_as == ("meshes" if meshes else "capsules")
+    assert_framed(with_robot, without)
