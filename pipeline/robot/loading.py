@@ -232,7 +232,7 @@ def load_robot_files(robot: str | Path, yaml_path: str | Path | None = None, *, 
                            f"(±{CONTINUOUS_LIMIT_RAD:.4f} rad): {', '.join(turned)}")
     if locked:
         held = ", ".join(f"{n} at its neutral configuration" if v is None else
-                         f"{n} = {v:g}{' (given)' if n in (lock or {}) else ''}" for n, v in locked.items())
+                         f"{n} = {v:g}" for n, v in locked.items())
         assumptions.append(f"joints off the arm chain {base_link} -> {tip_link} locked (at 0 when the limits "
                            f"allow, else mid-range, unless given with --lock NAME=VALUE): {held}")
     if spec is None:

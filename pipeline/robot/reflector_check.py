@@ -32,16 +32,23 @@ def capsules_holding(model: pin.Model, flange_frame: str, offset_m: np.ndarray,
         return []
     data = model.createData()
     flange = model.getFrameId(flange_frame)
-    frames = [model.getFrameId(c.frame) for c in capsules]
-    lo, hi = model.lowerPositionLimit, model.upperPositionLimit
+    # a capsule's frame: a model frame, else a joint of that name (models built in code); else skipped
+    frames = [("f", model.getFrameId(c.frame)) if model.existFrame(c.frame) else
+              ("j", model.getJointId(c.frame)) if model.existJointName(c.frame) else None for c in capsules]
+    # unbounded joints (models built in code): one turn
+    lo, hi = np.maximum(model.lowerPositionLimit, -np.pi), np.minimum(model.upperPositionLimit, np.pi)
+    lo, hi = np.minimum(lo, hi), np.maximum(lo, hi)
     Q = np.random.default_rng(0).uniform(lo, hi, (SAMPLES, model.nq))
     depth = np.empty((SAMPLES, len(capsules)))
     for n, q in enumerate(Q):
         pin.framesForwardKinematics(model, data, q)
         point = data.oMf[flange].act(np.asarray(offset_m, float))
         for k, (capsule, frame) in enumerate(zip(capsules, frames, strict=True)):
-            a, b = data.oMf[frame].act(capsule.p0), data.oMf[frame].act(capsule.p1)
-            depth[n, k] = capsule.radius_m - _point_segment_m(point, a, b)
+            if frame is None:
+                depth[n, k] = -np.inf
+                continue
+            pose = data.oMf[frame[1]] if frame[0] == "f" else data.oMi[frame[1]]
+            depth[n, k] = capsule.radius_m - _point_segment_m(point, pose.act(capsule.p0), pose.act(capsule.p1))
     share = (depth > 0).mean(axis=0)
     return [(capsules[k].name, float(share[k]), float(depth[:, k].max()))
             for k in np.flatnonzero(share >= INSIDE_SHARE)]

@@ -112,8 +112,8 @@ def arm_chain(urdf: Path, root: ET.Element, *, base: str | None = None, tip: str
     Default tip: the child link of the deepest revolute joint not named as a gripper/finger/hand joint
     (the most such joints between it and the root), or a ``tool0``/``flange`` link fixed to it
     (:func:`flange_link`); an ambiguous choice (several such chains) asks for ``--tip``. Joints in
-    ``lock`` and prismatic/planar/floating joints on the path (a linear track under the arm) are not
-    part of the chain (they are locked, :func:`build_arm_model`).
+    ``lock`` and prismatic/planar/floating joints below the first revolute one (a linear track under
+    the arm) are not part of the chain (they are locked, :func:`build_arm_model`).
     """
     joints = root.findall("joint")
     parent_joint = {j.find("child").get("link"): j for j in joints}
@@ -156,8 +156,10 @@ def arm_chain(urdf: Path, root: ET.Element, *, base: str | None = None, tip: str
             raise RobotFileError(urdf, "base", f"link '{base}' is carried by movable joints {', '.join(moving)}; "
                                  "choose a base link fixed to the root")
         path = path[names.index(base):]
-    chain = [j.get("name") for j in path
-             if j.get("type") in ("revolute", "continuous") and j.get("name") not in (lock or {})]
+    moving = [j for j in path if j.get("type") != "fixed" and j.get("name") not in (lock or {})]
+    while moving and moving[0].get("type") not in ("revolute", "continuous"):
+        moving = moving[1:]            # a track or lift below the arm: locked; one inside the arm is refused
+    chain = [j.get("name") for j in moving]
     if not chain:
         raise RobotFileError(urdf, "joints", f"no movable joint between '{base or root_link}' and '{tip}'")
     return chain, base or root_link, tip
@@ -364,7 +366,7 @@ def reach_m(model: pin.Model, flange: str) -> float:
     data = model.createData()
     fid = model.getFrameId(flange)
     rng = np.random.default_rng(0)
-    lo, hi = model.lowerPositionLimit, model.upperPositionLimit
+    lo, hi = np.sort([model.lowerPositionLimit, model.upperPositionLimit], axis=0)   # swapped: refused later
     base = model.jointPlacements[1].translation
     reach = 0.0
     for q in rng.uniform(lo, hi, size=(300, model.nq)):

@@ -119,7 +119,8 @@ def repair_inertias(model: pin.Model, root: ET.Element) -> list[str]:
 
 def _random_gravity_max(model: pin.Model, samples: int = 200) -> np.ndarray:
     data = model.createData()
-    Q = np.random.default_rng(0).uniform(model.lowerPositionLimit, model.upperPositionLimit, (samples, model.nq))
+    lo, hi = np.sort([model.lowerPositionLimit, model.upperPositionLimit], axis=0)   # swapped: refused later
+    Q = np.random.default_rng(0).uniform(lo, hi, (samples, model.nq))
     return np.max([np.abs(pin.computeGeneralizedGravity(model, data, q)) for q in Q], axis=0)
 
 
