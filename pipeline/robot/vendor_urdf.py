@@ -15,10 +15,12 @@ like a catalogue arm of the same reach, and every placeholder is listed as an as
   length, within 2 cm and 0.12 reach, as the fallback capsules of :mod:`pipeline.robot.urdf_import`);
 * joint speeds as on those data sheets: axes 1-3 at ``ARM_SPEED_RAD_S * sqrt(1.6 m / reach)``
   (KR 16-2: 156 deg/s at 1.61 m; KR 210: 105 deg/s at 2.70 m), the wrist twice as fast;
-* joint torques ``EFFORT_GRAVITY_FACTOR`` times the largest gravity torque over random
-  configurations of the (placeholder) model, at least ``MIN_EFFORT_SHARE`` of the largest one (a
-  drive sized to hold the arm and accelerate it, as industrial axes are, e.g. Siciliano et al.,
-  Robotics, 2009, sec. 5.2 on actuator sizing).
+* joint torques sized to hold the arm and accelerate it, as industrial drives are (Siciliano et
+  al., Robotics, 2009, sec. 5.2 on actuator sizing): the larger of ``EFFORT_GRAVITY_FACTOR``
+  times the largest gravity torque and ``EFFORT_INERTIA_FACTOR`` times the largest diagonal mass
+  matrix entry times the acceleration limit assumed later (``5/s x velocity limit``, a vertical
+  first axis has no gravity torque), over random configurations of the (placeholder) model; at
+  least ``MIN_EFFORT_SHARE`` of the largest.
 
 An inertia that is not physically consistent (principal moments not positive or violating the
 triangle inequality ``I1 + I2 >= I3``, Traversaro et al., IROS 2016) is repaired by the smallest
@@ -34,10 +36,12 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pinocchio as pin
 
+from pipeline.robot.urdf_import import ACCELERATION_PER_VELOCITY_1_S
+
 MASS_COEFF_KG, MASS_EXPONENT = 100.0, 2.4
 BASE_MASS_SHARE = 0.2
 ARM_SPEED_RAD_S = 2.72
-EFFORT_GRAVITY_FACTOR, MIN_EFFORT_SHARE = 3.0, 0.03
+EFFORT_GRAVITY_FACTOR, EFFORT_INERTIA_FACTOR, MIN_EFFORT_SHARE = 3.0, 2.0, 0.03
 MOMENT_FLOOR_KGM2 = 1e-6
 #: a principal moment below -this share of the largest is a typo (an error), not a rounding to repair
 SIGN_ERROR_SHARE = 1e-3
@@ -117,11 +121,16 @@ def repair_inertias(model: pin.Model, root: ET.Element) -> list[str]:
     return notes
 
 
-def _random_gravity_max(model: pin.Model, samples: int = 200) -> np.ndarray:
+def _random_torque_max(model: pin.Model, acceleration_rad_s2: np.ndarray, samples: int = 200) -> np.ndarray:
+    """Per joint, over random configurations: the larger of the gravity and acceleration torque terms."""
     data = model.createData()
     lo, hi = np.sort([model.lowerPositionLimit, model.upperPositionLimit], axis=0)   # swapped: refused later
-    Q = np.random.default_rng(0).uniform(lo, hi, (samples, model.nq))
-    return np.max([np.abs(pin.computeGeneralizedGravity(model, data, q)) for q in Q], axis=0)
+    worst = np.zeros(model.nq)
+    for q in np.random.default_rng(0).uniform(lo, hi, (samples, model.nq)):
+        gravity = EFFORT_GRAVITY_FACTOR * np.abs(pin.computeGeneralizedGravity(model, data, q))
+        inertia = EFFORT_INERTIA_FACTOR * np.diag(pin.crba(model, data, q)) * acceleration_rad_s2
+        worst = np.maximum(worst, np.maximum(gravity, inertia))
+    return worst
 
 
 def placeholder_limits(model: pin.Model, root: ET.Element, reach_m: float,
@@ -146,14 +155,14 @@ def placeholder_limits(model: pin.Model, root: ET.Element, reach_m: float,
     effort = model.effortLimit.copy()
     bad_e = [i for i in range(nq) if not effort[i] > 0]
     if bad_e:
-        gravity = EFFORT_GRAVITY_FACTOR * _random_gravity_max(model)
-        floor = MIN_EFFORT_SHARE * max(float(gravity.max()), 1.0)
+        needed = _random_torque_max(model, ACCELERATION_PER_VELOCITY_1_S * model.velocityLimit)
+        floor = MIN_EFFORT_SHARE * max(float(needed.max()), 1.0)
         for i in bad_e:
-            effort[i] = max(float(gravity[i]), floor)
+            effort[i] = max(float(needed[i]), floor)
         model.effortLimit = effort
         if "effort" not in keep:
             notes.append(f"PLACEHOLDER effort limits (effort 0 or missing in the URDF) on "
                          f"{', '.join(f'{names[i]} {effort[i]:.0f} N·m' for i in bad_e)}: "
-                         f"{EFFORT_GRAVITY_FACTOR:g} x the largest gravity torque, at least "
-                         f"{MIN_EFFORT_SHARE:.0%} of the largest")
+                         f"{EFFORT_GRAVITY_FACTOR:g} x the largest gravity torque or {EFFORT_INERTIA_FACTOR:g} x "
+                         f"inertia x acceleration limit, at least {MIN_EFFORT_SHARE:.0%} of the largest")
     return notes
