@@ -132,10 +132,13 @@ def test_inertia_violating_the_triangle_inequality_is_repaired_by_the_smallest_c
 
 
 def test_reflector_goes_on_tool0_outside_every_capsule(tmp_path):
-    robot = RobotModel.load(_write(tmp_path, _vendor_text()))
+    urdf = _write(tmp_path, _vendor_text())
+    robot = RobotModel.load(urdf)
     assert robot.spec.flange_frame == "tool0"
     assert robot.spec.tool.reflector_offset_m[2] > 0           # tool0's z points out of the flange
     assert not capsules_holding(robot.model, "tool0", robot.spec.tool.reflector_offset_m, robot.capsules)
+    wrist = RobotModel.load(urdf, tip="wrist_3_link")          # a last link frame chosen by hand
+    assert not capsules_holding(wrist.model, "wrist_3_link", wrist.spec.tool.reflector_offset_m, wrist.capsules)
 
 
 def test_reflector_inside_a_capsule_is_refused_at_load_time(tmp_path):
