@@ -25,7 +25,7 @@ from pipeline.robot.collision import CapsuleDistances, segment_distances
 from pipeline.robot.friction import joint_friction_torque
 from pipeline.robot.ik import IKResult, solve_ik
 from pipeline.robot.loading import ROBOTS_DIR, JointLimits, load_robot_files, resolve_robot_files, validate_joint_limits
-from pipeline.robot.reflector_check import capsules_holding, describe
+from pipeline.robot.reflector_check import capsules_holding, describe, marker_points
 from pipeline.robot.spec import Capsule, RobotSpec, robot_spec_to_yaml
 from pipeline.robot.urdf_export import export_urdf
 from pipeline.robot.urdf_import import absolute_mesh_paths
@@ -80,11 +80,12 @@ class RobotModel:
         assumed = spec.path == spec.urdf
         robot_model = cls._assemble(spec, model, urdf_text, assumptions)
         robot_model._check_always_colliding(fix=assumed)
-        holding = capsules_holding(robot_model.model, spec.flange_frame, spec.tool.reflector_offset_m, spec.capsules)
-        if holding:
-            raise RobotFileError(spec.path, "tool.reflector_offset_m", f"the reflector lies inside "
-                                 f"{describe(holding)}; move it out along the flange axis or put it on the tool "
-                                 "flange (flange_frame: tool0, or robot init --tip tool0)")
+        for field, what, point in marker_points(spec):
+            holding = capsules_holding(robot_model.model, spec.flange_frame, point, spec.capsules)
+            if holding:
+                raise RobotFileError(spec.path, field, f"{what} lies inside {describe(holding)}; move it out along "
+                                     "the flange axis or put it on the tool flange (flange_frame: tool0, or robot "
+                                     "init --tip tool0)")
         return robot_model
 
     @classmethod

@@ -58,3 +58,14 @@ def describe(holding: list[tuple[str, float, float]]) -> str:
     """``capsule 'link5' in 100 % of configurations (up to 42 mm deep)``, joined."""
     return "; ".join(f"capsule '{name}' in {share:.0%} of configurations (up to {depth * 1e3:.0f} mm deep)"
                      for name, share, depth in holding)
+
+
+def marker_points(spec) -> list[tuple[str, str, np.ndarray]]:  # noqa: ANN001 - RobotSpec
+    """(robot.yaml field, what, point in the flange frame) of the reflector and of every optical-probe
+    diode (diodes sit in the marker frame: flange orientation at the reflector offset)."""
+    offset = np.asarray(spec.tool.reflector_offset_m, float)
+    points = [("tool.reflector_offset_m", "the reflector", offset)]
+    if spec.optical_tracker is not None:
+        points += [(f"optical_tracker.probe_diodes_m[{k}]", f"probe diode {k}", offset + np.asarray(d, float))
+                   for k, d in enumerate(spec.optical_tracker.probe_diodes_m)]
+    return points

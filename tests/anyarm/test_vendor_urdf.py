@@ -145,23 +145,20 @@ def test_reflector_inside_a_capsule_is_refused_at_load_time(tmp_path):
     urdf = _write(tmp_path, _vendor_text())
     assert main(["robot", "init", str(urdf)]) == 0
     robot = RobotModel.load(urdf.parent)
-    capsule = max(robot.capsules, key=lambda c: c.radius_m)
-    frame = robot.model.frames[robot.model.getFrameId(capsule.frame)]
-    flange = robot.model.frames[robot.model.getFrameId("tool0")]
-    data = robot.model.createData()
-    pin.framesForwardKinematics(robot.model, data, np.zeros(robot.nq))
-    inside = data.oMf[robot.model.getFrameId("tool0")].actInv(data.oMf[robot.model.getFrameId(capsule.frame)].act(
-        0.5 * (capsule.p0 + capsule.p1)))
-    assert frame.parentJoint <= flange.parentJoint
+    model, data = robot.model, robot.model.createData()
+    flange = model.getFrameId("tool0")
+    # the middle of the last body's capsule: it moves with the flange, so it holds the point in every pose
+    capsule = next(c for c in robot.capsules
+                   if model.frames[model.getFrameId(c.frame)].parentJoint == model.frames[flange].parentJoint)
+    pin.framesForwardKinematics(model, data, np.zeros(robot.nq))
+    inside = data.oMf[flange].actInv(data.oMf[model.getFrameId(capsule.frame)].act(0.5 * (capsule.p0 + capsule.p1)))
     path = urdf.parent / "robot.yaml"
-    data_yaml = yaml.safe_load(path.read_text())
-    data_yaml["tool"]["reflector_offset_m"] = [float(v) for v in inside]
-    data_yaml["flange_frame"] = "tool0"
-    # the last body's capsule holds the point in every configuration; another may only in some
-    if capsules_holding(robot.model, "tool0", inside, robot.capsules):
-        path.write_text(yaml.safe_dump(data_yaml, sort_keys=False))
-        with pytest.raises(RobotFileError, match=r"tool.reflector_offset_m: the reflector lies inside capsule"):
-            RobotModel.load(urdf.parent)
+    edited = yaml.safe_load(path.read_text())
+    edited["tool"]["reflector_offset_m"] = [float(v) for v in inside]
+    path.write_text(yaml.safe_dump(edited, sort_keys=False))
+    with pytest.raises(RobotFileError, match=rf"tool.reflector_offset_m: the reflector lies inside capsule "
+                                             rf"'{capsule.name}' in 100% of configurations"):
+        RobotModel.load(urdf.parent)
 
 
 def test_assumed_marks_go_only_with_an_edit_and_init_respects_its_options(tmp_path):
