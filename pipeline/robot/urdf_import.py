@@ -10,15 +10,19 @@ What a URDF lacks is assumed from rules stated here (each becomes a line of
   Coulomb friction ``4 % of the effort limit`` (RX130L: 20 N m s/rad at 550 N m and 3.5 rad/s,
   25 N m at 550 N m);
 * acceleration limits ``5 x velocity limit`` per second (full speed in 0.2 s);
-* TCP at the flange (the tip link), reflector on the flange z axis on the side facing away from
-  the arm (the side the last body's tool/gripper geometry lies on, else away from the nearest
-  upstream joint), 10 mm beyond the last body's capsules (at least 30 mm), opening outwards;
+* TCP at the flange (the tip link, or a ``tool0``/``flange`` link fixed to it), reflector on the
+  flange z axis on the side facing away from the arm (``+z`` on ``tool0``, else the side the last
+  body's tool/gripper geometry lies on, else away from the nearest upstream joint), 10 mm beyond
+  the last body's capsules (at least 30 mm) and outside every other capsule, opening outwards;
 * a laser tracker 1.5 reaches in front of the base (x), 0.2 reaches up (DESIGN.md: 2.5 m from an
   arm of 1.66 m reach), with DESIGN.md's noise model;
 * one capsule per moving link fitted to its collision geometry (principal axis of the points,
   75th percentile radius: housings that stick out are not all covered, long links are not
-  swollen), or, where no geometry or mesh is available, a capsule from the joint
-  to the next joint with a radius of a quarter of that length.
+  swollen), or, where no geometry or mesh is available (a vendor's mesh package not installed:
+  stated), a capsule from the joint to the next joint with a radius of a quarter of that length.
+
+Placeholders for what a vendor URDF leaves empty (inertials, effort and velocity limits) are
+:mod:`pipeline.robot.vendor_urdf`'s.
 """
 
 from __future__ import annotations
