@@ -134,7 +134,7 @@ def _random_torque_max(model: pin.Model, acceleration_rad_s2: np.ndarray, sample
 
 
 def placeholder_limits(model: pin.Model, root: ET.Element, reach_m: float,
-                       keep: set[str] = frozenset()) -> list[str]:
+                       keep: frozenset[str] | set[str] = frozenset()) -> list[str]:
     """Replace velocity and effort limits <= 0 (``velocity="0"``, ``effort="0"``) by placeholders (in place).
 
     ``keep``: ``"velocity"`` / ``"effort"`` when robot.yaml sets that limit (nothing stated for it)."""
