@@ -6,7 +6,7 @@
   or be reused, and the robot's plausibility warnings
 * ``view [RUN_DIR] [--robot NAME] [--configurations NAME] [--trajectory NAME] [--open]``
 * ``study [NAME [ARGS...]]`` (no name: list the registered studies)
-* ``robot init ARM.urdf [--base LINK] [--tip LINK] [--out FILE]``: a commented robot.yaml
+* ``robot init ARM.urdf [--base LINK] [--tip LINK] [--lock JOINT=VALUE] [--out FILE] [--force]``: a commented robot.yaml
 * ``sweep [--seeds 0-19] [--robots A,B] [--config FILE] [--set k=v] [--vary k=[a,b]] [--scheduler ADDR]``
 
 ``run`` ends with the headline table (:mod:`pipeline.headline`) and the path of ``report.md``.
@@ -33,7 +33,7 @@ from pipeline.headline import print_headline, read_headline
 from pipeline.interrupts import handle_termination
 from pipeline.preflight import preflight
 from pipeline.robot.plausibility import robot_warnings
-from pipeline.robot.yaml_init import write_robot_yaml
+from pipeline.robot.yaml_init import parse_locks, write_robot_yaml
 from pipeline.run_check import check_run
 from pipeline.runner import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_QUALITY_GATE, run_pipeline
 from pipeline.viewer import view_run
@@ -102,6 +102,10 @@ def _parser() -> argparse.ArgumentParser:
     ri.add_argument("--base", metavar="LINK", help="first link of the arm chain (default: the URDF's root)")
     ri.add_argument("--tip", metavar="LINK", help="last link of the arm chain (default: found from the joints)")
     ri.add_argument("--out", metavar="FILE", help="where to write (default: robot.yaml beside the URDF)")
+    ri.add_argument("--lock", metavar="JOINT=VALUE", action="append", default=[],
+                    help="hold a joint off the arm (a linear track, a gripper) at VALUE rad or m; repeatable "
+                         "(default: 0 when its limits allow, else mid-range)")
+    ri.add_argument("--force", action="store_true", help="replace an existing robot.yaml")
     return p
 
 
@@ -134,7 +138,7 @@ def _cmd_check(ns: argparse.Namespace) -> int:
 
 
 def _cmd_robot(ns: argparse.Namespace) -> int:
-    written = write_robot_yaml(ns.urdf, ns.out, base=ns.base, tip=ns.tip)
+    written = write_robot_yaml(ns.urdf, ns.out, base=ns.base, tip=ns.tip, lock=parse_locks(ns.lock), force=ns.force)
     print(f"wrote {written}: edit the values marked as assumed, then run with --set robot={written.parent}")
     return 0
 

@@ -74,6 +74,9 @@ def _set_path(root: object, path: str, array: np.ndarray) -> bool:
     if last.startswith("["):
         return False                     # floats directly inside lists are not used by the spec
     current = parent.get(last) if isinstance(parent, dict) else getattr(parent, last, None)
+    if current is None and parent is getattr(root, "limit_overrides", None) and array.ndim == 1:
+        parent[last] = array.copy()      # a limit robot.yaml overrode: saved into the URDF, kept as given
+        return True
     if isinstance(current, pin.SE3) and array.shape == (4, 4):
         new: object = pin.SE3(array)
     elif isinstance(current, np.ndarray) and current.shape == array.shape:

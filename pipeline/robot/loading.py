@@ -18,7 +18,8 @@ import pinocchio as pin
 
 from pipeline.errors import RobotFileError
 from pipeline.robot.spec import RobotSpec, load_robot_spec
-from pipeline.robot.urdf_import import arm_chain, assumed_spec, build_arm_model
+from pipeline.robot.urdf_import import arm_chain, assumed_spec, build_arm_model, reach_m
+from pipeline.robot.vendor_urdf import placeholder_inertias, placeholder_limits, repair_inertias
 
 ROBOTS_DIR = Path(__file__).resolve().parents[2] / "robots"
 _JOINT_TYPES = {"revolute", "continuous", "prismatic", "fixed", "floating", "planar"}
@@ -100,9 +101,12 @@ def continuous_as_revolute(root: ET.Element, chain: list[str]) -> list[str]:
     return turned
 
 
-def check_chain_joints(urdf: Path, root: ET.Element, chain: list[str]) -> None:
+def check_chain_joints(urdf: Path, root: ET.Element, chain: list[str]) -> bool:
     """Arm joints must be revolute with finite limits and no ``<mimic>`` (the error model, the
-    symbolic bridge and calibration assume independent revolute axes); other joints are locked."""
+    symbolic bridge and calibration assume independent revolute axes); other joints are locked.
+    A missing velocity or effort limit is set to 0 in the tree (a placeholder follows); True when
+    the tree was changed."""
+    changed = False
     joints = {j.get("name"): j for j in root.findall("joint")}
     for name in chain:
         joint = joints[name]
@@ -115,9 +119,13 @@ def check_chain_joints(urdf: Path, root: ET.Element, chain: list[str]) -> None:
             raise RobotFileError(urdf, f"joint {name}: <mimic>", "a mimic joint on the arm chain is not supported "
                                  "(its motion is not independent); choose another --tip or remove the mimic tag")
         limit = joint.find("limit")
-        missing = [a for a in ("lower", "upper", "velocity", "effort") if limit is None or limit.get(a) is None]
+        missing = [a for a in ("lower", "upper") if limit is None or limit.get(a) is None]
         if missing:
             raise RobotFileError(urdf, f"joint {name}: <limit>", f"a revolute joint needs {', '.join(missing)}")
+        for attribute in ("velocity", "effort"):       # missing: a placeholder (vendor_urdf), like 0
+            if limit.get(attribute) is None:
+                limit.set(attribute, "0")
+                changed = True
         for attribute in ("lower", "upper", "velocity", "effort"):
             try:
                 value = float(limit.get(attribute))
@@ -126,6 +134,7 @@ def check_chain_joints(urdf: Path, root: ET.Element, chain: list[str]) -> None:
             if value is None or not np.isfinite(value):
                 raise RobotFileError(urdf, f"joint {name}: <limit {attribute}>",
                                      f"not a finite number: {limit.get(attribute)!r}")
+    return changed
 
 
 def validate_inertials(urdf: Path, model: pin.Model) -> None:
@@ -183,36 +192,56 @@ def _raise_limit_order(spec: RobotSpec, urdf: Path, overrides: dict, joint: str,
 
 
 def load_robot_files(robot: str | Path, yaml_path: str | Path | None = None, *, base: str | None = None,
-                     tip: str | None = None) -> tuple[RobotSpec, pin.Model, str, list[str]]:
+                     tip: str | None = None, lock: dict[str, float] | None = None,
+                     urdf_alone: bool = False) -> tuple[RobotSpec, pin.Model, str, list[str]]:
     """(spec, reduced Pinocchio model, URDF text, assumptions) of a robot folder, URDF + yaml or URDF alone.
 
-    With a ``robot.yaml`` the arm chain ends at its ``flange_frame`` (its link); without one at
-    ``tip`` or, by default, at the child link of the deepest revolute joint.
+    With a ``robot.yaml`` the arm chain ends at its ``flange_frame`` (its link) and starts at its
+    ``base_link``, its ``locked_joints`` held; without one (or with ``urdf_alone``, which ignores a
+    robot.yaml beside the URDF) at ``tip`` or, by default, at the child link of the deepest revolute
+    joint (a ``tool0``/``flange`` link fixed to it when there is one). Joints in ``lock`` (name ->
+    position, rad or m) and every other joint off the chain are locked. What a vendor URDF leaves
+    empty (inertials, effort and velocity limits) gets placeholders (:mod:`pipeline.robot.vendor_urdf`).
     """
     yaml_file, _ = resolve_robot_files(robot, yaml_path)
+    if urdf_alone and str(robot).endswith(".urdf"):
+        yaml_file = None
     spec = load_robot_spec(yaml_file) if yaml_file is not None else None
     urdf = Path(robot) if str(robot).endswith(".urdf") else spec.urdf
     root = check_urdf_xml(urdf)
     flange = spec.flange_frame if spec is not None else tip
-    chain, base_link, tip_link = arm_chain(urdf, root, base=base, tip=flange, tip_is_frame=spec is not None)
+    if spec is not None:
+        base = base or spec.base_link
+        lock = {**spec.locked_joints, **(lock or {})}
+    chain, base_link, tip_link = arm_chain(urdf, root, base=base, tip=flange, tip_is_frame=spec is not None,
+                                           lock=lock)
     turned = continuous_as_revolute(root, chain)
-    check_chain_joints(urdf, root, chain)
-    model, locked = build_arm_model(urdf, root, chain)
+    filled = check_chain_joints(urdf, root, chain)
+    model, locked = build_arm_model(urdf, root, chain, lock)
     if model.nq != model.nv:  # guard: chain joints are revolute
         raise RobotFileError(urdf, "joints", f"expected revolute joints only (nq={model.nq}, nv={model.nv})")
+    reach = reach_m(model, tip_link)
+    keep = {k for k in ("velocity", "effort") if spec is not None
+            and f"{k}_{'rad_s' if k == 'velocity' else 'Nm'}" in spec.limit_overrides}
+    assumptions: list[str] = [
+        *placeholder_inertias(model, root, model.frames[model.getFrameId(tip_link)].placement.translation, reach),
+        *repair_inertias(model, root), *placeholder_limits(model, root, reach, keep)]
     validate_inertials(urdf, model)
-    assumptions: list[str] = []
     if turned:
         assumptions.append(f"continuous joints loaded as revolute ones with limits of one turn each way "
                            f"(±{CONTINUOUS_LIMIT_RAD:.4f} rad): {', '.join(turned)}")
     if locked:
-        assumptions.append(f"joints off the arm chain {base_link} -> {tip_link} locked at their reference "
-                           f"position: {', '.join(locked)}")
+        held = ", ".join(f"{n} at its neutral configuration" if v is None else
+                         f"{n} = {v:g}" for n, v in locked.items())
+        assumptions.append(f"joints off the arm chain {base_link} -> {tip_link} locked (at 0 when the limits "
+                           f"allow, else mid-range, unless given with --lock NAME=VALUE): {held}")
     if spec is None:
         spec, assumed = assumed_spec(urdf, root, model, tip_link)
+        spec.base_link = base
+        spec.locked_joints = {n: v for n, v in locked.items() if v is not None}
         assumptions += assumed
     else:
         spec = load_robot_spec(yaml_file, nq=model.nq)
         spec.urdf = urdf
-    text = ET.tostring(root, encoding="unicode") if turned else urdf.read_text()
+    text = ET.tostring(root, encoding="unicode") if turned or filled else urdf.read_text()
     return spec, model, text, assumptions

@@ -20,10 +20,12 @@ from scipy.optimize import minimize
 
 from pipeline.artefacts import write_text
 from pipeline.errors import RobotFileError
+from pipeline.robot.assumed_values import assumed_sentences
 from pipeline.robot.collision import CapsuleDistances, segment_distances
 from pipeline.robot.friction import joint_friction_torque
 from pipeline.robot.ik import IKResult, solve_ik
 from pipeline.robot.loading import ROBOTS_DIR, JointLimits, load_robot_files, resolve_robot_files, validate_joint_limits
+from pipeline.robot.reflector_check import capsules_holding, describe, marker_points
 from pipeline.robot.spec import Capsule, RobotSpec, robot_spec_to_yaml
 from pipeline.robot.urdf_export import export_urdf
 from pipeline.robot.urdf_import import absolute_mesh_paths
@@ -66,16 +68,24 @@ class RobotModel:
     # ------------------------------------------------------------------ loading
     @classmethod
     def load(cls, robot: str | Path, yaml_path: str | Path | None = None, *, base: str | None = None,
-             tip: str | None = None) -> RobotModel:
+             tip: str | None = None, lock: dict[str, float] | None = None, urdf_alone: bool = False) -> RobotModel:
         """Load ``robots/<robot>/``, a folder with ``robot.yaml``, a URDF + yaml, or a URDF alone.
 
         A URDF alone gets stated assumptions for what it lacks (``assumptions``); joints off the
-        base->tip chain are locked (:mod:`pipeline.robot.loading`).
+        base->tip chain are locked, those in ``lock`` at the given positions (:mod:`pipeline.robot.loading`).
+        ``urdf_alone``: ignore a robot.yaml beside the URDF. The reflector must lie outside every capsule.
         """
-        spec, model, urdf_text, assumptions = load_robot_files(robot, yaml_path, base=base, tip=tip)
+        spec, model, urdf_text, assumptions = load_robot_files(robot, yaml_path, base=base, tip=tip, lock=lock,
+                                                               urdf_alone=urdf_alone)
         assumed = spec.path == spec.urdf
         robot_model = cls._assemble(spec, model, urdf_text, assumptions)
         robot_model._check_always_colliding(fix=assumed)
+        for field, what, point in marker_points(spec):
+            holding = capsules_holding(robot_model.model, spec.flange_frame, point, spec.capsules)
+            if holding:
+                raise RobotFileError(spec.path, field, f"{what} lies inside {describe(holding)}; move it out along "
+                                     "the flange axis or put it on the tool flange (flange_frame: tool0, or robot "
+                                     "init --tip tool0)")
         return robot_model
 
     @classmethod
@@ -166,7 +176,7 @@ class RobotModel:
     @property
     def assumptions(self) -> list[str]:
         """What was assumed because the robot files do not say it (listed in the run report)."""
-        return self.spec.assumptions
+        return [*self.spec.assumptions, *assumed_sentences(self.spec.assumed)]
 
     @property
     def has_tracker(self) -> bool:

@@ -16,6 +16,7 @@ import pinocchio as pin
 import yaml
 
 from pipeline.errors import RobotFileError
+from pipeline.robot.assumed_values import assumed_in_force, locked_joints
 from pipeline.typed_config import unknown_key
 from pipeline.yaml12 import DuplicateKeyError, load_yaml, yaml_problem
 
@@ -123,11 +124,17 @@ class RobotSpec:
     optical_tracker: OpticalTrackerSpec | None = None
     #: what was assumed about this robot (kept when a stage saves the model)
     assumptions: list[str] = field(default_factory=list)
+    #: first link of the arm chain (None: the URDF's root)
+    base_link: str | None = None
+    #: joints off the arm chain held at these positions (rad or m; others at 0 or mid-range)
+    locked_joints: dict[str, float] = field(default_factory=dict)
+    #: values robot.yaml marks as assumed and the user has not edited (:mod:`pipeline.robot.assumed_values`)
+    assumed: dict[str, dict] = field(default_factory=dict)
 
 
 _TOP_KEYS = {
     "name", "urdf", "flange_frame", "payload_kg", "tool", "actuation", "limits", "tracker",
-    "collision", "capsules", "assumptions", "optical_tracker",
+    "collision", "capsules", "assumptions", "optical_tracker", "base_link", "locked_joints", "assumed",
     # robot-specific defaults of the run configuration (test path placement, moves); read and
     # checked by pipeline.config.load_config, which layers them under the config file
     "run_defaults",
@@ -378,7 +385,11 @@ def load_robot_spec(path: Path, nq: int | None = None) -> RobotSpec:
         has_tracker=has_tracker,
         assumptions=[str(a) for a in _optional_list(top, "assumptions", "a list of sentences")],
         optical_tracker=optical,
+        base_link=top.text("base_link") if data.get("base_link") is not None else None,
+        locked_joints=locked_joints(path, data),
+        assumed=assumed_in_force(path, data),
     )
+
 
 
 def _points(reader: _Reader, key: str, minimum: int) -> np.ndarray:
@@ -484,8 +495,9 @@ def robot_spec_to_yaml(spec: RobotSpec, urdf_name: str) -> dict:
             for c in spec.capsules
         ],
     }
-    if spec.assumptions:
-        out["assumptions"] = list(spec.assumptions)
+    extra = {"base_link": spec.base_link, "locked_joints": {k: float(v) for k, v in spec.locked_joints.items()},
+             "assumptions": list(spec.assumptions), "assumed": {k: dict(v) for k, v in spec.assumed.items()}}
+    out |= {k: v for k, v in extra.items() if v}
     if spec.optical_tracker is not None:
         out["optical_tracker"] = _optical_yaml(spec.optical_tracker)
     return out

@@ -10,15 +10,19 @@ What a URDF lacks is assumed from rules stated here (each becomes a line of
   Coulomb friction ``4 % of the effort limit`` (RX130L: 20 N m s/rad at 550 N m and 3.5 rad/s,
   25 N m at 550 N m);
 * acceleration limits ``5 x velocity limit`` per second (full speed in 0.2 s);
-* TCP at the flange (the tip link), reflector on the flange z axis on the side facing away from
-  the arm (the side the last body's tool/gripper geometry lies on, else away from the nearest
-  upstream joint), 10 mm beyond the last body's capsules (at least 30 mm), opening outwards;
+* TCP at the flange (the tip link, or a ``tool0``/``flange`` link fixed to it), reflector on the
+  flange z axis on the side facing away from the arm (``+z`` on ``tool0``, else the side the last
+  body's tool/gripper geometry lies on, else away from the nearest upstream joint), 10 mm beyond
+  the last body's capsules (at least 30 mm) and outside every other capsule, opening outwards;
 * a laser tracker 1.5 reaches in front of the base (x), 0.2 reaches up (DESIGN.md: 2.5 m from an
   arm of 1.66 m reach), with DESIGN.md's noise model;
 * one capsule per moving link fitted to its collision geometry (principal axis of the points,
   75th percentile radius: housings that stick out are not all covered, long links are not
-  swollen), or, where no geometry or mesh is available, a capsule from the joint
-  to the next joint with a radius of a quarter of that length.
+  swollen), or, where no geometry or mesh is available (a vendor's mesh package not installed:
+  stated), a capsule from the joint to the next joint with a radius of a quarter of that length.
+
+Placeholders for what a vendor URDF leaves empty (inertials, effort and velocity limits) are
+:mod:`pipeline.robot.vendor_urdf`'s.
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ import numpy as np
 import pinocchio as pin
 
 from pipeline.errors import RobotFileError
+from pipeline.robot.reflector_check import capsules_holding
 from pipeline.robot.spec import ActuationSpec, Capsule, CollisionSpec, RobotSpec, ToolSpec, TrackerSpec
 
 WRIST_GEAR_RATIO, ARM_GEAR_RATIO = 50.0, 100.0
@@ -40,6 +45,8 @@ VISCOUS_FRACTION, COULOMB_FRACTION = 0.1, 0.04
 ACCELERATION_PER_VELOCITY_1_S = 5.0
 REFLECTOR_OFFSET_M = 0.03
 GRIPPER_WORDS = ("finger", "gripper", "hand")
+#: a link fixed to the last arm link that is the tool flange (ROS-Industrial REP 199 names it tool0)
+FLANGE_LINKS = ("tool0", "flange")
 TRACKER_DISTANCE_REACHES, TRACKER_HEIGHT_REACHES = 1.5, 0.2
 
 
@@ -83,13 +90,34 @@ def _is_arm_joint(joint: ET.Element) -> bool:
     return joint.get("type") in ("revolute", "continuous") and not any(w in name for w in GRIPPER_WORDS)
 
 
+def flange_link(root: ET.Element, link: str) -> str:
+    """``link``, or the first of :data:`FLANGE_LINKS` fixed to it (through fixed joints only): the
+    ROS-Industrial tool flange (REP 199), which a vendor's last link frame need not be (a KUKA's
+    ``link_6`` sits at the wrist centre, its ``tool0`` on the flange face)."""
+    fixed_children: dict[str, list[str]] = {}
+    for joint in root.findall("joint"):
+        if joint.get("type") == "fixed":
+            fixed_children.setdefault(joint.find("parent").get("link"), []).append(joint.find("child").get("link"))
+    found, todo = [], [link]
+    while todo:
+        current = todo.pop()
+        found.append(current)
+        todo += fixed_children.get(current, [])
+    for name in FLANGE_LINKS:
+        if name in found:
+            return name
+    return link
+
+
 def arm_chain(urdf: Path, root: ET.Element, *, base: str | None = None, tip: str | None = None,
-              tip_is_frame: bool = False) -> tuple[list[str], str, str]:
+              tip_is_frame: bool = False, lock: dict[str, float] | None = None) -> tuple[list[str], str, str]:
     """(movable joint names base->tip, base link, tip link).
 
     Default tip: the child link of the deepest revolute joint not named as a gripper/finger/hand joint
-    (the most such joints between it and the root); an ambiguous choice (several such chains) asks
-    for ``--tip``.
+    (the most such joints between it and the root), or a ``tool0``/``flange`` link fixed to it
+    (:func:`flange_link`); an ambiguous choice (several such chains) asks for ``--tip``. Joints in
+    ``lock`` and prismatic/planar/floating joints below the first revolute one (a linear track under
+    the arm) are not part of the chain (they are locked, :func:`build_arm_model`).
     """
     joints = root.findall("joint")
     parent_joint = {j.find("child").get("link"): j for j in joints}
@@ -118,7 +146,7 @@ def arm_chain(urdf: Path, root: ET.Element, *, base: str | None = None, tip: str
             raise RobotFileError(urdf, "tip", f"several arm chains end {deepest} joints from the root "
                                  f"({', '.join(sorted(ends))}): choose one (python -m pipeline robot init "
                                  f"{urdf} --tip LINK --out DIR/robot.yaml, then run with --set robot=DIR)")
-        tip = ends.pop()
+        tip = flange_link(root, ends.pop())
     path = path_to_root(tip)
     root_link = path[0].find("parent").get("link") if path else tip
     if base is not None:
@@ -132,34 +160,76 @@ def arm_chain(urdf: Path, root: ET.Element, *, base: str | None = None, tip: str
             raise RobotFileError(urdf, "base", f"link '{base}' is carried by movable joints {', '.join(moving)}; "
                                  "choose a base link fixed to the root")
         path = path[names.index(base):]
-    chain = [j.get("name") for j in path if j.get("type") != "fixed"]
+    moving = [j for j in path if j.get("type") != "fixed" and j.get("name") not in (lock or {})]
+    while moving and moving[0].get("type") not in ("revolute", "continuous"):
+        moving = moving[1:]            # a track or lift below the arm: locked; one inside the arm is refused
+    chain = [j.get("name") for j in moving]
     if not chain:
         raise RobotFileError(urdf, "joints", f"no movable joint between '{base or root_link}' and '{tip}'")
     return chain, base or root_link, tip
 
 
-def build_arm_model(urdf: Path, root: ET.Element, chain: list[str]) -> tuple[pin.Model, list[str]]:
-    """Pinocchio model of the chain: every other joint locked at its neutral position clipped into its
-    limits (``pin.buildReducedModel``, which merges the locked links' inertia into the arm)."""
+def build_arm_model(urdf: Path, root: ET.Element, chain: list[str],
+                    lock: dict[str, float] | None = None) -> tuple[pin.Model, dict[str, float | None]]:
+    """Pinocchio model of the chain: every other joint locked (``pin.buildReducedModel``, which merges
+    the locked links' inertia into the arm) at its ``lock`` value, else at 0 when its limits allow,
+    else mid-range (:func:`lock_positions`). Returns the model and each locked joint's value (None: a
+    multi-DOF joint held at its neutral configuration)."""
     try:     # from the checked tree (continuous chain joints turned revolute, loading.py)
         full = pin.buildModelFromXML(ET.tostring(root, encoding="unicode"))
     except (RuntimeError, ValueError) as exc:
         raise RobotFileError(urdf, "urdf", f"Pinocchio could not build the model ({exc})") from None
     locked = [str(n) for n in full.names[1:] if n not in chain]
+    q_ref = lock_positions(urdf, full, locked, lock or {})
     if not locked:
-        return full, []
-    q_ref = pin.neutral(full)
-    for jid in (full.getJointId(n) for n in locked):
-        joint = full.joints[jid]
-        i, n = joint.idx_q, joint.nq
-        if n == 1:
-            q_ref[i] = np.clip(0.0, full.lowerPositionLimit[i], full.upperPositionLimit[i])
+        return full, {}
     reduced = pin.buildReducedModel(full, [full.getJointId(n) for n in locked], q_ref)
-    return reduced, locked
+    held = {n: (float(q_ref[full.joints[full.getJointId(n)].idx_q]) if full.joints[full.getJointId(n)].nq == 1
+                else None) for n in locked}
+    return reduced, held
+
+
+def lock_positions(urdf: Path, full: pin.Model, locked: list[str], lock: dict[str, float]) -> np.ndarray:
+    """Configuration of the full model at which ``locked`` joints are held (the chain's entries unused)."""
+    unknown = sorted(set(lock) - set(locked))
+    if unknown:
+        raise RobotFileError(urdf, "lock", f"no joint '{unknown[0]}' off the arm chain (locked joints: "
+                             f"{', '.join(locked) or 'none'})")
+    q_ref = pin.neutral(full)
+    for name in locked:
+        joint = full.joints[full.getJointId(name)]
+        i, lo, hi = joint.idx_q, full.lowerPositionLimit[joint.idx_q], full.upperPositionLimit[joint.idx_q]
+        if joint.nq != 1:
+            if name in lock:
+                raise RobotFileError(urdf, f"lock {name}", f"a {joint.shortname()} joint cannot be locked at one value")
+            continue
+        if name in lock:
+            if not lo - 1e-12 <= lock[name] <= hi + 1e-12:
+                raise RobotFileError(urdf, f"lock {name}", f"{lock[name]:g} is outside the joint's limits "
+                                     f"[{lo:g}, {hi:g}]")
+            q_ref[i] = lock[name]
+        else:
+            q_ref[i] = 0.0 if lo <= 0.0 <= hi else 0.5 * (lo + hi)
+    return q_ref
+
+
+def missing_collision_meshes(urdf: Path) -> list[str]:
+    """The packages (``package://NAME``) or files of collision meshes that cannot be found."""
+    missing = []
+    for collision in ET.parse(urdf).getroot().iter("collision"):
+        for mesh in collision.iter("mesh"):
+            filename = mesh.get("filename", "")
+            if resolve_mesh(filename, urdf) is None:
+                name = filename[len("package://"):].split("/")[0] if filename.startswith("package://") else filename
+                missing.append(f"package {name}" if filename.startswith("package://") else filename)
+    return list(dict.fromkeys(missing))
 
 
 def _geometry_points(model: pin.Model, urdf: Path) -> dict[int, np.ndarray]:
-    """Collision-geometry points of each joint's links, in the joint frame (empty if none load)."""
+    """Collision-geometry points of each joint's links, in the joint frame (empty if none load, or
+    if a mesh is missing: a vendor URDF whose mesh package is not installed)."""
+    if missing_collision_meshes(urdf):
+        return {}
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -217,8 +287,11 @@ def fit_capsules(model: pin.Model, urdf: Path, flange: str, reach_m: float) -> t
             p0, p1 = np.zeros(3), np.asarray(end, float).copy()
             radius = float(np.clip(0.25 * np.linalg.norm(p1), 0.02, 0.12 * reach_m))
         capsules.append(Capsule(f"link{j}" if j else "base", frame, p0, p1, radius))
+    missing = missing_collision_meshes(urdf)
+    why = (f"collision meshes not found: {', '.join(missing)}; set ROS_PACKAGE_PATH to the folder holding them"
+           if missing else "no collision geometry loaded")
     how = ("fitted to the URDF collision geometry" if clouds else
-           "from each joint to the next, radius a quarter of that length (no collision geometry loaded)")
+           f"from each joint to the next, radius a quarter of that length ({why})")
     return capsules, how
 
 
@@ -249,19 +322,27 @@ def _outward_sign(model: pin.Model, flange_frame: pin.Frame, last_body: list[Cap
 def reflector_placement(model: pin.Model, flange: str, capsules: list[Capsule]) -> tuple[np.ndarray, np.ndarray]:
     """(position, opening axis) of the assumed reflector in the flange frame.
 
-    On the flange z axis, on the side facing away from the arm (:func:`_outward_sign`: ``-z`` for
+    On the flange z axis, on the side facing away from the arm (``+z`` on a ``tool0``/``flange``
+    link, whose z axis points out of the flange by ROS-Industrial's REP 199; else
+    :func:`_outward_sign`: ``-z`` for
     a URDF whose last link frame points back into the wrist, as Kinova's Jaco or Talos' arm),
     beyond every capsule of the last body (including locked fingers merged into it) by 10 mm, at
     least ``REFLECTOR_OFFSET_M`` from the flange. A reflector inside or behind the wrist would be
-    hidden from the tracker in every pose."""
+    hidden from the tracker in every pose; one that another capsule holds in most configurations
+    (:mod:`pipeline.robot.reflector_check`) is moved further out along the axis."""
     flange_frame = model.frames[model.getFrameId(flange)]
     last_body = [c for c in capsules if c.frame == str(model.names[flange_frame.parentJoint])]
-    sign = _outward_sign(model, flange_frame, last_body)
+    sign = 1.0 if flange in FLANGE_LINKS else _outward_sign(model, flange_frame, last_body)
     offset = REFLECTOR_OFFSET_M
     for capsule in last_body:
         ends = [flange_frame.placement.actInv(p) for p in (capsule.p0, capsule.p1)]
         offset = max(offset, max(sign * e[2] for e in ends) + capsule.radius_m + 0.01)
     axis = np.array([0.0, 0.0, sign])
+    for _ in range(10):       # then out of every other capsule that holds it (a wrist around the flange)
+        holding = capsules_holding(model, flange, offset * axis, capsules)
+        if not holding:
+            break
+        offset += max(depth for _, _, depth in holding) + 0.01
     return float(offset) * axis, axis
 
 
@@ -285,11 +366,11 @@ def _floor_check_from_joint(model: pin.Model, capsules: list[Capsule], clearance
     return min(k, model.nq)
 
 
-def _reach_m(model: pin.Model, flange: str) -> float:
+def reach_m(model: pin.Model, flange: str) -> float:
     data = model.createData()
     fid = model.getFrameId(flange)
     rng = np.random.default_rng(0)
-    lo, hi = model.lowerPositionLimit, model.upperPositionLimit
+    lo, hi = np.sort([model.lowerPositionLimit, model.upperPositionLimit], axis=0)   # swapped: refused later
     base = model.jointPlacements[1].translation
     reach = 0.0
     for q in rng.uniform(lo, hi, size=(300, model.nq)):
@@ -309,7 +390,7 @@ def assumed_spec(urdf: Path, root: ET.Element, model: pin.Model, tip_link: str) 
     nq = model.nq
     effort, velocity = model.effortLimit.copy(), model.velocityLimit.copy()
     gear = np.where(np.arange(nq) < 3, ARM_GEAR_RATIO, WRIST_GEAR_RATIO)
-    reach = _reach_m(model, tip_link)
+    reach = reach_m(model, tip_link)
     capsules, how = fit_capsules(model, urdf, tip_link, reach)
     tracker = assumed_tracker(reach)
     reflector_m, reflector_axis = reflector_placement(model, tip_link, capsules)
@@ -326,7 +407,7 @@ def assumed_spec(urdf: Path, root: ET.Element, model: pin.Model, tip_link: str) 
         f"flange = tip link '{tip_link}', TCP at the flange, payload 0 kg, "
         f"reflector {np.linalg.norm(reflector_m) * 1e3:.0f} mm "
         f"along the flange {'+' if reflector_axis[2] > 0 else '-'}z axis, facing away from the arm "
-        "(beyond the last body's capsules, so the beam can reach it)",
+        "(outside every capsule, so the beam can reach it)",
         f"gear ratios {ARM_GEAR_RATIO:g} (axes 1-3) and {WRIST_GEAR_RATIO:g} (wrist), no coupling",
         f"rotor inertia {ROTOR_INERTIA_PER_EFFORT_S2:g} s² x effort limit, viscous friction {VISCOUS_FRACTION:g} x "
         f"effort/velocity limit, Coulomb friction {COULOMB_FRACTION:.0%} of the effort limit",

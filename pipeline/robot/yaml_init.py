@@ -1,9 +1,14 @@
 """``python -m pipeline robot init ARM.urdf``: a commented robot.yaml with the values assumed for a URDF.
 
 :func:`write_robot_yaml` loads the URDF alone (:mod:`pipeline.robot.urdf_import` assumes what it
-lacks), and writes those values as a ``robot.yaml`` beside it (or at ``out``) for the user to edit,
-each section headed by the rule it came from. Loading the URDF again then reads this file instead
-of assuming. The file is written atomically and never overwrites an existing one.
+lacks; a robot.yaml beside it is ignored, so ``--tip``, ``--base`` and ``--lock`` always count),
+and writes those values as a ``robot.yaml`` beside it (or at ``out``) for the user to edit, each
+section headed by the rule it came from. Every value assumed carries a ``# ASSUMED: rule``
+comment and an entry under ``assumed`` with its digest (:mod:`pipeline.robot.assumed_values`):
+the robot's assumptions list it until the user edits the value. Placeholder velocity and effort
+limits (``velocity="0"`` / ``effort="0"`` in the URDF) are written as ``limits`` overrides. Loading
+the URDF again then reads this file instead of assuming. The file is written atomically and never
+replaces an existing one unless ``force``.
 """
 
 from __future__ import annotations
@@ -14,43 +19,124 @@ import yaml
 
 from pipeline.artefacts import write_text
 from pipeline.errors import RobotFileError
+from pipeline.robot.assumed_values import assumed_entry
 from pipeline.robot.model import RobotModel
 from pipeline.robot.spec import robot_spec_to_yaml
+from pipeline.robot.urdf_import import (
+    ACCELERATION_PER_VELOCITY_1_S,
+    ARM_GEAR_RATIO,
+    COULOMB_FRACTION,
+    ROTOR_INERTIA_PER_EFFORT_S2,
+    VISCOUS_FRACTION,
+    WRIST_GEAR_RATIO,
+)
 
 _HEADER = """\
 # robot.yaml written by `python -m pipeline robot init` from {urdf}
-# Every value below was ASSUMED because a URDF does not carry it. Edit what you know better;
-# units are SI (m, rad, kg, N·m, s). Assumptions made:
+# Values marked ASSUMED were assumed because the URDF does not carry them: edit what you know
+# better (the mark is tracked under `assumed:` and stops counting once the value is edited);
+# units are SI (m, rad, kg, N·m, s). Assumptions made on loading the URDF:
 {assumptions}
 """
 
 _SECTION_NOTES = {
     "tool": "# TCP pose and laser-tracker reflector in the flange frame",
     "actuation": "# drive train, joint side: gear ratios, rotor inertia, viscous and Coulomb friction",
-    "limits": "# position, velocity and effort limits come from the URDF; accelerations are stated here",
+    "limits": "# position, velocity and effort limits come from the URDF unless given here; accelerations "
+              "are stated here",
     "tracker": "# nominal laser-tracker pose in the base frame (p_base = T * p_tracker); delete the section "
                "if there is no tracker (then no calibration stage)",
     "collision": "# floor height and the first joint whose capsules must stay above it",
     "capsules": "# collision capsules: segment p0-p1 in the frame `frame`, swept by a sphere of radius_m",
+    "locked_joints": "# joints off the arm chain held at these positions (rad or m)",
 }
 
 
+def _rules(robot: RobotModel, *, tip_given: bool, lock: dict[str, float], placeholders: set[str]) -> dict[str, str]:
+    """Dotted path -> rule of every value ``robot init`` assumed."""
+    spec = robot.spec
+    rules = {
+        "payload_kg": "no payload",
+        "tool.transform_tcp_to_flange": "TCP at the flange",
+        "tool.reflector_offset_m": "on the flange z axis facing away from the arm, outside every capsule",
+        "tool.reflector_axis": "opening along the flange z axis, away from the arm",
+        "actuation.gear_ratio": f"{ARM_GEAR_RATIO:g} on axes 1-3, {WRIST_GEAR_RATIO:g} on the wrist",
+        "actuation.gear_coupling": "no coupling between axes",
+        "actuation.rotor_inertia_kgm2": f"{ROTOR_INERTIA_PER_EFFORT_S2:g} s² x effort limit",
+        "actuation.viscous_Nms_rad": f"{VISCOUS_FRACTION:g} x effort / velocity limit",
+        "actuation.coulomb_Nm": f"{COULOMB_FRACTION:.0%} of the effort limit",
+        "actuation.coulomb_smoothing_rad_s": "0.01 rad/s",
+        "limits.acceleration_rad_s2": f"{ACCELERATION_PER_VELOCITY_1_S:g}/s x velocity limit",
+        "tracker": "1.5 reaches in front of the base, 0.2 reaches up; 8 µm + 3 µm/m, 30°",
+        "collision.floor_z_m": "floor at the base",
+        "collision.floor_check_from_joint": "links bolted near the floor not checked",
+        "capsules": "one per link, fitted to its collision geometry or from joint to joint",
+    }
+    if not tip_given:
+        rules["flange_frame"] = "child of the deepest revolute joint (a tool0/flange link fixed to it if any)"
+    if spec.collision.ignore_pairs:
+        rules["collision.ignore_pairs"] = "capsule pairs overlapping in almost every configuration"
+    if set(spec.locked_joints) - set(lock):
+        rules["locked_joints"] = "0 when the limits allow, else mid-range (--lock NAME=VALUE to choose)"
+    for kind, key in (("velocity", "velocity_rad_s"), ("effort", "effort_Nm")):
+        if kind in placeholders:
+            rules[f"limits.{key}"] = f"PLACEHOLDER: the URDF's {kind} limit is 0 or missing"
+    return rules
+
+
+def _commented(key: str, value: object, rules: dict[str, str]) -> str:
+    """A top-level section as YAML, each assumed line ending in ``# ASSUMED: rule``."""
+    lines = yaml.safe_dump({key: value}, sort_keys=False, allow_unicode=True, width=100000,
+                           default_flow_style=None if isinstance(value, dict | list) else False).rstrip().split("\n")
+    for n, line in enumerate(lines):
+        indent = len(line) - len(line.lstrip())
+        name = line.strip().split(":", 1)[0]
+        dotted = key if n == 0 else f"{key}.{name}" if indent == 2 else None
+        if dotted in rules and ":" in line:
+            lines[n] = f"{line}  # ASSUMED: {rules[dotted]}"
+    return "\n".join(lines)
+
+
+def parse_locks(items: list[str]) -> dict[str, float]:
+    """``["track=0.5", ...]`` (``--lock JOINT=VALUE``) -> ``{"track": 0.5}``."""
+    locks = {}
+    for item in items:
+        name, _, value = item.partition("=")
+        try:
+            locks[name.strip()] = float(value)
+        except ValueError:
+            raise RobotFileError(None, "--lock", f"expected JOINT=VALUE with VALUE in rad or m, got {item!r}") from None
+    return locks
+
+
 def write_robot_yaml(urdf: str | Path, out: str | Path | None = None, *, base: str | None = None,
-                     tip: str | None = None) -> Path:
+                     tip: str | None = None, lock: dict[str, float] | None = None, force: bool = False) -> Path:
     """Write the commented robot.yaml of ``urdf`` (beside it unless ``out``) and return its path."""
     urdf = Path(urdf)
     target = Path(out) if out is not None else urdf.parent / "robot.yaml"
-    if target.exists():
-        raise RobotFileError(target, "robot.yaml", "already exists; remove it or write elsewhere (--out)")
-    robot = RobotModel.load(urdf, base=base, tip=tip)
+    if target.exists() and not force:
+        raise RobotFileError(target, "robot.yaml", "already exists; remove it, write elsewhere (--out) or "
+                             "replace it (--force)")
+    robot = RobotModel.load(urdf, base=base, tip=tip, lock=lock, urdf_alone=True)
     spec = robot.spec
-    data = robot_spec_to_yaml(spec, str(Path(urdf).resolve()) if target.parent.resolve() != urdf.parent.resolve()
+    placeholders = {kind for kind in ("velocity", "effort")
+                    if any(a.startswith(f"PLACEHOLDER {kind} limits") for a in robot.assumptions)}
+    spec.limit_overrides.update({"velocity_rad_s": robot.limits.velocity_rad_s} if "velocity" in placeholders
+                                else {})
+    spec.limit_overrides.update({"effort_Nm": robot.limits.effort_Nm} if "effort" in placeholders else {})
+    data = robot_spec_to_yaml(spec, str(urdf.resolve()) if target.parent.resolve() != urdf.parent.resolve()
                               else urdf.name)
     data.pop("assumptions", None)
-    lines = [_HEADER.format(urdf=urdf, assumptions="\n".join(f"#  - {a}" for a in robot.assumptions))]
+    rules = _rules(robot, tip_given=tip is not None, lock=lock or {}, placeholders=placeholders)
+    data["assumed"] = {dotted: assumed_entry(data, dotted, rule) for dotted, rule in rules.items()}
+    kept = [a for a in robot.assumptions if not a.startswith(("PLACEHOLDER velocity", "PLACEHOLDER effort"))]
+    lines = [_HEADER.format(urdf=urdf, assumptions="\n".join(f"#  - {a}" for a in kept))]
     for key, value in data.items():
         if key in _SECTION_NOTES:
             lines.append(_SECTION_NOTES[key])
-        lines.append(yaml.safe_dump({key: value}, sort_keys=False, allow_unicode=True, width=110).rstrip())
+        if key == "assumed":
+            lines.append("# values above still as robot init assumed them: rule and digest (do not edit)")
+        lines.append(_commented(key, value, rules) if key != "assumed" else
+                     yaml.safe_dump({key: value}, sort_keys=False, allow_unicode=True, width=110).rstrip())
     write_text(target, "\n".join(lines) + "\n")
     return target

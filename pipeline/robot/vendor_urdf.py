@@ -1,0 +1,168 @@
+"""Placeholders and repairs for URDFs as vendors ship them: no ``<inertial>``, ``effort="0"``.
+
+ROS-Industrial support packages (KUKA, ABB, Fanuc ...) and older research files describe the
+kinematics and the meshes but leave the dynamics empty: links without ``<inertial>`` (or mass 0)
+and joints with ``effort="0"`` / ``velocity="0"``. Such a file is loaded with placeholders sized
+like a catalogue arm of the same reach, and every placeholder is listed as an assumption:
+
+* total arm mass ``m = MASS_COEFF_KG * reach**MASS_EXPONENT``, a power law fitted in log-log to
+  manufacturers' data sheets (ABB IRB 120: 0.58 m / 25 kg; KUKA KR 6 R900 sixx: 0.90 m / 52 kg;
+  ABB IRB 140: 0.81 m / 98 kg; KUKA KR 16-2: 1.61 m / 235 kg; ABB IRB 2400-16: 1.55 m / 380 kg;
+  KUKA KR 210 R2700 prime: 2.70 m / 1068 kg; ABB IRB 6640-185: 2.80 m / 1310 kg); a fifth of it
+  is the base, the rest is shared by the moving links in proportion to their length plus a
+  tenth of the reach (a wrist is light but not massless);
+* each placeholder link a solid cylinder from its joint to the next (radius a quarter of that
+  length, within 2 cm and 0.12 reach, as the fallback capsules of :mod:`pipeline.robot.urdf_import`);
+* joint speeds as on those data sheets: axes 1-3 at ``ARM_SPEED_RAD_S * sqrt(1.6 m / reach)``
+  (KR 16-2: 156 deg/s at 1.61 m; KR 210: 105 deg/s at 2.70 m), the wrist twice as fast;
+* joint torques sized to hold the arm and accelerate it, as industrial drives are (Siciliano et
+  al., Robotics, 2009, sec. 5.2 on actuator sizing): the larger of ``EFFORT_GRAVITY_FACTOR``
+  times the largest gravity torque and ``EFFORT_INERTIA_FACTOR`` times the largest diagonal mass
+  matrix entry times the acceleration limit assumed later (``5/s x velocity limit``, a vertical
+  first axis has no gravity torque), over random configurations of the (placeholder) model; at
+  least ``MIN_EFFORT_SHARE`` of the largest.
+
+An inertia that is not physically consistent (principal moments not positive or violating the
+triangle inequality ``I1 + I2 >= I3``, Traversaro et al., IROS 2016) is repaired by the smallest
+change: zero (or rounding-negative) moments raised to ``MOMENT_FLOOR_KGM2``, then the smallest
+moment raised to ``I3 - I2``. A clearly negative moment (a sign typo) stays an error.
+"""
+
+from __future__ import annotations
+
+import warnings
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pinocchio as pin
+
+from pipeline.robot.urdf_import import ACCELERATION_PER_VELOCITY_1_S
+
+MASS_COEFF_KG, MASS_EXPONENT = 100.0, 2.4
+BASE_MASS_SHARE = 0.2
+ARM_SPEED_RAD_S = 2.72
+EFFORT_GRAVITY_FACTOR, EFFORT_INERTIA_FACTOR, MIN_EFFORT_SHARE = 3.0, 2.0, 0.03
+MOMENT_FLOOR_KGM2 = 1e-6
+#: a principal moment below -this share of the largest is a typo (an error), not a rounding to repair
+SIGN_ERROR_SHARE = 1e-3
+
+
+def datasheet_mass_kg(reach_m: float) -> float:
+    """Total mass of a catalogue industrial arm of this reach (module docstring)."""
+    return float(MASS_COEFF_KG * max(reach_m, 0.05) ** MASS_EXPONENT)
+
+
+def _segments(model: pin.Model, flange_local: np.ndarray) -> list[np.ndarray]:
+    """Per moving joint, the vector from its origin to the next joint's origin (the flange for the last)."""
+    return [np.asarray(model.jointPlacements[j + 1].translation if j + 1 < model.njoints else flange_local, float)
+            for j in range(1, model.njoints)]
+
+
+def _cylinder_inertia(mass_kg: float, segment: np.ndarray, reach_m: float) -> pin.Inertia:
+    """Solid cylinder along ``segment`` from the joint origin (radius a quarter of its length)."""
+    length = max(float(np.linalg.norm(segment)), 0.05 * reach_m)
+    radius = float(np.clip(0.25 * length, 0.02, 0.12 * reach_m))
+    axis = segment / np.linalg.norm(segment) if np.linalg.norm(segment) > 1e-9 else np.array([0.0, 0.0, 1.0])
+    axial, transverse = 0.5 * mass_kg * radius**2, mass_kg * (3 * radius**2 + length**2) / 12
+    inertia = transverse * np.eye(3) + (axial - transverse) * np.outer(axis, axis)
+    return pin.Inertia(mass_kg, 0.5 * np.asarray(segment, float), inertia)
+
+
+def child_links(root: ET.Element) -> dict[str, str]:
+    """Joint name -> child link name."""
+    return {str(j.get("name")): str(j.find("child").get("link")) for j in root.findall("joint")}
+
+
+def placeholder_inertias(model: pin.Model, root: ET.Element, flange_local: np.ndarray,
+                         reach_m: float) -> list[str]:
+    """Give every moving body of mass <= 0 a placeholder inertia (in place); the sentences stating it."""
+    links = child_links(root)
+    bad = [j for j in range(1, model.njoints) if abs(model.inertias[j].mass) < 1e-12]   # negative: an error
+    if not bad:
+        return []
+    segments = _segments(model, flange_local)
+    weights = np.array([np.linalg.norm(s) + 0.1 * reach_m for s in segments])
+    moving_kg = (1 - BASE_MASS_SHARE) * datasheet_mass_kg(reach_m)
+    for j in bad:
+        mass = float(moving_kg * weights[j - 1] / weights.sum())
+        model.inertias[j] = _cylinder_inertia(mass, segments[j - 1], reach_m)
+    listed = ", ".join(f"{links.get(str(model.names[j]), model.names[j])} {model.inertias[j].mass:.1f} kg"
+                       for j in bad)
+    return [f"PLACEHOLDER inertials (no <inertial> or mass 0 in the URDF): {listed}; sized like a catalogue "
+            f"arm of {reach_m:.2f} m reach ({datasheet_mass_kg(reach_m):.0f} kg in all, "
+            f"{MASS_COEFF_KG:g} kg x reach^{MASS_EXPONENT:g}), each link a solid cylinder from its joint to the "
+            "next: replace them by the real inertials (URDF) or identify them"]
+
+
+def repair_inertias(model: pin.Model, root: ET.Element) -> list[str]:
+    """Make every body's rotational inertia physically consistent by the smallest change (in place)."""
+    links = child_links(root)
+    notes = []
+    for j in range(1, model.njoints):
+        body = model.inertias[j]
+        if not body.mass > 0:
+            continue
+        moments, axes = np.linalg.eigh(0.5 * (body.inertia + body.inertia.T))
+        if moments.min() < -SIGN_ERROR_SHARE * np.abs(moments).max():
+            continue              # clearly negative: a sign typo, reported by the loader's check
+        fixed = np.maximum(moments, MOMENT_FLOOR_KGM2)
+        order = np.argsort(fixed)
+        a, b, c = fixed[order]
+        if a + b < c:
+            fixed[order[0]] = c - b
+        if np.allclose(fixed, moments, rtol=0, atol=1e-12):
+            continue
+        model.inertias[j] = pin.Inertia(body.mass, body.lever, axes @ np.diag(fixed) @ axes.T)
+        link = links.get(str(model.names[j]), str(model.names[j]))
+        note = (f"inertia of link {link} repaired (principal moments {np.round(moments, 6).tolist()} kg m² -> "
+                f"{np.round(fixed, 6).tolist()}: not positive or violating I1 + I2 >= I3; smallest change)")
+        warnings.warn(note, stacklevel=2)
+        notes.append(note)
+    return notes
+
+
+def _random_torque_max(model: pin.Model, acceleration_rad_s2: np.ndarray, samples: int = 200) -> np.ndarray:
+    """Per joint, over random configurations: the larger of the gravity and acceleration torque terms."""
+    data = model.createData()
+    lo, hi = np.sort([model.lowerPositionLimit, model.upperPositionLimit], axis=0)   # swapped: refused later
+    worst = np.zeros(model.nq)
+    for q in np.random.default_rng(0).uniform(lo, hi, (samples, model.nq)):
+        gravity = EFFORT_GRAVITY_FACTOR * np.abs(pin.computeGeneralizedGravity(model, data, q))
+        inertia = EFFORT_INERTIA_FACTOR * np.diag(pin.crba(model, data, q)) * acceleration_rad_s2
+        worst = np.maximum(worst, np.maximum(gravity, inertia))
+    return worst
+
+
+def placeholder_limits(model: pin.Model, root: ET.Element, reach_m: float,
+                       keep: frozenset[str] | set[str] = frozenset()) -> list[str]:
+    """Replace velocity and effort limits <= 0 (``velocity="0"``, ``effort="0"``) by placeholders (in place).
+
+    ``keep``: ``"velocity"`` / ``"effort"`` when robot.yaml sets that limit (nothing stated for it)."""
+    notes = []
+    nq = model.nq
+    names = [str(n) for n in model.names[1:]]
+    velocity = model.velocityLimit.copy()
+    bad_v = [i for i in range(nq) if not velocity[i] > 0]
+    if bad_v:
+        arm = ARM_SPEED_RAD_S * np.sqrt(1.6 / max(reach_m, 0.05))
+        for i in bad_v:
+            velocity[i] = arm if i < 3 else 2 * arm
+        model.velocityLimit = velocity
+        if "velocity" not in keep:
+            notes.append(f"PLACEHOLDER velocity limits (velocity 0 or missing in the URDF) on "
+                         f"{', '.join(f'{names[i]} {velocity[i]:.2f} rad/s' for i in bad_v)}: axes 1-3 at "
+                         f"{ARM_SPEED_RAD_S:g} rad/s x sqrt(1.6 m / reach), the wrist twice that (catalogue arms)")
+    effort = model.effortLimit.copy()
+    bad_e = [i for i in range(nq) if not effort[i] > 0]
+    if bad_e:
+        needed = _random_torque_max(model, ACCELERATION_PER_VELOCITY_1_S * model.velocityLimit)
+        floor = MIN_EFFORT_SHARE * max(float(needed.max()), 1.0)
+        for i in bad_e:
+            effort[i] = max(float(needed[i]), floor)
+        model.effortLimit = effort
+        if "effort" not in keep:
+            notes.append(f"PLACEHOLDER effort limits (effort 0 or missing in the URDF) on "
+                         f"{', '.join(f'{names[i]} {effort[i]:.0f} N·m' for i in bad_e)}: "
+                         f"{EFFORT_GRAVITY_FACTOR:g} x the largest gravity torque or {EFFORT_INERTIA_FACTOR:g} x "
+                         f"inertia x acceleration limit, at least {MIN_EFFORT_SHARE:.0%} of the largest")
+    return notes
