@@ -1,6 +1,7 @@
 # Two entry points for a new user:
 #   make run    create .venv, install the package, run the whole pipeline (python -m pipeline run)
 #   make test   create .venv, install with dev extras (+ chromium for the viewer test), run pytest
+#   make typecheck   mypy on the package; fails when a file has more errors than tools/mypy_baseline.json
 # Options: make run ARGS="--config configs/quick.yaml --set seed=3"   make test PYTEST_ARGS="tests/test_cli.py -x"
 # Installs are redone only when pyproject.toml changes (stamp files in .venv/).
 
@@ -13,7 +14,7 @@ PYTEST_ARGS ?=
 export OPENBLAS_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
 
-.PHONY: run test
+.PHONY: run test typecheck
 
 run: $(VENV)/.stamp-run
 	$(PY) -m pipeline run $(ARGS)
@@ -29,6 +30,9 @@ test: $(VENV)/.stamp-dev
 	      || echo "warning: could not install chromium; the viewer screenshot test will be skipped"; \
 	  else echo "warning: no chromium and no root/apt; the viewer screenshot test will be skipped"; fi; }
 	$(PY) -m pytest $(PYTEST_ARGS)
+
+typecheck: $(VENV)/.stamp-dev
+	$(PY) tools/mypy_ratchet.py
 
 $(PY):
 	@$(PYTHON) -c 'import sys; sys.exit(sys.version_info < (3, 11))' \

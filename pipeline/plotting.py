@@ -20,10 +20,12 @@ import pinocchio as pin
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
+from pipeline.robot.model import RobotModel
+
 DEFAULT_VIEWS: tuple[tuple[float, float], ...] = ((25.0, -60.0), (0.0, -90.0))
 
 
-def chain_points(robot: Any, q: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+def chain_points(robot: RobotModel, q: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
     """Segments (start, end) of the kinematic chain in the world frame at ``q``."""
     model = robot.model
     data = model.createData()
@@ -66,7 +68,7 @@ def _capsule_mesh(p0: np.ndarray, p1: np.ndarray, radius: float, n: int = 16) ->
     return pts[..., 0], pts[..., 1], pts[..., 2]
 
 
-def draw_robot(ax: Any, robot: Any, q: np.ndarray | None = None, *, color: str = "tab:blue",
+def draw_robot(ax: Any, robot: RobotModel, q: np.ndarray | None = None, *, color: str = "tab:blue",
                capsules: bool = True, alpha: float = 0.18, label: str | None = None,
                linewidth: float = 3.0) -> None:
     """Draw the robot at ``q`` (default zeros) on a 3-D axes."""
@@ -118,7 +120,7 @@ def set_equal_3d(ax: Any, points: np.ndarray | None = None, margin_m: float = 0.
     ax.set_zlabel("z [m]")
 
 
-def robot_extent(robot: Any, q: np.ndarray) -> np.ndarray:
+def robot_extent(robot: RobotModel, q: np.ndarray) -> np.ndarray:
     """Points spanning what :func:`draw_robot` draws (chain + capsule ends +/- radius)."""
     pts = [p for seg in chain_points(robot, q) for p in seg]
     if getattr(robot, "capsules", None):
@@ -146,7 +148,7 @@ def _hide_edge_on_axis(ax: Any, elev_deg: float, azim_deg: float) -> None:
         axis.label.set_visible(False)
 
 
-def robot_figure(robot: Any, q: np.ndarray | None = None, *,
+def robot_figure(robot: RobotModel, q: np.ndarray | None = None, *,
                  views: Sequence[tuple[float, float]] = DEFAULT_VIEWS, title: str | None = None,
                  points: np.ndarray | None = None, size_in: float = 5.0) -> Figure:
     """Figure with the robot at ``q`` seen from each ``(elevation_deg, azimuth_deg)`` view.

@@ -51,7 +51,7 @@ CONFIGURATIONS_PREFIX = "configurations_"
 COLORS = (0xE6550D, 0x3182BD, 0x31A354, 0x756BB1, 0xD62728, 0x8C564B)
 
 
-def capsule_geometry(robot: Any) -> pin.GeometryModel:
+def capsule_geometry(robot: RobotModel) -> pin.GeometryModel:
     """The robot's collision capsules as a Pinocchio geometry model (drawn when meshes are missing)."""
     geometry = pin.GeometryModel()
     for capsule in getattr(robot, "capsules", []):
@@ -69,7 +69,7 @@ def capsule_geometry(robot: Any) -> pin.GeometryModel:
     return geometry
 
 
-def visual_model(robot: Any) -> tuple[pin.GeometryModel, str]:
+def visual_model(robot: RobotModel) -> tuple[pin.GeometryModel, str]:
     """(visual geometry, "meshes" | "capsules") of ``robot``.
 
     The URDF is read from its file so relative and ``package://`` meshes resolve (ROS_PACKAGE_PATH,
@@ -107,7 +107,7 @@ class Viewer:
     ``viewer``: an existing ``meshcat.Visualizer``; ``open_browser``: open the page.
     """
 
-    def __init__(self, robot: Any, *, zmq_url: str | None = None, viewer: Any = None,
+    def __init__(self, robot: RobotModel, *, zmq_url: str | None = None, viewer: Any = None,
                  open_browser: bool = False, root: str | None = None) -> None:
 
         self.robot = robot

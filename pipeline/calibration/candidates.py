@@ -41,6 +41,7 @@ import numpy as np
 import pinocchio as pin
 
 from pipeline.robot.collision import segment_distances
+from pipeline.robot.model import RobotModel
 
 #: the beam is checked up to this distance before the reflector (as pipeline.robot.sensors does)
 BEAM_END_CLEARANCE_M = 0.02
@@ -76,7 +77,7 @@ class Chain:
         return self.R_place.shape[0]
 
 
-def chain_from_robot(robot, transform_tracker_to_base: pin.SE3 | None = None) -> Chain:
+def chain_from_robot(robot: RobotModel, transform_tracker_to_base: pin.SE3 | None = None) -> Chain:
     """Extract the serial chain, capsules, reflector and tracker facts of a RobotModel."""
     model = robot.model
     nq = model.nq

@@ -32,7 +32,7 @@ from pipeline.robot.model import RobotModel
 from pipeline.robot.stiffness import DEFLECTION_AT_TORQUE_LIMIT_RAD, nominal_joint_stiffness_Nm_rad
 
 
-def measurement_model(robot, cfg: Config, marker_points: bool = False) -> em.MeasurementModel:
+def measurement_model(robot: RobotModel, cfg: Config, marker_points: bool = False) -> em.MeasurementModel:
     """The error model the parameter subset needs (elastostatic when it has compliances; marker
     points when the readings are 6-D, :func:`pipeline.calibration.measure.expand_orientation`)."""
     return em.MeasurementModel(robot, compliance=subsets.wants_compliance(cfg.parameters), payload=cfg.payload(),
@@ -76,7 +76,7 @@ def gravity_model_of(robot: RobotModel, upstream: RobotModel) -> pin.Model:
     return model
 
 
-def load_gravity_model(cfg: Config, robot) -> RobotModel | None:
+def load_gravity_model(cfg: Config, robot: RobotModel) -> RobotModel | None:
     """The robot of ``calibration.gravity_model`` (same joints as ``robot``), or None."""
     if cfg.gravity_model is None:
         return None
@@ -123,7 +123,7 @@ def gravity_pass(mm: em.MeasurementModel, meas: ms.Measurements, basis: np.ndarr
             "chi2_per_dof_upstream_gravity": float(est.chi2_per_dof), "compliances": rows}
 
 
-def compliance_design_scale(robot) -> np.ndarray:
+def compliance_design_scale(robot: RobotModel) -> np.ndarray:
     """``(nq,)`` torque scale ``tau_s`` (N m) of the design's compliance unit ``theta_j = c_j tau_s_j``:
     the joint's torque limit (``robot.limits.effort_Nm``), or where none is given the torque that
     twists the nominal stiffness by :data:`pipeline.robot.stiffness.DEFLECTION_AT_TORQUE_LIMIT_RAD`."""

@@ -7,8 +7,10 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from pipeline.robot.model import RobotModel
 
-def show_calibration(robot, Q: np.ndarray, transform_tracker_to_base: pin.SE3 | None = None,
+
+def show_calibration(robot: RobotModel, Q: np.ndarray, transform_tracker_to_base: pin.SE3 | None = None,
                      viewer: Any = None, seconds_each: float = 1.0) -> Any:
     """Open (or reuse) a :class:`pipeline.viewer.Viewer`, draw the configurations ``Q`` (reflector
     points + an animation through them), the tracker as a sphere and a beam to every point."""

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.control.elastic_feedforward import link_torque
+from pipeline.robot.model import RobotModel
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad, stiffness_for_gravity_model
 
 #: a calibrated compliance is used when it is at least this many standard deviations (else nominal)
@@ -47,7 +48,8 @@ class StiffnessChoice:
         return [i + 1 for i, s in enumerate(self.source) if s.startswith("nominal")]
 
 
-def feedforward_stiffness(robot, calibration_arrays: dict[str, np.ndarray] | None, identified_inertias: bool,
+def feedforward_stiffness(robot: RobotModel, calibration_arrays: dict[str, np.ndarray] | None,
+                          identified_inertias: bool,
                           nominal_Nm_rad: np.ndarray | None = None) -> StiffnessChoice:
     """The stiffness for the feedforward of ``robot`` (the run's best model, carrying the calibrated
     stiffness in ``actuation.joint_stiffness_Nm_rad``) and its source per joint.
@@ -81,7 +83,8 @@ def feedforward_stiffness(robot, calibration_arrays: dict[str, np.ndarray] | Non
     return StiffnessChoice(k, source, factor, fitted)
 
 
-def deflection_budget(robot, q_d: np.ndarray, v_d: np.ndarray, a_d: np.ndarray, stiffness_Nm_rad: np.ndarray,
+def deflection_budget(robot: RobotModel, q_d: np.ndarray, v_d: np.ndarray, a_d: np.ndarray,
+                      stiffness_Nm_rad: np.ndarray,
                       frame: str, stride: int = 5) -> dict[str, list[float]]:
     """Per joint along the reference (every ``stride``-th sample): the largest deflection the elastic
     feedforward compensates, ``max |tau_l,i| / k_i`` (rad), and its TCP displacement

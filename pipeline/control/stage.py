@@ -50,6 +50,7 @@ from pipeline.control.validate import (
 )
 from pipeline.errors import ConfigError, InfeasibleError, PipelineError
 from pipeline.robot.defaults import ik_seeds_or_derived_rad, iso_or_derived, iso_rotation
+from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import start_configuration
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 from pipeline.runner import StageContext, StageResult
@@ -59,7 +60,7 @@ DEPENDS: tuple[str, ...] = ("model", "calibration", "identification")
 Config = ControlConfig
 
 
-def check(config: ControlConfig, robot) -> None:
+def check(config: ControlConfig, robot: RobotModel) -> None:
     """Validate the section against the robot before anything runs (ConfigError naming the field)."""
     config.validate(None)
     nq = robot.nq
@@ -70,7 +71,6 @@ def check(config: ControlConfig, robot) -> None:
 
 
 def _nominal_robot(ctx: StageContext):
-    from pipeline.robot.model import RobotModel
     from pipeline.runner import resolve_robot_dir
 
     return RobotModel.load(resolve_robot_dir(ctx.run))
@@ -97,7 +97,7 @@ def _upstream_robot(ctx: StageContext, stage: str):
     return None if out is None else out.robot
 
 
-def iso_reference(robot, cfg: ControlConfig):
+def iso_reference(robot: RobotModel, cfg: ControlConfig):
     """The EN ISO 9283 path of ``cfg.iso`` (None fields derived from ``robot``) and its joint reference:
     ``(ref, path, frame, ik_seeds, q_start)``; ``ref`` from ruckig + IK at every sample with ``robot``'s
     kinematics. Raises InfeasibleError naming ``control.iso`` when the path leaves the workspace."""

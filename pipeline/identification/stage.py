@@ -77,7 +77,7 @@ CONFIG_READS: tuple[str, ...] = ("control.iso", "control.ik_seeds_deg", "control
 TX40_ROBOT_NAME = "staubli_tx40"
 
 
-def tx40_wanted(cfg: Config, robot: Any) -> bool:
+def tx40_wanted(cfg: Config, robot: RobotModel) -> bool:
     """Fit the Stäubli TX40 record? ``run_tx40`` when set, else only when the robot is the TX40
     or ``tx40.data_dir`` points to a record."""
     if cfg.run_tx40 is not None:
@@ -93,7 +93,7 @@ def _nominal_robot(ctx: StageContext) -> Any:
         return ctx.robot
 
 
-def identified_robot(robot: Any, p: np.ndarray, stribeck: StribeckFit | None = None) -> Any:
+def identified_robot(robot: RobotModel, p: np.ndarray, stribeck: StribeckFit | None = None) -> Any:
     """Copy of ``robot`` with the standard parameters ``p`` (inertias, rotor inertia, viscous and
     Coulomb friction; torque offsets are not part of a RobotModel) and, with a Stribeck fit, its
     static excess and Stribeck velocity (``friction_model: stribeck``; else none)."""
@@ -110,7 +110,7 @@ def identified_robot(robot: Any, p: np.ndarray, stribeck: StribeckFit | None = N
     return robot.with_model(model, spec)
 
 
-def _fourier_validation(robot: Any, limits: fourier.ExcitationLimits, ex: ExcitationConfig,
+def _fourier_validation(robot: RobotModel, limits: fourier.ExcitationLimits, ex: ExcitationConfig,
                         sample_time_s: float, rng: np.random.Generator) -> val_mod.ValidationTrajectory:
     tr = fourier.random_feasible_trajectories(robot, limits, ex.harmonics, ex.base_frequency_hz, 1, rng)[0]
     t = np.arange(int(round(tr.period_s / sample_time_s))) * sample_time_s
@@ -118,7 +118,7 @@ def _fourier_validation(robot: Any, limits: fourier.ExcitationLimits, ex: Excita
     return val_mod.ValidationTrajectory(t, q, v, a, "fourier", "a random feasible Fourier trajectory")
 
 
-def check(config: Config, robot: Any) -> None:
+def check(config: Config, robot: RobotModel) -> None:
     """Called by the runner before any stage runs or anything is written: the configuration
     (robot-dependent ranges), the user's record (``data_file``) if any and the TX40 record's
     folder, so a bad value or file is reported before calibration runs."""
@@ -437,7 +437,7 @@ def _excitation_label(exc: design_mod.ExcitationResult | None, criterion: str) -
     return f"optimised Fourier trajectory ({criterion})"
 
 
-def _validation_markdown(cfg: Config, vt: val_mod.ValidationTrajectory, iso: Any, robot: Any) -> str:
+def _validation_markdown(cfg: Config, vt: val_mod.ValidationTrajectory, iso: Any, robot: RobotModel) -> str:
     """One paragraph for report.md: which trajectory validated the model; a visible warning
     when the EN ISO 9283 path was asked for but could not be used."""
     if vt.label == "iso9283":

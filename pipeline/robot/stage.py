@@ -8,13 +8,13 @@ the robot (kinematic chain and collision capsules) at the configured pose.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from pipeline.errors import ConfigError
 from pipeline.plotting import robot_figure
 from pipeline.robot.defaults import ready_pose_rad
+from pipeline.robot.model import RobotModel
 from pipeline.runner import StageContext, StageResult
 
 NAME = "model"
@@ -65,7 +65,7 @@ class Config:
                               f"expected a size in [{lo:g}, {hi:g}] inches, got {self.picture_size_in}")
 
 
-def _pose_problem(pose_deg: tuple[float, ...], robot: Any) -> str | None:
+def _pose_problem(pose_deg: tuple[float, ...], robot: RobotModel) -> str | None:
     """Why ``pose_deg`` does not fit ``robot`` (length, joint limits), or None."""
     if len(pose_deg) != robot.nq:
         return f"expected {robot.nq} angles (deg), one per joint, got {len(pose_deg)}"
@@ -81,7 +81,7 @@ def _pose_problem(pose_deg: tuple[float, ...], robot: Any) -> str | None:
     return None
 
 
-def check(config: Config, robot: Any) -> None:
+def check(config: Config, robot: RobotModel) -> None:
     """Robot-dependent checks, run before anything is written: ``pose_deg`` has one angle
     per joint, each within the joint limits."""
     if config.pose_deg is not None:

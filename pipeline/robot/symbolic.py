@@ -28,6 +28,7 @@ import pinocchio as pin
 from pipeline import codegen
 from pipeline.errors import PipelineError, RobotFileError
 from pipeline.robot import spatial_sx as sx
+from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import (
     DEFAULT_COULOMB_SMOOTHING_RAD_S,
     DEFAULT_FLANGE_FRAME,
@@ -79,7 +80,7 @@ class SymbolicRobot:
 
     def __init__(
         self,
-        robot: Any,
+        robot: RobotModel,
         *,
         flange_frame: str | None = None,
         tool_frames: Sequence[str] | None = None,
@@ -154,7 +155,7 @@ class SymbolicRobot:
         return state
 
     @classmethod
-    def from_robot(cls, robot: Any, *, jit: bool = False, **kwargs: Any) -> SymbolicRobot:
+    def from_robot(cls, robot: RobotModel, *, jit: bool = False, **kwargs: Any) -> SymbolicRobot:
         """Same as ``SymbolicRobot(robot, jit=jit, **kwargs)``."""
         return cls(robot, jit=jit, **kwargs)
 

@@ -16,6 +16,7 @@ import numpy as np
 from scipy.interpolate import make_interp_spline
 
 from pipeline.errors import InfeasibleError
+from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import ik_track, start_configuration
 
 
@@ -46,7 +47,7 @@ class JointPath:
         return q, dq, ddq
 
 
-def joint_path_from_cartesian(robot: Any, path: Any, n_points: int, q_seed: np.ndarray,
+def joint_path_from_cartesian(robot: RobotModel, path: Any, n_points: int, q_seed: np.ndarray,
                               frame: str | None = None, max_step_rad: float = np.radians(15.0),
                               name: str = "path") -> JointPath:
     """IK of a Cartesian path (``pipeline.robot.paths.CartesianPath``: line, circle, spline, ISO
