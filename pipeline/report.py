@@ -18,7 +18,7 @@ from pipeline.config import RunConfig
 from pipeline.errors import PipelineError
 
 
-def _fmt(value: Any) -> str:
+def _fmt(value: object) -> str:
     if isinstance(value, bool) or value is None:
         return str(value)
     if isinstance(value, float):

@@ -145,7 +145,7 @@ def config_reads(cfg: RunConfig, module: ModuleType) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for dotted in tuple(getattr(module, "CONFIG_READS", ()) or ()):
         head, *rest = str(dotted).split(".")
-        value: Any = cfg.sections.get(head)
+        value: object = cfg.sections.get(head)
         for part in rest:
             if isinstance(value, Mapping):
                 value = value.get(part)

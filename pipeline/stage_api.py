@@ -28,7 +28,7 @@ __all__ = ["StageContext", "StageResult", "StageOutput"]
 @dataclass
 class StageContext:
     run: RunConfig                        # name, seed, robot, profile (+ all sections)
-    config: Any                           # this stage's own Config dataclass (one type per stage)
+    config: Any                           # Any: this stage's own Config dataclass (one type per stage)
     robot: RobotModel                     # best model so far (a private copy)
     real: RealRobot | None                # sensors of the hidden robot (None if unavailable)
     upstream: dict[str, StageOutput]      # loaded results of the earlier stages it depends on

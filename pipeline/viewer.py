@@ -28,6 +28,7 @@ import sys
 import time
 import warnings
 from pathlib import Path
+from types import FrameType
 from typing import Any
 
 import coal
@@ -107,7 +108,7 @@ class Viewer:
     ``viewer``: an existing ``meshcat.Visualizer``; ``open_browser``: open the page.
     """
 
-    def __init__(self, robot: RobotModel, *, zmq_url: str | None = None, viewer: Any = None,
+    def __init__(self, robot: RobotModel, *, zmq_url: str | None = None, viewer: meshcat.Visualizer | None = None,
                  open_browser: bool = False, root: str | None = None) -> None:
 
         self.robot = robot
@@ -165,7 +166,7 @@ class Viewer:
     def __enter__(self) -> Viewer:
         return self
 
-    def __exit__(self, *exc: Any) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     # ------------------------------------------------------------------------ drawings
@@ -382,7 +383,7 @@ def view_run(run_dir: str | Path | None = None, *, robot: str | None = None, con
     if wait:
         print("press Ctrl-C to stop the viewer", file=sys.stderr)
 
-        def _stop(signum: int, frame: Any) -> None:    # SIGTERM ends the meshcat server like Ctrl-C
+        def _stop(signum: int, frame: FrameType | None) -> None:    # SIGTERM ends the meshcat server like Ctrl-C
             raise KeyboardInterrupt
 
         previous = signal.signal(signal.SIGTERM, _stop)

@@ -35,11 +35,11 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
+from pipeline.progress import TaskHandle
 from pipeline.robot.collision import segment_distances
 from pipeline.robot.model import RobotModel
 
@@ -255,7 +255,7 @@ def grid_values(chain: Chain, n_per_axis: int | list[int]) -> list[np.ndarray]:
 
 
 def filter_grid(chain: Chain, n_per_axis: int | list[int] = 13, margins: FilterMargins | None = None,
-                chunk: int = 20_000, progress: Any = None,
+                chunk: int = 20_000, progress: TaskHandle | None = None,
                 visibility: Callable[[Kinematics, np.ndarray], np.ndarray] | None = None
                 ) -> tuple[np.ndarray, np.ndarray, dict]:
     """Coarse-first filtering of the full joint-space grid.

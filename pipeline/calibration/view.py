@@ -2,16 +2,19 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
 
 from pipeline.robot.model import RobotModel
 
+if TYPE_CHECKING:
+    from pipeline.viewer import Viewer
+
 
 def show_calibration(robot: RobotModel, Q: np.ndarray, transform_tracker_to_base: pin.SE3 | None = None,
-                     viewer: Any = None, seconds_each: float = 1.0) -> Any:
+                     viewer: Viewer | None = None, seconds_each: float = 1.0) -> Viewer:
     """Open (or reuse) a :class:`pipeline.viewer.Viewer`, draw the configurations ``Q`` (reflector
     points + an animation through them), the tracker as a sphere and a beam to every point."""
     import meshcat.geometry as g

@@ -9,11 +9,10 @@ Range and length checks that do not need the robot are in ``validate(source)`` (
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 from pipeline.config_checks import check_choice, check_count, check_number, check_unique, check_vector
 from pipeline.control.iso9283 import TOOL_ORIENTATIONS
-from pipeline.errors import ConfigError
+from pipeline.errors import ConfigError, Source
 
 FEEDFORWARD_VARIANTS = ("none", "gravity", "full", "full_friction", "elastic_static", "elastic_flat")
 ISO_PLANES = ("diagonal_x", "diagonal_y", "horizontal")        # keys of pipeline.control.iso9283.PLANES
@@ -45,7 +44,7 @@ class IsoPathConfig:
     def __post_init__(self) -> None:
         self.validate(None)
 
-    def validate(self, source: Any = None, where: str = "control.iso") -> None:
+    def validate(self, source: Source = None, where: str = "control.iso") -> None:
         """Robot-independent checks; ConfigError naming ``<where>.<field>``."""
         if self.edge_m is not None:
             check_number(source, f"{where}.edge_m", self.edge_m, gt=0, unit="m")
@@ -112,7 +111,7 @@ class ControlConfig:
             self.iso = IsoPathConfig(**self.iso)
         self.validate(None)
 
-    def validate(self, source: Any = None) -> None:
+    def validate(self, source: Source = None) -> None:
         """Robot-independent checks; ConfigError naming ``control.<field>`` (``nq``: stage ``check``)."""
         s = source
         check_number(s, "control.sample_time_s", self.sample_time_s, gt=0, unit="s")

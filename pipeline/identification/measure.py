@@ -74,7 +74,8 @@ class JointRecord:
 
 
 def simulate_excitation(
-    real: Any, traj: FourierTrajectory, periods: int, sample_time_s: float, rng: np.random.Generator
+    real: Any, traj: FourierTrajectory,  # Any: the simulated hidden robot (joint sensors)
+    periods: int, sample_time_s: float, rng: np.random.Generator
 ) -> JointRecord:
     """The hidden robot runs ``periods`` periods of ``traj`` (ideal tracking), sampled every
     ``sample_time_s`` with its encoder and torque-sensor noise."""

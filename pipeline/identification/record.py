@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any
+from pathlib import Path
 
 import numpy as np
 
@@ -48,7 +48,7 @@ def load_user_record(cfg: Config, robot: RobotModel) -> meas_mod.JointRecord:
 
 
 
-def check_record_limits(rec: meas_mod.JointRecord, robot: RobotModel, file: Any) -> None:
+def check_record_limits(rec: meas_mod.JointRecord, robot: RobotModel, file: str | Path) -> None:
     lo, hi = robot.limits.lower_rad, robot.limits.upper_rad
     bad = np.argwhere((rec.q_rad < lo - 1e-6) | (rec.q_rad > hi + 1e-6))
     if bad.size:

@@ -42,6 +42,7 @@ from matplotlib.figure import Figure
 
 from pipeline.blas import single_thread_blas
 from pipeline.config import resolve_robot_dir
+from pipeline.control.config import IsoPathConfig
 from pipeline.errors import ConfigError, InfeasibleError, PipelineError
 from pipeline.identification import design as design_mod
 from pipeline.identification import estimate as est_mod
@@ -85,7 +86,7 @@ def tx40_wanted(cfg: Config, robot: RobotModel) -> bool:
     return getattr(robot, "name", "") == TX40_ROBOT_NAME or bool(cfg.tx40.data_dir)
 
 
-def _nominal_robot(ctx: StageContext) -> Any:
+def _nominal_robot(ctx: StageContext) -> RobotModel:
     """The robot as loaded from its files (structure of the base parameters)."""
     try:
         return RobotModel.load(resolve_robot_dir(ctx.run))
@@ -93,7 +94,7 @@ def _nominal_robot(ctx: StageContext) -> Any:
         return ctx.robot
 
 
-def identified_robot(robot: RobotModel, p: np.ndarray, stribeck: StribeckFit | None = None) -> Any:
+def identified_robot(robot: RobotModel, p: np.ndarray, stribeck: StribeckFit | None = None) -> RobotModel:
     """Copy of ``robot`` with the standard parameters ``p`` (inertias, rotor inertia, viscous and
     Coulomb friction; torque offsets are not part of a RobotModel) and, with a Stribeck fit, its
     static excess and Stribeck velocity (``friction_model: stribeck``; else none)."""
@@ -437,7 +438,8 @@ def _excitation_label(exc: design_mod.ExcitationResult | None, criterion: str) -
     return f"optimised Fourier trajectory ({criterion})"
 
 
-def _validation_markdown(cfg: Config, vt: val_mod.ValidationTrajectory, iso: Any, robot: RobotModel) -> str:
+def _validation_markdown(cfg: Config, vt: val_mod.ValidationTrajectory, iso: IsoPathConfig,
+                         robot: RobotModel) -> str:
     """One paragraph for report.md: which trajectory validated the model; a visible warning
     when the EN ISO 9283 path was asked for but could not be used."""
     if vt.label == "iso9283":

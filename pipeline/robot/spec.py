@@ -9,9 +9,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import pinocchio as pin
 import yaml
 
@@ -133,12 +133,12 @@ _TOP_KEYS = {
 _REQUIRED_TOP = {"urdf", "flange_frame", "tool", "actuation", "limits"}
 
 
-def _is_number(value: Any) -> bool:
+def _is_number(value: object) -> bool:
     """An int or float from YAML; ``true``/``false`` are not numbers (a bool is an int in Python)."""
     return isinstance(value, int | float) and not isinstance(value, bool)
 
 
-def _is_int(value: Any) -> bool:
+def _is_int(value: object) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)
 
 
@@ -205,7 +205,7 @@ class _Reader:
         return int(value)
 
     def vector(self, key: str, length: int | None, *, nonnegative: bool = False,
-               positive: bool = False, default: Any = None) -> np.ndarray:
+               positive: bool = False, default: npt.ArrayLike | None = None) -> np.ndarray:
         if key not in self.data:
             if default is None:
                 raise self.error(key, "missing")
