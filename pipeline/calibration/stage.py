@@ -433,7 +433,8 @@ def run(ctx) -> Any:
         arrays["heldout_errors_before_m"] = out.validation["errors_before_m"]
         arrays["heldout_errors_after_m"] = out.validation["errors_after_m"]
         arrays["heldout_predicted_std_m"] = out.validation["predicted_std_m"]
-    arrays.update(out.notes.get("static_torques", {}))   # elastostatic model: for later gravity models
+    if "static_torques" in out.notes:                     # elastostatic model: for later gravity models
+        arrays.update(out.notes["static_torques"].to_arrays())
     if out.selection is not None:
         arrays["index_history"] = np.array(out.selection.history, float).reshape(-1, 2)
 

@@ -50,6 +50,7 @@ from pipeline.control.validate import (
 )
 from pipeline.errors import ConfigError, InfeasibleError, PipelineError
 from pipeline.robot.defaults import ik_seeds_or_derived_rad, iso_or_derived, iso_rotation
+from pipeline.robot.handoff import ElastostaticRecord
 from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import start_configuration
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
@@ -134,7 +135,8 @@ def run(ctx: StageContext) -> StageResult:
     t_ref = time.perf_counter() - t0
     # the elastic variants' stiffness: calibrated (re-expressed for the identified inertias) or nominal
     cal_out = ctx.upstream.get("calibration")
-    stiffness = feedforward_stiffness(robot, None if cal_out is None else cal_out.arrays, identified,
+    record = None if cal_out is None else ElastostaticRecord.from_arrays(cal_out.arrays, robot.nq)
+    stiffness = feedforward_stiffness(robot, record, identified,
                                       nominal_joint_stiffness_Nm_rad(nominal))
     robot.spec.actuation.joint_stiffness_Nm_rad = stiffness.stiffness_Nm_rad
 

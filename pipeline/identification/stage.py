@@ -63,8 +63,9 @@ from pipeline.identification.tx40 import (
 )
 from pipeline.quality import QualityGates
 from pipeline.robot.defaults import iso_or_derived
+from pipeline.robot.handoff import JointFriction
 from pipeline.robot.model import RobotModel
-from pipeline.robot.parameters import set_dynamic_parameters
+from pipeline.robot.parameters import DynamicLayout, set_dynamic_parameters
 from pipeline.robot.symbolic import SymbolicRobot
 from pipeline.solver_status import is_success
 from pipeline.stage_api import StageContext, StageResult
@@ -94,6 +95,15 @@ def _nominal_robot(ctx: StageContext) -> RobotModel:
         return ctx.robot
 
 
+def identified_friction(p: np.ndarray, nq: int, stribeck: StribeckFit | None = None) -> JointFriction:
+    """The friction handed on: viscous and Coulomb from the standard parameters ``p``, the Stribeck
+    term from ``stribeck`` (``friction_model: stribeck``; else none)."""
+    layout = DynamicLayout(nq)
+    return JointFriction(p[layout.viscous].copy(), p[layout.coulomb].copy(),
+                         None if stribeck is None else stribeck.static_excess_Nm.copy(),
+                         None if stribeck is None else stribeck.stribeck_velocity_rad_s.copy())
+
+
 def identified_robot(robot: RobotModel, p: np.ndarray, stribeck: StribeckFit | None = None) -> RobotModel:
     """Copy of ``robot`` with the standard parameters ``p`` (inertias, rotor inertia, viscous and
     Coulomb friction; torque offsets are not part of a RobotModel) and, with a Stribeck fit, its
@@ -102,12 +112,8 @@ def identified_robot(robot: RobotModel, p: np.ndarray, stribeck: StribeckFit | N
     model = set_dynamic_parameters(robot.model, p)
     spec = copy.deepcopy(robot.spec)
     off = 10 * (robot.model.njoints - 1)
-    act = spec.actuation
-    act.rotor_inertia_kgm2 = p[off : off + nq].copy()
-    act.viscous_Nms_rad = p[off + nq : off + 2 * nq].copy()
-    act.coulomb_Nm = p[off + 2 * nq : off + 3 * nq].copy()
-    act.static_friction_excess_Nm = None if stribeck is None else stribeck.static_excess_Nm.copy()
-    act.stribeck_velocity_rad_s = None if stribeck is None else stribeck.stribeck_velocity_rad_s.copy()
+    spec.actuation.rotor_inertia_kgm2 = p[off : off + nq].copy()
+    identified_friction(p, nq, stribeck).apply_to(spec.actuation)
     return robot.with_model(model, spec)
 
 
