@@ -39,9 +39,9 @@ class StageContext:
 
 @dataclass
 class StageResult:
-    summary: dict                                           # -> summary.json (headline figures)
+    summary: dict[str, Any]                                 # -> summary.json (headline figures)
     arrays: dict[str, np.ndarray] = field(default_factory=dict)   # -> results.npz
-    data: dict = field(default_factory=dict)                # -> results.json
+    data: dict[str, Any] = field(default_factory=dict)      # -> results.json
     figures: dict[str, Figure] = field(default_factory=dict)  # matplotlib Figures -> <name>.png
     robot: RobotModel | None = None                         # RobotModel handed on -> robot/
     report_md: str = ""                                     # extra markdown for report.md
@@ -51,8 +51,8 @@ class StageResult:
 class StageOutput:
     """What later stages get from a finished stage."""
 
-    summary: dict
+    summary: dict[str, Any]
     arrays: dict[str, np.ndarray]
-    data: dict
+    data: dict[str, Any]
     robot: RobotModel | None             # from ``<stage>/robot/`` (exact, see pipeline.robot.exact)
     path: Path

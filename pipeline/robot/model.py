@@ -24,7 +24,7 @@ from pipeline.robot.collision import CapsuleDistances, segment_distances
 from pipeline.robot.friction import joint_friction_torque
 from pipeline.robot.ik import IKResult, solve_ik
 from pipeline.robot.loading import ROBOTS_DIR, JointLimits, load_robot_files, resolve_robot_files, validate_joint_limits
-from pipeline.robot.spec import Capsule, RobotSpec, robot_spec_to_yaml
+from pipeline.robot.spec import ActuationSpec, Capsule, RobotSpec, TrackerSpec, robot_spec_to_yaml
 from pipeline.robot.urdf_export import export_urdf
 from pipeline.robot.urdf_import import absolute_mesh_paths
 
@@ -156,11 +156,11 @@ class RobotModel:
                            m.effortLimit.copy(), self.spec.acceleration_rad_s2.copy())
 
     @property
-    def actuation(self):  # noqa: ANN201 - ActuationSpec
+    def actuation(self) -> ActuationSpec:
         return self.spec.actuation
 
     @property
-    def tracker(self):  # noqa: ANN201 - TrackerSpec
+    def tracker(self) -> TrackerSpec:
         return self.spec.tracker
 
     @property
@@ -342,7 +342,7 @@ class RobotModel:
         return bool(min(distances.self_min_m, distances.floor_min_m) < margin_m)
 
     # ------------------------------------------------------------------ summary
-    def summary(self) -> dict:
+    def summary(self) -> dict[str, object]:
         """DOF, reach (axis 1 to flange), moving mass and limits in readable units."""
         rng = np.random.default_rng(0)
         lim = self.limits
