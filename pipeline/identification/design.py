@@ -40,7 +40,6 @@ feasible Fourier trajectories with the same harmonics and limits.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -436,9 +435,8 @@ def _optimize_excitation_impl(
     solver, bounds, _obj = _build_nlp(robot, sym, crit, inner, L, max_iter, objective_change_tol)
     best: tuple[float, FourierTrajectory, FeasibilityReport, float] | None = None
     histories, start_results, cond_starts = [], [], []
-    iterable: Iterable[int] = range(len(starts))
-    if progress is not None:
-        iterable = progress.track(iterable, "excitation starts")
+    indices = range(len(starts))
+    iterable = indices if progress is None else progress.track(indices, "excitation starts")
     nc = nq * (2 * L + 1)
     for k in iterable:
         c0 = starts[k].coefficients.copy()
