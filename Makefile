@@ -4,6 +4,7 @@
 #   make lint   check the package's layers (import-linter contracts in pyproject.toml)
 #   make test-slow   the checks behind the `slow` marker (whole-pipeline runs, paper studies; CI runs both);
 #                    the paper-scale `study` set is left out: .venv/bin/python -m pytest -m study
+#   make typecheck   mypy on the package; fails when a file has more errors than tools/mypy_baseline.json
 # Options: make run ARGS="--config configs/quick.yaml --set seed=3"   make test PYTEST_ARGS="tests/test_cli.py -x"
 # Installs are redone only when pyproject.toml changes (stamp files in .venv/).
 
@@ -16,7 +17,7 @@ PYTEST_ARGS ?=
 export OPENBLAS_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
 
-.PHONY: run test test-slow lint
+.PHONY: run test test-slow lint typecheck
 
 run: $(VENV)/.stamp-run
 	$(PY) -m pipeline run $(ARGS)
@@ -38,6 +39,9 @@ test: $(VENV)/.stamp-dev
 
 test-slow: $(VENV)/.stamp-dev
 	$(PY) -m pytest -m 'slow and not study' $(PYTEST_ARGS)
+
+typecheck: $(VENV)/.stamp-dev
+	$(PY) tools/mypy_ratchet.py
 
 $(PY):
 	@$(PYTHON) -c 'import sys; sys.exit(sys.version_info < (3, 11))' \

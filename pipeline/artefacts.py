@@ -24,6 +24,7 @@ from typing import Any
 
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.figure import Figure
 
 
 # --------------------------------------------------------------------------------------------
@@ -80,7 +81,11 @@ def write_text(path: str | Path, text: str) -> Path:
     return Path(path)
 
 
-def to_jsonable(value: Any) -> Any:
+#: what :func:`json.dumps` writes: None, bool, number, str, and lists and str-keyed dicts of them
+JsonValue = None | bool | int | float | str | list["JsonValue"] | dict[str, "JsonValue"]
+
+
+def to_jsonable(value: object) -> JsonValue:
     """numpy arrays/scalars, tuples, Paths, dataclasses -> JSON types. NaN/inf -> None."""
     if isinstance(value, float):
         return value if math.isfinite(value) else None
@@ -101,7 +106,7 @@ def to_jsonable(value: Any) -> Any:
     raise TypeError(f"not JSON-able: {type(value).__name__}")
 
 
-def write_json(path: str | Path, obj: Any) -> Path:
+def write_json(path: str | Path, obj: object) -> Path:
     """Atomic JSON (indented, keys in insertion order); numpy values converted."""
     text = json.dumps(to_jsonable(obj), indent=2, allow_nan=False) + "\n"
     return write_text(path, text)
@@ -129,7 +134,7 @@ def read_npz(path: str | Path) -> dict[str, np.ndarray]:
         return {k: data[k] for k in data.files}
 
 
-def save_figure(path: str | Path, fig: Any, dpi: int = 120, close: bool = True) -> Path:
+def save_figure(path: str | Path, fig: Figure, dpi: int = 120, close: bool = True) -> Path:
     """Atomic PNG of a matplotlib figure (closed afterwards unless ``close=False``)."""
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
@@ -141,7 +146,7 @@ def save_figure(path: str | Path, fig: Any, dpi: int = 120, close: bool = True) 
 # --------------------------------------------------------------------------------------------
 # Hashing
 # --------------------------------------------------------------------------------------------
-def stable_json(obj: Any) -> str:
+def stable_json(obj: object) -> str:
     """Canonical JSON (sorted keys, no spaces) used for hashing."""
     return json.dumps(to_jsonable(obj), sort_keys=True, separators=(",", ":"), allow_nan=False)
 

@@ -212,7 +212,7 @@ class RunConfig:
 # --------------------------------------------------------------------------------------------
 # Parsing and validation
 # --------------------------------------------------------------------------------------------
-def _parse_stages(value: Any, source: str) -> list[str]:
+def _parse_stages(value: object, source: str) -> list[str]:
     if isinstance(value, str):
         items = [s.strip() for s in value.split(",") if s.strip()]
     elif isinstance(value, (list, tuple)) and all(isinstance(s, str) for s in value):
@@ -343,7 +343,7 @@ def load_config(
                 cfg.field_origins[key] = src
         merged: dict[str, Any] = {}
         errors: list[ConfigError | None] = []
-        instance: Any = None
+        instance: object = None
         for src, value in items:
             merged = merge_layers(merged, value)
             try:
@@ -428,7 +428,7 @@ def _blame(errors: list[ConfigError | None], items: list[tuple[str, Any]], secti
     return ConfigError(blame, final.field, final.problem)
 
 
-def _semantic_check(instance: Any, source: str) -> None:
+def _semantic_check(instance: object, source: str) -> None:
     """Call the section's own ``validate(source)`` (or ``validate()``) when it has one.
 
     Stage owners may add ``def validate(self, source: str) -> None`` to their Config that
@@ -451,7 +451,7 @@ def _semantic_check(instance: Any, source: str) -> None:
         raise with_source(exc, source) from None
 
 
-def quick_config(**overrides: Any) -> RunConfig:
+def quick_config(**overrides: object) -> RunConfig:
     """The quick profile (``configs/quick.yaml``) with optional dotted overrides.
 
     ``quick_config(**{"calibration.n_configurations": 20})``.

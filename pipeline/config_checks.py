@@ -6,9 +6,9 @@ Used by the sections' ``validate(source)`` methods (``pipeline.config`` calls th
 from __future__ import annotations
 
 import math
-from typing import Any
+from collections.abc import Hashable, Sequence
 
-from pipeline.errors import ConfigError
+from pipeline.errors import ConfigError, Source
 
 
 def _bounds(gt: float | None, ge: float | None, lt: float | None, le: float | None) -> str:
@@ -22,31 +22,32 @@ def _bounds(gt: float | None, ge: float | None, lt: float | None, le: float | No
     return lo or hi or "finite"
 
 
-def check_number(source: Any, name: str, value: Any, *, gt: float | None = None, ge: float | None = None,
+def check_number(source: Source, name: str, value: object, *, gt: float | None = None, ge: float | None = None,
                  lt: float | None = None, le: float | None = None, unit: str = "", why: str = "") -> None:
     """ConfigError unless ``value`` is a finite number within the bounds (``gt`` > , ``ge`` >=, ...)."""
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    number = float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else math.nan
+    ok = math.isfinite(number)
     if ok:
-        ok = ((gt is None or value > gt) and (ge is None or value >= ge)
-              and (lt is None or value < lt) and (le is None or value <= le))
+        ok = ((gt is None or number > gt) and (ge is None or number >= ge)
+              and (lt is None or number < lt) and (le is None or number <= le))
     if not ok:
         what = "a finite number" if (gt, ge, lt, le) == (None, None, None, None) else _bounds(gt, ge, lt, le)
         unit_text = f" {unit}" if unit else ""
         raise ConfigError(source, name, f"expected {what}{unit_text}, got {value!r}{why}")
 
 
-def check_count(source: Any, name: str, value: Any, minimum: int, why: str = "") -> None:
+def check_count(source: Source, name: str, value: object, minimum: int, why: str = "") -> None:
     """ConfigError unless ``value`` is an int >= ``minimum``."""
     if not isinstance(value, int) or isinstance(value, bool) or value < minimum:
         raise ConfigError(source, name, f"expected an integer >= {minimum}, got {value!r}{why}")
 
 
-def check_choice(source: Any, name: str, value: Any, allowed: tuple[str, ...]) -> None:
+def check_choice(source: Source, name: str, value: object, allowed: tuple[str, ...]) -> None:
     if value not in allowed:
         raise ConfigError(source, name, f"expected one of {', '.join(allowed)}, got {value!r}")
 
 
-def check_vector(source: Any, name: str, values: Any, n: int | None = None, unit: str = "", *,
+def check_vector(source: Source, name: str, values: object, n: int | None = None, unit: str = "", *,
                  gt: float | None = None, nonempty: bool = False) -> None:
     """A list of finite numbers: ``n`` of them (if given), non-empty (if asked), each > ``gt`` (if given)."""
     unit_text = f" ({unit})" if unit else ""
@@ -60,7 +61,7 @@ def check_vector(source: Any, name: str, values: Any, n: int | None = None, unit
         check_number(source, f"{name}[{i}]", v, gt=gt, unit=unit)
 
 
-def check_unique(source: Any, name: str, values: list) -> None:
+def check_unique(source: Source, name: str, values: Sequence[Hashable]) -> None:
     seen = set()
     for v in values:
         if v in seen:

@@ -59,7 +59,7 @@ def lookup_origin(origins: Mapping[str, str], dotted: str) -> str | None:
     return found
 
 
-def to_plain(value: Any) -> Any:
+def to_plain(value: object) -> Any:  # Any: plain dict/list/str/float/... of whatever shape came in
     """Dataclasses, tuples, Paths and numpy values -> plain Python (dict/list/str/float/...)."""
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
         return {f.name: to_plain(getattr(value, f.name)) for f in dataclasses.fields(value)}

@@ -8,6 +8,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+#: where a value came from, named in an error: a file, ``--set``, ... or None
+Source = str | Path | None
+
 
 class PipelineError(Exception):
     """A user-facing error: ``<file>: <field>: <problem>``."""

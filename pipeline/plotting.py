@@ -13,17 +13,19 @@ and the runner saves them as PNG.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
 
 import numpy as np
 import pinocchio as pin
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
+from mpl_toolkits.mplot3d.axes3d import Axes3D
+
+from pipeline.robot.model import RobotModel
 
 DEFAULT_VIEWS: tuple[tuple[float, float], ...] = ((25.0, -60.0), (0.0, -90.0))
 
 
-def chain_points(robot: Any, q: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+def chain_points(robot: RobotModel, q: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
     """Segments (start, end) of the kinematic chain in the world frame at ``q``."""
     model = robot.model
     data = model.createData()
@@ -43,7 +45,7 @@ def chain_points(robot: Any, q: np.ndarray) -> list[tuple[np.ndarray, np.ndarray
     return segments
 
 
-def new_3d_axes(fig: Figure | None = None, position: int | tuple[int, int, int] = 111) -> Any:
+def new_3d_axes(fig: Figure | None = None, position: int | tuple[int, int, int] = 111) -> Axes3D:
     """A 3-D axes (creates a Figure when ``fig`` is None)."""
     if fig is None:
         fig = Figure(figsize=(6, 6))
@@ -66,7 +68,7 @@ def _capsule_mesh(p0: np.ndarray, p1: np.ndarray, radius: float, n: int = 16) ->
     return pts[..., 0], pts[..., 1], pts[..., 2]
 
 
-def draw_robot(ax: Any, robot: Any, q: np.ndarray | None = None, *, color: str = "tab:blue",
+def draw_robot(ax: Axes3D, robot: RobotModel, q: np.ndarray | None = None, *, color: str = "tab:blue",
                capsules: bool = True, alpha: float = 0.18, label: str | None = None,
                linewidth: float = 3.0) -> None:
     """Draw the robot at ``q`` (default zeros) on a 3-D axes."""
@@ -86,19 +88,19 @@ def draw_robot(ax: Any, robot: Any, q: np.ndarray | None = None, *, color: str =
                             linewidth=0, shade=True)
 
 
-def draw_points(ax: Any, points: np.ndarray, *, color: str = "tab:orange", size: float = 8.0,
+def draw_points(ax: Axes3D, points: np.ndarray, *, color: str = "tab:orange", size: float = 8.0,
                 label: str | None = None) -> None:
     """Scatter ``(N, 3)`` points (e.g. TCP positions of a configuration set)."""
     P = np.atleast_2d(np.asarray(points, float))
     ax.scatter(P[:, 0], P[:, 1], P[:, 2], color=color, s=size, label=label, depthshade=False)
 
 
-def draw_floor(ax: Any, half_width_m: float, z_m: float = 0.0) -> None:
+def draw_floor(ax: Axes3D, half_width_m: float, z_m: float = 0.0) -> None:
     xx, yy = np.meshgrid([-half_width_m, half_width_m], [-half_width_m, half_width_m])
     ax.plot_surface(xx, yy, np.full_like(xx, z_m), color="0.6", alpha=0.15, linewidth=0)
 
 
-def set_equal_3d(ax: Any, points: np.ndarray | None = None, margin_m: float = 0.1) -> None:
+def set_equal_3d(ax: Axes3D, points: np.ndarray | None = None, margin_m: float = 0.1) -> None:
     """Equal scale on the three axes around ``points`` (default: what is drawn)."""
     if points is None:
         lims = np.array([ax.get_xlim3d(), ax.get_ylim3d(), ax.get_zlim3d()])
@@ -118,7 +120,7 @@ def set_equal_3d(ax: Any, points: np.ndarray | None = None, margin_m: float = 0.
     ax.set_zlabel("z [m]")
 
 
-def robot_extent(robot: Any, q: np.ndarray) -> np.ndarray:
+def robot_extent(robot: RobotModel, q: np.ndarray) -> np.ndarray:
     """Points spanning what :func:`draw_robot` draws (chain + capsule ends +/- radius)."""
     pts = [p for seg in chain_points(robot, q) for p in seg]
     if getattr(robot, "capsules", None):
@@ -129,7 +131,7 @@ def robot_extent(robot: Any, q: np.ndarray) -> np.ndarray:
     return np.array(pts)
 
 
-def _hide_edge_on_axis(ax: Any, elev_deg: float, azim_deg: float) -> None:
+def _hide_edge_on_axis(ax: Axes3D, elev_deg: float, azim_deg: float) -> None:
     """Orthographic projection and no tick labels on an axis seen edge-on (side/top views)."""
     e, a = np.deg2rad(elev_deg), np.deg2rad(azim_deg)
     edge_on = []
@@ -146,7 +148,7 @@ def _hide_edge_on_axis(ax: Any, elev_deg: float, azim_deg: float) -> None:
         axis.label.set_visible(False)
 
 
-def robot_figure(robot: Any, q: np.ndarray | None = None, *,
+def robot_figure(robot: RobotModel, q: np.ndarray | None = None, *,
                  views: Sequence[tuple[float, float]] = DEFAULT_VIEWS, title: str | None = None,
                  points: np.ndarray | None = None, size_in: float = 5.0) -> Figure:
     """Figure with the robot at ``q`` seen from each ``(elevation_deg, azimuth_deg)`` view.

@@ -18,7 +18,11 @@ from __future__ import annotations
 import contextlib
 import sys
 from collections.abc import Iterable, Iterator
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
+
+if TYPE_CHECKING:
+    from rich.progress import Progress as RichProgress
+    from rich.progress import TaskID
 
 from rich.console import Console
 from rich.progress import (
@@ -39,7 +43,7 @@ _ACTIVE: Progress | None = None
 class TaskHandle:
     """Handle of one progress task: ``advance(n)``, ``update(completed=..., total=...)``."""
 
-    def __init__(self, progress: Any | None, task_id: Any | None) -> None:
+    def __init__(self, progress: RichProgress | None, task_id: TaskID | None) -> None:
         self._progress = progress
         self._task_id = task_id
 
@@ -47,7 +51,7 @@ class TaskHandle:
         if self._progress is not None:
             self._progress.advance(self._task_id, n)
 
-    def update(self, **kwargs: Any) -> None:
+    def update(self, **kwargs: Any) -> None:  # Any: rich's own keyword arguments
         """Forwarded to ``rich.progress.Progress.update`` (completed, total, description)."""
         if self._progress is not None:
             self._progress.update(self._task_id, **kwargs)
@@ -63,7 +67,7 @@ class Progress:
         if enabled is None:
             enabled = sys.stderr.isatty()
         self.enabled = enabled
-        self._rich: Any | None = None
+        self._rich: RichProgress | None = None
         self._transient = transient
         self._depth = 0
         self._previous: Progress | None = None
@@ -92,7 +96,7 @@ class Progress:
         self._depth += 1
         return self
 
-    def __exit__(self, *exc: Any) -> None:
+    def __exit__(self, *exc: object) -> None:
         global _ACTIVE
         self._depth -= 1
         if self._depth == 0:

@@ -21,7 +21,7 @@ from pipeline.errors import PipelineError
 from pipeline.headline import headline_markdown, read_headline
 
 
-def _fmt(value: Any) -> str:
+def _fmt(value: object) -> str:
     if isinstance(value, bool) or value is None:
         return str(value)
     if isinstance(value, float):

@@ -14,6 +14,7 @@ from pathlib import Path
 import yaml
 
 from pipeline.errors import ConfigError
+from pipeline.yaml12 import load_yaml
 
 #: the profile whose runs carry the bare robot name
 DEFAULT_PROFILE = "full"
@@ -36,7 +37,7 @@ def run_dir_robot(run_dir: Path) -> str | None:
     """The ``robot`` of the run's ``config.yaml``; None for a new (or unreadable) run directory."""
     path = Path(run_dir) / RUN_CONFIG_FILE
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+        data = load_yaml(path.read_text(encoding="utf-8"))
     except (OSError, yaml.YAMLError):
         return None
     robot = data.get("robot") if isinstance(data, dict) else None

@@ -25,6 +25,7 @@ correctness beats reuse) plus the stage module's own folder when it lives outsid
 from __future__ import annotations
 
 import errno
+import hashlib
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -126,7 +127,7 @@ def config_reads(cfg: RunConfig, module: ModuleType) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for dotted in tuple(getattr(module, "CONFIG_READS", ()) or ()):
         head, *rest = str(dotted).split(".")
-        value: Any = cfg.sections.get(head)
+        value: object = cfg.sections.get(head)
         for part in rest:
             if isinstance(value, Mapping):
                 value = value.get(part)

@@ -26,7 +26,7 @@ __all__ = ["StageContext", "StageResult", "StageOutput", "stage_rng", "stable_st
 @dataclass
 class StageContext:
     run: RunConfig                        # name, seed, robot, profile (+ all sections)
-    config: Any                           # this stage's own Config dataclass (one type per stage)
+    config: Any                           # Any: this stage's own Config dataclass (one type per stage)
     robot: RobotModel                     # best model so far (a private copy)
     real: RealRobot | None                # sensors of the hidden robot (None if unavailable)
     upstream: dict[str, StageOutput]      # loaded results of the earlier stages it depends on
@@ -37,9 +37,9 @@ class StageContext:
 
 @dataclass
 class StageResult:
-    summary: dict                                           # -> summary.json (headline figures)
+    summary: dict[str, Any]                                 # -> summary.json (headline figures)
     arrays: dict[str, np.ndarray] = field(default_factory=dict)   # -> results.npz
-    data: dict = field(default_factory=dict)                # -> results.json
+    data: dict[str, Any] = field(default_factory=dict)      # -> results.json
     figures: dict[str, Figure] = field(default_factory=dict)  # matplotlib Figures -> <name>.png
     robot: RobotModel | None = None                         # RobotModel handed on -> robot/
     report_md: str = ""                                     # extra markdown for report.md
@@ -49,9 +49,9 @@ class StageResult:
 class StageOutput:
     """What later stages get from a finished stage."""
 
-    summary: dict
+    summary: dict[str, Any]
     arrays: dict[str, np.ndarray]
-    data: dict
+    data: dict[str, Any]
     robot: RobotModel | None             # from ``<stage>/robot/`` (exact, see pipeline.robot.exact)
     path: Path
 

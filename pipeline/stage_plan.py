@@ -23,7 +23,7 @@ from pipeline.robot.model import RobotModel
 class Plan:
     name: str
     module: ModuleType
-    config: Any                   # the stage's Config dataclass instance
+    config: Any                   # Any: the stage's own Config dataclass instance (one type per stage)
     depends: tuple[str, ...]
     closure: list[str]            # all upstream stages (transitive), in run order
     inputs_sha256: str = ""

@@ -35,18 +35,18 @@ def unknown_key(key: str, known: Sequence[str]) -> str:
     return f"unknown key (known keys: {', '.join(sorted(map(str, known))) or 'none'})"
 
 
-def _type_name(tp: Any) -> str:
+def _type_name(tp: object) -> str:
     if isinstance(tp, type):
         return tp.__name__
     return str(tp).replace("typing.", "")
 
 
-def describe(value: Any) -> str:
+def describe(value: object) -> str:
     text = repr(value)
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-def coerce(value: Any, tp: Any, where: str, source: str) -> Any:
+def coerce(value: Any, tp: Any, where: str, source: str) -> Any:  # Any: a YAML value checked against any annotation
     """Check ``value`` (from YAML) against type annotation ``tp`` and convert it.
 
     Supported: bool, int, float (ints accepted), str, Path, None, X | None, Union, Literal,
@@ -140,7 +140,7 @@ def _hints(cls: type) -> dict[str, Any]:
     try:
         return typing.get_type_hints(cls)
     except Exception:  # unresolved forward references: fall back to no checking
-        return {f.name: Any for f in dataclasses.fields(cls)}
+        return dict.fromkeys((f.name for f in dataclasses.fields(cls)), Any)
 
 
 def build_dataclass(cls: type, values: Mapping[str, Any], where: str, source: str) -> Any:

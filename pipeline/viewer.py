@@ -29,6 +29,7 @@ import sys
 import time
 import warnings
 from pathlib import Path
+from types import FrameType
 from typing import Any
 
 import coal
@@ -62,7 +63,7 @@ from pipeline.yaml12 import load_yaml
 TRAJECTORY_RE = re.compile(r"^trajectory_(?P<name>.+)_t$")
 CONFIGURATIONS_PREFIX = "configurations_"
 COLORS = (0xE6550D, 0x3182BD, 0x31A354, 0x756BB1, 0xD62728, 0x8C564B)
-def capsule_geometry(robot: Any) -> pin.GeometryModel:
+def capsule_geometry(robot: RobotModel) -> pin.GeometryModel:
     """The robot's collision capsules as a Pinocchio geometry model (drawn when meshes are missing)."""
     geometry = pin.GeometryModel()
     for capsule in getattr(robot, "capsules", []):
@@ -80,7 +81,7 @@ def capsule_geometry(robot: Any) -> pin.GeometryModel:
     return geometry
 
 
-def visual_model(robot: Any) -> tuple[pin.GeometryModel, str]:
+def visual_model(robot: RobotModel) -> tuple[pin.GeometryModel, str]:
     """(visual geometry, "meshes" | "capsules") of ``robot``.
 
     The URDF is read from its file so relative and ``package://`` meshes resolve (ROS_PACKAGE_PATH,
@@ -118,7 +119,7 @@ class Viewer:
     ``viewer``: an existing ``meshcat.Visualizer``; ``open_browser``: open the page.
     """
 
-    def __init__(self, robot: Any, *, zmq_url: str | None = None, viewer: Any = None,
+    def __init__(self, robot: RobotModel, *, zmq_url: str | None = None, viewer: meshcat.Visualizer | None = None,
                  open_browser: bool = False, root: str | None = None) -> None:
 
         self.robot = robot
@@ -214,7 +215,7 @@ class Viewer:
     def __enter__(self) -> Viewer:
         return self
 
-    def __exit__(self, *exc: Any) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     # ------------------------------------------------------------------------ drawings
@@ -468,7 +469,7 @@ def view_run(run_dir: str | Path | None = None, *, robot: str | None = None, con
     if wait:
         print("press Ctrl-C to stop the viewer", file=sys.stderr)
 
-        def _stop(signum: int, frame: Any) -> None:    # SIGTERM ends the meshcat server like Ctrl-C
+        def _stop(signum: int, frame: FrameType | None) -> None:    # SIGTERM ends the meshcat server like Ctrl-C
             raise KeyboardInterrupt
 
         previous = signal.signal(signal.SIGTERM, _stop)

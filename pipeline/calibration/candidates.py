@@ -35,13 +35,14 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
+from pipeline.progress import TaskHandle
 from pipeline.robot.collision import segment_distances
 from pipeline.robot.instruments import BEAM_END_CLEARANCE_M
+from pipeline.robot.model import RobotModel
 
 
 @dataclass
@@ -74,7 +75,7 @@ class Chain:
         return self.R_place.shape[0]
 
 
-def chain_from_robot(robot, transform_tracker_to_base: pin.SE3 | None = None) -> Chain:
+def chain_from_robot(robot: RobotModel, transform_tracker_to_base: pin.SE3 | None = None) -> Chain:
     """Extract the serial chain, capsules, reflector and tracker facts of a RobotModel."""
     model = robot.model
     nq = model.nq
@@ -268,7 +269,7 @@ def grid_values(chain: Chain, n_per_axis: int | list[int]) -> list[np.ndarray]:
 
 
 def filter_grid(chain: Chain, n_per_axis: int | list[int] = 13, margins: FilterMargins | None = None,
-                chunk: int = 20_000, progress: Any = None,
+                chunk: int = 20_000, progress: TaskHandle | None = None,
                 visibility: Callable[[Kinematics, np.ndarray], np.ndarray] | None = None
                 ) -> tuple[np.ndarray, np.ndarray, dict]:
     """Coarse-first filtering of the full joint-space grid.

@@ -56,6 +56,7 @@ from scipy.linalg import cho_factor, cho_solve
 
 from pipeline.blas import single_thread_blas
 from pipeline.calibration import candidates as cd
+from pipeline.robot.model import RobotModel
 
 
 @dataclass
@@ -195,7 +196,7 @@ def rms_scale_needed(rms_a: np.ndarray, rms_b: np.ndarray, factor: float, n_seed
     return float(np.quantile(factor * rms_b[:k] / rms_a[:k], 1.0 - p_all ** (1.0 / n_seeds)))
 
 
-def reflector_jacobian(robot, Qw: np.ndarray, basis: np.ndarray) -> np.ndarray:
+def reflector_jacobian(robot: RobotModel, Qw: np.ndarray, basis: np.ndarray) -> np.ndarray:
     """Stacked Jacobian rows ``(3 n_w, p)`` of the reflector position in the tracker frame at the
     working configurations ``Qw`` (nominal model and tracker pose) wrt the identifiable parameters
     (geometric basis ``(7 nq + 21, p)``)."""
@@ -207,7 +208,7 @@ def reflector_jacobian(robot, Qw: np.ndarray, basis: np.ndarray) -> np.ndarray:
     return (J @ P).reshape(-1, P.shape[1])
 
 
-def reflector_weight(robot, Qw: np.ndarray, basis: np.ndarray) -> np.ndarray:
+def reflector_weight(robot: RobotModel, Qw: np.ndarray, basis: np.ndarray) -> np.ndarray:
     """Weighting of the ``calib-design`` study's held-out figure: the reflector position in the
     tracker frame at the working configurations ``Qw``, ``W = sum_w J_w^T J_w / n_w`` with ``J_w``
     the rows of :func:`reflector_jacobian`."""

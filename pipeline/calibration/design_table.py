@@ -32,6 +32,7 @@ from pipeline.calibration import validate as va
 from pipeline.calibration.error_model import MeasurementModel
 from pipeline.calibration.estimate import Estimate, estimate
 from pipeline.errors import PipelineError
+from pipeline.robot.model import RobotModel
 
 
 def information(G: np.ndarray) -> np.ndarray:
@@ -55,7 +56,7 @@ def model_rms(validation: dict) -> tuple[float, float]:
     return actual, float(validation["predicted_model_rms_m"])
 
 
-def heldout_in_region(robot, real, region: ts.WorkingRegion, est: Estimate, n: int,
+def heldout_in_region(robot: RobotModel, real, region: ts.WorkingRegion, est: Estimate, n: int,
                       rng: np.random.Generator) -> ms.Measurements | None:
     """Up to ``n`` visible poses of the working region measured on the hidden robot (None: none)."""
     chain = cd.chain_from_robot(robot, est.transform_tracker_to_base)
@@ -68,7 +69,7 @@ def heldout_in_region(robot, real, region: ts.WorkingRegion, est: Estimate, n: i
     return m if len(m) >= 3 else None
 
 
-def design_table(robot, real, mm: MeasurementModel, basis: np.ndarray, spec_v: ix.IndexSpec,
+def design_table(robot: RobotModel, real, mm: MeasurementModel, basis: np.ndarray, spec_v: ix.IndexSpec,
                  chosen_label: str, chosen_Q: np.ndarray, chosen_est: Estimate, cs: cd.CandidateSet | None,
                  region: ts.WorkingRegion, rng: np.random.Generator, n_heldout: int = 300,
                  max_lm_iterations: int = 50, geometric_basis: np.ndarray | None = None) -> dict:
@@ -140,7 +141,7 @@ def summary(table: dict | None) -> dict | None:
                           "actual_model_rms_m": r["actual_model_rms_m"]} for r in table["rows"]}
 
 
-def for_run(cfg, robot, real, mm: MeasurementModel, basis: np.ndarray, spec: ix.IndexSpec,
+def for_run(cfg, robot: RobotModel, real, mm: MeasurementModel, basis: np.ndarray, spec: ix.IndexSpec,
             measured_Q: np.ndarray, est: Estimate, cs: cd.CandidateSet | None, region: ts.WorkingRegion | None,
             rng: np.random.Generator, geometric_basis: np.ndarray | None = None) -> dict | None:
     """The stage's call: the table of a calibration ``Config`` (None when ``design_table`` is off);

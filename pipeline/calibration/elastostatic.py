@@ -28,11 +28,12 @@ from pipeline.calibration import subsets
 from pipeline.calibration.config import Config
 from pipeline.calibration.estimate import Estimate, estimate, identified_compliance
 from pipeline.errors import ConfigError, PipelineError
+from pipeline.robot.handoff import ElastostaticRecord
 from pipeline.robot.model import RobotModel
 from pipeline.robot.stiffness import DEFLECTION_AT_TORQUE_LIMIT_RAD, nominal_joint_stiffness_Nm_rad
 
 
-def measurement_model(robot, cfg: Config, marker_points: bool = False) -> em.MeasurementModel:
+def measurement_model(robot: RobotModel, cfg: Config, marker_points: bool = False) -> em.MeasurementModel:
     """The error model the parameter subset needs (elastostatic when it has compliances; marker
     points when the readings are 6-D, :func:`pipeline.calibration.measure.expand_orientation`)."""
     return em.MeasurementModel(robot, compliance=subsets.wants_compliance(cfg.parameters), payload=cfg.payload(),
@@ -76,7 +77,7 @@ def gravity_model_of(robot: RobotModel, upstream: RobotModel) -> pin.Model:
     return model
 
 
-def load_gravity_model(cfg: Config, robot) -> RobotModel | None:
+def load_gravity_model(cfg: Config, robot: RobotModel) -> RobotModel | None:
     """The robot of ``calibration.gravity_model`` (same joints as ``robot``), or None."""
     if cfg.gravity_model is None:
         return None
@@ -123,7 +124,7 @@ def gravity_pass(mm: em.MeasurementModel, meas: ms.Measurements, basis: np.ndarr
             "chi2_per_dof_upstream_gravity": float(est.chi2_per_dof), "compliances": rows}
 
 
-def compliance_design_scale(robot) -> np.ndarray:
+def compliance_design_scale(robot: RobotModel) -> np.ndarray:
     """``(nq,)`` torque scale ``tau_s`` (N m) of the design's compliance unit ``theta_j = c_j tau_s_j``:
     the joint's torque limit (``robot.limits.effort_Nm``), or where none is given the torque that
     twists the nominal stiffness by :data:`pipeline.robot.stiffness.DEFLECTION_AT_TORQUE_LIMIT_RAD`."""
@@ -222,18 +223,17 @@ def measure_with_payload(mm: em.MeasurementModel, real, meas: ms.Measurements, c
 
 
 def static_torque_record(mm: em.MeasurementModel, meas: ms.Measurements, est: Estimate, basis: np.ndarray,
-                         identifiable_names: list[str]) -> dict[str, np.ndarray]:
+                         identifiable_names: list[str]) -> ElastostaticRecord:
     """What a later stage needs to re-express the identified stiffness for its own gravity model
     (:func:`pipeline.robot.stiffness.stiffness_for_gravity_model`): per measured configuration the
-    static torques the fit used (``elastostatic_torques_Nm``, payload included where mounted), the
-    payload's share of them, which joints' compliance was identified (the others are nominal), and
-    the standard deviation of each compliance (``joint_compliance_std``, rad/(N m); NaN where not
-    identified)."""
+    static torques the fit used (payload included where mounted), the payload's share of them,
+    which joints' compliance was identified (the others are nominal), and the standard deviation of
+    each compliance (rad/(N m); NaN where not identified)."""
     used = mm.static_torques(meas.Q, meas.payload_mounted)
     std = dict(zip(identifiable_names, est.std, strict=True))
     names = mm.names[mm.sl_compliance]
-    return {"elastostatic_configurations_rad": np.asarray(meas.Q, float),
-            "elastostatic_torques_Nm": used,
-            "elastostatic_payload_torques_Nm": used - mm.static_torques(meas.Q),
-            "joint_stiffness_identified": identified_compliance(mm, est.x, basis, est.covariance),
-            "joint_compliance_std": np.array([float(std.get(n, np.nan)) for n in names])}
+    return ElastostaticRecord(
+        stiffness_identified=identified_compliance(mm, est.x, basis, est.covariance),
+        compliance_std_rad_Nm=np.array([float(std.get(n, np.nan)) for n in names]),
+        configurations_rad=np.asarray(meas.Q, float), torques_Nm=used,
+        payload_torques_Nm=used - mm.static_torques(meas.Q))

@@ -39,6 +39,7 @@ import numpy as np
 import pinocchio as pin
 
 from pipeline.robot import spatial_sx as sx
+from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import KINEMATIC_COMPONENTS
 from pipeline.robot.payload import Payload, gravity_torques_Nm, with_payload
 from pipeline.robot.symbolic import SymbolicRobot
@@ -66,7 +67,7 @@ class MeasurementModel:
     ``Function.map`` in chunks.
     """
 
-    def __init__(self, robot, sym: SymbolicRobot | None = None, chunk: int = 4096, compliance: bool = False,
+    def __init__(self, robot: RobotModel, sym: SymbolicRobot | None = None, chunk: int = 4096, compliance: bool = False,
                  payload: Payload | None = None, marker_points: bool = False) -> None:
         self.robot = robot
         self.sym = sym if sym is not None else SymbolicRobot(robot)
@@ -357,13 +358,13 @@ def parameter_basis(report: IdentifiabilityReport, n_full: int, model_basis: np.
     return B[:, report.identifiable]
 
 
-def random_configurations(robot, n: int, rng: np.random.Generator) -> np.ndarray:
+def random_configurations(robot: RobotModel, n: int, rng: np.random.Generator) -> np.ndarray:
     """Uniform random joint vectors inside the limits."""
     lo, hi = robot.limits.lower_rad, robot.limits.upper_rad
     return rng.uniform(lo, hi, size=(n, robot.nq))
 
 
-def mdh_basis(robot, names: list[str], parallel_tol_rad: float = 1e-6) -> tuple[np.ndarray, list[str]]:
+def mdh_basis(robot: RobotModel, names: list[str], parallel_tol_rad: float = 1e-6) -> tuple[np.ndarray, list[str]]:
     """Basis ``B`` (n_full x n_mdh) mapping modified-DH errors to the SE(3) placement errors.
 
     For a placement ``M_i = Rx(alpha) Tx(a) Rz(theta) Tz(d)`` the right-multiplied twist of each

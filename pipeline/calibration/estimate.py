@@ -27,6 +27,7 @@ from scipy.spatial.transform import Rotation
 from pipeline.calibration.error_model import MeasurementModel
 from pipeline.calibration.gravity_uncertainty import Whitener
 from pipeline.errors import SolverError
+from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import apply_kinematic_errors
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 
@@ -180,7 +181,7 @@ def identified_compliance(mm: MeasurementModel, x: np.ndarray, basis: np.ndarray
     return known
 
 
-def calibrated_robot(robot, mm: MeasurementModel, x: np.ndarray, basis: np.ndarray | None = None,
+def calibrated_robot(robot: RobotModel, mm: MeasurementModel, x: np.ndarray, basis: np.ndarray | None = None,
                      covariance: np.ndarray | None = None):
     """``RobotModel`` with the identified kinematic errors (lead's conventions, docs/requests/calibration.md).
 

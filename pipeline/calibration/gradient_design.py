@@ -45,6 +45,7 @@ from pipeline.interrupts import raise_if_interrupted
 from pipeline.robot.collision import segment_distances
 from pipeline.robot.collision_sx import capsule_clearance_function, segment_distance_sx
 from pipeline.robot.instruments import BEAM_END_CLEARANCE_M, tracker_visibility
+from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import pinocchio_dynamic_parameters
 
 
@@ -93,7 +94,7 @@ class GradientDesignResult:
                 "n_configurations": int(len(self.Q))}
 
 
-def feasible_configurations(robot, Q: np.ndarray, transform_tracker_to_base, obstacles=()) -> np.ndarray:
+def feasible_configurations(robot: RobotModel, Q: np.ndarray, transform_tracker_to_base, obstacles=()) -> np.ndarray:
     """Mask of the rows of ``Q`` inside the joint limits, free of self/floor collision
     (``RobotModel.capsule_clearances >= 0``), measurable (:func:`pipeline.robot.instruments.tracker_visibility`)
     and with the beam and the moving capsules clear of the obstacle capsules ``(p0, p1, radius_m)``."""
@@ -119,7 +120,7 @@ def feasible_configurations(robot, Q: np.ndarray, transform_tracker_to_base, obs
     return ok
 
 
-def gradient_design(robot, mm: MeasurementModel, basis: np.ndarray, Q_start: np.ndarray, spec: ix.IndexSpec,
+def gradient_design(robot: RobotModel, mm: MeasurementModel, basis: np.ndarray, Q_start: np.ndarray, spec: ix.IndexSpec,
                     cfg: GradientDesignConfig | None = None, transform_tracker_to_base=None) -> GradientDesignResult:
     """Optimise the joint angles of ``len(Q_start)`` configurations (module docstring).
 
@@ -239,7 +240,7 @@ def gradient_design(robot, mm: MeasurementModel, basis: np.ndarray, Q_start: np.
                                 status, int((~mask).sum()), reasons, fallback)
 
 
-def infeasibility_reasons(robot, Q: np.ndarray, transform_tracker_to_base, obstacles, which: np.ndarray
+def infeasibility_reasons(robot: RobotModel, Q: np.ndarray, transform_tracker_to_base, obstacles, which: np.ndarray
                           ) -> list[tuple[int, str]]:
     """(row, rule) for the rows ``which`` of ``Q``: the first numeric rule each one breaks."""
     out = []

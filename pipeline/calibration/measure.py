@@ -26,6 +26,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from pipeline.errors import DataFileError
+from pipeline.robot.model import RobotModel
 from pipeline.robot.payload import Payload
 
 
@@ -107,12 +108,12 @@ def _thrice(a: np.ndarray | None) -> np.ndarray | None:
     return None if a is None else np.concatenate([a, a, a])
 
 
-def noise_model_sigma(robot, Y: np.ndarray) -> np.ndarray:
+def noise_model_sigma(robot: RobotModel, Y: np.ndarray) -> np.ndarray:
     """Sigma of the robot's tracker noise model at the range of each reading."""
     return robot.tracker.noise_const_m + robot.tracker.noise_per_m * np.linalg.norm(Y, axis=1)
 
 
-def reflector_reach_m(robot) -> float:
+def reflector_reach_m(robot: RobotModel) -> float:
     """Upper bound of the reflector's distance from the robot base origin (m): the sum of the
     joint placement offsets plus the reflector offset (revolute chain; exact bound, no sampling)."""
     model = robot.model
@@ -121,7 +122,7 @@ def reflector_reach_m(robot) -> float:
     return reach + float(np.linalg.norm(frame.placement.translation))
 
 
-def read_csv(path: str | Path, robot, min_rows: int = 1, min_rows_field: str | None = None) -> Measurements:
+def read_csv(path: str | Path, robot: RobotModel, min_rows: int = 1, min_rows_field: str | None = None) -> Measurements:
     """Read and validate a measurement CSV (format in the module docstring).
 
     Errors name the file, the 1-based file line (``line 51``) and the column. Values in the wrong
@@ -197,7 +198,7 @@ def read_csv(path: str | Path, robot, min_rows: int = 1, min_rows_field: str | N
     return Measurements(Q, Y, noise_model_sigma(robot, Y), str(path), rot, len(Q), np.zeros((0, nq)), None, lines)
 
 
-def _check_joint_angles(path: Path, Q: np.ndarray, robot, lines: np.ndarray) -> None:
+def _check_joint_angles(path: Path, Q: np.ndarray, robot: RobotModel, lines: np.ndarray) -> None:
     lo, hi = np.asarray(robot.limits.lower_rad, float), np.asarray(robot.limits.upper_rad, float)
     out = (Q < lo - 1e-9) | (Q > hi + 1e-9)
     if not out.any():
@@ -211,7 +212,7 @@ def _check_joint_angles(path: Path, Q: np.ndarray, robot, lines: np.ndarray) -> 
                         f"angles must be in rad{hint}")
 
 
-def _check_tracker_positions(path: Path, Y: np.ndarray, robot, lines: np.ndarray, has_header: bool) -> None:
+def _check_tracker_positions(path: Path, Y: np.ndarray, robot: RobotModel, lines: np.ndarray, has_header: bool) -> None:
     """Reflector positions must fit the robot: at most ``|tracker position| + reach`` from the
     tracker (nominal pose of robot.yaml, with a factor 1.5 of slack for a moved tracker) and spread
     over at most the reach sphere's diameter (independent of the tracker pose)."""

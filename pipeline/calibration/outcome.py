@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
@@ -12,7 +11,9 @@ from pipeline.calibration import design as ds
 from pipeline.calibration import error_model as em
 from pipeline.calibration import measure as ms
 from pipeline.calibration.estimate import Estimate
+from pipeline.calibration.gradient_design import GradientDesignResult
 from pipeline.calibration.robust import Rejection
+from pipeline.robot.model import RobotModel
 
 
 @dataclass
@@ -26,9 +27,9 @@ class CalibrationOutcome:
     measurements: ms.Measurements
     estimate: Estimate
     validation: dict | None         # None: no held-out validation (measurement file, no validation file)
-    robot: Any
+    robot: RobotModel
     timings_s: dict[str, float]
-    gradient: Any = None
+    gradient: GradientDesignResult | None = None
     working_Q: np.ndarray | None = None
     #: index of the configurations actually measured (``method`` "user file" for a measurement file)
     measured_design: dict | None = None

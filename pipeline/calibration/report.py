@@ -10,6 +10,7 @@ from pipeline.calibration import validate as va
 from pipeline.calibration.config import Config
 from pipeline.calibration.estimate import MAX_COMPLIANCE_RELATIVE_STD
 from pipeline.calibration.outcome import CalibrationOutcome
+from pipeline.robot.model import RobotModel
 
 
 def from_file(out: CalibrationOutcome) -> bool:
@@ -146,7 +147,7 @@ def outlier_markdown(out: CalibrationOutcome) -> str:
     return head + "\n" + "\n".join(table)
 
 
-def visibility_sentence(out: CalibrationOutcome, robot) -> str:
+def visibility_sentence(out: CalibrationOutcome, robot: RobotModel) -> str:
     """How many commanded poses the tracker could not see (report.md)."""
     m = out.measurements
     if from_file(out):
@@ -160,7 +161,7 @@ def visibility_sentence(out: CalibrationOutcome, robot) -> str:
             f"incidence > {deg:.0f}°) and were dropped; the fit uses the {len(m)} measured ones.")
 
 
-def report_markdown(out: CalibrationOutcome, cfg: Config, robot) -> str:
+def report_markdown(out: CalibrationOutcome, cfg: Config, robot: RobotModel) -> str:
     md = ["### Identifiability", "", out.report.markdown(), "", "### Measurements", "",
           visibility_sentence(out, robot), ""]
     d = out.measured_design

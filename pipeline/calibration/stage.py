@@ -69,6 +69,7 @@ from pipeline.errors import ConfigError, DataFileError, InfeasibleError, Pipelin
 from pipeline.progress import task
 from pipeline.quality import QualityGates
 from pipeline.robot.iso_search import POSE_AXES
+from pipeline.robot.model import RobotModel
 from pipeline.stage_api import StageResult
 
 NAME = "calibration"
@@ -79,7 +80,7 @@ FILE_INPUTS: tuple[str, ...] = ("gravity_model", "measurements_csv", "validation
 #: at most about this many candidates are saved for the viewer (every k-th)
 VIEWER_CANDIDATES = 2000
 
-def identify_parameter_set(robot, mm: em.MeasurementModel, cfg: Config, rng: np.random.Generator
+def identify_parameter_set(robot: RobotModel, mm: em.MeasurementModel, cfg: Config, rng: np.random.Generator
                            ) -> tuple[em.IdentifiabilityReport, np.ndarray]:
     """Identifiability analysis on random configurations (paper 002 SVD, paper 003 correlations)
     of the parameters in ``calibration.parameters`` (:mod:`pipeline.calibration.subsets`).
@@ -112,7 +113,7 @@ def identify_parameter_set(robot, mm: em.MeasurementModel, cfg: Config, rng: np.
     return rep, em.parameter_basis(rep, mm.n, B[:, cols])
 
 
-def build_candidates(robot, cfg: Config, basis: np.ndarray, rng: np.random.Generator,
+def build_candidates(robot: RobotModel, cfg: Config, basis: np.ndarray, rng: np.random.Generator,
                      static_torques: Callable[[np.ndarray], np.ndarray] | None = None) -> cd.CandidateSet:
     """Filtered candidate set with whitened Jacobians (nominal model, nominal tracker pose;
     ``static_torques`` for a basis with compliances, :func:`cd.build_candidate_set`)."""
@@ -139,7 +140,7 @@ def build_candidates(robot, cfg: Config, basis: np.ndarray, rng: np.random.Gener
                                   static_torques=static_torques)
 
 
-def too_few_candidates(cfg: Config, robot, n_feasible: int) -> str:
+def too_few_candidates(cfg: Config, robot: RobotModel, n_feasible: int) -> str:
     """Message for a candidate set smaller than ``n_configurations``, in the user's fields."""
     rules = "joint limits, collisions, floor, tracker visibility with the calibration.margin_* values"
     if cfg.candidates == "random":
@@ -152,14 +153,14 @@ def too_few_candidates(cfg: Config, robot, n_feasible: int) -> str:
             "asked for: raise grid_per_axis or lower n_configurations")
 
 
-def working_jacobian(robot, mm: em.MeasurementModel, Qw: np.ndarray, basis: np.ndarray) -> np.ndarray:
+def working_jacobian(robot: RobotModel, mm: em.MeasurementModel, Qw: np.ndarray, basis: np.ndarray) -> np.ndarray:
     """TCP-position Jacobian rows (3 n_w, p) at working configurations wrt ``theta`` (base frame;
     tracker and reflector parameters do not move the TCP; compliances by the gravity deflection,
     :func:`pipeline.calibration.task_space.tcp_jacobian`)."""
     return ts.tcp_jacobian(mm, Qw, basis, robot.frame_tcp)
 
 
-def index_spec(cfg: Config, robot, mm: em.MeasurementModel, basis: np.ndarray, rng: np.random.Generator,
+def index_spec(cfg: Config, robot: RobotModel, mm: em.MeasurementModel, basis: np.ndarray, rng: np.random.Generator,
                region: ts.WorkingRegion | None = None) -> tuple[ix.IndexSpec, np.ndarray | None]:
     """The observability index; for the TCP criteria random collision-free working poses (``V``: in
     the working region, :mod:`pipeline.calibration.task_space`)."""
@@ -174,7 +175,7 @@ def index_spec(cfg: Config, robot, mm: em.MeasurementModel, basis: np.ndarray, r
     return ix.IndexSpec(cfg.index_name, working_jacobian=Jw, n_working=len(Qw)), Qw
 
 
-def measured_design(robot, mm: em.MeasurementModel, basis: np.ndarray, Q: np.ndarray, spec: ix.IndexSpec,
+def measured_design(robot: RobotModel, mm: em.MeasurementModel, basis: np.ndarray, Q: np.ndarray, spec: ix.IndexSpec,
                     T_tb, method: str, mounted: np.ndarray | None = None) -> dict:
     """Observability index of the configurations ``Q`` actually measured (nominal model, whitened
     by the tracker noise model, tracker pose ``T_tb``, the payload's torque where ``mounted``);
@@ -185,7 +186,7 @@ def measured_design(robot, mm: em.MeasurementModel, basis: np.ndarray, Q: np.nda
     return {"method": method, "index_name": spec.name, "n_configurations": int(len(Q)), "index_value": float(value)}
 
 
-def predicted_on_random_poses(robot, mm: em.MeasurementModel, est: Estimate, cfg: Config,
+def predicted_on_random_poses(robot: RobotModel, mm: em.MeasurementModel, est: Estimate, cfg: Config,
                               rng: np.random.Generator, gravity: GravityCovariance | None = None) -> dict:
     """Covariance-predicted error over ``n_heldout`` random collision-free poses visible to the
     identified tracker (nominal model only: nothing is measured)."""
@@ -196,7 +197,7 @@ def predicted_on_random_poses(robot, mm: em.MeasurementModel, est: Estimate, cfg
     return va.predicted_error(mm, est, Q, sigma, gravity)
 
 
-def calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None,
+def calibrate(robot: RobotModel, real, cfg: Config, rng: np.random.Generator, progress=None,
               region: ts.WorkingRegion | None = None) -> CalibrationOutcome:
     """Run the whole calibration (see the module docstring) and return its outcome.
 
@@ -206,7 +207,7 @@ def calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress=None,
         return _calibrate(robot, real, cfg, rng, progress, region or ts.default_region(robot))
 
 
-def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress, region) -> CalibrationOutcome:
+def _calibrate(robot: RobotModel, real, cfg: Config, rng: np.random.Generator, progress, region) -> CalibrationOutcome:
     timings: dict[str, float] = {}
     t = time.perf_counter()
     user = ms.read_csv(cfg.measurements_csv, robot, min_rows=1) if cfg.measurements_csv else None
@@ -321,7 +322,8 @@ def _calibrate(robot, real, cfg: Config, rng: np.random.Generator, progress, reg
                               design, fit, prediction, rejection, notes, table)
 
 
-def heldout_measurements(robot, real, est: Estimate, cfg: Config, rng: np.random.Generator) -> ms.Measurements:
+def heldout_measurements(robot: RobotModel, real, est: Estimate, cfg: Config,
+                         rng: np.random.Generator) -> ms.Measurements:
     """>= n_heldout visible random poses (predicted with the identified tracker pose), measured."""
     chain = cd.chain_from_robot(robot, est.transform_tracker_to_base)
     margins = cd.FilterMargins(cfg.margin_collision_m, math.radians(1.0), 0.005)
@@ -349,7 +351,7 @@ def min_configurations(n_identifiable: int) -> int:
     return -(-n_identifiable // 3)
 
 
-def check_rows(cfg: Config, user: ms.Measurements, p: int, robot) -> None:
+def check_rows(cfg: Config, user: ms.Measurements, p: int, robot: RobotModel) -> None:
     """Enough independent equations (3 per position row, 6 per 6-D row) for the ``p`` parameters."""
     per_row = 6 if user.rotvec is not None and cfg.use_orientation else 3
     need = -(-p // per_row)
@@ -360,7 +362,7 @@ def check_rows(cfg: Config, user: ms.Measurements, p: int, robot) -> None:
                             "calibration.parameters selects fewer)")
 
 
-def check(config: Config, robot) -> None:
+def check(config: Config, robot: RobotModel) -> None:
     """Robot-dependent checks and the user files, before the runner creates any directory."""
     cfg = config
     user = ms.read_csv(cfg.measurements_csv, robot, min_rows=1) if cfg.measurements_csv else None
@@ -442,7 +444,8 @@ def run(ctx) -> Any:
         arrays["heldout_errors_before_m"] = out.validation["errors_before_m"]
         arrays["heldout_errors_after_m"] = out.validation["errors_after_m"]
         arrays["heldout_predicted_std_m"] = out.validation["predicted_std_m"]
-    arrays.update(out.notes.get("static_torques", {}))   # elastostatic model: for later gravity models
+    if "static_torques" in out.notes:                     # elastostatic model: for later gravity models
+        arrays.update(out.notes["static_torques"].to_arrays())
     if out.notes.get("heldout_configurations") is not None:   # for the viewer's layers
         arrays["configurations_heldout"] = out.notes["heldout_configurations"]
     if out.candidates is not None and len(out.candidates):

@@ -44,6 +44,7 @@ from pipeline.calibration.error_model import MeasurementModel
 from pipeline.errors import ConfigError, DataFileError, InfeasibleError
 from pipeline.robot.defaults import iso_or_derived
 from pipeline.robot.iso9283 import IsoPathConfig
+from pipeline.robot.model import RobotModel
 from pipeline.yaml12 import load_yaml
 
 WORKING_REGIONS = ("iso_cube", "box", "csv")
@@ -69,7 +70,7 @@ class WorkingRegion:
                 f"z {lo[2]:.3f}..{hi[2]:.3f} m")
 
 
-def region_from_config(cfg, iso_centre_m, iso_edge_m, robot) -> WorkingRegion:
+def region_from_config(cfg, iso_centre_m, iso_edge_m, robot: RobotModel) -> WorkingRegion:
     """The working region of a calibration ``Config`` (module docstring); ``iso_*`` from ``control.iso``."""
     if cfg.working_region == "box":
         box = np.asarray(cfg.working_box_m, float)
@@ -84,7 +85,7 @@ def region_from_config(cfg, iso_centre_m, iso_edge_m, robot) -> WorkingRegion:
     return WorkingRegion("ISO 9283 cube", c - h, c + h)
 
 
-def read_working_csv(path: str, robot) -> np.ndarray:
+def read_working_csv(path: str, robot: RobotModel) -> np.ndarray:
     """Joint configurations ``q1..qn`` (rad) of the user's working poses, inside the joint limits."""
     cols = [f"q{i + 1}" for i in range(robot.nq)]
     try:
@@ -107,14 +108,14 @@ def read_working_csv(path: str, robot) -> np.ndarray:
     return Q
 
 
-def tcp_positions(chain: cd.Chain, robot, Q: np.ndarray) -> np.ndarray:
+def tcp_positions(chain: cd.Chain, robot: RobotModel, Q: np.ndarray) -> np.ndarray:
     """TCP positions (N, 3) in the base frame from the batched chain kinematics."""
     kin = cd.kinematics(chain, Q)
     p_tcp_flange = np.asarray(robot.transform_tcp_to_flange.translation, float)
     return kin.o_flange + kin.R_flange @ p_tcp_flange
 
 
-def sample_region(robot, region: WorkingRegion, n: int, rng: np.random.Generator,
+def sample_region(robot: RobotModel, region: WorkingRegion, n: int, rng: np.random.Generator,
                   chain: cd.Chain | None = None, visibility: bool = False,
                   margins: cd.FilterMargins | None = None, max_batches: int = 60,
                   batch: int = 50_000) -> np.ndarray:
@@ -147,7 +148,7 @@ def sample_region(robot, region: WorkingRegion, n: int, rng: np.random.Generator
     return np.concatenate(out)[:n]
 
 
-def _draw_near_region(chain: cd.Chain, robot, region: WorkingRegion, batch: int, rng: np.random.Generator,
+def _draw_near_region(chain: cd.Chain, robot: RobotModel, region: WorkingRegion, batch: int, rng: np.random.Generator,
                       per_prefix: int = 16) -> np.ndarray:
     """Uniform joint configurations, drawn so that most have the TCP near the region: prefixes
     ``q_1..q_k`` (k = min(3, nq - 1)) are kept when the origin of joint k+1 is within the reach of the
@@ -255,7 +256,7 @@ def check_task_fields(cfg, source: str = "config") -> None:
             raise bad(key, f"must be >= 1, got {getattr(cfg, key)}")
 
 
-def default_region(robot) -> WorkingRegion:
+def default_region(robot: RobotModel) -> WorkingRegion:
     """The ISO 9283 cube the run uses by default for ``robot``: ``control.iso`` of the robot's
     ``run_defaults`` (robot.yaml), else the control stage's defaults (for callers without a run
     configuration: studies, notebooks), else the cube derived from the model
@@ -275,7 +276,7 @@ def default_region(robot) -> WorkingRegion:
     return WorkingRegion("ISO 9283 cube", c - 0.5 * float(edge), c + 0.5 * float(edge))
 
 
-def region_of_run(run, cfg, robot) -> WorkingRegion:
+def region_of_run(run, cfg, robot: RobotModel) -> WorkingRegion:
     """The working region of a run: ``control.iso`` of the run configuration for ``iso_cube``."""
     iso = getattr(getattr(run, "control", None), "iso", None)
     if cfg.working_region == "iso_cube" and iso is None:

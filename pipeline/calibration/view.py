@@ -2,19 +2,18 @@
 
 from __future__ import annotations
 
-from typing import Any
-
 import meshcat.geometry as g
 import meshcat.transformations as tf
 import numpy as np
 import pinocchio as pin
 
+from pipeline.robot.model import RobotModel
 from pipeline.viewer import Viewer
 from pipeline.viewer_scene import LAYERS
 
 
-def show_calibration(robot, Q: np.ndarray, transform_tracker_to_base: pin.SE3 | None = None,
-                     viewer: Any = None, seconds_each: float = 1.0) -> Any:
+def show_calibration(robot: RobotModel, Q: np.ndarray, transform_tracker_to_base: pin.SE3 | None = None,
+                     viewer: Viewer | None = None, seconds_each: float = 1.0) -> Viewer:
     """Open (or reuse) a :class:`pipeline.viewer.Viewer`, draw the configurations ``Q`` (reflector
     points + an animation through them), the tracker as a sphere and a beam to every point."""
     v = viewer if viewer is not None else Viewer(robot)

@@ -9,10 +9,9 @@ Range and length checks that do not need the robot are in ``validate(source)`` (
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 from pipeline.config_checks import check_choice, check_count, check_number, check_unique, check_vector
-from pipeline.errors import ConfigError
+from pipeline.errors import ConfigError, Source
 from pipeline.robot.iso9283 import IsoPathConfig
 
 FEEDFORWARD_VARIANTS = ("none", "gravity", "full", "full_friction", "elastic_static", "elastic_flat")
@@ -62,7 +61,7 @@ class ControlConfig:
             self.iso = IsoPathConfig(**self.iso)
         self.validate(None)
 
-    def validate(self, source: Any = None) -> None:
+    def validate(self, source: Source = None) -> None:
         """Robot-independent checks; ConfigError naming ``control.<field>`` (``nq``: stage ``check``)."""
         s = source
         check_number(s, "control.sample_time_s", self.sample_time_s, gt=0, unit="s")

@@ -34,6 +34,8 @@ import control as ct
 import numpy as np
 import pinocchio as pin
 
+from pipeline.robot.model import RobotModel
+
 
 @dataclass
 class ServoGains:
@@ -46,7 +48,7 @@ class ServoGains:
         return {"kp": self.kp, "kv": self.kv, "ki": self.ki}
 
 
-def reflected_inertia(robot, q_ref: np.ndarray) -> np.ndarray:
+def reflected_inertia(robot: RobotModel, q_ref: np.ndarray) -> np.ndarray:
     """Diagonal of the joint-space inertia (CRBA incl. rotor inertia) at ``q_ref``."""
     data = robot.model.createData()
     M = pin.crba(robot.model, data, np.asarray(q_ref, float))

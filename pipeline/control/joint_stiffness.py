@@ -26,6 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.control.elastic_feedforward import link_torque
+from pipeline.robot.handoff import ElastostaticRecord
+from pipeline.robot.model import RobotModel
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad, stiffness_for_gravity_model
 
 #: a calibrated compliance is used when it is at least this many standard deviations (else nominal)
@@ -47,41 +49,42 @@ class StiffnessChoice:
         return [i + 1 for i, s in enumerate(self.source) if s.startswith("nominal")]
 
 
-def feedforward_stiffness(robot, calibration_arrays: dict[str, np.ndarray] | None, identified_inertias: bool,
+def feedforward_stiffness(robot: RobotModel, record: ElastostaticRecord | None,
+                          identified_inertias: bool,
                           nominal_Nm_rad: np.ndarray | None = None) -> StiffnessChoice:
     """The stiffness for the feedforward of ``robot`` (the run's best model, carrying the calibrated
     stiffness in ``actuation.joint_stiffness_Nm_rad``) and its source per joint.
 
-    With the calibration's static-torque record in ``calibration_arrays``: a joint whose compliance
-    the calibration identified keeps it if it is significant (``c >= MIN_SIGNIFICANCE`` standard
-    deviations, ``joint_compliance_std``), else takes ``nominal_Nm_rad`` (default: ``robot``'s
+    With the calibration's static-torque ``record``: a joint whose compliance the calibration
+    identified keeps it if it is significant (``c >= MIN_SIGNIFICANCE`` standard deviations,
+    ``record.compliance_std_rad_Nm``), else takes ``nominal_Nm_rad`` (default: ``robot``'s
     value); with identified inertias (``identified_inertias``) the calibrated ones are re-expressed
     for their gravity torques (module docstring)."""
     k = nominal_joint_stiffness_Nm_rad(robot)
     k_nom = k.copy() if nominal_Nm_rad is None else np.asarray(nominal_Nm_rad, float).copy()
-    arrays = calibration_arrays or {}
-    fitted = "joint_stiffness_identified" in arrays
-    known = np.asarray(arrays.get("joint_stiffness_identified", np.zeros(robot.nq, bool)), bool).copy()
+    fitted = record is not None
+    known = np.zeros(robot.nq, bool) if record is None else record.stiffness_identified.copy()
     # without a record (a rigid calibration, or artefacts written before it existed) a value that is not
     # the nominal one came from upstream
     source = ["calibrated" if kn else "nominal" if fitted or np.isclose(k[i], k_nom[i]) else "as handed on"
               for i, kn in enumerate(known)]
-    std = np.asarray(arrays.get("joint_compliance_std", np.zeros(robot.nq)), float)
+    std = np.zeros(robot.nq) if record is None else record.compliance_std_rad_Nm
     weak = known & ~(1.0 / k >= MIN_SIGNIFICANCE * np.nan_to_num(std, nan=np.inf))
     for i in np.flatnonzero(weak):
         source[i], k[i] = f"nominal (calibrated compliance < {MIN_SIGNIFICANCE:g} sigma)", k_nom[i]
     known &= ~weak
     factor = np.ones(robot.nq)
-    if identified_inertias and known.any() and "elastostatic_torques_Nm" in arrays:
-        Q = np.asarray(arrays["elastostatic_configurations_rad"], float)
-        g_fit = np.asarray(arrays["elastostatic_torques_Nm"], float)
-        g_new = np.array([robot.gravity_torque(q) for q in Q]) + np.asarray(arrays["elastostatic_payload_torques_Nm"])
+    if (identified_inertias and known.any() and record is not None and record.configurations_rad is not None
+            and record.torques_Nm is not None and record.payload_torques_Nm is not None):
+        g_fit = record.torques_Nm
+        g_new = np.array([robot.gravity_torque(q) for q in record.configurations_rad]) + record.payload_torques_Nm
         k, factor = stiffness_for_gravity_model(k, known, g_fit, g_new)
         source = ["calibrated, identified gravity" if kn else src for kn, src in zip(known, source, strict=True)]
     return StiffnessChoice(k, source, factor, fitted)
 
 
-def deflection_budget(robot, q_d: np.ndarray, v_d: np.ndarray, a_d: np.ndarray, stiffness_Nm_rad: np.ndarray,
+def deflection_budget(robot: RobotModel, q_d: np.ndarray, v_d: np.ndarray, a_d: np.ndarray,
+                      stiffness_Nm_rad: np.ndarray,
                       frame: str, stride: int = 5) -> dict[str, list[float]]:
     """Per joint along the reference (every ``stride``-th sample): the largest deflection the elastic
     feedforward compensates, ``max |tau_l,i| / k_i`` (rad), and its TCP displacement

@@ -49,6 +49,7 @@ from pipeline.control.validate import (
 )
 from pipeline.errors import ConfigError, InfeasibleError, PipelineError
 from pipeline.robot.defaults import ik_seeds_or_derived_rad, iso_or_derived, iso_rotation
+from pipeline.robot.handoff import ElastostaticRecord
 from pipeline.robot.iso9283 import iso9283_path
 from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import start_configuration
@@ -61,7 +62,7 @@ DEPENDS: tuple[str, ...] = ("model", "calibration", "identification")
 Config = ControlConfig
 
 
-def check(config: ControlConfig, robot) -> None:
+def check(config: ControlConfig, robot: RobotModel) -> None:
     """Validate the section against the robot before anything runs (ConfigError naming the field)."""
     config.validate(None)
     nq = robot.nq
@@ -96,7 +97,7 @@ def _upstream_robot(ctx: StageContext, stage: str):
     return None if out is None else out.robot
 
 
-def iso_reference(robot, cfg: ControlConfig):
+def iso_reference(robot: RobotModel, cfg: ControlConfig):
     """The EN ISO 9283 path of ``cfg.iso`` (None fields derived from ``robot``) and its joint reference:
     ``(ref, path, frame, ik_seeds, q_start)``; ``ref`` from ruckig + IK at every sample with ``robot``'s
     kinematics. Raises InfeasibleError naming ``control.iso`` when the path leaves the workspace."""
@@ -133,7 +134,8 @@ def run(ctx: StageContext) -> StageResult:
     t_ref = time.perf_counter() - t0
     # the elastic variants' stiffness: calibrated (re-expressed for the identified inertias) or nominal
     cal_out = ctx.upstream.get("calibration")
-    stiffness = feedforward_stiffness(robot, None if cal_out is None else cal_out.arrays, identified,
+    record = None if cal_out is None else ElastostaticRecord.from_arrays(cal_out.arrays, robot.nq)
+    stiffness = feedforward_stiffness(robot, record, identified,
                                       nominal_joint_stiffness_Nm_rad(nominal))
     robot.spec.actuation.joint_stiffness_Nm_rad = stiffness.stiffness_Nm_rad
 

@@ -8,9 +8,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
 
-from pipeline.errors import ConfigError
+from pipeline.errors import ConfigError, Source
 from pipeline.identification.base_set import STRUCTURAL_BASE_TOLERANCE
 from pipeline.identification.friction import FRICTION_MODELS
 from pipeline.identification.tx40 import TX40_SAMPLE_TIME_S, Tx40Config
@@ -96,7 +95,7 @@ class Config:
     # data_file: validation fits on this first fraction of the record, scores on the rest
     data_train_fraction: float = 0.7
 
-    def validate(self, source: Any = None) -> None:
+    def validate(self, source: Source = None) -> None:
         """Range checks of values of the right type (called by ``pipeline.config`` at load time
         with the file or ``--set`` that set them, and again by :func:`run`); the robot-dependent
         ones are in :func:`check`."""

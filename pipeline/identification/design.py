@@ -61,6 +61,7 @@ from pipeline.identification.fourier import (
 from pipeline.identification.regressor import BaseParameters, RegressorModel
 from pipeline.identification.tcp_motion import tcp_motion_sx
 from pipeline.interrupts import raise_if_interrupted
+from pipeline.progress import Progress
 from pipeline.robot.collision_sx import capsule_clearance_function
 from pipeline.robot.model import RobotModel
 from pipeline.robot.symbolic import SymbolicRobot
@@ -381,7 +382,8 @@ def shrink_to_feasible(
 
 
 def optimize_excitation(robot: RobotModel, sym: SymbolicRobot, reg: RegressorModel, base: BaseParameters,
-                        limits: ExcitationLimits, rng: np.random.Generator, **options: Any) -> ExcitationResult:
+                        limits: ExcitationLimits, rng: np.random.Generator,
+                        **options: Any) -> ExcitationResult:  # Any: the options of _optimize_excitation_impl
     """Random-start IPOPT optimisation of the excitation (see the module docstring) with one BLAS
     thread; ``options`` are those of :func:`_optimize_excitation_impl`."""
     with single_thread_blas():
@@ -403,7 +405,7 @@ def _optimize_excitation_impl(
     max_iter: int = 150,
     criterion: str = "cond",
     n_check: int = 400,
-    progress: Any = None,
+    progress: Progress | None = None,
     softness: float = 0.0,
     objective_change_tol: float = 1e-2,
 ) -> ExcitationResult:
@@ -433,9 +435,8 @@ def _optimize_excitation_impl(
     solver, bounds, _obj = _build_nlp(robot, sym, crit, inner, L, max_iter, objective_change_tol)
     best: tuple[float, FourierTrajectory, FeasibilityReport, float] | None = None
     histories, start_results, cond_starts = [], [], []
-    iterable: Any = range(len(starts))
-    if progress is not None:
-        iterable = progress.track(iterable, "excitation starts")
+    indices = range(len(starts))
+    iterable = indices if progress is None else progress.track(indices, "excitation starts")
     nc = nq * (2 * L + 1)
     for k in iterable:
         c0 = starts[k].coefficients.copy()

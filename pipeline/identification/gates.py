@@ -15,11 +15,10 @@
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
 from pipeline.errors import DataFileError, PipelineError
+from pipeline.identification.config import Config
 from pipeline.quality import QualityGates
 from pipeline.solver_status import is_success
 
@@ -52,7 +51,7 @@ def check_data_excites(
 
 
 def add_result_gates(
-    gates: QualityGates, cfg: Any, cond_data: float, cond_design: float | None, rms_over_noise: np.ndarray,
+    gates: QualityGates, cfg: Config, cond_data: float, cond_design: float | None, rms_over_noise: np.ndarray,
     predicted_Nm: np.ndarray, effort_limit_Nm: np.ndarray, physical_status: str = "Solve_Succeeded",
 ) -> None:
     """The result gates (see module doc) with the thresholds of ``cfg`` (stage Config)."""

@@ -26,6 +26,7 @@ from pipeline.errors import DataFileError
 from pipeline.identification import signals
 from pipeline.identification.fourier import FourierTrajectory
 from pipeline.identification.regressor import RegressorModel, check_state_arrays
+from pipeline.robot.model import RobotModel
 
 
 @dataclass
@@ -73,7 +74,8 @@ class JointRecord:
 
 
 def simulate_excitation(
-    real: Any, traj: FourierTrajectory, periods: int, sample_time_s: float, rng: np.random.Generator
+    real: Any, traj: FourierTrajectory,  # Any: the simulated hidden robot (joint sensors)
+    periods: int, sample_time_s: float, rng: np.random.Generator
 ) -> JointRecord:
     """The hidden robot runs ``periods`` periods of ``traj`` (ideal tracking), sampled every
     ``sample_time_s`` with its encoder and torque-sensor noise."""
@@ -149,7 +151,7 @@ def read_csv_table(path: str | Path) -> tuple[list[str], np.ndarray, np.ndarray]
 
 def load_joint_csv(
     path: str | Path,
-    robot: Any,
+    robot: RobotModel,
     side: str = "joint",
     sample_time_s: float | None = None,
     q_offset_rad: np.ndarray | None = None,

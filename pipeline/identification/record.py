@@ -2,16 +2,17 @@
 
 from __future__ import annotations
 
-from typing import Any
+from pathlib import Path
 
 import numpy as np
 
 from pipeline.errors import ConfigError, DataFileError
 from pipeline.identification import measure as meas_mod
 from pipeline.identification.config import DATA_BORDER_SAMPLES, MAX_SAMPLE_TIME_S, Config
+from pipeline.robot.model import RobotModel
 
 
-def load_user_record(cfg: Config, robot: Any) -> meas_mod.JointRecord:
+def load_user_record(cfg: Config, robot: RobotModel) -> meas_mod.JointRecord:
     """Read and check ``cfg.data_file``: format, columns, NaN, time stamps, joint limits, enough
     samples for the held-out fit, and a position cut-off below the Nyquist frequency."""
     file = cfg.data_file
@@ -47,7 +48,7 @@ def load_user_record(cfg: Config, robot: Any) -> meas_mod.JointRecord:
 
 
 
-def check_record_limits(rec: meas_mod.JointRecord, robot: Any, file: Any) -> None:
+def check_record_limits(rec: meas_mod.JointRecord, robot: RobotModel, file: str | Path) -> None:
     lo, hi = robot.limits.lower_rad, robot.limits.upper_rad
     bad = np.argwhere((rec.q_rad < lo - 1e-6) | (rec.q_rad > hi + 1e-6))
     if bad.size:

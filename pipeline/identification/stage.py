@@ -62,8 +62,10 @@ from pipeline.identification.tx40 import (
 )
 from pipeline.quality import QualityGates
 from pipeline.robot.defaults import iso_or_derived
+from pipeline.robot.handoff import JointFriction
+from pipeline.robot.iso9283 import IsoPathConfig
 from pipeline.robot.model import RobotModel
-from pipeline.robot.parameters import set_dynamic_parameters
+from pipeline.robot.parameters import DynamicLayout, set_dynamic_parameters
 from pipeline.robot.symbolic import SymbolicRobot
 from pipeline.solver_status import is_success
 from pipeline.stage_api import StageContext, StageResult
@@ -79,7 +81,7 @@ CONFIG_READS: tuple[str, ...] = ("control.iso", "control.ik_seeds_deg", "control
 TX40_ROBOT_NAME = "staubli_tx40"
 
 
-def tx40_wanted(cfg: Config, robot: Any) -> bool:
+def tx40_wanted(cfg: Config, robot: RobotModel) -> bool:
     """Fit the Stäubli TX40 record? ``run_tx40`` when set, else only when the robot is the TX40
     or ``tx40.data_dir`` points to a record."""
     if cfg.run_tx40 is not None:
@@ -87,7 +89,7 @@ def tx40_wanted(cfg: Config, robot: Any) -> bool:
     return getattr(robot, "name", "") == TX40_ROBOT_NAME or bool(cfg.tx40.data_dir)
 
 
-def _nominal_robot(ctx: StageContext) -> Any:
+def _nominal_robot(ctx: StageContext) -> RobotModel:
     """The robot as loaded from its files (structure of the base parameters)."""
     try:
         return RobotModel.load(resolve_robot_dir(ctx.run))
@@ -95,7 +97,16 @@ def _nominal_robot(ctx: StageContext) -> Any:
         return ctx.robot
 
 
-def identified_robot(robot: Any, p: np.ndarray, stribeck: StribeckFit | None = None) -> Any:
+def identified_friction(p: np.ndarray, nq: int, stribeck: StribeckFit | None = None) -> JointFriction:
+    """The friction handed on: viscous and Coulomb from the standard parameters ``p``, the Stribeck
+    term from ``stribeck`` (``friction_model: stribeck``; else none)."""
+    layout = DynamicLayout(nq)
+    return JointFriction(p[layout.viscous].copy(), p[layout.coulomb].copy(),
+                         None if stribeck is None else stribeck.static_excess_Nm.copy(),
+                         None if stribeck is None else stribeck.stribeck_velocity_rad_s.copy())
+
+
+def identified_robot(robot: RobotModel, p: np.ndarray, stribeck: StribeckFit | None = None) -> RobotModel:
     """Copy of ``robot`` with the standard parameters ``p`` (inertias, rotor inertia, viscous and
     Coulomb friction; torque offsets are not part of a RobotModel) and, with a Stribeck fit, its
     static excess and Stribeck velocity (``friction_model: stribeck``; else none)."""
@@ -103,16 +114,12 @@ def identified_robot(robot: Any, p: np.ndarray, stribeck: StribeckFit | None = N
     model = set_dynamic_parameters(robot.model, p)
     spec = copy.deepcopy(robot.spec)
     off = 10 * (robot.model.njoints - 1)
-    act = spec.actuation
-    act.rotor_inertia_kgm2 = p[off : off + nq].copy()
-    act.viscous_Nms_rad = p[off + nq : off + 2 * nq].copy()
-    act.coulomb_Nm = p[off + 2 * nq : off + 3 * nq].copy()
-    act.static_friction_excess_Nm = None if stribeck is None else stribeck.static_excess_Nm.copy()
-    act.stribeck_velocity_rad_s = None if stribeck is None else stribeck.stribeck_velocity_rad_s.copy()
+    spec.actuation.rotor_inertia_kgm2 = p[off : off + nq].copy()
+    identified_friction(p, nq, stribeck).apply_to(spec.actuation)
     return robot.with_model(model, spec)
 
 
-def _fourier_validation(robot: Any, limits: fourier.ExcitationLimits, ex: ExcitationConfig,
+def _fourier_validation(robot: RobotModel, limits: fourier.ExcitationLimits, ex: ExcitationConfig,
                         sample_time_s: float, rng: np.random.Generator) -> val_mod.ValidationTrajectory:
     tr = fourier.random_feasible_trajectories(robot, limits, ex.harmonics, ex.base_frequency_hz, 1, rng)[0]
     t = np.arange(int(round(tr.period_s / sample_time_s))) * sample_time_s
@@ -120,7 +127,7 @@ def _fourier_validation(robot: Any, limits: fourier.ExcitationLimits, ex: Excita
     return val_mod.ValidationTrajectory(t, q, v, a, "fourier", "a random feasible Fourier trajectory")
 
 
-def check(config: Config, robot: Any) -> None:
+def check(config: Config, robot: RobotModel) -> None:
     """Called by the runner before any stage runs or anything is written: the configuration
     (robot-dependent ranges), the user's record (``data_file``) if any and the TX40 record's
     folder, so a bad value or file is reported before calibration runs."""
@@ -439,7 +446,8 @@ def _excitation_label(exc: design_mod.ExcitationResult | None, criterion: str) -
     return f"optimised Fourier trajectory ({criterion})"
 
 
-def _validation_markdown(cfg: Config, vt: val_mod.ValidationTrajectory, iso: Any, robot: Any) -> str:
+def _validation_markdown(cfg: Config, vt: val_mod.ValidationTrajectory, iso: IsoPathConfig,
+                         robot: RobotModel) -> str:
     """One paragraph for report.md: which trajectory validated the model; a visible warning
     when the EN ISO 9283 path was asked for but could not be used."""
     if vt.label == "iso9283":

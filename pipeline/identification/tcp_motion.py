@@ -13,14 +13,16 @@ the excitation NLP can bound ``|p_dot|^2`` and ``|p_ddot|^2`` per sample.
 
 from __future__ import annotations
 
-from typing import Any
-
 import casadi as ca
 import numpy as np
 import pinocchio as pin
 
+from pipeline.robot.model import RobotModel
+from pipeline.robot.symbolic import SymbolicRobot
 
-def tcp_speed_acceleration(robot: Any, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+
+def tcp_speed_acceleration(robot: RobotModel, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> tuple[np.ndarray,
+                           np.ndarray]:
     """``(|p_dot|, |p_ddot|)`` of the TCP at every sample (m/s, m/s^2), each (N,)."""
     model, data = robot.model, robot.new_data()
     fid = model.getFrameId(robot.frame_tcp)
@@ -33,7 +35,7 @@ def tcp_speed_acceleration(robot: Any, q: np.ndarray, v: np.ndarray, a: np.ndarr
     return speed, acc
 
 
-def tcp_motion_sx(robot: Any, sym: Any, q: ca.SX, v: ca.SX, a: ca.SX) -> tuple[ca.SX, ca.SX]:
+def tcp_motion_sx(robot: RobotModel, sym: SymbolicRobot, q: ca.SX, v: ca.SX, a: ca.SX) -> tuple[ca.SX, ca.SX]:
     """``(|p_dot|^2, |p_ddot|^2)`` of the TCP as SX expressions of ``q, v, a`` (nominal kinematics)."""
     pos, _ = sym.fk(robot.frame_tcp)(q, ca.DM(sym.nominal_kinematic_parameters()))
     jac = ca.jacobian(pos, q)

@@ -21,7 +21,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -36,6 +35,7 @@ from pipeline.identification.regressor import (
     base_parameters,
     standard_parameters,
 )
+from pipeline.robot.model import RobotModel
 
 TX40_DATA_DIR = REPO_ROOT / "data" / "staubli_tx40"
 TX40_SAMPLE_TIME_S = 2e-4
@@ -133,7 +133,7 @@ def check_tx40_config(cfg: Tx40Config, field: str = "identification.tx40") -> No
                           f"standard parameters, at least about {need} raw samples")
 
 
-def load_tx40_record(robot: Any, data_dir: str | Path | None = None, max_samples: int = 0) -> JointRecord:
+def load_tx40_record(robot: RobotModel, data_dir: str | Path | None = None, max_samples: int = 0) -> JointRecord:
     """The two CSV files (motor side) -> joint-side :class:`JointRecord`."""
     d = Path(data_dir) if data_dir else TX40_DATA_DIR
     files = {"q": d / TX40_FILES[0], "tau": d / TX40_FILES[1]}
@@ -212,13 +212,14 @@ def heldout_validation(
     )
 
 
-def run_tx40(robot: Any, config: Tx40Config | None = None, rng: np.random.Generator | None = None) -> Tx40Result:
+def run_tx40(robot: RobotModel, config: Tx40Config | None = None, rng: np.random.Generator | None = None) -> Tx40Result:
     """The whole TX40 study (see the module docstring)."""
     with single_thread_blas():
         return _run_tx40_impl(robot=robot, config=config, rng=rng)
 
 
-def _run_tx40_impl(robot: Any, config: Tx40Config | None = None, rng: np.random.Generator | None = None) -> Tx40Result:
+def _run_tx40_impl(robot: RobotModel, config: Tx40Config | None = None,
+                   rng: np.random.Generator | None = None) -> Tx40Result:
     """The whole TX40 study (see the module docstring)."""
     cfg = config or Tx40Config()
     rng = rng if rng is not None else np.random.default_rng(cfg.base_seed)

@@ -13,6 +13,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -22,7 +23,7 @@ from pipeline.control.config import ControlConfig
 from pipeline.errors import PipelineError
 from pipeline.identification.regressor import BaseParameters
 from pipeline.robot.defaults import ik_seeds_or_derived_rad, iso_or_derived, iso_rotation
-from pipeline.robot.iso9283 import iso9283_path
+from pipeline.robot.iso9283 import IsoPathConfig, iso9283_path
 from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import start_configuration
 from pipeline.robot.reference import cartesian_reference
@@ -38,7 +39,7 @@ class ValidationTrajectory:
     note: str = ""
 
 
-def run_control_config(run: Any) -> Any:
+def run_control_config(run: object) -> ControlConfig:
     """The run's validated ``control`` section (robot ``run_defaults`` merged in; read through the
     stage's ``CONFIG_READS``), or the built-in ``ControlConfig()`` when the run has none (a plain
     dict: module missing, or a bare RunConfig)."""
@@ -47,12 +48,12 @@ def run_control_config(run: Any) -> Any:
     return control if isinstance(control, ControlConfig) else ControlConfig()
 
 
-def run_iso_config(run: Any) -> Any:
+def run_iso_config(run: object) -> IsoPathConfig:
     """The EN ISO 9283 path settings of the run (``control.iso``, :func:`run_control_config`)."""
     return run_control_config(run).iso
 
 
-def ik_seeds_rad(control: Any, robot: RobotModel) -> np.ndarray:
+def ik_seeds_rad(control: ControlConfig | None, robot: RobotModel) -> np.ndarray:
     """The run's ``control.ik_seeds_deg`` as (k, nq) rad; none given -> seeds derived from the
     robot (:func:`pipeline.robot.defaults.ik_seeds_or_derived_rad`). A seed of the wrong length
     raises :class:`PipelineError` naming the field."""
@@ -68,7 +69,8 @@ def ik_seeds_rad(control: Any, robot: RobotModel) -> np.ndarray:
     return np.radians(np.vstack(arr))
 
 
-def iso_validation_trajectory(robot: RobotModel, sample_time_s: float, control: Any = None) -> ValidationTrajectory:
+def iso_validation_trajectory(robot: RobotModel, sample_time_s: float,
+                             control: ControlConfig | None = None) -> ValidationTrajectory:
     """The ISO 9283 path of the run's ``control.iso`` as joint reference of the control stage's path
     frame (``control.path_frame``: the tracker's reflector or the TCP), started by IK
     from the run's ``control.ik_seeds_deg`` with its ``control.ik_tolerance_m`` (``control`` from
@@ -88,7 +90,8 @@ def iso_validation_trajectory(robot: RobotModel, sample_time_s: float, control: 
 
 
 def validation_trajectory(
-    robot: RobotModel, sample_time_s: float, fallback: Any, use_iso: bool = True, control: Any = None
+    robot: RobotModel, sample_time_s: float, fallback: Callable[[], ValidationTrajectory], use_iso: bool = True,
+    control: ControlConfig | None = None,
 ) -> ValidationTrajectory:
     """ISO 9283 path of the run's control section (None: built-in defaults) if it can be built for
     ``robot`` (within limits), else ``fallback()`` with ``note`` saying the real reason."""
@@ -127,7 +130,8 @@ def fraction_within(z: np.ndarray, k: float = 3.0) -> float:
     return float(np.mean(np.abs(z) <= k))
 
 
-def truth_scores(real: Any, base: BaseParameters, beta: np.ndarray, sigma: np.ndarray) -> dict:
+def truth_scores(real: Any,  # Any: the simulated hidden robot (its true parameters)
+                  base: BaseParameters, beta: np.ndarray, sigma: np.ndarray) -> dict:
     """Score the base estimate against the hidden robot (evaluation only: call it after the
     estimate is final; the stage does so only with ``score_against_truth``)."""
     p_true = np.asarray(real.dynamic_parameters, float)

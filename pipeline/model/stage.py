@@ -9,14 +9,15 @@ the robot (kinematic chain and collision capsules) at the configured pose.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from pipeline.errors import ConfigError
 from pipeline.plotting import robot_figure
 from pipeline.robot.defaults import ready_pose_rad
+from pipeline.robot.model import RobotModel
 from pipeline.robot.plausibility import robot_warnings
+from pipeline.stage_api import StageContext, StageResult
 
 NAME = "model"
 DEPENDS: tuple[str, ...] = ()
@@ -66,7 +67,7 @@ class Config:
                               f"expected a size in [{lo:g}, {hi:g}] inches, got {self.picture_size_in}")
 
 
-def _pose_problem(pose_deg: tuple[float, ...], robot: Any) -> str | None:
+def _pose_problem(pose_deg: tuple[float, ...], robot: RobotModel) -> str | None:
     """Why ``pose_deg`` does not fit ``robot`` (length, joint limits), or None."""
     if len(pose_deg) != robot.nq:
         return f"expected {robot.nq} angles (deg), one per joint, got {len(pose_deg)}"
@@ -82,7 +83,7 @@ def _pose_problem(pose_deg: tuple[float, ...], robot: Any) -> str | None:
     return None
 
 
-def check(config: Config, robot: Any) -> None:
+def check(config: Config, robot: RobotModel) -> None:
     """Robot-dependent checks, run before anything is written: ``pose_deg`` has one angle
     per joint, each within the joint limits."""
     if config.pose_deg is not None:

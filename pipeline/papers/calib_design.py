@@ -60,7 +60,7 @@ SELECTORS = ("remove_and_replace", "detmax", "bsaa")
 BASELINES = ("every_kth", "random")
 
 
-def _spec(name: str, robot, mm, basis, Qw, sigma_m: float, kpi_Q) -> ix.IndexSpec:
+def _spec(name: str, robot: RobotModel, mm, basis, Qw, sigma_m: float, kpi_Q) -> ix.IndexSpec:
     if name == "V":
         return ts.task_space_spec(mm, Qw, basis)
     if name == "V_refl":

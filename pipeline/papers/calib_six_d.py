@@ -30,6 +30,7 @@ from pipeline.calibration.config import Config
 from pipeline.calibration.measure import Measurements, write_csv
 from pipeline.calibration.outcome import CalibrationOutcome
 from pipeline.calibration.stage import calibrate
+from pipeline.robot.model import RobotModel
 
 
 def simulate_six_d_record(real, Q: np.ndarray, rng: np.random.Generator, position_sigma_m: float = 1e-4,
@@ -66,7 +67,7 @@ class SixDTrial:
                 "orientation_predicted_rad": ao.get("predicted_model_rms", float("nan"))}
 
 
-def six_d_trial(robot, real, n_poses: int, rng: np.random.Generator, folder: str | Path,
+def six_d_trial(robot: RobotModel, real, n_poses: int, rng: np.random.Generator, folder: str | Path,
                 position_sigma_m: float = 1e-4, orientation_sigma_rad: float = 1e-3, n_validation: int = 200,
                 **config: object) -> SixDTrial:
     """Calibrate ``all`` parameters from ``n_poses`` random 6-D readings of ``real``

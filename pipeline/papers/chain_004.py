@@ -39,7 +39,7 @@ import argparse
 import json
 import shutil
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import fields
 from pathlib import Path
 from typing import Any
@@ -116,7 +116,7 @@ def _copy_upstream(src: Path, dst: Path, stages: Sequence[str]) -> None:
             shutil.copytree(src / name, dst / name)
 
 
-def run_chain(cfg: RunConfig, out: Path, say: Any) -> Run:
+def run_chain(cfg: RunConfig, out: Path, say: Callable[[str], object]) -> Run:
     t0 = time.perf_counter()
     with Progress(enabled=False) as prog:
         res = run_pipeline(cfg, out, progress=prog, log=lambda m: say(f"  [{cfg.name}] {m}"))
@@ -124,7 +124,7 @@ def run_chain(cfg: RunConfig, out: Path, say: Any) -> Run:
     return res.outputs
 
 
-def run_or_report(cfg: RunConfig, out: Path, say: Any, failures: dict[str, str]) -> Run | None:
+def run_or_report(cfg: RunConfig, out: Path, say: Callable[[str], object], failures: dict[str, str]) -> Run | None:
     """:func:`run_chain`, or None with the error recorded in ``failures[run name]`` (a stage that
     cannot plan or solve under the paper's settings is a result of the study, not its end)."""
     try:
@@ -135,7 +135,8 @@ def run_or_report(cfg: RunConfig, out: Path, say: Any, failures: dict[str, str])
         return None
 
 
-def run_study(seeds: Sequence[int], quick: bool, out: Path, experiments: bool = True, say: Any = print,
+def run_study(seeds: Sequence[int], quick: bool, out: Path, experiments: bool = True,
+              say: Callable[[str], object] = print,
               failures: dict[str, str] | None = None) -> tuple[list[Row], dict[str, float]]:
     """Every run of the study, then the rows; returns (rows, timings in s). The trajectory runs
     that fail (main and acceleration-limit experiment) are recorded in ``failures`` and their

@@ -9,9 +9,10 @@ collision model with the numeric filters.
 
 from __future__ import annotations
 
-from typing import Any
-
 import casadi as ca
+
+from pipeline.robot.model import RobotModel
+from pipeline.robot.symbolic import SymbolicRobot
 
 
 def segment_distance_sx(p0: ca.SX, p1: ca.SX, q0: ca.SX, q1: ca.SX) -> ca.SX:
@@ -36,7 +37,7 @@ def segment_distance_sx(p0: ca.SX, p1: ca.SX, q0: ca.SX, q1: ca.SX) -> ca.SX:
     return ca.sqrt(ca.dot(diff, diff) + 1e-12)
 
 
-def capsule_clearance_function(robot: Any, sym: Any) -> ca.Function:
+def capsule_clearance_function(robot: RobotModel, sym: SymbolicRobot) -> ca.Function:
     """``q -> (self-pair clearances, floor clearances of capsule end points)`` (SX), the symbolic
     twin of ``RobotModel.capsule_clearances`` (end points are exact for a plane)."""
     q = ca.SX.sym("q", robot.nq)

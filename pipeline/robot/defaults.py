@@ -35,6 +35,7 @@ from pipeline.robot.iso_search import (
     search_cube,
     verified_edge,
 )
+from pipeline.robot.model import RobotModel
 
 N_SAMPLES = 3000
 SLOW_SHARE = 0.8              # lowered ISO speed: this share of the highest speed a small cube allows
@@ -55,7 +56,7 @@ class IsoCube:
     rotation: np.ndarray | None = None          # the constant TCP orientation of the path (base frame)
 
 
-def _ranked_poses(robot) -> np.ndarray:
+def _ranked_poses(robot: RobotModel) -> np.ndarray:
     """Collision-free configurations (flange above the base) ranked best first (module docstring)."""
     lo, hi = robot.limits.lower_rad, robot.limits.upper_rad
     Q = np.random.default_rng(0).uniform(lo, hi, size=(N_SAMPLES, robot.nq))
@@ -81,12 +82,12 @@ def _ranked_poses(robot) -> np.ndarray:
     return Q[np.argsort(-score)]
 
 
-def ready_pose_rad(robot) -> np.ndarray:
+def ready_pose_rad(robot: RobotModel) -> np.ndarray:
     """A well-conditioned, collision-free pose near mid-range with the flange above the base."""
     return _ranked_poses(robot)[0].copy()
 
 
-def ik_seeds_rad(robot, count: int = 4) -> np.ndarray:
+def ik_seeds_rad(robot: RobotModel, count: int = 4) -> np.ndarray:
     """``(count, nq)`` distinct IK seeds: the best-ranked poses, more than 30° apart."""
     seeds: list[np.ndarray] = []
     for q in _ranked_poses(robot):
@@ -97,7 +98,8 @@ def ik_seeds_rad(robot, count: int = 4) -> np.ndarray:
     return np.array(seeds)
 
 
-def ptp_move_rad(robot, fractions: tuple[float, ...] = (0.4, 0.3, 0.2, 0.1)) -> tuple[np.ndarray, np.ndarray]:
+def ptp_move_rad(robot: RobotModel, fractions: tuple[float, ...] = (0.4, 0.3, 0.2, 0.1)) -> tuple[np.ndarray,
+                 np.ndarray]:
     """(start, goal): mid-range -/+ ``fraction`` of each range, the first fraction collision-free."""
     lo, hi = robot.limits.lower_rad, robot.limits.upper_rad
     mid = ready_pose_rad(robot)
@@ -124,7 +126,7 @@ def ptp_move_rad(robot, fractions: tuple[float, ...] = (0.4, 0.3, 0.2, 0.1)) -> 
 _CUBES: dict[tuple, IsoCube] = {}
 
 
-def iso_rotation(robot, plane: str, orientation: str) -> np.ndarray:
+def iso_rotation(robot: RobotModel, plane: str, orientation: str) -> np.ndarray:
     """The path's constant TCP orientation: ``down`` (z axis down), ``plane`` (z normal to the
     measuring plane, away from the base) or ``ready`` (as at :func:`ready_pose_rad`)."""
     if orientation == "ready":
@@ -134,7 +136,8 @@ def iso_rotation(robot, plane: str, orientation: str) -> np.ndarray:
     return tool_rotation(plane, orientation == "down")
 
 
-def _cache_key(robot, seeds: np.ndarray, plane: str, orientation: str, speed_m_s: float, frame: str) -> tuple:
+def _cache_key(robot: RobotModel, seeds: np.ndarray, plane: str, orientation: str, speed_m_s: float,
+               frame: str) -> tuple:
     """The robot's name plus everything of the model the search reads (the search is a pure function):
     kinematics, limits, and the inertias and torque limits of its gravity check."""
     placements = np.array([robot.model.jointPlacements[i].homogeneous for i in range(1, robot.model.njoints)])
@@ -147,7 +150,7 @@ def _cache_key(robot, seeds: np.ndarray, plane: str, orientation: str, speed_m_s
     return (robot.name, hash(model_bytes), plane, orientation, float(speed_m_s), frame)
 
 
-def iso_cube(robot, plane: str = "diagonal_x", orientation: str | None = None, speed_m_s: float = 1.0,
+def iso_cube(robot: RobotModel, plane: str = "diagonal_x", orientation: str | None = None, speed_m_s: float = 1.0,
              frame: str | None = None, direction: tuple[float, float, float] | None = None) -> IsoCube:
     """The largest ISO 9283 cube whose whole path is feasible, found by a search over the workspace
     (:mod:`pipeline.robot.iso_search`; the IK branch starts from :func:`ik_seeds_rad`, as the stages do),
@@ -211,7 +214,7 @@ def iso_cube(robot, plane: str = "diagonal_x", orientation: str | None = None, s
     return copy.deepcopy(cube)
 
 
-def ik_seeds_or_derived_rad(robot, seeds_deg: list | None) -> np.ndarray:
+def ik_seeds_or_derived_rad(robot: RobotModel, seeds_deg: list | None) -> np.ndarray:
     """``(k, nq)`` IK seeds: the configured ones (deg) or, when ``None``, :func:`ik_seeds_rad` after the
     start configuration of the default derived cube (:func:`iso_cube`, cached), so that a derived ISO path
     starts on the IK branch the search validated."""
@@ -225,7 +228,7 @@ def ik_seeds_or_derived_rad(robot, seeds_deg: list | None) -> np.ndarray:
     return np.radians(np.atleast_2d(np.asarray(seeds_deg, float)))
 
 
-def iso_or_derived(robot, iso: IsoPathConfig) -> IsoPathConfig:  # noqa: ANN001 - a RobotModel
+def iso_or_derived(robot: RobotModel, iso: IsoPathConfig) -> IsoPathConfig:
     """A copy of the ISO path settings with ``centre_m`` / ``edge_m`` / ``speed_m_s`` /
     ``tool_orientation`` left ``None`` filled from :func:`iso_cube` (the search runs only when the cube
     is missing; a given cube keeps the tool down unless told otherwise)."""

@@ -45,6 +45,7 @@ import pinocchio as pin
 
 from pipeline.errors import InfeasibleError
 from pipeline.robot.iso9283 import PLANES, iso9283_path
+from pipeline.robot.model import RobotModel
 from pipeline.robot.reference import cartesian_reference
 
 #: axes needed to hold a 6-D tool pose (position and orientation) along a Cartesian path
@@ -93,7 +94,8 @@ def _dls(model: pin.Model, data: pin.Data, fid: int, q: np.ndarray, target: pin.
     return q, err
 
 
-def check_cube(robot, edge_m: float, centre_m: np.ndarray, plane: str, rotation: np.ndarray, seeds: np.ndarray,
+def check_cube(robot: RobotModel, edge_m: float, centre_m: np.ndarray, plane: str, rotation: np.ndarray,
+               seeds: np.ndarray,
                frame: str, speed_m_s: float) -> CubeCheck:
     """Feasibility of one cube's whole ISO path (module docstring); ``speed_ratio <= 1`` = feasible."""
     model, data = robot.model, robot.new_data()
@@ -160,7 +162,7 @@ def _geometric_edge_bound(centre: np.ndarray, shoulder: np.ndarray, reach: float
     return best
 
 
-def search_cube(robot, seeds: np.ndarray, plane: str, rotation: np.ndarray, speed_m_s: float, frame: str,
+def search_cube(robot: RobotModel, seeds: np.ndarray, plane: str, rotation: np.ndarray, speed_m_s: float, frame: str,
                 ignore_speed: bool = False, memo: dict | None = None,
                 direction: tuple[float, float, float] = SEARCH_DIRECTIONS[0]) -> tuple[float, np.ndarray, float] | None:
     """(edge, centre, speed ratio) of the largest feasible cube (module docstring) on the vertical
@@ -174,7 +176,8 @@ def search_cube(robot, seeds: np.ndarray, plane: str, rotation: np.ndarray, spee
                               np.asarray(direction, float))
 
 
-def _search_half_plane(robot, seeds: np.ndarray, plane: str, rotation: np.ndarray, speed_m_s: float, frame: str,
+def _search_half_plane(robot: RobotModel, seeds: np.ndarray, plane: str, rotation: np.ndarray, speed_m_s: float,
+                       frame: str,
                        ignore_speed: bool, memo: dict, direction: np.ndarray) -> tuple[float, np.ndarray, float] | None:
     """:func:`search_cube` on the vertical half-plane from the first joint along ``direction``."""
     reach = float(robot.summary()["reach_m"])
@@ -252,7 +255,8 @@ def _bisect(ok: Callable[[float, np.ndarray], float | None], centre: np.ndarray,
     return lo_edge, lo_ratio
 
 
-def verified_edge(robot, edge_m: float, centre_m: np.ndarray, plane: str, rotation: np.ndarray, seeds: np.ndarray,
+def verified_edge(robot: RobotModel, edge_m: float, centre_m: np.ndarray, plane: str, rotation: np.ndarray,
+                  seeds: np.ndarray,
                   frame: str, speed_m_s: float, acceleration_m_s2: float = 5.0, jerk_m_s3: float = 50.0,
                   attempts: int = 8) -> tuple[float, np.ndarray] | None:
     """(edge, start configuration) for which the control stage's reference runs on the cube (module

@@ -26,7 +26,7 @@ from pipeline.robot.friction import joint_friction_torque
 from pipeline.robot.ik import IKResult, solve_ik
 from pipeline.robot.loading import ROBOTS_DIR, JointLimits, load_robot_files, resolve_robot_files, validate_joint_limits
 from pipeline.robot.reflector_check import capsules_holding, describe, marker_points
-from pipeline.robot.spec import Capsule, RobotSpec, robot_spec_to_yaml
+from pipeline.robot.spec import ActuationSpec, Capsule, RobotSpec, TrackerSpec, robot_spec_to_yaml
 from pipeline.robot.urdf_export import export_urdf
 from pipeline.robot.urdf_import import absolute_mesh_paths
 
@@ -166,11 +166,11 @@ class RobotModel:
                            m.effortLimit.copy(), self.spec.acceleration_rad_s2.copy())
 
     @property
-    def actuation(self):  # noqa: ANN201 - ActuationSpec
+    def actuation(self) -> ActuationSpec:
         return self.spec.actuation
 
     @property
-    def tracker(self):  # noqa: ANN201 - TrackerSpec
+    def tracker(self) -> TrackerSpec:
         return self.spec.tracker
 
     @property
@@ -352,7 +352,7 @@ class RobotModel:
         return bool(min(distances.self_min_m, distances.floor_min_m) < margin_m)
 
     # ------------------------------------------------------------------ summary
-    def summary(self) -> dict:
+    def summary(self) -> dict[str, object]:
         """DOF, reach (axis 1 to flange), moving mass and limits in readable units."""
         rng = np.random.default_rng(0)
         lim = self.limits

@@ -33,10 +33,10 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import casadi as ca
 import numpy as np
+import numpy.typing as npt
 import pinocchio as pin
 
 from pipeline.errors import PipelineError, RobotFileError
@@ -47,6 +47,8 @@ INERTIAL_COMPONENTS = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz",
 DEFAULT_FLANGE_FRAME = "flange"
 DEFAULT_TOOL_FRAMES = ("tcp", "reflector")
 DEFAULT_COULOMB_SMOOTHING_RAD_S = 0.01
+#: what the SX builders take for a joint or parameter vector: a CasADi symbol or numbers
+SymbolicArg = ca.SX | np.ndarray
 
 
 # --------------------------------------------------------------------------------------------
@@ -74,7 +76,7 @@ class JointInfo:
     def s_angular(self) -> np.ndarray:
         return self.axis if self.kind == "revolute" else np.zeros(3)
 
-    def motion(self, q: Any) -> tuple[ca.SX, ca.SX]:
+    def motion(self, q: SymbolicArg) -> tuple[ca.SX, ca.SX]:
         """Joint transform ``exp6(S q)`` as ``(R, p)``."""
         if self.kind == "revolute":
             return sx.rotation_about_axis(self.axis, q), ca.SX.zeros(3, 1)
@@ -211,7 +213,7 @@ class DynamicLayout:
         return slice(13 * self.nq, 14 * self.nq)
 
 
-def _check_vector(x: Any, size: int, field: str) -> np.ndarray:
+def _check_vector(x: npt.ArrayLike, size: int, field: str) -> np.ndarray:
     arr = np.asarray(x, dtype=float).reshape(-1)
     if arr.size != size:
         raise PipelineError(None, field, f"expected {size} values, got {arr.size}")
@@ -233,7 +235,7 @@ def _frame_id(model: pin.Model, name: str) -> int:
 
 def apply_kinematic_errors(
     model: pin.Model,
-    p_kin: Any,
+    p_kin: npt.ArrayLike,
     flange_frame: str = DEFAULT_FLANGE_FRAME,
     tool_frames: Sequence[str] = DEFAULT_TOOL_FRAMES,
 ) -> pin.Model:
@@ -282,9 +284,9 @@ def apply_kinematic_errors(
 
 def pinocchio_dynamic_parameters(
     model: pin.Model,
-    viscous_Nms_rad: Any = None,
-    coulomb_Nm: Any = None,
-    offset_Nm: Any = None,
+    viscous_Nms_rad: npt.ArrayLike | None = None,
+    coulomb_Nm: npt.ArrayLike | None = None,
+    offset_Nm: npt.ArrayLike | None = None,
 ) -> np.ndarray:
     """``p_dyn`` (``14 nq``) of a model: its inertias and armature, friction/offset as given (0)."""
     infos = joint_infos(model)
@@ -304,7 +306,7 @@ def pinocchio_dynamic_parameters(
     return p
 
 
-def dynamic_parameter_problems(p_dyn: Any, nq: int) -> list[str]:
+def dynamic_parameter_problems(p_dyn: npt.ArrayLike, nq: int) -> list[str]:
     """Physical-consistency problems of ``p_dyn``: mass <= 0, pseudo-inertia not positive
     definite (Wensing et al. 2017 LMI), negative rotor inertia, viscous or Coulomb friction.
     An empty list means physically consistent."""
@@ -329,7 +331,7 @@ def dynamic_parameter_problems(p_dyn: Any, nq: int) -> list[str]:
     return problems
 
 
-def set_dynamic_parameters(model: pin.Model, p_dyn: Any) -> pin.Model:
+def set_dynamic_parameters(model: pin.Model, p_dyn: npt.ArrayLike) -> pin.Model:
     """Copy of ``model`` with inertias (``pin.Inertia.FromDynamicParameters``) and armature from
     ``p_dyn``. Friction and torque offsets are not part of a ``pin.Model``: the caller keeps them.
 

@@ -20,6 +20,7 @@ import pinocchio as pin
 from scipy.interpolate import CubicSpline
 
 from pipeline.errors import ConfigError, InfeasibleError
+from pipeline.robot.model import RobotModel
 
 
 def _as3(x, name: str) -> np.ndarray:
@@ -200,7 +201,7 @@ class SplinePath(CartesianPath):
         return t, acc
 
 
-def ik_track(robot, poses: list[pin.SE3], q0: np.ndarray, frame: str = "tcp", tolerance_m: float = 1e-9,
+def ik_track(robot: RobotModel, poses: list[pin.SE3], q0: np.ndarray, frame: str = "tcp", tolerance_m: float = 1e-9,
              max_iterations: int = 50, times_s: np.ndarray | None = None) -> np.ndarray:
     """IK at every pose, warm-started from the previous solution (damped least squares on Pinocchio).
 
@@ -235,12 +236,12 @@ def ik_track(robot, poses: list[pin.SE3], q0: np.ndarray, frame: str = "tcp", to
     return out
 
 
-def joint_path(robot, path: CartesianPath, n: int, q0: np.ndarray, frame: str = "tcp") -> np.ndarray:
+def joint_path(robot: RobotModel, path: CartesianPath, n: int, q0: np.ndarray, frame: str = "tcp") -> np.ndarray:
     """(n, nq) joint positions along ``path`` sampled equally in arc length (IK warm-started)."""
     return ik_track(robot, path.sample(n), q0, frame)
 
 
-def limiting_joint(robot, q: np.ndarray) -> str:
+def limiting_joint(robot: RobotModel, q: np.ndarray) -> str:
     """'joint i at x deg of [lo, hi] deg' for the joint closest to (or beyond) a limit, relative to its range."""
     lo, hi = robot.limits.lower_rad, robot.limits.upper_rad
     margin = np.minimum(q - lo, hi - q) / (hi - lo)
@@ -249,7 +250,7 @@ def limiting_joint(robot, q: np.ndarray) -> str:
             f"{np.degrees(hi[j]):.1f}] deg")
 
 
-def check_within_limits(robot, q: np.ndarray, where: str) -> None:
+def check_within_limits(robot: RobotModel, q: np.ndarray, where: str) -> None:
     """Raise InfeasibleError naming ``where`` (the path point) and the first joint outside its limits."""
     lo, hi = robot.limits.lower_rad, robot.limits.upper_rad
     bad = np.nonzero((q < lo) | (q > hi))[0]
@@ -259,7 +260,7 @@ def check_within_limits(robot, q: np.ndarray, where: str) -> None:
                               f"[{np.degrees(lo[j]):.1f}, {np.degrees(hi[j]):.1f}] deg")
 
 
-def start_configuration(robot, pose: pin.SE3, seeds, frame: str = "tcp", tolerance_m: float = 1e-10,
+def start_configuration(robot: RobotModel, pose: pin.SE3, seeds, frame: str = "tcp", tolerance_m: float = 1e-10,
                         n_random: int = 30) -> np.ndarray:
     """IK from a cold start: damped Newton with step limiting from each seed, then from ``n_random``
     random configurations within the limits (fixed-seed generator: deterministic); the first

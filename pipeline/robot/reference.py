@@ -27,6 +27,7 @@ import pinocchio as pin
 from ruckig import InputParameter, Result, Ruckig, Trajectory
 
 from pipeline.errors import InfeasibleError, SolverError
+from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import CartesianPath, check_within_limits, limiting_joint
 
 
@@ -71,7 +72,7 @@ def profile_duration(length_m: float, v_max: float, a_max: float, j_max: float) 
     return float(_ruckig_profile(length_m, v_max, a_max, j_max).duration)
 
 
-def cartesian_reference(robot, path: CartesianPath, sample_time_s: float, speed_m_s: float,
+def cartesian_reference(robot: RobotModel, path: CartesianPath, sample_time_s: float, speed_m_s: float,
                         acceleration_m_s2: float, jerk_m_s3: float, q_start: np.ndarray, frame: str = "tcp",
                         ik_tolerance_m: float = 1e-9) -> Reference:
     """Sampled joint reference along ``path`` (its segments each rest-to-rest)."""
@@ -112,7 +113,7 @@ def resolved_rate(J: np.ndarray, x: np.ndarray) -> np.ndarray:
     return J.T @ np.linalg.solve(J @ J.T, x)
 
 
-def track(robot, rotation: np.ndarray, P: np.ndarray, Pd: np.ndarray, Pdd: np.ndarray, q_start: np.ndarray,
+def track(robot: RobotModel, rotation: np.ndarray, P: np.ndarray, Pd: np.ndarray, Pdd: np.ndarray, q_start: np.ndarray,
           frame: str, t_s: np.ndarray, tolerance_m: float = 1e-9, max_iterations: int = 20):
     """IK + joint velocities/accelerations at every sample in one pass.
 

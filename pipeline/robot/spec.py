@@ -7,11 +7,13 @@ errors, so a typo never silently falls back to a default.
 
 from __future__ import annotations
 
+from collections.abc import Set
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import pinocchio as pin
 import yaml
 
@@ -142,16 +144,16 @@ _TOP_KEYS = {
 _REQUIRED_TOP = {"urdf", "flange_frame", "tool", "actuation", "limits"}
 
 
-def _is_number(value: Any) -> bool:
+def _is_number(value: object) -> bool:
     """An int or float from YAML; ``true``/``false`` are not numbers (a bool is an int in Python)."""
     return isinstance(value, int | float) and not isinstance(value, bool)
 
 
-def _is_int(value: Any) -> bool:
+def _is_int(value: object) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)
 
 
-def _optional_list(reader: _Reader, key: str, what: str) -> list:
+def _optional_list(reader: _Reader, key: str, what: str) -> list[Any]:
     """A list that may be absent or ``null`` (empty); anything else but a list is an error."""
     value = reader.data.get(key)
     if value is None:
@@ -164,13 +166,13 @@ def _optional_list(reader: _Reader, key: str, what: str) -> list:
 class _Reader:
     """Typed access to a YAML mapping that reports ``file: field: problem``."""
 
-    def __init__(self, path: Path, data: dict, prefix: str = "") -> None:
+    def __init__(self, path: Path, data: dict[str, Any], prefix: str = "") -> None:  # YAML values
         self.path, self.data, self.prefix = path, data, prefix
 
     def error(self, key: str, problem: str) -> RobotFileError:
         return RobotFileError(self.path, f"{self.prefix}{key}", problem)
 
-    def check_keys(self, allowed: set[str], required: set[str] = frozenset()) -> None:
+    def check_keys(self, allowed: set[str], required: Set[str] = frozenset()) -> None:
         for key in self.data:
             if key not in allowed:
                 raise self.error(str(key), unknown_key(key, sorted(allowed)))
@@ -214,7 +216,7 @@ class _Reader:
         return int(value)
 
     def vector(self, key: str, length: int | None, *, nonnegative: bool = False,
-               positive: bool = False, default: Any = None) -> np.ndarray:
+               positive: bool = False, default: npt.ArrayLike | None = None) -> np.ndarray:
         if key not in self.data:
             if default is None:
                 raise self.error(key, "missing")
@@ -434,7 +436,7 @@ def _optical_tracker(opt: _Reader) -> OpticalTrackerSpec:
     )
 
 
-def _optical_yaml(o: OpticalTrackerSpec) -> dict:
+def _optical_yaml(o: OpticalTrackerSpec) -> dict[str, object]:
     return {"transform_camera_to_base": _se3_yaml(o.transform_camera_to_base),
             "camera_positions_m": [[float(v) for v in c] for c in o.camera_positions_m],
             "field_of_view_half_angle_deg": float(np.rad2deg(o.field_of_view_half_angle_rad)),
@@ -446,12 +448,12 @@ def _optical_yaml(o: OpticalTrackerSpec) -> dict:
             "noise_per_m": float(o.noise_per_m)}
 
 
-def _se3_yaml(transform: pin.SE3) -> dict:
+def _se3_yaml(transform: pin.SE3) -> dict[str, list[float]]:
     return {"xyz": [float(v) for v in transform.translation],
             "rpy": [float(v) for v in pin.rpy.matrixToRpy(transform.rotation)]}
 
 
-def robot_spec_to_yaml(spec: RobotSpec, urdf_name: str) -> dict:
+def robot_spec_to_yaml(spec: RobotSpec, urdf_name: str) -> dict[str, object]:
     """Inverse of :func:`load_robot_spec` (used to save calibrated/identified models)."""
     act = spec.actuation
     coupling = [[int(i), int(j), float(act.gear_matrix[i, j])]

@@ -20,11 +20,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.robot.model import RobotModel
+
 #: gearbox twist at the joint's torque limit used when robot.yaml states no stiffness (rad)
 DEFLECTION_AT_TORQUE_LIMIT_RAD = 2.0e-3
 
 
-def nominal_joint_stiffness_Nm_rad(robot) -> np.ndarray:
+def nominal_joint_stiffness_Nm_rad(robot: RobotModel) -> np.ndarray:
     """``(nq,)`` stiffness: robot.yaml ``actuation.joint_stiffness_Nm_rad`` or the torque-limit rule."""
     given = getattr(robot.spec.actuation, "joint_stiffness_Nm_rad", None)
     if given is not None:

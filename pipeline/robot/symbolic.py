@@ -17,23 +17,26 @@ Nothing here depends on ``K``.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Hashable, Sequence
 from pathlib import Path
 from typing import Any
 
 import casadi as ca
 import numpy as np
+import numpy.typing as npt
 import pinocchio as pin
 
 from pipeline import codegen
 from pipeline.errors import PipelineError, RobotFileError
 from pipeline.robot import spatial_sx as sx
+from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import (
     DEFAULT_COULOMB_SMOOTHING_RAD_S,
     DEFAULT_FLANGE_FRAME,
     DEFAULT_TOOL_FRAMES,
     DynamicLayout,
     KinematicLayout,
+    SymbolicArg,
     _check_vector,
     _frame_id,
     _model_name,
@@ -79,13 +82,13 @@ class SymbolicRobot:
 
     def __init__(
         self,
-        robot: Any,
+        robot: RobotModel | pin.Model,
         *,
         flange_frame: str | None = None,
         tool_frames: Sequence[str] | None = None,
         coulomb_smoothing_rad_s: float | None = None,
-        viscous_Nms_rad: Any = None,
-        coulomb_Nm: Any = None,
+        viscous_Nms_rad: npt.ArrayLike | None = None,
+        coulomb_Nm: npt.ArrayLike | None = None,
         jit: bool = False,
         cache_dir: Path | str | None = None,
     ) -> None:
@@ -145,7 +148,7 @@ class SymbolicRobot:
         self.cache_dir = Path(cache_dir) if cache_dir is not None else None
         self.gravity_linear = np.array(model.gravity.linear, dtype=float)
         self.gravity_angular = np.array(model.gravity.angular, dtype=float)
-        self._cache: dict[Any, ca.Function] = {}
+        self._cache: dict[Hashable, ca.Function] = {}
 
     def __getstate__(self) -> dict[str, Any]:
         """Pickle without the built functions (compiled ones cannot travel); rebuilt lazily."""
@@ -154,7 +157,8 @@ class SymbolicRobot:
         return state
 
     @classmethod
-    def from_robot(cls, robot: Any, *, jit: bool = False, **kwargs: Any) -> SymbolicRobot:
+    def from_robot(cls, robot: RobotModel | pin.Model, *, jit: bool = False,
+                   **kwargs: Any) -> SymbolicRobot:  # Any: keyword arguments of __init__, forwarded
         """Same as ``SymbolicRobot(robot, jit=jit, **kwargs)``."""
         return cls(robot, jit=jit, **kwargs)
 
@@ -186,7 +190,7 @@ class SymbolicRobot:
 
     # ----------------------------------------------------------------- function cache
 
-    def _function(self, key: Any, build) -> ca.Function:
+    def _function(self, key: Hashable, build: Callable[[], ca.Function]) -> ca.Function:
         if key not in self._cache:
             f = build()
             if self.jit:
@@ -284,7 +288,7 @@ class SymbolicRobot:
     # ----------------------------------------------------------------- dynamics
 
     def rigid_body_torque_expression(
-        self, q: Any, v: Any, a: Any, p_dyn: Any, gravity: bool = True
+        self, q: SymbolicArg, v: SymbolicArg, a: SymbolicArg, p_dyn: SymbolicArg, gravity: bool = True
     ) -> ca.SX:
         """``M(q) a + C(q, v) v [+ g(q)] + Ia a``: RNEA (Featherstone 2008, table 5.1) with the
         inertial parameters and rotor inertia of ``p_dyn`` (friction/offset not included)."""
@@ -333,13 +337,13 @@ class SymbolicRobot:
                 forces[info.parent] = (parent[0] + fp[0], parent[1] + fp[1])
         return ca.vertcat(*tau)
 
-    def friction_expression(self, v: Any, p_dyn: Any) -> ca.SX:
+    def friction_expression(self, v: SymbolicArg, p_dyn: SymbolicArg) -> ca.SX:
         """``fv v + fc tanh(v / width)`` (smooth Coulomb, width ``coulomb_smoothing_rad_s``)."""
         return p_dyn[self.dyn.viscous] * v + p_dyn[self.dyn.coulomb] * ca.tanh(
             v / self.coulomb_smoothing_rad_s
         )
 
-    def inverse_dynamics_expression(self, q: Any, v: Any, a: Any, p_dyn: Any) -> ca.SX:
+    def inverse_dynamics_expression(self, q: SymbolicArg, v: SymbolicArg, a: SymbolicArg, p_dyn: SymbolicArg) -> ca.SX:
         """Full joint torque: rigid body + rotor + friction + offset."""
         return (
             self.rigid_body_torque_expression(q, v, a, p_dyn, gravity=True)

@@ -23,6 +23,7 @@ import numpy as np
 import pinocchio as pin
 
 from pipeline.errors import RobotFileError
+from pipeline.robot.model import RobotModel
 
 PARAMS_PER_JOINT = 12 + 10 + 4  # placement (R row-major, p), inertia (10), armature, viscous, coulomb, effort
 
@@ -63,7 +64,7 @@ def chain_structure(model: pin.Model) -> ChainStructure:
     return ChainStructure(model.nq, tuple(int(p) for p in model.parents[1:]), tuple(axes))
 
 
-def parameter_vector(robot) -> np.ndarray:
+def parameter_vector(robot: RobotModel) -> np.ndarray:
     """Pack a RobotModel's dynamics into the input vector of :func:`forward_dynamics_function`."""
     m: pin.Model = robot.model
     act = robot.actuation

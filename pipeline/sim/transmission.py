@@ -28,6 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from pipeline.robot.model import RobotModel
+
 #: fixed salt of the transmission's random stream (independent of the truth's main stream)
 _TRANSMISSION_SALT = 0x7472616E
 
@@ -70,7 +72,7 @@ class Transmission:
                                 self.stribeck_velocity_rad_s, self.coulomb_load_coefficient]).ravel()
 
 
-def link_inertia_kgm2(robot, q: np.ndarray | None = None) -> np.ndarray:
+def link_inertia_kgm2(robot: RobotModel, q: np.ndarray | None = None) -> np.ndarray:
     """Diagonal of the link chain's joint-space inertia (rotor inertia excluded) at ``q`` (default 0)."""
     model = robot.model.copy()
     model.armature = np.zeros(model.nv)

@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 from pipeline.config_checks import check_choice, check_count, check_number, check_vector
-from pipeline.errors import ConfigError
+from pipeline.errors import ConfigError, Source
 from pipeline.robot.iso9283 import ISO_PLANES
 
 CP_SEGMENTS = ("line", "circle_large", "circle_small", "spline")   # smooth pieces of the ISO path, or a spline
@@ -84,7 +83,7 @@ class TrajectoryConfig:
     max_sim_averaged_torque_ratio: float = 1.0
     simulate: bool = True                     # run the trajectories in stage 3's servo simulation
 
-    def validate(self, source: Any = None) -> None:
+    def validate(self, source: Source = None) -> None:
         """Robot-independent checks (ConfigError naming ``trajectory.<field>``); the joint-vector
         lengths (``nq``) and joint limits are checked by ``pipeline.trajectory.stage.check``."""
         s = source

@@ -10,13 +10,21 @@ time law is optimised).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Protocol
 
 import numpy as np
+import pinocchio as pin
 from scipy.interpolate import make_interp_spline
 
 from pipeline.errors import InfeasibleError
+from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import ik_track, start_configuration
+
+
+class SampledPath(Protocol):
+    """A Cartesian path the IK follows: ``n`` poses along it (:class:`pipeline.robot.paths.CartesianPath`)."""
+
+    def sample(self, n: int) -> list[pin.SE3]: ...
 
 
 class JointPath:
@@ -46,7 +54,7 @@ class JointPath:
         return q, dq, ddq
 
 
-def joint_path_from_cartesian(robot: Any, path: Any, n_points: int, q_seed: np.ndarray,
+def joint_path_from_cartesian(robot: RobotModel, path: SampledPath, n_points: int, q_seed: np.ndarray,
                               frame: str | None = None, max_step_rad: float = np.radians(15.0),
                               name: str = "path") -> JointPath:
     """IK of a Cartesian path (``pipeline.robot.paths.CartesianPath``: line, circle, spline, ISO

@@ -35,6 +35,7 @@ from typing import Any
 
 import casadi as ca
 import numpy as np
+import numpy.typing as npt
 
 from pipeline import codegen
 from pipeline.errors import InfeasibleError, PipelineError, SolverError
@@ -47,8 +48,9 @@ JIT_FLAGS = ("-O1",)
 FORMULATION_VERSION = "ptp-v1"
 
 
-def energy_weights(pm: PlanningModel, kind: str, motor_resistance_ohm: Any = None,
-                   torque_constant_Nm_A: Any = None, gear_ratio: Any = None) -> np.ndarray:
+def energy_weights(pm: PlanningModel, kind: str, motor_resistance_ohm: npt.ArrayLike | None = None,
+                   torque_constant_Nm_A: npt.ArrayLike | None = None,
+                   gear_ratio: npt.ArrayLike | None = None) -> np.ndarray:
     """Weights W of ``int tau^T W tau dt`` for the energy measures described in the module doc."""
     if kind == "torque":
         return np.ones(pm.nq)
@@ -180,7 +182,7 @@ class PtpProblem:
         solver = ca.nlpsol(name, "ipopt", nlp, opts)
         self.build_time_s = time.perf_counter() - t0
         self.compile_time_s = 0.0
-        source: Any = nlp
+        source: dict[str, ca.SX] | str = nlp
         if self.jit:
             t1 = time.perf_counter()
             lib = _compile_nlp(solver, Path(cache_dir) if cache_dir else None, name,
@@ -356,7 +358,7 @@ class PtpProblem:
                                "acceleration_limits": acceleration_rad_s2 is not None})
 
     def pareto(self, q0: np.ndarray, q1: np.ndarray, k2_values: list[float], weights: np.ndarray,
-               **kw: Any) -> list[PtpResult]:
+               **kw: Any) -> list[PtpResult]:  # Any: the keyword arguments of solve, forwarded
         """Sweep ``k2`` (k1 = 1), each solve warm-started from the previous one."""
         out: list[PtpResult] = []
         x0 = None

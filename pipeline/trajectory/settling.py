@@ -43,13 +43,14 @@ from pipeline.control.validate import (
     SETTLING_ROTATION_TOLERANCE_RAD,
     settling_time,
 )
+from pipeline.robot.model import RobotModel
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.solve import PTPPlan
 from pipeline.trajectory.trajectories import JointTrajectory, TorqueCheck, check_trajectory
 
 
-def lowest_mode_hz(robot, q: np.ndarray, stiffness_Nm_rad: np.ndarray | None = None) -> float:
+def lowest_mode_hz(robot: RobotModel, q: np.ndarray, stiffness_Nm_rad: np.ndarray | None = None) -> float:
     """Lowest eigenfrequency [Hz] of ``K x = omega^2 M_l(q) x`` (motors held, module docstring)."""
     k = nominal_joint_stiffness_Nm_rad(robot) if stiffness_Nm_rad is None else np.asarray(stiffness_Nm_rad, float)
     model = robot.model.copy()
@@ -121,7 +122,7 @@ class SettleResult:
                 "residual_vibration_max_m": float(self.position_error_m[self.t_s > self.duration_s].max())}
 
 
-def move_and_settle(real, robot, traj: JointTrajectory, control_config: ControlConfig | None = None,
+def move_and_settle(real, robot: RobotModel, traj: JointTrajectory, control_config: ControlConfig | None = None,
                     rng: np.random.Generator | None = None, hold_s: float = 0.5, rest_window_s: float = 0.05,
                     feedforward: str = "full_friction", tcp_frame: str = "tcp") -> SettleResult:
     """Run ``traj`` on ``real`` with ``hold_s`` of hold after it; settling time of the link-side TCP
@@ -234,7 +235,7 @@ def slowed_into_limits(pm: PlanningModel, traj: JointTrajectory, tolerance: floa
     return slowed, check_trajectory(pm, slowed, energy_weights=energy_weights)
 
 
-def add_smooth_ptp(pm: PlanningModel, robot, plan: PTPPlan, filter_periods: float = 1.0,
+def add_smooth_ptp(pm: PlanningModel, robot: RobotModel, plan: PTPPlan, filter_periods: float = 1.0,
                    tolerance: float | None = None, acceleration_limits: bool = True) -> JointTrajectory:
     """Add the smooth variant of ``plan.trajectories["ptp"]`` (moving average over ``filter_periods``
     periods of the lowest elastic mode at the goal) to ``plan.trajectories`` and its fine-grid check
@@ -258,7 +259,8 @@ def add_smooth_ptp(pm: PlanningModel, robot, plan: PTPPlan, filter_periods: floa
 SETTLE_HOLD_S = 1.5
 
 
-def settle_study(real, robot, trajectories: dict[str, JointTrajectory], control_config: ControlConfig | None,
+def settle_study(real, robot: RobotModel, trajectories: dict[str, JointTrajectory],
+                 control_config: ControlConfig | None,
                  rng: np.random.Generator, hold_s: float = SETTLE_HOLD_S, filter_periods: float = 1.0,
                  elastic_feedforward: str | None = "elastic_flat") -> tuple[dict[str, SettleResult], dict]:
     """The PtP trade-off: the time-optimal plan ``trajectories["ptp"]``, its smooth variant (moving

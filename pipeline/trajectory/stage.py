@@ -30,6 +30,7 @@ from pipeline.control.config import ControlConfig
 from pipeline.errors import ConfigError
 from pipeline.quality import QualityGates
 from pipeline.robot.defaults import ptp_move_rad
+from pipeline.robot.model import RobotModel
 from pipeline.solver_status import SUCCESS_STATUSES
 from pipeline.stage_api import StageContext, StageResult
 from pipeline.trajectory.config import TrajectoryConfig
@@ -57,7 +58,7 @@ DEPENDS: tuple[str, ...] = ("model", "identification", "control")  # plans are r
 Config = TrajectoryConfig
 
 
-def check(config: TrajectoryConfig, robot) -> None:
+def check(config: TrajectoryConfig, robot: RobotModel) -> None:
     """Validate the section against the robot before anything runs (ConfigError naming the field)."""
     def bad(field: str, problem: str) -> ConfigError:
         return ConfigError(None, f"trajectory.{field}", problem)

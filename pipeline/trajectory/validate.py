@@ -10,11 +10,13 @@ from matplotlib.figure import Figure
 
 from pipeline.control.config import ControlConfig
 from pipeline.control.simulate import simulate_joint_trajectory
+from pipeline.robot.model import RobotModel
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.trajectories import JointTrajectory, TorqueCheck
 
 
-def simulate_on_real(real: Any, robot: Any, traj: JointTrajectory, control_config: Any = None,
+def simulate_on_real(real: Any, robot: RobotModel, traj: JointTrajectory,  # Any: the simulated hidden robot
+                     control_config: ControlConfig | None = None,
                      rng: np.random.Generator | None = None, average_window_s: float = 4e-3) -> dict:
     """Run ``traj`` through ``pipeline.control.simulate.simulate_joint_trajectory`` (cascade with
     full-friction feedforward from ``robot``) and report duration, max torque ratio and the TCP

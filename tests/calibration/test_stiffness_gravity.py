@@ -7,6 +7,7 @@ import pytest
 
 from pipeline.calibration import stage as st
 from pipeline.control.joint_stiffness import feedforward_stiffness
+from pipeline.robot.handoff import ElastostaticRecord
 from pipeline.robot.model import RobotModel
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 from pipeline.sim.truth import RealRobot
@@ -26,14 +27,15 @@ def nominal_gravity_run():
 def test_static_torque_record_matches_the_calibrated_stiffness(nominal_gravity_run):
     robot, _, out = nominal_gravity_run
     rec = out.notes["static_torques"]
-    Q = rec["elastostatic_configurations_rad"]
-    assert Q.shape == out.measurements.Q.shape and rec["elastostatic_torques_Nm"].shape == Q.shape
-    np.testing.assert_allclose(rec["elastostatic_torques_Nm"], [robot.gravity_torque(q) for q in Q], atol=1e-9)
-    assert not np.any(rec["elastostatic_payload_torques_Nm"])      # no payload readings here
-    known = rec["joint_stiffness_identified"]
+    Q, torques = rec.configurations_rad, rec.torques_Nm
+    assert Q is not None and torques is not None
+    assert Q.shape == out.measurements.Q.shape and torques.shape == Q.shape
+    np.testing.assert_allclose(torques, [robot.gravity_torque(q) for q in Q], atol=1e-9)
+    assert not np.any(rec.payload_torques_Nm)                      # no payload readings here
+    known = rec.stiffness_identified
     assert not known[0]                                            # vertical axis 1: no gravity load
     assert known[1] and known[2]
-    std = rec["joint_compliance_std"]
+    std = rec.compliance_std_rad_Nm
     assert np.all(np.isfinite(std[known])) and np.all(std[known] > 0)
     assert np.all(1.0 / out.robot.spec.actuation.joint_stiffness_Nm_rad[[1, 2]] > 3 * std[[1, 2]])  # significant
     k = out.robot.spec.actuation.joint_stiffness_Nm_rad
@@ -44,12 +46,12 @@ def test_identified_gravity_moves_the_stiffness_to_the_truth(nominal_gravity_run
     """The nominal inertias bias the stiffness of the loaded axes 2 and 3; re-expressed for the truth's
     inertias (a perfect identification) they land within a few per cent of the hidden stiffness."""
     _, real, out = nominal_gravity_run
-    arrays = out.notes["static_torques"]
+    record = ElastostaticRecord.from_arrays(out.notes["static_torques"].to_arrays(), 6)  # as saved and loaded
     identified = out.robot.copy()
     for j in range(1, identified.model.njoints):
         identified.model.inertias[j] = real.truth.model.inertias[j].copy()
     k_cal = out.robot.spec.actuation.joint_stiffness_Nm_rad
-    choice = feedforward_stiffness(identified, arrays, identified_inertias=True)
+    choice = feedforward_stiffness(identified, record, identified_inertias=True)
     k_true = real.joint_stiffness_Nm_rad
     err_cal = np.abs(k_cal / k_true - 1.0)
     err_new = np.abs(choice.stiffness_Nm_rad / k_true - 1.0)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from pipeline.control.joint_stiffness import deflection_budget, feedforward_stiffness, stiffness_markdown
+from pipeline.robot.handoff import ElastostaticRecord
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad, stiffness_for_gravity_model
 
 IDENTIFIED = np.array([False, True, True, False, True, False])
@@ -44,14 +45,14 @@ def test_feedforward_stiffness_sources_and_gravity_factor(rx130l):
     robot.spec.actuation.joint_stiffness_Nm_rad = k_cal
     Q = np.random.default_rng(1).uniform(-1.0, 1.0, (30, 6))
     rec = _record(robot, Q, 1.0 / 0.8)
-    choice = feedforward_stiffness(robot, rec, identified_inertias=True)
+    choice = feedforward_stiffness(robot, ElastostaticRecord.from_arrays(rec, 6), identified_inertias=True)
     loaded = IDENTIFIED & (np.abs(rec["elastostatic_torques_Nm"]).max(axis=0) > 1e-6)
     np.testing.assert_allclose(choice.stiffness_Nm_rad[loaded], 0.8 * k_cal[loaded], rtol=1e-9)
     np.testing.assert_array_equal(choice.stiffness_Nm_rad[~IDENTIFIED], k_cal[~IDENTIFIED])
     assert choice.nominal_joints == [1, 4, 6]
     assert choice.source[1] == "calibrated, identified gravity"
     # no identified inertias: the calibration's stiffness as it is; no record: every joint nominal
-    same = feedforward_stiffness(robot, rec, identified_inertias=False)
+    same = feedforward_stiffness(robot, ElastostaticRecord.from_arrays(rec, 6), identified_inertias=False)
     np.testing.assert_array_equal(same.stiffness_Nm_rad, k_cal)
     assert same.source[1] == "calibrated" and np.all(same.gravity_factor == 1.0)
     assert feedforward_stiffness(robot, None, True).nominal_joints == [1, 2, 3, 4, 5, 6]
@@ -91,7 +92,8 @@ def test_insignificant_compliance_falls_back_to_the_nominal_stiffness(rx130l):
     rec = _record(robot, np.random.default_rng(3).uniform(-1.0, 1.0, (30, 6)), 1.0)
     rec["joint_compliance_std"] = np.where(IDENTIFIED, 0.1 / k_cal, np.nan)
     rec["joint_compliance_std"][4] = 0.5 / k_cal[4]                   # c = 2 sigma
-    choice = feedforward_stiffness(robot, rec, identified_inertias=True, nominal_Nm_rad=k_nom)
+    choice = feedforward_stiffness(robot, ElastostaticRecord.from_arrays(rec, 6), identified_inertias=True,
+                                   nominal_Nm_rad=k_nom)
     assert choice.nominal_joints == [1, 4, 5, 6]
     assert choice.stiffness_Nm_rad[4] == k_nom[4] and choice.source[4].startswith("nominal (")
     np.testing.assert_allclose(choice.stiffness_Nm_rad[[1, 2]], k_cal[[1, 2]], rtol=1e-9)  # same gravity model
