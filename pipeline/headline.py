@@ -66,14 +66,14 @@ class Headline:
 
 
 # ------------------------------------------------------------------------------ formatting
-def _finite(value: Any) -> float | None:
+def _finite(value: object) -> float | None:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         return None
     return float(value) if math.isfinite(value) else None
 
 
 def _get(summary: dict, dotted: str) -> Any:
-    node: Any = summary
+    node: object = summary
     for part in dotted.split("."):
         if not isinstance(node, dict) or part not in node:
             return None
@@ -90,7 +90,7 @@ def ratio(x: float) -> str:
     return f"×{x:.3g}"
 
 
-def provenance(source: Any) -> str:
+def provenance(source: object) -> str:
     """``simulated`` for a simulated input, else ``recorded (<file name>)``."""
     if not source:
         return SIMULATED

@@ -26,11 +26,16 @@ import numpy as np
 
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import feasibility as fz
+from pipeline.calibration.config import Config as CalibrationConfig
+from pipeline.control.config import ControlConfig
 from pipeline.control.stage import iso_reference
 from pipeline.errors import ConfigError, InfeasibleError, PipelineError
 from pipeline.identification import fourier
+from pipeline.identification.config import Config as IdentificationConfig
 from pipeline.robot.defaults import ik_seeds_or_derived_rad, ptp_move_rad
+from pipeline.robot.model import RobotModel
 from pipeline.runner import Prepared
+from pipeline.trajectory.config import TrajectoryConfig
 from pipeline.trajectory.solve import cp_joint_path
 
 #: random configurations of the calibration probe (a chunk of the stage's own first 1 %)
@@ -39,7 +44,7 @@ CHECK_SAMPLES = 40_000
 EXCITATION_TRIES = 50
 
 
-def _calibration(robot: Any, cfg: Any) -> None:
+def _calibration(robot: RobotModel, cfg: CalibrationConfig) -> None:
     if cfg.measurements_csv or not robot.has_tracker:
         return
     margins = cd.FilterMargins(cfg.margin_collision_m, math.radians(cfg.margin_incidence_deg), cfg.margin_beam_m)
@@ -48,7 +53,7 @@ def _calibration(robot: Any, cfg: Any) -> None:
         raise fz.infeasible_error(diag, robot.spec.path)
 
 
-def _identification(robot: Any, cfg: Any) -> None:
+def _identification(robot: RobotModel, cfg: IdentificationConfig) -> None:
     if cfg.data_file:
         return
     ex = cfg.excitation
@@ -65,7 +70,7 @@ def _identification(robot: Any, cfg: Any) -> None:
                               "self_clearance_m / floor_clearance_m or base_frequency_hz, or check the capsules")
 
 
-def _collision_free(robot: Any, Q: np.ndarray, field: str) -> None:
+def _collision_free(robot: RobotModel, Q: np.ndarray, field: str) -> None:
     for k, q in enumerate(np.atleast_2d(Q)):
         where = f"{field}[{k}]" if len(np.atleast_2d(Q)) > 1 else field
         if not robot.within_limits(q):
@@ -75,13 +80,13 @@ def _collision_free(robot: Any, Q: np.ndarray, field: str) -> None:
                               f"{robot.name} in collision (or below collision.floor_z_m); choose another pose")
 
 
-def _control(robot: Any, cfg: Any) -> None:
+def _control(robot: RobotModel, cfg: ControlConfig) -> None:
     if cfg.ik_seeds_deg is not None:
         _collision_free(robot, ik_seeds_or_derived_rad(robot, cfg.ik_seeds_deg), "control.ik_seeds_deg")
     iso_reference(robot, cfg)
 
 
-def _trajectory(robot: Any, cfg: Any) -> None:
+def _trajectory(robot: RobotModel, cfg: TrajectoryConfig) -> None:
     if cfg.ptp_start_deg is not None and cfg.ptp_goal_deg is not None:
         _collision_free(robot, np.radians(cfg.ptp_start_deg), "trajectory.ptp_start_deg")
         _collision_free(robot, np.radians(cfg.ptp_goal_deg), "trajectory.ptp_goal_deg")

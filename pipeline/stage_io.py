@@ -287,7 +287,7 @@ def read_inputs_hash(stage_dir: str | Path) -> str | None:
 # --------------------------------------------------------------------------------------------
 def inputs_hash(
     stage: str,
-    stage_config: Any,
+    stage_config: object,
     run: Mapping[str, Any],
     robot_files_sha256: str,
     upstream: Mapping[str, str],

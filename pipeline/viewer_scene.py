@@ -10,9 +10,9 @@ the scene so that centre sits at the page's origin.
 from __future__ import annotations
 
 import io
-from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import pinocchio as pin
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
@@ -88,7 +88,7 @@ def layer_of(key: str, trajectory: bool) -> str:
             "not_visible": "not visible poses"}.get(name, "poses")
 
 
-def translation(p: Any) -> np.ndarray:
+def translation(p: npt.ArrayLike) -> np.ndarray:
     T = np.eye(4)
     T[:3, 3] = np.asarray(p, float)
     return T

@@ -38,7 +38,7 @@ _FLOAT_12 = re.compile(r"^(?:[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0
 class DuplicateKeyError(yaml.MarkedYAMLError):
     """A mapping holds ``key`` twice: on ``first_line`` and on ``second_line`` (1-based)."""
 
-    def __init__(self, key: Any, first_line: int, node: yaml.Node) -> None:
+    def __init__(self, key: object, first_line: int, node: yaml.Node) -> None:
         self.key = key
         self.first_line = first_line
         self.second_line = node.start_mark.line + 1

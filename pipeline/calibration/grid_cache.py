@@ -27,12 +27,12 @@ import time
 import zipfile
 from collections import OrderedDict
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from pipeline.calibration import candidates as cd
 from pipeline.codegen import cache_root
+from pipeline.progress import TaskHandle
 from pipeline.robot import collision
 
 #: grids kept in this process (a run uses one; tests may use a few robots)
@@ -82,7 +82,7 @@ def _write(path: Path, Q: np.ndarray, grid_index: np.ndarray, counts: dict) -> N
 
 
 def filter_grid(chain: cd.Chain, n_per_axis: int | list[int] = 13, margins: cd.FilterMargins | None = None,
-                chunk: int = 20_000, progress: Any = None, cache_dir: Path | None = None
+                chunk: int = 20_000, progress: TaskHandle | None = None, cache_dir: Path | None = None
                 ) -> tuple[np.ndarray, np.ndarray, dict]:
     """:func:`cd.filter_grid` (laser tracker visibility), reused when computed before for the same
     content (see the module docstring); the arrays returned are the caller's own copies."""

@@ -25,7 +25,7 @@ from pipeline.errors import RobotFileError
 _MISSING = object()
 
 
-def _normal(value: Any) -> Any:
+def _normal(value: object) -> object:
     if isinstance(value, bool) or value is None or isinstance(value, str):
         return value
     if isinstance(value, int | float):
@@ -37,7 +37,7 @@ def _normal(value: Any) -> Any:
     return str(value)
 
 
-def value_digest(value: Any) -> str:
+def value_digest(value: object) -> str:
     """Digest of a YAML value (numbers rounded to 12 significant digits)."""
     text = json.dumps(_normal(value), sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()[:16]
@@ -45,7 +45,7 @@ def value_digest(value: Any) -> str:
 
 def lookup(data: dict, dotted: str) -> Any:
     """The value at ``a.b.c`` in nested mappings, or ``_MISSING``."""
-    value: Any = data
+    value: object = data
     for key in dotted.split("."):
         if not isinstance(value, dict) or key not in value:
             return _MISSING

@@ -15,13 +15,12 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
 from pipeline.config_checks import check_choice, check_number, check_unique, check_vector
-from pipeline.errors import ConfigError
+from pipeline.errors import ConfigError, Source
 from pipeline.robot.paths import CartesianPath, CirclePath, LinePath, rectangle
 
 PLANES = {
@@ -101,7 +100,7 @@ class IsoPathConfig:
     def __post_init__(self) -> None:
         self.validate(None)
 
-    def validate(self, source: Any = None, where: str = "control.iso") -> None:
+    def validate(self, source: Source = None, where: str = "control.iso") -> None:
         """Robot-independent checks; ConfigError naming ``<where>.<field>``."""
         if self.edge_m is not None:
             check_number(source, f"{where}.edge_m", self.edge_m, gt=0, unit="m")

@@ -26,7 +26,8 @@ from pipeline.robot.friction import joint_friction_torque
 from pipeline.robot.ik import IKResult, solve_ik
 from pipeline.robot.loading import ROBOTS_DIR, JointLimits, load_robot_files, resolve_robot_files, validate_joint_limits
 from pipeline.robot.reflector_check import capsules_holding, describe, marker_points
-from pipeline.robot.spec import ActuationSpec, Capsule, RobotSpec, TrackerSpec, robot_spec_to_yaml
+from pipeline.robot.spec import ActuationSpec, Capsule, RobotSpec, TrackerSpec
+from pipeline.robot.spec_yaml import robot_spec_to_yaml
 from pipeline.robot.urdf_export import export_urdf
 from pipeline.robot.urdf_import import absolute_mesh_paths
 

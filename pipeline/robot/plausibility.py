@@ -30,9 +30,10 @@ here only, no robot is named in the checks):
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
+
+from pipeline.robot.model import RobotModel
 
 GRAVITY_M_S2 = 9.81
 #: mass-vs-reach law: mass / reach^REACH_EXPONENT (the data sheets' spread is smallest near 2.5)
@@ -138,7 +139,7 @@ class ArmFigures:
     link_masses_kg: np.ndarray
 
     @classmethod
-    def of(cls, robot: Any, summary: dict | None = None) -> ArmFigures:
+    def of(cls, robot: RobotModel, summary: dict | None = None) -> ArmFigures:
         """The figures of a :class:`~pipeline.robot.model.RobotModel` (``summary``: its
         ``summary()`` when already computed; it holds the reach)."""
         summary = robot.summary() if summary is None else summary
@@ -213,6 +214,6 @@ def plausibility_warnings(arm: ArmFigures) -> list[str]:
     return [*_mass_warnings(arm), *_limit_warnings(arm)]
 
 
-def robot_warnings(robot: Any, summary: dict | None = None) -> list[str]:
+def robot_warnings(robot: RobotModel, summary: dict | None = None) -> list[str]:
     """:func:`plausibility_warnings` of a :class:`~pipeline.robot.model.RobotModel`."""
     return plausibility_warnings(ArmFigures.of(robot, summary))

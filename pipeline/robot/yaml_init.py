@@ -21,7 +21,7 @@ from pipeline.artefacts import write_text
 from pipeline.errors import RobotFileError
 from pipeline.robot.assumed_values import assumed_entry
 from pipeline.robot.model import RobotModel
-from pipeline.robot.spec import robot_spec_to_yaml
+from pipeline.robot.spec_yaml import robot_spec_to_yaml
 from pipeline.robot.urdf_import import (
     ACCELERATION_PER_VELOCITY_1_S,
     ARM_GEAR_RATIO,
