@@ -8,7 +8,6 @@ from types import SimpleNamespace
 import numpy as np
 import pinocchio as pin
 import pytest
-from pipeline.robot.truth import RealRobot
 
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import error_model as em
@@ -17,6 +16,7 @@ from pipeline.calibration import stage as st
 from pipeline.calibration.elastostatic import design_basis, design_blocks, measurement_model
 from pipeline.calibration.estimate import estimate, register_points
 from pipeline.errors import DataFileError, InfeasibleError, PipelineError, SolverError
+from pipeline.sim.truth import RealRobot
 
 
 @pytest.fixture(scope="module")
