@@ -32,6 +32,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from pipeline import artefacts, stage_io
+from pipeline.typed_config import dotted_get
 
 SIMULATED = "simulated"
 #: where the figures of the control and trajectory stages come from: the servo loop simulated on
@@ -72,13 +73,8 @@ def _finite(value: object) -> float | None:
     return float(value) if math.isfinite(value) else None
 
 
-def _get(summary: dict, dotted: str) -> Any:
-    node: object = summary
-    for part in dotted.split("."):
-        if not isinstance(node, dict) or part not in node:
-            return None
-        node = node[part]
-    return node
+def _get(summary: dict, dotted: str) -> Any:  # Any: a summary.json value
+    return dotted_get(summary, dotted)
 
 
 def length(m: float) -> str:

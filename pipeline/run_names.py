@@ -1,7 +1,8 @@
 """Run names and the robot a run directory belongs to.
 
 A run without a ``name`` is named after its robot and profile: ``rx130l`` for the full profile,
-``iiwa-quick`` for the quick one (the robot's folder name, or a URDF's file stem). Two robots
+``iiwa-quick`` for the quick one (the robot's folder name, its ROS package's for a ``urdf`` folder,
+or a URDF's file stem). Two robots
 therefore never share a default run directory. The robot a directory was made with is the
 ``robot`` of its ``config.yaml``; a run of another robot into it is refused unless forced, so a
 run of one's own arm never replaces the built-in robot's run.
@@ -22,9 +23,14 @@ RUN_CONFIG_FILE = "config.yaml"
 
 
 def robot_label(robot: str | Path) -> str:
-    """Short name of a robot reference: a folder's name, a URDF's file stem, or the name itself."""
+    """Short name of a robot reference: a folder's name (for a ROS package's ``<package>/urdf``
+    folder, the package's), a URDF's file stem, or the name itself."""
     path = Path(str(robot).rstrip("/\\") or str(robot))
-    return path.stem if path.suffix.lower() == ".urdf" else path.name or str(robot)
+    if path.suffix.lower() == ".urdf":
+        return path.stem
+    if path.name == "urdf" and path.parent.name:
+        return path.parent.name
+    return path.name or str(robot)
 
 
 def default_run_name(robot: str | Path, profile: str) -> str:

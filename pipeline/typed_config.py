@@ -169,3 +169,13 @@ def with_source(exc: ConfigError, source: str) -> ConfigError:
     if exc.file is not None and exc.file not in ("None", "config"):
         return exc
     return ConfigError(source, exc.field, exc.problem)
+
+
+def dotted_get(data: object, dotted: str, default: object = None) -> Any:  # Any: whatever the mapping holds
+    """The value at ``a.b.c`` in nested mappings, or ``default`` where a key is missing."""
+    value = data
+    for key in dotted.split("."):
+        if not isinstance(value, dict) or key not in value:
+            return default
+        value = value[key]
+    return value

@@ -54,3 +54,8 @@ def test_another_robot_into_a_run_directory_is_refused_unless_forced(command, fa
     if command == "run":
         stored = yaml.safe_load((out / "shared" / "config.yaml").read_text())
         assert robot_label(stored["robot"]) == "my_arm"
+
+
+def test_a_ros_package_urdf_folder_is_named_after_its_package():
+    assert robot_label("/ws/kuka_kr16_support/urdf") == "kuka_kr16_support"
+    assert robot_label("/ws/kuka_kr16_support/urdf/kr16_2.urdf") == "kr16_2"

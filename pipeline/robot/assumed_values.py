@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from pipeline.errors import RobotFileError
+from pipeline.typed_config import dotted_get
 
 _MISSING = object()
 
@@ -43,14 +44,9 @@ def value_digest(value: object) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def lookup(data: dict, dotted: str) -> Any:
+def lookup(data: dict, dotted: str) -> Any:  # Any: whatever robot.yaml holds there
     """The value at ``a.b.c`` in nested mappings, or ``_MISSING``."""
-    value: object = data
-    for key in dotted.split("."):
-        if not isinstance(value, dict) or key not in value:
-            return _MISSING
-        value = value[key]
-    return value
+    return dotted_get(data, dotted, _MISSING)
 
 
 def assumed_entry(data: dict, dotted: str, rule: str) -> dict:

@@ -231,8 +231,31 @@ def ik_track(robot: RobotModel, poses: list[pin.SE3], q0: np.ndarray, frame: str
         if err_n >= max(tolerance_m * 100, 1e-7):
             raise InfeasibleError(None, "ik", f"TCP point {p} m at {where} not reached (error {err_n:.2e} m; "
                                   f"{limiting_joint(robot, q)})")
-        check_within_limits(robot, q, f"TCP point {p} m at {where}")
         out[k] = q
+    out = wrap_into_limits(robot, out)
+    for k, q in enumerate(out):
+        where = f"t = {times_s[k]:.4f} s" if times_s is not None else f"sample {k}"
+        check_within_limits(robot, q, f"TCP point {np.array2string(poses[k].translation, precision=4)} m at {where}")
+    return out
+
+
+def wrap_into_limits(robot: RobotModel, Q: np.ndarray) -> np.ndarray:
+    """``Q`` (N, nq) with each revolute joint's whole column shifted by a whole turn where that brings
+    every sample inside the joint's limits (``q`` and ``q ± 2π`` give the same pose): an IK track that
+    starts a turn away from where a joint of range beyond ±180° has room, e.g. a wrist at -350.3° of
+    [-350°, 350°], is the same motion at +9.7°. Columns already inside, or that no turn brings inside,
+    are returned as they are."""
+    lo, hi = robot.limits.lower_rad, robot.limits.upper_rad
+    out = np.array(Q, float)
+    for j in range(out.shape[1]):
+        col = out[:, j]
+        if np.all((col >= lo[j]) & (col <= hi[j])):
+            continue
+        for turns in (1, -1, 2, -2):
+            shifted = col + 2.0 * np.pi * turns
+            if np.all((shifted >= lo[j]) & (shifted <= hi[j])):
+                out[:, j] = shifted
+                break
     return out
 
 

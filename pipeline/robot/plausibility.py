@@ -29,6 +29,7 @@ here only, no robot is named in the checks):
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -139,12 +140,14 @@ class ArmFigures:
     link_masses_kg: np.ndarray
 
     @classmethod
-    def of(cls, robot: RobotModel, summary: dict | None = None) -> ArmFigures:
+    def of(cls, robot: RobotModel, summary: Mapping[str, object] | None = None) -> ArmFigures:
         """The figures of a :class:`~pipeline.robot.model.RobotModel` (``summary``: its
         ``summary()`` when already computed; it holds the reach)."""
         summary = robot.summary() if summary is None else summary
         masses = np.array([robot.model.inertias[j].mass for j in range(1, robot.model.njoints)])
-        return cls(float(summary["reach_m"]), float(masses.sum()), float(robot.payload_kg),
+        reach_m = summary["reach_m"]
+        assert isinstance(reach_m, float | int)
+        return cls(float(reach_m), float(masses.sum()), float(robot.payload_kg),
                    np.asarray(robot.limits.effort_Nm, float), np.asarray(robot.limits.velocity_rad_s, float),
                    masses)
 
@@ -214,6 +217,6 @@ def plausibility_warnings(arm: ArmFigures) -> list[str]:
     return [*_mass_warnings(arm), *_limit_warnings(arm)]
 
 
-def robot_warnings(robot: RobotModel, summary: dict | None = None) -> list[str]:
+def robot_warnings(robot: RobotModel, summary: Mapping[str, object] | None = None) -> list[str]:
     """:func:`plausibility_warnings` of a :class:`~pipeline.robot.model.RobotModel`."""
     return plausibility_warnings(ArmFigures.of(robot, summary))
