@@ -43,6 +43,9 @@ BASE_MASS_SHARE = 0.2
 ARM_SPEED_RAD_S = 2.72
 EFFORT_GRAVITY_FACTOR, EFFORT_INERTIA_FACTOR, MIN_EFFORT_SHARE = 3.0, 2.0, 0.03
 MOMENT_FLOOR_KGM2 = 1e-6
+#: a repair below this share of the largest principal moment is the rounding of a URDF's numbers
+#: (e.g. an identified inertia on its triangle boundary written with six digits): no warning
+ROUNDING_SHARE = 0.01
 #: a principal moment below -this share of the largest is a typo (an error), not a rounding to repair
 SIGN_ERROR_SHARE = 1e-3
 
@@ -116,7 +119,8 @@ def repair_inertias(model: pin.Model, root: ET.Element) -> list[str]:
         link = links.get(str(model.names[j]), str(model.names[j]))
         note = (f"inertia of link {link} repaired (principal moments {np.round(moments, 6).tolist()} kg m² -> "
                 f"{np.round(fixed, 6).tolist()}: not positive or violating I1 + I2 >= I3; smallest change)")
-        warnings.warn(note, stacklevel=2)
+        if np.max(np.abs(fixed - moments)) > ROUNDING_SHARE * np.abs(moments).max():
+            warnings.warn(note, stacklevel=2)    # smaller changes are the URDF text's rounding: noted only
         notes.append(note)
     return notes
 
