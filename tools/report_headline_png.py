@@ -51,7 +51,7 @@ def main() -> None:
         page.write_text(f"<!doctype html><html><head><meta charset='utf-8'><style>{CSS}</style></head>"
                         f"<body>{html}</body></html>", encoding="utf-8")
         subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
-                        f"--screenshot={ns.png.resolve()}", "--window-size=1290,760", page.as_uri()],
+                        f"--screenshot={ns.png.resolve()}", "--window-size=1290,570", page.as_uri()],
                        check=True, capture_output=True)
     print(f"wrote {ns.png}")
 
