@@ -9,8 +9,9 @@ import signal
 
 import pytest
 
-from pipeline import cli, interrupts
-from pipeline.config import load_config
+from pipeline import cli, interrupts, second_pass
+from pipeline.config import CONFIGS_DIR, load_config
+from pipeline.locking import run_lock
 from pipeline.run_check import check_run
 from pipeline.runner import run_pipeline
 
@@ -102,3 +103,18 @@ def test_caused_by_interrupt_follows_the_exception_chain():
     except SystemError as exc:
         assert interrupts.caused_by_interrupt(exc)
     assert not interrupts.caused_by_interrupt(ValueError("a plain error"))
+
+
+def test_a_locked_first_pass_names_the_run_directory_the_user_gave(tmp_path, capsys):
+    """The first calibration pass runs under ``<run>/first_pass/<name>``; a run holding that lock is
+    reported against ``<run>``, the directory the user named."""
+    cfg = load_config(CONFIGS_DIR / "quick.yaml", ["calibration.second_pass=always"], "calibration")
+    run_dir = tmp_path / "runs" / cfg.name
+    first_dir = second_pass.first_pass_root(run_dir) / cfg.name
+    first_dir.mkdir(parents=True)
+    with run_lock(first_dir):
+        code = cli.main(["run", "--config", str(CONFIGS_DIR / "quick.yaml"), "--stages", "calibration",
+                         "--set", "calibration.second_pass=always", "--out", str(tmp_path / "runs")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert err[-1].startswith(f"error: {run_dir}: process ") and "/first_pass/" not in err[-1]
