@@ -9,7 +9,7 @@ import signal
 
 import pytest
 
-from pipeline import cli, interrupts, second_pass
+from pipeline import cli, config, interrupts, second_pass
 from pipeline.config import CONFIGS_DIR, load_config
 from pipeline.locking import run_lock
 from pipeline.run_check import check_run
@@ -32,8 +32,6 @@ def test_copied_run_reuses_every_stage_with_identical_artefacts(fake_stages, tmp
 
 
 def test_file_inputs_enter_the_hash_by_content_not_path(fake_stages, tmp_path, monkeypatch):
-    from pipeline import config
-
     monkeypatch.setattr(config.STAGES["a"], "FILE_INPUTS", ("label",), raising=False)
     for folder in ("x", "y"):
         (tmp_path / folder).mkdir()
@@ -63,8 +61,6 @@ def test_check_reports_the_plan_run_follows(fake_stages, tmp_path):
 def _interrupting_stage(fake_stages, monkeypatch, swallow: bool):
     """Stage b's run sends SIGINT to the process from inside its loop; the handler's KeyboardInterrupt
     then surfaces as CasADi's SWIG wrappers report it (a SystemError), or is swallowed."""
-    from pipeline import config
-
     inner = config.STAGES["b"].run
 
     def run(ctx):
