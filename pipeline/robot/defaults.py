@@ -22,7 +22,9 @@ kinematics and capsules with a fixed-seed search (same robot -> same defaults).
 from __future__ import annotations
 
 import copy
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
@@ -123,7 +125,7 @@ def ptp_move_rad(robot: RobotModel, fractions: tuple[float, ...] = (0.4, 0.3, 0.
     return pair
 
 
-_CUBES: dict[tuple, IsoCube] = {}
+_CUBES: dict[tuple[object, ...], IsoCube] = {}
 
 
 def iso_rotation(robot: RobotModel, plane: str, orientation: str) -> np.ndarray:
@@ -137,7 +139,7 @@ def iso_rotation(robot: RobotModel, plane: str, orientation: str) -> np.ndarray:
 
 
 def _cache_key(robot: RobotModel, seeds: np.ndarray, plane: str, orientation: str, speed_m_s: float,
-               frame: str) -> tuple:
+               frame: str) -> tuple[object, ...]:
     """The robot's name plus everything of the model the search reads (the search is a pure function):
     kinematics, limits, and the inertias and torque limits of its gravity check."""
     placements = np.array([robot.model.jointPlacements[i].homogeneous for i in range(1, robot.model.njoints)])
@@ -187,8 +189,8 @@ def iso_cube(robot: RobotModel, plane: str = "diagonal_x", orientation: str | No
     if key in _CUBES:
         return copy.deepcopy(_CUBES[key])
     rotation = iso_rotation(robot, plane, orientation)
-    reach = float(robot.summary()["reach_m"])
-    memo: dict = {}
+    reach = cast(float, robot.summary()["reach_m"])
+    memo: dict[tuple[float, ...], float] = {}
     best = search_cube(robot, seeds, plane, rotation, speed_m_s, frame, memo=memo, direction=direction)
     speed, how = speed_m_s, "largest feasible cube found by search"
     if best is None:
@@ -201,7 +203,7 @@ def iso_cube(robot: RobotModel, plane: str = "diagonal_x", orientation: str | No
                     if speed > 0 else None)
     found = None if best is None or speed <= 0 else verified_edge(robot, best[0], best[1], plane, rotation, seeds,
                                                                   frame, speed)
-    if found is None:
+    if found is None or best is None:
         raise InfeasibleError(None, "control.iso", f"no ISO 9283 cube of edge >= {MIN_EDGE_REACH * reach:.3f} m "
                               f"is feasible for {robot.name} with the tool {orientation}: set control.iso.centre_m "
                               "and edge_m")
@@ -214,7 +216,7 @@ def iso_cube(robot: RobotModel, plane: str = "diagonal_x", orientation: str | No
     return copy.deepcopy(cube)
 
 
-def ik_seeds_or_derived_rad(robot: RobotModel, seeds_deg: list | None) -> np.ndarray:
+def ik_seeds_or_derived_rad(robot: RobotModel, seeds_deg: Sequence[Sequence[float]] | None) -> np.ndarray:
     """``(k, nq)`` IK seeds: the configured ones (deg) or, when ``None``, :func:`ik_seeds_rad` after the
     start configuration of the default derived cube (:func:`iso_cube`, cached), so that a derived ISO path
     starts on the IK branch the search validated."""

@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -64,7 +65,7 @@ def save_exact_robot(robot: RobotModel, folder: str | Path) -> Path:
 def _set_path(root: object, path: str, array: np.ndarray) -> bool:
     """Put ``array`` at dotted ``path`` inside ``root`` when a value of the same kind is there."""
     parts = path.replace("[", ".[").split(".")
-    parent: object = root
+    parent: Any = root    # a dataclass, dict or list of the spec: walked by name or index
     for part in parts[:-1]:
         parent = parent[int(part[1:-1])] if part.startswith("[") else (
             parent[part] if isinstance(parent, dict) else getattr(parent, part, None))
@@ -74,8 +75,9 @@ def _set_path(root: object, path: str, array: np.ndarray) -> bool:
     if last.startswith("["):
         return False                     # floats directly inside lists are not used by the spec
     current = parent.get(last) if isinstance(parent, dict) else getattr(parent, last, None)
-    if current is None and parent is getattr(root, "limit_overrides", None) and array.ndim == 1:
-        parent[last] = array.copy()      # a limit robot.yaml overrode: saved into the URDF, kept as given
+    overrides = getattr(root, "limit_overrides", None)
+    if current is None and isinstance(overrides, dict) and parent is overrides and array.ndim == 1:
+        overrides[last] = array.copy()      # a limit robot.yaml overrode: saved into the URDF, kept as given
         return True
     if isinstance(current, pin.SE3) and array.shape == (4, 4):
         new: object = pin.SE3(array)

@@ -45,7 +45,7 @@ def joint_friction_torque(act: ActuationSpec, v: np.ndarray) -> np.ndarray:
     """Friction torque at joint velocities ``v`` (..., nq) of the model's actuation (module doc)."""
     v = np.asarray(v, float)
     tau = act.viscous_Nms_rad * v + act.coulomb_Nm * np.tanh(v / act.coulomb_smoothing_rad_s)
-    if has_stribeck(act):
+    if act.static_friction_excess_Nm is not None and act.stribeck_velocity_rad_s is not None:  # has_stribeck
         tau = tau + stribeck_excess_torque(v, act.static_friction_excess_Nm, act.stribeck_velocity_rad_s,
                                            act.coulomb_smoothing_rad_s)
     return tau

@@ -17,6 +17,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+import numpy.typing as npt
 import pinocchio as pin
 
 from pipeline.config_checks import check_choice, check_number, check_unique, check_vector
@@ -44,12 +45,12 @@ class IsoPath(CartesianPath):
         self.breaks = np.concatenate([[0.0], np.cumsum([p.length_m for p in pieces])])
         self.length_m = float(self.breaks[-1])
 
-    def _split(self, s_m):
+    def _split(self, s_m: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         s = np.clip(np.atleast_1d(np.asarray(s_m, float)), 0.0, self.length_m)
         idx = np.clip(np.searchsorted(self.breaks, s, side="right") - 1, 0, len(self.pieces) - 1)
         return s, idx
 
-    def position(self, s_m):
+    def position(self, s_m: npt.ArrayLike) -> np.ndarray:
         s, idx = self._split(s_m)
         out = np.empty((len(s), 3))
         for i, p in enumerate(self.pieces):
@@ -58,7 +59,7 @@ class IsoPath(CartesianPath):
                 out[m] = p.position(s[m] - self.breaks[i])
         return out
 
-    def derivatives(self, s_m):
+    def derivatives(self, s_m: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         s, idx = self._split(s_m)
         d1, d2 = np.empty((len(s), 3)), np.empty((len(s), 3))
         for i, p in enumerate(self.pieces):
@@ -139,10 +140,10 @@ def tool_rotation(plane: str, tool_down: bool = True) -> np.ndarray:
     return np.column_stack([x, np.cross(z, x), z])
 
 
-def iso9283_path(robot: object | None, edge_m: float, centre_m: Sequence[float], plane: str = "diagonal_x",
+def iso9283_path(robot: object | None, edge_m: float, centre_m: npt.ArrayLike, plane: str = "diagonal_x",
                  rotation: np.ndarray | None = None, corner_fraction: float = 0.1,
                  large_circle_fraction: float = 0.8, small_circle_fraction: float = 0.1,
-                 segments=("line", "rectangle", "circle_large", "circle_small")) -> IsoPath:
+                 segments: Sequence[str] = ("line", "rectangle", "circle_large", "circle_small")) -> IsoPath:
     """Build the ISO 9283 path in a cube of edge ``edge_m`` centred at ``centre_m`` (base frame, m;
     a robot's cube comes from :func:`pipeline.robot.defaults.iso_cube` or its ``run_defaults``).
     ``rotation``: constant TCP orientation (default: tool z axis down).

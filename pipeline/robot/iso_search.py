@@ -39,6 +39,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 import pinocchio as pin
@@ -163,7 +164,7 @@ def _geometric_edge_bound(centre: np.ndarray, shoulder: np.ndarray, reach: float
 
 
 def search_cube(robot: RobotModel, seeds: np.ndarray, plane: str, rotation: np.ndarray, speed_m_s: float, frame: str,
-                ignore_speed: bool = False, memo: dict | None = None,
+                ignore_speed: bool = False, memo: dict[tuple[float, ...], float] | None = None,
                 direction: tuple[float, float, float] = SEARCH_DIRECTIONS[0]) -> tuple[float, np.ndarray, float] | None:
     """(edge, centre, speed ratio) of the largest feasible cube (module docstring) on the vertical
     half-plane from the first joint along ``direction`` (one of :data:`SEARCH_DIRECTIONS`), or ``None``.
@@ -178,9 +179,10 @@ def search_cube(robot: RobotModel, seeds: np.ndarray, plane: str, rotation: np.n
 
 def _search_half_plane(robot: RobotModel, seeds: np.ndarray, plane: str, rotation: np.ndarray, speed_m_s: float,
                        frame: str,
-                       ignore_speed: bool, memo: dict, direction: np.ndarray) -> tuple[float, np.ndarray, float] | None:
+                       ignore_speed: bool, memo: dict[tuple[float, ...], float],
+                       direction: np.ndarray) -> tuple[float, np.ndarray, float] | None:
     """:func:`search_cube` on the vertical half-plane from the first joint along ``direction``."""
-    reach = float(robot.summary()["reach_m"])
+    reach = cast(float, robot.summary()["reach_m"])
     base = robot.model.jointPlacements[1].translation
     shoulder = robot.model.jointPlacements[2].translation + base if robot.nq > 1 else base
     floor_z = float(robot.spec.collision.floor_z_m)

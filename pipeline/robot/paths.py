@@ -16,6 +16,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 
 import numpy as np
+import numpy.typing as npt
 import pinocchio as pin
 from scipy.interpolate import CubicSpline
 
@@ -23,14 +24,14 @@ from pipeline.errors import ConfigError, InfeasibleError
 from pipeline.robot.model import RobotModel
 
 
-def _as3(x, name: str) -> np.ndarray:
+def _as3(x: npt.ArrayLike, name: str) -> np.ndarray:
     a = np.asarray(x, float).reshape(-1)
     if a.shape != (3,) or not np.all(np.isfinite(a)):
         raise ConfigError(None, name, f"needs 3 finite numbers, got {x!r}")
     return a
 
 
-def _as_rotation(R) -> np.ndarray:
+def _as_rotation(R: npt.ArrayLike | None) -> np.ndarray:
     R = np.eye(3) if R is None else np.asarray(R, float)
     if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-9) or np.linalg.det(R) < 0:
         raise ConfigError(None, "rotation", "TCP rotation must be a proper 3x3 rotation matrix")
@@ -71,7 +72,8 @@ class CartesianPath(ABC):
 
 
 class LinePath(CartesianPath):
-    def __init__(self, p0, p1, rotation=None, label: str = "line") -> None:
+    def __init__(self, p0: npt.ArrayLike, p1: npt.ArrayLike, rotation: npt.ArrayLike | None = None,
+                 label: str = "line") -> None:
         self.p0, self.p1 = _as3(p0, "line.p0"), _as3(p1, "line.p1")
         self.length_m = float(np.linalg.norm(self.p1 - self.p0))
         if self.length_m <= 0:
@@ -80,11 +82,11 @@ class LinePath(CartesianPath):
         self.rotation = _as_rotation(rotation)
         self.label = label
 
-    def position(self, s_m):
+    def position(self, s_m: npt.ArrayLike) -> np.ndarray:
         s = np.atleast_1d(np.asarray(s_m, float))
         return self.p0 + s[:, None] * self.direction
 
-    def derivatives(self, s_m):
+    def derivatives(self, s_m: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         n = len(np.atleast_1d(s_m))
         return np.tile(self.direction, (n, 1)), np.zeros((n, 3))
 
@@ -93,8 +95,9 @@ class CirclePath(CartesianPath):
     """Circle (arc) of ``radius_m`` about ``centre`` in the plane with unit ``normal``, starting at
     ``centre + radius * start_direction`` and turning by ``angle_rad`` (right-handed about normal)."""
 
-    def __init__(self, centre, normal, radius_m: float, start_direction, angle_rad: float = 2 * np.pi,
-                 rotation=None, label: str = "circle") -> None:
+    def __init__(self, centre: npt.ArrayLike, normal: npt.ArrayLike, radius_m: float,
+                 start_direction: npt.ArrayLike, angle_rad: float = 2 * np.pi,
+                 rotation: npt.ArrayLike | None = None, label: str = "circle") -> None:
         self.centre = _as3(centre, "circle.centre")
         n = _as3(normal, "circle.normal")
         if radius_m <= 0 or angle_rad <= 0:
@@ -112,11 +115,11 @@ class CirclePath(CartesianPath):
         self.rotation = _as_rotation(rotation)
         self.label = label
 
-    def position(self, s_m):
+    def position(self, s_m: npt.ArrayLike) -> np.ndarray:
         th = np.atleast_1d(np.asarray(s_m, float)) / self.radius_m
         return self.centre + self.radius_m * (np.cos(th)[:, None] * self.e1 + np.sin(th)[:, None] * self.e2)
 
-    def derivatives(self, s_m):
+    def derivatives(self, s_m: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         th = np.atleast_1d(np.asarray(s_m, float)) / self.radius_m
         d1 = -np.sin(th)[:, None] * self.e1 + np.cos(th)[:, None] * self.e2
         d2 = (-np.cos(th)[:, None] * self.e1 - np.sin(th)[:, None] * self.e2) / self.radius_m
@@ -126,7 +129,7 @@ class CirclePath(CartesianPath):
 class PolylinePath(CartesianPath):
     """Straight lines through ``points`` (M, 3); the TCP stops at every corner."""
 
-    def __init__(self, points, rotation=None, label: str = "polyline") -> None:
+    def __init__(self, points: npt.ArrayLike, rotation: npt.ArrayLike | None = None, label: str = "polyline") -> None:
         pts = np.asarray(points, float)
         if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 2:
             raise ConfigError(None, "polyline.points", "needs (M >= 2, 3) points")
@@ -137,12 +140,12 @@ class PolylinePath(CartesianPath):
         self.length_m = float(self.breaks[-1])
         self.label = label
 
-    def _locate(self, s):
-        s = np.clip(np.atleast_1d(np.asarray(s, float)), 0.0, self.length_m)
+    def _locate(self, s_m: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        s = np.clip(np.atleast_1d(np.asarray(s_m, float)), 0.0, self.length_m)
         idx = np.clip(np.searchsorted(self.breaks, s, side="right") - 1, 0, len(self.lines) - 1)
         return s, idx
 
-    def position(self, s_m):
+    def position(self, s_m: npt.ArrayLike) -> np.ndarray:
         s, idx = self._locate(s_m)
         out = np.empty((len(s), 3))
         for i, ln in enumerate(self.lines):
@@ -150,16 +153,17 @@ class PolylinePath(CartesianPath):
             out[m] = ln.position(s[m] - self.breaks[i])
         return out
 
-    def derivatives(self, s_m):
+    def derivatives(self, s_m: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         s, idx = self._locate(s_m)
         d1 = np.array([self.lines[i].direction for i in idx]).reshape(-1, 3)
         return d1, np.zeros_like(d1)
 
-    def segments(self):
+    def segments(self) -> list[CartesianPath]:
         return list(self.lines)
 
 
-def rectangle(corners, rotation=None, close: bool = True, label: str = "rectangle") -> PolylinePath:
+def rectangle(corners: npt.ArrayLike, rotation: npt.ArrayLike | None = None, close: bool = True,
+              label: str = "rectangle") -> PolylinePath:
     """Polyline through the corners (4, 3), closed back to the first one."""
     c = np.asarray(corners, float)
     if c.shape != (4, 3):
@@ -170,7 +174,8 @@ def rectangle(corners, rotation=None, close: bool = True, label: str = "rectangl
 class SplinePath(CartesianPath):
     """Cubic spline through ``points`` (chord-length knots), re-parameterised by arc length."""
 
-    def __init__(self, points, rotation=None, n_table: int = 2001, label: str = "spline") -> None:
+    def __init__(self, points: npt.ArrayLike, rotation: npt.ArrayLike | None = None, n_table: int = 2001,
+                 label: str = "spline") -> None:
         pts = np.asarray(points, float)
         if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 3:
             raise ConfigError(None, "spline.points", "needs (M >= 3, 3) points")
@@ -186,10 +191,10 @@ class SplinePath(CartesianPath):
         self.rotation = _as_rotation(rotation)
         self.label = label
 
-    def position(self, s_m):
+    def position(self, s_m: npt.ArrayLike) -> np.ndarray:
         return self._cs(self._u_of_s(np.clip(np.atleast_1d(s_m), 0, self.length_m)))
 
-    def derivatives(self, s_m):
+    def derivatives(self, s_m: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         s = np.clip(np.atleast_1d(np.asarray(s_m, float)), 0, self.length_m)
         u = self._u_of_s(s)
         du = self._cs(u, 1)
@@ -283,15 +288,16 @@ def check_within_limits(robot: RobotModel, q: np.ndarray, where: str) -> None:
                               f"[{np.degrees(lo[j]):.1f}, {np.degrees(hi[j]):.1f}] deg")
 
 
-def start_configuration(robot: RobotModel, pose: pin.SE3, seeds, frame: str = "tcp", tolerance_m: float = 1e-10,
-                        n_random: int = 30) -> np.ndarray:
+def start_configuration(robot: RobotModel, pose: pin.SE3, seeds: npt.ArrayLike, frame: str = "tcp",
+                        tolerance_m: float = 1e-10, n_random: int = 30) -> np.ndarray:
     """IK from a cold start: damped Newton with step limiting from each seed, then from ``n_random``
     random configurations within the limits (fixed-seed generator: deterministic); the first
     solution within the limits wins. Raises InfeasibleError naming the point if none converges.
     """
     lo_, hi_ = robot.limits.lower_rad, robot.limits.upper_rad
     extra = np.random.default_rng(9283).uniform(lo_, hi_, (n_random, robot.model.nq))
-    seeds = np.vstack([np.atleast_2d(np.asarray(seeds, float)), extra]) if n_random else seeds
+    seeds = np.vstack([np.atleast_2d(np.asarray(seeds, float)), extra]) if n_random else np.atleast_2d(
+        np.asarray(seeds, float))
     model = robot.model
     data = model.createData()
     fid = model.getFrameId(frame)

@@ -114,7 +114,8 @@ def resolved_rate(J: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 
 def track(robot: RobotModel, rotation: np.ndarray, P: np.ndarray, Pd: np.ndarray, Pdd: np.ndarray, q_start: np.ndarray,
-          frame: str, t_s: np.ndarray, tolerance_m: float = 1e-9, max_iterations: int = 20):
+          frame: str, t_s: np.ndarray, tolerance_m: float = 1e-9,
+          max_iterations: int = 20) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """IK + joint velocities/accelerations at every sample in one pass.
 
     Warm start ``q_k^0 = q_{k-1} + dt v_{k-1} + dt^2/2 a_{k-1}``; Newton ``dq = J^+ e`` with
@@ -148,7 +149,7 @@ def track(robot: RobotModel, rotation: np.ndarray, P: np.ndarray, Pd: np.ndarray
             if err < tolerance_m:
                 break
             q = q + resolved_rate(J, e)
-        def where(k=k) -> str:
+        def where(k: int = k) -> str:
             return f"TCP point {np.array2string(P[k], precision=4)} m at t = {t_s[k]:.4f} s"
 
         cond = np.linalg.cond(J) if (k % 25 == 0 or err >= tolerance_m) else 1.0  # singularity watch

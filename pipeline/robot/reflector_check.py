@@ -11,8 +11,12 @@ it for good (it moves with the flange or turns about an axis through the reflect
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import pinocchio as pin
+
+from pipeline.robot.spec import Capsule, RobotSpec
 
 INSIDE_SHARE = 0.5
 SAMPLES = 64
@@ -25,7 +29,7 @@ def _point_segment_m(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
 
 
 def capsules_holding(model: pin.Model, flange_frame: str, offset_m: np.ndarray,
-                     capsules: list) -> list[tuple[str, float, float]]:
+                     capsules: Sequence[Capsule]) -> list[tuple[str, float, float]]:
     """(capsule name, share of configurations, largest depth m) of every capsule that holds the point
     ``offset_m`` (flange frame) in at least ``INSIDE_SHARE`` of random configurations."""
     if not capsules:
@@ -51,7 +55,7 @@ def capsules_holding(model: pin.Model, flange_frame: str, offset_m: np.ndarray,
             depth[n, k] = capsule.radius_m - _point_segment_m(point, pose.act(capsule.p0), pose.act(capsule.p1))
     share = (depth > 0).mean(axis=0)
     return [(capsules[k].name, float(share[k]), float(depth[:, k].max()))
-            for k in np.flatnonzero(share >= INSIDE_SHARE)]
+            for k in map(int, np.flatnonzero(share >= INSIDE_SHARE))]
 
 
 def describe(holding: list[tuple[str, float, float]]) -> str:
@@ -60,7 +64,7 @@ def describe(holding: list[tuple[str, float, float]]) -> str:
                      for name, share, depth in holding)
 
 
-def marker_points(spec) -> list[tuple[str, str, np.ndarray]]:  # noqa: ANN001 - RobotSpec
+def marker_points(spec: RobotSpec) -> list[tuple[str, str, np.ndarray]]:
     """(robot.yaml field, what, point in the flange frame) of the reflector and of every optical-probe
     diode (diodes sit in the marker frame: flange orientation at the reflector offset)."""
     offset = np.asarray(spec.tool.reflector_offset_m, float)

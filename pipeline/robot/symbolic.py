@@ -122,10 +122,9 @@ class SymbolicRobot:
             coulomb_smoothing_rad_s = getattr(
                 actuation, "coulomb_smoothing_rad_s", DEFAULT_COULOMB_SMOOTHING_RAD_S
             )
-        if viscous_Nms_rad is None:
-            viscous_Nms_rad = getattr(actuation, "viscous_Nms_rad", np.zeros(self.nq))
-        if coulomb_Nm is None:
-            coulomb_Nm = getattr(actuation, "coulomb_Nm", np.zeros(self.nq))
+        viscous = (getattr(actuation, "viscous_Nms_rad", np.zeros(self.nq)) if viscous_Nms_rad is None
+                   else viscous_Nms_rad)
+        coulomb = getattr(actuation, "coulomb_Nm", np.zeros(self.nq)) if coulomb_Nm is None else coulomb_Nm
         if not coulomb_smoothing_rad_s > 0:
             raise PipelineError(
                 None, "coulomb_smoothing_rad_s", f"must be positive, got {coulomb_smoothing_rad_s}"
@@ -133,8 +132,8 @@ class SymbolicRobot:
         self.flange_frame = flange_frame
         self.tool_frames = tuple(tool_frames)
         self.coulomb_smoothing_rad_s = float(coulomb_smoothing_rad_s)
-        self._viscous = _check_vector(viscous_Nms_rad, self.nq, "viscous_Nms_rad")
-        self._coulomb = _check_vector(coulomb_Nm, self.nq, "coulomb_Nm")
+        self._viscous = _check_vector(viscous, self.nq, "viscous_Nms_rad")
+        self._coulomb = _check_vector(coulomb, self.nq, "coulomb_Nm")
         self._flange_id = _frame_id(model, flange_frame) if self.tool_frames else None
         for name in self.tool_frames:
             fid = _frame_id(model, name)
@@ -337,7 +336,7 @@ class SymbolicRobot:
                 forces[info.parent] = (parent[0] + fp[0], parent[1] + fp[1])
         return ca.vertcat(*tau)
 
-    def friction_expression(self, v: SymbolicArg, p_dyn: SymbolicArg) -> ca.SX:
+    def friction_expression(self, v: SymbolicArg, p_dyn: SymbolicArg) -> SymbolicArg:
         """``fv v + fc tanh(v / width)`` (smooth Coulomb, width ``coulomb_smoothing_rad_s``)."""
         return p_dyn[self.dyn.viscous] * v + p_dyn[self.dyn.coulomb] * ca.tanh(
             v / self.coulomb_smoothing_rad_s

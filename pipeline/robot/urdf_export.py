@@ -18,6 +18,15 @@ def _fmt(values: np.ndarray) -> str:
     return " ".join(f"{float(v):.17g}" for v in values)
 
 
+def _link_of(joint: ET.Element, tag: str, name: str) -> str:
+    """The ``link`` attribute of a joint's ``<parent>`` or ``<child>`` element."""
+    element = joint.find(tag)
+    link = None if element is None else element.get("link")
+    if link is None:
+        raise RobotFileError(None, f"joint {name}", f"no <{tag} link=...> in the template URDF")
+    return link
+
+
 def export_urdf(model: pin.Model, template_urdf: str) -> str:
     """URDF text of ``model``: the template with joint origins, limits and link inertials replaced.
 
@@ -34,7 +43,7 @@ def export_urdf(model: pin.Model, template_urdf: str) -> str:
         element = joints.get(name)
         if element is None:
             raise RobotFileError(None, f"joint {name}", "not in the template URDF")
-        parent_link = element.find("parent").get("link")
+        parent_link = _link_of(element, "parent", name)
         # Pinocchio folds fixed joints (a `world` root, flange adapters) into the joint placement: the
         # URDF origin is the placement seen from the parent link's frame
         if not model.existFrame(parent_link, pin.FrameType.BODY):
@@ -52,7 +61,7 @@ def export_urdf(model: pin.Model, template_urdf: str) -> str:
             limit.set("upper", f"{model.upperPositionLimit[j - 1]:.17g}")
             limit.set("velocity", f"{model.velocityLimit[j - 1]:.17g}")
             limit.set("effort", f"{model.effortLimit[j - 1]:.17g}")
-        child = element.find("child").get("link")
+        child = _link_of(element, "child", name)
         moving_children.add(child)
         link = links[child]
         for old in link.findall("inertial"):
