@@ -84,6 +84,17 @@ def absolute_mesh_paths(urdf_text: str, urdf: Path) -> str:
     return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 
 
+def _link(joint: ET.Element, tag: str) -> str:
+    """The ``link`` attribute of a joint's ``<parent>`` or ``<child>`` (checked by ``check_urdf_xml``)."""
+    element = joint.find(tag)
+    return "" if element is None else element.get("link", "")
+
+
+def _name(element: ET.Element) -> str:
+    """An element's ``name`` attribute ("" when absent)."""
+    return element.get("name", "")
+
+
 def _is_arm_joint(joint: ET.Element) -> bool:
     """A revolute joint not named as a gripper or finger joint (the default tip's rule)."""
     name = (joint.get("name") or "").lower()
@@ -97,7 +108,7 @@ def flange_link(root: ET.Element, link: str) -> str:
     fixed_children: dict[str, list[str]] = {}
     for joint in root.findall("joint"):
         if joint.get("type") == "fixed":
-            fixed_children.setdefault(joint.find("parent").get("link"), []).append(joint.find("child").get("link"))
+            fixed_children.setdefault(_link(joint, "parent"), []).append(_link(joint, "child"))
     found, todo = [], [link]
     while todo:
         current = todo.pop()
@@ -120,15 +131,15 @@ def arm_chain(urdf: Path, root: ET.Element, *, base: str | None = None, tip: str
     the arm) are not part of the chain (they are locked, :func:`build_arm_model`).
     """
     joints = root.findall("joint")
-    parent_joint = {j.find("child").get("link"): j for j in joints}
-    links = [link.get("name") for link in root.findall("link")]
+    parent_joint = {_link(j, "child"): j for j in joints}
+    links = [_name(link) for link in root.findall("link")]
 
     def path_to_root(link: str) -> list[ET.Element]:
         path = []
         while link in parent_joint:
             joint = parent_joint[link]
             path.append(joint)
-            link = joint.find("parent").get("link")
+            link = _link(joint, "parent")
         return path[::-1]
 
     if tip is not None and tip not in links:
@@ -148,22 +159,22 @@ def arm_chain(urdf: Path, root: ET.Element, *, base: str | None = None, tip: str
                                  f"{urdf} --tip LINK --out DIR/robot.yaml, then run with --set robot=DIR)")
         tip = flange_link(root, ends.pop())
     path = path_to_root(tip)
-    root_link = path[0].find("parent").get("link") if path else tip
+    root_link = _link(path[0], "parent") if path else tip
     if base is not None:
-        names = [j.find("parent").get("link") for j in path]
+        names = [_link(j, "parent") for j in path]
         if base not in names:
             raise RobotFileError(urdf, "base", f"link '{base}' is not between the root and '{tip}' "
                                  f"(links on that path: {', '.join(names)})")
         above = path[:names.index(base)]
-        moving = [j.get("name") for j in above if j.get("type") != "fixed"]
-        if moving:
-            raise RobotFileError(urdf, "base", f"link '{base}' is carried by movable joints {', '.join(moving)}; "
+        carried = [_name(j) for j in above if j.get("type") != "fixed"]
+        if carried:
+            raise RobotFileError(urdf, "base", f"link '{base}' is carried by movable joints {', '.join(carried)}; "
                                  "choose a base link fixed to the root")
         path = path[names.index(base):]
-    moving = [j for j in path if j.get("type") != "fixed" and j.get("name") not in (lock or {})]
+    moving = [j for j in path if j.get("type") != "fixed" and _name(j) not in (lock or {})]
     while moving and moving[0].get("type") not in ("revolute", "continuous"):
         moving = moving[1:]            # a track or lift below the arm: locked; one inside the arm is refused
-    chain = [j.get("name") for j in moving]
+    chain = [_name(j) for j in moving]
     if not chain:
         raise RobotFileError(urdf, "joints", f"no movable joint between '{base or root_link}' and '{tip}'")
     return chain, base or root_link, tip
