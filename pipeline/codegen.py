@@ -23,6 +23,7 @@ import os
 import subprocess
 import sys
 import tempfile
+import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -84,28 +85,90 @@ def _generate(functions: Sequence[ca.Function], name: str) -> str:
     return generator.dump()
 
 
+def _sources(functions: Sequence[ca.Function], name: str) -> list[str]:
+    """The C code of each function in a file of its own (its static helpers with it), so that the
+    files compile side by side; a single function: one file, as before."""
+    if len(functions) == 1:
+        return [_generate(functions, name)]
+    return [_generate([f], f"{name}_{f.name()}") for f in functions]
+
+
+def compile_jobs() -> int:
+    """gcc processes run side by side: ``$PIPELINE_COMPILE_JOBS``, else the cores this process may use."""
+    env = os.environ.get("PIPELINE_COMPILE_JOBS")
+    if env:
+        return max(1, int(env))
+    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
+
+
+def _run_side_by_side(commands: list[list[str]], jobs: int, where: str, name: str, tmp: Path) -> None:
+    """Run the gcc ``commands`` at most ``jobs`` at a time, in the given order, each starting as soon
+    as a slot is free; the first failure stops the others and raises :class:`SolverError` with gcc's
+    message (each process writes its messages to a file in ``tmp``: no pipe to fill)."""
+    pending = list(enumerate(commands))
+    running: list[tuple[subprocess.Popen[bytes], Path]] = []
+    try:
+        while pending or running:
+            while pending and len(running) < jobs:
+                k, command = pending.pop(0)
+                log = tmp / f"gcc_{k}.log"
+                with log.open("wb") as sink:
+                    running.append((subprocess.Popen(command, stdout=sink, stderr=subprocess.STDOUT), log))
+            finished = [item for item in running if item[0].poll() is not None]
+            if not finished:
+                time.sleep(0.02)
+                continue
+            for item in finished:
+                running.remove(item)
+                if item[0].returncode != 0:
+                    message = item[1].read_text(errors="replace").strip()[-500:]
+                    raise SolverError(where, name, f"gcc failed: {message}")
+    finally:
+        for process, _ in running:
+            process.kill()
+            process.wait()
+
+
+def _compile(sources: list[str], name: str, flags: Sequence[str], tmp: Path, library: Path) -> None:
+    """gcc: one shared library from ``sources``. Several files: each compiled to an object by up to
+    :func:`compile_jobs` processes side by side (largest first), then linked."""
+    c_files = [tmp / f"{name}_{k}.c" for k in range(len(sources))]
+    for c_file, source in zip(c_files, sources, strict=True):
+        c_file.write_text(source)
+    if len(c_files) == 1:
+        _run_side_by_side([["gcc", "-shared", "-fPIC", *flags, str(c_files[0]), "-o", str(library), "-lm"]], 1,
+                          str(c_files[0]), name, tmp)
+        return
+    order = sorted(range(len(sources)), key=lambda k: -len(sources[k]))
+    objects = [c.with_suffix(".o") for c in c_files]
+    compile_flags = [f for f in flags if f != "-shared"]
+    _run_side_by_side([["gcc", "-c", "-fPIC", *compile_flags, str(c_files[k]), "-o", str(objects[k])]
+                       for k in order], compile_jobs(), str(c_files[0]), name, tmp)
+    _run_side_by_side([["gcc", "-shared", "-fPIC", *flags, *map(str, objects), "-o", str(library), "-lm"]], 1,
+                      str(c_files[0]), name, tmp)
+
+
 def build_library(name: str, functions: Sequence[ca.Function] | Callable[[], Sequence[ca.Function]], *,
                   subdir: str = "casadi", flags: Sequence[str] = DEFAULT_FLAGS, key: str | None = None,
                   cache_dir: Path | None = None) -> Path:
-    """Path of the shared library holding ``functions`` (compiled now if not cached)."""
+    """Path of the shared library holding ``functions`` (compiled now if not cached).
+
+    Several functions are compiled in files of their own by up to :func:`compile_jobs` gcc
+    processes side by side (the PtP NLP of a 6-axis arm: its Lagrangian Hessian is most of the
+    code, so two cores take the time of the Hessian alone); the key does not depend on the cores."""
     cache = _writable_cache((cache_dir if cache_dir is not None else cache_root()) / subdir)
-    source = None
+    sources = None
     if key is None:
-        source = _generate(functions() if callable(functions) else functions, name)
-        key = hashlib.sha256((source + " ".join(flags) + ca.__version__).encode()).hexdigest()[:20]
+        sources = _sources(functions() if callable(functions) else functions, name)
+        key = hashlib.sha256(("".join(sources) + " ".join(flags) + ca.__version__).encode()).hexdigest()[:20]
     library = cache / f"{name}_{key}.so"
     if _intact(library):
         return library
-    if source is None:
-        source = _generate(functions() if callable(functions) else functions, name)
+    if sources is None:
+        sources = _sources(functions() if callable(functions) else functions, name)
     with tempfile.TemporaryDirectory(dir=cache) as tmp:
-        c_file = Path(tmp) / f"{name}.c"
-        c_file.write_text(source)
         tmp_library = Path(tmp) / library.name
-        command = ["gcc", "-shared", "-fPIC", *flags, str(c_file), "-o", str(tmp_library), "-lm"]
-        result = subprocess.run(command, capture_output=True, text=True, check=False)
-        if result.returncode != 0:
-            raise SolverError(str(c_file), name, f"gcc failed: {result.stderr.strip()[-500:]}")
+        _compile(sources, name, flags, Path(tmp), tmp_library)
         stamp = Path(tmp) / (library.name + ".sha256")
         stamp.write_text(_sha256(tmp_library) + "\n")
         os.replace(tmp_library, library)
