@@ -47,6 +47,13 @@ import casadi as ca
 import numpy as np
 
 from pipeline.blas import single_thread_blas
+from pipeline.forks import fork_map
+from pipeline.identification.excitation_criterion import (
+    CriterionCallback,
+    ExcitationCriterion,
+    condition_number,
+    regressor_casadi,
+)
 from pipeline.identification.fourier import (
     NLP_EXTRA_CLEARANCE_M,
     NLP_LIMIT_FACTOR,
@@ -68,189 +75,6 @@ from pipeline.robot.symbolic import SymbolicRobot
 from pipeline.solver_status import is_success
 
 
-def regressor_casadi(sym: SymbolicRobot, reg: RegressorModel, base: BaseParameters) -> ca.Function:
-    """``Y_b(q, v, a)`` as a CasADi function: inertial columns from ``sym.regressor`` (the
-    symbolic bridge), actuator columns from the gear matrix (same formulas as
-    :meth:`RegressorModel.actuator_columns`), then the base columns."""
-    nq = reg.nv
-    q, v, a = ca.SX.sym("q", nq), ca.SX.sym("v", nq), ca.SX.sym("a", nq)
-    y_sym = sym.regressor(q, v, a)
-    n_link_cols = reg.n_parameters - 4 * nq
-    y_links = y_sym[:, :n_link_cols]
-    K = reg.gear_matrix
-    kd = np.abs(np.diag(K))
-    vm = ca.mtimes(ca.DM(K), v)
-    am = ca.mtimes(ca.DM(K), a)
-    w = reg.coulomb_width_rad_s
-    cols = []
-    for group in range(4):
-        for j in range(nq):
-            kj = ca.DM(K[j].reshape(-1, 1))
-            if group == 0:
-                cols.append(kj * am[j] / kd[j] ** 2)
-            elif group == 1:
-                cols.append(kj * vm[j] / kd[j] ** 2)
-            elif group == 2:
-                s = ca.tanh(vm[j] / (kd[j] * w)) if w > 0 else ca.sign(vm[j])
-                cols.append(kj * s / kd[j])
-            else:
-                e = np.zeros((nq, 1))
-                e[j] = 1.0
-                cols.append(ca.DM(e))
-    y = ca.horzcat(y_links, *cols)
-    yb = y[:, [int(i) for i in base.independent]]
-    return ca.Function("regressor_base", [q, v, a], [yb], ["q", "v", "a"], ["Yb"])
-
-
-class ExcitationCriterion:
-    """Value and exact gradient of the excitation criterion.
-
-    Works on the sample states ``S`` (3 nq x N, column k = [q; v; a] at sample k) -- the NLP's
-    lifted variables -- or on Fourier coefficients through the basis (``*_coefficients``)."""
-
-    def __init__(
-        self,
-        y_base: ca.Function,
-        basis: tuple[np.ndarray, np.ndarray, np.ndarray],
-        nq: int,
-        criterion: str = "cond",
-        softness: float = 0.0,
-    ) -> None:
-        if criterion not in ("cond", "logdet"):
-            raise ValueError(f"criterion must be 'cond' or 'logdet', got {criterion!r}")
-        self.criterion = criterion
-        self.softness = float(softness)
-        self.bq, self.bv, self.ba = basis
-        self.n = self.bq.shape[0]
-        self.nq = nq
-        self.nb = y_base.size2_out(0)
-        q, v, a = (ca.SX.sym(s, nq) for s in "qva")
-        gbar = ca.SX.sym("gbar", nq, self.nb)
-        yb = y_base(q, v, a)
-        inner = ca.sum1(ca.sum2(yb * gbar))
-        state = ca.vertcat(q, v, a)
-        y_s = ca.Function("y_s", [state], [yb])
-        vjp = ca.Function("vjp", [state, gbar], [ca.gradient(inner, state)])
-        self._y = y_s.map(self.n)
-        self._vjp = vjp.map(self.n)
-        self.n_evals = 0
-
-    def states(self, x: np.ndarray) -> np.ndarray:
-        """Fourier coefficients (flat, row-major (nq, 2L+1)) -> S (3 nq, N)."""
-        c = np.asarray(x, float).reshape(self.nq, -1)
-        return np.vstack([c @ self.bq.T, c @ self.bv.T, c @ self.ba.T])
-
-    def matrix_states(self, S: np.ndarray) -> np.ndarray:
-        yb = np.asarray(self._y(S))  # (nq, N*nb), blocks per sample
-        return yb.reshape(self.nq, self.n, self.nb).transpose(1, 0, 2).reshape(-1, self.nb)
-
-    def matrix(self, x: np.ndarray) -> np.ndarray:
-        return self.matrix_states(self.states(x))
-
-    def value_and_gradient_states(
-        self, S: np.ndarray, gradient: bool = True
-    ) -> tuple[float, np.ndarray | None]:
-        self.n_evals += 1
-        W = self.matrix_states(S)
-        G = W.T @ W
-        lam, U = np.linalg.eigh(G)
-        lam = np.maximum(lam, 1e-300)
-        if self.criterion == "cond" and self.softness > 0:
-            # smooth surrogate: soft max minus soft min of log(lambda) (log-sum-exp, sharpness
-            # 1/softness); tends to log(lambda_max / lambda_min) as softness -> 0
-            ll = np.log(lam)
-            b = 1.0 / self.softness
-            w_hi = np.exp(b * (ll - ll.max()))
-            w_lo = np.exp(-b * (ll - ll.min()))
-            f = float(ll.max() + np.log(w_hi.sum()) / b - ll.min() + np.log(w_lo.sum()) / b)
-            w_hi, w_lo = w_hi / w_hi.sum(), w_lo / w_lo.sum()
-            dG = (U * ((w_hi - w_lo) / lam)) @ U.T
-        elif self.criterion == "cond":
-            f = float(np.log(lam[-1]) - np.log(lam[0]))
-            dG = np.outer(U[:, -1], U[:, -1]) / lam[-1] - np.outer(U[:, 0], U[:, 0]) / lam[0]
-        else:
-            f = float(-np.sum(np.log(lam)) / self.nb)
-            dG = -(U / lam) @ U.T / self.nb
-        if not gradient:
-            return f, None
-        dW = 2.0 * W @ dG  # df/dW, (N*nq, nb)
-        gbar = dW.reshape(self.n, self.nq, self.nb).transpose(1, 0, 2).reshape(self.nq, -1)
-        return f, np.asarray(self._vjp(S, gbar))  # (3 nq, N)
-
-    def value_and_gradient(self, x: np.ndarray, gradient: bool = True) -> tuple[float, np.ndarray | None]:
-        """Criterion and gradient with respect to the Fourier coefficients."""
-        f, gs = self.value_and_gradient_states(self.states(x), gradient)
-        if gs is None:
-            return f, None
-        nq = self.nq
-        grad = gs[:nq] @ self.bq + gs[nq : 2 * nq] @ self.bv + gs[2 * nq :] @ self.ba
-        return f, grad.ravel()
-
-
-def condition_number(W: np.ndarray) -> float:
-    s = np.linalg.svd(W, compute_uv=False)
-    return float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
-
-
-class _Objective(ca.Callback):
-    """CasADi callback wrapping :class:`ExcitationCriterion` (value + exact gradient)."""
-
-    def __init__(self, name: str, crit: ExcitationCriterion) -> None:
-        ca.Callback.__init__(self)
-        self.crit = crit
-        self.shape = (3 * crit.nq, crit.n)
-        self._jac: _Gradient | None = None
-        self.construct(name, {})
-
-    def get_n_in(self) -> int:
-        return 1
-
-    def get_n_out(self) -> int:
-        return 1
-
-    def get_sparsity_in(self, i: int) -> ca.Sparsity:
-        return ca.Sparsity.dense(*self.shape)
-
-    def get_sparsity_out(self, i: int) -> ca.Sparsity:
-        return ca.Sparsity.dense(1, 1)
-
-    def eval(self, arg: list) -> list:
-        f, _ = self.crit.value_and_gradient_states(np.asarray(arg[0]), gradient=False)
-        return [f]
-
-    def has_jacobian(self) -> bool:
-        return True
-
-    def get_jacobian(self, name: str, inames: list, onames: list, opts: dict) -> ca.Function:
-        self._jac = _Gradient(name, self.crit)
-        return self._jac
-
-
-class _Gradient(ca.Callback):
-    def __init__(self, name: str, crit: ExcitationCriterion) -> None:
-        ca.Callback.__init__(self)
-        self.crit = crit
-        self.shape = (3 * crit.nq, crit.n)
-        self.construct(name, {})
-
-    def get_n_in(self) -> int:
-        return 2
-
-    def get_n_out(self) -> int:
-        return 1
-
-    def get_sparsity_in(self, i: int) -> ca.Sparsity:
-        return ca.Sparsity.dense(*self.shape) if i == 0 else ca.Sparsity.dense(1, 1)
-
-    def get_sparsity_out(self, i: int) -> ca.Sparsity:
-        return ca.Sparsity.dense(1, self.shape[0] * self.shape[1])
-
-    def eval(self, arg: list) -> list:
-        _, g = self.crit.value_and_gradient_states(np.asarray(arg[0]))
-        return [ca.DM(g.reshape(1, -1, order="F"))]
-
-
-# ------------------------------------------------------------------------------ optimisation
 @dataclass
 class ExcitationResult:
     """The optimised trajectory and the evidence around it."""
@@ -299,7 +123,7 @@ def _build_nlp(
     harmonics: int,
     max_iter: int,
     objective_change_tol: float = 1e-2,
-) -> tuple[Any, dict, _Objective]:
+) -> tuple[Any, dict, CriterionCallback]:
     """Lifted NLP: variables ``z = [c (nq (2L+1)); S (3 nq x N)]`` with ``S = B(c)`` as linear
     equalities, so every nonlinear constraint touches one sample (block-sparse Jacobian) and the
     position/velocity/acceleration limits are simple bounds on ``S``."""
@@ -332,7 +156,7 @@ def _build_nlp(
     s_hi = np.concatenate([limits.upper_rad, limits.velocity_rad_s, limits.acceleration_rad_s2])
     lbx = np.concatenate([np.full(nc, -np.inf), np.tile(s_lo, n)])
     ubx = np.concatenate([np.full(nc, np.inf), np.tile(s_hi, n)])
-    obj = _Objective("excitation_objective", crit)
+    obj = CriterionCallback("excitation_objective", crit)
     z = ca.vertcat(c, ca.vec(S))
     solver = ca.nlpsol(
         "excitation",
@@ -379,6 +203,22 @@ def shrink_to_feasible(
         if report.feasible:
             return trial, report
     return traj, report
+
+
+@dataclass
+class _StartOutcome:
+    """One excitation start: condition numbers before/after, the criterion's score, the feasible
+    trajectory, IPOPT's status, iterations and objective history, and the criterion's evaluations."""
+
+    cond_start: float
+    cond_end: float
+    score: float
+    trajectory: FourierTrajectory
+    feasibility: FeasibilityReport
+    status: str
+    iterations: int
+    objective_history: list[float]
+    criterion_evaluations: int
 
 
 def optimize_excitation(robot: RobotModel, sym: SymbolicRobot, reg: RegressorModel, base: BaseParameters,
@@ -433,21 +273,18 @@ def _optimize_excitation_impl(
 
     inner = limits.tightened(NLP_LIMIT_FACTOR, NLP_EXTRA_CLEARANCE_M)
     solver, bounds, _obj = _build_nlp(robot, sym, crit, inner, L, max_iter, objective_change_tol)
-    best: tuple[float, FourierTrajectory, FeasibilityReport, float] | None = None
-    histories, start_results, cond_starts = [], [], []
-    indices = range(len(starts))
-    iterable = indices if progress is None else progress.track(indices, "excitation starts")
     nc = nq * (2 * L + 1)
-    for k in iterable:
+
+    def solve_start(k: int) -> _StartOutcome:
+        """One IPOPT start, made feasible and scored (runs in a forked child: pure in ``k``)."""
+        evals0 = crit.n_evals
         c0 = starts[k].coefficients.copy()
         c0[:, 1:] *= NLP_LIMIT_FACTOR - 0.01  # start inside the NLP's tighter limits
         x0 = c0.ravel()
         z0 = np.concatenate([x0, crit.states(x0).ravel(order="F")])
         cond0 = condition_number(crit.matrix(x0))
-        cond_starts.append(cond0)
         sol = solver(x0=z0, **bounds)
         st = solver.stats()
-        raise_if_interrupted(st["return_status"], "excitation IPOPT")
         xk = np.asarray(sol["x"]).ravel()[:nc]
         traj = FourierTrajectory(xk.reshape(nq, 2 * L + 1), base_frequency_hz)
         traj, feas = shrink_to_feasible(robot, traj, limits, n_check)
@@ -455,21 +292,33 @@ def _optimize_excitation_impl(
         score = (np.log(condk) if criterion == "cond"
                  else crit.value_and_gradient(traj.coefficients.ravel(), gradient=False)[0])
         objs = list(st.get("iterations", {}).get("obj", []))
-        hist = [float(np.exp(0.5 * o)) for o in objs] if criterion == "cond" else []
-        histories.append(hist)
+        return _StartOutcome(cond0, condk, float(score), traj, feas, str(st["return_status"]), int(st["iter_count"]),
+                             [float(o) for o in objs], crit.n_evals - evals0)
+
+    best: tuple[float, FourierTrajectory, FeasibilityReport, float] | None = None
+    histories, start_results, cond_starts = [], [], []
+    indices = range(len(starts))
+    iterable = indices if progress is None else progress.track(indices, "excitation starts")
+    n_evals = crit.n_evals
+    # the starts are independent: side by side on the available cores (pipeline.forks)
+    for _, out in zip(iterable, fork_map(solve_start, len(starts)), strict=True):
+        raise_if_interrupted(out.status, "excitation IPOPT")
+        n_evals += out.criterion_evaluations
+        cond_starts.append(out.cond_start)
+        histories.append([float(np.exp(0.5 * o)) for o in out.objective_history] if criterion == "cond" else [])
         start_results.append(
             {
-                "cond_start": cond0,
-                "cond_end": condk,
-                "status": str(st["return_status"]),
-                "iterations": int(st["iter_count"]),
-                "feasible": feas.feasible,
-                "feasibility": feas.to_dict(),
+                "cond_start": out.cond_start,
+                "cond_end": out.cond_end,
+                "status": out.status,
+                "iterations": out.iterations,
+                "feasible": out.feasibility.feasible,
+                "feasibility": out.feasibility.to_dict(),
             }
         )
-        ok = feas.feasible and is_success(st["return_status"])
-        if ok and (best is None or score < best[3]):
-            best = (condk, traj, feas, score)
+        ok = out.feasibility.feasible and is_success(out.status)
+        if ok and (best is None or out.score < best[3]):
+            best = (out.cond_end, out.trajectory, out.feasibility, out.score)
     # never worse than the best random feasible trajectory (quality gate)
     i0 = int(order[0])
     score0 = float(score_random[i0])
@@ -493,7 +342,7 @@ def _optimize_excitation_impl(
         feasibility=best[2],
         criterion=criterion,
         n_samples=n_samples,
-        details={"criterion_evaluations": crit.n_evals},
+        details={"criterion_evaluations": n_evals},
         source=source,
         fallback_reason=reason,
     )

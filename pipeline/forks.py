@@ -1,0 +1,60 @@
+"""Independent tasks on forked worker processes, for state that cannot be pickled.
+
+A CasADi solver whose objective is a Python callback (the excitation design's condition number)
+cannot be sent to a worker process, but a forked child inherits it. :func:`fork_map` runs
+``task(0) .. task(n-1)`` on up to :func:`available_cores` children forked after the task was built
+and yields the results in order; only the results are pickled. Without ``fork`` (other platforms),
+inside a daemonic worker (which may not have children) or with one core the tasks run here, one
+after the other: the results do not depend on where they ran when ``task`` is a pure function of
+its index. The children ignore SIGINT; Ctrl-C reaches this process, which stops them.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import signal
+from collections.abc import Callable, Iterator
+from typing import TypeVar, cast
+
+T = TypeVar("T")
+
+#: the task of the pool being run (set before the fork, so every child has it)
+_TASK: list[Callable[[int], object]] = []
+
+
+def available_cores() -> int:
+    """The cores this process may run on (its CPU affinity), at least 1."""
+    if hasattr(os, "sched_getaffinity"):
+        return max(1, len(os.sched_getaffinity(0)))
+    return max(1, os.cpu_count() or 1)
+
+
+def _call(k: int) -> object:
+    return _TASK[-1](k)
+
+
+def _child_signals() -> None:
+    """Ctrl-C is the parent's to handle; SIGTERM (how the pool stops its workers) ends a child
+    quietly, not through the parent's SIGTERM-as-KeyboardInterrupt handler (:mod:`pipeline.interrupts`)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+def fork_map(task: Callable[[int], T], n: int, jobs: int | None = None) -> Iterator[T]:
+    """``task(k)`` for ``k = 0 .. n-1``, in order, on up to ``jobs`` (default: the available cores)
+    forked processes, or here when forking is not possible (module docstring)."""
+    jobs = min(n, available_cores() if jobs is None else jobs)
+    if jobs <= 1 or "fork" not in mp.get_all_start_methods() or mp.current_process().daemon:
+        for k in range(n):
+            yield task(k)
+        return
+    _TASK.append(task)
+    try:
+        with mp.get_context("fork").Pool(jobs, initializer=_child_signals) as pool:
+            for result in pool.imap(_call, range(n)):
+                yield cast(T, result)    # what task returned, pickled by the child
+            pool.close()
+            pool.join()
+    finally:
+        _TASK.pop()
