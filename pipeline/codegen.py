@@ -94,8 +94,8 @@ def _sources(functions: Sequence[ca.Function], name: str) -> list[str]:
 
 
 def compile_jobs() -> int:
-    """gcc processes run side by side: ``$PIPELINE_COMPILE_JOBS``, else the cores this process may use."""
-    env = os.environ.get("PIPELINE_COMPILE_JOBS")
+    """gcc processes run side by side: ``$PIPELINE_JOBS``, else the cores this process may use."""
+    env = os.environ.get("PIPELINE_JOBS")
     if env:
         return max(1, int(env))
     return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))

@@ -24,7 +24,9 @@ _TASK: list[Callable[[int], object]] = []
 
 
 def available_cores() -> int:
-    """The cores this process may run on (its CPU affinity), at least 1."""
+    """``$PIPELINE_JOBS`` when set, else the cores this process may run on (its CPU affinity); >= 1."""
+    if os.environ.get("PIPELINE_JOBS"):
+        return max(1, int(os.environ["PIPELINE_JOBS"]))
     if hasattr(os, "sched_getaffinity"):
         return max(1, len(os.sched_getaffinity(0)))
     return max(1, os.cpu_count() or 1)

@@ -18,7 +18,7 @@ def _functions() -> list[ca.Function]:
 
 @pytest.mark.parametrize("jobs", ["1", "2"])
 def test_functions_compiled_side_by_side_evaluate_like_casadi(tmp_path, monkeypatch, jobs):
-    monkeypatch.setenv("PIPELINE_COMPILE_JOBS", jobs)
+    monkeypatch.setenv("PIPELINE_JOBS", jobs)
     library = codegen.build_library("side", _functions(), cache_dir=tmp_path)
     x = np.array([0.3, -1.2, 2.0])
     for f in _functions():
@@ -27,16 +27,16 @@ def test_functions_compiled_side_by_side_evaluate_like_casadi(tmp_path, monkeypa
 
 
 def test_library_key_does_not_depend_on_the_cores(tmp_path, monkeypatch):
-    monkeypatch.setenv("PIPELINE_COMPILE_JOBS", "2")
+    monkeypatch.setenv("PIPELINE_JOBS", "2")
     first = codegen.build_library("side", _functions(), cache_dir=tmp_path)
     stamp = first.stat().st_mtime_ns
-    monkeypatch.setenv("PIPELINE_COMPILE_JOBS", "1")
+    monkeypatch.setenv("PIPELINE_JOBS", "1")
     again = codegen.build_library("side", _functions(), cache_dir=tmp_path)
     assert again == first and again.stat().st_mtime_ns == stamp     # found in the cache, not rebuilt
 
 
 def test_gcc_failure_names_the_library(tmp_path, monkeypatch):
-    monkeypatch.setenv("PIPELINE_COMPILE_JOBS", "2")
+    monkeypatch.setenv("PIPELINE_JOBS", "2")
     with pytest.raises(codegen.SolverError, match="gcc failed"):
         codegen.build_library("side", _functions(), cache_dir=tmp_path, flags=("-fno-such-flag-anywhere",))
     assert not list(tmp_path.rglob("*.so"))

@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from pipeline.forks import fork_map
 from pipeline.progress import TaskHandle
 from pipeline.robot.collision import segment_distances
 from pipeline.robot.instruments import BEAM_END_CLEARANCE_M
@@ -316,23 +317,31 @@ def filter_grid(chain: Chain, n_per_axis: int | list[int] = 13, margins: FilterM
     feas_Q, counts = [], {"total": total, "prefix_collision_free": n_prefix_ok,
                           "collision": 0, "visibility": 0}
     n_last = sizes[-1]
-    for s in range(0, len(prefix), chunk):
-        P = prefix[s : s + chunk]
+
+    def expand(k: int) -> tuple[np.ndarray, int, int]:
+        """Chunk ``k`` of the prefixes along the last axis: (feasible rows, collisions, not visible)."""
+        P = prefix[k * chunk : (k + 1) * chunk]
         Q = np.concatenate([np.repeat(P, n_last, axis=0), np.tile(vals[-1], len(P))[:, None]], axis=1)
         kin = kinematics(chain, Q)
         seg = capsule_segments(chain, kin)
         ok = _collision_ok(chain, seg, margins, post_pairs, post_floor)
-        counts["collision"] += int((~ok).sum())
         idx = np.flatnonzero(ok)
-        if idx.size:
-            sub = Kinematics(kin.Rpre[idx], kin.opre[idx], kin.Rpost[idx], kin.p_reflector[idx],
-                             kin.R_flange[idx], kin.o_flange[idx], kin.reflector_axis[idx])
-            vis = (_visibility_ok(chain, sub, seg[idx], margins) if visibility is None
-                   else visibility(sub, seg[idx]))
-            counts["visibility"] += int((~vis).sum())
-            feas_Q.append(Q[idx[vis]])
+        if not idx.size:
+            return Q[:0], int((~ok).sum()), 0
+        sub = Kinematics(kin.Rpre[idx], kin.opre[idx], kin.Rpost[idx], kin.p_reflector[idx],
+                         kin.R_flange[idx], kin.o_flange[idx], kin.reflector_axis[idx])
+        vis = (_visibility_ok(chain, sub, seg[idx], margins) if visibility is None
+               else visibility(sub, seg[idx]))
+        return Q[idx[vis]], int((~ok).sum()), int((~vis).sum())
+
+    # the chunks are independent: side by side on the available cores, results in chunk order
+    n_chunks = -(-len(prefix) // chunk)
+    for k, (rows, n_collision, n_hidden) in enumerate(fork_map(expand, n_chunks)):
+        counts["collision"] += n_collision
+        counts["visibility"] += n_hidden
+        feas_Q.append(rows)
         if progress is not None:
-            progress.advance(len(P))
+            progress.advance(len(prefix[k * chunk : (k + 1) * chunk]))
     Qf = np.concatenate(feas_Q) if feas_Q else np.zeros((0, nq))
     # flat grid indices (lexicographic, axis 1 slowest)
     steps = [(chain.upper[i] - chain.lower[i]) / sizes[i] for i in range(nq)]

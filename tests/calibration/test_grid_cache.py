@@ -62,3 +62,10 @@ def test_key_follows_every_input_and_no_path(chain):
         grid_cache.grid_key(chain, PER_AXIS, MARGINS, 10_000),
     ]
     assert len({key, *others}) == 5
+
+
+def test_chunks_filtered_side_by_side_give_the_serial_result(chain, fresh, monkeypatch):
+    monkeypatch.setenv("PIPELINE_JOBS", "1")
+    serial = cd.filter_grid(chain, 5, MARGINS, chunk=64)
+    monkeypatch.setenv("PIPELINE_JOBS", "2")
+    _assert_same(cd.filter_grid(chain, 5, MARGINS, chunk=64), serial)
