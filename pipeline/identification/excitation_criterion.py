@@ -10,6 +10,8 @@ regressor comes from the symbolic bridge (:func:`regressor_casadi`).
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
+
 import casadi as ca
 import numpy as np
 
@@ -163,14 +165,15 @@ class CriterionCallback(ca.Callback):
     def get_sparsity_out(self, i: int) -> ca.Sparsity:
         return ca.Sparsity.dense(1, 1)
 
-    def eval(self, arg: list) -> list:
+    def eval(self, arg: Sequence[ca.DM]) -> list[float]:
         f, _ = self.crit.value_and_gradient_states(np.asarray(arg[0]), gradient=False)
         return [f]
 
     def has_jacobian(self) -> bool:
         return True
 
-    def get_jacobian(self, name: str, inames: list, onames: list, opts: dict) -> ca.Function:
+    def get_jacobian(self, name: str, inames: Sequence[str], onames: Sequence[str],
+                     opts: Mapping[str, object]) -> ca.Function:
         self._jac = _CriterionGradient(name, self.crit)
         return self._jac
 
@@ -194,8 +197,9 @@ class _CriterionGradient(ca.Callback):
     def get_sparsity_out(self, i: int) -> ca.Sparsity:
         return ca.Sparsity.dense(1, self.shape[0] * self.shape[1])
 
-    def eval(self, arg: list) -> list:
+    def eval(self, arg: Sequence[ca.DM]) -> list[ca.DM]:
         _, g = self.crit.value_and_gradient_states(np.asarray(arg[0]))
+        assert g is not None                       # asked with gradient=True
         return [ca.DM(g.reshape(1, -1, order="F"))]
 
 
