@@ -153,22 +153,26 @@ def andrews_bandwidth(scores: np.ndarray) -> float:
     return float(min(1.1447 * (alpha * T) ** (1.0 / 3.0), T - 1))
 
 
-def hac_covariance(W: np.ndarray, y: np.ndarray, est: LeastSquaresEstimate) -> HacCovariance:
-    """Newey & West (1987, Econometrica 55(3)) sandwich covariance of Gautier's WLS estimate
-    ``est`` on ``(W, y)``, valid when the residuals are correlated in time (filtering, decimation,
-    unmodelled friction and elasticity) and across the joints of a sample:
+def hac_covariance(J: np.ndarray, residual: np.ndarray, joint_sigma_Nm: np.ndarray,
+                   white_covariance: np.ndarray | None = None) -> HacCovariance:
+    """Newey & West (1987, Econometrica 55(3)) sandwich covariance of a weighted least-squares
+    estimate with Jacobian ``J`` (the regressor; for a non-linear nested fit the Jacobian of the
+    model at the estimate, so the covariance is the joint one) and ``residual`` (rows sample-major,
+    ``k*n_rows + j``), weights ``1 / joint_sigma_Nm`` (Gautier). Valid when the residuals are
+    correlated in time (filtering, decimation, unmodelled friction and elasticity) and across the
+    joints of a sample:
 
-        X = S^-1/2 W, e = S^-1/2 (y - W beta), g_k = sum over sample k's rows of X_r e_r,
+        X = S^-1/2 J, e = S^-1/2 residual, g_k = sum over sample k's rows of X_r e_r,
         Cov = n/(n-p) (X^T X)^-1 [G_0 + sum_{l=1}^{L} (1 - l/(L+1)) (G_l + G_l^T)] (X^T X)^-1,
         G_l = sum_k g_k g_{k-l}^T,
 
     Bartlett weights, bandwidth ``L`` by Andrews' (1991) AR(1) plug-in rule
-    (:func:`andrews_bandwidth`). The rows are sample-major (``k*nv + j``)."""
-    nv = est.residual_Nm.shape[1]
-    n = W.shape[0] // nv
-    w = np.tile(1.0 / est.joint_sigma_Nm, n)
-    X = W * w[:, None]
-    e = (y - W @ est.beta) * w
+    (:func:`andrews_bandwidth`). ``white_covariance``: the white-residual one, for the ratio."""
+    nv = len(joint_sigma_Nm)
+    n = J.shape[0] // nv
+    w = np.tile(1.0 / np.asarray(joint_sigma_Nm, float), n)
+    X = J * w[:, None]
+    e = np.asarray(residual, float).ravel() * w
     G = (X * e[:, None]).reshape(n, nv, -1).sum(axis=1)  # (n, p) scores per sample
     bw = andrews_bandwidth(G)
     meat = G.T @ G
@@ -176,11 +180,19 @@ def hac_covariance(W: np.ndarray, y: np.ndarray, est: LeastSquaresEstimate) -> H
         gl = G[lag:].T @ G[:-lag]
         meat += (1.0 - lag / (bw + 1.0)) * (gl + gl.T)
     bread = np.linalg.pinv(X.T @ X)
-    p = W.shape[1]
+    p = J.shape[1]
     cov = bread @ meat @ bread * (n / max(n - p, 1))
     cov = 0.5 * (cov + cov.T)
-    white = np.clip(np.diag(est.covariance), 1e-300, None)
-    return HacCovariance(cov, bw, float(np.mean(np.diag(cov) / white)))
+    if white_covariance is None:
+        return HacCovariance(cov, bw, float("nan"))
+    k = white_covariance.shape[0]
+    white = np.clip(np.diag(white_covariance), 1e-300, None)
+    return HacCovariance(cov, bw, float(np.mean(np.diag(cov)[:k] / white)))
+
+
+def wls_hac_covariance(W: np.ndarray, y: np.ndarray, est: LeastSquaresEstimate) -> HacCovariance:
+    """:func:`hac_covariance` of Gautier's WLS estimate ``est`` on ``(W, y)``."""
+    return hac_covariance(W, np.asarray(y, float) - W @ est.beta, est.joint_sigma_Nm, est.covariance)
 
 
 # ----------------------------------------------------------------------------- log-Cholesky

@@ -78,6 +78,24 @@ class StribeckFit:
         st = stribeck_torque(v, self.static_excess_Nm, self.stribeck_velocity_rad_s, self.coulomb_width_rad_s)
         return st.mean(axis=1) if st.ndim == 3 else st
 
+    def jacobian(self, v: np.ndarray) -> np.ndarray:
+        """(N*nq, 2 k) columns d(torque)/d(fs_j, log vs_j) of the k kept terms (``fs_j > 0``), rows
+        sample-major like the regressor; ``v`` (N, nq) or (N, m, nq) as in :meth:`stribeck_torque`.
+        With the base regressor they form the Jacobian of the nested fit (its joint covariance)."""
+        v3 = np.asarray(v, float)
+        v3 = v3[:, None, :] if v3.ndim == 2 else v3
+        n, _, nq = v3.shape
+        w = self.coulomb_width_rad_s
+        sgn = np.tanh(v3 / w) if w > 0 else np.sign(v3)
+        u2 = (v3 / self.stribeck_velocity_rad_s) ** 2
+        shape = (np.exp(-u2) * sgn).mean(axis=1)                      # d/d fs
+        dlog = (self.static_excess_Nm * 2 * u2 * np.exp(-u2) * sgn).mean(axis=1)   # d/d log vs
+        kept = np.flatnonzero(self.static_excess_Nm > 0)
+        out = np.zeros((n, nq, 2 * len(kept)))
+        for c, j in enumerate(kept):
+            out[:, j, 2 * c], out[:, j, 2 * c + 1] = shape[:, j], dlog[:, j]
+        return out.reshape(n * nq, -1)
+
     def predict(self, Wb: np.ndarray, v: np.ndarray) -> np.ndarray:
         """(N, nq) torques of the base regressor ``Wb`` (sample-major rows) and velocities ``v``."""
         nq = np.asarray(v).shape[1]
@@ -145,6 +163,10 @@ def fit_stribeck(
         fit.static_excess_Nm = np.where(drop, 0.0, fit.static_excess_Nm)
         gain = stribeck_chi2_gain(Wb, y, fit.stribeck_torque(v3), sigma)
     fit.chi2_gain = np.where(fit.static_excess_Nm > 0, gain, 0.0)
+    if np.any(fit.static_excess_Nm != fs):   # terms dropped: the base parameters without them
+        w = np.tile(1.0 / sigma, n)
+        fit.beta = np.linalg.lstsq(Wb * w[:, None], (np.asarray(y, float) - fit.stribeck_torque(v3).ravel()) * w,
+                                   rcond=None)[0]
     return fit
 
 

@@ -140,3 +140,18 @@ def report_markdown(summary: dict, tx: Tx40Result | None) -> str:
         ]
     return "\n".join(lines)
 
+
+def replay(t: np.ndarray, q: np.ndarray, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    """Every k-th sample so that the replay runs at about ``rate_hz``."""
+    dt = float(np.median(np.diff(t))) if len(t) > 1 else 1.0 / rate_hz
+    step = max(1, int(round(1.0 / (rate_hz * dt))))
+    return t[::step] - t[0], q[::step]
+
+
+def excitation_label(exc: design_mod.ExcitationResult | None, criterion: str) -> str:
+    """The excitation as the summary names it."""
+    if exc is None:
+        return "from the user's record"
+    if exc.source != "optimised":
+        return f"best random feasible Fourier trajectory ({exc.fallback_reason})"
+    return f"optimised Fourier trajectory ({criterion})"

@@ -170,13 +170,6 @@ def run(ctx: StageContext) -> StageResult:
         return _run(ctx)
 
 
-def _replay(t: np.ndarray, q: np.ndarray, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
-    """Every k-th sample so that the replay runs at about ``rate_hz``."""
-    dt = float(np.median(np.diff(t))) if len(t) > 1 else 1.0 / rate_hz
-    step = max(1, int(round(1.0 / (rate_hz * dt))))
-    return t[::step] - t[0], q[::step]
-
-
 def _run(ctx: StageContext) -> StageResult:
     cfg: Config = ctx.config
     source = getattr(ctx.run, "source", None)
@@ -324,8 +317,11 @@ def _run(ctx: StageContext) -> StageResult:
     if fit is None and wls is not wls_vc:   # the base estimate of the handed-on friction model
         wls, y_fit, ols = wls_vc, y, est_mod.ols(Wb, y, nm)
     white_sigma = wls.sigma
-    hac = est_mod.hac_covariance(Wb, y_fit, wls)   # correlated residuals: the covariance reported and scored
-    wls.covariance = hac.covariance
+    # correlated residuals: the covariance reported and scored is the HAC sandwich, for a handed-on
+    # Stribeck term the joint one of the nested fit (base parameters with fs, log vs), marginal in beta
+    J = Wb if fit is None else np.hstack([Wb, fit.jacobian(data.v_blocks)])
+    hac = est_mod.hac_covariance(J, y_fit - Wb @ wls.beta, wls.joint_sigma_Nm, wls.covariance)
+    wls.covariance = hac.covariance[: base.n_base, : base.n_base]
     new_robot = identified_robot(robot, phys.p, None if fit is None else expand_to_joints(fit, used, nq))
     timings["validation_s"] = time.perf_counter() - t1
 
@@ -347,7 +343,7 @@ def _run(ctx: StageContext) -> StageResult:
     summary: dict[str, Any] = {
         "n_base_parameters": base.n_base,
         "n_base_parameters_structural": base_design.n_base,
-        "excitation": _excitation_label(exc, ex.criterion),
+        "excitation": report.excitation_label(exc, ex.criterion),
         "excitation_fallback_reason": None if exc is None else (exc.fallback_reason or None),
         "base_parameter_set": base.set_names,
         "cond_optimized": None if exc is None else exc.cond_optimized,
@@ -391,7 +387,7 @@ def _run(ctx: StageContext) -> StageResult:
         t_rep = np.arange(0.0, traj.period_s, 1.0 / cfg.replay_rate_hz)
         q_rep, _, _ = traj.evaluate(t_rep)
     else:  # the user's (processed: filtered, decimated, borders dropped) trajectory
-        t_rep, q_rep = _replay(np.arange(data.n_samples) * data.sample_time_s, data.q, cfg.replay_rate_hz)
+        t_rep, q_rep = report.replay(np.arange(data.n_samples) * data.sample_time_s, data.q, cfg.replay_rate_hz)
     arrays: dict[str, np.ndarray] = {
         "trajectory_excitation_t": t_rep,
         "trajectory_excitation_q": q_rep,
@@ -468,14 +464,6 @@ def _run(ctx: StageContext) -> StageResult:
         f"**Excitation: the best random feasible trajectory is used** ({exc.fallback_reason}).\n\n")
     return gates.finish(StageResult(summary=summary, arrays=arrays, data=data_out, figures=figures, robot=new_robot,
                                     report_md=fallback_md + validation_md + report.report_markdown(summary, tx)))
-
-
-def _excitation_label(exc: design_mod.ExcitationResult | None, criterion: str) -> str:
-    if exc is None:
-        return "from the user's record"
-    if exc.source != "optimised":
-        return f"best random feasible Fourier trajectory ({exc.fallback_reason})"
-    return f"optimised Fourier trajectory ({criterion})"
 
 
 def _validation_markdown(cfg: Config, vt: val_mod.ValidationTrajectory, iso: IsoPathConfig,
