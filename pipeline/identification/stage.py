@@ -13,14 +13,16 @@ and the real Stäubli TX40 record (paper ``004_abbe750b8bbcc3aa.txt`` §4).
    one of the record's base regressor, validation is on the record's held-out tail (fit on the
    first ``data_train_fraction``, :func:`.tx40.heldout_validation`), the noise sigma comes from
    the WLS residuals and the hidden robot (``ctx.real``) is never used. :func:`check` reads and
-   checks the record before any stage runs.
+   checks the record before any stage runs; non-uniform time stamps are resampled, torque columns
+   without a signal (or joints not named in ``joints``) are left out (:mod:`.joints`).
 4. Period averaging, zero-phase filtering, differentiation, block decimation (:mod:`.measure`);
    the data must excite the model (motion per joint, rank and condition; :mod:`.gates`).
 5. OLS, Gautier's WLS (covariance -> base parameter sigmas) and the physically consistent fit
    (log-Cholesky, IPOPT) whose standard parameters become the handed-on ``RobotModel``. With
    ``friction_model: stribeck`` (default) a Stribeck term is fitted first with the base parameters
    (:mod:`.friction`), taken off the torques and handed on in the model's actuation; the
-   viscous + Coulomb fit is kept beside it and both are scored on the validation torques.
+   viscous + Coulomb fit is kept beside it, both are scored on the validation torques and the
+   better one is handed on. Base-parameter sigmas: HAC sandwich (:func:`.estimate.hac_covariance`).
 6. Validation on the run's ISO 9283 path (``control.iso`` from the run's ``control.ik_seeds_deg``,
    measured vs predicted torques; a random Fourier trajectory, with the real reason in the report,
    when that path cannot be used), or the held-out tail of a record.
@@ -148,9 +150,9 @@ def check(config: Config, robot: RobotModel) -> None:
                           f"{cfg.base_samples} random samples give {cfg.base_samples * nq} regressor rows for the "
                           f"{n_params} standard parameters of {robot.name}; need at least {-(-n_params // nq)} "
                           "(default 300)")
-    if cfg.data_file:
-        load_user_record(cfg, robot)
-    else:
+    rec = load_user_record(cfg, robot) if cfg.data_file else None
+    select_joints(cfg.joints, [str(n) for n in robot.model.names[1:]], {} if rec is None else rec.unmeasured)
+    if rec is None:
         ex = cfg.excitation
         n_per = int(round(1.0 / (ex.base_frequency_hz * cfg.sample_time_s)))
         m = n_per // cfg.decimation
