@@ -147,9 +147,10 @@ def _calibration_rows(s: dict) -> list[Row]:
 def _identification_rows(s: dict) -> list[Row]:
     ratios = s.get("validation_rms_over_noise")
     values = [_finite(r) for r in ratios] if isinstance(ratios, list) else []
-    if not values or any(v is None for v in values):
+    measured = [j for j, r in enumerate(ratios or []) if r is not None]   # unmeasured joints: null
+    if not measured or any(values[j] is None for j in measured):
         return []
-    worst = max(range(len(values)), key=lambda j: values[j] or 0.0)
+    worst = max(measured, key=lambda j: values[j] or 0.0)
     check = _gate(s, "validation_rms_over_noise")
     against = (f"gate ≤ {check['threshold']:g}" if check and check.get("threshold") is not None
                else "torque noise σ")

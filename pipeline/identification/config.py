@@ -94,6 +94,9 @@ class Config:
     replay_rate_hz: float = 50.0
     # data_file: validation fits on this first fraction of the record, scores on the rest
     data_train_fraction: float = 0.7
+    # joints whose torques the fit uses (robot joint names or 1-based indices); empty: every joint
+    # whose logged torque column carries a signal (joints.unmeasured_torque_columns)
+    joints: list[str | int] = field(default_factory=list)
 
     def validate(self, source: Source = None) -> None:
         """Range checks of values of the right type (called by ``pipeline.config`` at load time

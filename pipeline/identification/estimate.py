@@ -6,7 +6,8 @@ Paper ``004_abbe750b8bbcc3aa.txt`` §4.1 (overdetermined system (28), ``tau = W 
 * **WLS, Gautier's weighting** (Gautier & Poignet 2001): from the OLS residual ``rho_j`` of joint
   ``j`` (``r_j`` rows, ``c_j`` base parameters acting on that joint)
   ``sigma_j^2 = ||rho_j||^2 / (r_j - c_j)``; rows of joint ``j`` are divided by ``sigma_j`` and
-  the estimate is re-solved. Covariance ``(W^T S^-1 W)^-1`` gives each base parameter's sigma.
+  the estimate is re-solved. Covariance ``(W^T S^-1 W)^-1`` assumes white residuals; the one the
+  stage reports and scores with is the HAC sandwich of :func:`hac_covariance` (Newey & West 1987).
 * **Physically consistent** estimate of the *standard* parameters: each link's parameters come
   from its log-Cholesky parameters ``theta`` (Rucker & Wensing 2022): the pseudo-inertia
   ``J = U U^T`` with ``U = e^alpha [[e^d1, s12, s13, t1], [0, e^d2, s23, t2], [0, 0, e^d3, t3],
@@ -120,6 +121,78 @@ def _wls(W: np.ndarray, y: np.ndarray, nv: int, iterations: int) -> LeastSquares
     chi2 = float(np.sum((est.residual_Nm / est.joint_sigma_Nm) ** 2) / n_dof)
     est.covariance = est.covariance * chi2
     return est
+
+
+@dataclass
+class HacCovariance:
+    """Heteroskedasticity and autocorrelation consistent covariance (:func:`hac_covariance`)."""
+
+    covariance: np.ndarray
+    bandwidth: float  # Bartlett lag window: weights 1 - l / (bandwidth + 1)
+    white_ratio: float  # mean over parameters of the HAC variance / the white-residual WLS variance
+
+    @property
+    def sigma(self) -> np.ndarray:
+        return np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
+
+
+def andrews_bandwidth(scores: np.ndarray) -> float:
+    """Bartlett-kernel bandwidth of Andrews (1991, Econometrica 59(3), eqs. 6.2 and 6.4): an AR(1)
+    fitted to each score series ``g_a`` (rho_a, innovation variance s_a^2),
+    ``alpha(1) = sum 4 rho^2 s^4 / ((1-rho)^6 (1+rho)^2) / sum s^4 / (1-rho)^4`` and
+    ``S = 1.1447 (alpha(1) T)^(1/3)``, at most ``T - 1`` lags."""
+    g = np.asarray(scores, float)
+    T = g.shape[0]
+    x, x1 = g[1:], g[:-1]
+    den = np.sum(x1**2, axis=0)
+    rho = np.clip(np.where(den > 0, np.sum(x * x1, axis=0) / np.where(den > 0, den, 1.0), 0.0), -0.97, 0.97)
+    s2 = np.mean((x - rho * x1) ** 2, axis=0)
+    num = np.sum(4 * rho**2 * s2**2 / ((1 - rho) ** 6 * (1 + rho) ** 2))
+    dnm = np.sum(s2**2 / (1 - rho) ** 4)
+    alpha = num / dnm if dnm > 0 else 0.0
+    return float(min(1.1447 * (alpha * T) ** (1.0 / 3.0), T - 1))
+
+
+def hac_covariance(J: np.ndarray, residual: np.ndarray, joint_sigma_Nm: np.ndarray,
+                   white_covariance: np.ndarray | None = None) -> HacCovariance:
+    """Newey & West (1987, Econometrica 55(3)) sandwich covariance of a weighted least-squares
+    estimate with Jacobian ``J`` (the regressor; for a non-linear nested fit the Jacobian of the
+    model at the estimate, so the covariance is the joint one) and ``residual`` (rows sample-major,
+    ``k*n_rows + j``), weights ``1 / joint_sigma_Nm`` (Gautier). Valid when the residuals are
+    correlated in time (filtering, decimation, unmodelled friction and elasticity) and across the
+    joints of a sample:
+
+        X = S^-1/2 J, e = S^-1/2 residual, g_k = sum over sample k's rows of X_r e_r,
+        Cov = n/(n-p) (X^T X)^-1 [G_0 + sum_{l=1}^{L} (1 - l/(L+1)) (G_l + G_l^T)] (X^T X)^-1,
+        G_l = sum_k g_k g_{k-l}^T,
+
+    Bartlett weights, bandwidth ``L`` by Andrews' (1991) AR(1) plug-in rule
+    (:func:`andrews_bandwidth`). ``white_covariance``: the white-residual one, for the ratio."""
+    nv = len(joint_sigma_Nm)
+    n = J.shape[0] // nv
+    w = np.tile(1.0 / np.asarray(joint_sigma_Nm, float), n)
+    X = J * w[:, None]
+    e = np.asarray(residual, float).ravel() * w
+    G = (X * e[:, None]).reshape(n, nv, -1).sum(axis=1)  # (n, p) scores per sample
+    bw = andrews_bandwidth(G)
+    meat = G.T @ G
+    for lag in range(1, int(np.floor(bw)) + 1):
+        gl = G[lag:].T @ G[:-lag]
+        meat += (1.0 - lag / (bw + 1.0)) * (gl + gl.T)
+    bread = np.linalg.pinv(X.T @ X)
+    p = J.shape[1]
+    cov = bread @ meat @ bread * (n / max(n - p, 1))
+    cov = 0.5 * (cov + cov.T)
+    if white_covariance is None:
+        return HacCovariance(cov, bw, float("nan"))
+    k = white_covariance.shape[0]
+    white = np.clip(np.diag(white_covariance), 1e-300, None)
+    return HacCovariance(cov, bw, float(np.mean(np.diag(cov)[:k] / white)))
+
+
+def wls_hac_covariance(W: np.ndarray, y: np.ndarray, est: LeastSquaresEstimate) -> HacCovariance:
+    """:func:`hac_covariance` of Gautier's WLS estimate ``est`` on ``(W, y)``."""
+    return hac_covariance(W, np.asarray(y, float) - W @ est.beta, est.joint_sigma_Nm, est.covariance)
 
 
 # ----------------------------------------------------------------------------- log-Cholesky
@@ -245,27 +318,30 @@ def physical_fit(
     fit_offsets: bool = True,
     min_mass_kg: float = 1e-2,
     min_spread_m: float = 1e-3,
+    n_rows: int | None = None,
 ) -> PhysicalEstimate:
     """Physically consistent least squares on the standard regressor ``Y`` (see module doc).
 
-    ``Y``: (N*nv, 10*n_links + 4*nv) standard regressor, ``y`` torques, ``joint_sigma_Nm`` the
-    per-joint weights (Gautier); ``regularization`` is ``lambda`` relative to the number of rows.
+    ``Y``: (N*n_rows, 10*n_links + 4*nv) standard regressor, ``y`` torques, ``joint_sigma_Nm`` the
+    per-row weights (Gautier); ``regularization`` is ``lambda`` relative to the number of rows.
+    ``n_rows``: torque rows per sample when only some of the ``nv`` joints are measured (default nv).
     """
     n_std = Y.shape[1]
     n_links = (n_std - 4 * nv) // 10
     if n_links * 10 + 4 * nv != n_std:
         raise DataFileError(None, "regressor", f"{n_std} columns do not match {nv} joints")
-    _check_system(Y, y, nv)
+    nr = nv if n_rows is None else n_rows
+    _check_system(Y, y, nr)
     with single_thread_blas():
         return _physical_fit(Y, y, nv, p_nominal, joint_sigma_Nm, regularization, max_iter, fit_offsets,
-                             min_mass_kg, min_spread_m, n_links)
+                             min_mass_kg, min_spread_m, n_links, nr)
 
 
 def _physical_fit(Y, y, nv, p_nominal, joint_sigma_Nm, regularization, max_iter, fit_offsets,  # noqa: ANN001
-                  min_mass_kg, min_spread_m, n_links) -> PhysicalEstimate:  # noqa: ANN001
+                  min_mass_kg, min_spread_m, n_links, nr) -> PhysicalEstimate:  # noqa: ANN001
     n_std = Y.shape[1]
-    sig = np.ones(nv) if joint_sigma_Nm is None else np.asarray(joint_sigma_Nm, float)
-    w = np.tile(1.0 / sig, Y.shape[0] // nv)
+    sig = np.ones(nr) if joint_sigma_Nm is None else np.asarray(joint_sigma_Nm, float)
+    w = np.tile(1.0 / sig, Y.shape[0] // nr)
     # compress: ||A p - b||^2 = ||R p - r||^2 + const
     A = np.hstack([Y * w[:, None], (y * w)[:, None]])
     R = np.linalg.qr(A, mode="r")
@@ -323,7 +399,7 @@ def _physical_fit(Y, y, nv, p_nominal, joint_sigma_Nm, regularization, max_iter,
         raise SolverError(None, "physical_fit", f"IPOPT: {stats['return_status']}")
     p_fun = ca.Function("p", [x], [p])
     p_hat = np.asarray(p_fun(sol["x"])).ravel()
-    resid = (y - Y @ p_hat).reshape(-1, nv)
+    resid = (y - Y @ p_hat).reshape(-1, nr)
     eigs = [
         float(np.linalg.eigvalsh(pseudo_inertia(p_hat[10 * i : 10 * i + 10])).min())
         for i in range(n_links)

@@ -11,18 +11,30 @@ eq. of the "Stribeck" steady-state curve):
 with ``fs_j >= 0`` the static excess and ``vs_j > 0`` the Stribeck velocity. ``tau`` is linear in
 the base parameters ``beta`` and in ``fs`` but not in ``vs``; all are estimated together by
 IPOPT with exact derivatives (CasADi automatic differentiation, exact Hessian) minimising the
-residual weighted by the per-joint noise sigmas (the WLS weights, Gautier), started from the WLS
-estimate with ``fs = 0``. ``log vs`` is the variable (``vs`` in [``VS_MIN``, ``VS_MAX``]).
+residual weighted by the per-joint noise sigmas (the WLS weights, Gautier). The fit is nested in
+the viscous + Coulomb fit and starts from it (its WLS ``beta``, ``fs = 0``); a joint's term whose
+likelihood-ratio gain (same weights as the fit) is below :data:`MIN_CHI2_GAIN` is dropped, the
+others' gains recomputed without it, so a handed-on gain is never negative.
+``log vs`` is the variable.
+
+Physically plausible terms only: the static excess is bounded by
+:data:`MAX_EXCESS_OVER_LIMIT` of the joint's torque limit (static friction of geared joints is a
+few per cent of the rated torque; Armstrong-Hélouvry et al. 1994 §2 report static over Coulomb
+friction ratios of about 1.1-1.5, i.e. an excess of a fraction of the Coulomb level), and the
+Stribeck velocity is at least the Coulomb smoothing width ``w`` (a narrower dip is below what the
+smooth sign resolves: a spike fitted to noise) and at most ``VS_MAX``.
 
 With ``friction_model: stribeck`` the stage subtracts the fitted Stribeck term from the measured
 torques before the physically consistent fit and hands ``fs``, ``vs`` on in the identified model
 (``actuation.static_friction_excess_Nm``, ``actuation.stribeck_velocity_rad_s``; the model's
-``friction_torque`` is :func:`pipeline.robot.friction.joint_friction_torque`). Both models are
-scored on the held-out validation torques (:func:`friction_summary`).
+``friction_torque`` is :func:`pipeline.robot.friction.joint_friction_torque`) only when the
+held-out validation torques select it: both models are scored on them (:func:`friction_summary`)
+and the one with the smaller mean RMS / noise sigma is handed on.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import casadi as ca
@@ -45,6 +57,8 @@ VS_START_RAD_S = 0.05
 #: a joint's Stribeck term is kept when it lowers chi-squared by this much: the 0.1 % quantile of
 #: chi-squared with 2 degrees of freedom (f_s, v_s), -2 ln(0.001)
 MIN_CHI2_GAIN = 13.8
+#: largest plausible static excess, as a fraction of the joint's torque limit (module doc)
+MAX_EXCESS_OVER_LIMIT = 0.1
 
 
 @dataclass
@@ -64,6 +78,24 @@ class StribeckFit:
         st = stribeck_torque(v, self.static_excess_Nm, self.stribeck_velocity_rad_s, self.coulomb_width_rad_s)
         return st.mean(axis=1) if st.ndim == 3 else st
 
+    def jacobian(self, v: np.ndarray) -> np.ndarray:
+        """(N*nq, 2 k) columns d(torque)/d(fs_j, log vs_j) of the k kept terms (``fs_j > 0``), rows
+        sample-major like the regressor; ``v`` (N, nq) or (N, m, nq) as in :meth:`stribeck_torque`.
+        With the base regressor they form the Jacobian of the nested fit (its joint covariance)."""
+        v3 = np.asarray(v, float)
+        v3 = v3[:, None, :] if v3.ndim == 2 else v3
+        n, _, nq = v3.shape
+        w = self.coulomb_width_rad_s
+        sgn = np.tanh(v3 / w) if w > 0 else np.sign(v3)
+        u2 = (v3 / self.stribeck_velocity_rad_s) ** 2
+        shape = (np.exp(-u2) * sgn).mean(axis=1)                      # d/d fs
+        dlog = (self.static_excess_Nm * 2 * u2 * np.exp(-u2) * sgn).mean(axis=1)   # d/d log vs
+        kept = np.flatnonzero(self.static_excess_Nm > 0)
+        out = np.zeros((n, nq, 2 * len(kept)))
+        for c, j in enumerate(kept):
+            out[:, j, 2 * c], out[:, j, 2 * c + 1] = shape[:, j], dlog[:, j]
+        return out.reshape(n * nq, -1)
+
     def predict(self, Wb: np.ndarray, v: np.ndarray) -> np.ndarray:
         """(N, nq) torques of the base regressor ``Wb`` (sample-major rows) and velocities ``v``."""
         nq = np.asarray(v).shape[1]
@@ -73,6 +105,7 @@ class StribeckFit:
 def fit_stribeck(
     Wb: np.ndarray, y: np.ndarray, v: np.ndarray, beta0: np.ndarray, joint_sigma_Nm: np.ndarray,
     coulomb_width_rad_s: float, max_iter: int = 200, min_chi2_gain: float = MIN_CHI2_GAIN,
+    max_excess_Nm: np.ndarray | None = None,
 ) -> StribeckFit:
     """Joint weighted least squares of ``beta``, ``fs``, ``vs`` (module doc); raises
     :class:`SolverError` unless IPOPT succeeds (KeyboardInterrupt when interrupted).
@@ -83,7 +116,8 @@ def fit_stribeck(
 
     A joint's term is kept only when it is significant: its likelihood-ratio statistic
     (:func:`stribeck_chi2_gain`) at least ``min_chi2_gain``; else its ``fs`` is set to 0 (no
-    Stribeck term fitted to noise is handed on)."""
+    Stribeck term fitted to noise is handed on). ``max_excess_Nm``: upper bound of ``fs`` per joint
+    (:data:`MAX_EXCESS_OVER_LIMIT` x the torque limit; None: unbounded)."""
     v = np.asarray(v, float)
     v3 = v[:, None, :] if v.ndim == 2 else v
     n, k, nq = v3.shape
@@ -107,9 +141,11 @@ def fit_stribeck(
     solver = ca.nlpsol("stribeck_fit", "ipopt", {"x": x, "f": 0.5 * ca.sumsqr(r)},
                        {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
                         "ipopt.max_iter": max_iter, "ipopt.tol": 1e-8})
-    lbx = np.concatenate([np.full(nb, -np.inf), np.zeros(nq), np.full(nq, np.log(VS_MIN_RAD_S))])
-    ubx = np.concatenate([np.full(nb, np.inf), np.full(nq, np.inf), np.full(nq, np.log(VS_MAX_RAD_S))])
-    x0 = np.concatenate([np.asarray(beta0, float), np.zeros(nq), np.full(nq, np.log(VS_START_RAD_S))])
+    vs_min = max(VS_MIN_RAD_S, float(coulomb_width_rad_s))
+    fs_max = np.full(nq, np.inf) if max_excess_Nm is None else np.asarray(max_excess_Nm, float)
+    lbx = np.concatenate([np.full(nb, -np.inf), np.zeros(nq), np.full(nq, np.log(vs_min))])
+    ubx = np.concatenate([np.full(nb, np.inf), fs_max, np.full(nq, np.log(VS_MAX_RAD_S))])
+    x0 = np.concatenate([np.asarray(beta0, float), np.zeros(nq), np.full(nq, np.log(max(VS_START_RAD_S, vs_min)))])
     sol = solver(x0=x0, lbx=lbx, ubx=ubx)
     stats = solver.stats()
     status = str(stats["return_status"])
@@ -117,71 +153,100 @@ def fit_stribeck(
     if not is_success(status):
         raise SolverError(None, "identification.friction_model", f"IPOPT returned {status} for the Stribeck fit")
     xs = np.asarray(sol["x"]).ravel()
-    fit = StribeckFit(beta=xs[:nb], static_excess_Nm=xs[nb : nb + nq], stribeck_velocity_rad_s=np.exp(xs[nb + nq :]),
+    fs, vs = np.clip(xs[nb : nb + nq], 0.0, fs_max), np.exp(xs[nb + nq :])
+    fit = StribeckFit(beta=xs[:nb], static_excess_Nm=fs, stribeck_velocity_rad_s=vs,
                       coulomb_width_rad_s=float(coulomb_width_rad_s), status=status,
                       iterations=int(stats["iter_count"]))
-    fit.chi2_gain = stribeck_chi2_gain(Wb, y, fit.stribeck_torque(v3))
-    fit.static_excess_Nm = np.where(fit.chi2_gain >= min_chi2_gain, fit.static_excess_Nm, 0.0)
+    sigma = np.asarray(joint_sigma_Nm, float)
+    gain = stribeck_chi2_gain(Wb, y, fit.stribeck_torque(v3), sigma)
+    while np.any(drop := (fit.static_excess_Nm > 0) & (gain < min_chi2_gain)):  # the rest's gains without them
+        fit.static_excess_Nm = np.where(drop, 0.0, fit.static_excess_Nm)
+        gain = stribeck_chi2_gain(Wb, y, fit.stribeck_torque(v3), sigma)
+    fit.chi2_gain = np.where(fit.static_excess_Nm > 0, gain, 0.0)
+    if np.any(fit.static_excess_Nm != fs):   # terms dropped: the base parameters without them
+        w = np.tile(1.0 / sigma, n)
+        fit.beta = np.linalg.lstsq(Wb * w[:, None], (np.asarray(y, float) - fit.stribeck_torque(v3).ravel()) * w,
+                                   rcond=None)[0]
     return fit
 
 
-def stribeck_chi2_gain(Wb: np.ndarray, y: np.ndarray, st: np.ndarray) -> np.ndarray:
-    """Per joint, the drop of the residual sum of squares (in units of that joint's residual
-    variance) that joint's Stribeck term ``st[:, j]`` buys, the base parameters refitted both ways:
-    the likelihood-ratio statistic, chi-squared with 2 degrees of freedom (f_s, v_s) when the term is
-    not there (Wilks)."""
+def stribeck_chi2_gain(Wb: np.ndarray, y: np.ndarray, st: np.ndarray, joint_sigma_Nm: np.ndarray) -> np.ndarray:
+    """Per joint, the drop of the weighted residual sum of squares (the fit's own weights
+    ``1 / joint_sigma_Nm``) that joint's Stribeck term ``st[:, j]`` buys, the base parameters
+    refitted both ways: the likelihood-ratio statistic, chi-squared with 2 degrees of freedom
+    (f_s, v_s) when the term is not there (Wilks). A negative gain means the term raises the
+    residual: :func:`fit_stribeck` drops it (and every term below the threshold)."""
     n, nq = st.shape
-    Q, _ = np.linalg.qr(Wb)
+    w = np.tile(1.0 / np.asarray(joint_sigma_Nm, float), n)
+    Q, _ = np.linalg.qr(Wb * w[:, None])
 
-    def residual(rhs: np.ndarray) -> np.ndarray:
-        return (rhs - Q @ (Q.T @ rhs)).reshape(n, nq)
+    def ssr(rhs: np.ndarray) -> float:
+        r = rhs * w
+        return float(np.sum((r - Q @ (Q.T @ r)) ** 2))
 
     y = np.asarray(y, float)
-    full = residual(y - st.ravel())
-    var = np.maximum(np.mean(full**2, axis=0), 1e-300)
-    ssr_full = np.sum(full**2 / var)
+    ssr_full = ssr(y - st.ravel())
     gain = np.empty(nq)
     for j in range(nq):
         without = st.copy()
         without[:, j] = 0.0
-        gain[j] = np.sum(residual(y - without.ravel()) ** 2 / var) - ssr_full
+        gain[j] = ssr(y - without.ravel()) - ssr_full
     return gain
 
 
 def stribeck_heldout(data: ProcessedData, base: BaseParameters, p_nominal: np.ndarray, nq: int,
                      train_fraction: float, regularization: float, max_iter: int, coulomb_width_rad_s: float,
-                     field_name: str = "train_fraction") -> dict[str, np.ndarray]:
+                     field_name: str = "train_fraction", max_excess_Nm: np.ndarray | None = None,
+                     ) -> dict[str, np.ndarray]:
     """Held-out predictions of the Stribeck model on a (non-periodic) record: Stribeck term fitted
     with the base parameters on the first ``train_fraction`` of the samples, taken off the torques,
     then :func:`~pipeline.identification.tx40.heldout_validation`'s fits; their predictions on the
     rest plus the Stribeck term (keys ``ols``, ``wls``, ``physical``)."""
     n_train = int(train_fraction * data.n_samples)
-    rows = n_train * nq
+    nr = data.tau.shape[1]
+    rows = n_train * nr
     Wb = base.base_regressor(data.Y)
-    wls = est_mod.wls(Wb[:rows], data.y[:rows], nq)
+    wls = est_mod.wls(Wb[:rows], data.y[:rows], nr)
     vb = data.v_blocks
-    fit = fit_stribeck(Wb[:rows], data.y[:rows], vb[:n_train], wls.beta, wls.joint_sigma_Nm, coulomb_width_rad_s)
+    fit = fit_stribeck(Wb[:rows], data.y[:rows], vb[:n_train], wls.beta, wls.joint_sigma_Nm, coulomb_width_rad_s,
+                       max_excess_Nm=max_excess_Nm)
     st = fit.stribeck_torque(vb)
     ho = heldout_validation(replace(data, tau=data.tau - st), base, p_nominal, nq, train_fraction, regularization,
-                            max_iter, field_name)
+                            max_iter, field_name, n_rows=nr)
     return {k: pred + st[n_train:] for k, pred in ho.pred.items()}
 
 
-def friction_summary(rms_Nm: dict[str, np.ndarray], sigma_Nm: np.ndarray | None, fit: StribeckFit) -> dict:
+def expand_to_joints(fit: StribeckFit, used: np.ndarray, nq: int) -> StribeckFit:
+    """The fit of the measured joints ``used`` as a fit of all ``nq`` joints (no Stribeck term on
+    the others)."""
+    fs, vs = np.zeros(nq), np.full(nq, VS_START_RAD_S)
+    fs[used], vs[used] = fit.static_excess_Nm, fit.stribeck_velocity_rad_s
+    return replace(fit, static_excess_Nm=fs, stribeck_velocity_rad_s=vs, chi2_gain=None)
+
+
+def friction_summary(rms_Nm: dict[str, np.ndarray], sigma_Nm: np.ndarray | None, fit: StribeckFit,
+                     per_joint: Callable[[np.ndarray], list] = list,
+                     torque_limit_Nm: np.ndarray | None = None) -> dict:
     """Summary entries of the two friction models scored on the same held-out torques: per joint
     RMS (``friction_heldout_rms_Nm``), RMS / noise sigma, the model with the smaller mean RMS /
-    sigma (``friction_model_best``) and the Stribeck fit. JSON-able."""
+    sigma (``friction_model_best``, the one handed on) and the Stribeck fit with its static excess
+    over the torque limit. ``per_joint`` maps a value per measured joint to the list over all
+    joints (None where unmeasured). JSON-able."""
     sigma = np.ones_like(next(iter(rms_Nm.values()))) if sigma_Nm is None else np.asarray(sigma_Nm, float)
     best = min(rms_Nm, key=lambda k: float(np.mean(np.asarray(rms_Nm[k]) / sigma)))
+    lim = np.full(len(sigma), np.nan) if torque_limit_Nm is None else np.asarray(torque_limit_Nm, float)
     return {
-        "friction_heldout_rms_Nm": {k: np.asarray(r, float).tolist() for k, r in rms_Nm.items()},
-        "friction_heldout_rms_over_noise": {k: (np.asarray(r, float) / sigma).tolist() for k, r in rms_Nm.items()},
+        "friction_heldout_rms_Nm": {k: per_joint(np.asarray(r, float)) for k, r in rms_Nm.items()},
+        "friction_heldout_rms_over_noise": {k: per_joint(np.asarray(r, float) / sigma) for k, r in rms_Nm.items()},
         "friction_model_best": best,
-        "stribeck_static_excess_Nm": fit.static_excess_Nm.tolist(),
-        "stribeck_velocity_rad_s": fit.stribeck_velocity_rad_s.tolist(),
+        "stribeck_static_excess_Nm": per_joint(fit.static_excess_Nm),
+        "stribeck_static_excess_over_limit": per_joint(fit.static_excess_Nm / lim),
+        "stribeck_static_excess_bound_over_limit": MAX_EXCESS_OVER_LIMIT,
+        "stribeck_velocity_rad_s": per_joint(fit.stribeck_velocity_rad_s),
         "stribeck_status": fit.status,
-        "stribeck_chi2_gain": None if fit.chi2_gain is None else fit.chi2_gain.tolist(),
+        "stribeck_chi2_gain": None if fit.chi2_gain is None else per_joint(fit.chi2_gain),
     }
 
 
-__all__ = ["FRICTION_MODELS", "StribeckFit", "fit_stribeck", "friction_summary", "stribeck_heldout", "stribeck_torque"]
+__all__ = ["FRICTION_MODELS", "MAX_EXCESS_OVER_LIMIT", "StribeckFit", "expand_to_joints", "fit_stribeck",
+           "friction_summary", "stribeck_heldout", "stribeck_torque"]

@@ -53,8 +53,12 @@ def check_data_excites(
 def add_result_gates(
     gates: QualityGates, cfg: Config, cond_data: float, cond_design: float | None, rms_over_noise: np.ndarray,
     predicted_Nm: np.ndarray, effort_limit_Nm: np.ndarray, physical_status: str = "Solve_Succeeded",
+    joint_numbers: np.ndarray | None = None,
 ) -> None:
-    """The result gates (see module doc) with the thresholds of ``cfg`` (stage Config)."""
+    """The result gates (see module doc) with the thresholds of ``cfg`` (stage Config). The per-joint
+    arrays hold the measured joints only; ``joint_numbers`` (1-based) names them (default 1..n)."""
+    ratio = np.asarray(rms_over_noise, float)
+    numbers = np.arange(1, ratio.size + 1) if joint_numbers is None else np.asarray(joint_numbers, int)
     gates.require("physical_fit_status", is_success(physical_status),
                   f"IPOPT returned {physical_status} for the physically consistent fit (identification."
                   "physical_max_iter)")
@@ -62,14 +66,13 @@ def add_result_gates(
         gates.check("cond_data_over_design", cond_data / cond_design, "<=", cfg.max_cond_data_over_design,
                     "fitted base regressor on the data vs the design criterion (identification."
                     "max_cond_data_over_design)")
-    ratio = np.asarray(rms_over_noise, float)
     worst = int(np.nanargmax(ratio)) if ratio.size and np.any(np.isfinite(ratio)) else 0
     gates.check("validation_rms_over_noise", float(np.max(ratio)) if ratio.size else float("nan"), "<=",
                 cfg.max_validation_rms_over_noise,
-                f"worst joint {worst + 1}; identification.max_validation_rms_over_noise")
+                f"worst joint {numbers[worst]}; identification.max_validation_rms_over_noise")
     lim = np.asarray(effort_limit_Nm, float)
     over = np.max(np.abs(predicted_Nm), axis=0) / lim if len(predicted_Nm) else np.zeros_like(lim)
     j = int(np.argmax(over))
     gates.check("predicted_torque_over_limit", float(over[j]), "<=", cfg.max_predicted_torque_over_limit,
-                f"joint {j + 1}: max |predicted torque| on the validation path / torque limit "
+                f"joint {numbers[j]}: max |predicted torque| on the validation path / torque limit "
                 f"{lim[j]:.4g} N·m; identification.max_predicted_torque_over_limit")

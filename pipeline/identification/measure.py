@@ -16,7 +16,7 @@ Processing (:func:`process_periodic`, :func:`process_record`) turns them into sa
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +25,7 @@ import numpy as np
 from pipeline.errors import DataFileError
 from pipeline.identification import signals
 from pipeline.identification.fourier import FourierTrajectory
+from pipeline.identification.joints import unmeasured_torque_columns
 from pipeline.identification.regressor import RegressorModel, check_state_arrays
 from pipeline.robot.model import RobotModel
 
@@ -38,6 +39,12 @@ class JointRecord:
     tau_Nm: np.ndarray
     source: str = ""
     line_numbers: np.ndarray | None = None  # file line of each sample (header = line 1), if from a file
+    #: logged with non-uniform time stamps: the largest logged interval [s] and how it was resampled
+    max_gap_s: float | None = None
+    max_gap_where: str = ""  # "line 57": the logged sample that ends the largest interval
+    resampling: str = ""
+    #: torque columns that carry no signal (joint index -> reason), found on the logged values
+    unmeasured: dict[int, str] = field(default_factory=dict)
 
     def where(self, k: int) -> str:
         """``"line 57"`` for a file record, else ``"sample 55"``."""
@@ -194,7 +201,15 @@ def load_joint_csv(
         q, tau = motor_to_joint(q, tau, robot.actuation.gear_matrix)
     if q_offset_rad is not None:
         q = q + np.asarray(q_offset_rad, float)
-    rec = JointRecord(t, q, tau, str(path), line_numbers)
+    unmeasured = unmeasured_torque_columns(tau)
+    max_gap_s, gap_where, how = None, "", ""
+    dt = np.diff(t)
+    if len(t) > 2 and np.max(np.abs(dt - np.median(dt))) > 1e-3 * np.median(dt) + 1e-9:
+        res = signals.resample_uniform(t, q, tau)
+        t, q, tau, max_gap_s, how = res.t_s, res.q, res.tau, res.max_gap_s, res.method
+        gap_where = f"line {line_numbers[res.max_gap_index]}"
+        line_numbers = line_numbers[np.searchsorted(data[:, col["t"]], t, side="right") - 1]
+    rec = JointRecord(t, q, tau, str(path), line_numbers, max_gap_s, gap_where, how, unmeasured)
     rec.validate(nq, min_samples)
     return rec
 
@@ -216,13 +231,14 @@ class ProcessedData:
     q: np.ndarray
     v: np.ndarray
     a: np.ndarray
-    tau: np.ndarray  # (N, nq)
-    Y: np.ndarray  # (N*nq, n_std) standard regressor after the parallel decimation
+    tau: np.ndarray  # (N, n_rows): the measured joints (RegressorModel.rows)
+    Y: np.ndarray  # (N*n_rows, n_std) standard regressor after the parallel decimation
     sample_time_s: float
     noise_sigma_Nm: np.ndarray | None = None  # per raw sample, from the spread between periods
     #: (N, decimation, nq) full-rate velocities behind each block mean (process_periodic), for a
     #: model term non-linear in v (Stribeck) averaged like the regressor; None: ``v`` itself
     v_full: np.ndarray | None = None
+    rows: np.ndarray | None = None  # the joints of the torque columns (RegressorModel.rows); None: all
 
     @property
     def n_samples(self) -> int:
@@ -230,8 +246,10 @@ class ProcessedData:
 
     @property
     def v_blocks(self) -> np.ndarray:
-        """(N, k, nq) velocities whose mean of a function gives that function's processed sample."""
-        return self.v[:, None, :] if self.v_full is None else self.v_full
+        """(N, k, n_rows) velocities of the torque columns' joints whose mean of a function gives that
+        function's processed sample."""
+        vb = self.v[:, None, :] if self.v_full is None else self.v_full
+        return vb if self.rows is None else vb[..., self.rows]
 
     @property
     def y(self) -> np.ndarray:
@@ -280,18 +298,22 @@ def process_periodic(
     a3 = signals.differentiate(v3, dt)
     v, a = v3[n : 2 * n], a3[n : 2 * n]
     Y = reg.stacked(q, v, a)
+    rows = np.arange(nq) if reg.rows is None else np.asarray(reg.rows)
+    nr = len(rows)
+    tau_mean, noise = tau_mean[:, rows], noise[rows]
     dec = max(int(decimation), 1)
     m = n // dec
-    if m * nq <= Y.shape[1]:
+    if m * nr <= Y.shape[1]:
         raise DataFileError(
             rec.source or None, "identification.decimation",
             f"{m} samples after decimation by {dec} are too few for {Y.shape[1]} parameters",
         )
     p = Y.shape[1]
-    Yd = Y[: m * dec * nq].reshape(m, dec, nq, p).mean(axis=1).reshape(m * nq, p)
-    taud = tau_mean[: m * dec].reshape(m, dec, nq).mean(axis=1)
+    Yd = Y[: m * dec * nr].reshape(m, dec, nr, p).mean(axis=1).reshape(m * nr, p)
+    taud = tau_mean[: m * dec].reshape(m, dec, nr).mean(axis=1)
     mid = np.arange(m) * dec + dec // 2
-    return ProcessedData(q[mid], v[mid], a[mid], taud, Yd, dt * dec, noise, v[: m * dec].reshape(m, dec, nq))
+    return ProcessedData(q[mid], v[mid], a[mid], taud, Yd, dt * dec, noise, v[: m * dec].reshape(m, dec, nq),
+                         reg.rows)
 
 
 def process_record(
@@ -312,10 +334,10 @@ def process_record(
     q = signals.decimate(st.q, decimation, fs)
     v = signals.decimate(st.v, decimation, fs)
     a = signals.decimate(st.a, decimation, fs)
-    tau = signals.decimate(rec.tau_Nm, decimation, fs)
+    tau = signals.decimate(rec.tau_Nm if reg.rows is None else rec.tau_Nm[:, reg.rows], decimation, fs)
     b = border_samples
     if q.shape[0] <= 2 * b + 1:
         raise DataFileError(rec.source or None, "samples", f"{rec.q_rad.shape[0]} samples are too few")
     q, v, a, tau = (x[b:-b] if b > 0 else x for x in (q, v, a, tau))
     check_state_arrays(q, v, a, nq, rec.source or None)
-    return ProcessedData(q, v, a, tau, reg.stacked(q, v, a), dt * decimation)
+    return ProcessedData(q, v, a, tau, reg.stacked(q, v, a), dt * decimation, rows=reg.rows)

@@ -13,8 +13,10 @@ from pipeline.robot.model import RobotModel
 
 
 def load_user_record(cfg: Config, robot: RobotModel) -> meas_mod.JointRecord:
-    """Read and check ``cfg.data_file``: format, columns, NaN, time stamps, joint limits, enough
-    samples for the held-out fit, and a position cut-off below the Nyquist frequency."""
+    """Read and check ``cfg.data_file``: format, columns, NaN, time stamps (non-uniform ones are
+    resampled, :func:`~pipeline.identification.signals.resample_uniform`, unless the largest gap is
+    longer than half the period of the position filter's cut-off), joint limits, enough samples for
+    the held-out fit, and a position cut-off below the Nyquist frequency."""
     file = cfg.data_file
     rec = meas_mod.load_joint_csv(file, robot, cfg.data_side)
     check_record_limits(rec, robot, file)
@@ -29,6 +31,11 @@ def load_user_record(cfg: Config, robot: RobotModel) -> meas_mod.JointRecord:
         raise ConfigError(None, "identification.data_cutoff_hz",
                           f"{cfg.data_cutoff_hz} Hz is not below the Nyquist frequency {0.5 * fs:g} Hz of {file} "
                           f"(its column t implies a {fs:g} Hz sample rate; t must be in seconds)")
+    max_gap = 0.5 / cfg.data_cutoff_hz   # half the period of the filter's cut-off: the band it keeps is sampled
+    if rec.max_gap_s is not None and rec.max_gap_s > max_gap:
+        raise DataFileError(file, "t", f"the time stamps leave a gap of {rec.max_gap_s:g} s ({rec.max_gap_where}), "
+                            f"longer than 1 / (2 x identification.data_cutoff_hz) = {max_gap:g} s: the position "
+                            "filter's band cannot be resampled across it; cut the record there or lower data_cutoff_hz")
     n_raw = rec.q_rad.shape[0]
     n_proc = -(-n_raw // cfg.data_decimation) - 2 * DATA_BORDER_SAMPLES
     n_train = int(cfg.data_train_fraction * n_proc)

@@ -104,6 +104,8 @@ class RegressorModel:
     model: pin.Model
     gear_matrix: np.ndarray
     coulomb_width_rad_s: float = 0.0
+    #: joints whose torque rows :meth:`stacked` keeps (measured torques); None: every joint
+    rows: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.gear_matrix = np.asarray(self.gear_matrix, float)
@@ -119,6 +121,11 @@ class RegressorModel:
     @property
     def nv(self) -> int:
         return self.model.nv
+
+    @property
+    def n_rows(self) -> int:
+        """Rows per sample of :meth:`stacked`."""
+        return self.nv if self.rows is None else len(self.rows)
 
     @property
     def n_parameters(self) -> int:
@@ -152,7 +159,8 @@ class RegressorModel:
         return np.hstack([y_links, self.actuator_columns(v, a)])
 
     def stacked(self, Q: np.ndarray, V: np.ndarray, A: np.ndarray) -> np.ndarray:
-        """Regressor stacked sample-major: rows ``k*nv + j`` (sample k, joint j)."""
+        """Regressor stacked sample-major: rows ``k*nv + j`` (sample k, joint j; only the joints of
+        :attr:`rows` when set)."""
         Q, V, A = (np.atleast_2d(np.asarray(x, float)) for x in (Q, V, A))
         check_state_arrays(Q, V, A, self.nv)
         n, nv = Q.shape[0], self.nv
@@ -172,11 +180,13 @@ class RegressorModel:
         out[:, :, n_link + nv : n_link + 2 * nv] = (vm / kd**2)[:, None, :] * K.T[None]
         out[:, :, n_link + 2 * nv : n_link + 3 * nv] = (s / kd)[:, None, :] * K.T[None]
         out[:, :, n_link + 3 * nv :] = np.eye(nv)[None]
-        return out.reshape(n * nv, self.n_parameters)
+        if self.rows is not None:
+            out = out[:, self.rows]
+        return out.reshape(n * self.n_rows, self.n_parameters)
 
     def torques(self, Q: np.ndarray, V: np.ndarray, A: np.ndarray, p: np.ndarray) -> np.ndarray:
-        """(N, nv) joint torques ``Y p``."""
-        return (self.stacked(Q, V, A) @ p).reshape(-1, self.nv)
+        """(N, n_rows) joint torques ``Y p`` (the joints of :attr:`rows`)."""
+        return (self.stacked(Q, V, A) @ p).reshape(-1, self.n_rows)
 
 
 def check_state_arrays(Q: np.ndarray, V: np.ndarray, A: np.ndarray, nv: int, file=None) -> None:

@@ -71,8 +71,8 @@ def convergence_figure(res: design_mod.ExcitationResult) -> Figure:
 
 
 
-def _numbers(values: list[float]) -> str:
-    return "[" + ", ".join(f"{v:.3g}" for v in values) + "]"
+def _numbers(values: list[float | None]) -> str:
+    return "[" + ", ".join("-" if v is None else f"{v:.3g}" for v in values) + "]"
 
 
 def report_markdown(summary: dict, tx: Tx40Result | None) -> str:
@@ -97,16 +97,32 @@ def report_markdown(summary: dict, tx: Tx40Result | None) -> str:
         "|---|---|---|---|",
     ]
     sig = summary["torque_noise_sigma_Nm"] or [float("nan")] * len(summary["validation_torque_rms_Nm"])
+    unmeasured = summary.get("joints_unmeasured") or {}
+    names = list(unmeasured)
     for j, (r, s) in enumerate(zip(summary["validation_torque_rms_Nm"], sig, strict=True)):
-        lines.append(f"| {j + 1} | {r:.3f} | {s:.3f} | {r / s:.2f} |")
+        lines.append(f"| {j + 1} | {r:.3f} | {s:.3f} | {r / s:.2f} |" if r is not None and s is not None else
+                     f"| {j + 1} | unmeasured | | |")
+    if unmeasured:
+        lines += ["", f"Joints left out of the fit, the gates and the headline ({len(names)}; their drive-train "
+                  "parameters stay nominal): " + "; ".join(f"{n}: {why}" for n, why in unmeasured.items()) + "."]
+    if summary.get("record_resampling"):
+        gap_ms = summary["record_max_gap_s"] * 1e3
+        lines += ["", f"The record's time stamps are not uniform (largest gap {gap_ms:.3g} ms): resampled, "
+                  f"{summary['record_resampling']}."]
+    if summary.get("base_covariance"):
+        lines += ["", f"Base-parameter sigmas: {summary['base_covariance']}; median "
+                  f"{summary['base_sigma_hac_over_white_median']:.2f} x the white-residual WLS sigma."]
     by_model = summary.get("friction_heldout_rms_over_noise")
     if by_model:
-        lines += ["", f"Friction models on the same validation torques (handed on: `{summary['friction_model']}`; "
-                  f"static excess {_numbers(summary['stribeck_static_excess_Nm'])} N m, Stribeck velocity "
-                  f"{_numbers(summary['stribeck_velocity_rad_s'])} rad/s):", "",
+        lines += ["", f"Friction models on the same validation torques (handed on, chosen by them: "
+                  f"`{summary.get('friction_model_handed_on', summary['friction_model'])}`; Stribeck static excess "
+                  f"{_numbers(summary['stribeck_static_excess_Nm'])} N m, at most "
+                  f"{summary.get('stribeck_static_excess_bound_over_limit', float('nan')):.0%} of the torque limit, "
+                  f"Stribeck velocity {_numbers(summary['stribeck_velocity_rad_s'])} rad/s):", "",
                   "| joint | " + " | ".join(f"{k} RMS / sigma" for k in by_model) + " |",
                   "|---|" + "---|" * len(by_model)]
-        lines += [f"| {j + 1} | " + " | ".join(f"{by_model[k][j]:.2f}" for k in by_model) + " |"
+        lines += [f"| {j + 1} | " + " | ".join("unmeasured" if by_model[k][j] is None else f"{by_model[k][j]:.2f}"
+                                              for k in by_model) + " |"
                   for j in range(len(next(iter(by_model.values()))))]
     if tx is not None:
         lines += [
@@ -124,3 +140,18 @@ def report_markdown(summary: dict, tx: Tx40Result | None) -> str:
         ]
     return "\n".join(lines)
 
+
+def replay(t: np.ndarray, q: np.ndarray, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    """Every k-th sample so that the replay runs at about ``rate_hz``."""
+    dt = float(np.median(np.diff(t))) if len(t) > 1 else 1.0 / rate_hz
+    step = max(1, int(round(1.0 / (rate_hz * dt))))
+    return t[::step] - t[0], q[::step]
+
+
+def excitation_label(exc: design_mod.ExcitationResult | None, criterion: str) -> str:
+    """The excitation as the summary names it."""
+    if exc is None:
+        return "from the user's record"
+    if exc.source != "optimised":
+        return f"best random feasible Fourier trajectory ({exc.fallback_reason})"
+    return f"optimised Fourier trajectory ({criterion})"

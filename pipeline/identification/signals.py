@@ -6,6 +6,11 @@ acceleration, then the regressor rows and torques are decimated (the same zero-p
 before keeping every ``factor``-th sample, the "parallel decimation" of Gautier). Periodic
 excitation data can be averaged over its periods, which divides the noise variance by the
 number of periods.
+
+Records logged with non-uniform time stamps are first resampled onto a uniform grid
+(:func:`resample_uniform`): positions by a not-a-knot cubic spline (``scipy.interpolate.CubicSpline``,
+C2, so the derivatives taken after filtering stay smooth), torques by linear interpolation
+(``scipy.interpolate.make_interp_spline`` with ``k=1``: no overshoot between two logged values).
 """
 
 from __future__ import annotations
@@ -13,9 +18,39 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.interpolate
 import scipy.signal
 
 from pipeline.errors import DataFileError
+
+
+@dataclass
+class Resampled:
+    """A record on a uniform grid (:func:`resample_uniform`)."""
+
+    t_s: np.ndarray
+    q: np.ndarray
+    tau: np.ndarray
+    sample_time_s: float
+    max_gap_s: float  # largest interval between two logged time stamps
+    max_gap_index: int  # index of the logged sample that ends the largest gap
+    method: str
+
+
+def resample_uniform(t_s: np.ndarray, q: np.ndarray, tau: np.ndarray) -> Resampled:
+    """Positions and torques logged at strictly increasing, non-uniform ``t_s`` on the uniform grid
+    ``t_0 + k dt``, ``dt`` the median logged interval (module doc for the interpolation)."""
+    t = np.asarray(t_s, float)
+    dt_logged = np.diff(t)
+    dt = float(np.median(dt_logged))
+    n = int(np.floor((t[-1] - t[0]) / dt + 1e-9)) + 1
+    grid = t[0] + np.arange(n) * dt
+    q_u = scipy.interpolate.CubicSpline(t, np.asarray(q, float), axis=0)(grid)
+    tau_u = scipy.interpolate.make_interp_spline(t, np.asarray(tau, float), k=1, axis=0)(grid)
+    k = int(np.argmax(dt_logged))
+    return Resampled(grid, q_u, tau_u, dt, float(dt_logged[k]), k + 1,
+                     f"positions by a not-a-knot cubic spline, torques linearly, onto {dt * 1e3:.4g} ms steps "
+                     f"(the median logged interval)")
 
 
 def lowpass(x: np.ndarray, cutoff_hz: float, sample_rate_hz: float, order: int = 4) -> np.ndarray:

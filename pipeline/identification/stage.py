@@ -13,14 +13,16 @@ and the real Stäubli TX40 record (paper ``004_abbe750b8bbcc3aa.txt`` §4).
    one of the record's base regressor, validation is on the record's held-out tail (fit on the
    first ``data_train_fraction``, :func:`.tx40.heldout_validation`), the noise sigma comes from
    the WLS residuals and the hidden robot (``ctx.real``) is never used. :func:`check` reads and
-   checks the record before any stage runs.
+   checks the record before any stage runs; non-uniform time stamps are resampled, torque columns
+   without a signal (or joints not named in ``joints``) are left out (:mod:`.joints`).
 4. Period averaging, zero-phase filtering, differentiation, block decimation (:mod:`.measure`);
    the data must excite the model (motion per joint, rank and condition; :mod:`.gates`).
 5. OLS, Gautier's WLS (covariance -> base parameter sigmas) and the physically consistent fit
    (log-Cholesky, IPOPT) whose standard parameters become the handed-on ``RobotModel``. With
    ``friction_model: stribeck`` (default) a Stribeck term is fitted first with the base parameters
    (:mod:`.friction`), taken off the torques and handed on in the model's actuation; the
-   viscous + Coulomb fit is kept beside it and both are scored on the validation torques.
+   viscous + Coulomb fit is kept beside it, both are scored on the validation torques and the
+   better one is handed on. Base-parameter sigmas: HAC sandwich (:func:`.estimate.hac_covariance`).
 6. Validation on the run's ISO 9283 path (``control.iso`` from the run's ``control.ik_seeds_deg``,
    measured vs predicted torques; a random Fourier trajectory, with the real reason in the report,
    when that path cannot be used), or the held-out tail of a record.
@@ -50,8 +52,16 @@ from pipeline.identification import measure as meas_mod
 from pipeline.identification import validate as val_mod
 from pipeline.identification.base_set import structural_base_parameters
 from pipeline.identification.config import DATA_BORDER_SAMPLES, Config, ExcitationConfig
-from pipeline.identification.friction import StribeckFit, fit_stribeck, friction_summary, stribeck_heldout
+from pipeline.identification.friction import (
+    MAX_EXCESS_OVER_LIMIT,
+    StribeckFit,
+    expand_to_joints,
+    fit_stribeck,
+    friction_summary,
+    stribeck_heldout,
+)
 from pipeline.identification.gates import add_result_gates, check_data_excites
+from pipeline.identification.joints import select_joints
 from pipeline.identification.record import load_user_record
 from pipeline.identification.regressor import RegressorModel, standard_parameters
 from pipeline.identification.tx40 import (
@@ -140,9 +150,9 @@ def check(config: Config, robot: RobotModel) -> None:
                           f"{cfg.base_samples} random samples give {cfg.base_samples * nq} regressor rows for the "
                           f"{n_params} standard parameters of {robot.name}; need at least {-(-n_params // nq)} "
                           "(default 300)")
-    if cfg.data_file:
-        load_user_record(cfg, robot)
-    else:
+    rec = load_user_record(cfg, robot) if cfg.data_file else None
+    select_joints(cfg.joints, [str(n) for n in robot.model.names[1:]], {} if rec is None else rec.unmeasured)
+    if rec is None:
         ex = cfg.excitation
         n_per = int(round(1.0 / (ex.base_frequency_hz * cfg.sample_time_s)))
         m = n_per // cfg.decimation
@@ -162,13 +172,6 @@ def run(ctx: StageContext) -> StageResult:
         return _run(ctx)
 
 
-def _replay(t: np.ndarray, q: np.ndarray, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
-    """Every k-th sample so that the replay runs at about ``rate_hz``."""
-    dt = float(np.median(np.diff(t))) if len(t) > 1 else 1.0 / rate_hz
-    step = max(1, int(round(1.0 / (rate_hz * dt))))
-    return t[::step] - t[0], q[::step]
-
-
 def _run(ctx: StageContext) -> StageResult:
     cfg: Config = ctx.config
     source = getattr(ctx.run, "source", None)
@@ -185,10 +188,14 @@ def _run(ctx: StageContext) -> StageResult:
     act = robot.actuation
     coupled = cfg.actuator_coupling == "gear" or (cfg.actuator_coupling == "auto" and user_data)
     K = act.gear_matrix if coupled else np.eye(nq)
-    reg = RegressorModel(robot.model, K, act.coulomb_smoothing_rad_s)
     rec = load_user_record(cfg, robot) if user_data else None  # before any long computation
+    # joints whose torques the fit uses: the named ones, else those whose column carries a signal
+    sel = select_joints(cfg.joints, [str(n) for n in robot.model.names[1:]], {} if rec is None else rec.unmeasured)
+    used, rows = sel.used, None if sel.all_used else sel.used
+    nm = len(used)
+    reg = RegressorModel(robot.model, K, act.coulomb_smoothing_rad_s, rows)
     nominal = _nominal_robot(ctx)
-    reg_nominal = RegressorModel(nominal.model, K, act.coulomb_smoothing_rad_s)
+    reg_nominal = RegressorModel(nominal.model, K, act.coulomb_smoothing_rad_s, rows)
     # Structural base set, decided on the nominal model (the design criterion's set); the current
     # (calibrated) model keeps the same set with its own combinations (:mod:`.base_set`)
     base_design, base = structural_base_parameters(reg_nominal, reg, ctx.rng, cfg.base_samples, cfg.base_tolerance,
@@ -229,32 +236,33 @@ def _run(ctx: StageContext) -> StageResult:
     t1 = time.perf_counter()
     Wb = base.base_regressor(data.Y)
     y = data.y
-    cond_data = check_data_excites(data.q, Wb, [f"q{j + 1}" for j in range(nq)], cfg.min_joint_motion_rad,
+    cond_data = check_data_excites(data.q[:, used], Wb, [f"q{j + 1}" for j in used], cfg.min_joint_motion_rad,
                                    cfg.max_cond_base_regressor_data, str(cfg.data_file) if user_data else None)
     cond_data_structural = float(np.linalg.cond(base_design.base_regressor(data.Y)))  # design criterion's set
-    wls_vc = est_mod.wls(Wb, y, nq)
-    # friction_model stribeck: fit the Stribeck term with the base parameters (IPOPT), take it off
-    # the torques and fit the rest as before; viscous_coulomb kept beside it for the report
-    fit = (fit_stribeck(Wb, y, data.v_blocks, wls_vc.beta, wls_vc.joint_sigma_Nm, reg.coulomb_width_rad_s)
-           if cfg.friction_model == "stribeck" else None)
+    wls_vc = est_mod.wls(Wb, y, nm)
+    # friction_model stribeck: fit the Stribeck term with the base parameters (IPOPT), nested in the
+    # viscous + Coulomb fit, take it off the torques and fit the rest as before; the held-out data
+    # choose which of the two models is handed on
+    max_excess = MAX_EXCESS_OVER_LIMIT * robot.limits.effort_Nm[used]
+    fit = (fit_stribeck(Wb, y, data.v_blocks, wls_vc.beta, wls_vc.joint_sigma_Nm, reg.coulomb_width_rad_s,
+                        max_excess_Nm=max_excess) if cfg.friction_model == "stribeck" else None)
     timings["stribeck_fit_s"] = time.perf_counter() - t1
     y_fit = y if fit is None else y - fit.stribeck_torque(data.v_blocks).ravel()
-    ols = est_mod.ols(Wb, y_fit, nq)
-    wls = wls_vc if fit is None else est_mod.wls(Wb, y_fit, nq)
+    ols = est_mod.ols(Wb, y_fit, nm)
+    wls = wls_vc if fit is None else est_mod.wls(Wb, y_fit, nm)
     p_nom = standard_parameters(robot.model, act.rotor_inertia_kgm2, act.viscous_Nms_rad, act.coulomb_Nm)
     phys = est_mod.physical_fit(data.Y, y_fit, nq, p_nom, wls.joint_sigma_Nm, cfg.regularization,
-                                cfg.physical_max_iter)
+                                cfg.physical_max_iter, n_rows=nm)
     phys_vc = phys if fit is None else est_mod.physical_fit(data.Y, y, nq, p_nom, wls_vc.joint_sigma_Nm,
-                                                            cfg.regularization, cfg.physical_max_iter)
+                                                            cfg.regularization, cfg.physical_max_iter, n_rows=nm)
     timings["estimation_s"] = time.perf_counter() - t1
-    new_robot = identified_robot(robot, phys.p, fit)
 
     # ---------------------------------------------------------------- validation
     t1 = time.perf_counter()
     if rec is not None:
         # held-out tail of the user's record: a separate fit on the first part (tx40 route)
         ho = heldout_validation(data, base, p_nom, nq, cfg.data_train_fraction, cfg.regularization,
-                                cfg.physical_max_iter, "identification.data_train_fraction")
+                                cfg.physical_max_iter, "identification.data_train_fraction", n_rows=nm)
         pct = round(100 * (1 - cfg.data_train_fraction))
         vt = val_mod.ValidationTrajectory(
             ho.t_s, ho.q, np.empty((0, nq)), np.empty((0, nq)), f"held-out last {pct} % of the user's record",
@@ -263,7 +271,7 @@ def _run(ctx: StageContext) -> StageResult:
         if fit is not None:   # the Stribeck model: its own fit on the first part, scored on the rest
             pred_s = stribeck_heldout(data, base, p_nom, nq, cfg.data_train_fraction, cfg.regularization,
                                       cfg.physical_max_iter, reg.coulomb_width_rad_s,
-                                      "identification.data_train_fraction")
+                                      "identification.data_train_fraction", max_excess)
             pred_phys, pred_wls = pred_s["physical"], pred_s["wls"]
         rms_phys, rel_phys = val_mod.torque_rms(tau_v, pred_phys)
         rms_wls, rel_wls = val_mod.torque_rms(tau_v, pred_wls)
@@ -286,23 +294,37 @@ def _run(ctx: StageContext) -> StageResult:
         noise_sigma = data.noise_sigma_Nm
         noise_source = "spread between excitation periods"
         meas_v = ctx.real.execute_joint_trajectory(vt.t_s, vt.q, vt.v, vt.a, ctx.rng)
-        tau_v = meas_v.tau_Nm
+        tau_v = meas_v.tau_Nm[:, used]
         Yv = reg.stacked(vt.q, vt.v, vt.a)
-        st_v = 0.0 if fit is None else fit.stribeck_torque(vt.v)
-        pred_phys = (Yv @ phys.p).reshape(-1, nq) + st_v
-        pred_wls = (base.base_regressor(Yv) @ wls.beta).reshape(-1, nq) + st_v
-        pred_vc = (Yv @ phys_vc.p).reshape(-1, nq)
+        st_v = 0.0 if fit is None else fit.stribeck_torque(vt.v[:, used])
+        pred_phys = (Yv @ phys.p).reshape(-1, nm) + st_v
+        pred_wls = (base.base_regressor(Yv) @ wls.beta).reshape(-1, nm) + st_v
+        pred_vc = (Yv @ phys_vc.p).reshape(-1, nm)
         rms_phys, rel_phys = val_mod.torque_rms(tau_v, pred_phys)
         rms_wls, rel_wls = val_mod.torque_rms(tau_v, pred_wls)
         if noise_sigma is None or not np.all(np.isfinite(noise_sigma)):
-            noise_sigma = np.asarray(meas_v.tau_sigma_Nm, float)
+            noise_sigma = np.asarray(meas_v.tau_sigma_Nm, float)[used]
             noise_source = "torque sensor of the simulation"
     friction: dict[str, Any] = {}
     if fit is not None:  # both friction models' physically consistent fits on the same held-out torques
         vc_status = phys_vc.status if rec is None else ho.phys.status
         scored = {"viscous_coulomb": val_mod.torque_rms(tau_v, pred_vc)[0]} if is_success(vc_status) else {}
-        friction = friction_summary(scored | {"stribeck": rms_phys}, noise_sigma, fit)
+        friction = friction_summary(scored | {"stribeck": rms_phys}, noise_sigma, fit, sel.per_joint,
+                                    robot.limits.effort_Nm[used])
         friction["friction_viscous_coulomb_status"] = vc_status   # not scored unless IPOPT succeeded
+        if friction["friction_model_best"] == "viscous_coulomb":   # the held-out data select the handed-on model
+            fit, phys, pred_phys = None, phys_vc, pred_vc
+            rms_phys, rel_phys = val_mod.torque_rms(tau_v, pred_phys)
+    friction["friction_model_handed_on"] = "viscous_coulomb" if fit is None else "stribeck"
+    if fit is None and wls is not wls_vc:   # the base estimate of the handed-on friction model
+        wls, y_fit, ols = wls_vc, y, est_mod.ols(Wb, y, nm)
+    white_sigma = wls.sigma
+    # correlated residuals: the covariance reported and scored is the HAC sandwich, for a handed-on
+    # Stribeck term the joint one of the nested fit (base parameters with fs, log vs), marginal in beta
+    J = Wb if fit is None else np.hstack([Wb, fit.jacobian(data.v_blocks)])
+    hac = est_mod.hac_covariance(J, y_fit - Wb @ wls.beta, wls.joint_sigma_Nm, wls.covariance)
+    wls.covariance = hac.covariance[: base.n_base, : base.n_base]
+    new_robot = identified_robot(robot, phys.p, None if fit is None else expand_to_joints(fit, used, nq))
     timings["validation_s"] = time.perf_counter() - t1
 
     truth = None
@@ -318,11 +340,12 @@ def _run(ctx: StageContext) -> StageResult:
     timings["total_s"] = time.perf_counter() - t0
 
     # ---------------------------------------------------------------- outputs
-    ratio = rms_phys / noise_sigma if noise_sigma is not None else np.full(nq, np.nan)
+    ratio = rms_phys / noise_sigma if noise_sigma is not None else np.full(nm, np.nan)
+    pj = sel.per_joint
     summary: dict[str, Any] = {
         "n_base_parameters": base.n_base,
         "n_base_parameters_structural": base_design.n_base,
-        "excitation": _excitation_label(exc, ex.criterion),
+        "excitation": report.excitation_label(exc, ex.criterion),
         "excitation_fallback_reason": None if exc is None else (exc.fallback_reason or None),
         "base_parameter_set": base.set_names,
         "cond_optimized": None if exc is None else exc.cond_optimized,
@@ -337,12 +360,19 @@ def _run(ctx: StageContext) -> StageResult:
         "excitation_tcp_speed_bound_m_s": ex.max_tcp_speed_m_s,
         "excitation_tcp_acceleration_bound_m_s2": ex.max_tcp_acceleration_m_s2,
         "validation_trajectory": vt.label,
-        "validation_torque_rms_Nm": rms_phys.tolist(),
-        "validation_relative_error": rel_phys.tolist(),
-        "validation_torque_rms_wls_Nm": rms_wls.tolist(),
-        "torque_noise_sigma_Nm": None if noise_sigma is None else np.asarray(noise_sigma).tolist(),
+        "validation_torque_rms_Nm": pj(rms_phys),
+        "validation_relative_error": pj(rel_phys),
+        "validation_torque_rms_wls_Nm": pj(rms_wls),
+        "torque_noise_sigma_Nm": None if noise_sigma is None else pj(noise_sigma),
         "torque_noise_source": noise_source,
-        "validation_rms_over_noise": ratio.tolist(),
+        "validation_rms_over_noise": pj(ratio),
+        **sel.to_dict(),
+        # a record logged with non-uniform time stamps, resampled (signals.resample_uniform)
+        "record_max_gap_s": None if rec is None else rec.max_gap_s,
+        "record_resampling": None if rec is None or not rec.resampling else rec.resampling,
+        "base_covariance": (f"HAC sandwich (Newey & West 1987), Bartlett kernel, bandwidth {hac.bandwidth:.2f} "
+                            "samples (Andrews 1991 AR(1) plug-in)"),
+        "base_sigma_hac_over_white_median": float(np.median(wls.sigma / np.maximum(white_sigma, 1e-300))),
         "fraction_within_3sigma": None if truth is None else truth["fraction_within_3sigma"],
         "physically_consistent": bool(phys.consistent),
         "fit_rms_Nm_wls": wls.rms_Nm,
@@ -359,7 +389,7 @@ def _run(ctx: StageContext) -> StageResult:
         t_rep = np.arange(0.0, traj.period_s, 1.0 / cfg.replay_rate_hz)
         q_rep, _, _ = traj.evaluate(t_rep)
     else:  # the user's (processed: filtered, decimated, borders dropped) trajectory
-        t_rep, q_rep = _replay(np.arange(data.n_samples) * data.sample_time_s, data.q, cfg.replay_rate_hz)
+        t_rep, q_rep = report.replay(np.arange(data.n_samples) * data.sample_time_s, data.q, cfg.replay_rate_hz)
     arrays: dict[str, np.ndarray] = {
         "trajectory_excitation_t": t_rep,
         "trajectory_excitation_q": q_rep,
@@ -431,19 +461,11 @@ def _run(ctx: StageContext) -> StageResult:
             "TX40 held-out 30 %: measured vs physically consistent fit")
     gates = QualityGates(NAME, accept_poor=bool(getattr(ctx.run, "accept_poor", False)))
     add_result_gates(gates, cfg, cond_data, None if exc is None else exc.cond_optimized, ratio, pred_phys,
-                     robot.limits.effort_Nm, phys.status)
+                     robot.limits.effort_Nm[used], phys.status, used + 1)
     fallback_md = "" if exc is None or not exc.fallback_reason else (
         f"**Excitation: the best random feasible trajectory is used** ({exc.fallback_reason}).\n\n")
     return gates.finish(StageResult(summary=summary, arrays=arrays, data=data_out, figures=figures, robot=new_robot,
                                     report_md=fallback_md + validation_md + report.report_markdown(summary, tx)))
-
-
-def _excitation_label(exc: design_mod.ExcitationResult | None, criterion: str) -> str:
-    if exc is None:
-        return "from the user's record"
-    if exc.source != "optimised":
-        return f"best random feasible Fourier trajectory ({exc.fallback_reason})"
-    return f"optimised Fourier trajectory ({criterion})"
 
 
 def _validation_markdown(cfg: Config, vt: val_mod.ValidationTrajectory, iso: IsoPathConfig,

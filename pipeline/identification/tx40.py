@@ -182,11 +182,13 @@ class HeldOutValidation:
 
 def heldout_validation(
     data: ProcessedData, base: BaseParameters, p_nominal: np.ndarray, nq: int, train_fraction: float,
-    regularization: float, max_iter: int, field_name: str = "train_fraction",
+    regularization: float, max_iter: int, field_name: str = "train_fraction", n_rows: int | None = None,
 ) -> HeldOutValidation:
     """Held-out test of a (non-periodic) record: OLS, Gautier's WLS and the physically consistent
     fit (log-Cholesky, paper ``004_abbe750b8bbcc3aa.txt`` §4.1) on the first ``train_fraction`` of
-    the processed samples, torques predicted on the rest (the last samples, never seen by the fit)."""
+    the processed samples, torques predicted on the rest (the last samples, never seen by the fit).
+    ``n_rows``: measured torques per sample when only some of the ``nq`` joints are (default nq)."""
+    nv, nq = nq, (nq if n_rows is None else n_rows)
     n = data.n_samples
     ntr = int(train_fraction * n)
     if not 0 < ntr < n:
@@ -196,8 +198,8 @@ def heldout_validation(
     tr, te = slice(0, ntr * nq), slice(ntr * nq, None)
     ols = est_mod.ols(Wb[tr], y[tr], nq)
     wls = est_mod.wls(Wb[tr], y[tr], nq)
-    phys = est_mod.physical_fit(data.Y[tr], y[tr], nq, p_nominal, wls.joint_sigma_Nm,
-                                regularization=regularization, max_iter=max_iter)
+    phys = est_mod.physical_fit(data.Y[tr], y[tr], nv, p_nominal, wls.joint_sigma_Nm,
+                                regularization=regularization, max_iter=max_iter, n_rows=nq)
     pred = {
         "ols": (Wb[te] @ ols.beta).reshape(-1, nq),
         "wls": (Wb[te] @ wls.beta).reshape(-1, nq),
