@@ -131,7 +131,10 @@ def _cmd_check(ns: argparse.Namespace) -> int:
     print(f"ok: {cfg.source}, robot {cfg.robot}, run directory {prep.run_dir}")
     for plan in prep.plans:
         reason = prep.reasons[plan.name]
-        print(f"  {plan.name}: " + ("reuse" if reason is None else f"run ({reason})"))
+        print(f"  {plan.name}: " + ("reuse" if reason is None else f"run ({reason})")
+              + f"; {plan.provenance.sentence()}")
+    if prep.second_pass:
+        print(f"  {prep.second_pass}")
     for warning in robot_warnings(prep.nominal):      # placeholder data: warnings, not errors
         print(f"warning: robot {prep.nominal.name}: {warning}")
     return 0

@@ -74,6 +74,9 @@ NAME = "identification"
 DEPENDS: tuple[str, ...] = ("model", "calibration")
 #: fields naming files: the inputs hash covers their content, not their path
 FILE_INPUTS: tuple[str, ...] = ("data_file",)
+#: provenance (pipeline.stage_plan): the field naming a recorded file, else what is simulated
+RECORDED_INPUT = "data_file"
+SIMULATES = "joint torques of the hidden robot"
 #: settings of other sections this stage reads (the runner adds them to its inputs hash): the
 #: validation path is the run's EN ISO 9283 path (robot ``run_defaults`` included)
 CONFIG_READS: tuple[str, ...] = ("control.iso", "control.ik_seeds_deg", "control.ik_tolerance_m",
