@@ -61,6 +61,7 @@ from pipeline.identification.tx40 import (
     run_tx40,
 )
 from pipeline.quality import QualityGates
+from pipeline.robot.assumed_values import predicted_drive_values
 from pipeline.robot.defaults import iso_or_derived
 from pipeline.robot.handoff import JointFriction
 from pipeline.robot.iso9283 import IsoPathConfig
@@ -186,7 +187,9 @@ def _run(ctx: StageContext) -> StageResult:
         raise PipelineError(None, "identification", "no hidden robot to measure and no data_file given")
 
     act = robot.actuation
-    coupled = cfg.actuator_coupling == "gear" or (cfg.actuator_coupling == "auto" and user_data)
+    # a record's torques are motor-side through the gear matrix, unless measured on the link side
+    coupled = cfg.actuator_coupling == "gear" or (cfg.actuator_coupling == "auto" and user_data
+                                                  and act.torque_side == "motor")
     K = act.gear_matrix if coupled else np.eye(nq)
     reg = RegressorModel(robot.model, K, act.coulomb_smoothing_rad_s)
     rec = load_user_record(cfg, robot) if user_data else None  # before any long computation
@@ -244,7 +247,8 @@ def _run(ctx: StageContext) -> StageResult:
     y_fit = y if fit is None else y - fit.stribeck_torque(data.v_blocks).ravel()
     ols = est_mod.ols(Wb, y_fit, nq)
     wls = wls_vc if fit is None else est_mod.wls(Wb, y_fit, nq)
-    p_nom = standard_parameters(robot.model, act.rotor_inertia_kgm2, act.viscous_Nms_rad, act.coulomb_Nm)
+    drive = predicted_drive_values(act, robot.spec.assumed)   # assumed or link-side drive values: 0
+    p_nom = standard_parameters(robot.model, drive["rotor_inertia_kgm2"], drive["viscous_Nms_rad"], drive["coulomb_Nm"])
     phys = est_mod.physical_fit(data.Y, y_fit, nq, p_nom, wls.joint_sigma_Nm, cfg.regularization,
                                 cfg.physical_max_iter)
     phys_vc = phys if fit is None else est_mod.physical_fit(data.Y, y, nq, p_nom, wls_vc.joint_sigma_Nm,
