@@ -47,7 +47,7 @@ from pipeline.progress import Progress
 from pipeline.robot.model import RobotModel
 from pipeline.run_names import check_run_robot
 from pipeline.sim.truth import RealRobot, TruthConfig
-from pipeline.stage_api import PROVENANCE_FILE, StageContext, StageOutput, StageResult, stage_rng
+from pipeline.stage_api import StageContext, StageOutput, StageResult, stage_rng
 from pipeline.stage_io import (
     REJECTED_SUFFIX,
     changed_inputs,
@@ -417,7 +417,7 @@ def _run_locked(prep: Prepared, prog: Progress, say: Callable[[str], None]) -> R
         raise
     finally:
         try:
-            _write_provenance(prep)
+            stage_io.write_provenance(run_dir, {p.name: p.provenance for p in prep.plans}, prep.second_pass)
             report = report_mod.write_report(run_dir, cfg, [p.name for p in prep.plans],
                                              expected={p.name: p.inputs_sha256 for p in prep.plans},
                                              failure=failure)
@@ -427,17 +427,6 @@ def _run_locked(prep: Prepared, prog: Progress, say: Callable[[str], None]) -> R
             report = run_dir / "report.md"     # keep the stage's own error, not this one
     say(f"report: {report}")
     return RunResult(run_dir, report, outputs, ran, reused)
-
-
-def _write_provenance(prep: Prepared) -> None:
-    """``<run>/provenance.json``: each planned stage's provenance and the second-pass decision."""
-    record = {"stages": {p.name: p.provenance.to_dict() for p in prep.plans}, "second_pass": prep.second_pass}
-    path = prep.run_dir / PROVENANCE_FILE
-    try:
-        if not path.is_file() or artefacts.read_json(path) != record:
-            artefacts.write_json(path, record)
-    except (OSError, ValueError):
-        artefacts.write_json(path, record)
 
 
 def _run_one(plan: _Plan, prep: Prepared, outputs: dict[str, StageOutput], handed_robot: dict[str, RobotModel],
@@ -471,6 +460,7 @@ def _run_one(plan: _Plan, prep: Prepared, outputs: dict[str, StageOutput], hande
         final = stage_io.commit_stage_dir(staging, run_dir / plan.name)
     except QualityGateError as exc:
         if isinstance(exc.result, StageResult):
+            exc.result.summary["provenance"] = plan.provenance.to_dict()
             try:
                 write_rejected(staging, rejected, plan.name, exc.result, exc.one_line())
                 say(f"{plan.name}: quality gate failed; its result is kept for inspection in {rejected} "
