@@ -12,9 +12,10 @@ replaces an existing one unless ``force``.
 
 Torque side (``actuation.torque_side``, ``--torque-side``): where a torque log of the arm is
 measured. ``link``: joint torque sensors after the gear (Franka Panda/FR3, KUKA LBR iiwa/Med,
-Kinova Gen3), whose torque holds neither rotor inertia nor drive friction: those are written as 0,
-facts rather than assumptions. ``motor``: torques from motor currents; rotor inertia and friction
-are assumed by the rules below and left out of the nominal prediction while unedited
+Kinova Gen3), whose torque holds neither rotor inertia nor drive friction: the prediction of a
+logged torque leaves them out, while robot.yaml keeps the drive's values for the simulated plant
+(its motor mass). ``motor``: torques from motor currents; rotor inertia and friction are assumed by
+the rules below and left out of the nominal prediction while unedited
 (:func:`pipeline.robot.assumed_values.predicted_drive_values`). Without the option the side is
 detected (:func:`detect_torque_side`) and marked ASSUMED.
 """
@@ -25,7 +26,6 @@ import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-import numpy as np
 import yaml
 
 from pipeline.artefacts import write_text
@@ -66,8 +66,6 @@ _SECTION_NOTES = {
 
 #: arm names (URDF robot, link or joint names) of arms with a torque sensor in every joint
 LINK_SIDE_ARMS = re.compile(r"panda|fr3|franka|iiwa|lbr|kuka_med|gen3", re.IGNORECASE)
-#: what a link-side torque sensor does not see: written as 0 (facts, not assumptions)
-_UNSEEN_ON_THE_LINK_SIDE = ("rotor_inertia_kgm2", "viscous_Nms_rad", "coulomb_Nm")
 
 
 def detect_torque_side(urdf: Path, arm_joints: list[str]) -> tuple[str, str]:
@@ -162,16 +160,10 @@ def write_robot_yaml(urdf: str | Path, out: str | Path | None = None, *, base: s
     side, how = (torque_side, "") if torque_side is not None else detect_torque_side(
         urdf, [str(robot.model.names[j]) for j in range(1, robot.model.njoints)])
     spec.actuation.torque_side = side
-    if side == "link":
-        for name in _UNSEEN_ON_THE_LINK_SIDE:
-            setattr(spec.actuation, name, np.zeros(robot.nq))
     data = robot_spec_to_yaml(spec, str(urdf.resolve()) if target.parent.resolve() != urdf.parent.resolve()
                               else urdf.name)
     data.pop("assumptions", None)
     rules = _rules(robot, tip_given=tip is not None, lock=lock or {}, placeholders=placeholders)
-    if side == "link":
-        for name in _UNSEEN_ON_THE_LINK_SIDE:
-            rules.pop(f"actuation.{name}")
     if how:
         rules["actuation.torque_side"] = how
     data["assumed"] = {dotted: assumed_entry(data, dotted, rule) for dotted, rule in rules.items()}

@@ -63,11 +63,21 @@ def test_the_nominal_prediction_of_an_initialised_robot_is_the_bare_urdf(tmp_pat
     drive = predicted_drive_values(robot.actuation, robot.spec.assumed)
     np.testing.assert_allclose(_nominal_torques(robot, drive, q, v, a), _bare_urdf_torques(robot, q, v, a),
                                atol=1e-9)
-    if side == "motor":   # the assumed values themselves would change the prediction
-        kept = {n: np.asarray(getattr(robot.actuation, n), float) for n in drive}
-        assert np.abs(_nominal_torques(robot, kept, q, v, a) - _bare_urdf_torques(robot, q, v, a)).max() > 1e-3
-    else:
-        assert not np.any(robot.actuation.rotor_inertia_kgm2) and not np.any(robot.actuation.coulomb_Nm)
+    # the drive values robot.yaml holds (for the simulated plant) would change the prediction
+    kept = {n: np.asarray(getattr(robot.actuation, n), float) for n in drive}
+    assert np.abs(_nominal_torques(robot, kept, q, v, a) - _bare_urdf_torques(robot, q, v, a)).max() > 1e-3
+
+
+def test_a_link_side_sensor_sees_no_drive_values_even_edited_ones(tmp_path):
+    _init(_urdf("ur5"), tmp_path, "--torque-side", "link")
+    path = tmp_path / "robot.yaml"
+    data = yaml.safe_load(path.read_text())
+    data["actuation"]["coulomb_Nm"] = [1.0, 2.0, 3.0, 0.5, 0.5, 0.5]
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    robot = RobotModel.load(tmp_path)
+    assert np.any(robot.actuation.rotor_inertia_kgm2)        # the drive is there (simulated plant) ...
+    drive = predicted_drive_values(robot.actuation, robot.spec.assumed)
+    assert not any(np.any(v) for v in drive.values())         # ... but not in a link-side torque
 
 
 def test_an_edited_drive_value_is_a_fact_and_kept(tmp_path):
