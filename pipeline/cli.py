@@ -6,7 +6,8 @@
   or be reused, and the robot's plausibility warnings
 * ``view [RUN_DIR] [--robot NAME] [--configurations NAME] [--trajectory NAME] [--open]``
 * ``study [NAME [ARGS...]]`` (no name: list the registered studies)
-* ``robot init ARM.urdf [--base LINK] [--tip LINK] [--lock JOINT=VALUE] [--out FILE] [--force]``: a commented robot.yaml
+* ``robot init ARM.urdf [--base LINK] [--tip LINK] [--lock JOINT=VALUE] [--torque-side link|motor] [--out FILE]
+  [--force]``: a commented robot.yaml
 * ``sweep [--seeds 0-19] [--robots A,B] [--config FILE] [--set k=v] [--vary k=[a,b]] [--scheduler ADDR]``
 
 ``run`` ends with the headline table (:mod:`pipeline.headline`) and the path of ``report.md``.
@@ -105,6 +106,9 @@ def _parser() -> argparse.ArgumentParser:
     ri.add_argument("--lock", metavar="JOINT=VALUE", action="append", default=[],
                     help="hold a joint off the arm (a linear track, a gripper) at VALUE rad or m; repeatable "
                          "(default: 0 when its limits allow, else mid-range)")
+    ri.add_argument("--torque-side", choices=("link", "motor"), default=None,
+                    help="where your torque log is measured: link (joint torque sensors, e.g. Franka, iiwa) or "
+                         "motor (motor currents); default: detected from the URDF, else motor")
     ri.add_argument("--force", action="store_true", help="replace an existing robot.yaml")
     return p
 
@@ -131,14 +135,18 @@ def _cmd_check(ns: argparse.Namespace) -> int:
     print(f"ok: {cfg.source}, robot {cfg.robot}, run directory {prep.run_dir}")
     for plan in prep.plans:
         reason = prep.reasons[plan.name]
-        print(f"  {plan.name}: " + ("reuse" if reason is None else f"run ({reason})"))
+        print(f"  {plan.name}: " + ("reuse" if reason is None else f"run ({reason})")
+              + f"; {plan.provenance.sentence()}")
+    if prep.second_pass:
+        print(f"  {prep.second_pass}")
     for warning in robot_warnings(prep.nominal):      # placeholder data: warnings, not errors
         print(f"warning: robot {prep.nominal.name}: {warning}")
     return 0
 
 
 def _cmd_robot(ns: argparse.Namespace) -> int:
-    written = write_robot_yaml(ns.urdf, ns.out, base=ns.base, tip=ns.tip, lock=parse_locks(ns.lock), force=ns.force)
+    written = write_robot_yaml(ns.urdf, ns.out, base=ns.base, tip=ns.tip, lock=parse_locks(ns.lock), force=ns.force,
+                               torque_side=ns.torque_side)
     print(f"wrote {written}: edit the values marked as assumed, then run with --set robot={written.parent}")
     return 0
 

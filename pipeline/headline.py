@@ -14,7 +14,9 @@ Read from the stages' ``summary.json`` (nothing is recomputed), one row per figu
 * every stage with quality gates: how many pass.
 
 Each row states its verdict (pass/FAIL of a gate, or the ratio to its anchor) and the provenance
-of its input (simulated, or the recorded file). :func:`headline_markdown` opens ``report.md``
+of its input (simulated, or the recorded file: the stage's typed record, ``summary.json``
+``provenance``); the run's ``provenance.json`` adds whether the second calibration pass ran and why.
+:func:`headline_markdown` opens ``report.md``
 followed by the assumptions still in force and the warnings; :func:`print_headline` prints the
 same table on the console.
 """
@@ -32,6 +34,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from pipeline import artefacts, stage_io
+from pipeline.stage_api import PROVENANCE_FILE, Provenance
 from pipeline.typed_config import dotted_get
 
 SIMULATED = "simulated"
@@ -58,6 +61,7 @@ class Headline:
 
     run: str
     rows: list[Row] = field(default_factory=list)
+    inputs: list[str] = field(default_factory=list)        # each stage's provenance, one sentence
     assumptions: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
 
@@ -94,6 +98,15 @@ def provenance(source: object) -> str:
     if "simulat" in text.lower():
         return SIMULATED
     return f"recorded ({Path(text).name or text})"
+
+
+def typed_label(record: Provenance) -> str:
+    """The input column of a stage with a typed provenance record: recorded inputs say which
+    robot they start from when a simulated upstream stage was left out."""
+    label = record.label()
+    if record.recorded and "calibration" in record.left_out:
+        label += ", nominal kinematics"
+    return label
 
 
 def _gate(summary: dict, name: str) -> dict | None:
@@ -238,6 +251,9 @@ def gate_row(stage: str, s: dict) -> Row | None:
 def stage_rows(stage: str, summary: dict, stale: bool = False) -> list[Row]:
     """The headline rows of one stage (a stale stage's rows say so in their source)."""
     rows = list(STAGE_ROWS.get(stage, lambda s: [])(summary))
+    record = Provenance.from_dict(summary.get("provenance"))
+    if record is not None:
+        rows = [Row(r.stage, r.figure, r.value, r.against, r.verdict, typed_label(record)) for r in rows]
     gates = gate_row(stage, summary)
     if gates is not None:
         rows.append(gates)
@@ -259,6 +275,20 @@ def _read_summary(stage_dir: Path) -> dict:
     return data if isinstance(data, dict) else {}
 
 
+def _second_pass_row(run_dir: Path, stages: Sequence[str]) -> Row | None:
+    """Whether the second calibration pass ran, and why (``provenance.json`` of the run)."""
+    try:
+        record = artefacts.read_json(run_dir / PROVENANCE_FILE)
+    except (OSError, ValueError):
+        return None
+    note = record.get("second_pass") if isinstance(record, dict) else None
+    if not note or "calibration" not in stages:
+        return None
+    ran = not str(note).startswith("no ")
+    return Row("calibration", "second calibration pass", str(note), "identified inertias of the arm calibrated",
+               "ran" if ran else "not run", "")
+
+
 def read_headline(run_dir: Path, stages: Sequence[str], stale: Iterable[str] = ()) -> Headline:
     """The headline of ``run_dir`` from the ``summary.json`` of ``stages`` (in that order; stages
     without a summary are left out; ``stale``: stages whose results are from an earlier run)."""
@@ -271,12 +301,19 @@ def read_headline(run_dir: Path, stages: Sequence[str], stale: Iterable[str] = (
         if not summary:
             continue
         rows = stage_rows(stage, summary, stage in stale)
+        record = Provenance.from_dict(summary.get("provenance"))
         if stage == "identification":
-            model_data = provenance(summary.get("data_source"))
+            model_data = (provenance(summary.get("data_source")) if record is None
+                          else typed_label(record) if record.recorded else SIMULATED)
         elif stage in SIMULATED_ON_THE_MODEL and model_data != SIMULATED:
             rows = [Row(r.stage, r.figure, r.value, r.against, r.verdict,
                         f"{r.source}, model from {model_data}" if r.source else r.source) for r in rows]
         headline.rows += rows
+        if record is not None:
+            headline.inputs.append(f"{stage}: {record.sentence()}")
+        if stage == "calibration":
+            second = _second_pass_row(run_dir, stages)
+            headline.rows += [] if second is None else [second]
         if stage == "model":
             headline.assumptions = [str(a) for a in summary.get("assumptions") or []]
             headline.warnings += [str(w) for w in summary.get("plausibility_warnings") or []]
@@ -301,6 +338,8 @@ def headline_markdown(headline: Headline) -> str:
                   + " |" for r in headline.rows]
     else:
         lines.append("_no finished stage yet_")
+    if headline.inputs:
+        lines += ["", "**Inputs** (recorded or simulated):", "", *[f"* {x}" for x in headline.inputs]]
     lines += ["", "**Assumptions still in force**" + (":" if headline.assumptions else ": none (every robot "
               "fact comes from the robot files)")]
     lines += ["", *[f"* {a}" for a in headline.assumptions]] if headline.assumptions else []
@@ -337,6 +376,8 @@ def print_headline(headline: Headline, console: Console | None = None) -> None:
             console.width = LOG_WIDTH
     if headline.rows:
         console.print(headline_table(headline))
+    for line in headline.inputs:
+        console.print(f"input: {line}", markup=False)
     if headline.assumptions:
         console.print(f"assumptions still in force ({len(headline.assumptions)}):", markup=False)
         for a in headline.assumptions:

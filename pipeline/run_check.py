@@ -28,8 +28,9 @@ def check_run(cfg: RunConfig, out_root: str | Path | None = None, force: bool | 
     """What :func:`pipeline.runner.run_pipeline` would do with the same arguments; writes nothing."""
     prep = prepare_run(cfg, out_root, force)
     available = [n for n in config_mod.stage_names() if n not in unavailable_stages(prep.nominal)]
-    if not second_pass.wanted(cfg, [p.name for p in prep.plans], available):
-        return prep
+    first_pass, why_not = second_pass.decision(cfg, [p.name for p in prep.plans], available)
+    if not first_pass:
+        return replace(prep, second_pass=why_not)
     first = prepare_run(second_pass.first_pass_config(cfg), second_pass.first_pass_root(prep.run_dir), force)
     todo = {n: r for n, r in first.reasons.items() if r is not None}
     if todo:

@@ -244,10 +244,11 @@ class Prepared:
     cfg: RunConfig
     plans: list[_Plan]
     nominal: RobotModel
-    real: RealRobot
+    real: RealRobot | None            # the hidden robot (None: every planned stage is recorded or reads files)
     run_dir: Path
     forced: set[str]
     reasons: dict[str, str | None]    # stage -> why it runs (None: reused)
+    second_pass: str = ""             # whether the second calibration pass ran, and why (provenance.json)
 
 
 def prepare_run(cfg: RunConfig, out_root: str | Path | None = None,
@@ -258,7 +259,7 @@ def prepare_run(cfg: RunConfig, out_root: str | Path | None = None,
     robot_dir = resolve_robot_dir(cfg)         # user input first: the robot, then the stage modules
     nominal = RobotModel.load(robot_dir)
     plans = plan_stages(cfg, unavailable_stages(nominal))
-    real = _make_real(nominal, cfg)
+    real = _make_real(nominal, cfg) if any(p.provenance.simulated for p in plans) else None
     hashes = stage_inputs_hashes(cfg, plans, robot_dir)
     forced = set(hashes) if force is True else set(force or ())
     run_dir = (Path(out_root) if out_root is not None else default_runs_dir()) / cfg.name
@@ -294,8 +295,12 @@ def run_pipeline(
         prep = prepare_run(cfg, out_root, force)
         available = [n for n in config_mod.stage_names() if n not in unavailable_stages(prep.nominal)]
         copied: list[str] = []
-        if second_pass.wanted(cfg, [p.name for p in prep.plans], available):
+        first, why_not = second_pass.decision(cfg, [p.name for p in prep.plans], available)
+        if first:
             prep, copied = _after_first_pass(prep, force, prog, say)
+        elif why_not:
+            say(f"calibration: {why_not}")
+            prep = replace(prep, second_pass=why_not)
         result = _run_prepared(prep, out_root, prog, say)
         if copied:   # stages this run took over from the first pass: written in this call
             ran = [n for n in result.outputs if n in copied or n in result.ran]
@@ -326,10 +331,14 @@ def _after_first_pass(prep: Prepared, force: bool | Sequence[str], prog: Progres
         copied = second_pass.reuse_first_pass({n: o for n, o in first.outputs.items() if n in planned}, run_dir)
         # the first pass's stages ran (or were forced) already
         rest = planned if force is True else list(force or ())
-        return prepare_run(cfg, prep.run_dir.parent, [n for n in rest if n not in first.outputs]), copied
-    say(f"calibration: second pass with the first pass's identified inertias (gravity model's share of the "
-        f"first pass's predicted error {share_text})")
-    return prepare_run(second, prep.run_dir.parent, force), []
+        again = prepare_run(cfg, prep.run_dir.parent, [n for n in rest if n not in first.outputs])
+        return replace(again, second_pass=f"no second calibration pass: the gravity model's share of the predicted "
+                       f"error is {share_text} < {second_pass.GRAVITY_SHARE_FOR_SECOND_PASS}"), copied
+    note = (f"second calibration pass with the inertias identified in the first pass "
+            f"({first.outputs['identification'].path.parent}; gravity model's share of its predicted error "
+            f"{share_text})")
+    say(f"calibration: {note}")
+    return replace(prepare_run(second, prep.run_dir.parent, force), second_pass=note), []
 
 
 def _run_prepared(prep: Prepared, out_root: str | Path | None, prog: Progress,
@@ -393,7 +402,7 @@ def _run_locked(prep: Prepared, prog: Progress, say: Callable[[str], None]) -> R
                 if reason is None:
                     outputs[plan.name] = load_stage_output(stage_dir)
                     reused.append(plan.name)
-                    say(f"{plan.name}: reused ({stage_dir})")
+                    say(f"{plan.name}: reused ({stage_dir}; {plan.provenance.sentence()})")
                 else:
                     if reason != "not run yet":
                         say(f"{plan.name}: re-running because {reason}")
@@ -408,6 +417,7 @@ def _run_locked(prep: Prepared, prog: Progress, say: Callable[[str], None]) -> R
         raise
     finally:
         try:
+            stage_io.write_provenance(run_dir, {p.name: p.provenance for p in prep.plans}, prep.second_pass)
             report = report_mod.write_report(run_dir, cfg, [p.name for p in prep.plans],
                                              expected={p.name: p.inputs_sha256 for p in prep.plans},
                                              failure=failure)
@@ -432,14 +442,17 @@ def _run_one(plan: _Plan, prep: Prepared, outputs: dict[str, StageOutput], hande
         raise _write_error(exc, run_dir) from None
     # a fresh hidden robot per stage: its sensors draw noise from generators seeded by the run, so a
     # stage measures the same whether the earlier stages ran in this process or were reused
-    ctx = StageContext(run=cfg, config=plan.config, robot=_copy_robot(robot), real=_make_real(prep.nominal, cfg),
+    # a recorded stage gets no hidden robot: it simulates nothing
+    real = None if plan.provenance.recorded else _make_real(prep.nominal, cfg)
+    ctx = StageContext(run=cfg, config=plan.config, robot=_copy_robot(robot), real=real,
                        upstream={u: outputs[u] for u in plan.closure}, out_dir=staging,
-                       rng=stage_rng(cfg.seed, plan.name), progress=prog)
-    say(f"{plan.name}: running")
+                       rng=stage_rng(cfg.seed, plan.name), progress=prog, provenance=plan.provenance)
+    say(f"{plan.name}: running ({plan.provenance.sentence()})")
     t0 = time.perf_counter()
     rejected = run_dir / f"{plan.name}{REJECTED_SUFFIX}"
     try:
         result = _check_result(plan.name, plan.module.run(ctx))
+        result.summary["provenance"] = plan.provenance.to_dict()
         if interrupted():             # the stage swallowed the signal: never commit its result
             raise KeyboardInterrupt(f"stage {plan.name} interrupted")
         duration = time.perf_counter() - t0
@@ -447,6 +460,7 @@ def _run_one(plan: _Plan, prep: Prepared, outputs: dict[str, StageOutput], hande
         final = stage_io.commit_stage_dir(staging, run_dir / plan.name)
     except QualityGateError as exc:
         if isinstance(exc.result, StageResult):
+            exc.result.summary["provenance"] = plan.provenance.to_dict()
             try:
                 write_rejected(staging, rejected, plan.name, exc.result, exc.one_line())
                 say(f"{plan.name}: quality gate failed; its result is kept for inspection in {rejected} "

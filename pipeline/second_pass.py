@@ -20,8 +20,14 @@ runs, each one-way (robot model -> calibration -> identification -> ...):
 A run whose stages include calibration gets its first pass whenever the robot has an identification
 stage, also when identification itself is not selected (``--stages calibration``): the same
 configuration gives the same calibration whichever stages are selected. Both passes draw from the
-same seed, so the hidden robot is the same. The first pass's results stay in its folder for
-comparison (first -> second pass in the run log).
+same seed, so the hidden robot is the same.
+
+The identified inertias must be those of the arm calibrated: the second pass runs only when both
+stages are recorded (inertias identified from recorded torques of the arm whose tracker file is
+calibrated) or both simulated (the same hidden robot). A recorded calibration file with a simulated
+identification, or a simulated calibration with a recorded torque log, gets no first pass and no
+second pass; :func:`decision` says why (console, ``provenance.json``, headline). The first pass's
+results stay in its folder for comparison (first -> second pass in the run log).
 """
 
 from __future__ import annotations
@@ -33,7 +39,7 @@ from pathlib import Path
 from pipeline import artefacts, stage_io
 from pipeline.calibration.config import Config as CalibrationConfig
 from pipeline.config import RunConfig
-from pipeline.stage_api import StageOutput
+from pipeline.stage_api import StageOutput, stage_provenance
 
 #: ``auto`` runs the second pass when the gravity model makes up at least this share of the first
 #: pass's predicted held-out error (variance share, calibration summary ``gravity_model_share``):
@@ -44,12 +50,29 @@ FIRST_PASS_FOLDER = "first_pass"
 GRAVITY_MODELS_FOLDER = ".gravity_models"
 
 
-def wanted(cfg: RunConfig, planned: list[str], available: list[str]) -> bool:
-    """Whether this run starts with a first pass: calibration planned, an identification stage
-    available for the robot, a calibration section asking for it and no gravity model given."""
+def decision(cfg: RunConfig, planned: list[str], available: list[str]) -> tuple[bool, str]:
+    """Whether this run starts with a first pass, and why not (empty when it does, or when no
+    second pass is in question: no calibration planned, no identification stage for the robot,
+    ``second_pass: never`` or a gravity model given). A first pass needs a calibration and an
+    identification of the same provenance: both recorded or both simulated (module doc)."""
     cal = cfg.sections.get("calibration")
-    return (isinstance(cal, CalibrationConfig) and cal.second_pass != "never" and cal.gravity_model is None
-            and "calibration" in planned and "identification" in available)
+    if not (isinstance(cal, CalibrationConfig) and cal.second_pass != "never" and cal.gravity_model is None
+            and "calibration" in planned and "identification" in available):
+        return False, ""
+    cal_from, ident_from = stage_provenance(cfg, "calibration"), stage_provenance(cfg, "identification")
+    if cal_from.recorded and not ident_from.recorded:
+        return False, (f"no second calibration pass: the calibration is {cal_from.label()} but the identification "
+                       "would be simulated, and the simulated robot's inertias are not those of the arm measured "
+                       "(identification.data_file: a torque log of the same arm enables it)")
+    if ident_from.recorded and not cal_from.recorded:
+        return False, (f"no second calibration pass: the identification is {ident_from.label()} but the "
+                       "calibration is simulated, and the recorded inertias are not those of the simulated robot")
+    return True, ""
+
+
+def wanted(cfg: RunConfig, planned: list[str], available: list[str]) -> bool:
+    """Whether this run starts with a first pass (:func:`decision`)."""
+    return decision(cfg, planned, available)[0]
 
 
 def first_pass_config(cfg: RunConfig) -> RunConfig:

@@ -10,17 +10,82 @@ from __future__ import annotations
 import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
 
+from pipeline import config as config_mod
 from pipeline.config import RunConfig
 from pipeline.progress import Progress
 from pipeline.robot.model import RobotModel
 from pipeline.sim.truth import RealRobot
 
-__all__ = ["StageContext", "StageResult", "StageOutput", "stage_rng", "stable_stage_hash"]
+__all__ = ["StageContext", "StageResult", "StageOutput", "stage_rng", "stable_stage_hash", "Provenance",
+           "RECORDED", "SIMULATED", "ROBOT_FILES", "stage_config", "own_provenance", "stage_provenance"]
+
+#: provenance kinds: a file the user measured, the simulated world (:mod:`pipeline.sim`), the robot files only
+RECORDED, SIMULATED, ROBOT_FILES = "recorded", "simulated", "robot files"
+PROVENANCE_KINDS = (RECORDED, SIMULATED, ROBOT_FILES)
+#: the run's provenance record: each stage's :class:`Provenance` and the second-pass decision
+#: (written by the runner, read by the headline)
+PROVENANCE_FILE = "provenance.json"
+
+
+@dataclass(frozen=True)
+class Provenance:
+    """Where a stage's inputs come from (decided by the stage plan, :mod:`pipeline.stage_plan`).
+
+    ``kind``: ``recorded`` (a file of the stage's ``RECORDED_INPUT`` field), ``simulated`` (what the
+    stage's ``SIMULATES`` names, on the hidden robot) or ``robot files`` (no measurement at all).
+    ``upstream``: the stages whose results it uses; ``left_out``: the simulated stages a recorded
+    stage does not use (it starts from the nominal model or a recorded stage's robot instead);
+    ``note``: one sentence for the report (e.g. which kinematics a recorded stage starts from)."""
+
+    kind: str
+    source: str
+    upstream: tuple[str, ...] = ()
+    left_out: tuple[str, ...] = ()
+    note: str = ""
+
+    def __post_init__(self) -> None:
+        if self.kind not in PROVENANCE_KINDS:
+            raise ValueError(f"provenance kind {self.kind!r} is not one of {PROVENANCE_KINDS}")
+
+    @property
+    def recorded(self) -> bool:
+        return self.kind == RECORDED
+
+    @property
+    def simulated(self) -> bool:
+        return self.kind == SIMULATED
+
+    def label(self) -> str:
+        """``recorded (<file name>)``, ``simulated (<what>)`` or ``robot files``."""
+        if self.kind == ROBOT_FILES:
+            return ROBOT_FILES
+        source = Path(self.source).name if self.recorded else self.source
+        return f"{self.kind} ({source})" if source else self.kind
+
+    def sentence(self) -> str:
+        """The label, the stages used and the note: one line of the console and of report.md."""
+        text = self.label()
+        if self.upstream:
+            text += f"; uses {', '.join(self.upstream)}"
+        return f"{text}; {self.note}" if self.note else text
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"kind": self.kind, "source": self.source, "upstream": list(self.upstream),
+                "left_out": list(self.left_out), "note": self.note}
+
+    @classmethod
+    def from_dict(cls, data: object) -> Provenance | None:
+        """The record saved by :meth:`to_dict` (None: no such record, e.g. a summary of older code)."""
+        if not isinstance(data, dict) or data.get("kind") not in PROVENANCE_KINDS:
+            return None
+        return cls(str(data["kind"]), str(data.get("source") or ""), tuple(map(str, data.get("upstream") or ())),
+                   tuple(map(str, data.get("left_out") or ())), str(data.get("note") or ""))
 
 
 @dataclass
@@ -33,6 +98,7 @@ class StageContext:
     out_dir: Path                         # staging directory (write extra files here)
     rng: np.random.Generator              # seeded from (run seed, stage name)
     progress: Progress                    # ctx.progress.track(iterable, "description")
+    provenance: Provenance | None = None  # recorded or simulated inputs (None: a context built by hand)
 
 
 @dataclass
@@ -64,3 +130,29 @@ def stable_stage_hash(name: str) -> int:
 def stage_rng(seed: int, stage: str) -> np.random.Generator:
     """``np.random.default_rng([seed, stable_stage_hash(stage)])``."""
     return np.random.default_rng([seed, stable_stage_hash(stage)])
+
+
+def stage_config(cfg: RunConfig, name: str, module: ModuleType) -> Any:  # Any: the stage's own Config
+    """The stage's section as its ``Config`` dataclass (built from a plain mapping and stored back)."""
+    section = cfg.sections.get(name)
+    if section is None or isinstance(section, dict):
+        section = config_mod.build_dataclass(module.Config, section or {}, name, cfg.source)
+        cfg.sections[name] = section
+    return section
+
+
+def own_provenance(module: ModuleType, config: object) -> Provenance:
+    """Recorded when the stage's ``RECORDED_INPUT`` field names a file, simulated when it declares
+    ``SIMULATES``, else robot files (upstream stages not yet filled in)."""
+    field_name = str(getattr(module, "RECORDED_INPUT", "") or "")
+    record = getattr(config, field_name, None) if field_name else None
+    if record:
+        return Provenance(RECORDED, str(record))
+    simulates = str(getattr(module, "SIMULATES", "") or "")
+    return Provenance(SIMULATED, simulates) if simulates else Provenance(ROBOT_FILES, "")
+
+
+def stage_provenance(cfg: RunConfig, name: str) -> Provenance:
+    """The stage's own provenance from the run configuration (planned or not)."""
+    module = config_mod.load_stage_module(name)
+    return own_provenance(module, stage_config(cfg, name, module))

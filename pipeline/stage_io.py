@@ -45,7 +45,7 @@ from pipeline.config import to_plain
 from pipeline.errors import PipelineError
 from pipeline.robot.exact import load_exact_robot, save_exact_robot
 from pipeline.robot.model import RobotModel
-from pipeline.stage_api import StageOutput, StageResult
+from pipeline.stage_api import PROVENANCE_FILE, Provenance, StageOutput, StageResult
 from pipeline.yaml12 import load_yaml
 
 SUMMARY = "summary.json"
@@ -309,3 +309,17 @@ def inputs_hash(
         "code": code_sha256,
     }
     return hashlib.sha256(artefacts.stable_json(payload).encode()).hexdigest()
+
+
+def write_provenance(run_dir: Path, stages: Mapping[str, Provenance], second_pass: str) -> Path:
+    """``<run>/provenance.json``: each planned stage's provenance and whether the second calibration
+    pass ran, and why (rewritten only when it changes)."""
+    record = {"stages": {name: p.to_dict() for name, p in stages.items()}, "second_pass": second_pass}
+    path = Path(run_dir) / PROVENANCE_FILE
+    try:
+        if artefacts.read_json(path) == record:
+            return path
+    except (OSError, ValueError):
+        pass
+    return artefacts.write_json(path, record)
+

@@ -3,11 +3,18 @@
 A stage module exposes ``NAME``, ``DEPENDS``, ``Config``, ``run`` and optionally ``check`` and
 ``CONFIG_READS`` (:mod:`pipeline.runner`). A stage the robot cannot run (e.g. calibration
 without a tracker) is left out with its reason (:func:`unavailable_stages`).
+
+Provenance (:class:`~pipeline.stage_api.Provenance`): a stage whose ``RECORDED_INPUT`` field names
+a file is *recorded*, one that declares ``SIMULATES`` is *simulated* otherwise, the others read the
+robot files only. A recorded stage never depends on a simulated one: such an upstream stage is
+neither pulled into the plan nor handed on to it (it starts from the nominal model, or from a
+recorded upstream stage's robot), so a run with recorded inputs simulates only what its selected
+stages need.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from types import ModuleType
 from typing import Any
@@ -17,6 +24,7 @@ from pipeline.config import RunConfig
 from pipeline.errors import ConfigError, PipelineError
 from pipeline.robot.iso_search import POSE_AXES
 from pipeline.robot.model import RobotModel
+from pipeline.stage_api import ROBOT_FILES, Provenance, own_provenance, stage_config
 
 
 @dataclass
@@ -28,6 +36,7 @@ class Plan:
     closure: list[str]            # all upstream stages (transitive), in run order
     inputs_sha256: str = ""
     inputs: dict[str, Any] = field(default_factory=dict)   # what the inputs hash covers (manifest)
+    provenance: Provenance = field(default_factory=lambda: Provenance(ROBOT_FILES, ""))
 
 
 def _check_stage_module(name: str, module: ModuleType) -> None:
@@ -40,6 +49,10 @@ def _check_stage_module(name: str, module: ModuleType) -> None:
     reads = getattr(module, "CONFIG_READS", ())
     if not isinstance(reads, (tuple, list)) or not all(isinstance(r, str) and r for r in reads):
         raise PipelineError(where, "CONFIG_READS", f"expected a tuple of dotted setting names, got {reads!r}")
+    for attr in ("RECORDED_INPUT", "SIMULATES"):
+        value = getattr(module, attr, "")
+        if not isinstance(value, str):
+            raise PipelineError(where, attr, f"expected a string, got {value!r}")
     for dotted in reads:
         if dotted.split(".")[0] not in config_mod.section_names():
             raise PipelineError(where, "CONFIG_READS", f"{dotted!r} is not in a section of the run "
@@ -62,6 +75,13 @@ def unavailable_stages(robot: RobotModel) -> dict[str, str]:
     return out
 
 
+def _left_out_note(name: str, left_out: Sequence[str], depends: Sequence[str]) -> str:
+    if not left_out:
+        return ""
+    start = ("nominal kinematics" if "calibration" not in depends else "the recorded calibration's robot")
+    return (f"{name} is recorded: the simulated {', '.join(left_out)} is not used (starts from {start})")
+
+
 def plan_stages(cfg: RunConfig, unavailable: Mapping[str, str] | None = None) -> list[Plan]:
     """Needed stages (selected + their transitive dependencies) in registry order.
 
@@ -82,6 +102,18 @@ def plan_stages(cfg: RunConfig, unavailable: Mapping[str, str] | None = None) ->
             _check_stage_module(name, modules[name])
         return modules[name]
 
+    own: dict[str, Provenance] = {}
+
+    def provenance_of(name: str) -> Provenance:
+        if name not in own:
+            module = module_of(name)
+            own[name] = own_provenance(module, stage_config(cfg, name, module))
+        return own[name]
+
+    def used(name: str, dep: str) -> bool:
+        """A recorded stage never uses a simulated one."""
+        return dep not in unavailable and not (provenance_of(name).recorded and provenance_of(dep).simulated)
+
     needed: set[str] = set()
     stack = list(cfg.stages)
     while stack:
@@ -99,21 +131,24 @@ def plan_stages(cfg: RunConfig, unavailable: Mapping[str, str] | None = None) ->
             if order.index(dep) >= order.index(name):
                 raise PipelineError(where, "DEPENDS",
                                     f"{dep!r} does not run before {name!r}")
-            stack.append(dep)
+            if used(name, dep):
+                stack.append(dep)
 
     plans: dict[str, Plan] = {}
     for name in order:
         if name not in needed:
             continue
         module = module_of(name)
-        section = cfg.sections.get(name)
-        if section is None or isinstance(section, dict):
-            section = config_mod.build_dataclass(module.Config, section or {}, name, cfg.source)
-            cfg.sections[name] = section
+        section = stage_config(cfg, name, module)
         closure: set[str] = set()
-        depends = tuple(d for d in module.DEPENDS if d not in unavailable)
+        depends = tuple(d for d in module.DEPENDS if used(name, d))
         for dep in depends:
             closure.add(dep)
             closure.update(plans[dep].closure)
-        plans[name] = Plan(name, module, section, depends, [s for s in order if s in closure])
+        upstream = [s for s in order if s in closure]
+        left_out = tuple(d for d in module.DEPENDS if d not in unavailable and d not in depends)
+        mine = provenance_of(name)
+        provenance = Provenance(mine.kind, mine.source, tuple(upstream), left_out,
+                                _left_out_note(name, left_out, depends))
+        plans[name] = Plan(name, module, section, depends, upstream, provenance=provenance)
     return list(plans.values())

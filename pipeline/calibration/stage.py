@@ -77,6 +77,9 @@ DEPENDS: tuple[str, ...] = ("model",)
 CONFIG_READS: tuple[str, ...] = ("control.iso",)
 #: fields naming files or folders: the inputs hash covers their content, not their path
 FILE_INPUTS: tuple[str, ...] = ("gravity_model", "measurements_csv", "validation_csv", "working_csv")
+#: provenance (pipeline.stage_plan): the field naming a recorded file, else what is simulated
+RECORDED_INPUT = "measurements_csv"
+SIMULATES = "tracker readings of the hidden robot"
 #: at most about this many candidates are saved for the viewer (every k-th)
 VIEWER_CANDIDATES = 2000
 

@@ -59,6 +59,8 @@ from pipeline.stage_api import StageContext, StageResult
 
 NAME = "control"
 DEPENDS: tuple[str, ...] = ("model", "calibration", "identification")
+#: provenance (pipeline.stage_plan): what is simulated (this stage reads no recorded file)
+SIMULATES = "servo loop on the hidden robot"
 Config = ControlConfig
 
 

@@ -78,7 +78,8 @@ class Config:
     data_decimation: int = 10
     # actuator columns: "gear" = motor-side rotor/friction through the gear matrix (coupled axes,
     # e.g. TX40 5/6), "none" = diagonal joint-side (RobotModel, SymbolicRobot and the hidden robot),
-    # "auto" = gear for a data_file (a real drive train), none for the simulated hidden robot
+    # "auto" = gear for a data_file (a real drive train; none with robot.yaml actuation.torque_side: link),
+    # none for the simulated hidden robot
     actuator_coupling: str = "auto"
     # quality gates (pipeline.quality): data must excite the model (hard error) ...
     min_joint_motion_rad: float = 0.05  # peak to peak, every joint

@@ -71,6 +71,7 @@ from pipeline.identification.tx40 import (
     run_tx40,
 )
 from pipeline.quality import QualityGates
+from pipeline.robot.assumed_values import predicted_drive_values
 from pipeline.robot.defaults import iso_or_derived
 from pipeline.robot.handoff import JointFriction
 from pipeline.robot.iso9283 import IsoPathConfig
@@ -84,6 +85,9 @@ NAME = "identification"
 DEPENDS: tuple[str, ...] = ("model", "calibration")
 #: fields naming files: the inputs hash covers their content, not their path
 FILE_INPUTS: tuple[str, ...] = ("data_file",)
+#: provenance (pipeline.stage_plan): the field naming a recorded file, else what is simulated
+RECORDED_INPUT = "data_file"
+SIMULATES = "joint torques of the hidden robot"
 #: settings of other sections this stage reads (the runner adds them to its inputs hash): the
 #: validation path is the run's EN ISO 9283 path (robot ``run_defaults`` included)
 CONFIG_READS: tuple[str, ...] = ("control.iso", "control.ik_seeds_deg", "control.ik_tolerance_m",
@@ -186,7 +190,9 @@ def _run(ctx: StageContext) -> StageResult:
         raise PipelineError(None, "identification", "no hidden robot to measure and no data_file given")
 
     act = robot.actuation
-    coupled = cfg.actuator_coupling == "gear" or (cfg.actuator_coupling == "auto" and user_data)
+    # a record's torques are motor-side through the gear matrix, unless measured on the link side
+    coupled = cfg.actuator_coupling == "gear" or (cfg.actuator_coupling == "auto" and user_data
+                                                  and act.torque_side == "motor")
     K = act.gear_matrix if coupled else np.eye(nq)
     rec = load_user_record(cfg, robot) if user_data else None  # before any long computation
     # joints whose torques the fit uses: the named ones, else those whose column carries a signal
@@ -250,7 +256,9 @@ def _run(ctx: StageContext) -> StageResult:
     y_fit = y if fit is None else y - fit.stribeck_torque(data.v_blocks).ravel()
     ols = est_mod.ols(Wb, y_fit, nm)
     wls = wls_vc if fit is None else est_mod.wls(Wb, y_fit, nm)
-    p_nom = standard_parameters(robot.model, act.rotor_inertia_kgm2, act.viscous_Nms_rad, act.coulomb_Nm)
+    drive = predicted_drive_values(act, robot.spec.assumed)   # assumed or link-side drive values: 0
+    p_nom = standard_parameters(robot.model, drive["rotor_inertia_kgm2"], drive["viscous_Nms_rad"],
+                                drive["coulomb_Nm"])
     phys = est_mod.physical_fit(data.Y, y_fit, nq, p_nom, wls.joint_sigma_Nm, cfg.regularization,
                                 cfg.physical_max_iter, n_rows=nm)
     phys_vc = phys if fit is None else est_mod.physical_fit(data.Y, y, nq, p_nom, wls_vc.joint_sigma_Nm,

@@ -17,13 +17,36 @@ from __future__ import annotations
 
 import hashlib
 import json
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from pipeline.errors import RobotFileError
 from pipeline.typed_config import dotted_get
 
 _MISSING = object()
+
+#: robot.yaml ``actuation.torque_side``: motor (torques from motor currents) or link (joint torque sensors)
+TORQUE_SIDES = ("link", "motor")
+#: drive values ``robot init`` assumes (a URDF has none): while still assumed they are left out of
+#: the nominal torque prediction, which then is the bare URDF's (identification fits them)
+DRIVE_VALUES = ("rotor_inertia_kgm2", "viscous_Nms_rad", "coulomb_Nm")
+
+
+def predicted_drive_values(actuation: Any, assumed: Mapping[str, object]) -> dict[str, np.ndarray]:  # Any: spec
+    """Rotor inertia, viscous and Coulomb friction of the nominal torque prediction, by name.
+
+    A value is 0 (left out, as in the bare URDF) when robot.yaml still holds it as ``robot init``
+    assumed it (``assumed``: the entries in force), or when torques are measured on the link side
+    (``actuation.torque_side: link``: a joint torque sensor after the gear sees neither the rotor's
+    inertia nor the drive's friction). An assumed value can make the prediction worse than the bare
+    URDF; left out, the nominal model is the bare URDF and the data identify the rest."""
+    link = getattr(actuation, "torque_side", "motor") == "link"
+    return {name: (np.zeros_like(np.asarray(getattr(actuation, name), float))
+                   if link or f"actuation.{name}" in assumed else np.asarray(getattr(actuation, name), float).copy())
+            for name in DRIVE_VALUES}
 
 
 def _normal(value: object) -> object:

@@ -18,7 +18,7 @@ import pinocchio as pin
 import yaml
 
 from pipeline.errors import RobotFileError
-from pipeline.robot.assumed_values import assumed_in_force, locked_joints
+from pipeline.robot.assumed_values import TORQUE_SIDES, assumed_in_force, locked_joints
 from pipeline.typed_config import unknown_key
 from pipeline.yaml12 import DuplicateKeyError, load_yaml, yaml_problem
 
@@ -57,6 +57,9 @@ class ActuationSpec:
     #: ``f_s`` (N m) and Stribeck velocity ``v_s`` (rad/s) per joint; None: viscous + Coulomb only
     static_friction_excess_Nm: np.ndarray | None = None
     stribeck_velocity_rad_s: np.ndarray | None = None
+    #: where logged torques are measured: "motor" (from motor currents: rotor inertia and drive
+    #: friction are in them) or "link" (joint torque sensors after the gear: they are not)
+    torque_side: str = "motor"
 
 
 @dataclass
@@ -278,7 +281,7 @@ def load_robot_spec(path: Path, nq: int | None = None) -> RobotSpec:
     act.check_keys(
         {"gear_ratio", "gear_coupling", "rotor_inertia_kgm2", "viscous_Nms_rad", "coulomb_Nm",
          "coulomb_smoothing_rad_s", "joint_stiffness_Nm_rad", "static_friction_excess_Nm",
-         "stribeck_velocity_rad_s"},
+         "stribeck_velocity_rad_s", "torque_side"},
         {"gear_ratio", "rotor_inertia_kgm2", "viscous_Nms_rad", "coulomb_Nm"},
     )
     per_joint = [len(v) for k in ("gear_ratio", "rotor_inertia_kgm2", "viscous_Nms_rad", "coulomb_Nm")
@@ -317,7 +320,10 @@ def load_robot_spec(path: Path, nq: int | None = None) -> RobotSpec:
         coulomb_smoothing_rad_s=act.number("coulomb_smoothing_rad_s", positive=True, default=0.01),
         joint_stiffness_Nm_rad=(act.vector("joint_stiffness_Nm_rad", n, positive=True)
                                 if "joint_stiffness_Nm_rad" in act.data else None),
+        torque_side=act.text("torque_side", default="motor"),
     )
+    if actuation.torque_side not in TORQUE_SIDES:
+        raise act.error("torque_side", f"must be one of {', '.join(TORQUE_SIDES)}, got {actuation.torque_side!r}")
     if ("static_friction_excess_Nm" in act.data) != ("stribeck_velocity_rad_s" in act.data):
         raise act.error("stribeck_velocity_rad_s", "give static_friction_excess_Nm and stribeck_velocity_rad_s "
                         "together (the Stribeck friction term) or neither")

@@ -48,6 +48,7 @@ def robot_spec_to_yaml(spec: RobotSpec, urdf_name: str) -> dict[str, object]:
             "viscous_Nms_rad": [float(v) for v in act.viscous_Nms_rad],
             "coulomb_Nm": [float(v) for v in act.coulomb_Nm],
             "coulomb_smoothing_rad_s": float(act.coulomb_smoothing_rad_s),
+            "torque_side": act.torque_side,
         } | ({} if act.joint_stiffness_Nm_rad is None
              else {"joint_stiffness_Nm_rad": [float(v) for v in act.joint_stiffness_Nm_rad]})
         | ({} if act.static_friction_excess_Nm is None or act.stribeck_velocity_rad_s is None

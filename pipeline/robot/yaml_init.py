@@ -9,10 +9,21 @@ the robot's assumptions list it until the user edits the value. Placeholder velo
 limits (``velocity="0"`` / ``effort="0"`` in the URDF) are written as ``limits`` overrides. Loading
 the URDF again then reads this file instead of assuming. The file is written atomically and never
 replaces an existing one unless ``force``.
+
+Torque side (``actuation.torque_side``, ``--torque-side``): where a torque log of the arm is
+measured. ``link``: joint torque sensors after the gear (Franka Panda/FR3, KUKA LBR iiwa/Med,
+Kinova Gen3), whose torque holds neither rotor inertia nor drive friction: the prediction of a
+logged torque leaves them out, while robot.yaml keeps the drive's values for the simulated plant
+(its motor mass). ``motor``: torques from motor currents; rotor inertia and friction are assumed by
+the rules below and left out of the nominal prediction while unedited
+(:func:`pipeline.robot.assumed_values.predicted_drive_values`). Without the option the side is
+detected (:func:`detect_torque_side`) and marked ASSUMED.
 """
 
 from __future__ import annotations
 
+import re
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import yaml
@@ -41,7 +52,8 @@ _HEADER = """\
 
 _SECTION_NOTES = {
     "tool": "# TCP pose and laser-tracker reflector in the flange frame",
-    "actuation": "# drive train, joint side: gear ratios, rotor inertia, viscous and Coulomb friction",
+    "actuation": "# drive train, joint side: gear ratios, rotor inertia, viscous and Coulomb friction; torque_side: "
+                 "where a torque log is measured (link: joint torque sensors, motor: motor currents)",
     "limits": "# position, velocity and effort limits come from the URDF unless given here; accelerations "
               "are stated here",
     "tracker": "# nominal laser-tracker pose in the base frame (p_base = T * p_tracker); delete the section "
@@ -50,6 +62,25 @@ _SECTION_NOTES = {
     "capsules": "# collision capsules: segment p0-p1 in the frame `frame`, swept by a sphere of radius_m",
     "locked_joints": "# joints off the arm chain held at these positions (rad or m)",
 }
+
+
+#: arm names (URDF robot, link or joint names) of arms with a torque sensor in every joint
+LINK_SIDE_ARMS = re.compile(r"panda|fr3|franka|iiwa|lbr|kuka_med|gen3", re.IGNORECASE)
+
+
+def detect_torque_side(urdf: Path, arm_joints: list[str]) -> tuple[str, str]:
+    """``(side, how)``: ``link`` when the URDF names an arm built with joint torque sensors (robot,
+    link or joint names matching :data:`LINK_SIDE_ARMS`) or declares a ``force_torque`` sensor
+    (Gazebo ``<sensor type="force_torque">``) on every arm joint; else ``motor``."""
+    root = ET.parse(urdf).getroot()
+    names = [root.get("name") or "", *(e.get("name") or "" for e in root.iter() if e.tag in ("link", "joint"))]
+    if any(LINK_SIDE_ARMS.search(n) for n in names):
+        return "link", "the URDF names an arm with a torque sensor in every joint (Franka, iiwa/LBR, Kinova Gen3)"
+    sensed = {g.get("reference") for g in root.iter("gazebo")
+              if any(x.get("type") == "force_torque" for x in g.iter("sensor"))}
+    if arm_joints and set(arm_joints) <= sensed:
+        return "link", "the URDF declares a force_torque sensor on every arm joint"
+    return "motor", "no joint torque sensor found in the URDF: torques from motor currents"
 
 
 def _rules(robot: RobotModel, *, tip_given: bool, lock: dict[str, float], placeholders: set[str]) -> dict[str, str]:
@@ -110,8 +141,10 @@ def parse_locks(items: list[str]) -> dict[str, float]:
 
 
 def write_robot_yaml(urdf: str | Path, out: str | Path | None = None, *, base: str | None = None,
-                     tip: str | None = None, lock: dict[str, float] | None = None, force: bool = False) -> Path:
-    """Write the commented robot.yaml of ``urdf`` (beside it unless ``out``) and return its path."""
+                     tip: str | None = None, lock: dict[str, float] | None = None, force: bool = False,
+                     torque_side: str | None = None) -> Path:
+    """Write the commented robot.yaml of ``urdf`` (beside it unless ``out``) and return its path.
+    ``torque_side``: link | motor (None: :func:`detect_torque_side`, marked ASSUMED)."""
     urdf = Path(urdf)
     target = Path(out) if out is not None else urdf.parent / "robot.yaml"
     if target.exists() and not force:
@@ -124,10 +157,15 @@ def write_robot_yaml(urdf: str | Path, out: str | Path | None = None, *, base: s
     spec.limit_overrides.update({"velocity_rad_s": robot.limits.velocity_rad_s} if "velocity" in placeholders
                                 else {})
     spec.limit_overrides.update({"effort_Nm": robot.limits.effort_Nm} if "effort" in placeholders else {})
+    side, how = (torque_side, "") if torque_side is not None else detect_torque_side(
+        urdf, [str(robot.model.names[j]) for j in range(1, robot.model.njoints)])
+    spec.actuation.torque_side = side
     data = robot_spec_to_yaml(spec, str(urdf.resolve()) if target.parent.resolve() != urdf.parent.resolve()
                               else urdf.name)
     data.pop("assumptions", None)
     rules = _rules(robot, tip_given=tip is not None, lock=lock or {}, placeholders=placeholders)
+    if how:
+        rules["actuation.torque_side"] = how
     data["assumed"] = {dotted: assumed_entry(data, dotted, rule) for dotted, rule in rules.items()}
     kept = [a for a in robot.assumptions if not a.startswith(("PLACEHOLDER velocity", "PLACEHOLDER effort"))]
     lines = [_HEADER.format(urdf=urdf, assumptions="\n".join(f"#  - {a}" for a in kept))]

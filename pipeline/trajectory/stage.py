@@ -55,6 +55,8 @@ from pipeline.trajectory.validate import (
 
 NAME = "trajectory"
 DEPENDS: tuple[str, ...] = ("model", "identification", "control")  # plans are run in the servo simulation
+#: provenance (pipeline.stage_plan): what is simulated (this stage reads no recorded file)
+SIMULATES = "servo loop on the hidden robot"
 Config = TrajectoryConfig
 
 
