@@ -8,8 +8,9 @@ training folds' residuals). The measurement set-up (tracker pose, reflector or m
 a 6-D marker's rotation) is estimated in every candidate.
 
 The poses are split into ``k`` folds in file order modulo ``k`` (the three fitted rows of a 6-D
-pose stay together); each fold is predicted by the least-squares fit of the other folds
-(:func:`pipeline.calibration.estimate.estimate`) and every held-out pose is scored: the distance
+pose stay together); each fold is predicted by the robust fit of the other folds
+(:func:`pipeline.calibration.robust.robust_estimate`: gross errors are rejected inside the training
+folds only) and every held-out pose is scored: the distance
 between the read and predicted marker origin, and for 6-D readings the angle between the read and
 predicted marker frame. The cross-validation error of a candidate is the mean squared error over
 all held-out poses; its standard error is the spread of the per-fold mean squared errors,
@@ -36,7 +37,7 @@ from pipeline.calibration import subsets
 from pipeline.calibration.config import Config
 from pipeline.calibration.elastostatic import measurement_model
 from pipeline.calibration.error_model import MeasurementModel
-from pipeline.calibration.estimate import Estimate, estimate
+from pipeline.calibration.estimate import Estimate
 from pipeline.calibration.residual_map import fit_residual_map
 from pipeline.calibration.robust import robust_estimate
 from pipeline.errors import PipelineError
@@ -189,8 +190,13 @@ def heldout_errors(mm: MeasurementModel, est: Estimate, meas: ms.Measurements, r
 
 
 def score_subset(mm: MeasurementModel, basis: np.ndarray, meas: ms.Measurements, orientation_sigma_rad: float,
-                 folds: int, max_iterations: int, rng: np.random.Generator) -> tuple[CandidateScore, CandidateScore]:
-    """Held-out errors of one parameter subset without and with the residual map."""
+                 folds: int, max_iterations: int, rng: np.random.Generator, robust: dict | None = None
+                 ) -> tuple[CandidateScore, CandidateScore]:
+    """Held-out errors of one parameter subset without and with the residual map; each training fold
+    is fitted by :func:`pipeline.calibration.robust.robust_estimate` (``robust``: its loss,
+    confidence and max_fraction), so gross errors are rejected inside the training folds only and
+    every held-out pose is scored."""
+    robust = robust or {}
     n = len(meas)
     six_d = meas.rotvec is not None and mm.marker_points
     rec = ms.expand_orientation(meas, orientation_sigma_rad) if six_d else meas
@@ -211,7 +217,8 @@ def score_subset(mm: MeasurementModel, basis: np.ndarray, meas: ms.Measurements,
 
         try:
             est, _ = robust_estimate(mm, rec.Q[train], rec.Y[train], rec.sigma_m[train], basis, f"fold {f + 1}",
-                                     max_iterations, part(rec.payload_mounted), offsets=part(rec.offset_m))
+                                     max_iterations, part(rec.payload_mounted), offsets=part(rec.offset_m),
+                                     **robust)
         except PipelineError:
             continue   # this fold's training poses do not excite every parameter
         e, R_tb, ang = heldout_errors(mm, est, meas, test)
@@ -228,7 +235,7 @@ def score_subset(mm: MeasurementModel, basis: np.ndarray, meas: ms.Measurements,
 
 def select_model(meas: ms.Measurements, setup: Callable[[str], tuple[MeasurementModel, np.ndarray]],
                  orientation_sigma_rad: float, folds: int, max_iterations: int,
-                 rng: np.random.Generator) -> ModelSelection:
+                 rng: np.random.Generator, robust: dict | None = None) -> ModelSelection:
     """Score every candidate (module docstring) and choose one. ``setup(parameters)`` gives the
     measurement model and identifiable basis of a parameter subset."""
     folds = min(folds, len(meas))
@@ -240,7 +247,7 @@ def select_model(meas: ms.Measurements, setup: Callable[[str], tuple[Measurement
         except PipelineError as exc:
             notes.append(f"{subset}: not fitted ({exc})")
             continue
-        plain, mapped = score_subset(mm, basis, meas, orientation_sigma_rad, folds, max_iterations, rng)
+        plain, mapped = score_subset(mm, basis, meas, orientation_sigma_rad, folds, max_iterations, rng, robust)
         plain.candidate, mapped.candidate = Candidate(subset, False), Candidate(subset, True)
         scores += [plain, mapped]
     chosen = one_standard_error(scores)
@@ -262,7 +269,8 @@ def choose_parameters(robot: RobotModel, cfg: Config, user: ms.Measurements | No
         return mm, identify(robot, mm, c, rng)[1]
 
     sel = select_model(user, setup, cfg.orientation_sigma_rad, cfg.cross_validation_folds or DEFAULT_FOLDS,
-                       cfg.max_lm_iterations, rng)
+                       cfg.max_lm_iterations, rng, {"loss": cfg.robust_loss, "confidence": cfg.outlier_confidence,
+                                                    "max_fraction": cfg.max_outlier_fraction})
     p = sel.chosen.parameters
     return replace(cfg, parameters=p,
                    gravity_model=cfg.gravity_model if subsets.wants_compliance(p) else None), sel

@@ -293,9 +293,10 @@ def _calibrate(robot: RobotModel, real, cfg: Config, rng: np.random.Generator, p
                                      rec.payload_mounted, cfg.robust_loss, cfg.outlier_confidence,
                                      cfg.max_outlier_fraction, rec.offset_m, gravity)
     notes |= {"fit_record": rec} if six_d else {}
-    notes["residual_map"] = msel.final_residual_map(notes["model_selection"], mm, est, user, rec, rejection.rejected, rng)
-    if notes["model_selection"] is not None:
-        notes["cross_validation"] = notes["model_selection"].cross_validation()
+    sel = notes["model_selection"]
+    notes["residual_map"] = msel.final_residual_map(sel, mm, est, user, rec, rejection.rejected, rng)
+    if sel is not None:
+        notes["cross_validation"] = sel.cross_validation()
     elif user is not None and cfg.cross_validation_folds:
         notes["cross_validation"] = cross_validate(mm, rec, basis, rejection.rejected, cfg.cross_validation_folds,
                                                    cfg.max_lm_iterations)
