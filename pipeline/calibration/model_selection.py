@@ -276,11 +276,12 @@ def choose_parameters(robot: RobotModel, cfg: Config, user: ms.Measurements | No
                    gravity_model=cfg.gravity_model if subsets.wants_compliance(p) else None), sel
 
 
-def final_residual_map(sel: ModelSelection | None, mm: MeasurementModel, est: Estimate, user: ms.Measurements,
-                       rec: ms.Measurements, rejected: np.ndarray, rng: np.random.Generator) -> ResidualMap | None:
+def final_residual_map(sel: ModelSelection | None, mm: MeasurementModel, est: Estimate,
+                       user: ms.Measurements | None, rec: ms.Measurements, rejected: np.ndarray,
+                       rng: np.random.Generator) -> ResidualMap | None:
     """The residual map of the chosen model, fitted to the final fit's residuals at the marker
     origins of the poses the outlier test kept (None: the map was not chosen)."""
-    if sel is None or not sel.chosen.residual_map:
+    if sel is None or user is None or not sel.chosen.residual_map:
         return None
     rows = np.asarray(rejected, int)
     bad = set((rec.pose_index[rows] if rec.pose_index is not None else rows).tolist())

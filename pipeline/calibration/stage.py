@@ -220,7 +220,7 @@ def _calibrate(robot: RobotModel, real, cfg: Config, rng: np.random.Generator, p
                 m.sigma_m = np.full(len(m), float(cfg.position_sigma_m))
     six_d = user is not None and user.rotvec is not None and cfg.use_orientation
     notes: dict = {}
-    if six_d:   # a marker turned on the flange: its rotation in closed form first
+    if six_d and user is not None:   # a marker turned on the flange: its rotation in closed form first
         notes["marker_rotation_on_flange"], user, val_user = mf.align_records(robot, user, val_user)
     cfg, notes["model_selection"] = msel.choose_parameters(robot, cfg, user, six_d, rng, identify_parameter_set)
     mm = measurement_model(robot, cfg, marker_points=six_d)

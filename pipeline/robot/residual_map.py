@@ -72,5 +72,7 @@ class ResidualMap:
         if cls.KEYS["alpha_m"] not in arrays:
             return None
         length, signal, noise = (float(v) for v in np.asarray(arrays["residual_map_hyperparameters"], float))
-        return cls(*(np.asarray(arrays[cls.KEYS[name]], float) for name in ("inputs_rad", "alpha_m", "cholesky")),
-                   length, signal, noise)
+        def get(name: str) -> np.ndarray:
+            return np.asarray(arrays[cls.KEYS[name]], float)
+
+        return cls(get("inputs_rad"), get("alpha_m"), get("cholesky"), length, signal, noise)
