@@ -290,10 +290,11 @@ def final_residual_map(sel: ModelSelection | None, mm: MeasurementModel, est: Es
     return fit_residual_map(user.Q[keep], e @ R_tb.T, rng)
 
 
-def stage_entries(notes: dict) -> tuple[dict, dict[str, np.ndarray], str]:
+def stage_entries(notes: dict, parameters: str | list[str]) -> tuple[dict, dict[str, np.ndarray], str]:
     """Summary entries, ``results.npz`` arrays (the residual map handed on) and the report section
-    of the model selection, the residual map and the marker rotation kept in an outcome's notes."""
-    summary: dict = {}
+    of the model selection, the residual map and the marker rotation kept in an outcome's notes
+    (``parameters``: the configured subset; auto without a selection is all)."""
+    summary: dict = {"parameters": "all"} if parameters == "auto" else {}
     arrays: dict[str, np.ndarray] = {}
     md = ""
     sel: ModelSelection | None = notes.get("model_selection")

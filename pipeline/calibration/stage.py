@@ -478,7 +478,7 @@ def run(ctx) -> Any:
         "candidate_counts": out.candidates.counts if out.candidates is not None else None,
         "gradient_design": out.gradient.as_dict() if out.gradient is not None else None,
     }
-    extra_summary, extra_arrays, selection_md = msel.stage_entries(out.notes)
+    extra_summary, extra_arrays, selection_md = msel.stage_entries(out.notes, cfg.parameters)
     summary |= extra_summary
     arrays |= extra_arrays
     figures = {}
