@@ -78,8 +78,10 @@ class Config:
     measurements_csv: str | None = None
     validation_csv: str | None = None
     figures: bool = True
-    #: all | geometric | joint_offsets | joint_offsets+compliance | [names] (pipeline.calibration.subsets)
-    parameters: str | list[str] = "all"
+    #: auto | all | geometric | joint_offsets | joint_offsets+compliance | [names]
+    #: (pipeline.calibration.subsets); auto: chosen by cross-validation for a measurement file
+    #: (pipeline.calibration.model_selection), all in simulation
+    parameters: str | list[str] = "auto"
     #: robust loss before the outlier test: huber | cauchy | linear (pipeline.calibration.robust)
     robust_loss: str = "huber"
     #: per-reading confidence of the chi-square outlier test on whitened residuals
@@ -96,7 +98,8 @@ class Config:
     payload_com_m: list[float] | None = None
     #: fraction of the selected configurations measured a second time with the payload mounted
     payload_fraction: float = 0.0
-    #: k-fold cross-validation on a measurement file (0: none; e.g. 5), pipeline.calibration.crossval
+    #: k-fold cross-validation on a measurement file (0: none; e.g. 5), pipeline.calibration.crossval;
+    #: parameters auto uses this many folds (0: 5)
     cross_validation_folds: int = 0
     #: 1-sigma of a measurement file's positions (m); None: the tracker noise model of robot.yaml
     position_sigma_m: float | None = None

@@ -36,7 +36,9 @@ from pipeline.calibration import error_model as em
 from pipeline.calibration import feasibility as fz
 from pipeline.calibration import grid_cache, plots, subsets
 from pipeline.calibration import indices as ix
+from pipeline.calibration import marker_frame as mf
 from pipeline.calibration import measure as ms
+from pipeline.calibration import model_selection as msel
 from pipeline.calibration import task_space as ts
 from pipeline.calibration import validate as va
 from pipeline.calibration.config import MAX_CANDIDATES, Config
@@ -220,6 +222,10 @@ def _calibrate(robot: RobotModel, real, cfg: Config, rng: np.random.Generator, p
             if m is not None:
                 m.sigma_m = np.full(len(m), float(cfg.position_sigma_m))
     six_d = user is not None and user.rotvec is not None and cfg.use_orientation
+    notes: dict = {}
+    if six_d and user is not None:   # a marker turned on the flange: its rotation in closed form first
+        notes["marker_rotation_on_flange"], user, val_user = mf.align_records(robot, user, val_user)
+    cfg, notes["model_selection"] = msel.choose_parameters(robot, cfg, user, six_d, rng, identify_parameter_set)
     mm = measurement_model(robot, cfg, marker_points=six_d)
     upstream_gravity = load_gravity_model(cfg, robot)
     if upstream_gravity is not None:
@@ -289,8 +295,12 @@ def _calibrate(robot: RobotModel, real, cfg: Config, rng: np.random.Generator, p
     est, rejection = robust_estimate(mm, rec.Q, rec.Y, rec.sigma_m, basis, rec.source, cfg.max_lm_iterations,
                                      rec.payload_mounted, cfg.robust_loss, cfg.outlier_confidence,
                                      cfg.max_outlier_fraction, rec.offset_m, gravity)
-    notes: dict = {"fit_record": rec} if six_d else {}
-    if user is not None and cfg.cross_validation_folds:
+    notes |= {"fit_record": rec} if six_d else {}
+    sel = notes["model_selection"]
+    notes["residual_map"] = msel.final_residual_map(sel, mm, est, user, rec, rejection.rejected, rng)
+    if sel is not None:
+        notes["cross_validation"] = sel.cross_validation()
+    elif user is not None and cfg.cross_validation_folds:
         notes["cross_validation"] = cross_validate(mm, rec, basis, rejection.rejected, cfg.cross_validation_folds,
                                                    cfg.max_lm_iterations)
     if upstream_gravity is not None:
@@ -471,12 +481,16 @@ def run(ctx) -> Any:
         "candidate_counts": out.candidates.counts if out.candidates is not None else None,
         "gradient_design": out.gradient.as_dict() if out.gradient is not None else None,
     }
+    extra_summary, extra_arrays, selection_md = msel.stage_entries(out.notes, cfg.parameters)
+    summary |= extra_summary
+    arrays |= extra_arrays
     figures = {}
     if cfg.figures:
         figures = plots.stage_figures(out)
     data["design_table"] = out.design_table
     result = StageResult(summary=summary, arrays=arrays, data=data, figures=figures, robot=out.robot,
-                         report_md=report_markdown(out, cfg, ctx.robot) + dtab.markdown_section(out.design_table))
+                         report_md=selection_md + report_markdown(out, cfg, ctx.robot)
+                         + dtab.markdown_section(out.design_table))
     gates = QualityGates(NAME, accept_poor=ctx.run.accept_poor)
     gates.check("chi2_per_dof", est.chi2_per_dof, "<=", cfg.max_chi2_per_dof,
                 "whitened fit residuals after the outlier test; far above 1: the error model does not explain "

@@ -1,13 +1,16 @@
 """Parameter subsets of the calibration (``calibration.parameters``).
 
-- ``all`` (default): every geometric error of the error model and the joint compliances
+- ``auto`` (default): with a measurement file, the subset (and the residual map) chosen by
+  cross-validation (:mod:`pipeline.calibration.model_selection`); in simulation ``all``;
+- ``all``: every geometric error of the error model and the joint compliances
   (elastostatic model, :mod:`pipeline.calibration.error_model`);
 - ``geometric``: the geometric errors only (the rigid-arm calibration of earlier versions);
 - ``joint_offsets``: the joint zero offsets ``j{i}.dq``;
 - ``joint_offsets+compliance``: zero offsets and compliances ``j{i}.c``;
 - a list of parameter names (``[j2.dq, j3.dq, j2.c]``).
 
-The measurement set-up (``tracker.*`` pose, ``reflector.*`` offset) is always estimated. Among the
+The measurement set-up (``tracker.*`` pose, ``reflector.*`` offset, and for 6-D readings the marker
+frame's rotation ``tool.rx..rz``) is always estimated. Among the
 selected parameters the identifiability analysis keeps the identifiable base set.
 """
 
@@ -16,17 +19,19 @@ from __future__ import annotations
 from pipeline.calibration.error_model import is_compliance
 from pipeline.errors import ConfigError
 
-NAMED_SUBSETS = ("all", "geometric", "joint_offsets", "joint_offsets+compliance")
+NAMED_SUBSETS = ("auto", "all", "geometric", "joint_offsets", "joint_offsets+compliance")
 
 
 def _setup(name: str) -> bool:
-    return name.startswith(("tracker.", "reflector."))
+    """Tracker pose, reflector offset and the marker's rotation on the flange (tool rotations: only
+    6-D readings see them; position readings leave them unidentifiable)."""
+    return name.startswith(("tracker.", "reflector.", "tool.r"))
 
 
 def wants_compliance(parameters: str | list[str]) -> bool:
     """Whether the subset needs the elastostatic error model."""
     if isinstance(parameters, str):
-        return parameters in ("all", "joint_offsets+compliance")
+        return parameters in ("auto", "all", "joint_offsets+compliance")
     return any(is_compliance(p) for p in parameters)
 
 
@@ -44,7 +49,7 @@ def check_parameters(parameters: object, source: str = "config") -> None:
 
 def select(parameters: str | list[str], names: list[str]) -> list[int]:
     """Column indices of ``names`` (the error model's parameters) in the subset."""
-    if parameters == "all":
+    if parameters in ("auto", "all"):   # auto: "all" until the model selection has chosen
         return list(range(len(names)))
     if parameters == "geometric":
         return [i for i, n in enumerate(names) if not is_compliance(n)]

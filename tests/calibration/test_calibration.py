@@ -356,7 +356,8 @@ def test_measurement_file_without_validation_file_has_no_heldout_validation(robo
     from pipeline.calibration import indices as ix
 
     path, _, n_meas, _ = tracker_files
-    cfg = _cfg(measurements_csv=str(path), n_heldout=200, identifiability_samples=60, index_name="O3")
+    cfg = _cfg(measurements_csv=str(path), n_heldout=200, identifiability_samples=60, index_name="O3",
+               parameters="all")
     res = st.run(_Ctx(cfg, robot, 5))
     s = res.summary
     assert all(s[k] is None for k in HELDOUT_KEYS)

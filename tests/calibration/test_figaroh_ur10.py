@@ -1,0 +1,103 @@
+"""FIGAROH's UR10 6-D motion-capture record (recorded, data/figaroh_ur10_mocap): the URDF as shipped,
+robot.yaml from `robot init` unedited, the CSV converted in layout only (tools/mocap_rpy_csv.py)."""
+
+from __future__ import annotations
+
+import importlib.util
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from pipeline.calibration import error_model as em
+from pipeline.calibration import marker_frame as mf
+from pipeline.calibration import measure as ms
+from pipeline.calibration import model_selection as msel
+from pipeline.calibration import stage as st
+from pipeline.calibration.estimate import register_points
+from pipeline.robot.model import RobotModel
+from pipeline.robot.yaml_init import write_robot_yaml
+
+REPO = Path(__file__).resolve().parents[2]
+DATA = REPO / "data" / "figaroh_ur10_mocap"
+JOINTS = ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint",
+          "wrist_3_joint"]
+#: the issue's target: 5-fold held-out RMS over all 23 poses (FIGAROH itself: 4.15 mm, 0.51 deg)
+TARGET_POSITION_M = 4.0e-3
+TARGET_ORIENTATION_RAD = np.radians(0.5)
+
+
+def _converter():
+    spec = importlib.util.spec_from_file_location("mocap_rpy_csv", REPO / "tools" / "mocap_rpy_csv.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="module")
+def record(tmp_path_factory) -> tuple[RobotModel, ms.Measurements]:
+    folder = tmp_path_factory.mktemp("ur10")
+    shutil.copy(DATA / "robot.urdf", folder / "robot.urdf")
+    write_robot_yaml(folder / "robot.urdf")
+    robot = RobotModel.load(folder)
+    path = _converter().convert(DATA / "calibration.csv", folder / "ur10.csv", JOINTS)
+    return robot, ms.read_csv(path, robot)
+
+
+def _orientation_gap_rad(robot: RobotModel, meas: ms.Measurements) -> float:
+    """RMS angle between the read orientations and the nominal reflector frame's (tracker registered)."""
+    mm = em.MeasurementModel(robot, marker_points=True)
+    P, R_refl = mm.base_positions(meas.Q, np.zeros(mm.n), None, np.zeros((len(meas), 3)))
+    T = register_points(meas.Y, P)
+    R_meas = Rotation.from_rotvec(meas.rotvec).as_matrix()
+    R_pred = np.einsum("ji,njk->nik", T.rotation, R_refl)
+    ang = np.linalg.norm(Rotation.from_matrix(np.einsum("nji,njk->nik", R_pred, R_meas)).as_rotvec(), axis=1)
+    return float(np.sqrt(np.mean(ang ** 2)))
+
+
+def test_conversion_keeps_every_value(record):
+    robot, meas = record
+    assert len(meas) == 23 and meas.rotvec is not None
+    raw = np.genfromtxt(DATA / "calibration.csv", delimiter=",", names=True)
+    assert np.array_equal(meas.Y, np.column_stack([raw["x1"], raw["y1"], raw["z1"]]))
+    R = Rotation.from_euler("xyz", np.column_stack([raw["phix1"], raw["phiy1"], raw["phiz1"]])).as_matrix()
+    assert np.allclose(Rotation.from_rotvec(meas.rotvec).as_matrix(), R, atol=1e-12)
+
+
+def test_marker_rotation_on_the_flange_is_found_in_closed_form(record):
+    """The marker is turned about 30 deg on the flange (README); after the alignment the readings
+    agree with the nominal reflector frame to the nominal arm's own errors (a few degrees)."""
+    robot, meas = record
+    R_m, aligned, _ = mf.align_records(robot, meas, None)
+    assert 20.0 < mf.mount_rotation_deg(R_m) < 40.0
+    before, after = _orientation_gap_rad(robot, meas), _orientation_gap_rad(robot, aligned)
+    assert before > np.radians(15.0) and after < 0.2 * before
+
+
+@pytest.fixture(scope="module")
+def selection(record) -> msel.ModelSelection:
+    """parameters auto on the record; noise by hand until the record's own noise model is estimated:
+    2 mm per position axis, 1 mrad per orientation axis."""
+    robot, meas = record
+    meas = ms.Measurements(meas.Q, meas.Y, np.full(len(meas), 2e-3), meas.source, meas.rotvec, len(meas))
+    cfg = st.Config(measurements_csv="recorded", orientation_sigma_rad=1e-3, figures=False)
+    _, aligned, _ = mf.align_records(robot, meas, None)
+    chosen_cfg, sel = msel.choose_parameters(robot, cfg, aligned, True, np.random.default_rng(0),
+                                             st.identify_parameter_set)
+    assert sel is not None and chosen_cfg.parameters == sel.chosen.parameters
+    return sel
+
+
+def test_auto_meets_the_published_figures_over_all_poses(selection):
+    cv = selection.cross_validation()
+    assert selection.folds == 5 and cv["n_poses"] == 23
+    assert cv["rms_position_error_m"] <= TARGET_POSITION_M
+    assert cv["rms_orientation_error_rad"] <= TARGET_ORIENTATION_RAD
+    # every candidate scored every held-out pose, in position and orientation
+    for s in selection.scores:
+        assert s.valid and np.all(np.isfinite(s.orientation_error_rad))
+    # 23 poses cannot support joint compliances on top of the geometry
+    assert selection.chosen.parameters != "all"
+    assert "one-standard-error" in selection.markdown() and "(chosen)" in selection.markdown()

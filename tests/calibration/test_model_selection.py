@@ -1,0 +1,107 @@
+"""parameters auto: the one-standard-error rule and the Gaussian-process residual map."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.calibration import marker_frame as mf
+from pipeline.calibration import subsets
+from pipeline.calibration.config import Config
+from pipeline.calibration.model_selection import Candidate, CandidateScore, one_standard_error
+from pipeline.calibration.residual_map import fit_residual_map
+from pipeline.robot.residual_map import ResidualMap
+
+FOLDS = np.arange(40) % 5
+#: pose-to-pose spread of held-out errors, common to all candidates (the same poses are held out)
+SPREAD = np.abs(1.0 + 0.4 * np.random.default_rng(0).standard_normal(40))
+
+
+def _score(parameters: str, n: int, rms_m: float, rng: np.random.Generator, residual_map: bool = False
+           ) -> CandidateScore:
+    e = rms_m * SPREAD * (1.0 + 0.02 * rng.standard_normal(40))
+    return CandidateScore(Candidate(parameters, residual_map), n, FOLDS, e, None)
+
+
+def test_one_standard_error_prefers_the_simpler_model_unless_the_richer_is_clearly_better():
+    rng = np.random.default_rng(1)
+    simple = _score("joint_offsets", 10, 1.00e-3, rng)
+    close = _score("geometric", 30, 0.97e-3, rng)
+    assert one_standard_error([simple, close]).parameters == "joint_offsets"
+    far = _score("geometric", 30, 0.40e-3, rng)
+    assert one_standard_error([simple, far]).parameters == "geometric"
+
+
+def test_one_standard_error_needs_orientation_too_for_six_d_readings():
+    rng = np.random.default_rng(2)
+    simple = _score("joint_offsets", 10, 1.0e-3, rng)
+    rich = _score("geometric", 30, 1.0e-3, rng)
+    simple.orientation_error_rad = np.full(40, 0.02) * (1 + 0.1 * rng.standard_normal(40))
+    rich.orientation_error_rad = np.full(40, 0.005) * (1 + 0.1 * rng.standard_normal(40))
+    assert one_standard_error([simple, rich]).parameters == "geometric"
+
+
+def test_a_failed_fold_disqualifies_a_candidate():
+    rng = np.random.default_rng(3)
+    broken = _score("geometric", 30, 0.1e-3, rng)
+    broken.position_error_m[:8] = np.nan
+    assert one_standard_error([_score("joint_offsets", 10, 1e-3, rng), broken]).parameters == "joint_offsets"
+
+
+def test_auto_is_the_default_and_means_all_without_a_measurement_file():
+    assert Config().parameters == "auto"
+    names = ["j2.dq", "j2.dx", "j2.c", "tracker.dx", "tool.rx"]
+    assert subsets.select("auto", names) == subsets.select("all", names)
+    assert subsets.wants_compliance("auto")
+    # the marker's rotation on the flange is part of the set-up in every subset
+    assert "tool.rx" in [names[i] for i in subsets.select("joint_offsets", names)]
+
+
+@pytest.fixture(scope="module")
+def smooth_field():
+    """A smooth millimetre-size field over 6 joint angles, read with 30 µm noise."""
+    rng = np.random.default_rng(4)
+
+    def field(Q: np.ndarray) -> np.ndarray:
+        return 1e-3 * np.column_stack([np.sin(Q[:, 1]) * np.cos(Q[:, 2]), np.cos(Q[:, 1] + Q[:, 0]),
+                                       0.5 * np.sin(Q[:, 2] - Q[:, 3])])
+
+    Q = rng.uniform(-1.0, 1.0, (150, 6))
+    D = field(Q) + 30e-6 * rng.standard_normal((150, 3))
+    return field, Q, D, fit_residual_map(Q, D, rng)
+
+
+def test_residual_map_learns_a_smooth_field_and_knows_where_it_does_not(smooth_field):
+    field, _, _, rmap = smooth_field
+    rng = np.random.default_rng(5)
+    Q_new = rng.uniform(-0.8, 0.8, (200, 6))
+    truth = field(Q_new)
+    mean, std = rmap.predict(Q_new)
+    rms_before = np.sqrt(np.mean(np.sum(truth ** 2, axis=1)))
+    rms_after = np.sqrt(np.mean(np.sum((truth - mean) ** 2, axis=1)))
+    assert rms_after < 0.2 * rms_before
+    # its stated uncertainty is honest inside the data (per-axis error against per-axis std)
+    assert 0.5 < np.sqrt(np.mean((truth - mean) ** 2)) / np.sqrt(np.mean(std ** 2)) < 2.0
+    # far from every calibration pose: no correction, the prior's full uncertainty
+    far_mean, far_std = rmap.predict(np.full((1, 6), 40.0))
+    assert np.all(np.abs(far_mean) < 1e-9) and far_std[0] == pytest.approx(rmap.signal_std_m, rel=1e-6)
+    positions = np.zeros((len(Q_new), 3))
+    assert np.allclose(rmap.correct(positions, Q_new), mean)
+
+
+def test_residual_map_hand_off_round_trip(smooth_field):
+    _, Q, _, rmap = smooth_field
+    back = ResidualMap.from_arrays(rmap.to_arrays())
+    assert back is not None
+    for a, b in zip(rmap.predict(Q[:10]), back.predict(Q[:10]), strict=True):
+        assert np.array_equal(a, b)
+    assert ResidualMap.from_arrays({}) is None
+
+
+def test_project_to_rotation_returns_the_rotation_of_a_perturbed_one():
+    rng = np.random.default_rng(6)
+    R = np.linalg.qr(rng.standard_normal((3, 3)))[0]
+    R *= np.sign(np.linalg.det(R))
+    P = mf.project_to_rotation(R + 1e-3 * rng.standard_normal((3, 3)))
+    assert np.allclose(P @ P.T, np.eye(3), atol=1e-12) and np.linalg.det(P) > 0
+    assert np.abs(P - R).max() < 5e-3
