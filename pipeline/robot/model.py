@@ -74,7 +74,9 @@ class RobotModel:
 
         A URDF alone gets stated assumptions for what it lacks (``assumptions``); joints off the
         base->tip chain are locked, those in ``lock`` at the given positions (:mod:`pipeline.robot.loading`).
-        ``urdf_alone``: ignore a robot.yaml beside the URDF. The reflector must lie outside every capsule.
+        ``urdf_alone``: ignore a robot.yaml beside the URDF. An assumed reflector (or probe diode) must lie
+        outside every capsule; one robot.yaml gives (measured, calibrated) may not, which
+        :func:`pipeline.robot.plausibility.robot_warnings` reports.
         """
         spec, model, urdf_text, assumptions = load_robot_files(robot, yaml_path, base=base, tip=tip, lock=lock,
                                                                urdf_alone=urdf_alone)
@@ -82,6 +84,8 @@ class RobotModel:
         robot_model = cls._assemble(spec, model, urdf_text, assumptions)
         robot_model._check_always_colliding(fix=assumed)
         for field, what, point in marker_points(spec):
+            if not (assumed or field.split("[")[0] in spec.assumed):
+                continue      # measured or calibrated: a fact (robot_warnings names a capsule that holds it)
             holding = capsules_holding(robot_model.model, spec.flange_frame, point, spec.capsules)
             if holding:
                 raise RobotFileError(spec.path, field, f"{what} lies inside {describe(holding)}; move it out along "

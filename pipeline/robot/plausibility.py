@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.robot.model import RobotModel
+from pipeline.robot.reflector_check import capsules_holding, describe, marker_points
 
 GRAVITY_M_S2 = 9.81
 #: mass-vs-reach law: mass / reach^REACH_EXPONENT (the data sheets' spread is smallest near 2.5)
@@ -217,6 +218,21 @@ def plausibility_warnings(arm: ArmFigures) -> list[str]:
     return [*_mass_warnings(arm), *_limit_warnings(arm)]
 
 
+def marker_warnings(robot: RobotModel) -> list[str]:
+    """A reflector or probe diode that robot.yaml gives (measured or calibrated, not assumed) inside a
+    collision capsule: the marker is real, so the capsule is larger than the arm there, and a simulated
+    measurement design rejects every pose in which it holds the marker."""
+    spec = robot.spec
+    out = []
+    for field, what, point in marker_points(spec):
+        holding = capsules_holding(robot.model, spec.flange_frame, point, spec.capsules)
+        if holding:
+            out.append(f"{what} ({field}) lies inside {describe(holding)}: the capsules are larger than the arm "
+                       "there (edit capsules in robot.yaml), or the offset is wrong")
+    return out
+
+
 def robot_warnings(robot: RobotModel, summary: Mapping[str, object] | None = None) -> list[str]:
-    """:func:`plausibility_warnings` of a :class:`~pipeline.robot.model.RobotModel`."""
-    return plausibility_warnings(ArmFigures.of(robot, summary))
+    """:func:`plausibility_warnings` of a :class:`~pipeline.robot.model.RobotModel`, and
+    :func:`marker_warnings`."""
+    return [*plausibility_warnings(ArmFigures.of(robot, summary)), *marker_warnings(robot)]

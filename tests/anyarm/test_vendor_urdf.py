@@ -15,8 +15,10 @@ import yaml
 
 from pipeline.cli import main
 from pipeline.errors import RobotFileError
+from pipeline.robot.assumed_values import value_digest
 from pipeline.robot.example_robots import example_arm_urdf
 from pipeline.robot.model import RobotModel
+from pipeline.robot.plausibility import robot_warnings
 from pipeline.robot.reflector_check import capsules_holding
 from pipeline.robot.vendor_urdf import BASE_MASS_SHARE, datasheet_mass_kg
 
@@ -141,7 +143,7 @@ def test_reflector_goes_on_tool0_outside_every_capsule(tmp_path):
     assert not capsules_holding(wrist.model, "wrist_3_link", wrist.spec.tool.reflector_offset_m, wrist.capsules)
 
 
-def test_reflector_inside_a_capsule_is_refused_at_load_time(tmp_path):
+def test_an_assumed_reflector_inside_a_capsule_is_refused_a_given_one_is_warned(tmp_path):
     urdf = _write(tmp_path, _vendor_text())
     assert main(["robot", "init", str(urdf)]) == 0
     robot = RobotModel.load(urdf.parent)
@@ -155,10 +157,17 @@ def test_reflector_inside_a_capsule_is_refused_at_load_time(tmp_path):
     path = urdf.parent / "robot.yaml"
     edited = yaml.safe_load(path.read_text())
     edited["tool"]["reflector_offset_m"] = [float(v) for v in inside]
+    # still marked as robot init's assumption (its digest follows the value): refused
+    edited["assumed"]["tool.reflector_offset_m"]["sha256"] = value_digest(edited["tool"]["reflector_offset_m"])
     path.write_text(yaml.safe_dump(edited, sort_keys=False))
     with pytest.raises(RobotFileError, match=rf"tool.reflector_offset_m: the reflector lies inside capsule "
                                              rf"'{capsule.name}' in 100% of configurations"):
         RobotModel.load(urdf.parent)
+    # a value the user gives (measured, or a calibration's): loaded, and the capsule is named in a warning
+    del edited["assumed"]["tool.reflector_offset_m"]
+    path.write_text(yaml.safe_dump(edited, sort_keys=False))
+    given = RobotModel.load(urdf.parent)
+    assert any(f"capsule '{capsule.name}' in 100% of configurations" in w for w in robot_warnings(given))
 
 
 def test_assumed_marks_go_only_with_an_edit_and_init_respects_its_options(tmp_path):
