@@ -157,9 +157,12 @@ class Plant:
         static deflection under gravity, ``g(q0) / k``), both with velocity ``v0``; ``q0`` is the link side.
         """
         n, N = self.nq, len(q_d_fb)
+        transmission = self.elastic or self.stribeck
+        tr_vec = self.transmission.loop_vector() if transmission else None
+        # the hidden robot's numbers are constants of the compiled loop (one library per plant)
         ls = loop.LoopStructure(self._chain, velocity_samples, self.substeps_for(sample_time_s / velocity_samples),
-                                measurement_delay_samples, chunk_samples, self.elastic, self.stribeck)
-        tr_vec = self.transmission.loop_vector() if ls.transmission else None
+                                measurement_delay_samples, chunk_samples, self.elastic, self.stribeck,
+                                loop.plant_numbers(self._p, tr_vec) if engine == "compiled" else ())
         P = loop.loop_parameters(self._p, gains["kp"], gains["kv"], gains["ki"], velocity_filter_alpha,
                                  self.encoder_resolution_rad, sample_time_s, tr_vec)
         noise = self.encoder_noise_rad * rng.standard_normal((N, velocity_samples * n))
