@@ -52,39 +52,26 @@ def main(robot_name: str = "rx130l", python_seconds: float = 1.0) -> None:
 def _measure(real, robot, ref, cfg, python_seconds: float) -> None:
     t0 = time.perf_counter()
     k_warm = min(len(ref.t_s), 50)
-    real.plant.fixed_plant_numbers = False      # warm the generic library too
-    simulate_joint_trajectory(real, robot, ref.t_s[:k_warm], ref.q_d[:k_warm], ref.v_d[:k_warm], ref.a_d[:k_warm],
-                              cfg, "full_friction", np.random.default_rng(0))
-    real.plant.fixed_plant_numbers = True
     simulate_joint_trajectory(real, robot, ref.t_s[:k_warm], ref.q_d[:k_warm], ref.v_d[:k_warm], ref.a_d[:k_warm],
                               cfg, "full_friction", np.random.default_rng(0))
     print(f"compiled rollout ready in {time.perf_counter() - t0:.2f} s (gcc on first use, then cached on disk)")
-    results, generic = [], []
+    results = []
     whole = []
-    for _ in range(3):          # alternating, so that both see the same load of a shared machine
+    for _ in range(3):
         c0, t0 = time.process_time(), time.perf_counter()
         res = simulate_joint_trajectory(real, robot, ref.t_s, ref.q_d, ref.v_d, ref.a_d, cfg, "full_friction",
                                         np.random.default_rng(0))
         results.append(res)
         whole.append((time.perf_counter() - t0, time.process_time() - c0))
-        real.plant.fixed_plant_numbers = False
-        generic.append(simulate_joint_trajectory(real, robot, ref.t_s, ref.q_d, ref.v_d, ref.a_d, cfg,
-                                                 "full_friction", np.random.default_rng(0)))
-        real.plant.fixed_plant_numbers = True
     best = max(results, key=lambda r: r.realtime_factor)
     best_cpu = max(results, key=lambda r: r.realtime_factor_cpu)
     sim_s = len(ref.t_s) * cfg.sample_time_s + cfg.settle_time_s
-    print(f"compiled loop, plant numbers as constants: {sim_s:.2f} s simulated in {best.wall_time_s:.3f} s wall "
+    print(f"compiled loop: {sim_s:.2f} s simulated in {best.wall_time_s:.3f} s wall "
           f"-> real-time factor {best.realtime_factor:.1f} (CPU-time based {best_cpu.realtime_factor_cpu:.1f}; "
           f"best of 3)")
     wall_s, cpu_s = min(w for w, _ in whole), min(c for _, c in whole)
     print(f"whole control simulation (resample, feedforward, loop): {sim_s / wall_s:.1f} x real time wall, "
           f"{sim_s / cpu_s:.1f} x CPU (best of 3)")
-    g_wall = max(generic, key=lambda r: r.realtime_factor)
-    g_cpu = max(generic, key=lambda r: r.realtime_factor_cpu)
-    print(f"compiled loop, plant numbers as inputs (the generic library): real-time factor "
-          f"{g_wall.realtime_factor:.1f} wall, {g_cpu.realtime_factor_cpu:.1f} CPU; largest difference of the "
-          f"encoder records {np.abs(g_wall.q - best.q).max():.1e} rad")
     k = min(len(ref.t_s), int(python_seconds / cfg.sample_time_s))
     py_cfg = ControlConfig(on_saturation="clip", engine="python", settle_time_s=0.0)
     res_py = simulate_joint_trajectory(real, robot, ref.t_s[:k], ref.q_d[:k], ref.v_d[:k], ref.a_d[:k], py_cfg,

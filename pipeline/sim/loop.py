@@ -19,12 +19,6 @@ history), so the measurement delay only acts on the feedback, not as a lag.
 The step is rolled out with ``mapaccum`` over a chunk of samples, C code is generated and
 compiled with gcc once per structure; the ``.so`` is cached under ``~/.cache/pipeline/control``
 keyed by a hash of the structure, the loop settings, CasADi's version and this source.
-With ``LoopStructure.plant_numbers`` (what :class:`pipeline.sim.plant.Plant` passes: the hidden
-robot does not change within a run) the plant's numbers are constants of the generated code and
-the step is expanded into one flat SX expression: gcc then folds the constant inertias, placements
-and transmission numbers and keeps the step in registers (RX130L elastic plant: about 1.7x faster
-than the step with the plant numbers as inputs; identical arithmetic up to rounding, the loop
-outputs agree to < 1e-9, ``tests/sim/test_dynamics_loop.py``).
 """
 
 from __future__ import annotations
@@ -57,9 +51,6 @@ class LoopStructure:
     chunk_samples: int = 250
     elastic: bool = False        # two-mass joints: state + (theta, omega), encoders on theta
     stribeck: bool = False       # the truth's Stribeck / load-dependent friction (rigid joints)
-    # the plant part of the loop parameters (p_dyn, then the transmission numbers) fixed in the
-    # generated code; the rollout then ignores those entries of its P input. Empty: all inputs.
-    plant_numbers: tuple[float, ...] = ()
 
     @property
     def nq(self) -> int:
@@ -106,33 +97,8 @@ def loop_parameters(p_dyn: np.ndarray, kp: np.ndarray, kv: np.ndarray, ki: np.nd
     return np.concatenate([p_dyn, kp, kv, ki, [alpha, encoder_resolution_rad, sample_time_s], *extra])
 
 
-def plant_numbers(p_dyn: np.ndarray, transmission: np.ndarray | None = None) -> tuple[float, ...]:
-    """The plant part of the loop parameters (``LoopStructure.plant_numbers``): ``p_dyn`` and, for an
-    elastic or Stribeck plant, the transmission numbers."""
-    extra = [] if transmission is None else [np.asarray(transmission, float)]
-    return tuple(float(x) for x in np.concatenate([np.asarray(p_dyn, float), *extra]))
-
-
 def build_step(ls: LoopStructure) -> ca.Function:
-    """``step(x, u, P) -> (x_next, y)``; layouts in the module docstring and :func:`unpack_output`.
-
-    With ``ls.plant_numbers`` the step is one flat SX function whose plant entries of ``P`` are
-    those constants (the entries passed in ``P`` are not read)."""
-    step = _step_mx(ls)
-    if not ls.plant_numbers:
-        return step
-    npd, n_ctrl = ls.chain.n_params, 3 * ls.nq + 3
-    fixed = np.asarray(ls.plant_numbers, float)
-    if len(fixed) != ls.n_loop_params - n_ctrl:
-        raise ValueError(f"plant_numbers: {len(fixed)} numbers, the loop needs {ls.n_loop_params - n_ctrl}")
-    x, u, P = ca.SX.sym("x", ls.n_state), ca.SX.sym("u", ls.n_input), ca.SX.sym("P", ls.n_loop_params)
-    p_fixed = ca.vertcat(ca.DM(fixed[:npd]), P[npd:npd + n_ctrl], ca.DM(fixed[npd:]))
-    x_next, y = step(x, u, p_fixed)
-    return ca.Function("step", [x, u, P], [x_next, y], ["x", "u", "P"], ["x_next", "y"])
-
-
-def _step_mx(ls: LoopStructure) -> ca.Function:
-    """The step with every loop parameter an input (MX graph of the SX plant functions)."""
+    """``step(x, u, P) -> (x_next, y)``; layouts in the module docstring and :func:`unpack_output`."""
     n, nv_, ns = ls.nq, ls.velocity_samples_per_position_sample, ls.substeps_per_velocity_sample
     dm = ls.measurement_delay_samples
     fd = dynamics.forward_dynamics_function(ls.chain)
@@ -210,10 +176,7 @@ def unpack_output(Y: np.ndarray, n: int) -> dict[str, np.ndarray]:
     return {k: Y[:, i * n:(i + 1) * n] for i, k in enumerate(names) if (i + 1) * n <= Y.shape[1]}
 
 
-# the .so is built for this machine (host name in the cache key); -fno-math-errno lets gcc fuse sin
-# and cos of a joint angle into one sincos call (errno is never read); -O2 runs the flat step as fast
-# as -O3 and compiles quicker
-GCC_FLAGS = ("-O2", "-march=native", "-fno-math-errno")
+GCC_FLAGS = ("-O3", "-march=native")  # the .so is built for this machine (host name in the cache key)
 _CACHE: dict[str, ca.Function] = {}
 _LOCK = threading.Lock()
 

@@ -67,9 +67,6 @@ class Plant:
         self.integration_rate_hz = float(integration_rate_hz)
         self.nq = model.model.nq
         self.transmission = transmission
-        # the compiled loop takes this plant's numbers as constants of its code (False: as inputs of
-        # the generic library shared by every plant of the same structure; same results up to rounding)
-        self.fixed_plant_numbers = True
         k = None if transmission is None else np.asarray(transmission.stiffness_Nm_rad, float)
         if k is not None and np.any(np.isfinite(k)) and not np.all(np.isfinite(k)):
             raise ConfigError(None, "truth.joint_stiffness", "either every joint is elastic or none (inf)")
@@ -160,12 +157,9 @@ class Plant:
         static deflection under gravity, ``g(q0) / k``), both with velocity ``v0``; ``q0`` is the link side.
         """
         n, N = self.nq, len(q_d_fb)
-        transmission = self.elastic or self.stribeck
-        tr_vec = self.transmission.loop_vector() if transmission else None
-        # the hidden robot's numbers are constants of the compiled loop (one library per plant)
         ls = loop.LoopStructure(self._chain, velocity_samples, self.substeps_for(sample_time_s / velocity_samples),
-                                measurement_delay_samples, chunk_samples, self.elastic, self.stribeck,
-                                loop.plant_numbers(self._p, tr_vec) if self.fixed_plant_numbers else ())
+                                measurement_delay_samples, chunk_samples, self.elastic, self.stribeck)
+        tr_vec = self.transmission.loop_vector() if ls.transmission else None
         P = loop.loop_parameters(self._p, gains["kp"], gains["kv"], gains["ki"], velocity_filter_alpha,
                                  self.encoder_resolution_rad, sample_time_s, tr_vec)
         noise = self.encoder_noise_rad * rng.standard_normal((N, velocity_samples * n))
