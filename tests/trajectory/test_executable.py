@@ -10,7 +10,7 @@ from pipeline.trajectory.executable import choose
 def test_the_shortest_passing_remedy_is_executed_else_the_lowest_ratio():
     rng = np.random.default_rng(3)
     for _ in range(200):
-        names = ["reserve", "smooth", "slowed"][: int(rng.integers(1, 4))]
+        names = ["time_optimal", "reserve", "smooth", "slowed"][: int(rng.integers(1, 5))]
         cands = {n: {"duration_s": float(rng.uniform(0.6, 0.9)),
                      "max_averaged_torque_ratio": float(rng.uniform(0.8, 1.4))} for n in names}
         pick = choose(cands, 1.0)
