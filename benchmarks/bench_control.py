@@ -26,6 +26,7 @@ from pipeline.robot.iso9283 import iso9283_path
 from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import start_configuration
 from pipeline.robot.reference import cartesian_reference
+from pipeline.sim import dynamics, loop
 from pipeline.sim.truth import RealRobot, TruthConfig
 
 
@@ -55,14 +56,22 @@ def _measure(real, robot, ref, cfg, python_seconds: float) -> None:
                               cfg, "full_friction", np.random.default_rng(0))
     print(f"compiled rollout ready in {time.perf_counter() - t0:.2f} s (gcc on first use, then cached on disk)")
     results = []
+    whole = []
     for _ in range(3):
+        c0, t0 = time.process_time(), time.perf_counter()
         res = simulate_joint_trajectory(real, robot, ref.t_s, ref.q_d, ref.v_d, ref.a_d, cfg, "full_friction",
                                         np.random.default_rng(0))
         results.append(res)
+        whole.append((time.perf_counter() - t0, time.process_time() - c0))
     best = max(results, key=lambda r: r.realtime_factor)
+    best_cpu = max(results, key=lambda r: r.realtime_factor_cpu)
     sim_s = len(ref.t_s) * cfg.sample_time_s + cfg.settle_time_s
-    print(f"compiled loop: {sim_s:.2f} s simulated in {best.wall_time_s:.3f} s wall -> real-time factor "
-          f"{best.realtime_factor:.1f} (CPU-time based {best.realtime_factor_cpu:.1f}; best of 3)")
+    print(f"compiled loop: {sim_s:.2f} s simulated in {best.wall_time_s:.3f} s wall "
+          f"-> real-time factor {best.realtime_factor:.1f} (CPU-time based {best_cpu.realtime_factor_cpu:.1f}; "
+          f"best of 3)")
+    wall_s, cpu_s = min(w for w, _ in whole), min(c for _, c in whole)
+    print(f"whole control simulation (resample, feedforward, loop): {sim_s / wall_s:.1f} x real time wall, "
+          f"{sim_s / cpu_s:.1f} x CPU (best of 3)")
     k = min(len(ref.t_s), int(python_seconds / cfg.sample_time_s))
     py_cfg = ControlConfig(on_saturation="clip", engine="python", settle_time_s=0.0)
     res_py = simulate_joint_trajectory(real, robot, ref.t_s[:k], ref.q_d[:k], ref.v_d[:k], ref.a_d[:k], py_cfg,
@@ -74,5 +83,48 @@ def _measure(real, robot, ref, cfg, python_seconds: float) -> None:
           f"{best.realtime_factor_cpu / res_py.realtime_factor_cpu:.1f}x CPU")
 
 
+def _synthetic_chain(n: int, rng: np.random.Generator) -> tuple[dynamics.ChainStructure, np.ndarray]:
+    """A serial chain of ``n`` revolute joints (axes z, y, y, x, y, x, z, ...), 0.2-0.5 m links, 2-20 kg."""
+    cycle = ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0), (0.0, 1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (1.0, 0.0, 0.0))
+    axes = tuple(cycle[i % len(cycle)] for i in range(n))
+    rows = []
+    for _ in range(n):
+        m = rng.uniform(2.0, 20.0)
+        c = rng.uniform(-0.1, 0.1, 3)
+        inertia = pin.Inertia(m, c, np.diag(rng.uniform(0.01, 0.5, 3)))
+        rows.append(np.concatenate([np.eye(3).ravel(), [0.0, 0.0, rng.uniform(0.2, 0.5)],
+                                    inertia.toDynamicParameters(), [0.5, 5.0, 5.0, 500.0]]))
+    p = np.concatenate([*rows, [0.0, 0.0, -9.81], [0.01]])
+    return dynamics.ChainStructure(n, tuple(range(n)), axes), p
+
+
+def scaling(joints: tuple[int, ...] = (2, 3, 4, 6, 7, 8), samples: int = 2500) -> None:
+    """Compiled loop time per simulated second against the number of joints, fitted ``t ~ n^p``."""
+    rng = np.random.default_rng(0)
+    times = []
+    for n in joints:
+        chain, p = _synthetic_chain(n, rng)
+        ls = loop.LoopStructure(chain, 2, 2, 1, 250)
+        roll = loop.compiled_rollout(ls)
+        P = loop.loop_parameters(p, np.full(n, 30.0), np.full(n, 500.0), np.full(n, 5e3), 0.4, 1e-7, 4e-4)
+        q0 = np.zeros(n)
+        U = np.zeros((ls.n_input, ls.chunk_samples))
+        U[n * 3:n * 5] = 10.0
+        x0 = np.concatenate([q0, np.zeros(n), np.zeros(n), q0, np.zeros(n), q0])
+        best = np.inf
+        for _ in range(3):
+            c0 = time.thread_time()
+            for _ in range(samples // ls.chunk_samples):
+                roll(x0, U, P)
+            best = min(best, time.thread_time() - c0)
+        times.append(best / (samples * 4e-4))
+        print(f"  {n} joints: {times[-1] * 1e3:.2f} ms CPU per simulated second "
+              f"(real-time factor {1 / times[-1]:.0f})")
+    slope = np.polyfit(np.log(joints), np.log(times), 1)[0]
+    print(f"control loop time ~ n_joints^{slope:.2f} (least squares on log-log, {len(joints)} chains)")
+
+
 if __name__ == "__main__":
     main(sys.argv[1] if len(sys.argv) > 1 else "rx130l", float(sys.argv[2]) if len(sys.argv) > 2 else 1.0)
+    print("--- scaling with the number of joints (rigid plant, 2 substeps per 200 us)")
+    scaling()

@@ -35,6 +35,7 @@ from pipeline.solver_status import SUCCESS_STATUSES
 from pipeline.stage_api import StageContext, StageResult
 from pipeline.trajectory.config import TrajectoryConfig
 from pipeline.trajectory.dynamics import PlanningModel
+from pipeline.trajectory.executable import executable_cp, executed_check
 from pipeline.trajectory.settling import (
     add_smooth_ptp,
     settle_study,
@@ -142,9 +143,16 @@ def quality_gates(cfg: TrajectoryConfig, cp: CPPlan, ptp: PTPPlan, sims: dict[st
         statuses["cp_smooth_solver_status"] = cp.smooth.info.get("solver_status")
     for name, status in statuses.items():
         gates.require(name, status in SUCCESS_STATUSES, f"IPOPT returned {status}")
+    torque_limited_cp = elastic_plant and not cfg.acceleration_limits and "cp_executed" in sims
+    if torque_limited_cp:
+        chk = cp.checks["cp_executed"]
+        gates.check("cp_executed_fine_violation", chk.violation, "<=", tol, "torque excess on the fine grid")
+        gates.check("cp_executed_fine_max_velocity_ratio", chk.max_velocity_ratio, "<=", 1.0 + tol)
     for name, s in sims.items():
         if name in ("ptp_ruckig", "ptp_energy_at_ruckig_duration"):
             continue                 # the baseline is reported, not vouched for
+        if torque_limited_cp and name in ("cp", "cp_smooth"):
+            continue                 # reported (summary cp_sim_*); the executed CP is the one vouched for
         if elastic_plant and name == "ptp" and "ptp_smooth" in sims:
             continue                 # reported (summary ptp_sim_*); the smooth plan is the executable one
         gates.check(f"{name}_sim_max_averaged_torque_ratio", s["max_averaged_torque_ratio"], "<=",
@@ -181,6 +189,11 @@ def _executable_smooth_ptp(ctx: StageContext, pm: PlanningModel, ptp: PTPPlan, c
         ptp.trajectories["ptp_smooth"] = smooth
         ptp.checks["ptp_smooth"] = check_trajectory(pm, smooth, energy_weights=ptp.weights)
     return smooth, sim
+
+
+def elastic_of(ctx: StageContext) -> bool:
+    """Whether the hidden robot's joints are elastic (the executed CP is then verified in its servo)."""
+    return ctx.real is not None and bool(ctx.real.transmission.elastic)
 
 
 def run(ctx: StageContext) -> StageResult:
@@ -223,6 +236,7 @@ def run(ctx: StageContext) -> StageResult:
     summary["torque_limits_Nm"] = np.asarray(robot.limits.effort_Nm, float).tolist()
     sims: dict[str, dict] = {}
     settle: dict = {}
+    cp_table = ""
     if cfg.simulate and ctx.real is not None:
         t0 = time.perf_counter()
         ccfg = _control_config(ctx)
@@ -251,6 +265,16 @@ def run(ctx: StageContext) -> StageResult:
             summary[f"{name}_sim_max_feedforward_ratio"] = sims[name]["max_feedforward_ratio"]
             summary[f"{name}_sim_max_averaged_torque_ratio"] = sims[name]["max_averaged_torque_ratio"]
             summary[f"{name}_sim_feedback_std_ratio"] = float(max(sims[name]["feedback_std_ratio_per_joint"]))
+        if elastic_of(ctx):
+            ex = executable_cp(ctx.real, robot, pm, cp, ccfg, seed, cfg, sims["cp"])
+            sims["cp_executed"] = ex.sim
+            cp.checks["cp_executed"] = executed_check(pm, ex)
+            summary.update(ex.summary(cp.optimal.duration_s))
+            summary["cp_executed_sim_max_averaged_torque_ratio"] = ex.sim["max_averaged_torque_ratio"]
+            summary["cp_executed_sim_max_torque_ratio"] = ex.sim["max_torque_ratio"]
+            summary["cp_executed_sim_tcp_error_max_m"] = ex.sim.get("tcp_error_max_m")
+            summary["cp_executed_fine_violation"] = cp.checks["cp_executed"].violation
+            cp_table = ex.table(cp.optimal.duration_s, cfg.max_sim_averaged_torque_ratio)
         timings["simulation_s"] = time.perf_counter() - t0
     summary["timings_s"] = timings
     if cp.smooth is not None:
@@ -344,6 +368,8 @@ def run(ctx: StageContext) -> StageResult:
               f"Energies are the fine-grid re-check ({cfg.fine_dt_s * 1e3:g} ms samples, full friction model).\n\n")
     report += "| quantity | value |\n|---|---|\n" + "\n".join(
         f"| {k} | {v:.4g} |" if isinstance(v, float) else f"| {k} | {v} |" for k, v in rows)
+    if cp_table:
+        report += "\n\n" + cp_table
     if settle:
         report += "\n\n" + settling_table(list(settle.values())) + "\n\n" + settling_verdict(summary)
     if summary["ptp_pareto"]:

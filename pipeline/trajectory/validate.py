@@ -48,6 +48,7 @@ def simulate_on_real(real: Any, robot: RobotModel, traj: JointTrajectory,  # Any
            "max_torque_ratio_per_joint": np.asarray(res.max_torque_ratio, float).tolist(),
            "max_feedforward_ratio": float(np.max(np.abs(res.tau_ff) / limit)),
            "max_averaged_torque_ratio": float(np.max(np.abs(averaged))),
+           "max_averaged_torque_ratio_per_joint": np.abs(averaged).max(axis=0).tolist(),
            "average_window_s": width * dt,
            "feedback_std_ratio_per_joint": feedback.std(axis=0).tolist(),
            "feedback_max_ratio_per_joint": np.abs(feedback).max(axis=0).tolist(),

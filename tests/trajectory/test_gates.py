@@ -79,3 +79,22 @@ def test_on_an_elastic_plant_the_smooth_ptp_is_gated_not_the_time_optimal_one():
     sims["ptp_smooth"]["max_averaged_torque_ratio"] = 1.2
     with pytest.raises(QualityGateError, match="ptp_smooth_sim_max_averaged_torque_ratio"):
         _finish(quality_gates(TrajectoryConfig(), cp, ptp, sims, elastic_plant=True))
+
+
+def test_torque_limited_cp_on_an_elastic_plant_gates_the_executed_cp():
+    cp, ptp = _plans()
+    cp.checks["cp_executed"] = _check()
+    sims = {"cp": {"max_averaged_torque_ratio": 2.1}, "cp_smooth": {"max_averaged_torque_ratio": 1.3},
+            "cp_executed": {"max_averaged_torque_ratio": 0.99}}
+    torque_limited = TrajectoryConfig(acceleration_limits=False)
+    with pytest.raises(QualityGateError, match="cp_sim_max_averaged_torque_ratio"):
+        _finish(quality_gates(TrajectoryConfig(), cp, ptp, sims, elastic_plant=True))   # default: cp gated
+    assert _finish(quality_gates(torque_limited, cp, ptp, sims, elastic_plant=True)).summary[
+        "quality_gates"]["passed"]
+    sims["cp_executed"]["max_averaged_torque_ratio"] = 1.05
+    with pytest.raises(QualityGateError, match="cp_executed_sim_max_averaged_torque_ratio"):
+        _finish(quality_gates(torque_limited, cp, ptp, sims, elastic_plant=True))
+    sims["cp_executed"]["max_averaged_torque_ratio"] = 0.99
+    cp.checks["cp_executed"] = _check(violation=0.02)
+    with pytest.raises(QualityGateError, match="cp_executed_fine_violation"):
+        _finish(quality_gates(torque_limited, cp, ptp, sims, elastic_plant=True))

@@ -64,6 +64,10 @@ def test_stage_quick(quick_config, rx130l, ptp_problem, tmp_path):
     assert abs(s["ptp_smooth_settle_duration_s"] - scale * (s["ptp_duration_s"] + s["ptp_smooth_filter_time_s"])) \
         < 2e-3 * scale
     assert "ptp_settling" in res.figures and "move + settle [s]" in res.report_md
+    # the CP the elastic arm executes: a measured remedy, never shorter than the time-optimal plan
+    assert s["cp_executed"] in ("time_optimal", "reserve", "smooth", "slowed")
+    assert s["cp_executed_duration_s"] >= s["cp_duration_s"] * (1 - 1e-6)
+    assert "Executable CP on the elastic arm" in res.report_md
     assert s["ptp_smooth_sim_tcp_error_max_m"] is not None
     assert s["ptp_smooth_fine_violation"] <= tol and "ptp_smooth_fine_violation" in gates
     assert s["ptp_smooth_duration_s"] == s["ptp_smooth_settle_duration_s"]
