@@ -141,52 +141,55 @@ def fitted(label: str, x, t) -> None:
     print(f"  {label}: time ~ x^k with k = {k:.2f}", flush=True)
 
 
+def both_times(pm: PlanningModel, path: JointPath, n: int, ours: list, theirs: list):
+    """Best-of-3 CPU times of the reachability CP and of toppra at grid ``n``, appended to the lists."""
+    t_ra, ra = best_time(lambda: solve_cp_reachability(pm, path, n, acceleration_limits=False), 3)
+    t_tp, _ = best_time(lambda: toppra_cp(pm, path, n), 3)
+    ours.append(t_ra)
+    theirs.append(t_tp)
+    return t_ra, ra, t_tp
+
+
+def fitted_pair(label: str, x, ours: list, theirs: list) -> None:
+    fitted(f"{label}, reachability", x, ours)
+    fitted(f"{label}, toppra", x, theirs)
+
+
 def scaling(robot: RobotModel, name: str) -> None:
     values = None if name == "rx130l" else {"robot": name}
     cfg = load_config(None, values=values).trajectory
     pm = PlanningModel.from_robot(robot, cfg.torque_reserve)
     path, _ = cp_joint_path(robot, cfg)
-    ours, theirs = [], []
+    ours: list[float] = []
+    theirs: list[float] = []
     print(f"scaling on {name} ({cfg.cp_segment}), process CPU, best of 3:")
     for n in SCALING_N:
-        t_ra, ra = best_time(lambda n=n: solve_cp_reachability(pm, path, n, acceleration_limits=False), 3)
-        t_tp, _ = best_time(lambda n=n: toppra_cp(pm, path, n), 3)
-        ours.append(t_ra)
-        theirs.append(t_tp)
+        t_ra, ra, t_tp = both_times(pm, path, n, ours, theirs)
         print(f"  N = {n:5d}: reachability {1e3 * t_ra:8.1f} ms ({ra.info['friction_rounds']} rounds), "
               f"toppra {1e3 * t_tp:8.1f} ms, ratio {t_ra / t_tp:.2f}")
-    fitted("grid N, reachability", SCALING_N, ours)
-    fitted("grid N, toppra", SCALING_N, theirs)
+    fitted_pair("grid N", SCALING_N, ours, theirs)
     cube = iso_cube(robot, cfg.cp_plane, None, frame=robot.frame_tcp)
-    lengths, ours, theirs = [], [], []
+    lengths: list[float] = []
+    ours, theirs = [], []
     for f in (0.4, 0.6, 0.8, 1.0):
         cfg.cp_edge_m, cfg.cp_centre_m = f * cube.edge_m, list(cube.centre_m)
         path, piece = cp_joint_path(robot, cfg)
-        t_ra, ra = best_time(lambda path=path: solve_cp_reachability(pm, path, N_GRID, acceleration_limits=False), 3)
-        t_tp, _ = best_time(lambda path=path: toppra_cp(pm, path, N_GRID), 3)
+        t_ra, ra, t_tp = both_times(pm, path, N_GRID, ours, theirs)
         lengths.append(piece.length_m)
-        ours.append(t_ra)
-        theirs.append(t_tp)
         print(f"  path {piece.length_m:.3f} m: reachability {1e3 * t_ra:.1f} ms ({ra.duration_s:.4f} s motion), "
               f"toppra {1e3 * t_tp:.1f} ms")
-    fitted("path length (N fixed), reachability", lengths, ours)
-    fitted("path length (N fixed), toppra", lengths, theirs)
-    joints, ours, theirs = [], [], []
+    fitted_pair("path length (N fixed)", lengths, ours, theirs)
+    joints: list[int] = []
+    ours, theirs = [], []
     for arm in ("ur5", "z1", "ur10", "panda", "xarm7"):
         made = urdf_joint_move(arm)
         if made is None:
             continue
-        pm_a, path_a = made
-        t_ra, _ = best_time(lambda pm_a=pm_a, path_a=path_a: solve_cp_reachability(pm_a, path_a, N_GRID,
-                                                                                   acceleration_limits=False), 3)
-        t_tp, _ = best_time(lambda pm_a=pm_a, path_a=path_a: toppra_cp(pm_a, path_a, N_GRID), 3)
-        joints.append(pm_a.nq)
-        ours.append(t_ra)
-        theirs.append(t_tp)
-        print(f"  {arm} ({pm_a.nq} axes, joint move): reachability {1e3 * t_ra:.1f} ms, toppra {1e3 * t_tp:.1f} ms")
+        t_ra, _, t_tp = both_times(*made, N_GRID, ours, theirs)
+        joints.append(made[0].nq)
+        print(f"  {arm} ({made[0].nq} axes, joint move): reachability {1e3 * t_ra:.1f} ms, toppra {1e3 * t_tp:.1f} ms")
     if len(set(joints)) > 1:
-        fitted("number of joints (6 and 7 axes), reachability", joints, ours)
-        fitted("number of joints (6 and 7 axes), toppra", joints, theirs)
+        fitted_pair("number of joints (6 and 7 axes)", joints, ours, theirs)
 
 
 def main(*robots: str) -> None:

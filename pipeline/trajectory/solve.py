@@ -436,7 +436,7 @@ def best_ptp_candidate(pm: PlanningModel, problem: PtpProblem, q0: np.ndarray, q
     if not plans or plans[0][0] >= ruckig_fine.duration_s:
         attempt("ruckig", _ruckig_nodes(problem, ruckig_fine))
     if not plans:
-        raise failure
+        raise failure or SolverError(None, "ptp", "no NLP solve was attempted")
     _, _, res, tr, chk = min(plans, key=lambda x: x[0])
     rk_chk = check_trajectory(pm, ruckig_fine, energy_weights=weights)
     if within_limits(rk_chk, FINE_GRID_ROUNDOFF, acc) and ruckig_fine.duration_s < tr.duration_s:
