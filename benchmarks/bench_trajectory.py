@@ -20,6 +20,14 @@ Prints, each as a ratio measured here:
 
 Torque and speed limits only (``acceleration_limits = False``: the torque-limited study of paper 004
 section 5); ``benchmarks/bench_cp.py`` measures the CP solvers with and without acceleration limits.
+
+``bench_trajectory.py moves [n] [arm ...]``: ``n`` random feasible PtP moves per arm (default 50;
+arms: the robot folders rx130l, staubli_tx40, kuka_kr15 and the example-robot-data URDFs ur5, panda,
+z1), quick profile (``configs/quick.yaml``). Per move the plan handed on (:func:`best_ptp_candidate`:
+NLP from the quintic, from ruckig's profile, or ruckig's profile itself) / the torque-feasible ruckig
+duration, both on the fine grid; prints per arm the median and worst ratio and how often each
+candidate won (target: ratio <= 1 on every move). ``bench_trajectory.py scaling``: PtP solve time
+(process CPU) against move length, grid N and number of joints (6 and 7 axes) with fitted exponents.
 """
 
 from __future__ import annotations
@@ -31,12 +39,25 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.config import load_config
+from pipeline.errors import PipelineError
 from pipeline.robot.defaults import ptp_move_rad
+from pipeline.robot.example_robots import example_arm_urdf
 from pipeline.robot.model import RobotModel
+from pipeline.trajectory.baselines import ruckig_resampled, ruckig_torque_feasible
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.ptp import energy_weights
-from pipeline.trajectory.solve import cp_joint_path, plan_cp, plan_ptp, ptp_problem, solve_ptp_verified
+from pipeline.trajectory.solve import (
+    best_ptp_candidate,
+    cp_joint_path,
+    plan_cp,
+    plan_ptp,
+    ptp_problem,
+    solve_ptp_verified,
+)
 from pipeline.trajectory.trajectories import check_trajectory
+
+QUICK = Path(__file__).resolve().parent.parent / "configs" / "quick.yaml"
+MOVE_ARMS = ("rx130l", "staubli_tx40", "kuka_kr15", "ur5", "panda", "z1")
 
 
 def perturbed_starts(problem, q0: np.ndarray, q1: np.ndarray, duration_s: float, n: int, seed: int = 0):
@@ -146,5 +167,138 @@ def main(robot_name: str = "rx130l", segment: str = "circle_large", torque_reser
         for r in p["ptp_pareto"]))
 
 
+def load_arm(name: str) -> RobotModel | None:
+    """A robot folder by name, else an example-robot-data URDF by short name (None: not installed)."""
+    try:
+        return RobotModel.load(name)
+    except PipelineError:
+        urdf = example_arm_urdf(name)
+        return None if urdf is None else RobotModel.load(urdf)
+
+
+def random_moves(pm: PlanningModel, n: int, rng: np.random.Generator, min_step_rad: float = 0.3):
+    """``n`` random rest-to-rest moves inside the middle 80 % of every joint range whose holding
+    torques at start and goal are within the planning limits (a feasible move exists)."""
+    lo, hi = pm.lower_rad, pm.upper_rad
+    lo, hi = lo + 0.1 * (hi - lo), hi - 0.1 * (hi - lo)
+    zero = np.zeros(pm.nq)
+    found = 0
+    while found < n:
+        q0, q1 = rng.uniform(lo, hi), rng.uniform(lo, hi)
+        if np.max(np.abs(q1 - q0)) < min_step_rad:
+            continue
+        hold = np.abs(pm.rigid_torques(np.vstack([q0, q1]), np.vstack([zero, zero]), np.vstack([zero, zero])))
+        if np.all(hold < 0.9 * pm.effort_Nm):
+            found += 1
+            yield q0, q1
+
+
+def moves(n: str = "50", *arms: str) -> None:
+    """Random moves per arm: plan handed on / torque-feasible ruckig (module docstring); an argument
+    ``refine=K`` sets ``ruckig_refine_evaluations`` (0: bisection and joint rounds only, faster)."""
+    cfg = load_config(QUICK).trajectory
+    cfg.acceleration_limits = False                 # torque and speed limits: the full-dynamics case
+    for a in [a for a in arms if a.startswith("refine=")]:
+        cfg.ruckig_refine_evaluations = int(a.split("=", 1)[1])
+    arms = tuple(a for a in arms if not a.startswith("refine="))
+    print(f"quick profile: N = {cfg.ptp_n_intervals}, ruckig jerk ratios {cfg.ruckig_jerk_ratios_1_s}, "
+          f"{cfg.ruckig_refine_evaluations} ruckig refinement evaluations, fine grid "
+          f"{1e3 * cfg.fine_dt_s:g} ms, torque and speed limits only; ratio = plan handed on / ruckig (both on the "
+          "fine grid)")
+    for name in arms or MOVE_ARMS:
+        robot = load_arm(name)
+        if robot is None:
+            print(f"{name}: not installed; skipped")
+            continue
+        pm = PlanningModel.from_robot(robot, cfg.torque_reserve)
+        problem = ptp_problem(pm, robot, cfg)
+        w = energy_weights(pm, cfg.ptp_energy)
+        ratios, sources, cpu = [], {}, 0.0
+        for i, (q0, q1) in enumerate(random_moves(pm, int(n), np.random.default_rng(7))):
+            c0 = time.process_time()
+            try:
+                rk = ruckig_torque_feasible(pm, q0, q1, cfg.ruckig_check_dt_s, tuple(cfg.ruckig_jerk_ratios_1_s),
+                                            joint_rounds=cfg.ruckig_joint_rounds,
+                                            refine_evaluations=cfg.ruckig_refine_evaluations)
+                rk_fine = ruckig_resampled(pm, q0, q1, rk, cfg.fine_dt_s)
+                res, tr, _ = best_ptp_candidate(pm, problem, q0, q1, cfg, w, rk_fine)
+            except PipelineError as exc:
+                print(f"  {name} move {i}: {exc}")
+                continue
+            cpu += time.process_time() - c0
+            ratios.append(tr.duration_s / rk.duration_s)
+            nlp = tr.info["source"] == "nlp"
+            key = tr.info["source"] + (f" (NLP from {res.info['warm_start']})" if nlp else "")
+            sources[key] = sources.get(key, 0) + 1
+            print(f"  {name} move {i}: ours {tr.duration_s:.4f} s / ruckig {rk.duration_s:.4f} s = "
+                  f"{ratios[-1]:.4f} ({key}; NLP candidates {tr.info['nlp_candidates_s']})", flush=True)
+        if ratios:
+            r = np.asarray(ratios)
+            print(f"{name} ({robot.nq} axes): {r.size} moves, ours / ruckig median {np.median(r):.4f}, worst "
+                  f"{r.max():.4f}, moves slower than ruckig {int(np.sum(r > 1.0))}; plan from {sources}; "
+                  f"{cpu / r.size:.1f} s CPU per move", flush=True)
+
+
+def fitted(label: str, x, t) -> None:
+    k = np.polyfit(np.log(np.asarray(x, float)), np.log(np.asarray(t, float)), 1)[0]
+    print(f"  {label}: time ~ x^k with k = {k:.2f}", flush=True)
+
+
+def ptp_cpu_s(pm: PlanningModel, robot: RobotModel, cfg, q0: np.ndarray, q1: np.ndarray, n: int) -> tuple[float, float]:
+    """Process CPU time of one cold, verified time-optimal solve (NLP not compiled: the CasADi
+    virtual machine, so that no gcc run enters the figures) and the duration found."""
+    cfg.ptp_n_intervals, cfg.ptp_jit = n, False
+    problem = ptp_problem(pm, robot, cfg)
+    w = energy_weights(pm, cfg.ptp_energy)
+    r = solve_ptp_verified(pm, problem, q0, q1, cfg, cfg.ptp_k1, cfg.ptp_k2, w)
+    return r.info["cpu_time_s"], r.duration_s
+
+
+def scaling(*_: str) -> None:
+    """PtP solve time against grid N, move length and number of joints, with fitted exponents."""
+    cfg = load_config(QUICK).trajectory
+    cfg.acceleration_limits = False
+    robot = RobotModel.load("rx130l")
+    pm = PlanningModel.from_robot(robot, cfg.torque_reserve)
+    q0, q1 = ptp_move_rad(robot)
+    print("PtP scaling (process CPU of one cold verified solve, quick profile, torque and speed limits):")
+    ns, ts = (12, 25, 50, 100), []
+    for n in ns:
+        t, d = ptp_cpu_s(pm, robot, cfg, q0, q1, n)
+        ts.append(t)
+        print(f"  rx130l N = {n:4d}: {t:.2f} s CPU ({d:.4f} s motion)", flush=True)
+    fitted("grid N", ns, ts)
+    lengths, ts = [], []
+    for f in (0.25, 0.5, 0.75, 1.0):
+        t, d = ptp_cpu_s(pm, robot, cfg, q0, q0 + f * (q1 - q0), 25)
+        lengths.append(float(np.max(np.abs(f * (q1 - q0)))))
+        ts.append(t)
+        print(f"  rx130l move {lengths[-1]:.2f} rad (largest joint step), N = 25: {t:.2f} s CPU ({d:.4f} s motion)",
+              flush=True)
+    fitted("move length", lengths, ts)
+    joints, ts = [], []
+    for arm in ("ur5", "z1", "panda", "xarm7"):
+        r = load_arm(arm)
+        if r is None:
+            continue
+        pm_a = PlanningModel.from_robot(r, cfg.torque_reserve)
+        a0, a1 = ptp_move_rad(r)
+        try:
+            t, d = ptp_cpu_s(pm_a, r, cfg, a0, a1, 25)
+        except PipelineError as exc:
+            print(f"  {arm}: {exc}")
+            continue
+        joints.append(r.nq)
+        ts.append(t)
+        print(f"  {arm} ({r.nq} axes), N = 25: {t:.2f} s CPU ({d:.4f} s motion)", flush=True)
+    if len(set(joints)) > 1:
+        fitted("number of joints (6 and 7 axes)", joints, ts)
+
+
 if __name__ == "__main__":
-    main(*sys.argv[1:])
+    if sys.argv[1:2] == ["moves"]:
+        moves(*sys.argv[2:])
+    elif sys.argv[1:2] == ["scaling"]:
+        scaling(*sys.argv[2:])
+    else:
+        main(*sys.argv[1:])

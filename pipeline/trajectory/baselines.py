@@ -232,6 +232,20 @@ def ruckig_torque_feasible(pm: PlanningModel, q0: np.ndarray, q1: np.ndarray, ch
     return best
 
 
+def ruckig_resampled(pm: PlanningModel, q0: np.ndarray, q1: np.ndarray, rk: RuckigResult, dt_s: float,
+                     name: str = "ptp_ruckig") -> JointTrajectory:
+    """The same ruckig profile (its searched limits) sampled every ``dt_s``, e.g. on the fine grid."""
+    info = rk.info
+    tr = _ruckig_sample(np.asarray(q0, float), np.asarray(q1, float), pm.velocity_rad_s,
+                        np.asarray(info["max_accel_rad_s2"], float), np.asarray(info["jerk_rad_s3"], float), dt_s,
+                        amin=-np.asarray(info["min_accel_rad_s2"], float))
+    if tr is None:
+        raise SolverError(None, "ptp ruckig baseline", "ruckig cannot recompute its own profile")
+    tr.name = name
+    tr.info.update(rk.trajectory.info)
+    return tr
+
+
 def _ruckig_result(tr: JointTrajectory, r: float, alpha: np.ndarray, ratio: float, limits) -> RuckigResult:
     ap, am, jm = limits(alpha, ratio)
     return RuckigResult(tr, tr.duration_s, float(np.min(alpha)), ratio, r, 0.0, 0,

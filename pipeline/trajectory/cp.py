@@ -308,7 +308,8 @@ def cp_grid_activity(pm: PlanningModel, path: JointPath, profile: CPProfile) -> 
     tau = pm.torques(q, v, ddq * xs[:, None] ** 2 + dq * aa)
     tau_max = pm.effort_Nm * (1.0 - float(profile.info.get("torque_margin") or 0.0))
     if profile.info.get("torque_scale") is not None:
-        tau_max = tau_max * np.asarray(profile.info["torque_scale"], float)
+        scale = np.asarray(profile.info["torque_scale"], float)          # per joint, or per interval and joint
+        tau_max = tau_max * (np.tile(scale, (3, 1)) if scale.ndim == 2 else scale)
     level = np.maximum(np.abs(tau) / tau_max, np.abs(v) / pm.velocity_rad_s).max(axis=1)
     per_interval = level.reshape(3, N).max(axis=0)
     node = np.empty(N + 1)

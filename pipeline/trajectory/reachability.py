@@ -69,11 +69,12 @@ def _rows(pm: PlanningModel, path: JointPath, s: np.ndarray, tau_max: np.ndarray
         vb = np.min((pm.velocity_rad_s / np.abs(dq)) ** 2, axis=1)
     vb = np.minimum(vb, _BIG)
     zero = np.zeros_like(dq)
-    A = pc.m / tau_max
-    C = pc.c / tau_max
-    G = pc.g / tau_max
-    FV = np.tile(pm.viscous_Nms_rad / tau_max, (len(pts), 1))
-    FC = np.tile(pm.coulomb_Nm / tau_max, (len(pts), 1))
+    # per-interval limits (N, nq): interval k's start, midpoint and end rows divide by row k
+    tau_int = np.broadcast_to(np.asarray(tau_max, float), (N, pm.nq))
+    tau_pts = {0: tau_int, 1: tau_int, 2: tau_int}
+    A, C, G = pc.m, pc.c, pc.g
+    FV = np.tile(pm.viscous_Nms_rad, (len(pts), 1))
+    FC = np.tile(pm.coulomb_Nm, (len(pts), 1))
     D = dq
     if acceleration:
         amax = np.asarray(pm.acceleration_rad_s2, float)
@@ -84,8 +85,13 @@ def _rows(pm: PlanningModel, path: JointPath, s: np.ndarray, tau_max: np.ndarray
         FC = np.hstack([FC, zero])
         D = np.hstack([D, dq])
     idx = {0: np.arange(N), 1: N + 1 + np.arange(N), 2: np.arange(1, N + 1)}
-    return {P: {"A": A[i], "C": C[i], "G": G[i], "FV": FV[i], "FC": FC[i], "D": D[i], "vb": vb[i]}
-            for P, i in idx.items()}
+    out = {}
+    for P, i in idx.items():
+        scale = np.ones((N, A.shape[1]))
+        scale[:, :pm.nq] = tau_pts[P]
+        out[P] = {"A": A[i] / scale, "C": C[i] / scale, "G": G[i] / scale, "FV": FV[i] / scale,
+                  "FC": FC[i] / scale, "D": D[i], "vb": vb[i]}
+    return out
 
 
 _W = {0: (1.0, 0.0), 1: (0.5, 0.5), 2: (0.0, 1.0)}   # b_P = w0 b_k + w1 b_{k+1}
@@ -152,9 +158,7 @@ def _passes(n_rows: int, n_stages: int) -> tuple[ca.Function, ca.Function]:
                        [ca.fmax(0.0, ca.mmin(p + s * ca.fmin(x, y_star)))])
     fwd = ca.Function("cp_forward", [x, ca.vertcat(u, t, k_next)],
                       [ca.fmax(0.0, ca.fmin(k_next, ca.mmin(u + t * x)))])
-    # expanded into one SX function: the virtual machine runs the unrolled loop without call overhead
-    return (back.mapaccum("cp_backward_pass", n_stages).expand(),
-            fwd.mapaccum("cp_forward_pass", n_stages).expand())
+    return back.mapaccum("cp_backward_pass", n_stages), fwd.mapaccum("cp_forward_pass", n_stages)
 
 
 def _topp_ra(p: np.ndarray, sl: np.ndarray, u: np.ndarray, t: np.ndarray,
@@ -186,13 +190,15 @@ def _call(fold: ca.Function, stages: np.ndarray, n: int) -> np.ndarray:
 def solve_cp_reachability(pm: PlanningModel, path: JointPath, n_grid: int = 400, name: str = "cp",
                           torque_margin: float = 0.0, torque_scale: np.ndarray | None = None,
                           acceleration_limits: bool = True, tol: float = 1e-5,
-                          max_rounds: int = 30) -> CPProfile:
+                          max_rounds: int = 30, warm: CPProfile | None = None) -> CPProfile:
     """Time-optimal profile with viscous + smooth Coulomb friction (module docstring).
 
-    ``torque_margin`` / per-joint ``torque_scale`` tighten the torque limits as in
-    :func:`pipeline.trajectory.cp.solve_cp_refined`. Raises InfeasibleError when the path cannot
-    be held at rest within the torque limits, SolverError when the friction iteration does not
-    settle within ``max_rounds``.
+    ``torque_margin`` / ``torque_scale`` tighten the torque limits as in
+    :func:`pipeline.trajectory.cp.solve_cp_refined`: per joint (nq,) or per grid interval and
+    joint (N, nq), the latter to tighten only where a fine-grid check found an excess. ``warm``:
+    a profile on the same grid whose speeds start the friction iteration (fewer rounds). Raises
+    InfeasibleError when the path cannot be held at rest within the torque limits, SolverError when
+    the friction iteration does not settle within ``max_rounds``.
     """
     t0 = time.perf_counter()
     N = int(n_grid)
@@ -203,17 +209,23 @@ def solve_cp_reachability(pm: PlanningModel, path: JointPath, n_grid: int = 400,
         tau_max = tau_max * np.asarray(torque_scale, float)
     rows = _rows(pm, path, s, tau_max, acceleration_limits)
     nq = pm.nq
+    limits = np.broadcast_to(tau_max, (N, nq))
     for P in (0, 2):
         hold = np.abs(rows[P]["G"][:, :nq])
         if (hold > 1.0).any():
             k, j = np.argwhere(hold > 1.0)[0]
             sk = s[k] if P == 0 else s[k + 1]
             raise InfeasibleError(None, f"{path.name} at s = {sk:.3f} joint {j + 1} torque limit",
-                                  f"holding torque {hold[k, j] * tau_max[j]:.1f} N·m exceeds the limit "
-                                  f"{tau_max[j]:.1f} N·m even at crawling speed")
+                                  f"holding torque {hold[k, j] * limits[k, j]:.1f} N·m exceeds the limit "
+                                  f"{limits[k, j]:.1f} N·m even at crawling speed")
     width = pm.coulomb_smoothing_rad_s
     # round 0: Coulomb friction saturated in the direction of motion (toppra's model), no viscous
     fr = {P: row["FC"] * np.sign(np.where(np.abs(row["D"]) < 1e-9, 0.0, row["D"])) for P, row in rows.items()}
+    if warm is not None and len(warm.sdot) == N + 1:
+        xw = warm.sdot
+        xwm = np.sqrt(0.5 * (xw[:-1] ** 2 + xw[1:] ** 2))
+        fr = {0: _friction(rows[0], xw[:-1], width), 1: _friction(rows[1], xwm, width),
+              2: _friction(rows[2], xw[1:], width)}
     x_prev = None
     rounds = 0
     for _ in range(max_rounds):

@@ -47,7 +47,8 @@ from pipeline.robot.model import RobotModel
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.solve import PTPPlan
-from pipeline.trajectory.trajectories import JointTrajectory, TorqueCheck, check_trajectory
+from pipeline.trajectory.trajectories import JointTrajectory, check_trajectory, slowed_into_limits
+from pipeline.trajectory.trajectories import time_scaled as time_scaled  # re-exported beside slowed_into_limits
 
 
 def lowest_mode_hz(robot: RobotModel, q: np.ndarray, stiffness_Nm_rad: np.ndarray | None = None) -> float:
@@ -198,41 +199,6 @@ def settling_figure(results: list[SettleResult]) -> Figure:
     ax2.set_title("move-and-settle time")
     ax2.grid(alpha=0.3, axis="x")
     return fig
-
-
-def time_scaled(traj: JointTrajectory, factor: float, name: str | None = None) -> JointTrajectory:
-    """The same path ``factor`` times slower: ``t' = factor t``, ``v' = v / factor``, ``a' = a / factor^2``
-    (``info["time_scale"]``: the product of all scalings)."""
-    info = {**traj.info, "time_scale": float(traj.info.get("time_scale", 1.0)) * float(factor)}
-    return JointTrajectory(name or traj.name, traj.t_s[0] + factor * (traj.t_s - traj.t_s[0]), traj.q.copy(),
-                           traj.v / factor, traj.a / factor**2, info)
-
-
-def _within_limits(check: TorqueCheck, tolerance: float, acceleration_limits: bool) -> bool:
-    return bool(check.violation <= tolerance and check.max_velocity_ratio <= 1.0 + tolerance
-                and (not acceleration_limits or check.max_acceleration_ratio <= 1.0 + tolerance))
-
-
-def slowed_into_limits(pm: PlanningModel, traj: JointTrajectory, tolerance: float, acceleration_limits: bool = True,
-                       energy_weights: np.ndarray | None = None) -> tuple[JointTrajectory, TorqueCheck]:
-    """``traj`` and its fine-grid check when within the limits (ratios <= 1 + ``tolerance``), else the
-    same path slowed down (:func:`time_scaled`; bisection on the factor to ~1e-5) until it is. A plan
-    that 4x slower still breaks a limit (a static torque: slowing does not help) is returned at that
-    speed, for the stage's gate to report."""
-    check = check_trajectory(pm, traj, energy_weights=energy_weights)
-    if _within_limits(check, tolerance, acceleration_limits):
-        return traj, check
-    lo, hi = 1.0, 1.05
-    while not _within_limits(check_trajectory(pm, time_scaled(traj, hi)), tolerance, acceleration_limits):
-        lo, hi = hi, 1.0 + 2.0 * (hi - 1.0)
-        if hi > 4.0:
-            break                     # left to the stage's gate
-    for _ in range(12):
-        mid = 0.5 * (lo + hi)
-        ok = _within_limits(check_trajectory(pm, time_scaled(traj, mid)), tolerance, acceleration_limits)
-        lo, hi = (lo, mid) if ok else (mid, hi)
-    slowed = time_scaled(traj, hi, traj.name)
-    return slowed, check_trajectory(pm, slowed, energy_weights=energy_weights)
 
 
 def add_smooth_ptp(pm: PlanningModel, robot: RobotModel, plan: PTPPlan, filter_periods: float = 1.0,

@@ -14,13 +14,13 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.errors import InfeasibleError, SolverError
+from pipeline.errors import InfeasibleError, PipelineError, SolverError
 from pipeline.robot.defaults import iso_cube, ready_pose_rad
 from pipeline.robot.iso9283 import iso9283_path, tool_rotation
 from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import SplinePath
 from pipeline.robot.symbolic import SymbolicRobot
-from pipeline.trajectory.baselines import RuckigResult, ruckig_torque_feasible, toppra_cp
+from pipeline.trajectory.baselines import RuckigResult, ruckig_resampled, ruckig_torque_feasible, toppra_cp
 from pipeline.trajectory.config import TrajectoryConfig
 from pipeline.trajectory.cp import (
     CP_ACTIVE_LEVEL,
@@ -36,7 +36,13 @@ from pipeline.trajectory.design import JointPath, joint_path_from_cartesian
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.ptp import PtpProblem, PtpResult, energy_weights
 from pipeline.trajectory.reachability import solve_cp_reachability
-from pipeline.trajectory.trajectories import JointTrajectory, TorqueCheck, check_trajectory
+from pipeline.trajectory.trajectories import (
+    JointTrajectory,
+    TorqueCheck,
+    check_trajectory,
+    slowed_into_limits,
+    within_limits,
+)
 from pipeline.trajectory.validate import dominated_flags
 
 
@@ -97,8 +103,16 @@ class CPPlan:
             "cp_active_fraction": self.activity.get("active_fraction"),
             "cp_grid_min_activity": self.activity.get("grid_min_activity"),
             "cp_grid_active_fraction": self.activity.get("grid_active_fraction"),
+            # to the verified plan (solve, fine-grid check, local re-solves) / one solve; wall and process CPU
             "cp_solve_time_s": self.timings_s.get("cp_convex", 0.0) + self.timings_s.get("cp_refined", 0.0),
+            "cp_first_solve_time_s": self.timings_s.get("cp_first_solve"),
+            "cp_solve_cpu_time_s": self.timings_s.get("cp_verified_cpu"),
+            "cp_first_solve_cpu_time_s": self.timings_s.get("cp_first_solve_cpu"),
+            "cp_tightening_rounds": self.timings_s.get("cp_tightening_rounds"),
             "cp_toppra_solve_time_s": self.toppra.solve_time_s,
+            "cp_toppra_solve_cpu_time_s": self.timings_s.get("cp_toppra_cpu"),
+            "cp_verified_vs_toppra_cpu_ratio": (self.timings_s["cp_verified_cpu"] / self.timings_s["cp_toppra_cpu"]
+                                                if self.timings_s.get("cp_toppra_cpu") else None),
         }
         if self.smooth is not None:
             s["cp_smooth_duration_s"] = self.smooth.duration_s
@@ -108,6 +122,34 @@ class CPPlan:
         return s
 
 
+def verified_cp(pm: PlanningModel, path: JointPath, opt: CPProfile, cfg: TrajectoryConfig,
+                 solve: Callable[[np.ndarray | None, CPProfile | None], CPProfile]) -> tuple[CPProfile, int]:
+    """Check ``opt`` on the fine time grid (full friction model) and, while a torque exceeds its limit
+    by more than ``cfg.violation_tolerance``, tighten and re-solve warm-started from it. The
+    reachability solver is tightened locally: only the grid intervals (and joints) whose fine
+    samples exceed, by their excess; the NLP per joint. Returns the plan and the re-solves."""
+    local = cfg.cp_method == "reachability"
+    N = len(opt.s) - 1
+    scale = np.ones((N, pm.nq)) if local else np.ones(pm.nq)
+    rounds = 0
+    for _ in range(cfg.max_tightening_rounds):
+        tr = opt.sample(path, cfg.fine_dt_s)
+        ratio = check_trajectory(pm, tr).torque_ratio
+        if ratio.max() <= 1.0 + cfg.violation_tolerance:
+            break
+        rounds += 1
+        if local:
+            k = np.clip(np.searchsorted(opt.grid_times(), tr.t_s, side="right") - 1, 0, N - 1)
+            worst = np.zeros((N, pm.nq))
+            np.maximum.at(worst, k, ratio)
+        else:
+            worst = ratio.max(axis=0)
+        bad = worst > 1.0 + cfg.violation_tolerance
+        scale[bad] = scale[bad] / worst[bad] * (1.0 - 0.25 * cfg.violation_tolerance)
+        opt = solve(scale, opt)
+    return opt, rounds
+
+
 def plan_cp(pm: PlanningModel, path: JointPath, cfg: TrajectoryConfig) -> CPPlan:
     """Time-optimal CP on ``path``: toppra baseline, our convex problem with toppra's
     constraints (equal-constraints comparison), convex + midpoints, friction refinement,
@@ -115,14 +157,16 @@ def plan_cp(pm: PlanningModel, path: JointPath, cfg: TrajectoryConfig) -> CPPlan
     N = cfg.cp_n_grid
     acc = bool(cfg.acceleration_limits)
     tim = {}
+    c0 = time.process_time()
     tp = toppra_cp(pm, path, N, acceleration_limits=acc)
+    tim["cp_toppra_cpu"] = time.process_time() - c0
     eq = solve_cp_convex(pm, path, N, midpoints=False, name="cp_equal", acceleration_limits=acc)
     cv = None
 
     def solve(scale: np.ndarray | None, warm: CPProfile | None) -> CPProfile:
         if cfg.cp_method == "reachability":
             return solve_cp_reachability(pm, path, N, name="cp", torque_margin=cfg.cp_torque_margin,
-                                         torque_scale=scale, acceleration_limits=acc)
+                                         torque_scale=scale, acceleration_limits=acc, warm=warm)
         return solve_cp_refined(pm, path, warm, midpoints=True, name="cp", torque_margin=cfg.cp_torque_margin,
                                 torque_scale=scale, acceleration_limits=acc)
 
@@ -130,18 +174,11 @@ def plan_cp(pm: PlanningModel, path: JointPath, cfg: TrajectoryConfig) -> CPPlan
         t0 = time.perf_counter()
         cv = solve_cp_convex(pm, path, N, midpoints=True, name="cp_convex", acceleration_limits=acc)
         tim["cp_convex"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     opt = solve(None, cv)
-    # verify on the fine grid; tighten the limits of joints that exceed the tolerance and re-solve
-    scale = np.ones(pm.nq)
-    for _ in range(cfg.max_tightening_rounds):
-        chk = check_trajectory(pm, opt.sample(path, cfg.fine_dt_s))
-        ratio = chk.torque_ratio.max(axis=0)
-        bad = ratio > 1.0 + cfg.violation_tolerance
-        if not bad.any():
-            break
-        scale[bad] = scale[bad] / ratio[bad] * (1.0 - 0.25 * cfg.violation_tolerance)
-        opt = solve(scale, opt)
+    tim["cp_first_solve"], tim["cp_first_solve_cpu"] = time.perf_counter() - t0, time.process_time() - c0
+    opt, tim["cp_tightening_rounds"] = verified_cp(pm, path, opt, cfg, solve)
+    tim["cp_verified_cpu"] = time.process_time() - c0
     tim["cp_refined"] = time.perf_counter() - t0
     sm = None
     if cfg.cp_smooth:
@@ -206,6 +243,10 @@ class PTPPlan:
             "ptp_nlp_duration_s": self.result.duration_s,              # the fine-grid limits) / the NLP's
             "ptp_ruckig_duration_s": self.ruckig.duration_s,
             "ptp_duration_vs_ruckig_ratio": self.trajectories["ptp"].duration_s / self.ruckig.duration_s,
+            # which candidate is the plan (nlp, or ruckig's profile when no NLP solve beat it) and the
+            # start of the NLP solve kept (quintic, or ruckig's profile)
+            "ptp_source": self.trajectories["ptp"].info.get("source", "nlp"),
+            "ptp_nlp_warm_start": self.result.info.get("warm_start"),
             "ptp_fine_violation": self.checks["ptp"].violation,
             "ptp_fine_max_velocity_ratio": self.checks["ptp"].max_velocity_ratio,
             "ptp_ruckig_fine_violation": self.checks["ptp_ruckig"].violation,
@@ -349,16 +390,79 @@ def settle_pareto(sweep: list[PtpResult], fine_energy: Callable[[PtpResult], flo
     return pts
 
 
+#: fine-grid limit ratios above 1 by less than this are round-off; the PtP plan handed on is slowed
+#: into its limits to this accuracy (the gates accept ``violation_tolerance``)
+FINE_GRID_ROUNDOFF = 1e-4
+
+
+def _ruckig_nodes(problem: PtpProblem, ruckig_fine: JointTrajectory) -> np.ndarray:
+    """ruckig's profile at the transcription's nodes (interpolated from its fine samples): a warm start."""
+    t = np.linspace(0.0, ruckig_fine.duration_s, problem.N + 1)
+    q, v, a = (np.column_stack([np.interp(t, ruckig_fine.t_s, x[:, j]) for j in range(problem.nq)])
+               for x in (ruckig_fine.q, ruckig_fine.v, ruckig_fine.a))
+    v[0] = v[-1] = a[0] = a[-1] = 0.0
+    return problem.pack(ruckig_fine.duration_s, q, v, a)
+
+
+def best_ptp_candidate(pm: PlanningModel, problem: PtpProblem, q0: np.ndarray, q1: np.ndarray,
+                       cfg: TrajectoryConfig, weights: np.ndarray, ruckig_fine: JointTrajectory
+                       ) -> tuple[PtpResult, JointTrajectory, TorqueCheck]:
+    """The shortest plan found that keeps the limits on the fine grid, among: the NLP from its cold
+    start, the NLP warm-started from the torque-feasible ruckig profile (solved when the cold start
+    is not shorter than ruckig, or fails) and that ruckig profile itself.
+
+    A time-optimal plan of the full dynamics can never be slower than a torque-feasible ruckig
+    profile, which is itself a feasible motion; when the NLP ends above it (a poorer local optimum,
+    or the transcription's piecewise-linear accelerations cannot follow ruckig's switching times
+    between its nodes), the ruckig profile is the plan (``info["source"] = "ruckig"``). Each NLP
+    plan is slowed into its limits (:func:`slowed_into_limits`, ``FINE_GRID_ROUNDOFF``) before the
+    comparison, so the durations compared are those handed on."""
+    acc = bool(cfg.acceleration_limits)
+    plans: list[tuple[float, str, PtpResult, JointTrajectory, TorqueCheck]] = []
+    failure: PipelineError | None = None
+
+    def attempt(start: str, x0: np.ndarray | None) -> None:
+        nonlocal failure
+        try:
+            r = solve_ptp_verified(pm, problem, q0, q1, cfg, cfg.ptp_k1, cfg.ptp_k2, weights, x0=x0)
+        except (InfeasibleError, SolverError) as exc:
+            failure = failure or exc
+            return
+        r.info["warm_start"] = start
+        tr, chk = slowed_into_limits(pm, r.sample(cfg.fine_dt_s, "ptp"), FINE_GRID_ROUNDOFF, acc, weights)
+        plans.append((tr.duration_s, start, r, tr, chk))
+
+    attempt("quintic", None)
+    if not plans or plans[0][0] >= ruckig_fine.duration_s:
+        attempt("ruckig", _ruckig_nodes(problem, ruckig_fine))
+    if not plans:
+        raise failure or SolverError(None, "ptp", "no NLP solve was attempted")
+    _, _, res, tr, chk = min(plans, key=lambda x: x[0])
+    rk_chk = check_trajectory(pm, ruckig_fine, energy_weights=weights)
+    if within_limits(rk_chk, FINE_GRID_ROUNDOFF, acc) and ruckig_fine.duration_s < tr.duration_s:
+        tr = JointTrajectory("ptp", ruckig_fine.t_s, ruckig_fine.q, ruckig_fine.v, ruckig_fine.a,
+                             {**ruckig_fine.info, "source": "ruckig"})
+        chk = rk_chk
+    else:
+        tr.info["source"] = "nlp"
+    tr.info["nlp_warm_start"] = res.info["warm_start"]
+    tr.info["nlp_candidates_s"] = {start: d for d, start, *_ in plans}
+    return res, tr, chk
+
+
 def plan_ptp(pm: PlanningModel, problem: PtpProblem, q0: np.ndarray, q1: np.ndarray,
              cfg: TrajectoryConfig, pareto: bool = True) -> PTPPlan:
-    """Time-optimal PtP (k1, k2), ruckig baseline, minimum energy at ruckig's duration, Pareto sweep."""
+    """Time-optimal PtP (k1, k2), never slower than its ruckig baseline (:func:`best_ptp_candidate`),
+    minimum energy at ruckig's duration, Pareto sweep."""
     w = energy_weights(pm, cfg.ptp_energy, cfg.motor_resistance_ohm, cfg.torque_constant_Nm_A,
                        getattr(getattr(pm.robot, "actuation", None), "gear_ratio", None))
-    res = solve_ptp_verified(pm, problem, q0, q1, cfg, cfg.ptp_k1, cfg.ptp_k2, w)
     rk = ruckig_torque_feasible(pm, q0, q1, cfg.ruckig_check_dt_s, tuple(cfg.ruckig_jerk_ratios_1_s),
                                 joint_rounds=cfg.ruckig_joint_rounds,
                                 refine_evaluations=cfg.ruckig_refine_evaluations,
                                 acceleration_limits=cfg.acceleration_limits)
+    # the baseline verified on the same fine grid as every plan
+    rk_fine = ruckig_resampled(pm, q0, q1, rk, cfg.fine_dt_s)
+    res, ptp_tr, ptp_chk = best_ptp_candidate(pm, problem, q0, q1, cfg, w, rk_fine)
     fixed: PtpResult | None = None
     note = ""
     if rk.duration_s < res.duration_s:
@@ -392,9 +496,10 @@ def plan_ptp(pm: PlanningModel, problem: PtpProblem, q0: np.ndarray, q1: np.ndar
             sweep, lambda r: check_trajectory(pm, r.sample(cfg.fine_dt_s), energy_weights=w).energy,
             lambda r: solve_ptp_verified(pm, problem, q0, q1, cfg, r.k1, r.k2, w, torque_scale=scale0),
             cold_started=(res,))
-    trajs = {"ptp": res.sample(cfg.fine_dt_s, "ptp"), "ptp_ruckig": rk.trajectory}
+    trajs = {"ptp": ptp_tr, "ptp_ruckig": rk_fine}
     if fixed is not None:
         trajs["ptp_energy_at_ruckig_duration"] = fixed.sample(cfg.fine_dt_s, "ptp_energy_at_ruckig_duration")
-    checks = {k: check_trajectory(pm, v, energy_weights=w) for k, v in trajs.items()}
+    checks = {k: check_trajectory(pm, v, energy_weights=w) for k, v in trajs.items() if k != "ptp"}
+    checks["ptp"] = ptp_chk
     return PTPPlan(np.asarray(q0, float), np.asarray(q1, float), w, res, rk, fixed, sweep, trajs, checks,
                    problem.compile_time_s, problem.build_time_s, note)

@@ -45,7 +45,15 @@ from pipeline.trajectory.settling import (
     slowed_into_limits,
     time_scaled,
 )
-from pipeline.trajectory.solve import CPPlan, PTPPlan, cp_joint_path, plan_cp, plan_ptp, ptp_problem
+from pipeline.trajectory.solve import (
+    FINE_GRID_ROUNDOFF,
+    CPPlan,
+    PTPPlan,
+    cp_joint_path,
+    plan_cp,
+    plan_ptp,
+    ptp_problem,
+)
 from pipeline.trajectory.trajectories import JointTrajectory, check_trajectory
 from pipeline.trajectory.validate import (
     activity_figure,
@@ -159,10 +167,6 @@ def quality_gates(cfg: TrajectoryConfig, cp: CPPlan, ptp: PTPPlan, sims: dict[st
                     cfg.max_sim_averaged_torque_ratio, "servo simulation, 4 ms mean over the full limits")
     return gates
 
-
-#: fine-grid limit ratios above 1 by less than this are round-off; the time-optimal PtP is slowed
-#: into its limits to this accuracy (the gates accept ``violation_tolerance``)
-FINE_GRID_ROUNDOFF = 1e-4
 
 #: rounds of slowing the smooth PtP until the servo simulation keeps the torque limits
 SERVO_SCALING_ROUNDS = 4

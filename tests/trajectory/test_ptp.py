@@ -62,9 +62,24 @@ def test_every_reported_energy_is_the_fine_grid_one(plan, pm, quick_traj_config)
         assert e["energy"] == check_trajectory(pm, r.sample(dt), energy_weights=plan.weights).energy
     main = s["ptp_pareto"][0]
     assert plan.pareto[0] is plan.result
-    assert main["energy"] == s["ptp_energy"] and main["duration_s"] == s["ptp_nlp_duration_s"]
-    assert plan.result.energy != s["ptp_energy"]          # the Simpson value differs: not reported
-    assert s["ptp_ruckig_energy"] == check_trajectory(pm, plan.ruckig.trajectory, energy_weights=plan.weights).energy
+    assert main["duration_s"] == s["ptp_nlp_duration_s"]
+    assert main["energy"] == check_trajectory(pm, plan.result.sample(dt), energy_weights=plan.weights).energy
+    # the plan handed on (the NLP's, slowed into the fine-grid limits, or ruckig's profile)
+    assert s["ptp_energy"] == check_trajectory(pm, plan.trajectories["ptp"], energy_weights=plan.weights).energy
+    assert plan.result.energy != main["energy"]            # the Simpson value differs: not reported
+    rk = plan.trajectories["ptp_ruckig"]
+    assert s["ptp_ruckig_energy"] == check_trajectory(pm, rk, energy_weights=plan.weights).energy
+    assert np.all(np.diff(rk.t_s) <= dt + 1e-12)           # the baseline checked on the same fine grid
+
+
+def test_plan_never_slower_than_its_ruckig_baseline(plan, pm, quick_traj_config):
+    """The torque-feasible ruckig profile is itself a candidate: the plan handed on is never longer,
+    and it keeps the limits on the fine grid."""
+    s = plan.summary()
+    assert s["ptp_duration_s"] <= plan.ruckig.duration_s
+    assert s["ptp_duration_vs_ruckig_ratio"] <= 1.0
+    assert s["ptp_source"] in ("nlp", "ruckig") and s["ptp_nlp_warm_start"] in ("quintic", "ruckig")
+    assert s["ptp_fine_violation"] <= quick_traj_config.violation_tolerance
 
 
 def _really_dominated(i, pts):
