@@ -119,7 +119,7 @@ def _fake(k2, T, E, tag="warm"):
 def test_settle_pareto_resolves_dominated_points_cold():
     """Re-solve each dominated point once from a cold start, keep the lower k1 T + k2 E (fine-grid
     E), flag what stays dominated, never re-solve the main (cold-started) solution."""
-    from pipeline.trajectory.solve import settle_pareto
+    from pipeline.trajectory.pareto import settle_pareto
 
     main = _fake(0.01, 0.628, 1.416, "main")
     better = _fake(0.003, 0.627, 1.5, "cold")           # beats 0.629 / 1.760 and is not dominated
@@ -148,7 +148,7 @@ def test_settle_pareto_resolves_dominated_points_cold():
 
 
 def test_settle_pareto_flags_a_dominated_main_solution():
-    from pipeline.trajectory.solve import settle_pareto
+    from pipeline.trajectory.pareto import settle_pareto
 
     main = _fake(0.01, 0.7, 2.0, "main")
     out = settle_pareto([main, _fake(0.1, 0.6, 1.0)], lambda r: r.info["E"],
