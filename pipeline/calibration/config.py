@@ -93,6 +93,12 @@ class Config:
     #: elastic arm gives hundreds; the elastostatic model ~1 (its gravity-model uncertainty is in
     #: the covariance, pipeline.calibration.gravity_uncertainty)
     max_chi2_per_dof: float = 10.0
+    #: quality gate: held-out (or cross-validated) RMS error over its covariance prediction must
+    #: lie in [1 / max_actual_over_predicted, max_actual_over_predicted]
+    max_actual_over_predicted: float = 1.5
+    #: quality gate (gross inadequacy): held-out (or cross-validated) RMS error after calibration
+    #: over the nominal model's must not exceed this
+    max_error_after_over_before: float = 0.5
     #: known payload mounted on the flange for some measurements: mass (kg), COM in the flange frame (m)
     payload_mass_kg: float | None = None
     payload_com_m: list[float] | None = None
@@ -217,6 +223,10 @@ class Config:
             raise bad("max_outlier_fraction", f"must be in [0, 0.5), got {self.max_outlier_fraction}")
         if not (math.isfinite(self.max_chi2_per_dof) and self.max_chi2_per_dof > 1):
             raise bad("max_chi2_per_dof", f"must be > 1 (chi²/dof is 1 for a right model), got {self.max_chi2_per_dof}")
+        if not (math.isfinite(self.max_actual_over_predicted) and self.max_actual_over_predicted > 1):
+            raise bad("max_actual_over_predicted", f"must be > 1, got {self.max_actual_over_predicted}")
+        if not (math.isfinite(self.max_error_after_over_before) and 0 < self.max_error_after_over_before <= 1):
+            raise bad("max_error_after_over_before", f"must be in (0, 1], got {self.max_error_after_over_before}")
         self._validate_payload(bad)
         for key, hi in (("gravity_model_relative_sigma", 1.0), ("gravity_model_com_sigma_m", 0.5),
                         ("gravity_model_identified_scale", 1.0)):

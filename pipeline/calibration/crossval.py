@@ -1,10 +1,19 @@
 """k-fold cross-validation of a calibration on the user's own readings (no held-out file needed).
 
 The poses (rows of the measurement file; the three fitted rows of a 6-D pose stay together) are
-split into ``k`` folds in file order modulo ``k``; each fold is predicted by the least-squares fit
-(:func:`pipeline.calibration.estimate.estimate`, same identifiable set) of the other folds, without
-the readings the outlier test rejected. The RMS of the position errors of the left-out poses is
-an honest out-of-sample accuracy; it exceeds the in-sample fit residual by the estimation noise.
+split into ``k`` folds in file order modulo ``k``. Each fold is predicted by the robust fit
+(:func:`pipeline.calibration.robust.robust_estimate`, same identifiable set, same per-reading noise
+``sigma_m``) of the other folds: the outlier test runs inside the training folds only, so a gross
+error cannot leave a fold unscored by having been rejected on the whole record. Every left-out
+pose is predicted; a left-out reading that fails the held-out outlier test under its fold's
+model (:func:`pipeline.calibration.validate.gross_error_rows`: whitened by its predicted error
+covariance) is counted (``n_rejected``) and left out of the statistics, as for a held-out file.
+
+Per left-out pose the error ``|e|`` and its prediction ``E|e|^2 = trace(J C J^T) + 3 sigma^2``
+(:func:`pipeline.calibration.validate.predicted_covariance`) give the cross-validated
+``actual_over_predicted = sqrt(mean |e|^2 / mean E|e|^2)``; the nominal model with the fold's
+registered tracker pose gives the error "before". The RMS of the left-out errors is an honest
+out-of-sample accuracy; it exceeds the in-sample fit residual by the estimation noise.
 """
 
 from __future__ import annotations
@@ -13,43 +22,71 @@ import numpy as np
 
 from pipeline.calibration import measure as ms
 from pipeline.calibration.error_model import MeasurementModel
-from pipeline.calibration.estimate import estimate
+from pipeline.calibration.gravity_uncertainty import GravityCovariance
+from pipeline.calibration.robust import robust_estimate
+from pipeline.calibration.validate import gross_error_rows, predicted_covariance
 from pipeline.errors import PipelineError
 
 
-def cross_validate(mm: MeasurementModel, rec: ms.Measurements, basis: np.ndarray, rejected: np.ndarray,
-                   folds: int, max_iterations: int) -> dict:
-    """Per-fold and overall RMS position error (m) of the left-out poses (module docstring)."""
+def _rms(e: np.ndarray) -> float | None:
+    return float(np.sqrt(np.mean(e ** 2))) if e.size else None
+
+
+def cross_validate(mm: MeasurementModel, rec: ms.Measurements, basis: np.ndarray, sigma_m: np.ndarray,
+                   folds: int, max_iterations: int, *, loss: str = "huber", confidence: float = 0.999,
+                   max_fraction: float = 0.1, gravity: GravityCovariance | None = None) -> dict:
+    """Per-fold and overall RMS position error (m) of the left-out poses, before and after, with
+    the predicted RMS and the left-out readings rejected (module docstring)."""
     pose = rec.pose_index if rec.pose_index is not None else np.arange(len(rec))
-    keep = np.ones(len(rec), bool)
-    keep[np.asarray(rejected, int)] = False
+    sigma_m = np.asarray(sigma_m, float)
     fold_of = pose % folds
-    errors: list[np.ndarray] = []
+    after: list[np.ndarray] = []
+    before: list[np.ndarray] = []
+    predicted_var: list[np.ndarray] = []
     per_fold: list[float | None] = []
+    n_rejected = 0
     origin = np.all(rec.offset_m == 0, axis=1) if rec.offset_m is not None else np.ones(len(rec), bool)
+
+    def part(a: np.ndarray | None, m: np.ndarray) -> np.ndarray | None:
+        return None if a is None else a[m]
+
     for f in range(folds):
-        train = keep & (fold_of != f)
-        test = keep & (fold_of == f) & origin
+        train = fold_of != f
+        test = (fold_of == f) & origin
         if not test.any():
             per_fold.append(None)
             continue
-
-        def part(a: np.ndarray | None, m: np.ndarray) -> np.ndarray | None:
-            return None if a is None else a[m]
-
         try:
-            est = estimate(mm, rec.Q[train], rec.Y[train], rec.sigma_m[train], basis, f"fold {f + 1}",
-                           max_iterations, part(rec.payload_mounted, train), part(rec.offset_m, train))
+            est, _ = robust_estimate(mm, rec.Q[train], rec.Y[train], sigma_m[train], basis, f"fold {f + 1}",
+                                     max_iterations, part(rec.payload_mounted, train), loss, confidence,
+                                     max_fraction, part(rec.offset_m, train), gravity)
         except PipelineError:
             per_fold.append(None)   # this fold's training poses do not excite every parameter
             continue
-        pred = mm.predict(rec.Q[test], est.x, est.registration, part(rec.payload_mounted, test),
-                          part(rec.offset_m, test))
-        e = np.linalg.norm(rec.Y[test] - pred, axis=1)
-        errors.append(e)
-        per_fold.append(float(np.sqrt(np.mean(e ** 2))))
-    all_e = np.concatenate(errors) if errors else np.zeros(0)
-    return {"folds": int(folds), "n_poses": int(all_e.size),
-            "rms_position_error_m": float(np.sqrt(np.mean(all_e ** 2))) if all_e.size else None,
+        held = ms.Measurements(rec.Q[test], rec.Y[test], sigma_m[test], f"fold {f + 1}")
+        bad = gross_error_rows(mm, est, held, confidence, gravity)
+        ok = np.ones(len(held), bool)
+        ok[bad] = False
+        n_rejected += int(len(bad))
+        Q, Y = held.Q[ok], held.Y[ok]
+        if not len(Q):
+            per_fold.append(None)
+            continue
+        e = np.linalg.norm(Y - mm.predict(Q, est.x, est.registration), axis=1)
+        after.append(e)
+        before.append(np.linalg.norm(Y - mm.predict(Q, np.zeros(mm.n), est.registration), axis=1))
+        cov, _ = predicted_covariance(mm, est, Q, held.sigma_m[ok], gravity)
+        predicted_var.append(np.trace(cov, axis1=1, axis2=2))
+        per_fold.append(_rms(e))
+    e_all = np.concatenate(after) if after else np.zeros(0)
+    b_all = np.concatenate(before) if before else np.zeros(0)
+    var = np.concatenate(predicted_var) if predicted_var else np.zeros(0)
+    predicted = float(np.sqrt(np.mean(var))) if var.size else None
+    rms = _rms(e_all)
+    return {"folds": int(folds), "n_poses": int(e_all.size), "n_rejected": n_rejected,
+            "rms_position_error_m": rms,
+            "rms_position_error_before_m": _rms(b_all),
+            "predicted_rms_position_error_m": predicted,
+            "actual_over_predicted": rms / predicted if rms is not None and predicted else None,
             "per_fold_rms_m": per_fold,
             "n_folds_not_regular": int(sum(v is None for v in per_fold))}

@@ -75,6 +75,8 @@ def summary_of(out: CalibrationOutcome, cfg: Config) -> dict:
                                if out.measurements.payload_mounted is not None else 0),
         "gravity_pass": out.notes.get("gravity_pass"),
         "cross_validation": out.notes.get("cross_validation"),
+        "noise_model": out.notes["noise_model"].as_dict() if "noise_model" in out.notes else None,
+        "n_outliers_expected_clean": expected_rejections(out.rejection) if out.rejection is not None else None,
         "joint_stiffness_Nm_rad": (None if out.robot.spec.actuation.joint_stiffness_Nm_rad is None
                                    else [float(v) for v in out.robot.spec.actuation.joint_stiffness_Nm_rad]),
         "lm_iterations": out.estimate.iterations,
@@ -134,7 +136,8 @@ def outlier_markdown(out: CalibrationOutcome) -> str:
         return ""
     head = (f"Outlier test (robust loss `{rej.loss}`, then chi-square with 3 dof on the whitened residual "
             f"at {100 * rej.confidence:.2f} % confidence per reading: reject |r/σ| > {rej.threshold:.2f}): "
-            f"**{rej.n_rejected} reading(s) rejected** of {len(rej.whitened_norm)}.")
+            f"**{rej.n_rejected} reading(s) rejected** of {len(rej.whitened_norm)}; a clean record of this size "
+            f"would lose {expected_rejections(rej):.1f} on average (the test's false-alarm share).")
     if rej.capped:
         head += (" More readings failed the test than calibration.max_outlier_fraction allows: the model does "
                  "not explain the data (see chi²/dof).")
@@ -145,6 +148,26 @@ def outlier_markdown(out: CalibrationOutcome) -> str:
     table += [f"| {r['pose_index']} | {r['csv_line'] if r['csv_line'] is not None else '—'} | "
               f"{r['whitened_residual']:.1f} |" for r in rows]
     return head + "\n" + "\n".join(table)
+
+
+def expected_rejections(rej) -> float:
+    """Readings a clean record loses to the outlier test on average: ``N (1 - confidence)``."""
+    return float(len(rej.whitened_norm) * (1.0 - rej.confidence))
+
+
+def noise_markdown(out: CalibrationOutcome) -> list[str]:
+    """The readings' noise model: sensor, arm repeatability, REML remainder (report.md)."""
+    noise = out.notes.get("noise_model")
+    if noise is None:
+        return []
+    s = np.asarray(out.measurements.sigma_m, float)
+    line = (f"Noise model of a reading (1σ per axis, pipeline.calibration.noise_model): sensor "
+            f"{1e3 * float(np.sqrt(np.mean(s ** 2))):.4f} mm (RMS over the readings), arm repeatability "
+            f"{1e3 * noise.repeatability_sigma_m:.4f} mm (robot.yaml repeatability_m / 3.616), unmodelled "
+            f"remainder {1e3 * noise.remainder_sigma_m[0]:.4f} mm (REML on the fit residuals)")
+    if noise.remainder_sigma_m[1]:
+        line += f", remainder of the marker-point rows {1e3 * noise.remainder_sigma_m[1]:.4f} mm"
+    return [line + ".", ""]
 
 
 def visibility_sentence(out: CalibrationOutcome, robot: RobotModel) -> str:
@@ -168,12 +191,17 @@ def report_markdown(out: CalibrationOutcome, cfg: Config, robot: RobotModel) -> 
     if d is not None and from_file(out):
         md += [f"Configurations chosen by the user (no selection was run): {d['index_name']} = "
                f"{d['index_value']:.6g} for the {d['n_configurations']} measured configurations.", ""]
-    md += ["### Fit", "", va.fit_markdown(out.fit, out.prediction), "", outlier_markdown(out), ""]
+    md += ["### Fit", "", va.fit_markdown(out.fit, out.prediction), "", *noise_markdown(out), outlier_markdown(out),
+           ""]
     cv = out.notes.get("cross_validation")
     if cv is not None and cv["rms_position_error_m"] is not None:
         md += [f"{cv['folds']}-fold cross-validation on the measurement file: RMS position error of the left-out "
                f"poses {1e3 * cv['rms_position_error_m']:.4f} mm over {cv['n_poses']} poses "
-               f"({cv['n_folds_not_regular']} fold(s) too small to fit).", ""]
+               f"({cv['n_folds_not_regular']} fold(s) too small to fit); the outlier test runs inside the "
+               f"training folds only, {cv['n_rejected']} left-out reading(s) failed it under their fold's model"
+               + (f"; predicted RMS {1e3 * cv['predicted_rms_position_error_m']:.4f} mm, actual/predicted "
+                  f"{cv['actual_over_predicted']:.3f}" if cv.get("actual_over_predicted") is not None else "")
+               + ".", ""]
     g = out.notes.get("gravity_pass")
     if g is not None:
         md += [f"Second calibration pass: gravity torques of the elastostatic model from `{g['gravity_model']}` "

@@ -32,6 +32,7 @@ from pipeline.calibration.error_model import MeasurementModel
 from pipeline.calibration.estimate import MAX_COMPLIANCE_RELATIVE_STD, Estimate
 from pipeline.calibration.gravity_uncertainty import GravityCovariance
 from pipeline.calibration.measure import MARKER_LEVER_M, Measurements
+from pipeline.quality import QualityGates
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 
 
@@ -298,3 +299,38 @@ def table_markdown(v: dict) -> str:
     else:
         lines.append("\nOrientation errors: not measured (the laser tracker reads positions only).")
     return "\n".join(lines)
+
+
+def gate_figures(summary: dict) -> tuple[str, float | None, float | None]:
+    """The out-of-sample figures the gates judge: ``(source, actual/predicted, after/before)`` from
+    the held-out validation, else from the cross-validation, else ``("none", None, None)``."""
+    if summary.get("actual_over_predicted") is not None:
+        before = summary["heldout_rms_position_error_before_m"]
+        return ("held-out", summary["actual_over_predicted"],
+                summary["heldout_rms_position_error_after_m"] / before if before else None)
+    cv = summary.get("cross_validation") or {}
+    if cv.get("actual_over_predicted") is not None:
+        before = cv.get("rms_position_error_before_m")
+        return "cross-validated", cv["actual_over_predicted"], cv["rms_position_error_m"] / before if before else None
+    return "none", None, None
+
+
+def check_gates(gates: QualityGates, summary: dict, cfg) -> None:
+    """The calibration's quality gates: chi²/dof of the fit under the full noise model (sensor,
+    repeatability, remainder: :mod:`pipeline.calibration.noise_model`), and on held-out or
+    cross-validated poses actual/predicted within ``[1/m, m]`` (``m`` = ``max_actual_over_predicted``)
+    and the error after calibration against the nominal model's (gross inadequacy)."""
+    gates.check("chi2_per_dof", summary["chi2_per_dof"], "<=", cfg.max_chi2_per_dof,
+                "whitened fit residuals after the outlier test under the noise model (sensor, arm repeatability, "
+                "remainder estimated by REML); far above 1: the fit did not converge or the remainder estimate failed")
+    source, ratio, after_before = gate_figures(summary)
+    if ratio is not None:
+        m = cfg.max_actual_over_predicted
+        what = f"{source} RMS error over its covariance prediction"
+        gates.check("actual_over_predicted", ratio, ">=", 1.0 / m, what + ": the prediction is pessimistic")
+        gates.check("actual_over_predicted", ratio, "<=", m, what + ": the prediction is optimistic")
+    if after_before is not None:
+        gates.check("error_after_over_before", after_before, "<=", cfg.max_error_after_over_before,
+                    f"{source} RMS error of the calibrated model over the nominal model's: the error model does not "
+                    "explain the readings (calibration.parameters; a wrong tool, tracker or joint order?)")
+

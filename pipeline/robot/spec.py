@@ -135,11 +135,15 @@ class RobotSpec:
     locked_joints: dict[str, float] = field(default_factory=dict)
     #: values robot.yaml marks as assumed and the user has not edited (:mod:`pipeline.robot.assumed_values`)
     assumed: dict[str, dict] = field(default_factory=dict)
+    #: ISO 9283 pose repeatability RP of the arm (m; 1-sigma per axis RP / 3.616,
+    #: :mod:`pipeline.robot.repeatability`); None: not stated (calibration leaves it to the remainder)
+    repeatability_m: float | None = None
 
 
 _TOP_KEYS = {
     "name", "urdf", "flange_frame", "payload_kg", "tool", "actuation", "limits", "tracker",
     "collision", "capsules", "assumptions", "optical_tracker", "base_link", "locked_joints", "assumed",
+    "repeatability_m",
     # robot-specific defaults of the run configuration (test path placement, moves); read and
     # checked by pipeline.config.load_config, which layers them under the config file
     "run_defaults",
@@ -396,6 +400,8 @@ def load_robot_spec(path: Path, nq: int | None = None) -> RobotSpec:
         base_link=top.text("base_link") if data.get("base_link") is not None else None,
         locked_joints=locked_joints(path, data),
         assumed=assumed_in_force(path, data),
+        repeatability_m=(top.number("repeatability_m", nonnegative=True)
+                         if data.get("repeatability_m") is not None else None),
     )
 
 

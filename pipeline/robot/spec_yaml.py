@@ -36,6 +36,7 @@ def robot_spec_to_yaml(spec: RobotSpec, urdf_name: str) -> dict[str, object]:
         "urdf": urdf_name,
         "flange_frame": spec.flange_frame,
         "payload_kg": float(spec.payload_kg),
+        **({} if spec.repeatability_m is None else {"repeatability_m": float(spec.repeatability_m)}),
         "tool": {
             "transform_tcp_to_flange": _se3_yaml(spec.tool.transform_tcp_to_flange),
             "reflector_offset_m": [float(v) for v in spec.tool.reflector_offset_m],

@@ -37,6 +37,7 @@ import pinocchio as pin
 
 from pipeline.errors import RobotFileError
 from pipeline.robot.reflector_check import capsules_holding
+from pipeline.robot.repeatability import assumed_repeatability_m, repeatability_rule
 from pipeline.robot.spec import ActuationSpec, Capsule, CollisionSpec, RobotSpec, ToolSpec, TrackerSpec
 
 WRIST_GEAR_RATIO, ARM_GEAR_RATIO = 50.0, 100.0
@@ -411,7 +412,8 @@ def assumed_spec(urdf: Path, root: ET.Element, model: pin.Model, tip_link: str) 
         actuation=ActuationSpec(gear, np.diag(gear), ROTOR_INERTIA_PER_EFFORT_S2 * effort,
                                 VISCOUS_FRACTION * effort / velocity, COULOMB_FRACTION * effort, 0.01),
         acceleration_rad_s2=ACCELERATION_PER_VELOCITY_1_S * velocity, limit_overrides={}, tracker=tracker,
-        collision=CollisionSpec(0.0, _floor_check_from_joint(model, capsules)), capsules=capsules)
+        collision=CollisionSpec(0.0, _floor_check_from_joint(model, capsules)), capsules=capsules,
+        repeatability_m=assumed_repeatability_m(reach))
     t = tracker.transform_tracker_to_base.translation
     assumptions = [
         f"no robot.yaml: the facts a URDF lacks are assumed (write one to edit: python -m pipeline robot init {urdf})",
@@ -425,6 +427,8 @@ def assumed_spec(urdf: Path, root: ET.Element, model: pin.Model, tip_link: str) 
         f"acceleration limits {ACCELERATION_PER_VELOCITY_1_S:g}/s x velocity limit",
         f"laser tracker at {np.round(t, 3).tolist()} m in the base frame (1.5 reaches in front), "
         "8 µm + 3 µm/m, incidence <= 30°",
+        f"arm repeatability RP ±{1e3 * assumed_repeatability_m(reach):g} mm (ISO 9283; {repeatability_rule()}, "
+        f"reach {reach:.2f} m)",
         f"collision capsules {how}; floor at z = 0, checked from joint {spec.collision.floor_check_from_joint} "
         "(links whose axis stays within their capsule radius + 6 cm of the floor are not checked)",
     ]

@@ -32,6 +32,7 @@ from pipeline.artefacts import write_text
 from pipeline.errors import RobotFileError
 from pipeline.robot.assumed_values import assumed_entry
 from pipeline.robot.model import RobotModel
+from pipeline.robot.repeatability import repeatability_rule
 from pipeline.robot.spec_yaml import robot_spec_to_yaml
 from pipeline.robot.urdf_import import (
     ACCELERATION_PER_VELOCITY_1_S,
@@ -88,6 +89,7 @@ def _rules(robot: RobotModel, *, tip_given: bool, lock: dict[str, float], placeh
     spec = robot.spec
     rules = {
         "payload_kg": "no payload",
+        "repeatability_m": repeatability_rule(),
         "tool.transform_tcp_to_flange": "TCP at the flange",
         "tool.reflector_offset_m": "on the flange z axis facing away from the arm, outside every capsule",
         "tool.reflector_axis": "opening along the flange z axis, away from the arm",

@@ -1,0 +1,173 @@
+"""Noise model of a calibration reading: sensor + arm repeatability + unmodelled remainder.
+
+A reading ``y_k = h(q_k, x) + e_k`` is off the model by three independent parts, each isotropic
+per axis:
+
+* the sensor's noise ``sigma_s,k`` (laser tracker: ``noise_const_m + noise_per_m * range``; a 6-D
+  camera system: its stated noise);
+* the arm's **repeatability**: the arm commanded to ``q_k`` stops a little elsewhere each time.
+  Data sheets state ISO 9283 pose repeatability ``RP = l_bar + 3 S_l``, ``l`` the distance of an
+  attained position from the barycentre of the attained positions. For an isotropic Gaussian
+  scatter of ``sigma`` per axis ``l`` is Maxwell distributed (mean ``2 sqrt(2/pi) sigma``, standard
+  deviation ``sqrt(3 - 8/pi) sigma``), so ``RP = 3.616 sigma`` and the 1-sigma per axis is
+  ``sigma_r = RP / 3.616`` (:func:`pipeline.robot.repeatability.repeatability_sigma_m`);
+* the **remainder** the model does not explain (gear transmission error, thermal drift, link
+  bending beyond the joint compliances, a sensor noisier than stated): a variance ``tau^2`` per
+  axis estimated from the calibration's own residuals, one per row group (position rows; the
+  virtual marker-point rows of 6-D readings).
+
+So ``Sigma_k = (sigma_s,k^2 + sigma_r^2 + tau_g(k)^2) I (+ B_k B_k^T`` of the gravity-model prior,
+:mod:`pipeline.calibration.gravity_uncertainty`).
+
+``tau^2`` is a variance component estimated by restricted maximum likelihood (REML, Patterson &
+Thompson 1971, "Recovery of inter-block information when block sizes are unequal", Biometrika 58;
+in geodetic adjustment the same estimate is Förstner's / Koch's variance component estimation,
+Koch 1999, "Parameter Estimation and Hypothesis Testing in Linear Models", §3.6). Linearised at the
+fit (Jacobian ``J``, residual ``r``), REML minimises over ``tau^2 >= 0``
+
+    l(tau^2) = log|Sigma| + log|J^T Sigma^-1 J| + r^T P r,
+    P = Sigma^-1 - Sigma^-1 J (J^T Sigma^-1 J)^-1 J^T Sigma^-1,
+
+which, unlike the maximum-likelihood variance ``|r|^2 / N``, accounts for the ``p`` degrees of
+freedom the fit took (``r^T P r`` does not depend on the parameters at which ``r`` is taken,
+``P J = 0``). With one component the minimum is found on a bracket in ``log tau``; with two groups
+each is updated in turn (two sweeps). ``tau = 0`` is kept when it minimises ``l``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from pipeline.calibration.error_model import MeasurementModel
+from pipeline.calibration.estimate import Estimate
+from pipeline.calibration.gravity_uncertainty import GravityCovariance
+from pipeline.calibration.measure import Measurements
+from pipeline.calibration.robust import Rejection, robust_estimate
+from pipeline.robot.repeatability import repeatability_sigma_m  # noqa: F401 - re-exported
+
+
+@dataclass
+class NoiseModel:
+    """Per-axis 1-sigma parts of a reading's error besides the sensor's (m)."""
+
+    repeatability_sigma_m: float = 0.0
+    #: remainder 1-sigma per row group (0: position rows, 1: virtual marker-point rows)
+    remainder_sigma_m: tuple[float, float] = (0.0, 0.0)
+
+    def total(self, sensor_sigma_m: np.ndarray, groups: np.ndarray | None = None) -> np.ndarray:
+        """``(N,)`` 1-sigma per axis of each reading: sensor, repeatability and remainder combined."""
+        s = np.asarray(sensor_sigma_m, float)
+        g = np.zeros(len(s), int) if groups is None else np.asarray(groups, int)
+        tau = np.asarray(self.remainder_sigma_m, float)[g]
+        return np.sqrt(s ** 2 + self.repeatability_sigma_m ** 2 + tau ** 2)
+
+    def as_dict(self) -> dict[str, float]:
+        return {"repeatability_sigma_m": float(self.repeatability_sigma_m),
+                "remainder_sigma_m": float(self.remainder_sigma_m[0]),
+                "remainder_orientation_points_sigma_m": float(self.remainder_sigma_m[1])}
+
+
+def row_groups(offset_m: np.ndarray | None, n: int) -> np.ndarray:
+    """``(N,)`` 0 for a position row (marker origin), 1 for a virtual marker-point row."""
+    if offset_m is None:
+        return np.zeros(n, int)
+    return np.any(np.asarray(offset_m) != 0, axis=1).astype(int)
+
+
+def _blocks(base_var: np.ndarray, factors: np.ndarray | None) -> np.ndarray:
+    cov = base_var[:, None, None] * np.eye(3)
+    if factors is not None and factors.shape[2]:
+        cov = cov + np.einsum("nir,njr->nij", factors, factors)
+    return cov
+
+
+def reml_objective(residual: np.ndarray, J: np.ndarray, base_var: np.ndarray,
+                   factors: np.ndarray | None = None) -> float:
+    """``l`` of the module docstring for per-reading variance ``base_var`` (N,) (plus the gravity
+    factors' ``B_k B_k^T``); ``residual`` (N, 3), ``J`` (N, 3, p) block-diagonal readings."""
+    L = np.linalg.cholesky(_blocks(base_var, factors))
+    logdet_sigma = 2.0 * float(np.sum(np.log(np.diagonal(L, axis1=1, axis2=2))))
+    W = np.linalg.inv(L)
+    wr = np.einsum("nij,nj->ni", W, residual).reshape(-1)
+    wJ = np.einsum("nij,njp->nip", W, J).reshape(len(wr), -1)
+    q, r = np.linalg.qr(wJ)
+    d = np.abs(np.diagonal(r))
+    keep = d > d.max() * 1e-10 if d.size else d.astype(bool)
+    logdet_info = 2.0 * float(np.sum(np.log(d[keep])))
+    proj = q[:, keep].T @ wr
+    return logdet_sigma + logdet_info + float(wr @ wr - proj @ proj)
+
+
+def reml_remainder(residual: np.ndarray, J: np.ndarray, sigma_m: np.ndarray, groups: np.ndarray | None = None,
+                   factors: np.ndarray | None = None, sweeps: int = 2) -> tuple[float, float]:
+    """REML remainder 1-sigma per axis (m) of row groups 0 and 1 (module docstring): readings of
+    residual ``(N, 3)``, Jacobian ``(N, 3, p)`` wrt the fitted parameters, known 1-sigma ``sigma_m``
+    (N,) (sensor and repeatability)."""
+    residual, J = np.asarray(residual, float), np.asarray(J, float)
+    s2 = np.asarray(sigma_m, float) ** 2
+    g = np.zeros(len(s2), int) if groups is None else np.asarray(groups, int)
+    tau2 = [0.0, 0.0]
+    present = [bool(np.any(g == k)) for k in (0, 1)]
+    for _ in range(sweeps if all(present) else 1):
+        for k in (0, 1):
+            if not present[k]:
+                continue
+
+            def obj(log_tau: float, k: int = k) -> float:
+                t = list(tau2)
+                t[k] = math.exp(2.0 * log_tau)
+                return reml_objective(residual, J, s2 + np.asarray(t)[g], factors)
+
+            rows = residual[g == k]
+            rms = math.sqrt(float(np.mean(rows ** 2))) if rows.size else 0.0
+            floor = math.sqrt(float(np.mean(s2[g == k])))
+            hi = math.log(max(4.0 * rms, 2.0 * floor, 1e-12))
+            lo = math.log(max(1e-3 * floor, 1e-12))
+            sol = minimize_scalar(obj, bounds=(lo, hi), method="bounded", options={"xatol": 1e-3})
+            t0 = list(tau2)
+            t0[k] = 0.0
+            zero = reml_objective(residual, J, s2 + np.asarray(t0)[g], factors)
+            tau2[k] = 0.0 if zero <= float(sol.fun) else math.exp(2.0 * float(sol.x))
+    return math.sqrt(tau2[0]), math.sqrt(tau2[1])
+
+
+def _remainder_at(mm: MeasurementModel, est: Estimate, rec: Measurements, known_sigma_m: np.ndarray,
+                  groups: np.ndarray, kept: np.ndarray, gravity: GravityCovariance | None) -> tuple[float, float]:
+    """REML remainder of the kept readings of ``rec`` at the fit ``est``."""
+    def part(a: np.ndarray | None) -> np.ndarray | None:
+        return None if a is None else a[kept]
+
+    Q, mounted, offsets = rec.Q[kept], part(rec.payload_mounted), part(rec.offset_m)
+    pred, J = mm.jacobian(Q, est.x, est.registration, est.basis, mounted, offsets)
+    factors = (gravity.factors(Q, est.x, est.registration, mounted, offsets)
+               if gravity is not None and gravity.active and mm.compliance else None)
+    return reml_remainder(rec.Y[kept] - pred, J, known_sigma_m[kept], groups[kept], factors)
+
+
+def fit_with_noise_model(mm: MeasurementModel, rec: Measurements, basis: np.ndarray, noise: NoiseModel,
+                         gravity: GravityCovariance | None, *, max_iterations: int, loss: str, confidence: float,
+                         max_fraction: float, rounds: int = 3, tolerance: float = 0.05
+                         ) -> tuple[Estimate, Rejection, NoiseModel]:
+    """Robust fit (:func:`pipeline.calibration.robust.robust_estimate`) with the readings' noise
+    ``sensor + repeatability + remainder``; the remainder by REML on the kept readings of that fit,
+    then the fit again with it, until the readings' total variance changes by less than
+    ``tolerance`` (relative, mean over the readings) or after ``rounds`` fits."""
+    groups = row_groups(rec.offset_m, len(rec))
+    known = NoiseModel(noise.repeatability_sigma_m).total(rec.sigma_m, groups)
+    current = noise
+    for _ in range(rounds):
+        sigma = current.total(rec.sigma_m, groups)
+        est, rejection = robust_estimate(mm, rec.Q, rec.Y, sigma, basis, rec.source, max_iterations,
+                                         rec.payload_mounted, loss, confidence, max_fraction, rec.offset_m, gravity)
+        kept = np.ones(len(rec), bool)
+        kept[rejection.rejected] = False
+        new = NoiseModel(noise.repeatability_sigma_m, _remainder_at(mm, est, rec, known, groups, kept, gravity))
+        change = float(np.mean(np.abs(new.total(rec.sigma_m, groups) ** 2 - sigma ** 2)) / np.mean(sigma ** 2))
+        current = new
+        if change < tolerance:
+            break
+    return est, rejection, current

@@ -1,0 +1,119 @@
+"""Noise model of calibration readings: repeatability, REML remainder, gates, gross errors in a file."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.stats import binom
+
+from pipeline.calibration import candidates as cd
+from pipeline.calibration import measure as ms
+from pipeline.calibration import noise_model as nm
+from pipeline.calibration import stage as st
+from pipeline.calibration.validate import gate_figures
+from pipeline.robot import repeatability as rp
+
+
+def test_repeatability_sigma_reproduces_iso9283_rp():
+    """RP = mean distance from the barycentre + 3 standard deviations, of a Gaussian scatter."""
+    rng = np.random.default_rng(0)
+    sigma = 1e-5
+    p = sigma * rng.standard_normal((200_000, 3))
+    d = np.linalg.norm(p - p.mean(axis=0), axis=1)
+    rp_m = d.mean() + 3 * d.std()
+    assert rp.repeatability_sigma_m(rp_m) == pytest.approx(sigma, rel=0.01)
+
+
+def test_assumed_repeatability_grows_with_reach():
+    values = [rp.assumed_repeatability_m(r) for r in (0.5, 1.4, 2.0, 3.5)]
+    assert values == sorted(values) and values[0] < values[-1]
+    assert all(0.02e-3 <= v <= 0.1e-3 for v in values)
+
+
+def _linear_record(rng, n, p, sigma, tau):
+    J = rng.standard_normal((n, 3, p))
+    e = rng.standard_normal((n, 3)) * np.sqrt(sigma ** 2 + tau ** 2)
+    A = J.reshape(-1, p)
+    r = e.reshape(-1) - A @ np.linalg.lstsq(A, e.reshape(-1), rcond=None)[0]
+    return r.reshape(n, 3), J
+
+
+@pytest.mark.parametrize("tau", [20e-6, 1e-3])
+def test_reml_recovers_the_remainder(tau):
+    rng = np.random.default_rng(3)
+    r, J = _linear_record(rng, 200, 30, 10e-6, tau)
+    est, _ = nm.reml_remainder(r, J, np.full(200, 10e-6))
+    assert est == pytest.approx(tau, rel=0.15)
+
+
+def test_reml_finds_no_remainder_in_clean_readings():
+    """REML counts the p parameters fitted: the ML variance |r|^2/N would read less than sigma^2."""
+    rng = np.random.default_rng(4)
+    r, J = _linear_record(rng, 60, 40, 10e-6, 0.0)
+    est, _ = nm.reml_remainder(r, J, np.full(60, 10e-6))
+    assert est < 5e-6
+
+
+def test_noise_model_total_adds_the_parts_in_quadrature():
+    noise = nm.NoiseModel(3e-6, (4e-6, 12e-6))
+    total = noise.total(np.array([0.0, 0.0]), np.array([0, 1]))
+    assert total == pytest.approx([5e-6, np.sqrt(9 + 144) * 1e-6])
+
+
+def test_gates_judge_heldout_before_cross_validation():
+    s = {"actual_over_predicted": 1.1, "heldout_rms_position_error_before_m": 1e-3,
+         "heldout_rms_position_error_after_m": 1e-4, "cross_validation": {"actual_over_predicted": 9.0}}
+    assert gate_figures(s) == ("held-out", 1.1, pytest.approx(0.1))
+    s["actual_over_predicted"] = None
+    s["cross_validation"] |= {"rms_position_error_m": 2e-4, "rms_position_error_before_m": 1e-3}
+    assert gate_figures(s) == ("cross-validated", 9.0, pytest.approx(0.2))
+
+
+@pytest.fixture(scope="module")
+def gross_files(tmp_path_factory):
+    """A simulated record written to CSV, the same with three gross errors, and a held-out file."""
+    from pipeline.robot.model import RobotModel
+    from pipeline.sim.truth import RealRobot
+
+    robot = RobotModel.load("rx130l")
+    real = RealRobot.create(robot, 21)
+    rng = np.random.default_rng(21)
+    ch = cd.chain_from_robot(robot)
+    Q, _ = cd.random_candidates(ch, 60, rng)
+    meas = ms.measure_simulated(real, Q, rng)
+    Qv, _ = cd.random_candidates(ch, 150, rng)
+    held = ms.measure_simulated(real, Qv, rng)
+    d = tmp_path_factory.mktemp("gross")
+    Y = meas.Y.copy()
+    Y[5, 0] += 2e-3
+    Y[17, 1] += 3e-3
+    Y[30] = Y[29]              # a stale reading: the previous pose's position again
+    bad = ms.Measurements(meas.Q, Y, meas.sigma_m, "gross")
+    return (robot, ms.write_csv(d / "clean.csv", meas), ms.write_csv(d / "gross.csv", bad),
+            ms.write_csv(d / "val.csv", held), len(meas))
+
+
+class _Ctx:
+    def __init__(self, config, robot):
+        from types import SimpleNamespace
+
+        self.config, self.robot, self.rng, self.progress = config, robot, np.random.default_rng(6), None
+        self.run = SimpleNamespace(accept_poor=False)
+        self.real = None
+
+
+def test_three_gross_errors_are_found_and_the_run_passes(gross_files):
+    robot, clean, gross, val, n = gross_files
+    figures = {}
+    for name, path in (("clean", clean), ("gross", gross)):
+        cfg = st.Config(measurements_csv=str(path), validation_csv=str(val), identifiability_samples=60, figures=False)
+        res = st.run(_Ctx(cfg, robot))      # raises on a failed quality gate (exit 3)
+        figures[name] = res.summary
+    g, c = figures["gross"], figures["clean"]
+    rejected = {r["pose_index"] for r in g["outliers_rejected"]}
+    assert {5, 17, 30} <= rejected
+    assert g["heldout_rms_position_error_after_m"] <= 1.1 * c["heldout_rms_position_error_after_m"]
+    assert g["quality_gates"]["passed"] and 1 / 1.5 <= g["actual_over_predicted"] <= 1.5
+    # a clean record loses no more than the test's false-alarm share allows (99.9 % binomial bound)
+    assert c["n_outliers_expected_clean"] == pytest.approx(n * 1e-3)
+    assert c["n_outliers_rejected"] <= binom.ppf(0.999, n, 1e-3) + 1
