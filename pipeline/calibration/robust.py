@@ -3,6 +3,11 @@
 Tracker records contain gross errors (a beam that hit the wrong surface: millimetres off; a
 stale reading repeated after a blocked beam). One of them moves a least-squares fit far off, so:
 
+0. with the elastostatic model, a geometric screen first: the rigid model (the identified
+   geometric parameters alone) fitted with the redescending Cauchy loss, and the readings failing
+   the test of step 3 under it left out of step 1. A gross error cannot then pull the compliances
+   (and a wrong first-pass gravity model with them) towards itself and hide; a screened reading
+   that the elastostatic fit explains comes back in step 3 (:func:`geometric_screen`);
 1. plain least squares (:func:`pipeline.calibration.estimate.estimate`, registration + LM);
 2. with ``loss`` "huber" or "cauchy": ``scipy.optimize.least_squares`` from that solution with the
    robust loss on the whitened residual components (``f_scale`` = :data:`ROBUST_SCALE` sigma);
@@ -41,6 +46,7 @@ from scipy.stats import chi2
 from pipeline.calibration.error_model import MeasurementModel
 from pipeline.calibration.estimate import Estimate, estimate
 from pipeline.calibration.gravity_uncertainty import GravityCovariance, Whitener
+from pipeline.errors import PipelineError
 
 #: scale of the robust loss in whitened units (readings within 2 sigma count quadratically)
 ROBUST_SCALE = 2.0
@@ -91,6 +97,30 @@ def _robust_refit(mm: MeasurementModel, est: Estimate, Q: np.ndarray, Y: np.ndar
                     int(sol.nfev), est.chi2_per_dof, est.residual_rms_m, bool(sol.success), est.cost_history)
 
 
+def geometric_screen(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarray, basis: np.ndarray,
+                     source: str, max_iterations: int, mounted: np.ndarray | None, offsets: np.ndarray | None,
+                     confidence: float, max_fraction: float) -> np.ndarray:
+    """``(N,)`` bool: readings kept by step 0 of the module docstring (all of them without
+    compliance columns in ``basis``, or when the rigid fit is not regular)."""
+    n = len(Q)
+    keep = np.ones(n, bool)
+    if not mm.compliance:
+        return keep
+    elastic = np.any(np.asarray(basis)[mm.sl_compliance] != 0, axis=0)
+    if not elastic.any() or elastic.all():
+        return keep
+    try:
+        rigid = estimate(mm, Q, Y, sigma, basis[:, ~elastic], source, max_iterations, mounted, offsets)
+    except PipelineError:
+        return keep
+    rigid = _robust_refit(mm, rigid, Q, Y, sigma, mounted, "cauchy", max_iterations, offsets)
+    norm = _whitened_norm(mm, rigid, Q, Y, sigma, mounted, offsets)
+    scale = max(1.0, float(np.sqrt(np.median(norm ** 2) / chi2.ppf(0.5, 3))))
+    bad = np.flatnonzero(norm > np.sqrt(chi2.ppf(confidence, 3)) * scale)
+    keep[bad[np.argsort(-norm[bad])][: int(np.floor(max_fraction * n))]] = False
+    return keep
+
+
 def robust_estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarray, basis: np.ndarray,
                     source: str = "measurements", max_iterations: int = 50, mounted: np.ndarray | None = None,
                     loss: str = "huber", confidence: float = 0.999, max_fraction: float = 0.1,
@@ -104,7 +134,12 @@ def robust_estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: n
     median_3 = float(chi2.ppf(0.5, 3))
     threshold = base_threshold
     max_rejected = int(np.floor(max_fraction * n))
-    est = estimate(mm, Q, Y, sigma, basis, source, max_iterations, mounted, offsets)
+    kept = geometric_screen(mm, Q, Y, sigma, basis, source, max_iterations, mounted, offsets, confidence, max_fraction)
+
+    def rows(a: np.ndarray | None) -> np.ndarray | None:
+        return None if a is None else a[kept]
+
+    est = estimate(mm, Q[kept], Y[kept], sigma[kept], basis, source, max_iterations, rows(mounted), rows(offsets))
     use_gravity = gravity is not None and gravity.active
 
     def gravity_factors(e: Estimate) -> np.ndarray | None:
@@ -112,10 +147,10 @@ def robust_estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: n
 
     fac = gravity_factors(est)
     if fac is not None:
-        est = estimate(mm, Q, Y, sigma, basis, source, max_iterations, mounted, offsets, fac)
+        est = estimate(mm, Q[kept], Y[kept], sigma[kept], basis, source, max_iterations, rows(mounted), rows(offsets),
+                       fac[kept])
     probe = est if loss == "linear" else _robust_refit(mm, est, Q, Y, sigma, mounted, loss, max_iterations, offsets,
                                                        fac)
-    kept = np.ones(n, bool)
     capped = False
     for _ in range(MAX_ROUNDS):
         norm = _whitened_norm(mm, probe, Q, Y, sigma, mounted, offsets, fac)

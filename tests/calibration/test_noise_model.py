@@ -117,3 +117,19 @@ def test_three_gross_errors_are_found_and_the_run_passes(gross_files):
     # a clean record loses no more than the test's false-alarm share allows (99.9 % binomial bound)
     assert c["n_outliers_expected_clean"] == pytest.approx(n * 1e-3)
     assert c["n_outliers_rejected"] <= binom.ppf(0.999, n, 1e-3) + 1
+
+
+def test_readings_the_model_cannot_explain_still_fail(gross_files, tmp_path):
+    """Readings paired with the wrong poses (a shifted file): the calibration explains little of the
+    nominal error, and the gross-inadequacy gate stops the run (exit 3)."""
+    from pipeline.errors import QualityGateError
+
+    robot, clean, _, val, _ = gross_files
+    m = ms.read_csv(clean, robot)
+    shifted = ms.write_csv(tmp_path / "shifted.csv", ms.Measurements(m.Q, np.roll(m.Y, 1, axis=0), m.sigma_m, "x"))
+    cfg = st.Config(measurements_csv=str(shifted), validation_csv=str(val), identifiability_samples=60,
+                    figures=False, max_outlier_fraction=0.0)
+    with pytest.raises(QualityGateError) as info:
+        st.run(_Ctx(cfg, robot))
+    failed = {c["name"] for c in info.value.result.summary["quality_gates"]["checks"] if not c["passed"]}
+    assert failed & {"error_after_over_before", "actual_over_predicted"}

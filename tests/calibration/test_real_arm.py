@@ -14,7 +14,7 @@ from pipeline.calibration import stage as st
 from pipeline.calibration import validate as va
 from pipeline.calibration.estimate import estimate, register_points
 from pipeline.calibration.robust import robust_estimate
-from pipeline.errors import ConfigError, DataFileError, QualityGateError
+from pipeline.errors import ConfigError, DataFileError
 from pipeline.papers.calib_six_d import simulate_six_d_record
 from pipeline.robot.model import RobotModel
 from pipeline.sim.truth import RealRobot, TruthConfig
@@ -38,15 +38,19 @@ def _ctx(cfg: st.Config, robot: RobotModel, real: RealRobot, seed: int) -> Simpl
                            run=SimpleNamespace(accept_poor=False))
 
 
-def test_geometric_only_calibration_of_an_elastic_arm_fails_its_chi2_gate(robot):
-    """Default truth (elastic joints): a rigid error model cannot explain the readings."""
+def test_geometric_only_calibration_of_an_elastic_arm_reports_its_remainder_honestly(robot):
+    """Default truth (elastic joints): a rigid error model leaves the deflections unexplained; the
+    noise model takes them up as a remainder far above the tracker noise, so chi²/dof is ~1 and the
+    held-out error is predicted as it is (an honest, if coarse, calibration), worse than the
+    elastostatic model's by far."""
     real = RealRobot.create(robot, 4)
-    with pytest.raises(QualityGateError) as info:
-        st.run(_ctx(_cfg(parameters="geometric"), robot, real, 4))
-    assert "chi2_per_dof" in str(info.value) and "elasticity" in str(info.value)
-    s = info.value.result.summary
-    assert s["chi2_per_dof"] > 3 * 10.0 and s["rms_after_over_sigma"] > 5
-    assert s["quality_gates"]["passed"] is False
+    res = st.run(_ctx(_cfg(parameters="geometric"), robot, real, 4))
+    s = res.summary
+    noise = s["noise_model"]
+    assert noise["remainder_sigma_m"] > 5 * noise["repeatability_sigma_m"] + 1e-4
+    assert s["chi2_per_dof"] < 2 and 1 / 1.5 <= s["actual_over_predicted"] <= 1.5
+    assert s["heldout_rms_position_error_after_m"] > 3 * noise["remainder_sigma_m"] / 2
+    assert "unmodelled remainder" in res.report_md
 
 
 @pytest.fixture(scope="module")
