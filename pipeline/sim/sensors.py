@@ -4,6 +4,9 @@ Noise facts (DESIGN.md, "Sensors"):
 - laser tracker: reflector position, isotropic sigma = 8 µm + 3 µm per metre of range, only
   if the incidence angle between the reflector axis and the beam is <= 30 deg and no link
   capsule blocks the beam (paper 000 §2, tracker and incidence constraint);
+- the arm's repeatability (robot.yaml ``repeatability_m``, ISO 9283 RP; none without it): an
+  isotropic scatter of RP / 3.616 per axis of the reflector at each commanded pose
+  (:mod:`pipeline.robot.repeatability`), drawn after the tracker noise;
 - encoders: sigma about 2 µrad joint side;
 - motor torque from current: sigma about 1 % of the torque limit;
 - gross tracker errors (:class:`GrossErrors`, all 0 by default here): a rate of readings off by
@@ -28,6 +31,7 @@ import pinocchio as pin
 from pipeline.robot.instruments import tracker_visibility
 from pipeline.robot.model import RobotModel
 from pipeline.robot.payload import Payload
+from pipeline.robot.repeatability import repeatability_sigma_m
 
 
 @dataclass
@@ -98,6 +102,8 @@ class LaserTracker(LinkSideSensor):
         self.noise_const_m = robot.tracker.noise_const_m
         self.noise_per_m = robot.tracker.noise_per_m
         self.max_incidence_rad = robot.tracker.max_incidence_rad
+        #: the arm's own scatter at a commanded pose, 1-sigma per axis (robot.yaml repeatability_m)
+        self.repeatability_sigma_m = repeatability_sigma_m(robot.spec.repeatability_m or 0.0)
 
     def visible(self, Q: np.ndarray, payload: Payload | None = None) -> np.ndarray:
         """Whether each configuration can be measured (incidence and beam blockage)."""
@@ -118,6 +124,8 @@ class LaserTracker(LinkSideSensor):
         positions = positions_base @ base_to_tracker.rotation.T + base_to_tracker.translation
         sigma = self.noise_const_m + self.noise_per_m * vis.range_m
         positions = positions + sigma[:, None] * rng.standard_normal(positions.shape)
+        if self.repeatability_sigma_m > 0:   # the arm stops a little elsewhere each time (drawn only then)
+            positions = positions + self.repeatability_sigma_m * rng.standard_normal(positions.shape)
         corrupted = self._gross.apply(positions, vis.visible, rng)
         positions[~vis.visible] = np.nan
         return TrackerReading(positions, vis.visible, sigma, corrupted)
