@@ -78,11 +78,8 @@ def gross_files(tmp_path_factory):
     robot = RobotModel.load("rx130l")
     real = RealRobot.create(robot, 21)
     rng = np.random.default_rng(21)
-    ch = cd.chain_from_robot(robot)
-    Q, _ = cd.random_candidates(ch, 60, rng)
-    meas = ms.measure_simulated(real, Q, rng)
-    Qv, _ = cd.random_candidates(ch, 150, rng)
-    held = ms.measure_simulated(real, Qv, rng)
+    meas, held = (ms.measure_simulated(real, cd.random_candidates(cd.chain_from_robot(robot), n, rng)[0], rng)
+                  for n in (60, 150))
     d = tmp_path_factory.mktemp("gross")
     Y = meas.Y.copy()
     Y[5, 0] += 2e-3
