@@ -130,3 +130,22 @@ def test_readings_the_model_cannot_explain_still_fail(gross_files, tmp_path):
         st.run(_Ctx(cfg, robot))
     failed = {c["name"] for c in info.value.result.summary["quality_gates"]["checks"] if not c["passed"]}
     assert failed & {"error_after_over_before", "actual_over_predicted"}
+
+
+def test_clean_record_loses_no_more_than_the_confidence_implies():
+    """At 90 % per reading a clean record may lose about a tenth, never much more (binomial bound);
+    with the remainder in the noise model the robust scale does not inflate the count."""
+    from pipeline.calibration import error_model as em
+    from pipeline.calibration.robust import robust_estimate
+    from pipeline.robot.model import RobotModel
+    from pipeline.sim.truth import RealRobot, TruthConfig
+
+    robot = RobotModel.load("rx130l")
+    real = RealRobot.create(robot, 8, TruthConfig.ideal())
+    rng = np.random.default_rng(8)
+    meas = ms.measure_simulated(real, cd.random_candidates(cd.chain_from_robot(robot), 80, rng)[0], rng)
+    mm = em.MeasurementModel(robot)
+    _, basis = st.identify_parameter_set(robot, mm, st.Config(identifiability_samples=60), rng)
+    _, rej = robust_estimate(mm, meas.Q, meas.Y, meas.sigma_m, basis, confidence=0.9, max_fraction=0.4)
+    n = len(meas)
+    assert rej.n_rejected <= binom.ppf(0.999, n, 0.1)
