@@ -31,7 +31,7 @@ def robot_spec_to_yaml(spec: RobotSpec, urdf_name: str) -> dict[str, object]:
     act = spec.actuation
     coupling = [[int(i), int(j), float(act.gear_matrix[i, j])]
                 for i, j in zip(*np.nonzero(act.gear_matrix - np.diag(np.diag(act.gear_matrix))), strict=True)]
-    out = {
+    out: dict[str, object] = {
         "name": spec.name,
         "urdf": urdf_name,
         "flange_frame": spec.flange_frame,
