@@ -137,7 +137,7 @@ def outlier_markdown(out: CalibrationOutcome) -> str:
     head = (f"Outlier test (robust loss `{rej.loss}`, then chi-square with 3 dof on the whitened residual "
             f"at {100 * rej.confidence:.2f} % confidence per reading: reject |r/σ| > {rej.threshold:.2f}): "
             f"**{rej.n_rejected} reading(s) rejected** of {len(rej.whitened_norm)}; a clean record of this size "
-            f"would lose {expected_rejections(rej):.1f} on average (the test's false-alarm share).")
+            f"would lose {expected_rejections(rej):.2g} on average (the test's false-alarm share).")
     if rej.capped:
         head += (" More readings failed the test than calibration.max_outlier_fraction allows: the model does "
                  "not explain the data (see chi²/dof).")
