@@ -270,3 +270,20 @@ def _is_number(s: str) -> bool:
     except ValueError:
         return False
     return True
+
+
+def min_configurations(n_identifiable: int) -> int:
+    """Fewest configurations whose 3 tracker coordinates each can determine ``n_identifiable``
+    parameters (no redundancy: a few more are needed when the tracker cannot see some)."""
+    return -(-n_identifiable // 3)
+
+
+def check_rows(use_orientation: bool, user: Measurements, p: int, robot: RobotModel) -> None:
+    """Enough independent equations (3 per position row, 6 per 6-D row) for the ``p`` parameters."""
+    per_row = 6 if user.rotvec is not None and use_orientation else 3
+    need = -(-p // per_row)
+    if len(user) < need:
+        kind = "position + orientation" if per_row == 6 else "position"
+        raise DataFileError(user.source, "rows", f"{len(user)} measurement rows, need at least {need} ({per_row} "
+                            f"equations per {kind} row for the {p} identifiable parameters of {robot.name}; "
+                            "calibration.parameters selects fewer)")

@@ -67,7 +67,7 @@ from pipeline.calibration.report import (  # noqa: F401 - re-exported (tests, no
     summary_of,
     visibility_sentence,
 )
-from pipeline.errors import ConfigError, DataFileError, InfeasibleError, PipelineError
+from pipeline.errors import ConfigError, InfeasibleError, PipelineError
 from pipeline.progress import task
 from pipeline.quality import QualityGates
 from pipeline.robot.iso_search import POSE_AXES
@@ -238,7 +238,7 @@ def _calibrate(robot: RobotModel, real, cfg: Config, rng: np.random.Generator, p
     timings["identifiability_s"] = time.perf_counter() - t
     p = basis.shape[1]
     if user is not None:
-        check_rows(cfg, user, p, robot)
+        ms.check_rows(cfg.use_orientation, user, p, robot)
     selection = None
     cs = None
     grad = None
@@ -289,7 +289,7 @@ def _calibrate(robot: RobotModel, real, cfg: Config, rng: np.random.Generator, p
             raise InfeasibleError(None, "calibration.n_configurations",
                                   f"only {len(meas)} of the {meas.n_requested} measured configurations were visible "
                                   f"to the tracker; the {p} identifiable parameters need at least "
-                                  f"{min_configurations(p)}: raise n_configurations")
+                                  f"{ms.min_configurations(p)}: raise n_configurations")
     else:
         meas = user  # the user's configurations: no candidates, no selection, no simulated robot
     t = time.perf_counter()
@@ -366,23 +366,6 @@ def heldout_measurements(robot: RobotModel, real, est: Estimate, cfg: Config,
     return ms.Measurements(Q, Y, s, "simulated tracker (held-out)", None, sum(p.n_requested for p in parts))
 
 
-def min_configurations(n_identifiable: int) -> int:
-    """Fewest configurations whose 3 tracker coordinates each can determine ``n_identifiable``
-    parameters (no redundancy: a few more are needed when the tracker cannot see some)."""
-    return -(-n_identifiable // 3)
-
-
-def check_rows(cfg: Config, user: ms.Measurements, p: int, robot: RobotModel) -> None:
-    """Enough independent equations (3 per position row, 6 per 6-D row) for the ``p`` parameters."""
-    per_row = 6 if user.rotvec is not None and cfg.use_orientation else 3
-    need = -(-p // per_row)
-    if len(user) < need:
-        kind = "position + orientation" if per_row == 6 else "position"
-        raise DataFileError(user.source, "rows", f"{len(user)} measurement rows, need at least {need} ({per_row} "
-                            f"equations per {kind} row for the {p} identifiable parameters of {robot.name}; "
-                            "calibration.parameters selects fewer)")
-
-
 def check(config: Config, robot: RobotModel) -> None:
     """Robot-dependent checks and the user files, before the runner creates any directory."""
     cfg = config
@@ -413,7 +396,7 @@ def check(config: Config, robot: RobotModel) -> None:
                               f"{MAX_CANDIDATES:.3g} (time and memory); lower grid_per_axis or use candidates: random")
     _, basis = identify_parameter_set(robot, mm, cfg, np.random.default_rng(0))
     p = basis.shape[1]
-    n_min = min_configurations(p)
+    n_min = ms.min_configurations(p)
     if not cfg.measurements_csv:   # the design fields are used only without a measurement file
         why = (f"3 tracker coordinates per configuration for the {p} identifiable parameters of {robot.name}")
         if cfg.n_configurations < n_min:
@@ -431,7 +414,7 @@ def check(config: Config, robot: RobotModel) -> None:
                               f"the start subset must be regular: need at least {n_min} ({why}) or null "
                               f"(2/3 of n_configurations), got {cfg.n_initial}")
     if cfg.measurements_csv:
-        check_rows(cfg, user, p, robot)
+        ms.check_rows(cfg.use_orientation, user, p, robot)
     if cfg.validation_csv:
         ms.read_csv(cfg.validation_csv, robot, min_rows=1)
 

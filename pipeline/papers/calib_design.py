@@ -109,7 +109,7 @@ def robot_designs(robot_name: str, n: int, curve: list[int], quick: bool, grid: 
     kpi_Q = Qw[rng.choice(len(Qw), size=min(kpi_poses, len(Qw)), replace=False)]
     sigma = float(np.median(cs.sigma_m))
     specs = {name: _spec(name, robot, mm, basis, Qw, sigma, kpi_Q) for name in INDICES}
-    n_min = st.min_configurations(basis.shape[1])
+    n_min = ms.min_configurations(basis.shape[1])
     designs: dict[str, dict] = {}
 
     def add(key: str, method: str, index: str, size: int, sel: np.ndarray, t: float) -> None:
