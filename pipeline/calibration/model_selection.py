@@ -31,6 +31,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
+from scipy.stats import chi2
 
 from pipeline.calibration import measure as ms
 from pipeline.calibration import subsets
@@ -74,16 +75,23 @@ class CandidateScore:
     fold_of_pose: np.ndarray                       # (n,) fold of each pose
     position_error_m: np.ndarray                   # (n,)
     orientation_error_rad: np.ndarray | None       # (n,) 6-D readings, else None
+    #: (n,) poses that count in the score (False: a gross error, :func:`gross_heldout_poses`)
+    scored: np.ndarray | None = None
+
+    @property
+    def mask(self) -> np.ndarray:
+        return np.ones(len(self.position_error_m), bool) if self.scored is None else self.scored
 
     @property
     def valid(self) -> bool:
-        return bool(np.all(np.isfinite(self.position_error_m)))
+        return bool(np.all(np.isfinite(self.position_error_m[self.mask])))
 
     def mse_and_se(self, e: np.ndarray) -> tuple[float, float]:
-        """Mean squared error over all held-out poses and its standard error across the folds."""
-        folds = np.unique(self.fold_of_pose)
-        per_fold = np.array([np.mean(e[self.fold_of_pose == f] ** 2) for f in folds])
-        return float(np.mean(e ** 2)), float(np.std(per_fold, ddof=1) / np.sqrt(len(folds)))
+        """Mean squared error over the scored held-out poses and its standard error across the folds."""
+        m = self.mask
+        folds = np.unique(self.fold_of_pose[m])
+        per_fold = np.array([np.mean(e[m & (self.fold_of_pose == f)] ** 2) for f in folds])
+        return float(np.mean(e[m] ** 2)), float(np.std(per_fold, ddof=1) / np.sqrt(len(folds)))
 
     def as_dict(self) -> dict:
         mse, se = self.mse_and_se(self.position_error_m) if self.valid else (float("nan"), float("nan"))
@@ -114,8 +122,11 @@ class ModelSelection:
         """The chosen candidate's held-out figures (``summary.json`` ``cross_validation``)."""
         s = self.score_of(self.chosen)
         d = s.as_dict()
-        per_fold = [float(np.sqrt(np.mean(s.position_error_m[s.fold_of_pose == f] ** 2))) for f in range(self.folds)]
-        return {"folds": self.folds, "n_poses": int(len(s.position_error_m)), "model": self.chosen.name,
+        m = s.mask
+        per_fold = [float(np.sqrt(np.mean(s.position_error_m[m & (s.fold_of_pose == f)] ** 2)))
+                    for f in range(self.folds)]
+        return {"folds": self.folds, "n_poses": int(m.sum()), "n_gross_left_out": int((~m).sum()),
+                "model": self.chosen.name,
                 "rms_position_error_m": d["rms_position_error_m"],
                 "rms_orientation_error_rad": d["rms_orientation_error_rad"],
                 "per_fold_rms_m": per_fold, "n_folds_not_regular": 0}
@@ -250,8 +261,29 @@ def select_model(meas: ms.Measurements, setup: Callable[[str], tuple[Measurement
         plain, mapped = score_subset(mm, basis, meas, orientation_sigma_rad, folds, max_iterations, rng, robust)
         plain.candidate, mapped.candidate = Candidate(subset, False), Candidate(subset, True)
         scores += [plain, mapped]
+    gross = gross_heldout_poses(scores, float((robust or {}).get("confidence", 0.999)))
+    if gross.any():
+        for score in scores:
+            score.scored = ~gross
+        notes.append(f"{int(gross.sum())} held-out pose(s) beyond the chi-square bound of the best candidate's "
+                     "robust error scale (gross errors) left out of every candidate's score")
     chosen = one_standard_error(scores)
     return ModelSelection(folds, scores, chosen, notes)
+
+
+def gross_heldout_poses(scores: list[CandidateScore], confidence: float) -> np.ndarray:
+    """(n,) held-out poses whose position error is a gross error for the candidate with the smallest
+    median held-out error: ``e^2 > chi2_3(confidence) s^2`` with the robust per-axis scale
+    ``s^2 = median(e^2) / median(chi2_3)`` (Rousseeuw & Croux 1993: a median-based scale is not
+    inflated by the outliers it screens). One mask for every candidate, so a gross reading in a
+    left-out fold neither favours the stiffest model nor hides in the score."""
+    fitted = [s for s in scores if np.all(np.isfinite(s.position_error_m))]
+    if not fitted:
+        return np.zeros(len(scores[0].position_error_m) if scores else 0, bool)
+    best = min(fitted, key=lambda s: float(np.median(s.position_error_m)))
+    e2 = best.position_error_m ** 2
+    scale2 = float(np.median(e2)) / chi2.median(3)
+    return e2 > chi2.ppf(confidence, 3) * scale2
 
 
 def choose_parameters(robot: RobotModel, cfg: Config, user: ms.Measurements | None, six_d: bool,
