@@ -1,12 +1,29 @@
-"""Shared fixtures.
+"""Shared fixtures (reuse them instead of building the same thing again in a test file).
 
 * ``quick_config``: the quick profile (``configs/quick.yaml``) as a fresh :class:`RunConfig`.
 * ``rx130l``: the built-in robot, loaded once per session (do not mutate it; use ``.copy()``).
+* ``shipped_configs``: (config, robot) pairs every shipped setting must pass.
 * ``fake_stages``: replaces the stage registry with small fake stages (runner tests).
+* ``execute_notebook(name, workdir) -> str``: every code cell of ``notebooks/<name>`` run top to
+  bottom in an IPython shell inside the test process (no kernel start, no second import of the
+  package), returning the text the cells printed.
+* ``tests/trajectory/conftest.py``: the RX130L planning model, the quick ISO line, ONE compiled PtP
+  problem and ONE quick-profile PtP plan of the big move (``big_move_plan``).
+
+Sharing a costly result (a stage run, a solved problem) between test files: a session-scoped
+fixture builds it once per pytest-xdist worker; mark the files that use it with the same
+``pytest.mark.xdist_group("<name>")`` and ``make test`` (``--dist loadgroup``) runs them on one
+worker, so it is built once per run (see tests/trajectory/test_ptp.py and test_settling.py).
+
+Compiled CasADi code is cached on disk by content (``$PIPELINE_CACHE_DIR``, see
+:mod:`pipeline.codegen`), so a compiled function is built once per machine, not per worker.
+Durations: ``--durations=15`` (pyproject ``addopts``) prints the slowest tests of every run.
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,8 +34,12 @@ import matplotlib
 
 matplotlib.use("Agg")
 
+import matplotlib.pyplot as plt  # noqa: E402
+import nbformat  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
+from IPython.core.interactiveshell import InteractiveShell  # noqa: E402
+from traitlets.config import Config  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 os.environ.setdefault("MPLBACKEND", "Agg")
@@ -115,16 +136,31 @@ NOTEBOOKS = REPO / "notebooks"
 
 
 def _execute_notebook(name: str, workdir: Path) -> str:
-    import nbformat
-    from nbclient import NotebookClient
-
     nb = nbformat.read(NOTEBOOKS / name, as_version=4)
-    NotebookClient(nb, timeout=300, kernel_name="python3", resources={"metadata": {"path": str(workdir)}}).execute()
-    return "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", []))
+    settings = Config()
+    settings.HistoryManager.enabled = False        # no history database shared by the workers
+    shell = InteractiveShell.instance(config=settings)
+    shell.reset(new_session=False)                 # a fresh namespace for every notebook
+    text = io.StringIO()
+    cwd = Path.cwd()
+    try:
+        os.chdir(workdir)
+        with contextlib.redirect_stdout(text):
+            for i, cell in enumerate(c for c in nb.cells if c.cell_type == "code"):
+                result = shell.run_cell(cell.source, store_history=False, silent=False)
+                if not result.success:
+                    raise AssertionError(f"{name}: code cell {i + 1} failed: {result.error_in_exec!r}\n"
+                                         f"{cell.source}") from (result.error_in_exec or result.error_before_exec)
+    finally:
+        os.chdir(cwd)
+        shell.reset(new_session=False)
+        plt.close("all")
+    return text.getvalue()
 
 
 @pytest.fixture
 def execute_notebook():
-    """``execute_notebook(name, workdir) -> str``: run ``notebooks/<name>`` top to bottom in
-    ``workdir`` and return the text of all its outputs."""
+    """``execute_notebook(name, workdir) -> str``: run every code cell of ``notebooks/<name>`` top
+    to bottom in ``workdir`` and return the text of all its outputs."""
     return _execute_notebook
+
