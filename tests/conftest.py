@@ -22,9 +22,11 @@ Durations: ``--durations=15`` (pyproject ``addopts``) prints the slowest tests o
 
 from __future__ import annotations
 
+import builtins
 import contextlib
 import io
 import os
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
@@ -135,26 +137,44 @@ def fake_stages(monkeypatch):
 NOTEBOOKS = REPO / "notebooks"
 
 
-def _execute_notebook(name: str, workdir: Path) -> str:
-    nb = nbformat.read(NOTEBOOKS / name, as_version=4)
+@contextlib.contextmanager
+def _ipython_shell(workdir: Path):
+    """A fresh IPython shell working in ``workdir``; afterwards the process is as before: the shell
+    instance cleared, ``__main__``, the builtins it adds (``__IPYTHON__``, ``display``), the sys hooks,
+    the working directory and the open figures restored."""
+    saved_main, saved_cwd = sys.modules.get("__main__"), Path.cwd()
+    saved_hooks = (sys.excepthook, sys.displayhook)
+    saved_builtins = {k: builtins.__dict__[k] for k in ("__IPYTHON__", "display", "get_ipython")
+                      if k in builtins.__dict__}
     settings = Config()
     settings.HistoryManager.enabled = False        # no history database shared by the workers
+    InteractiveShell.clear_instance()
     shell = InteractiveShell.instance(config=settings)
-    shell.reset(new_session=False)                 # a fresh namespace for every notebook
-    text = io.StringIO()
-    cwd = Path.cwd()
     try:
         os.chdir(workdir)
-        with contextlib.redirect_stdout(text):
-            for i, cell in enumerate(c for c in nb.cells if c.cell_type == "code"):
-                result = shell.run_cell(cell.source, store_history=False, silent=False)
-                if not result.success:
-                    raise AssertionError(f"{name}: code cell {i + 1} failed: {result.error_in_exec!r}\n"
-                                         f"{cell.source}") from (result.error_in_exec or result.error_before_exec)
+        yield shell
     finally:
-        os.chdir(cwd)
+        os.chdir(saved_cwd)
         shell.reset(new_session=False)
+        InteractiveShell.clear_instance()
+        if saved_main is not None:
+            sys.modules["__main__"] = saved_main
+        sys.excepthook, sys.displayhook = saved_hooks
+        for k in ("__IPYTHON__", "display", "get_ipython"):
+            builtins.__dict__.pop(k, None)
+        builtins.__dict__.update(saved_builtins)
         plt.close("all")
+
+
+def _execute_notebook(name: str, workdir: Path) -> str:
+    nb = nbformat.read(NOTEBOOKS / name, as_version=4)
+    text = io.StringIO()
+    with _ipython_shell(workdir) as shell, contextlib.redirect_stdout(text):
+        for i, cell in enumerate(c for c in nb.cells if c.cell_type == "code"):
+            result = shell.run_cell(cell.source, store_history=False)
+            if not result.success:
+                error = result.error_in_exec or result.error_before_exec
+                raise AssertionError(f"{name}: code cell {i + 1} failed: {error!r}\n{cell.source}") from error
     return text.getvalue()
 
 
