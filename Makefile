@@ -13,8 +13,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 ARGS ?=
 PYTEST_ARGS ?=
-# pytest workers (pytest-xdist): one per core of the 2-core machines this is measured on; --dist loadgroup
-# keeps the tests of one xdist_group mark on one worker (they share a session fixture, see tests/conftest.py)
+# pytest workers (pytest-xdist): one per core of the 2-core machines this is measured on
 PYTEST_WORKERS ?= 2
 # one BLAS thread: reproducible numbers (see pipeline/__init__.py)
 export OPENBLAS_NUM_THREADS ?= 1
@@ -38,10 +37,10 @@ test: $(VENV)/.stamp-dev
 	    (sudo apt-get update -qq && sudo DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null) \
 	      || echo "warning: could not install chromium; the viewer screenshot test will be skipped"; \
 	  else echo "warning: no chromium and no root/apt; the viewer screenshot test will be skipped"; fi; }
-	$(PY) -m pytest -n $(PYTEST_WORKERS) --dist loadgroup --durations=15 $(PYTEST_ARGS)
+	$(PY) -m pytest -n $(PYTEST_WORKERS) --durations=15 $(PYTEST_ARGS)
 
 test-slow: $(VENV)/.stamp-dev
-	$(PY) -m pytest -n $(PYTEST_WORKERS) --dist loadgroup --durations=15 -m 'slow and not study' $(PYTEST_ARGS)
+	$(PY) -m pytest -n $(PYTEST_WORKERS) --durations=15 -m 'slow and not study' $(PYTEST_ARGS)
 
 typecheck: $(VENV)/.stamp-dev
 	$(PY) tools/mypy_ratchet.py

@@ -10,10 +10,9 @@
 * ``tests/trajectory/conftest.py``: the RX130L planning model, the quick ISO line, ONE compiled PtP
   problem and ONE quick-profile PtP plan of the big move (``big_move_plan``).
 
-Sharing a costly result (a stage run, a solved problem) between test files: a session-scoped
-fixture builds it once per pytest-xdist worker; mark the files that use it with the same
-``pytest.mark.xdist_group("<name>")`` and ``make test`` (``--dist loadgroup``) runs them on one
-worker, so it is built once per run (see tests/trajectory/test_ptp.py and test_settling.py).
+Sharing a costly result (a stage run, a solved problem) between test files: put a session-scoped
+fixture here or in the package's conftest; it is built once per pytest-xdist worker (at most twice
+per ``make test``), see ``big_move_plan``.
 
 Compiled CasADi code is cached on disk by content (``$PIPELINE_CACHE_DIR``, see
 :mod:`pipeline.codegen`), so a compiled function is built once per machine, not per worker.

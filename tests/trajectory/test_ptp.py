@@ -14,9 +14,6 @@ from pipeline.trajectory.ptp import energy_weights
 from pipeline.trajectory.solve import plan_ptp
 from pipeline.trajectory.trajectories import check_trajectory
 
-# with --dist loadgroup (make test) both files run on one worker: one plan of the big move per run
-pytestmark = pytest.mark.xdist_group("big_move_plan")
-
 
 @pytest.fixture
 def plan(big_move_plan):

@@ -5,7 +5,6 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-import pytest
 
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 from pipeline.sim.truth import RealRobot, TruthConfig
@@ -22,9 +21,6 @@ from pipeline.trajectory.settling import (
 from pipeline.trajectory.solve import plan_ptp
 from pipeline.trajectory.solve import ptp_problem as build_ptp_problem
 from pipeline.trajectory.trajectories import JointTrajectory, check_trajectory
-
-# with --dist loadgroup (make test) both files run on one worker: one plan of the big move per run
-pytestmark = pytest.mark.xdist_group("big_move_plan")
 
 
 def _bang_bang(dt: float = 1e-3, T: float = 0.4, n: int = 6) -> JointTrajectory:
