@@ -37,10 +37,10 @@ test: $(VENV)/.stamp-dev
 	    (sudo apt-get update -qq && sudo DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null) \
 	      || echo "warning: could not install chromium; the viewer screenshot test will be skipped"; \
 	  else echo "warning: no chromium and no root/apt; the viewer screenshot test will be skipped"; fi; }
-	$(PY) -m pytest -n $(PYTEST_WORKERS) $(PYTEST_ARGS)
+	$(PY) -m pytest -n $(PYTEST_WORKERS) --durations=15 $(PYTEST_ARGS)
 
 test-slow: $(VENV)/.stamp-dev
-	$(PY) -m pytest -n $(PYTEST_WORKERS) -m 'slow and not study' $(PYTEST_ARGS)
+	$(PY) -m pytest -n $(PYTEST_WORKERS) --durations=15 -m 'slow and not study' $(PYTEST_ARGS)
 
 typecheck: $(VENV)/.stamp-dev
 	$(PY) tools/mypy_ratchet.py

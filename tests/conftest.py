@@ -1,13 +1,31 @@
-"""Shared fixtures.
+"""Shared fixtures (reuse them instead of building the same thing again in a test file).
 
 * ``quick_config``: the quick profile (``configs/quick.yaml``) as a fresh :class:`RunConfig`.
 * ``rx130l``: the built-in robot, loaded once per session (do not mutate it; use ``.copy()``).
+* ``shipped_configs``: (config, robot) pairs every shipped setting must pass.
 * ``fake_stages``: replaces the stage registry with small fake stages (runner tests).
+* ``execute_notebook(name, workdir) -> str``: every code cell of ``notebooks/<name>`` run top to
+  bottom in an IPython shell inside the test process (no kernel start, no second import of the
+  package), returning the text the cells printed.
+* ``tests/trajectory/conftest.py``: the RX130L planning model, the quick ISO line, ONE compiled PtP
+  problem and ONE quick-profile PtP plan of the big move (``big_move_plan``).
+
+Sharing a costly result (a stage run, a solved problem) between test files: put a session-scoped
+fixture here or in the package's conftest; it is built once per pytest-xdist worker (at most twice
+per ``make test``), see ``big_move_plan``.
+
+Compiled CasADi code is cached on disk by content (``$PIPELINE_CACHE_DIR``, see
+:mod:`pipeline.codegen`), so a compiled function is built once per machine, not per worker.
+Durations: ``--durations=15`` (pyproject ``addopts``) prints the slowest tests of every run.
 """
 
 from __future__ import annotations
 
+import builtins
+import contextlib
+import io
 import os
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
@@ -17,8 +35,12 @@ import matplotlib
 
 matplotlib.use("Agg")
 
+import matplotlib.pyplot as plt  # noqa: E402
+import nbformat  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
+from IPython.core.interactiveshell import InteractiveShell  # noqa: E402
+from traitlets.config import Config  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 os.environ.setdefault("MPLBACKEND", "Agg")
@@ -114,17 +136,50 @@ def fake_stages(monkeypatch):
 NOTEBOOKS = REPO / "notebooks"
 
 
-def _execute_notebook(name: str, workdir: Path) -> str:
-    import nbformat
-    from nbclient import NotebookClient
+@contextlib.contextmanager
+def _ipython_shell(workdir: Path):
+    """A fresh IPython shell working in ``workdir``; afterwards the process is as before: the shell
+    instance cleared, ``__main__``, the builtins it adds (``__IPYTHON__``, ``display``), the sys hooks,
+    the working directory and the open figures restored."""
+    saved_main, saved_cwd = sys.modules.get("__main__"), Path.cwd()
+    saved_hooks = (sys.excepthook, sys.displayhook)
+    saved_builtins = {k: builtins.__dict__[k] for k in ("__IPYTHON__", "display", "get_ipython")
+                      if k in builtins.__dict__}
+    settings = Config()
+    settings.HistoryManager.enabled = False        # no history database shared by the workers
+    InteractiveShell.clear_instance()
+    shell = InteractiveShell.instance(config=settings)
+    try:
+        os.chdir(workdir)
+        yield shell
+    finally:
+        os.chdir(saved_cwd)
+        shell.reset(new_session=False)
+        InteractiveShell.clear_instance()
+        if saved_main is not None:
+            sys.modules["__main__"] = saved_main
+        sys.excepthook, sys.displayhook = saved_hooks
+        for k in ("__IPYTHON__", "display", "get_ipython"):
+            builtins.__dict__.pop(k, None)
+        builtins.__dict__.update(saved_builtins)
+        plt.close("all")
 
+
+def _execute_notebook(name: str, workdir: Path) -> str:
     nb = nbformat.read(NOTEBOOKS / name, as_version=4)
-    NotebookClient(nb, timeout=300, kernel_name="python3", resources={"metadata": {"path": str(workdir)}}).execute()
-    return "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", []))
+    text = io.StringIO()
+    with _ipython_shell(workdir) as shell, contextlib.redirect_stdout(text):
+        for i, cell in enumerate(c for c in nb.cells if c.cell_type == "code"):
+            result = shell.run_cell(cell.source, store_history=False)
+            if not result.success:
+                error = result.error_in_exec or result.error_before_exec
+                raise AssertionError(f"{name}: code cell {i + 1} failed: {error!r}\n{cell.source}") from error
+    return text.getvalue()
 
 
 @pytest.fixture
 def execute_notebook():
-    """``execute_notebook(name, workdir) -> str``: run ``notebooks/<name>`` top to bottom in
-    ``workdir`` and return the text of all its outputs."""
+    """``execute_notebook(name, workdir) -> str``: run every code cell of ``notebooks/<name>`` top
+    to bottom in ``workdir`` and return the text of all its outputs."""
     return _execute_notebook
+

@@ -17,9 +17,27 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def run_cli(*args: str, cwd: Path = REPO) -> subprocess.CompletedProcess:
+    """``python -m pipeline *args`` in a child process (the entry point and its exit code)."""
     env = {**os.environ, "MPLBACKEND": "Agg", "PYTHONWARNINGS": "ignore"}
     return subprocess.run([sys.executable, "-m", "pipeline", *args], cwd=cwd, env=env,
                           capture_output=True, text=True, timeout=300)
+
+
+@pytest.fixture
+def cli_in_process(capsys, monkeypatch):
+    """``cli_in_process(*args) -> CompletedProcess``: :func:`pipeline.cli.main` in this process, run
+    from the repository root, with its exit code and captured output (the same code path as
+    :func:`run_cli` without a child interpreter's imports; any uncaught exception fails the test
+    where the child process would have printed a traceback)."""
+    monkeypatch.chdir(REPO)
+
+    def call(*args: str) -> subprocess.CompletedProcess:
+        capsys.readouterr()
+        code = cli.main(list(args))
+        out, err = capsys.readouterr()
+        return subprocess.CompletedProcess(["pipeline", *args], code, out, err)
+
+    return call
 
 
 def assert_one_line_error(proc: subprocess.CompletedProcess, out: Path, *fragments: str) -> str:
@@ -41,34 +59,34 @@ def robot_copy(tmp_path):
     return dst
 
 
-def test_unknown_robot(tmp_path):
+def test_unknown_robot(tmp_path, cli_in_process):
     out = tmp_path / "runs"
-    proc = run_cli("run", "--set", "robot=does_not_exist", "--out", str(out))
+    proc = cli_in_process("run", "--set", "robot=does_not_exist", "--out", str(out))
     assert_one_line_error(proc, out, "--set", "robot", "does_not_exist")
 
 
-def test_urdf_not_xml(tmp_path, robot_copy):
+def test_urdf_not_xml(tmp_path, robot_copy, cli_in_process):
     (robot_copy / "rx130l.urdf").write_text("this is { not xml\n")
     out = tmp_path / "runs"
-    proc = run_cli("run", "--stages", "model", "--set", f"robot={robot_copy}", "--out", str(out))
+    proc = cli_in_process("run", "--stages", "model", "--set", f"robot={robot_copy}", "--out", str(out))
     assert_one_line_error(proc, out, str(robot_copy / "rx130l.urdf"), "XML")
 
 
-def test_negative_mass_in_robot_yaml(tmp_path, robot_copy):
+def test_negative_mass_in_robot_yaml(tmp_path, robot_copy, cli_in_process):
     yaml_file = robot_copy / "robot.yaml"
     text = yaml_file.read_text()
     assert "payload_kg: 10.0" in text
     yaml_file.write_text(text.replace("payload_kg: 10.0", "payload_kg: -10.0"))
     out = tmp_path / "runs"
-    proc = run_cli("run", "--stages", "model", "--set", f"robot={robot_copy}", "--out", str(out))
+    proc = cli_in_process("run", "--stages", "model", "--set", f"robot={robot_copy}", "--out", str(out))
     assert_one_line_error(proc, out, yaml_file.name, "payload_kg")
 
 
-def test_negative_link_mass_in_urdf(tmp_path, robot_copy):
+def test_negative_link_mass_in_urdf(tmp_path, robot_copy, cli_in_process):
     urdf = robot_copy / "rx130l.urdf"
     urdf.write_text(urdf.read_text().replace('<mass value="35"/>', '<mass value="-35"/>', 1))
     out = tmp_path / "runs"
-    proc = run_cli("run", "--stages", "model", "--set", f"robot={robot_copy}", "--out", str(out))
+    proc = cli_in_process("run", "--stages", "model", "--set", f"robot={robot_copy}", "--out", str(out))
     assert_one_line_error(proc, out, str(urdf), "mass")
 
 
@@ -81,11 +99,11 @@ def test_negative_link_mass_in_urdf(tmp_path, robot_copy):
         ("name: t\nstages: [model]\nmodel: {picture_size_in: big}\n", ["model.picture_size_in", "expected number"]),
     ],
 )
-def test_bad_config_file(tmp_path, text, fragments):
+def test_bad_config_file(tmp_path, text, fragments, cli_in_process):
     cfg = tmp_path / "bad.yaml"
     cfg.write_text(text)
     out = tmp_path / "runs"
-    proc = run_cli("run", "--config", str(cfg), "--out", str(out))
+    proc = cli_in_process("run", "--config", str(cfg), "--out", str(out))
     line = assert_one_line_error(proc, out, *fragments)
     assert line.startswith(f"error: {cfg}: ")
 
@@ -111,7 +129,7 @@ def test_missing_stage_module_reported(monkeypatch, tmp_path, capsys):
     assert not out.exists()
 
 
-def test_model_stage_end_to_end(tmp_path):
+def test_model_stage_end_to_end(tmp_path, cli_in_process):
     out = tmp_path / "runs"
     proc = run_cli("run", "--stages", "model", "--set", "name=e2e", "--out", str(out))
     assert proc.returncode == 0, proc.stderr
@@ -120,7 +138,8 @@ def test_model_stage_end_to_end(tmp_path):
     assert "](model/robot.png)" in report and "| dof | 6 |" in report
     png = (run_dir / "model" / "robot.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
-    proc2 = run_cli("run", "--stages", "model", "--set", "name=e2e", "--out", str(out))
+    # the second run in this process (the entry point is covered above): the stage is reused
+    proc2 = cli_in_process("run", "--stages", "model", "--set", "name=e2e", "--out", str(out))
     assert proc2.returncode == 0 and "model: reused" in proc2.stderr
 
 
@@ -139,26 +158,26 @@ def _demo_study(argv: list[str]) -> None:
     globals()["_CALLS"].append(argv)
 
 
-def test_joint_without_limits_is_one_line(tmp_path, robot_copy):
+def test_joint_without_limits_is_one_line(tmp_path, robot_copy, cli_in_process):
     urdf = robot_copy / "rx130l.urdf"
     text = urdf.read_text()
     start = text.index("<limit", text.index('<joint name="joint_2"'))
     urdf.write_text(text[:start] + text[text.index("/>", start) + 2:])
     out = tmp_path / "runs"
-    proc = run_cli("run", "--stages", "model", "--set", f"robot={robot_copy}", "--out", str(out))
+    proc = cli_in_process("run", "--stages", "model", "--set", f"robot={robot_copy}", "--out", str(out))
     assert_one_line_error(proc, out, str(urdf), "joint joint_2: <limit>", "lower")
 
 
-def test_out_that_is_a_file(tmp_path):
+def test_out_that_is_a_file(tmp_path, cli_in_process):
     target = tmp_path / "a_file"
     target.write_text("")
-    proc = run_cli("run", "--stages", "model", "--out", str(target))
+    proc = cli_in_process("run", "--stages", "model", "--out", str(target))
     assert_one_line_error(proc, tmp_path / "nothing", "--out", "cannot create the run directory")
 
 
-def test_stage_check_names_the_source(tmp_path):
+def test_stage_check_names_the_source(tmp_path, cli_in_process):
     out = tmp_path / "runs"
-    proc = run_cli("run", "--set", "trajectory.cp_segment=zigzag", "--out", str(out))
+    proc = cli_in_process("run", "--set", "trajectory.cp_segment=zigzag", "--out", str(out))
     assert_one_line_error(proc, out, "--set", "trajectory.cp_segment")
 
 
@@ -181,11 +200,11 @@ def test_second_robot_runs_every_stage(tmp_path):
     assert trajectory["ptp_duration_s"] < trajectory["ptp_ruckig_duration_s"]
 
 
-def test_model_pose_checked_before_anything_is_written(tmp_path):
+def test_model_pose_checked_before_anything_is_written(tmp_path, cli_in_process):
     """The user's repro: a pose that does not fit the robot is named with its source (--set)
     before the run directory is touched."""
     out = tmp_path / "runs"
-    proc = run_cli("run", "--config", "configs/quick.yaml", "--stages", "model",
+    proc = cli_in_process("run", "--config", "configs/quick.yaml", "--stages", "model",
                    "--set", "model.pose_deg=[0,0,0,0,200,0]", "--out", str(out))
     assert_one_line_error(proc, out, "error: --set: model.pose_deg: ", "outside the joint limits")
 

@@ -81,18 +81,18 @@ def _table(path: Path) -> list[dict[str, str]]:
 
 def test_local_and_dask_sweeps_give_the_same_table(tmp_path: Path) -> None:
     distributed = pytest.importorskip("distributed")
-    args = ["sweep", "--config", QUICK, "--seeds", "0-2", "--stages", "calibration", "--out", str(tmp_path / "local")]
+    args = ["sweep", "--config", QUICK, "--seeds", "0-1", "--stages", "calibration", "--out", str(tmp_path / "local")]
     for item in TINY:
         args += ["--set", item]
     assert cli.main(args) == 0
     local = _table(tmp_path / "local" / "sweep.csv")
-    assert [r["seed"] for r in local] == ["0", "1", "2"] and all(r["status"] == "ok" for r in local)
+    assert [r["seed"] for r in local] == ["0", "1"] and all(r["status"] == "ok" for r in local)
     figure = "calibration.heldout_rms_position_error_after_m"
-    assert len({r[figure] for r in local}) == 3          # three hidden robots, three results
+    assert len({r[figure] for r in local}) == 2          # two hidden robots, two results
     assert (tmp_path / "local" / "sweep.png").stat().st_size > 0
     assert figure in (tmp_path / "local" / "sweep.md").read_text()
 
-    spec = SweepSpec(seeds=[0, 1, 2], robots=[None], out_dir=tmp_path / "dask", config_path=QUICK,
+    spec = SweepSpec(seeds=[0, 1], robots=[None], out_dir=tmp_path / "dask", config_path=QUICK,
                      overrides=list(TINY), stages="calibration")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=None) as cluster, distributed.Client(cluster) as client:

@@ -95,7 +95,9 @@ def test_failed_gate_raises_unless_accept_poor(tmp_path):
     figure and threshold named; with --accept-poor the result is handed on and says so."""
     ctx, _ = quick_context(tmp_path, overrides={"run_tx40": False, "max_validation_rms_over_noise": 0.2,
                                                 "max_cond_data_over_design": 1e9,
-                                                "excitation": {"n_random": 4, "max_iter": 30}})
+                                                # a small excitation problem: the validation gate fails on any fit
+                                                "excitation": {"n_samples": 30, "n_starts": 1, "n_random": 2,
+                                                               "max_iter": 10}})
     ctx.run.accept_poor = False
     with pytest.raises(QualityGateError) as info:
         stage.run(ctx)

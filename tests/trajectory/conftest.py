@@ -1,11 +1,14 @@
 """Shared trajectory fixtures: the nominal RX130L planning model, a joint path of the quick ISO
-line, and ONE compiled PtP problem (quick settings: N = 25, gcc -O0; cached on disk by the hash
-of its code, so the notebook and the stage test reuse the library)."""
+line, ONE compiled PtP problem (quick settings: N = 25, gcc -O0; cached on disk by the hash
+of its code, so the notebook and the stage test reuse the library) and ONE quick-profile PtP plan of
+the big move, read by the PtP and the settling tests."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+
+from pipeline.trajectory.solve import PTPPlan, plan_ptp
 
 
 @pytest.fixture(scope="session")
@@ -40,3 +43,14 @@ def ptp_problem(rx130l, pm, quick_traj_config):
 @pytest.fixture(scope="session")
 def big_move():
     return np.radians([-45, 20, 30, 0, 40, 0]), np.radians([45, 60, -20, 30, 50, 60])
+
+
+@pytest.fixture(scope="session")
+def big_move_plan(pm, ptp_problem, big_move, quick_traj_config) -> PTPPlan:
+    """The quick profile's PtP plan of ``big_move``: the time-optimal move (k1 = 1, k2 = 0.01), ruckig,
+    the energy optimum at ruckig's duration and the Pareto sweep k2 = [0.01, 0.1, 1.0] (0.01 is the
+    main solution, reused). Shared: a test that adds to its dicts first copies them (``dataclasses.replace``)."""
+    assert quick_traj_config.ptp_k1 == 1.0 and quick_traj_config.ptp_k2 == 0.01
+    assert quick_traj_config.ptp_pareto_k2 == [0.01, 0.1, 1.0]
+    return plan_ptp(pm, ptp_problem, *big_move, quick_traj_config)
+

@@ -15,12 +15,10 @@ from pipeline.trajectory.solve import plan_ptp
 from pipeline.trajectory.trajectories import check_trajectory
 
 
-@pytest.fixture(scope="module")
-def plan(pm, ptp_problem, big_move, quick_traj_config):
-    # 0.01 = the main solution's k2 (k1 = 1): reused as a point of the sweep, no extra solve
-    cfg = dataclasses.replace(quick_traj_config, ptp_pareto_k2=[0.01, 0.1, 1.0])
-    assert cfg.ptp_k1 == 1.0 and cfg.ptp_k2 == 0.01
-    return plan_ptp(pm, ptp_problem, *big_move, cfg)
+@pytest.fixture
+def plan(big_move_plan):
+    # the session's plan of the big move (conftest): Pareto k2 = [0.01, 0.1, 1.0], 0.01 = the main solution
+    return big_move_plan
 
 
 def test_rest_to_rest_within_limits(plan, pm, big_move, quick_traj_config):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
@@ -93,11 +95,13 @@ def test_time_scaling_keeps_the_path_and_slows_the_derivatives():
     assert np.allclose(slow.v, tr.v / 1.25) and np.allclose(slow.a, tr.a / 1.25**2)
 
 
-def test_smooth_ptp_is_slowed_into_the_limits(rx130l, pm, ptp_problem, big_move, quick_traj_config):
+def test_smooth_ptp_is_slowed_into_the_limits(rx130l, pm, big_move_plan, quick_traj_config):
     """The moving average of a plan on its torque limits may leave them; with a tolerance the smooth
     plan is slowed down until its fine-grid check holds (and not slowed when it already does)."""
     cfg = quick_traj_config
-    plan = plan_ptp(pm, ptp_problem, *big_move, cfg)
+    # its own dicts: add_smooth_ptp adds the smooth variant to the shared plan's trajectories and checks
+    plan = dataclasses.replace(big_move_plan, trajectories=dict(big_move_plan.trajectories),
+                               checks=dict(big_move_plan.checks))
     tol = cfg.violation_tolerance
     raw = smooth_trajectory(plan.trajectories["ptp"], 1.0 / lowest_mode_hz(rx130l, plan.q1))
     smooth = add_smooth_ptp(pm, rx130l, plan, tolerance=tol, acceleration_limits=cfg.acceleration_limits)
@@ -110,10 +114,10 @@ def test_smooth_ptp_is_slowed_into_the_limits(rx130l, pm, ptp_problem, big_move,
         assert smooth.duration_s > raw.duration_s and smooth.info["time_scale"] > 1
 
 
-def test_a_plan_over_its_limits_is_slowed_exactly_into_them(pm, ptp_problem, big_move, quick_traj_config):
+def test_a_plan_over_its_limits_is_slowed_exactly_into_them(pm, big_move_plan):
     """The interpolated plan may pass a limit between the NLP's nodes: slowed_into_limits stretches
     time until every fine-grid ratio is within the tolerance, and leaves a plan within them alone."""
-    traj = plan_ptp(pm, ptp_problem, *big_move, quick_traj_config).trajectories["ptp"]
+    traj = big_move_plan.trajectories["ptp"]
     fast = time_scaled(traj, 0.97, "ptp")             # 3 % too fast: over a speed or torque limit
     check = check_trajectory(pm, fast)
     assert check.max_velocity_ratio > 1.0 + 1e-4 or check.violation > 1e-4
