@@ -131,10 +131,11 @@ def baseline_configurations(robot: RobotModel, Qc: np.ndarray, n: int, visible, 
 
 
 def _seed(args: tuple) -> dict:
-    robot_name, seed, truth_name, grid_data, n, n_heldout, criteria, margins, camera = args
+    robot_name, seed, truth_name, grid_data, n, n_heldout, criteria, margins, camera, compliance_scale = args
     with single_thread_blas():
         robot = RobotModel.load(robot_name)
-        truth = TruthConfig.ideal() if truth_name == "ideal" else TruthConfig()
+        truth = (TruthConfig.ideal() if truth_name == "ideal"
+                 else TruthConfig(joint_compliance_scale=compliance_scale))
         real = RealRobot.create(robot, seed, truth)
         rng = np.random.default_rng([seed, 4])
         mm = em.MeasurementModel(robot, marker_points=True)
@@ -281,6 +282,9 @@ def study_004(argv: list[str]) -> int:
                     help="camera pose that decides the candidates: registered from pilot readings, or robot.yaml's")
     ap.add_argument("--laser-grid", type=int, default=9,
                     help="grid per axis of the laser-tracker experiment (0: skip it)")
+    ap.add_argument("--compliance-scale", type=float, default=1.0,
+                    help="default truth's joint compliance / nominal (k = torque limit / 2 mrad / scale; "
+                         "the stiffness experiment)")
     ap.add_argument("--jobs", type=int, default=1)
     a = ap.parse_args(argv)
     t0 = time.perf_counter()
@@ -290,7 +294,8 @@ def study_004(argv: list[str]) -> int:
           f"(nominal, no margin): {grid['n_visible']} (paper: about {PAPER['visible']}); with the visibility margins "
           f"({a.margin_angle_deg} deg, {a.margin_occlusion_m} m) at the nominal camera pose: "
           f"{grid['n_candidates_nominal']} [{grid['time_s']:.0f} s]")
-    jobs = [(a.robot, s, t, grid, a.n, a.heldout, a.criteria, margins, a.camera) for t in a.truth for s in a.seeds]
+    jobs = [(a.robot, s, t, grid, a.n, a.heldout, a.criteria, margins, a.camera, a.compliance_scale)
+            for t in a.truth for s in a.seeds]
     rows = run_parallel(_seed, jobs, a.jobs)
     print(f"candidates per seed (visible with the margins at the {a.camera} camera pose): "
           + ", ".join(f"seed {r['seed']} {r['n_candidates']} ({r['n_pilot']} pilot poses)" for r in rows
