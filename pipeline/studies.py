@@ -25,6 +25,7 @@ import contextlib
 import importlib
 import io
 import json
+import math
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
@@ -111,6 +112,18 @@ def _capture(results_dir: Path, name: str, argv: Sequence[str]) -> Iterator[None
         write_text(results_dir / "tables.md", header + tee.copy.getvalue() + "```\n")
 
 
+def _finite(node: object) -> object:
+    """``node`` with every non-finite number (a standard error of one seed, an infinite factor)
+    written as None (JSON has no NaN or infinity)."""
+    if isinstance(node, float) and not math.isfinite(node):
+        return None
+    if isinstance(node, dict):
+        return {k: _finite(v) for k, v in node.items()}
+    if isinstance(node, list):
+        return [_finite(v) for v in node]
+    return node
+
+
 def save_result(name: str, result: dict, filename: str = "result.json") -> Path:
     """Write ``result`` to ``data/studies/<name>/<filename>``; under ``--results DIR`` also
     ``DIR/results.json`` with the command, variant and provenance of the run."""
@@ -120,7 +133,7 @@ def save_result(name: str, result: dict, filename: str = "result.json") -> Path:
     evidence = _EVIDENCE["dir"]
     if evidence is not None:
         text = json.dumps({**_EVIDENCE_META, "result": result}, indent=1, default=float)
-        write_json(evidence / "results.json", json.loads(text))
+        write_json(evidence / "results.json", _finite(json.loads(text)))
         print(f"written {evidence / 'results.json'}")
     return path
 
