@@ -14,9 +14,10 @@ with :func:`save_result`.
 
 Committed evidence: ``python -m pipeline study NAME [ARGS...] --results DIR`` runs the study as
 usual and also writes what it printed to ``DIR/tables.md`` and its result to ``DIR/results.json``
-(``{"study", "command", "variant", "provenance", "result"}``; ``variant`` is ``quick`` when the
-arguments contain ``--quick``, else ``full``). ``docs/papers/results/<study>/`` holds the
-committed ones; ``tests/papers/test_papers_evidence.py`` checks docs/PAPERS.md against them.
+(``{"study", "command", "variant", "provenance", "result"}``; ``variant``: ``quick`` with
+``--quick``, ``full`` with the study's defaults, else ``custom`` — the command says which).
+``docs/papers/results/<study>/`` holds the committed ones; ``tests/papers/test_papers_evidence.py``
+checks docs/PAPERS.md against them.
 """
 
 from __future__ import annotations
@@ -92,9 +93,19 @@ class _Tee(io.TextIOBase):
         self.stream.flush()
 
 
+def _variant(argv: Sequence[str]) -> str:
+    """``quick`` (``--quick``), ``full`` (the study's defaults; ``--jobs``/``--scheduler`` aside) or
+    ``custom`` (other arguments: the command in the file says which)."""
+    if "--quick" in argv:
+        return "quick"
+    rest = [a for i, a in enumerate(argv) if a not in ("--jobs", "--scheduler")
+            and (i == 0 or argv[i - 1] not in ("--jobs", "--scheduler"))]
+    return "custom" if rest else "full"
+
+
 @contextlib.contextmanager
 def _capture(results_dir: Path, name: str, argv: Sequence[str]) -> Iterator[None]:
-    variant = "quick" if "--quick" in argv else "full"
+    variant = _variant(argv)
     command = " ".join(["python -m pipeline study", name, *argv, "--results", str(results_dir)])
     _EVIDENCE["dir"] = results_dir
     _EVIDENCE_META.clear()

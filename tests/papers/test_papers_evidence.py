@@ -50,29 +50,38 @@ def table_rows(text: str) -> Iterator[tuple[str, list[str]]]:
 
 
 def lookup(node: object, path: str) -> Iterator[float]:
-    """Every number under the dotted ``path`` of ``node`` (``*``: all items)."""
-    head, _, rest = path.partition(".")
+    """Every number under the dotted ``path`` of ``node`` (``*``: all items; a dict key may
+    itself hold dots, e.g. ``headline.kuka_kr15.tcp_vs_heuristic``)."""
+    yield from _walk(node, path.split("."), path)
+
+
+def _walk(node: object, parts: list[str], path: str) -> Iterator[float]:
+    if not parts:
+        yield from flatten(node)
+        return
+    head = parts[0]
     if head == "*":
-        items = node.values() if isinstance(node, dict) else node
-        children = list(items) if isinstance(items, list | type({}.values())) else []
+        items = list(node.values()) if isinstance(node, dict) else node if isinstance(node, list) else []
+        for child in items:
+            yield from _walk(child, parts[1:], path)
     elif "=" in head and isinstance(node, list):
         field, _, wanted = head.partition("=")
         children = [item for item in node if isinstance(item, dict) and str(item.get(field)) == wanted]
         if not children:
             raise KeyError(path)
+        for child in children:
+            yield from _walk(child, parts[1:], path)
     elif isinstance(node, dict):
-        children = [node[head]] if head in node else []
-        if not children:
-            raise KeyError(path)
+        for k in range(1, len(parts) + 1):
+            key = ".".join(parts[:k])
+            if key in node:
+                yield from _walk(node[key], parts[k:], path)
+                return
+        raise KeyError(path)
     elif isinstance(node, list):
-        children = [node[int(head)]]
+        yield from _walk(node[int(head)], parts[1:], path)
     else:
         raise KeyError(path)
-    for child in children:
-        if rest:
-            yield from lookup(child, rest)
-        else:
-            yield from flatten(child)
 
 
 def flatten(node: object) -> Iterator[float]:
@@ -127,7 +136,7 @@ def test_each_number_of_ours_is_in_its_results_file(label, row):
         candidates = [float(r[k]) for k in keys for r in table if r.get(k) not in (None, "")]
     else:
         data = json.loads((folder / "results.json").read_text(encoding="utf-8"))
-        assert data["variant"] in ("full", "quick") and data["command"].startswith("python -m pipeline study")
+        assert data["variant"] in ("full", "quick", "custom") and data["command"].startswith("python -m pipeline study")
         assert (folder / "tables.md").is_file()
         candidates = [v for k in keys for v in lookup(data["result"], k)]
     assert keys and candidates, f"{label}: no values under {keys} in {folder}/results.json"
@@ -140,6 +149,6 @@ def test_every_results_folder_states_its_command_and_variant():
     assert folders
     for folder in folders:
         data = json.loads((folder / "results.json").read_text(encoding="utf-8"))
-        assert data["variant"] in ("full", "quick")
+        assert data["variant"] in ("full", "quick", "custom")
         head = (folder / "tables.md").read_text(encoding="utf-8").splitlines()[0]
         assert data["command"] in head and data["variant"] in head
