@@ -22,6 +22,8 @@ from pathlib import Path
 
 import pytest
 
+from pipeline import cli, studies
+
 ROOT = Path(__file__).resolve().parents[2]
 PAPERS = ROOT / "docs" / "PAPERS.md"
 RESULTS = ROOT / "docs" / "papers" / "results"
@@ -152,3 +154,28 @@ def test_every_results_folder_states_its_command_and_variant():
         assert data["variant"] in ("full", "quick", "custom")
         head = (folder / "tables.md").read_text(encoding="utf-8").splitlines()[0]
         assert data["command"] in head and data["variant"] in head
+
+
+def _demo_study(argv: list[str]) -> None:
+    print("| a | b |\n|---|---|\n| 1 | 2 |")
+    studies.save_result("demo", {"argv": argv, "gain": 0.5, "sem": float("nan")})
+
+
+def test_study_results_folder_holds_the_printed_tables_and_the_result(tmp_path, monkeypatch, capsys):
+    """``study NAME ARGS --results DIR``: DIR/tables.md is what the study printed, headed by the
+    command and variant; DIR/results.json its result (non-finite numbers as null)."""
+    monkeypatch.setitem(studies.STUDIES, "demo", f"{__name__}:_demo_study")
+    monkeypatch.setattr(studies, "study_dir", lambda name, root=None: tmp_path / "data")
+    (tmp_path / "data").mkdir()
+    folder = tmp_path / "evidence"
+    assert cli.main(["study", "demo", "--quick", "--results", str(folder)]) == 0
+    data = json.loads((folder / "results.json").read_text(encoding="utf-8"))
+    assert data["variant"] == "quick" and data["study"] == "demo"
+    assert data["result"] == {"argv": ["--quick"], "gain": 0.5, "sem": None}
+    tables = (folder / "tables.md").read_text(encoding="utf-8")
+    assert data["command"] in tables.splitlines()[0] and "| 1 | 2 |" in tables
+    assert (tmp_path / "data" / "result.json").is_file()          # the study's own output as before
+    assert cli.main(["study", "demo", "--n", "3", "--results", str(folder)]) == 0
+    assert json.loads((folder / "results.json").read_text(encoding="utf-8"))["variant"] == "custom"
+    assert cli.main(["study", "demo", "--results"]) == 2
+    assert "error: study: --results: expected a folder" in capsys.readouterr().err
