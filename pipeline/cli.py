@@ -162,7 +162,14 @@ def _cmd_study(ns: argparse.Namespace) -> int:
         names = studies.list_studies()
         print("\n".join(names) if names else "no studies registered (see pipeline/studies.py)")
         return 0
-    return studies.run_study(ns.name, ns.args)
+    args, results_dir = list(ns.args), None
+    if "--results" in args:
+        i = args.index("--results")
+        if i + 1 >= len(args):
+            raise PipelineError("study", "--results", "expected a folder")
+        results_dir = args[i + 1]
+        del args[i:i + 2]
+    return studies.run_study(ns.name, args, results_dir=results_dir)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

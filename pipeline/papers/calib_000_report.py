@@ -15,13 +15,12 @@ by 6-9 %, 50-70 % of the configurations designed without it collide.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 
 import numpy as np
 
 from pipeline.papers import calib_000_elastic as el
-from pipeline.studies import study_dir
+from pipeline.studies import save_result
 
 PAPER_KUKA = {"kuka_kr15": (0.44, 0.17), "kuka_kr300": (0.40, 0.10), "kuka_kr500": (0.43, 0.12)}
 PAPER_NOTIONAL = {"both_vs_heuristic_min": 0.36, "tcp_vs_heuristic": 0.43, "tcp_vs_parameter": 0.19,
@@ -212,6 +211,4 @@ def report(kuka: list[dict], notional: list[dict], args: dict, run_time_s: float
 
 
 def save(name: str, result: dict) -> None:
-    path = study_dir(name) / "result.json"
-    path.write_text(json.dumps(result, indent=1, default=float))
-    print(f"written {path}")
+    save_result(name, result)

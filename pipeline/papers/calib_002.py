@@ -34,9 +34,8 @@ import time
 import casadi as ca
 import numpy as np
 
-from pipeline.artefacts import write_json
 from pipeline.calibration import error_model as em
-from pipeline.studies import study_dir
+from pipeline.studies import save_result
 
 _DEG = math.pi / 180.0
 #: (theta offset rad, d m, a m, alpha rad) per joint: MPE 2018 / 1760190 Table 2, rounded (docstring)
@@ -118,10 +117,13 @@ def perturbation(rng: np.random.Generator, n: int, length_sigma_m: float, angle_
 
 
 def run_seed(seed: int, scale: float, noise_m: float, n_id: int = 50, n_val: int = 200, iterations: int = 3,
-             start_offset: tuple[float, float] = (0.0, 0.0), model: ProbeModel | None = None) -> dict:
+             start_offset: tuple[float, float] = (0.0, 0.0), model: ProbeModel | None = None,
+             noise_shape: str = "gaussian") -> dict:
     """One simulated AACMM: truth = nominal + ``scale`` x (1 mm, 1 mrad) Gaussian deviations; Gauss-Newton
     steps of paper 002 eq. 18 on the 23 identifiable columns from the nominal table (or from a start
-    ``start_offset`` = (m, rad) further away: §1 claim that precise initial values are not needed)."""
+    ``start_offset`` = (m, rad) further away: §1 claim that precise initial values are not needed).
+    Reading noise per axis: Gaussian with sigma ``noise_m``, or (``noise_shape="uniform"``) bounded,
+    uniform on ±sqrt(3) ``noise_m`` (the same sigma, no tails: the bounded-noise experiment)."""
     model = model or ProbeModel()
     rng = np.random.default_rng([seed, 2])
     nominal = nominal_parameters()
@@ -130,6 +132,8 @@ def run_seed(seed: int, scale: float, noise_m: float, n_id: int = 50, n_val: int
     true = nominal + scale * perturbation(rng, model.n, 1e-3, 1e-3)
 
     def measure(Q: np.ndarray) -> np.ndarray:
+        if noise_shape == "uniform":
+            return model(Q, true)[0] + noise_m * math.sqrt(3.0) * rng.uniform(-1.0, 1.0, (len(Q), 3))
         return model(Q, true)[0] + noise_m * rng.standard_normal((len(Q), 3))
 
     Q_before, Q_id, Q_after = (rng.uniform(-np.pi, np.pi, (k, 6)) for k in (n_val, n_id, n_val))
@@ -161,9 +165,10 @@ def _fmt(values: list[float], k: float = 1e3, digits: int = 3) -> str:
     return f"{k * m:.{digits}f} ± {k * s:.{digits}f}"
 
 
-def fitted_scale(seeds: list[int], noise_m: float, model: ProbeModel) -> float:
+def fitted_scale(seeds: list[int], noise_m: float, model: ProbeModel, noise_shape: str = "gaussian") -> float:
     """Truth deviation scale whose mean 'before' error over ``seeds`` equals Table 2's mean (docstring)."""
-    unit = [run_seed(s, 1.0, noise_m, iterations=0, model=model)["before"]["mean_abs"].mean() for s in seeds]
+    unit = [run_seed(s, 1.0, noise_m, iterations=0, model=model, noise_shape=noise_shape)["before"]["mean_abs"].mean()
+            for s in seeds]
     target = float(np.mean(PAPER_002["before_mean_abs_mm"])) * 1e-3
     # before = |deviation effect + noise|: remove the noise share in quadrature (Gaussian per axis)
     noise_abs = noise_m * math.sqrt(2 / math.pi)
@@ -188,6 +193,8 @@ def study_002(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(prog="study calib-002")
     ap.add_argument("--seeds", type=int, default=20, help="number of simulated arms (seeds 0..n-1)")
     ap.add_argument("--noise-mm", type=float, default=1e3 * REPEATABILITY_M, help="reading noise, 1 sigma per axis")
+    ap.add_argument("--noise-shape", choices=["gaussian", "uniform"], default="gaussian",
+                    help="reading noise per axis: Gaussian, or bounded (uniform, same sigma)")
     ap.add_argument("--quick", action="store_true", help="5 seeds, no sweeps")
     a = ap.parse_args(argv)
     t0 = time.perf_counter()
@@ -211,8 +218,8 @@ def study_002(argv: list[str]) -> int:
     result["rank_probe_on_axis"] = rep_axis.rank
 
     # E2: Tables 2 and 4 over the seeds
-    scale = fitted_scale(seeds, noise, model)
-    rows = [run_seed(s, scale, noise, model=model) for s in seeds]
+    scale = fitted_scale(seeds, noise, model, a.noise_shape)
+    rows = [run_seed(s, scale, noise, model=model, noise_shape=a.noise_shape) for s in seeds]
     print(f"\ntruth deviations: {scale:.3f} mm / {scale:.3f} mrad (1 sigma per DH parameter), fitted so that the mean "
           f"'before' error equals Table 2's; reading noise {a.noise_mm:.3f} mm per axis; {len(seeds)} seeds, "
           "mean ± standard error")
@@ -261,7 +268,7 @@ def study_002(argv: list[str]) -> int:
         print("|---|---|---|")
         result["noise_sweep"] = []
         for nz in (0.005e-3, 0.02e-3, 0.05e-3, 0.1e-3):
-            rr = [run_seed(s, scale, nz, model=model) for s in seeds[:10]]
+            rr = [run_seed(s, scale, nz, model=model, noise_shape=a.noise_shape) for s in seeds[:10]]
             mn = [float(r["after"]["mean_abs"].mean()) for r in rr]
             result["noise_sweep"].append({"noise_mm": nz * 1e3, "after_mean_abs_mm": _mse(mn)[0] * 1e3})
             print(f"| {nz * 1e3:.3f} | {_fmt(mn, digits=4)} | {nz * 1e3 * math.sqrt(2 / math.pi):.4f} |")
@@ -271,7 +278,7 @@ def study_002(argv: list[str]) -> int:
         print("|---|---|---|")
         result["poses_sweep"] = []
         for n_id in (10, 20, 30, 50, 100, 200):
-            rr = [run_seed(s, scale, noise, n_id=n_id, model=model) for s in seeds[:10]]
+            rr = [run_seed(s, scale, noise, n_id=n_id, model=model, noise_shape=a.noise_shape) for s in seeds[:10]]
             mn = [float(r["after"]["mean_abs"].mean()) for r in rr]
             mx = [float(r["after"]["max_abs"].max()) for r in rr]
             result["poses_sweep"].append({"poses": n_id, "after_mean_abs_mm": _mse(mn)[0] * 1e3,
@@ -283,7 +290,8 @@ def study_002(argv: list[str]) -> int:
         print("|---|---|")
         result["start_sweep"] = []
         for off in ((1e-3, 1e-3), (10e-3, 10e-3), (30e-3, 50e-3)):
-            rr = [run_seed(s, scale, noise, iterations=5, start_offset=off, model=model) for s in seeds[:10]]
+            rr = [run_seed(s, scale, noise, iterations=5, start_offset=off, model=model, noise_shape=a.noise_shape)
+                  for s in seeds[:10]]
             cells = [float(np.median([r["history"][it]["mean_abs_m"].mean() for r in rr])) for it in (1, 2, 5)]
             result["start_sweep"].append({"length_sigma_mm": off[0] * 1e3, "angle_sigma_mrad": off[1] * 1e3,
                                           "median_mean_abs_mm_after_1_2_5": [c * 1e3 for c in cells]})
@@ -291,6 +299,5 @@ def study_002(argv: list[str]) -> int:
                   + " / ".join(f"{1e3 * c:.4f}" for c in cells) + " |")
     result["run_time_s"] = time.perf_counter() - t0
     print(f"\nrun time {result['run_time_s']:.1f} s")
-    path = write_json(study_dir("calib-002") / "result.json", result)
-    print(f"written {path}")
+    save_result("calib-002", result)
     return 0

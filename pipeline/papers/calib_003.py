@@ -43,7 +43,6 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from pipeline.artefacts import write_json
 from pipeline.blas import single_thread_blas
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import error_model as em
@@ -54,7 +53,7 @@ from pipeline.papers import calib_003_search as ps
 from pipeline.robot.model import RobotModel
 from pipeline.robot.spec import TrackerSpec
 from pipeline.sim.truth import RealRobot, TruthConfig
-from pipeline.studies import study_dir
+from pipeline.studies import save_result
 
 #: paper 003 Table 2 (simulation): mean, RMSE, max positioning error [mm]
 PAPER_003 = {"none": (0.485, 0.558, 1.078), "detmax_O1": (0.4131, 0.4807, 1.0966), "detmax_O2": (0.430, 0.491, 1.015),
@@ -337,6 +336,5 @@ def study_003(argv: list[str]) -> int:
     result["rows"] = rows
     result["run_time_s"] = time.perf_counter() - t0
     print(f"\nrun time {result['run_time_s']:.0f} s")
-    path = write_json(study_dir("calib-003") / "result.json", result)
-    print(f"written {path}")
+    save_result("calib-003", result)
     return 0

@@ -131,10 +131,12 @@ def baseline_configurations(robot: RobotModel, Qc: np.ndarray, n: int, visible, 
 
 
 def _seed(args: tuple) -> dict:
-    robot_name, seed, truth_name, grid_data, n, n_heldout, criteria, margins, camera = args
+    (robot_name, seed, truth_name, grid_data, n, n_heldout, criteria, margins, camera, compliance_scale,
+     n_initial) = args
     with single_thread_blas():
         robot = RobotModel.load(robot_name)
-        truth = TruthConfig.ideal() if truth_name == "ideal" else TruthConfig()
+        truth = (TruthConfig.ideal() if truth_name == "ideal"
+                 else TruthConfig(joint_compliance_scale=compliance_scale))
         real = RealRobot.create(robot, seed, truth)
         rng = np.random.default_rng([seed, 4])
         mm = em.MeasurementModel(robot, marker_points=True)
@@ -157,7 +159,7 @@ def _seed(args: tuple) -> dict:
         designs: dict[str, np.ndarray] = {}
         run_time: dict[str, float] = {}
         for name in criteria:
-            sel = ds.remove_and_replace(G, ix.IndexSpec(name), n, rng, n_initial=n)
+            sel = ds.remove_and_replace(G, ix.IndexSpec(name), n, rng, n_initial=n_initial or n)
             designs[f"rr_{name}"] = Qc[sel.selected]
             run_time[f"rr_{name}"] = sel.run_time_s
         designs["grid_order"] = Qc[ds.linear_scan_design(G, ix.IndexSpec("O3"), n).selected]
@@ -281,6 +283,11 @@ def study_004(argv: list[str]) -> int:
                     help="camera pose that decides the candidates: registered from pilot readings, or robot.yaml's")
     ap.add_argument("--laser-grid", type=int, default=9,
                     help="grid per axis of the laser-tracker experiment (0: skip it)")
+    ap.add_argument("--compliance-scale", type=float, default=1.0,
+                    help="default truth's joint compliance / nominal (k = torque limit / 2 mrad / scale; "
+                         "the stiffness experiment)")
+    ap.add_argument("--n-initial", type=int, default=None,
+                    help="R&R start size (default --n; below it step 3, adding configurations, runs)")
     ap.add_argument("--jobs", type=int, default=1)
     a = ap.parse_args(argv)
     t0 = time.perf_counter()
@@ -290,7 +297,9 @@ def study_004(argv: list[str]) -> int:
           f"(nominal, no margin): {grid['n_visible']} (paper: about {PAPER['visible']}); with the visibility margins "
           f"({a.margin_angle_deg} deg, {a.margin_occlusion_m} m) at the nominal camera pose: "
           f"{grid['n_candidates_nominal']} [{grid['time_s']:.0f} s]")
-    jobs = [(a.robot, s, t, grid, a.n, a.heldout, a.criteria, margins, a.camera) for t in a.truth for s in a.seeds]
+    jobs = [(a.robot, s, t, grid, a.n, a.heldout, a.criteria, margins, a.camera, a.compliance_scale,
+             a.n_initial)
+            for t in a.truth for s in a.seeds]
     rows = run_parallel(_seed, jobs, a.jobs)
     print(f"candidates per seed (visible with the margins at the {a.camera} camera pose): "
           + ", ".join(f"seed {r['seed']} {r['n_candidates']} ({r['n_pilot']} pilot poses)" for r in rows

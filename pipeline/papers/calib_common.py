@@ -5,8 +5,6 @@ or arms in parallel with joblib (``--jobs``), results written to ``data/studies/
 
 from __future__ import annotations
 
-import json
-
 from joblib import Parallel, delayed
 
 from pipeline import studies
@@ -21,6 +19,5 @@ def run_parallel(fn, items, jobs: int):
 
 def save_result(name: str, result: dict) -> None:
     """Write ``result`` to ``data/studies/<name>/result.json`` (:func:`pipeline.studies.study_dir`)."""
-    path = studies.study_dir(name) / "result.json"
-    path.write_text(json.dumps(result, indent=1, default=float))
-    print(f"\nwritten {path}")
+    print()
+    studies.save_result(name, result)

@@ -51,7 +51,7 @@ from pipeline.progress import Progress
 from pipeline.runner import run_pipeline
 from pipeline.sim.truth import TruthConfig
 from pipeline.stage_io import load_run
-from pipeline.studies import study_dir
+from pipeline.studies import save_result, study_dir
 
 NAME = "paper-004"
 FULL_CONFIG = CONFIGS_DIR / "paper004.yaml"
@@ -225,6 +225,5 @@ def study_paper_004(argv: list[str]) -> int:
     result = {"args": {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(a).items()},
               "paper_settings": PAPER_SETTINGS, "rows": [r.to_dict() for r in rows], "timings_s": timings,
               "failures": failures}
-    path.write_text(json.dumps(result, indent=1, default=float))
-    print(f"written {path}")
+    save_result(NAME, result, path.name)
     return 0

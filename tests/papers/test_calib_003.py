@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 
+from pipeline import studies
 from pipeline.calibration import indices as ix
 from pipeline.papers import calib_003 as p3
 from pipeline.papers import calib_003_search as ps
@@ -83,7 +84,7 @@ def test_normalised_oc_terms_sit_mid_range():
 
 
 def test_quick_study_prints_every_row_and_calibrates(tmp_path, monkeypatch, capsys):
-    monkeypatch.setattr(p3, "study_dir", lambda name: tmp_path)
+    monkeypatch.setattr(studies, "study_dir", lambda name, root=None: tmp_path)
     assert p3.study_003(["--quick", "--seeds", "1", "--sweep-seeds", "1", "--small", "20"]) == 0
     res = json.loads((tmp_path / "result.json").read_text())
     out = capsys.readouterr().out
