@@ -93,8 +93,8 @@ class Config:
     #: elastic arm gives hundreds; the elastostatic model ~1 (its gravity-model uncertainty is in
     #: the covariance, pipeline.calibration.gravity_uncertainty)
     max_chi2_per_dof: float = 10.0
-    #: quality gate: held-out (or cross-validated) RMS error over its covariance prediction must
-    #: lie in [1 / max_actual_over_predicted, max_actual_over_predicted]
+    #: quality gate: held-out (or cross-validated) RMS error over its covariance prediction must not
+    #: exceed max_actual_over_predicted (optimistic); below its inverse (pessimistic) is a warning
     max_actual_over_predicted: float = 1.5
     #: quality gate (gross inadequacy): held-out (or cross-validated) RMS error after calibration
     #: over the nominal model's must not exceed this

@@ -32,8 +32,12 @@ from pipeline.robot.urdf_export import export_urdf
 from pipeline.robot.urdf_import import absolute_mesh_paths
 
 WORLD = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-#: a capsule pair closer than zero in at least this share of random configurations always collides
+#: a capsule pair closer than :data:`PAIR_MARGIN_M` in at least this share of random configurations
+#: always collides
 ALWAYS_COLLIDING_SHARE = 0.95
+#: the self-collision clearance the stages keep (``calibration.margin_collision_m``'s default, the ranked
+#: default poses): a pair always closer than this rejects every configuration as surely as an overlap
+PAIR_MARGIN_M = 0.01
 #: assumed (fitted) capsules: pairs overlapping in this share of random configurations are neighbours in
 #: all but name (a UR base and shoulder) and are left out of the self-collision check
 ASSUMED_COLLIDING_SHARE = 0.3
@@ -82,7 +86,7 @@ class RobotModel:
                                                                urdf_alone=urdf_alone)
         assumed = spec.path == spec.urdf
         robot_model = cls._assemble(spec, model, urdf_text, assumptions)
-        robot_model._check_always_colliding(fix=assumed)
+        robot_model._check_always_colliding(fix=assumed or "capsules" in spec.assumed)
         for field, what, point in marker_points(spec):
             if not (assumed or field.split("[")[0] in spec.assumed):
                 continue      # measured or calibrated: a fact (robot_warnings names a capsule that holds it)
@@ -124,16 +128,17 @@ class RobotModel:
     def _check_always_colliding(self, fix: bool, samples: int = 200) -> None:
         """Capsule pairs that overlap in (almost) every random configuration inside the limits.
 
-        Such a pair makes every candidate configuration "in collision". With assumed capsules the
-        pair is left out of the self-collision check (an assumption); with a robot.yaml it is an
-        error naming the pair and the fix.
+        Such a pair makes every candidate configuration "in collision". With assumed capsules (a URDF
+        alone, or robot.yaml's capsules still as ``robot init`` fitted them) the pair is left out of the
+        self-collision check (an assumption); with capsules the user gave it is an error naming the
+        pair and the fix.
         """
         if not self._self_pairs:
             return
         rng = np.random.default_rng(0)
         Q = rng.uniform(self.model.lowerPositionLimit, self.model.upperPositionLimit, size=(samples, self.nq))
         pair, _ = self.capsule_clearances(self.capsule_segments(Q))
-        share = (pair < 0).mean(axis=0)
+        share = (pair < PAIR_MARGIN_M).mean(axis=0)
         bad = [self._self_pairs[i] for i in np.flatnonzero(share >= (ASSUMED_COLLIDING_SHARE if fix
                                                                       else ALWAYS_COLLIDING_SHARE))]
         if not bad:
@@ -142,7 +147,8 @@ class RobotModel:
         if not fix:
             i, k = bad[0]
             raise RobotFileError(self.spec.path, "capsules", f"capsules '{names[0][0]}' and '{names[0][1]}' overlap in "
-                                 f"{share[self._self_pairs.index((i, k))]:.0%} of random configurations: shrink "
+                                 f"{share[self._self_pairs.index((i, k))]:.0%} of random configurations (closer than "
+                                 f"{PAIR_MARGIN_M * 1e3:.0f} mm): shrink "
                                  "them (radius_m, p0, p1) or list the pair under collision.ignore_pairs")
         self.spec.collision.ignore_pairs = list(self.spec.collision.ignore_pairs) + names
         self._self_pairs = [p for p in self._self_pairs if p not in bad]
