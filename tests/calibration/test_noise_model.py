@@ -2,16 +2,23 @@
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 from scipy.stats import binom
 
 from pipeline.calibration import candidates as cd
+from pipeline.calibration import error_model as em
 from pipeline.calibration import measure as ms
 from pipeline.calibration import noise_model as nm
 from pipeline.calibration import stage as st
+from pipeline.calibration.robust import robust_estimate
 from pipeline.calibration.validate import gate_figures
+from pipeline.errors import QualityGateError
 from pipeline.robot import repeatability as rp
+from pipeline.robot.model import RobotModel
+from pipeline.sim.truth import RealRobot, TruthConfig
 
 
 def test_repeatability_sigma_reproduces_iso9283_rp():
@@ -72,8 +79,6 @@ def test_gates_judge_heldout_before_cross_validation():
 @pytest.fixture(scope="module")
 def gross_files(tmp_path_factory):
     """A simulated record written to CSV, the same with three gross errors, and a held-out file."""
-    from pipeline.robot.model import RobotModel
-    from pipeline.sim.truth import RealRobot
 
     robot = RobotModel.load("rx130l")
     real = RealRobot.create(robot, 21)
@@ -92,7 +97,6 @@ def gross_files(tmp_path_factory):
 
 class _Ctx:
     def __init__(self, config, robot):
-        from types import SimpleNamespace
 
         self.config, self.robot, self.rng, self.progress = config, robot, np.random.default_rng(6), None
         self.run = SimpleNamespace(accept_poor=False)
@@ -120,7 +124,6 @@ def test_three_gross_errors_are_found_and_the_run_passes(gross_files):
 def test_readings_the_model_cannot_explain_still_fail(gross_files, tmp_path):
     """Readings paired with the wrong poses (a shifted file): the calibration explains little of the
     nominal error, and the gross-inadequacy gate stops the run (exit 3)."""
-    from pipeline.errors import QualityGateError
 
     robot, clean, _, val, _ = gross_files
     m = ms.read_csv(clean, robot)
@@ -136,10 +139,6 @@ def test_readings_the_model_cannot_explain_still_fail(gross_files, tmp_path):
 def test_clean_record_loses_no_more_than_the_confidence_implies():
     """At 90 % per reading a clean record may lose about a tenth, never much more (binomial bound);
     with the remainder in the noise model the robust scale does not inflate the count."""
-    from pipeline.calibration import error_model as em
-    from pipeline.calibration.robust import robust_estimate
-    from pipeline.robot.model import RobotModel
-    from pipeline.sim.truth import RealRobot, TruthConfig
 
     robot = RobotModel.load("rx130l")
     real = RealRobot.create(robot, 8, TruthConfig.ideal())

@@ -10,6 +10,7 @@ import pytest
 from pipeline.errors import InfeasibleError, PipelineError, SolverError
 from pipeline.trajectory import solve as solve_mod
 from pipeline.trajectory.baselines import ruckig_torque_feasible
+from pipeline.trajectory.pareto import settle_pareto
 from pipeline.trajectory.ptp import energy_weights
 from pipeline.trajectory.solve import plan_ptp
 from pipeline.trajectory.trajectories import check_trajectory
@@ -117,7 +118,6 @@ def _fake(k2, T, E, tag="warm"):
 def test_settle_pareto_resolves_dominated_points_cold():
     """Re-solve each dominated point once from a cold start, keep the lower k1 T + k2 E (fine-grid
     E), flag what stays dominated, never re-solve the main (cold-started) solution."""
-    from pipeline.trajectory.pareto import settle_pareto
 
     main = _fake(0.01, 0.628, 1.416, "main")
     better = _fake(0.003, 0.627, 1.5, "cold")           # beats 0.629 / 1.760 and is not dominated
@@ -146,7 +146,6 @@ def test_settle_pareto_resolves_dominated_points_cold():
 
 
 def test_settle_pareto_flags_a_dominated_main_solution():
-    from pipeline.trajectory.pareto import settle_pareto
 
     main = _fake(0.01, 0.7, 2.0, "main")
     out = settle_pareto([main, _fake(0.1, 0.6, 1.0)], lambda r: r.info["E"],
