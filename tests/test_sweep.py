@@ -20,7 +20,8 @@ QUICK = str(REPO_ROOT / "configs" / "quick.yaml")
 # small designs on the rigid robot: the sweep machinery is under test here, not the elastostatic model
 TINY = ["calibration.n_random_candidates=300", "calibration.n_configurations=20", "calibration.n_heldout=100",
         "truth.joint_compliance_scale=0", "truth.transmission_error_amplitude_rad=0",
-        "calibration.second_pass=never"]   # one pass: the sweep machinery is under test, not the second pass
+        "calibration.second_pass=never",   # one pass: the sweep machinery is under test, not the second pass
+        "calibration.figures=false"]
 
 
 def test_parse_seeds_ranges_lists_and_errors() -> None:

@@ -82,6 +82,7 @@ def six_d_trial(robot: RobotModel, real, n_poses: int, rng: np.random.Generator,
                                 position_sigma_m, orientation_sigma_rad)
     val = simulate_six_d_record(real, cd.random_candidates(chain, n_validation, rng, visibility=False)[0], rng,
                                 0.0, 0.0, "exact poses")
+    config.setdefault("parameters", "all")
     cfg = Config(measurements_csv=str(write_csv(folder / "fit.csv", fit)), figures=False,
                  validation_csv=str(write_csv(folder / "validation.csv", val)), position_sigma_m=position_sigma_m,
                  orientation_sigma_rad=orientation_sigma_rad, **config)

@@ -99,6 +99,22 @@ class PtpResult:
         return JointTrajectory(name, t, q, v, a, info={"k1": self.k1, "k2": self.k2})
 
 
+def _check_duration_attainable(dq_rad: np.ndarray, duration_s: float, velocity_rad_s: np.ndarray,
+                               acceleration_rad_s2: npt.ArrayLike | None) -> None:
+    """Refuse a fixed duration below a bound no rest-to-rest move can beat, before IPOPT spends its
+    iterations proving it: the mean speed ``|dq| / T`` cannot exceed the velocity limit, and under an
+    acceleration limit ``a`` the bang-bang move takes ``2 sqrt(|dq| / a)``."""
+    distance = np.abs(np.asarray(dq_rad, float))
+    bound_s = distance / np.asarray(velocity_rad_s, float)
+    if acceleration_rad_s2 is not None:
+        bound_s = np.maximum(bound_s, 2.0 * np.sqrt(distance / np.asarray(acceleration_rad_s2, float)))
+    j = int(np.argmax(bound_s))
+    if duration_s < bound_s[j] * (1.0 - 1e-9):
+        raise InfeasibleError(None, f"ptp duration joint {j + 1}",
+                              f"{duration_s:.4g} s is below the {bound_s[j]:.4g} s that its "
+                              f"{np.degrees(distance[j]):.1f} deg need at the velocity/acceleration limits")
+
+
 def _compile_nlp(solver_sx: ca.Function, cache_dir: Path | None, name: str,
                  flags: tuple[str, ...] = JIT_FLAGS) -> Path:
     """C code of the NLP's functions (objective, constraints and their derivatives) -> .so.
@@ -283,6 +299,8 @@ class PtpProblem:
                 raise InfeasibleError(None, f"ptp {nm} joint {j + 1}",
                                       f"{np.degrees(qq[j]):.2f} deg outside the limits "
                                       f"[{np.degrees(lo[j]):.1f}, {np.degrees(hi[j]):.1f}] deg")
+        if duration_s is not None:
+            _check_duration_attainable(q1 - q0, float(duration_s), vmax, acceleration_rad_s2)
         pd = self.p_dyn_nominal.copy()
         # static feasibility: holding torque at start and goal
         for nm, qq in (("start", q0), ("goal", q1)):

@@ -188,9 +188,15 @@ def test_goal_outside_limits_is_named(ptp_problem, big_move):
         ptp_problem.solve(q0, bad)
 
 
-def test_unattainable_duration_raises(ptp_problem, big_move, pm):
-    with pytest.raises((InfeasibleError, SolverError)):
+def test_unattainable_duration_raises_before_the_solver_runs(ptp_problem, big_move, pm):
+    """0.05 s for a 90 deg move beats the velocity limits' own bound: refused up front, naming the joint."""
+    with pytest.raises(InfeasibleError, match="ptp duration joint 1"):
         ptp_problem.solve(*big_move, k1=0.0, k2=1.0, weights=energy_weights(pm, "normalised"), duration_s=0.05)
+    bound_s = float(np.max(np.abs(big_move[1] - big_move[0]) / pm.velocity_rad_s))
+    bang_bang_s = 2.0 * np.sqrt(abs(big_move[1][0] - big_move[0][0]) / 0.5)     # joint 1 at 0.5 rad/s²
+    with pytest.raises(InfeasibleError, match=f"below the {bang_bang_s:.4g} s"):
+        ptp_problem.solve(*big_move, k1=0.0, k2=1.0, duration_s=1.01 * bound_s,
+                          acceleration_rad_s2=np.full(pm.nq, 0.5))
 
 
 def test_compiled_library_is_reused(pm, rx130l, ptp_problem, quick_traj_config):
