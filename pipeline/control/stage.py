@@ -27,7 +27,7 @@ import time
 import numpy as np
 
 from pipeline.control import report
-from pipeline.control.config import ControlConfig
+from pipeline.control.config import Config, ControlConfig
 from pipeline.control.design import (
     IsoReference,
     ServoDesign,
@@ -49,7 +49,7 @@ NAME = "control"
 DEPENDS: tuple[str, ...] = ("model", "calibration", "identification")
 #: provenance (pipeline.stage_plan): what is simulated (this stage reads no recorded file)
 SIMULATES = "servo loop on the hidden robot"
-Config = ControlConfig
+__all__ = ["NAME", "DEPENDS", "SIMULATES", "Config", "check", "run"]
 
 
 def check(config: ControlConfig, robot: RobotModel) -> None:

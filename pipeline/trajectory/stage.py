@@ -32,7 +32,7 @@ from pipeline.robot.defaults import ptp_move_rad
 from pipeline.robot.model import RobotModel
 from pipeline.stage_api import StageContext, StageResult
 from pipeline.trajectory import report
-from pipeline.trajectory.config import TrajectoryConfig
+from pipeline.trajectory.config import Config, TrajectoryConfig
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.measure import ServoVerification, verify_in_servo
 from pipeline.trajectory.settling import add_smooth_ptp, slowed_into_limits
@@ -43,7 +43,7 @@ NAME = "trajectory"
 DEPENDS: tuple[str, ...] = ("model", "identification", "control")  # plans are run in the servo simulation
 #: provenance (pipeline.stage_plan): what is simulated (this stage reads no recorded file)
 SIMULATES = "servo loop on the hidden robot"
-Config = TrajectoryConfig
+__all__ = ["NAME", "DEPENDS", "SIMULATES", "Config", "check", "run"]
 
 
 def check(config: TrajectoryConfig, robot: RobotModel) -> None:
