@@ -158,7 +158,7 @@ def iso_reference(robot: RobotModel, cfg: ControlConfig
                         iso.large_circle_fraction, iso.small_circle_fraction, tuple(iso.segments))
     seeds = ik_seeds_or_derived_rad(robot, cfg.ik_seeds_deg)
     try:
-        q_start = start_configuration(robot, path.poses([0.0])[0], seeds, frame)
+        q_start = start_configuration(robot, path.poses(np.array([0.0]))[0], seeds, frame)
         ref = cartesian_reference(robot, path, cfg.sample_time_s, iso.speed_m_s, iso.acceleration_m_s2,
                                   iso.jerk_m_s3, q_start, frame, cfg.ik_tolerance_m)
     except InfeasibleError as exc:

@@ -20,6 +20,7 @@ from pipeline.control.design import IsoReference, ServoDesign
 from pipeline.control.estimate import ControlModels, with_dynamics_of
 from pipeline.control.simulate import ClosedLoopResult, first_saturation, simulate_joint_trajectory
 from pipeline.control.validate import registered_error, run_metrics
+from pipeline.errors import PipelineError
 from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import start_configuration
 from pipeline.robot.reference import cartesian_reference
@@ -38,6 +39,13 @@ class ServoRuns:
     noise_seed: int
 
 
+def measured_tcp(res: ClosedLoopResult) -> np.ndarray:
+    """The run's TCP as the ideal tracker measured it (every run of the stage names its TCP frame)."""
+    if res.tcp_position_m is None:
+        raise PipelineError(None, "control", "the closed loop returned no TCP measurement")
+    return res.tcp_position_m
+
+
 def run_variant(real: Any, model: RobotModel, iso: IsoReference, q_d: np.ndarray, v_d: np.ndarray,  # Any: the
                 a_d: np.ndarray, cfg: ControlConfig, variant: str, servo: ServoDesign,  # simulated hidden robot
                 noise_seed: int) -> ClosedLoopResult:
@@ -52,6 +60,7 @@ def variant_runs(ctx: StageContext, models: ControlModels, iso: IsoReference, se
     ``compare_nominal_feedforward``, full_friction from the nominal dynamics) on the ISO reference."""
     cfg: ControlConfig = ctx.config
     ref, robot = iso.ref, models.robot
+    assert ctx.real is not None          # the stage checked it before any step
     tcp_at_ref = ctx.real.plant.measure_tcp(ref.q_d, iso.frame)
     noise_seed = int(ctx.rng.integers(2**32))  # common random numbers across the variants
     runs, metrics = {}, {}
@@ -62,7 +71,7 @@ def variant_runs(ctx: StageContext, models: ControlModels, iso: IsoReference, se
         variant = "full_friction" if name == "full_friction_nominal" else name
         res = run_variant(ctx.real, model, iso, ref.q_d, ref.v_d, ref.a_d, cfg, variant, servo, noise_seed)
         runs[name] = res
-        metrics[name] = run_metrics(res.lag_error_rad, res.tcp_position_m, ref.tcp_d_m, tcp_at_ref)
+        metrics[name] = run_metrics(res.lag_error_rad, measured_tcp(res), ref.tcp_d_m, tcp_at_ref)
         metrics[name]["max_torque_ratio"] = res.max_torque_ratio.tolist()
         metrics[name]["realtime_factor"] = res.realtime_factor
         metrics[name]["realtime_factor_cpu"] = res.realtime_factor_cpu
@@ -81,20 +90,21 @@ def kinematics_comparison(ctx: StageContext, models: ControlModels, iso: IsoRefe
     ref, main = iso.ref, measured.main
     if models.calibrated:
         nom_kin = with_dynamics_of(models.nominal, models.robot)
-        q_start_n = start_configuration(nom_kin, iso.path.poses([0.0])[0], np.vstack([iso.q_start, iso.seeds]),
-                                        iso.frame)
+        q_start_n = start_configuration(nom_kin, iso.path.poses(np.array([0.0]))[0],
+                                        np.vstack([iso.q_start, iso.seeds]), iso.frame)
         ref_n = cartesian_reference(nom_kin, iso.path, cfg.sample_time_s, iso.iso.speed_m_s,
                                     iso.iso.acceleration_m_s2, iso.iso.jerk_m_s3, q_start_n, iso.frame,
                                     cfg.ik_tolerance_m)
         res_n = run_variant(ctx.real, models.robot, iso, ref_n.q_d, ref_n.v_d, ref_n.a_d, cfg, main, servo,
                             measured.noise_seed)
-        n = min(len(res_n.tcp_position_m), len(ref.tcp_d_m))
-        rms_nominal_kin = float(np.sqrt(np.mean(np.sum((res_n.tcp_position_m[:n] - ref.tcp_d_m[:n]) ** 2, 1))))
-        reg_nominal_kin = registered_error(res_n.tcp_position_m[:n], ref.tcp_d_m[:n])
+        tcp_n = measured_tcp(res_n)
+        n = min(len(tcp_n), len(ref.tcp_d_m))
+        rms_nominal_kin = float(np.sqrt(np.mean(np.sum((tcp_n[:n] - ref.tcp_d_m[:n]) ** 2, 1))))
+        reg_nominal_kin = registered_error(tcp_n[:n], ref.tcp_d_m[:n])
     else:
         rms_nominal_kin = measured.metrics[main]["tcp_error_rms_m"]
-        reg_nominal_kin = registered_error(measured.runs[main].tcp_position_m, ref.tcp_d_m)
-    reg_main = registered_error(measured.runs[main].tcp_position_m, ref.tcp_d_m)
+        reg_nominal_kin = registered_error(measured_tcp(measured.runs[main]), ref.tcp_d_m)
+    reg_main = registered_error(measured_tcp(measured.runs[main]), ref.tcp_d_m)
     registered = {"tcp_error_rms_registered_nominal_kinematics_m": float(np.sqrt(np.mean(reg_nominal_kin**2))),
                   "tcp_error_rms_registered_calibrated_kinematics_m": float(np.sqrt(np.mean(reg_main**2)))}
     return rms_nominal_kin, registered

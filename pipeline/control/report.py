@@ -29,7 +29,7 @@ from matplotlib.figure import Figure
 from pipeline.control.config import ControlConfig
 from pipeline.control.design import IsoReference, ServoDesign
 from pipeline.control.joint_stiffness import StiffnessChoice
-from pipeline.control.measure import ServoRuns
+from pipeline.control.measure import ServoRuns, measured_tcp
 from pipeline.robot.reference import Reference
 
 
@@ -95,7 +95,7 @@ def figures(iso: IsoReference, measured: ServoRuns, servo: ServoDesign, cfg: Con
     """The stage's figures: lag errors, TCP error, the ISO path, Bode plots of axes 1-3."""
     ref, runs, path, tcp_at_ref = iso.ref, measured.runs, iso.path, measured.tcp_at_ref
     servo_models = servo.loop_models(min(3, nq), cfg.sample_time_s, cfg.measurement_delay_samples)
-    show = [k for k in ("none", "full_friction", "elastic_flat") if k in runs] or list(runs)
+    show: list[str] = [k for k in ("none", "full_friction", "elastic_flat") if k in runs] or list(runs)
     lag = {k: runs[k].lag_error_rad for k in runs}
     tcp = {k: np.linalg.norm(runs[k].tcp_position_m - tcp_at_ref, axis=1) for k in runs}
     tcp_abs = {k: np.linalg.norm(runs[k].tcp_position_m - ref.tcp_d_m, axis=1) for k in runs}
@@ -166,7 +166,7 @@ def arrays(iso: IsoReference, measured: ServoRuns, servo: ServoDesign, cfg: Cont
     }
     for name, res in runs.items():
         out[f"lag_error_{name}_rad"] = res.lag_error_rad
-        out[f"tcp_{name}_m"] = res.tcp_position_m
+        out[f"tcp_{name}_m"] = measured_tcp(res)
         out[f"tau_cmd_{name}_Nm"] = res.tau_cmd
     return out
 

@@ -328,7 +328,7 @@ def choose_friction_model(robot: RobotModel, regs: Regressors, fits: Fits, val: 
     better one is handed on (``fits`` and ``val`` switched to it). Returns the summary's friction part."""
     friction: dict[str, Any] = {}
     if fits.stribeck is not None:
-        vc_status = fits.phys_vc.status if regs.record is None else val.heldout.phys.status
+        vc_status = fits.phys_vc.status if val.heldout is None else val.heldout.phys.status   # a record's tail
         scored = ({"viscous_coulomb": val_mod.torque_rms(val.tau_Nm, val.pred_vc)[0]} if is_success(vc_status)
                   else {})
         friction = friction_summary(scored | {"stribeck": val.rms_phys}, val.noise_sigma, fits.stribeck,
