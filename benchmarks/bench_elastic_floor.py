@@ -53,10 +53,9 @@ from scipy.signal import savgol_filter
 
 from pipeline.control import simulate
 from pipeline.control.config import ControlConfig
-from pipeline.control.design import ServoGains, filter_alpha, servo_report, stick_slip_gains
+from pipeline.control.design import ServoGains, filter_alpha, iso_reference, servo_report, stick_slip_gains
 from pipeline.control.elastic_feedforward import link_torque
 from pipeline.control.simulate import servo_gains, simulate_joint_trajectory
-from pipeline.control.stage import iso_reference
 from pipeline.robot.friction import stribeck_slope_Nms_rad
 from pipeline.robot.model import RobotModel
 from pipeline.sim.plant import Plant

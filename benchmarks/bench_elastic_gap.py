@@ -4,7 +4,7 @@ Run: ``.venv/bin/python benchmarks/bench_elastic_gap.py [RUN_DIR]`` (default ``d
 a run of the default configuration through ``identification``: ``python -m pipeline run --stages
 identification``). The run's robot, seed and truth configuration are read from ``RUN_DIR``.
 
-The control stage's ISO reference (:func:`pipeline.control.stage.iso_reference`, the pipeline
+The control stage's ISO reference (:func:`pipeline.control.design.iso_reference`, the pipeline
 model's kinematics) runs on the hidden robot's elastic plant (Stribeck friction, seeded) through
 :func:`pipeline.control.simulate.simulate_joint_trajectory` with the servo gains of the pipeline
 model and the stage's encoder-noise stream, for the ``elastic_flat`` feedforward (paper
@@ -41,9 +41,9 @@ import yaml
 
 from pipeline.config import load_config
 from pipeline.control.config import ControlConfig
+from pipeline.control.design import iso_reference
 from pipeline.control.joint_stiffness import StiffnessChoice, feedforward_stiffness
 from pipeline.control.simulate import servo_gains, simulate_joint_trajectory
-from pipeline.control.stage import iso_reference
 from pipeline.robot.model import RobotModel
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 from pipeline.sim.truth import RealRobot, TruthConfig

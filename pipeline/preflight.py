@@ -9,7 +9,7 @@ functions, so a robot that cannot run a stage is named before minutes of search:
 * identification: one random excitation that passes the stage's limits and collision check
   (:func:`pipeline.identification.fourier.random_feasible_trajectories`);
 * control: the IK seeds inside the limits and collision-free, the ISO 9283 cube (configured or
-  derived) and its joint reference (:func:`pipeline.control.stage.iso_reference`);
+  derived) and its joint reference (:func:`pipeline.control.design.iso_reference`);
 * trajectory: the PtP start and goal collision-free, the CP path's joint path
   (:func:`pipeline.trajectory.solve.cp_joint_path`).
 
@@ -28,7 +28,7 @@ from pipeline.calibration import candidates as cd
 from pipeline.calibration import feasibility as fz
 from pipeline.calibration.config import Config as CalibrationConfig
 from pipeline.control.config import ControlConfig
-from pipeline.control.stage import iso_reference
+from pipeline.control.design import iso_reference
 from pipeline.errors import ConfigError, InfeasibleError, PipelineError
 from pipeline.identification import fourier
 from pipeline.identification.config import Config as IdentificationConfig

@@ -109,3 +109,7 @@ class ControlConfig:
             raise ConfigError(s, "control.iso", f"expected a mapping of ISO path settings, got {self.iso!r}")
         check_number(s, "control.benchmark_python_seconds", self.benchmark_python_seconds, ge=0, unit="s",
                      why=" (0 skips the plain-Python benchmark)")
+
+
+#: the name every stage package gives its section dataclass (docs/ARCHITECTURE.md "Stage skeleton")
+Config = ControlConfig

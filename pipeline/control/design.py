@@ -23,6 +23,9 @@ Loop models for Bode plots and margins, at the velocity sample time ``T_v``:
     L_v = C_v P D F (loop broken at the torque);  velocity loop closed: T_v(z) = v_hat / v_cmd
     position   L_p = Kp T_v / (z - 1) * T_v(z) * z^-(r d_m + r/2), r = T_p / T_v
                (the measurement delay of d_m position samples and half a position-loop hold).
+
+The reference the servo follows (:func:`iso_reference`): the EN ISO 9283 path of ``control.iso``
+with a ruckig speed profile and IK at every sample (paper 004 §2.3.3).
 """
 
 from __future__ import annotations
@@ -34,7 +37,13 @@ import control as ct
 import numpy as np
 import pinocchio as pin
 
+from pipeline.control.config import ControlConfig
+from pipeline.errors import InfeasibleError
+from pipeline.robot.defaults import ik_seeds_or_derived_rad, iso_or_derived, iso_rotation
+from pipeline.robot.iso9283 import IsoPath, IsoPathConfig, iso9283_path
 from pipeline.robot.model import RobotModel
+from pipeline.robot.paths import start_configuration
+from pipeline.robot.reference import Reference, cartesian_reference
 
 
 @dataclass
@@ -135,3 +144,58 @@ def servo_report(gains: ServoGains, sample_time_s: float, velocity_samples: int,
 def filter_alpha(cutoff_hz: float, velocity_sample_time_s: float) -> float:
     """First-order low-pass coefficient: alpha = 1 - exp(-2 pi f_c T_v)."""
     return float(1.0 - np.exp(-2 * np.pi * cutoff_hz * velocity_sample_time_s))
+
+
+def iso_reference(robot: RobotModel, cfg: ControlConfig
+                  ) -> tuple[Reference, IsoPath, str, np.ndarray, np.ndarray]:
+    """The EN ISO 9283 path of ``cfg.iso`` (None fields derived from ``robot``) and its joint reference:
+    ``(ref, path, frame, ik_seeds, q_start)``; ``ref`` from ruckig + IK at every sample with ``robot``'s
+    kinematics. Raises InfeasibleError naming ``control.iso`` when the path leaves the workspace."""
+    iso = iso_or_derived(robot, cfg.iso)
+    frame = robot.frame_reflector if cfg.path_frame == "reflector" else robot.frame_tcp
+    rotation = iso_rotation(robot, iso.plane, iso.tool_orientation)
+    path = iso9283_path(robot, iso.edge_m, iso.centre_m, iso.plane, rotation, iso.corner_fraction,
+                        iso.large_circle_fraction, iso.small_circle_fraction, tuple(iso.segments))
+    seeds = ik_seeds_or_derived_rad(robot, cfg.ik_seeds_deg)
+    try:
+        q_start = start_configuration(robot, path.poses(np.array([0.0]))[0], seeds, frame)
+        ref = cartesian_reference(robot, path, cfg.sample_time_s, iso.speed_m_s, iso.acceleration_m_s2,
+                                  iso.jerk_m_s3, q_start, frame, cfg.ik_tolerance_m)
+    except InfeasibleError as exc:
+        raise InfeasibleError(exc.file, "control.iso", f"{exc.field}: {exc.problem}; the ISO path (cube centre "
+                              f"{iso.centre_m} m, edge {iso.edge_m} m) must lie in this robot's workspace: set "
+                              "control.iso.centre_m / edge_m in the run config, or run_defaults in its robot.yaml"
+                              ) from None
+    return ref, path, frame, seeds, q_start
+
+
+@dataclass
+class IsoReference:
+    """The reference the stage follows: :func:`iso_reference`'s parts, the ISO settings it used (None
+    fields derived from the robot) and the seconds it took."""
+
+    ref: Reference
+    path: IsoPath
+    frame: str
+    seeds: np.ndarray
+    q_start: np.ndarray
+    iso: IsoPathConfig
+    time_s: float
+
+
+@dataclass
+class ServoDesign:
+    """The servo every run shares: gains, velocity samples per position sample, the velocity filter's
+    ``alpha`` and the margins and bandwidths of each joint (:func:`servo_report`)."""
+
+    gains: ServoGains
+    velocity_samples: int
+    alpha: float
+    report: list[dict]
+
+    def loop_models(self, joints: int, sample_time_s: float, measurement_delay_samples: int
+                    ) -> list[dict[str, ct.TransferFunction]]:
+        """:func:`loop_models` of the first ``joints`` joints (the Bode figure)."""
+        g = self.gains
+        return [loop_models(g.inertia_kgm2[i], g.kp[i], g.kv[i], g.ki[i], sample_time_s, self.velocity_samples,
+                            measurement_delay_samples, self.alpha) for i in range(joints)]

@@ -1,4 +1,4 @@
-"""Metrics and figures of the closed-loop runs (paper 004 §2.3.3, Fig. 2).
+"""Metrics of the closed-loop runs (paper 004 §2.3.3, Fig. 2).
 
 * Lag error per joint: ``e_i(t) = q_d,i(t) - q_i(t)`` (encoder), max |e| and RMS.
 * TCP path error: ``|p_meas(t) - p_d(t)|`` with ``p_meas`` the TCP position of the real robot
@@ -15,10 +15,8 @@
 
 from __future__ import annotations
 
-import control as ct
 import numpy as np
 import pinocchio as pin
-from matplotlib.figure import Figure
 
 SETTLING_POSITION_TOLERANCE_M = 50e-6
 SETTLING_ROTATION_TOLERANCE_RAD = 0.1e-3
@@ -77,92 +75,3 @@ def registered_error(measured_m: np.ndarray, desired_m: np.ndarray) -> np.ndarra
     D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
     R = Vt.T @ D @ U.T
     return np.linalg.norm((measured_m - a) @ R.T + b - desired_m, axis=1)
-
-
-VARIANT_STYLE = {"none": ("tab:red", "no feedforward"), "gravity": ("tab:orange", "gravity"),
-                 "full": ("tab:green", "rigid body"), "full_friction": ("tab:blue", "rigid body + friction"),
-                 "full_friction_nominal": ("tab:purple", "rigid body + friction (nominal model)"),
-                 "elastic_static": ("tab:olive", "elastic: static deflection"),
-                 "elastic_flat": ("tab:cyan", "elastic: two-mass inverse (flatness)")}
-
-
-def lag_figure(t_s: np.ndarray, lag: dict[str, np.ndarray], axes: tuple[int, ...] = (0, 1, 2)) -> Figure:
-    """Paper 004 Fig. 2(a): lag errors of axes 1-3 with and without feedforward."""
-    fig = Figure(figsize=(8, 2.2 * len(axes)), constrained_layout=True)
-    axs = fig.subplots(len(axes), 1, sharex=True)
-    for ax, j in zip(np.atleast_1d(axs), axes, strict=True):
-        for name, e in lag.items():
-            color, label = VARIANT_STYLE.get(name, ("k", name))
-            ax.plot(t_s, np.degrees(e[:, j]) * 1e3, color=color, lw=0.8, label=label)
-        ax.set_ylabel(f"axis {j + 1} lag [mdeg]")
-        ax.grid(alpha=0.3)
-    np.atleast_1d(axs)[0].legend(fontsize=7, ncol=2)
-    np.atleast_1d(axs)[-1].set_xlabel("time [s]")
-    fig.suptitle("Lag errors on the ISO 9283 path")
-    return fig
-
-
-def tcp_figure(s_m: np.ndarray, tcp_tracking: dict[str, np.ndarray], tcp_absolute: dict[str, np.ndarray]) -> Figure:
-    """Paper 004 Fig. 2(b): TCP error along the path with and without feedforward.
-
-    Top: tracking error (measured TCP against the real robot at the reference joints), bottom:
-    absolute error against the desired Cartesian path (adds the kinematic model error).
-    """
-    fig = Figure(figsize=(8, 5.5), constrained_layout=True)
-    axs = fig.subplots(2, 1, sharex=True)
-    for ax, errs, title in ((axs[0], tcp_tracking, "TCP tracking error (vs. real robot at q_d)"),
-                            (axs[1], tcp_absolute, "absolute TCP error (vs. desired path)")):
-        for name, e in errs.items():
-            color, label = VARIANT_STYLE.get(name, ("k", name))
-            ax.plot(s_m, e * 1e3, color=color, lw=0.8, label=label)
-        ax.set_ylabel("TCP error [mm]")
-        ax.set_yscale("log")
-        ax.grid(alpha=0.3, which="both")
-        ax.set_title(title, fontsize=9)
-    axs[0].legend(fontsize=7, ncol=2)
-    axs[1].set_xlabel("path length [m]")
-    return fig
-
-
-def path_figure(desired_m: np.ndarray, actual: dict[str, np.ndarray], points: dict[str, np.ndarray],
-                scale: float = 200.0) -> Figure:
-    """Desired TCP path and the measured ones (deviations from it magnified ``scale`` times), 3-D."""
-    fig = Figure(figsize=(6, 5.5), constrained_layout=True)
-    ax = fig.add_subplot(111, projection="3d")
-    ax.plot(*desired_m.T, color="k", lw=0.8, label="desired")
-    for name, p in actual.items():
-        color, label = VARIANT_STYLE.get(name, ("k", name))
-        ax.plot(*(desired_m + scale * (p - desired_m)).T, color=color, lw=0.6, label=f"{label} (deviation x{scale:g})")
-    for k, p in points.items():
-        if k.startswith("P"):
-            ax.scatter(*p, color="k", s=8)
-            ax.text(*p, k, fontsize=7)
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.set_zlabel("z [m]")
-    ax.legend(fontsize=7)
-    return fig
-
-
-def bode_figure(models: list[dict], joints: tuple[int, ...] = (0, 1, 2)) -> Figure:
-    """Bode magnitude/phase of the velocity and position open loops (python-control frequency response)."""
-    fig = Figure(figsize=(9, 5.5), constrained_layout=True)
-    axs = fig.subplots(2, 2, sharex="col")
-    for col, key in enumerate(("velocity_open", "position_open")):
-        for j in joints:
-            sys = models[j][key]
-            w = np.logspace(0, np.log10(np.pi / sys.dt) - 0.01, 600)
-            resp = ct.frequency_response(sys, w)
-            mag, phase = np.abs(resp.complex).ravel(), np.unwrap(np.angle(resp.complex).ravel())
-            axs[0, col].semilogx(w / 2 / np.pi, 20 * np.log10(mag), label=f"axis {j + 1}")
-            axs[1, col].semilogx(w / 2 / np.pi, np.degrees(phase))
-        axs[0, col].axhline(0, color="k", lw=0.5)
-        axs[1, col].axhline(-180, color="k", lw=0.5)
-        axs[0, col].set_title(key.replace("_", " ") + " loop")
-        axs[1, col].set_xlabel("frequency [Hz]")
-        for r in range(2):
-            axs[r, col].grid(alpha=0.3, which="both")
-    axs[0, 0].set_ylabel("magnitude [dB]")
-    axs[1, 0].set_ylabel("phase [deg]")
-    axs[0, 0].legend(fontsize=7)
-    return fig

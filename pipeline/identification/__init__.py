@@ -20,6 +20,8 @@ Public entry points:
   (log-Cholesky, IPOPT), ``is_physically_consistent``.
 - :mod:`~pipeline.identification.validate`: ISO 9283 validation trajectory, torque RMS, z-scores.
 - :mod:`~pipeline.identification.tx40`: ``run_tx40`` on the real Stäubli TX40 record.
-- :mod:`~pipeline.identification.stage`: the runner stage ``identification`` and
+- :mod:`~pipeline.identification.outcome`: what the stage's steps hand each other and
   ``identified_robot(robot, p)`` (a ``RobotModel`` with identified inertias, rotor inertia, friction).
+- :mod:`~pipeline.identification.report`: summary, arrays, figures and report text.
+- :mod:`~pipeline.identification.stage`: the runner stage ``identification`` (its steps in order).
 """

@@ -1,14 +1,22 @@
-"""Figures and report tables of the identification stage (measured vs predicted torques,
-parameter errors, condition-number convergence, the TX40 comparison)."""
+"""Summary, arrays, data, figures and report tables of the identification stage (measured vs
+predicted torques, parameter errors, condition-number convergence, the TX40 comparison)."""
 
 from __future__ import annotations
+
+from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
 
 from pipeline.identification import design as design_mod
+from pipeline.identification.config import Config
+from pipeline.identification.outcome import Outcome
 from pipeline.identification.regressor import BaseParameters
 from pipeline.identification.tx40 import Tx40Result
+from pipeline.identification.validate import ValidationTrajectory
+from pipeline.robot.iso9283 import IsoPathConfig
+from pipeline.robot.model import RobotModel
+from pipeline.stage_api import StageResult
 
 
 def torques_figure(t: np.ndarray, measured: np.ndarray, predicted: np.ndarray, title: str) -> Figure:
@@ -155,3 +163,179 @@ def excitation_label(exc: design_mod.ExcitationResult | None, criterion: str) ->
     if exc.source != "optimised":
         return f"best random feasible Fourier trajectory ({exc.fallback_reason})"
     return f"optimised Fourier trajectory ({criterion})"
+
+
+def summary(cfg: Config, o: Outcome) -> dict[str, Any]:
+    """The stage's summary.json."""
+    base, sel, rec, exc, ex = o.regs.base, o.regs.selection, o.regs.record, o.measured.excitation, cfg.excitation
+    f, v, wls, truth = o.fits, o.val, o.fits.wls, o.truth
+    pj = sel.per_joint
+    summary: dict[str, Any] = {
+        "n_base_parameters": base.n_base,
+        "n_base_parameters_structural": o.regs.base_design.n_base,
+        "excitation": excitation_label(exc, ex.criterion),
+        "excitation_fallback_reason": None if exc is None else (exc.fallback_reason or None),
+        "base_parameter_set": base.set_names,
+        "cond_optimized": None if exc is None else exc.cond_optimized,
+        "cond_random_median": None if exc is None else exc.cond_random_median,
+        "cond_improvement": None if exc is None else exc.cond_random_median / exc.cond_optimized,
+        "cond_base_regressor_data": f.cond_data,
+        "cond_base_regressor_data_structural": f.cond_data_structural,
+        "excitation_criterion": None if exc is None else ex.criterion,
+        # largest TCP speed / acceleration of the excitation (fine grid, nominal kinematics) and the bounds
+        "excitation_tcp_speed_max_m_s": None if exc is None else exc.feasibility.tcp_speed_max_m_s,
+        "excitation_tcp_acceleration_max_m_s2": None if exc is None else exc.feasibility.tcp_acceleration_max_m_s2,
+        "excitation_tcp_speed_bound_m_s": ex.max_tcp_speed_m_s,
+        "excitation_tcp_acceleration_bound_m_s2": ex.max_tcp_acceleration_m_s2,
+        "validation_trajectory": v.trajectory.label,
+        "validation_torque_rms_Nm": pj(v.rms_phys),
+        "validation_relative_error": pj(v.rel_phys),
+        "validation_torque_rms_wls_Nm": pj(v.rms_wls),
+        "torque_noise_sigma_Nm": None if v.noise_sigma is None else pj(v.noise_sigma),
+        "torque_noise_source": v.noise_source,
+        "validation_rms_over_noise": pj(v.rms_over_noise),
+        **sel.to_dict(),
+        # a record logged with non-uniform time stamps, resampled (signals.resample_uniform)
+        "record_max_gap_s": None if rec is None else rec.max_gap_s,
+        "record_resampling": None if rec is None or not rec.resampling else rec.resampling,
+        "base_covariance": (f"HAC sandwich (Newey & West 1987), Bartlett kernel, bandwidth {o.hac.bandwidth:.2f} "
+                            "samples (Andrews 1991 AR(1) plug-in)"),
+        "base_sigma_hac_over_white_median": float(np.median(wls.sigma / np.maximum(o.white_sigma, 1e-300))),
+        "fraction_within_3sigma": None if truth is None else truth["fraction_within_3sigma"],
+        "physically_consistent": bool(f.phys.consistent),
+        "fit_rms_Nm_wls": wls.rms_Nm,
+        "data_source": o.measured.source,
+        "actuator_coupling": "gear matrix" if o.regs.coupled else "diagonal (joint side)",
+        "n_samples_fit": o.measured.data.n_samples,
+        "friction_model": cfg.friction_model,
+        **o.friction,
+        "runtime_s": o.timings["total_s"],
+    }
+    if o.tx is not None:
+        summary.update(o.tx.summary())
+    return summary
+
+
+def arrays(cfg: Config, o: Outcome) -> dict[str, np.ndarray]:
+    """The stage's arrays: the excitation for the viewer replay, base and standard parameters, the
+    validation torques, the excitation's coefficients and the truth scores when there are any."""
+    exc, traj, data, truth = o.measured.excitation, o.measured.trajectory, o.measured.data, o.truth
+    f, vt = o.fits, o.val.trajectory
+    if traj is not None:
+        t_rep = np.arange(0.0, traj.period_s, 1.0 / cfg.replay_rate_hz)
+        q_rep, _, _ = traj.evaluate(t_rep)
+    else:  # the user's (processed: filtered, decimated, borders dropped) trajectory
+        t_rep, q_rep = replay(np.arange(data.n_samples) * data.sample_time_s, data.q, cfg.replay_rate_hz)
+    out: dict[str, np.ndarray] = {
+        "trajectory_excitation_t": t_rep,
+        "trajectory_excitation_q": q_rep,
+        "base_beta": f.wls.beta,
+        "base_sigma": f.wls.sigma,
+        "base_beta_ols": f.ols.beta,
+        "base_matrix_E": o.regs.base.matrix,
+        "standard_parameters_physical": f.phys.p,
+        "standard_parameters_nominal": f.p_nom,
+        "validation_t_s": vt.t_s,
+        "validation_q": vt.q,
+        "validation_tau_measured_Nm": o.val.tau_Nm,
+        "validation_tau_predicted_Nm": o.val.pred_phys,
+    }
+    if exc is not None and traj is not None:
+        out["excitation_coefficients"] = traj.coefficients
+        out["cond_random"] = np.asarray(exc.cond_random)
+    if truth is not None:
+        out["base_beta_true"] = truth["beta_true"]
+        out["base_z"] = truth["z"]
+    return out
+
+
+def data(cfg: Config, o: Outcome) -> dict[str, Any]:
+    """The stage's data.json: parameter names, the excitation's details, estimation, validation, timings."""
+    base, exc, traj, phys, vt = o.regs.base, o.measured.excitation, o.measured.trajectory, o.fits.phys, o.val.trajectory
+    truth, tx = o.truth, o.tx
+    if exc is not None and traj is not None:
+        excitation_data: dict[str, Any] = {
+            "trajectory": traj.to_dict(),
+            "starts": exc.start_results,
+            "feasibility": exc.feasibility.to_dict(),
+            "cond_starts": exc.cond_starts,
+            "cond_history": exc.cond_history,
+            **exc.details,
+        }
+    else:
+        excitation_data = {"source": "user record", "file": str(cfg.data_file),
+                           "cond_base_regressor": o.fits.cond_data}
+    data_out = {
+        "base_parameter_names": base.names,
+        "standard_parameter_names": base.standard_names,
+        "base_qr_tolerance": base.tolerance,
+        "base_rank_gap": base.rank_gap,
+        "excitation": excitation_data,
+        "estimation": {
+            "joint_sigma_Nm_wls": o.fits.wls.joint_sigma_Nm.tolist(),
+            "physical_status": phys.status,
+            "physical_iterations": phys.iterations,
+            "min_pseudo_inertia_eig": phys.min_pseudo_inertia_eig,
+        },
+        "validation": {"label": vt.label, "note": vt.note, "rms_wls_Nm": o.val.rms_wls.tolist(),
+                       "relative_wls": o.val.rel_wls.tolist()},
+        "timings_s": o.timings,
+    }
+    if truth is not None:
+        data_out["truth_scores"] = {"max_abs_z": truth["max_abs_z"],
+                                    "fraction_within_3sigma": truth["fraction_within_3sigma"]}
+    if tx is not None:
+        data_out["tx40"] = {
+            "heldout_rms_per_joint_Nm": tx.heldout_rms_per_joint_Nm,
+            "train_rms_Nm": tx.train_rms_Nm,
+            "ols_rotor_inertia_axis6_base": tx.details.get("ols_ia6_base_value"),
+            **{k: v for k, v in tx.details.items() if k != "ols_ia6_base_value"},
+        }
+    return data_out
+
+
+def figures(o: Outcome) -> dict[str, Figure]:
+    """Convergence of the excitation, base parameters, validation torques, the TX40 held-out torques."""
+    exc, base, wls, truth, tx = o.measured.excitation, o.regs.base, o.fits.wls, o.truth, o.tx
+    vt = o.val.trajectory
+    figures: dict[str, Figure] = {}
+    if exc is not None:
+        figures["convergence"] = convergence_figure(exc)
+    figures["parameters"] = parameters_figure(base, wls.beta, wls.sigma, base.from_standard(o.fits.phys.p),
+                                            base.from_standard(o.fits.p_nom), None if truth is None else truth["z"])
+    figures["validation_torques"] = torques_figure(vt.t_s, o.val.tau_Nm, o.val.pred_phys,
+                                                 f"validation on {vt.label}: measured vs identified model")
+    if tx is not None:
+        figures["tx40_heldout"] = torques_figure(
+            tx.heldout_t_s, tx.heldout_tau_Nm, tx.heldout_pred_Nm["physical"],
+            "TX40 held-out 30 %: measured vs physically consistent fit")
+    return figures
+
+
+def stage_result(cfg: Config, o: Outcome, robot: RobotModel) -> StageResult:
+    """The stage's result (summary, arrays, data, figures, report text) handing on ``robot``."""
+    exc = o.measured.excitation
+    s = summary(cfg, o)
+    fallback_md = "" if exc is None or not exc.fallback_reason else (
+        f"**Excitation: the best random feasible trajectory is used** ({exc.fallback_reason}).\n\n")
+    return StageResult(summary=s, arrays=arrays(cfg, o), data=data(cfg, o), figures=figures(o), robot=robot,
+                       report_md=fallback_md + o.val.markdown + report_markdown(s, o.tx))
+
+
+def validation_markdown(cfg: Config, vt: ValidationTrajectory, iso: IsoPathConfig, robot: RobotModel) -> str:
+    """One paragraph for report.md: which trajectory validated the model; a visible warning
+    when the EN ISO 9283 path was asked for but could not be used."""
+    if vt.label == "iso9283":
+        return f"Validation on the EN ISO 9283 path of `control.iso` ({vt.note}).\n\n"
+    if cfg.validation != "iso9283":
+        return ("Validation on a random feasible Fourier trajectory "
+                f"(`identification.validation: {cfg.validation}`).\n\n")
+    why = vt.note.split("; ")[0] if vt.note else "not reachable"
+    fix = ("Set `control.ik_seeds_deg` to a configuration near the path (or the robot's `run_defaults`)"
+           if "ik_seeds" in why or "IK" in why else
+           "Set `control.iso.centre_m` and `control.iso.edge_m` (or the robot's `run_defaults`) to a cube inside "
+           "its workspace")
+    return ("**Warning: validation fell back to a random Fourier trajectory.** The EN ISO 9283 path "
+            f"(`control.iso.centre_m` = {None if iso.centre_m is None else list(iso.centre_m)} m, "
+            f"`control.iso.edge_m` = {iso.edge_m} m) "
+            f"cannot be followed by {robot.name}: {why}. {fix}.\n\n")

@@ -21,6 +21,8 @@ import numpy as np
 
 from pipeline.control.config import ControlConfig
 from pipeline.errors import PipelineError
+from pipeline.identification import fourier
+from pipeline.identification.config import ExcitationConfig
 from pipeline.identification.regressor import BaseParameters
 from pipeline.robot.defaults import ik_seeds_or_derived_rad, iso_or_derived, iso_rotation
 from pipeline.robot.iso9283 import IsoPathConfig, iso9283_path
@@ -87,6 +89,15 @@ def iso_validation_trajectory(robot: RobotModel, sample_time_s: float,
                               iso.jerk_m_s3, q_start, frame, cfg.ik_tolerance_m)
     return ValidationTrajectory(ref.t_s, ref.q_d, ref.v_d, ref.a_d, "iso9283",
                                 f"edge {iso.edge_m} m, centre {list(iso.centre_m)} m, {iso.speed_m_s} m/s")
+
+
+def fourier_validation(robot: RobotModel, limits: fourier.ExcitationLimits, ex: ExcitationConfig,
+                       sample_time_s: float, rng: np.random.Generator) -> ValidationTrajectory:
+    """One period of a random feasible Fourier trajectory (the fallback when the ISO path cannot be used)."""
+    tr = fourier.random_feasible_trajectories(robot, limits, ex.harmonics, ex.base_frequency_hz, 1, rng)[0]
+    t = np.arange(int(round(tr.period_s / sample_time_s))) * sample_time_s
+    q, v, a = tr.evaluate(t)
+    return ValidationTrajectory(t, q, v, a, "fourier", "a random feasible Fourier trajectory")
 
 
 def validation_trajectory(

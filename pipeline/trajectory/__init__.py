@@ -11,5 +11,8 @@ Public API (paper 004 section 5, DESIGN.md "Trajectories"):
 * baselines: :func:`~pipeline.trajectory.baselines.toppra_cp`,
   :func:`~pipeline.trajectory.baselines.ruckig_torque_feasible`
 * verification: :func:`~pipeline.trajectory.trajectories.check_trajectory`,
-  :func:`~pipeline.trajectory.validate.simulate_on_real`
+  :func:`~pipeline.trajectory.validate.simulate_on_real`, the plans in the servo simulation
+  (:func:`~pipeline.trajectory.measure.verify_in_servo`), the gates
+  (:func:`~pipeline.trajectory.validate.quality_gates`)
+* outputs: :mod:`~pipeline.trajectory.report`
 """

@@ -175,3 +175,7 @@ class TrajectoryConfig:
         if not isinstance(self.acceleration_limits, bool):
             raise ConfigError(s, name("acceleration_limits"),
                               f"expected true or false, got {self.acceleration_limits!r}")
+
+
+#: the name every stage package gives its section dataclass (docs/ARCHITECTURE.md "Stage skeleton")
+Config = TrajectoryConfig

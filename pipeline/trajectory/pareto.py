@@ -8,7 +8,6 @@ from collections.abc import Callable
 
 from pipeline.errors import InfeasibleError, SolverError
 from pipeline.trajectory.ptp import PtpResult
-from pipeline.trajectory.validate import dominated_flags
 
 
 def settle_pareto(sweep: list[PtpResult], fine_energy: Callable[[PtpResult], float],
@@ -17,7 +16,7 @@ def settle_pareto(sweep: list[PtpResult], fine_energy: Callable[[PtpResult], flo
     """The Pareto sweep with fine-grid energies (``info["fine_energy"] = fine_energy(r)``) and no
     silently hidden local optima.
 
-    While a point is dominated by another (:func:`~pipeline.trajectory.validate.dominated_flags`
+    While a point is dominated by another (:func:`dominated_flags`
     on duration and fine-grid energy) and has not been tried yet, ``cold_solve(r)`` re-solves its
     ``k2`` once from a cold start and the one with the lower ``k1 T + k2 E`` (fine-grid energy)
     stays (``info["cold_restart"]``: ``"kept"`` on the cold solution, ``"discarded"`` or
@@ -58,3 +57,15 @@ def settle_pareto(sweep: list[PtpResult], fine_energy: Callable[[PtpResult], flo
     for r, f in zip(pts, flags, strict=True):
         r.info["dominated"] = bool(f)
     return pts
+
+
+def dominated_flags(points: list[tuple[float, float]], rtol: float = 1e-9) -> list[bool]:
+    """For each ``(duration, energy)`` point: is another point at least as good in both and
+    strictly better in one (beyond the relative tolerance ``rtol``)? Dominated points of a
+    Pareto sweep are poorer local optima of the NLP."""
+    def better(a: float, b: float) -> bool:       # a clearly below b
+        return a < b - rtol * max(abs(a), abs(b))
+
+    return [any(j != i and not better(t, tj) and not better(e, ej) and (better(tj, t) or better(ej, e))
+                for j, (tj, ej) in enumerate(points))
+            for i, (t, e) in enumerate(points)]

@@ -1,18 +1,21 @@
-"""Verification of planned trajectories: fine-grid torque check, execution in stage 3's servo
-simulation on the real robot, and the plots (paper 004 Fig. 8 style, Pareto front)."""
+"""Verification of planned trajectories: execution in stage 3's servo simulation on the real robot
+(:func:`simulate_on_real`) and the stage's quality gates (:func:`quality_gates`: limits on the fine
+grid and in the servo simulation, IPOPT statuses). Figures: :mod:`pipeline.trajectory.report`."""
 
 from __future__ import annotations
 
 from typing import Any
 
 import numpy as np
-from matplotlib.figure import Figure
 
 from pipeline.control.config import ControlConfig
 from pipeline.control.simulate import simulate_joint_trajectory
+from pipeline.quality import QualityGates
 from pipeline.robot.model import RobotModel
-from pipeline.trajectory.dynamics import PlanningModel
-from pipeline.trajectory.trajectories import JointTrajectory, TorqueCheck
+from pipeline.solver_status import SUCCESS_STATUSES
+from pipeline.trajectory.config import TrajectoryConfig
+from pipeline.trajectory.solve import CPPlan, PTPPlan
+from pipeline.trajectory.trajectories import JointTrajectory
 
 
 def simulate_on_real(real: Any, robot: RobotModel, traj: JointTrajectory,  # Any: the simulated hidden robot
@@ -68,78 +71,47 @@ def simulate_on_real(real: Any, robot: RobotModel, traj: JointTrajectory,  # Any
     return out
 
 
-def activity_figure(pm: PlanningModel, traj: JointTrajectory, check: TorqueCheck, title: str) -> Figure:
-    """Normalised torques and speeds of every joint and their envelope (paper 004 Fig. 8):
-    on a time-optimal trajectory at least one of them is at 1 at every instant."""
-    fig = Figure(figsize=(8, 5), constrained_layout=True)
-    ax1, ax2 = fig.subplots(2, 1, sharex=True)
-    for j in range(pm.nq):
-        ax1.plot(check.t_s, check.tau_Nm[:, j] / pm.effort_Nm[j], lw=0.9, label=f"axis {j + 1}")
-        ax2.plot(traj.t_s, traj.v[:, j] / pm.velocity_rad_s[j], lw=0.9)
-    env = np.maximum(check.torque_ratio.max(axis=1), check.velocity_ratio.max(axis=1))
-    ax2.plot(check.t_s, env, "k--", lw=1.0, label="max over torque and speed ratios")
-    for ax, lab in ((ax1, "tau / tau_max"), (ax2, "qdot / qdot_max")):
-        ax.axhline(1.0, color="grey", lw=0.6)
-        ax.axhline(-1.0, color="grey", lw=0.6)
-        ax.set_ylabel(lab)
-        ax.grid(alpha=0.3)
-    ax1.legend(fontsize=7, ncol=6, loc="lower center")
-    ax2.legend(fontsize=7, loc="lower center")
-    ax2.set_xlabel("t [s]")
-    ax1.set_title(title)
-    return fig
-
-
-def dominated_flags(points: list[tuple[float, float]], rtol: float = 1e-9) -> list[bool]:
-    """For each ``(duration, energy)`` point: is another point at least as good in both and
-    strictly better in one (beyond the relative tolerance ``rtol``)? Dominated points of a
-    Pareto sweep are poorer local optima of the NLP."""
-    def better(a: float, b: float) -> bool:       # a clearly below b
-        return a < b - rtol * max(abs(a), abs(b))
-
-    return [any(j != i and not better(t, tj) and not better(e, ej) and (better(tj, t) or better(ej, e))
-                for j, (tj, ej) in enumerate(points))
-            for i, (t, e) in enumerate(points)]
-
-
-def pareto_figure(points: list[tuple[float, float, float]], ruckig: tuple[float, float] | None,
-                  energy_label: str, dominated: list[bool] | None = None) -> Figure:
-    """Duration against energy for the k2 sweep ``(k2, duration, energy)`` (k2 annotated), ruckig's
-    point for reference. The front line joins the non-dominated points only; ``dominated`` points
-    (default: computed with :func:`dominated_flags`) are drawn hollow, labelled as local optima."""
-    fig = Figure(figsize=(6, 4), constrained_layout=True)
-    ax = fig.subplots()
-    if dominated is None:
-        dominated = dominated_flags([(p[1], p[2]) for p in points])
-    front = sorted((p for p, d in zip(points, dominated, strict=True) if not d), key=lambda p: p[1])
-    if front:
-        ax.plot([p[1] for p in front], [p[2] for p in front], "o-", color="tab:blue", label="PtP NLP (k1 = 1)")
-    off = [p for p, d in zip(points, dominated, strict=True) if d]
-    if off:
-        ax.plot([p[1] for p in off], [p[2] for p in off], "o", mfc="none", color="tab:blue",
-                label="dominated (local optimum)")
-    for k2, t, e in points:
-        ax.annotate(f"k2={k2:g}", (t, e), fontsize=7, textcoords="offset points", xytext=(4, 4))
-    if ruckig is not None:
-        ax.plot([ruckig[0]], [ruckig[1]], "s", color="tab:red", label="ruckig (torque-feasible limits)")
-    ax.set_xlabel("duration [s]")
-    ax.set_ylabel(energy_label)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    return fig
-
-
-def comparison_figure(pm: PlanningModel, items: list[tuple[str, JointTrajectory, TorqueCheck]],
-                      title: str) -> Figure:
-    """Max torque ratio over joints against time for several trajectories."""
-    fig = Figure(figsize=(8, 3), constrained_layout=True)
-    ax = fig.subplots()
-    for name, _, chk in items:
-        ax.plot(chk.t_s, chk.torque_ratio.max(axis=1), lw=0.9, label=f"{name} ({chk.t_s[-1]:.3f} s)")
-    ax.axhline(1.0, color="grey", lw=0.6)
-    ax.set_xlabel("t [s]")
-    ax.set_ylabel("max_i |tau_i| / tau_max,i")
-    ax.set_title(title)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    return fig
+def quality_gates(cfg: TrajectoryConfig, cp: CPPlan, ptp: PTPPlan, sims: dict[str, dict],
+                  accept_poor: bool = False, elastic_plant: bool = False) -> QualityGates:
+    """The stage's gates: every plan within its limits on the fine grid (torque excess, speed and,
+    with ``acceleration_limits``, acceleration ratios <= 1 + ``violation_tolerance``), every IPOPT
+    solve of a stored plan ``Solve_Succeeded`` (or acceptable), and in the servo simulation the
+    command averaged over 4 ms within ``max_sim_averaged_torque_ratio`` x the full torque limits.
+    On an elastic plant the time-optimal (rigid-model) PtP is reported, not vouched for: its torque
+    steps ring the joints (paper 004 §5: hence jerk-limited plans); the smooth PtP is the one gated."""
+    gates = QualityGates("trajectory", accept_poor=accept_poor)
+    tol = cfg.violation_tolerance
+    plans = {**cp.checks, **ptp.checks}
+    for name in ("cp", "cp_smooth", "ptp", "ptp_energy_at_ruckig_duration", "ptp_smooth"):
+        if name not in plans:
+            continue
+        chk = plans[name]
+        gates.check(f"{name}_fine_violation", chk.violation, "<=", tol, "torque excess on the fine grid")
+        gates.check(f"{name}_fine_max_velocity_ratio", chk.max_velocity_ratio, "<=", 1.0 + tol)
+        if cfg.acceleration_limits:
+            gates.check(f"{name}_fine_max_acceleration_ratio", chk.max_acceleration_ratio, "<=", 1.0 + tol)
+    statuses = {"ptp_solver_status": ptp.result.info.get("solver_status"),
+                "ptp_energy_at_ruckig_duration_solver_status": ptp.at_ruckig_duration_status()}
+    if ptp.at_ruckig_duration is None:          # a comparison that does not exist is not a failed solve
+        statuses.pop("ptp_energy_at_ruckig_duration_solver_status")
+    if cp.optimal.info.get("method") == "nlp":          # the reachability solver has no IPOPT status
+        statuses["cp_solver_status"] = cp.optimal.info.get("solver_status")
+    if cp.smooth is not None:
+        statuses["cp_smooth_solver_status"] = cp.smooth.info.get("solver_status")
+    for name, status in statuses.items():
+        gates.require(name, status in SUCCESS_STATUSES, f"IPOPT returned {status}")
+    torque_limited_cp = elastic_plant and not cfg.acceleration_limits and "cp_executed" in sims
+    if torque_limited_cp:
+        chk = cp.checks["cp_executed"]
+        gates.check("cp_executed_fine_violation", chk.violation, "<=", tol, "torque excess on the fine grid")
+        gates.check("cp_executed_fine_max_velocity_ratio", chk.max_velocity_ratio, "<=", 1.0 + tol)
+    for name, s in sims.items():
+        if name in ("ptp_ruckig", "ptp_energy_at_ruckig_duration"):
+            continue                 # the baseline is reported, not vouched for
+        if torque_limited_cp and name in ("cp", "cp_smooth"):
+            continue                 # reported (summary cp_sim_*); the executed CP is the one vouched for
+        if elastic_plant and name == "ptp" and "ptp_smooth" in sims:
+            continue                 # reported (summary ptp_sim_*); the smooth plan is the executable one
+        gates.check(f"{name}_sim_max_averaged_torque_ratio", s["max_averaged_torque_ratio"], "<=",
+                    cfg.max_sim_averaged_torque_ratio, "servo simulation, 4 ms mean over the full limits")
+    return gates

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from pipeline.control import stage
+from pipeline.control.estimate import with_dynamics_of
 from pipeline.progress import Progress
 from pipeline.sim.truth import RealRobot, TruthConfig
 from pipeline.stage_api import StageContext, StageOutput, stage_rng
@@ -53,7 +54,7 @@ def test_stage_without_upstream(quick_config, rx130l, real, tmp_path):
 
 def test_stage_with_calibrated_kinematics(quick_config, rx130l, real, tmp_path):
     # a perfect calibration: the hidden kinematics with the nominal dynamics
-    calibrated = stage._with_dynamics_of(real.truth, rx130l)
+    calibrated = with_dynamics_of(real.truth, rx130l)
     upstream = {"calibration": StageOutput({}, {}, {}, calibrated, tmp_path)}
     cfg = quick_config.control
     cfg.variants = ["elastic_flat"]  # the elastic truth: rigid feedforward leaves the mm-level joint deflection

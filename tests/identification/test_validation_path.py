@@ -8,7 +8,7 @@ import pytest
 
 from pipeline.config import RunConfig, load_config, resolve_robot_dir
 from pipeline.control.config import ControlConfig
-from pipeline.identification import stage
+from pipeline.identification import report, stage
 from pipeline.identification import validate as val_mod
 from pipeline.robot.model import RobotModel
 from pipeline.runner import stage_inputs_hashes
@@ -59,7 +59,7 @@ def test_rx130l_sized_path_falls_back_on_the_tx40(tx40):
     rx130l_cube = ControlConfig(iso={"centre_m": [1.0, 0.0, 0.6], "edge_m": 0.5})   # out of the TX40's reach
     vt = val_mod.validation_trajectory(tx40, 4e-3, lambda: fallback, control=rx130l_cube)
     assert vt.label == "fourier" and "ISO 9283 path" in vt.note
-    md = stage._validation_markdown(stage.Config(), vt, rx130l_cube.iso, tx40)
+    md = report.validation_markdown(stage.Config(), vt, rx130l_cube.iso, tx40)
     assert "Warning" in md and "control.iso.centre_m" in md and "control.iso.edge_m" in md
     assert "fell back" in md
 
@@ -67,7 +67,7 @@ def test_rx130l_sized_path_falls_back_on_the_tx40(tx40):
 def test_iso_path_markdown_names_the_path(tx40):
     run = load_config(values={"robot": "staubli_tx40"})
     vt = val_mod.validation_trajectory(tx40, 4e-3, _no_fallback, control=run.control)
-    md = stage._validation_markdown(stage.Config(), vt, run.control.iso, tx40)
+    md = report.validation_markdown(stage.Config(), vt, run.control.iso, tx40)
     assert "EN ISO 9283 path" in md and "Warning" not in md
 
 
@@ -102,5 +102,5 @@ def test_wrong_seed_length_is_the_stated_reason(tx40):
     control = load_config(values={"robot": "staubli_tx40", "control.ik_seeds_deg": [[0.0] * 7]}).control
     vt = val_mod.validation_trajectory(tx40, 4e-3, lambda: fallback, control=control)
     assert vt.label == "fourier" and "control.ik_seeds_deg[0]" in vt.note and "7 values" in vt.note
-    md = stage._validation_markdown(stage.Config(), vt, control.iso, tx40)
+    md = report.validation_markdown(stage.Config(), vt, control.iso, tx40)
     assert "control.ik_seeds_deg" in md and "7 values, the robot has 6 joints" in md

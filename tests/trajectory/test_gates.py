@@ -10,8 +10,8 @@ import pytest
 from pipeline.errors import QualityGateError
 from pipeline.stage_api import StageResult
 from pipeline.trajectory.config import TrajectoryConfig
-from pipeline.trajectory.stage import quality_gates
 from pipeline.trajectory.trajectories import TorqueCheck
+from pipeline.trajectory.validate import quality_gates
 
 
 def _check(violation: float = 0.0, v: float = 0.9, a: float = 0.9) -> TorqueCheck:

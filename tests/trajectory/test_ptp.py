@@ -100,7 +100,7 @@ def test_pareto_front_monotone_and_flags_true(plan):
 
 
 def test_dominated_flags():
-    from pipeline.trajectory.validate import dominated_flags
+    from pipeline.trajectory.pareto import dominated_flags
 
     # k2 = 0.003 of the review: 0.629 s / 1.760 is worse in both than 0.628 s / 1.416
     pts = [(0.629, 1.760), (0.628, 1.416), (0.64, 1.3), (0.64, 1.3), (0.70, 1.35)]
@@ -155,7 +155,7 @@ def test_settle_pareto_flags_a_dominated_main_solution():
 
 
 def test_pareto_figure_marks_dominated_points():
-    from pipeline.trajectory.validate import pareto_figure
+    from pipeline.trajectory.report import pareto_figure
 
     fig = pareto_figure([(0.003, 0.629, 1.76), (0.01, 0.628, 1.416), (0.1, 0.64, 1.3)], (0.9, 1.2), "energy [s]")
     ax = fig.axes[0]

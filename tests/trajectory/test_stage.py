@@ -10,7 +10,7 @@ import pytest
 from pipeline.progress import Progress
 from pipeline.sim.truth import RealRobot, TruthConfig
 from pipeline.stage_api import StageContext, stage_rng
-from pipeline.trajectory import stage
+from pipeline.trajectory import report, stage
 
 REQUIRED = ("cp_duration_s", "cp_toppra_duration_s", "cp_fine_violation", "cp_toppra_fine_violation_full_friction",
             "cp_smooth_duration_s", "ptp_duration_s", "ptp_ruckig_duration_s", "ptp_fine_violation",
@@ -100,14 +100,14 @@ def test_report_units_and_pareto_table():
          "cold_restart": "discarded"},
         {"k2": 0.01, "duration_s": 0.6281234567891234, "energy": 1.4161234567891234, "dominated": False,
          "cold_restart": None}]}
-    table = stage.pareto_table(summary["ptp_pareto"], "energy (normalised) [s]")
+    table = report.pareto_table(summary["ptp_pareto"], "energy (normalised) [s]")
     lines = table.splitlines()
     assert "| k2 | duration [s] | energy (normalised) [s] | dominated |" in lines
     assert "| 0.003 | 0.6291 | 1.76 | yes (local optimum; cold re-solve: discarded) |" in lines
     assert "| 0.01 | 0.6281 | 1.416 | no |" in lines
     assert "1234567" not in table
-    assert stage._pct(0.002758) == "0.276 %" and stage._pct(0.0) == "0.000 %"
-    assert stage.ENERGY_UNITS["torque"] == "N²·m²·s"
+    assert report.percent(0.002758) == "0.276 %" and report.percent(0.0) == "0.000 %"
+    assert report.ENERGY_UNITS["torque"] == "N²·m²·s"
 
 
 def test_check_names_bad_fields(quick_config, rx130l):

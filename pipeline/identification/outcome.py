@@ -1,0 +1,150 @@
+"""What the identification stage's steps hand to each other and to the report, and the model it hands
+on: the identified robot (standard parameters, rotor inertia, friction) and its friction.
+
+Steps (:mod:`pipeline.identification.stage`): the regressor and its base set (:class:`Regressors`),
+the data (:class:`Measured`), the fits on all samples (:class:`Fits`), the scores on the
+validation torques (:class:`Validation`), all of them for the report (:class:`Outcome`).
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from pipeline.identification.design import ExcitationResult
+from pipeline.identification.estimate import HacCovariance, LeastSquaresEstimate, PhysicalEstimate
+from pipeline.identification.fourier import ExcitationLimits, FourierTrajectory
+from pipeline.identification.friction import StribeckFit
+from pipeline.identification.joints import JointSelection
+from pipeline.identification.measure import JointRecord, ProcessedData
+from pipeline.identification.regressor import BaseParameters, RegressorModel
+from pipeline.identification.tx40 import HeldOutValidation, Tx40Result
+from pipeline.identification.validate import ValidationTrajectory
+from pipeline.robot.handoff import JointFriction
+from pipeline.robot.model import RobotModel
+from pipeline.robot.parameters import DynamicLayout, set_dynamic_parameters
+
+
+@dataclass
+class Regressors:
+    """The regressor of the current model, its base set and the nominal model's structural one, the
+    gear coupling of the torques, the user's record (None: simulated) and the joints the fit uses."""
+
+    coupled: bool
+    record: JointRecord | None
+    selection: JointSelection
+    reg: RegressorModel
+    base_design: BaseParameters      # structural base set, decided on the nominal model
+    base: BaseParameters             # the same set with the current model's combinations
+
+    @property
+    def used(self) -> np.ndarray:
+        """0-based joints whose torques the fit uses."""
+        return self.selection.used
+
+    @property
+    def n_used(self) -> int:
+        """How many joints the fit uses."""
+        return len(self.selection.used)
+
+
+@dataclass
+class Measured:
+    """Processed data (period-averaged, filtered, decimated) and, when simulated, the excitation."""
+
+    data: ProcessedData
+    source: str
+    excitation: ExcitationResult | None = None
+    limits: ExcitationLimits | None = None
+    trajectory: FourierTrajectory | None = None
+
+
+@dataclass
+class Fits:
+    """Fits on all samples: base regressor and torques, condition numbers, OLS / WLS, the optional
+    Stribeck term (``stribeck``) and the physically consistent fits with (``phys``) and without it
+    (``phys_vc``, viscous + Coulomb)."""
+
+    Wb: np.ndarray
+    y: np.ndarray
+    cond_data: float
+    cond_data_structural: float
+    wls_vc: LeastSquaresEstimate
+    max_excess_Nm: np.ndarray
+    stribeck: StribeckFit | None
+    y_fit: np.ndarray
+    ols: LeastSquaresEstimate
+    wls: LeastSquaresEstimate
+    p_nom: np.ndarray
+    phys: PhysicalEstimate
+    phys_vc: PhysicalEstimate
+
+
+@dataclass
+class Validation:
+    """Measured and predicted torques on the validation trajectory and their RMS per joint, the
+    torque noise sigma and where it comes from, the report's paragraph on the trajectory."""
+
+    trajectory: ValidationTrajectory
+    tau_Nm: np.ndarray
+    pred_phys: np.ndarray
+    pred_wls: np.ndarray
+    pred_vc: np.ndarray
+    rms_phys: np.ndarray
+    rel_phys: np.ndarray
+    rms_wls: np.ndarray
+    rel_wls: np.ndarray
+    noise_sigma: np.ndarray | None
+    noise_source: str
+    markdown: str = ""
+    heldout: HeldOutValidation | None = None    # a record's held-out tail
+
+    @property
+    def rms_over_noise(self) -> np.ndarray:
+        """Validation RMS over the noise sigma per joint (NaN without a sigma)."""
+        if self.noise_sigma is None:
+            return np.full(len(self.rms_phys), np.nan)
+        return self.rms_phys / self.noise_sigma
+
+
+@dataclass
+class Outcome:
+    """Everything the report draws on: the steps' results, the friction part of the summary, the
+    base-parameter covariance (and the white-residual sigmas it replaced), the truth scores (only
+    when allowed), the TX40 record's fit and the timings."""
+
+    regs: Regressors
+    measured: Measured
+    fits: Fits
+    val: Validation
+    friction: dict[str, Any]
+    hac: HacCovariance
+    white_sigma: np.ndarray
+    truth: dict[str, Any] | None
+    tx: Tx40Result | None
+    timings: dict[str, float]
+
+
+def identified_friction(p: np.ndarray, nq: int, stribeck: StribeckFit | None = None) -> JointFriction:
+    """The friction handed on: viscous and Coulomb from the standard parameters ``p``, the Stribeck
+    term from ``stribeck`` (``friction_model: stribeck``; else none)."""
+    layout = DynamicLayout(nq)
+    return JointFriction(p[layout.viscous].copy(), p[layout.coulomb].copy(),
+                         None if stribeck is None else stribeck.static_excess_Nm.copy(),
+                         None if stribeck is None else stribeck.stribeck_velocity_rad_s.copy())
+
+
+def identified_robot(robot: RobotModel, p: np.ndarray, stribeck: StribeckFit | None = None) -> RobotModel:
+    """Copy of ``robot`` with the standard parameters ``p`` (inertias, rotor inertia, viscous and
+    Coulomb friction; torque offsets are not part of a RobotModel) and, with a Stribeck fit, its
+    static excess and Stribeck velocity (``friction_model: stribeck``; else none)."""
+    nq = robot.nq
+    model = set_dynamic_parameters(robot.model, p)
+    spec = copy.deepcopy(robot.spec)
+    off = 10 * (robot.model.njoints - 1)
+    spec.actuation.rotor_inertia_kgm2 = p[off : off + nq].copy()
+    identified_friction(p, nq, stribeck).apply_to(spec.actuation)
+    return robot.with_model(model, spec)
