@@ -80,19 +80,30 @@ def _table(path: Path) -> list[dict[str, str]]:
     return [{k: v.replace(root, "<out>") for k, v in r.items() if not is_timing_column(k)} for r in rows]
 
 
-def test_local_and_dask_sweeps_give_the_same_table(tmp_path: Path) -> None:
-    distributed = pytest.importorskip("distributed")
-    args = ["sweep", "--config", QUICK, "--seeds", "0-1", "--stages", "calibration", "--out", str(tmp_path / "local")]
+@pytest.fixture(scope="module")
+def local_sweep(tmp_path_factory) -> tuple[Path, list[dict]]:
+    """``sweep`` through the CLI over two seeds, run in this process."""
+    out = tmp_path_factory.mktemp("sweep") / "local"
+    args = ["sweep", "--config", QUICK, "--seeds", "0-1", "--stages", "calibration", "--out", str(out)]
     for item in TINY:
         args += ["--set", item]
     assert cli.main(args) == 0
-    local = _table(tmp_path / "local" / "sweep.csv")
+    return out, _table(out / "sweep.csv")
+
+
+def test_local_sweep_writes_one_row_per_seed(local_sweep) -> None:
+    out, local = local_sweep
     assert [r["seed"] for r in local] == ["0", "1"] and all(r["status"] == "ok" for r in local)
     figure = "calibration.heldout_rms_position_error_after_m"
     assert len({r[figure] for r in local}) == 2          # two hidden robots, two results
-    assert (tmp_path / "local" / "sweep.png").stat().st_size > 0
-    assert figure in (tmp_path / "local" / "sweep.md").read_text()
+    assert (out / "sweep.png").stat().st_size > 0
+    assert figure in (out / "sweep.md").read_text()
 
+
+@pytest.mark.slow
+def test_local_and_dask_sweeps_give_the_same_table(local_sweep, tmp_path: Path) -> None:
+    distributed = pytest.importorskip("distributed")
+    _, local = local_sweep
     spec = SweepSpec(seeds=[0, 1], robots=[None], out_dir=tmp_path / "dask", config_path=QUICK,
                      overrides=list(TINY), stages="calibration")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,

@@ -91,6 +91,7 @@ def _without_timings(value: object) -> object:
     return value
 
 
+@pytest.mark.slow   # forks a process pool; the dispatch order itself is a fast test (test_dispatch.py)
 def test_notional_rows_do_not_depend_on_the_worker_count() -> None:
     cfg = p0.Settings(n=20, pool=60, gradient=False, criteria=("param_literal", "tcp"))
     tasks = p0.notional_tasks(cfg, seed=0, count=2)
