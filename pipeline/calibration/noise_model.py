@@ -57,13 +57,18 @@ class NoiseModel:
     repeatability_sigma_m: float = 0.0
     #: remainder 1-sigma per row group (0: position rows, 1: virtual marker-point rows)
     remainder_sigma_m: tuple[float, float] = (0.0, 0.0)
+    #: factor on the 1-sigma of the marker-point rows in the fit (the orientation weight, chosen by
+    #: cross-validation, :func:`pipeline.calibration.model_selection.orientation_weight`)
+    orientation_scale: float = 1.0
 
     def total(self, sensor_sigma_m: np.ndarray, groups: np.ndarray | None = None) -> np.ndarray:
-        """``(N,)`` 1-sigma per axis of each reading: sensor, repeatability and remainder combined."""
+        """``(N,)`` 1-sigma per axis of each reading: sensor, repeatability and remainder combined
+        (marker-point rows times ``orientation_scale``)."""
         s = np.asarray(sensor_sigma_m, float)
         g = np.zeros(len(s), int) if groups is None else np.asarray(groups, int)
         tau = np.asarray(self.remainder_sigma_m, float)[g]
-        return np.sqrt(s ** 2 + self.repeatability_sigma_m ** 2 + tau ** 2)
+        scale = np.where(g == 1, self.orientation_scale, 1.0)
+        return scale * np.sqrt(s ** 2 + self.repeatability_sigma_m ** 2 + tau ** 2)
 
     def as_dict(self) -> dict[str, float]:
         return {"repeatability_sigma_m": float(self.repeatability_sigma_m),
@@ -165,7 +170,8 @@ def fit_with_noise_model(mm: MeasurementModel, rec: Measurements, basis: np.ndar
                                          rec.payload_mounted, loss, confidence, max_fraction, rec.offset_m, gravity)
         kept = np.ones(len(rec), bool)
         kept[rejection.rejected] = False
-        new = NoiseModel(noise.repeatability_sigma_m, _remainder_at(mm, est, rec, known, groups, kept, gravity))
+        new = NoiseModel(noise.repeatability_sigma_m, _remainder_at(mm, est, rec, known, groups, kept, gravity),
+                         noise.orientation_scale)
         change = float(np.mean(np.abs(new.total(rec.sigma_m, groups) ** 2 - sigma ** 2)) / np.mean(sigma ** 2))
         current = new
         if change < tolerance:

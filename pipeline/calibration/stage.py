@@ -297,8 +297,10 @@ def _calibrate(robot: RobotModel, real, cfg: Config, rng: np.random.Generator, p
     gravity = GravityCovariance(mm, cfg.gravity_prior())
     robust: dict[str, Any] = {"loss": cfg.robust_loss, "confidence": cfg.outlier_confidence,
                               "max_fraction": cfg.max_outlier_fraction}
+    kappa = notes["model_selection"].orientation_scale if notes["model_selection"] is not None else 1.0
     est, rejection, noise = nm.fit_with_noise_model(mm, rec, basis, nm.NoiseModel(nm.repeatability_sigma_m(
-        robot.spec.repeatability_m or 0.0)), gravity, max_iterations=cfg.max_lm_iterations, **robust)
+        robot.spec.repeatability_m or 0.0), orientation_scale=kappa), gravity, max_iterations=cfg.max_lm_iterations,
+        **robust)
     notes |= {"fit_record": rec} if six_d else {}
     notes["noise_model"] = noise
     sel = notes["model_selection"]
