@@ -146,9 +146,11 @@ def _calibration_rows(s: dict) -> list[Row]:
     value = length(after) + (f" (before {length(before)})" if before is not None else "")
     source = provenance(s.get("validation_source") or s.get("measurement_source"))
     rows = []
-    sigma = _finite(s.get("tracker_noise_sigma_m"))
+    # the readings' total noise (sensor + repeatability + remainder); runs saved before it had its own
+    # key held the total as tracker_noise_sigma_m
+    sigma = _finite(s.get("noise_total_sigma_m", s.get("tracker_noise_sigma_m")))
     if sigma:
-        rows.append(Row("calibration", f"{label} / tracker noise", value, f"noise σ {length(sigma)}",
+        rows.append(Row("calibration", f"{label} / noise", value, f"noise σ {length(sigma)}",
                         ratio(after / sigma), source))
     predicted = _finite(s.get("predicted_rms_position_error_m"))
     if predicted:
