@@ -305,18 +305,20 @@ def select_model(meas: ms.Measurements, setup: Callable[[str], tuple[Measurement
         except PipelineError as exc:
             notes.append(f"{subset}: not fitted ({exc})")
 
-    def score(subset: str, kappa: float) -> tuple[CandidateScore, CandidateScore]:
+    def scored_with(subset: str, kappa: float) -> tuple[CandidateScore, CandidateScore]:
         mm, basis = models[subset]
         return score_subset(mm, basis, meas, orientation_sigma_rad, folds, max_iterations, rng, robust,
                             replace(noise, orientation_scale=kappa))
 
-    kappa, tried, done = 1.0, [], {}
-    weight_subset = WEIGHT_SUBSET if WEIGHT_SUBSET in models else next(iter(models), None)
-    if meas.rotvec is not None and weight_subset is not None and models[weight_subset][0].marker_points:
-        kappa, done = orientation_weight(lambda k: score(weight_subset, k))
+    kappa = 1.0
+    tried: list[tuple[float, float, float]] = []
+    done: dict[float, tuple[CandidateScore, CandidateScore]] = {}
+    weight_subset = WEIGHT_SUBSET if WEIGHT_SUBSET in models else next(iter(models), "")
+    if meas.rotvec is not None and weight_subset and models[weight_subset][0].marker_points:
+        kappa, done = orientation_weight(lambda k: scored_with(weight_subset, k))
         tried = [(k, *rms_errors(pair[0])) for k, pair in sorted(done.items())]
     for subset in models:
-        plain, mapped = done[kappa] if subset == weight_subset and kappa in done else score(subset, kappa)
+        plain, mapped = done[kappa] if subset == weight_subset and kappa in done else scored_with(subset, kappa)
         plain.candidate, mapped.candidate = Candidate(subset, False), Candidate(subset, True)
         scores += [plain, mapped]
     gross = gross_heldout_poses(scores, float((robust or {}).get("confidence", 0.999)))

@@ -307,13 +307,17 @@ class RobotModel:
 
         result = solve(target, q0, restarts)
         rmap = self.residual_map_of(frame)
-        for _ in range(10 if rmap is not None else 0):
-            if not result.success:
-                break
+        if rmap is None:
+            return result
+        for _ in range(10):
             miss = float(np.linalg.norm(self.fk(result.q, frame).translation - target.translation))
-            if miss <= tolerance_m:
+            if not result.success or miss <= tolerance_m:
                 break
             result = solve(pin.SE3(target.rotation, target.translation - rmap.mean(result.q)), result.q, 0)
+        miss = float(np.linalg.norm(self.fk(result.q, frame).translation - target.translation))
+        if result.success and miss > tolerance_m:
+            result.success, result.position_error_m = False, miss
+            result.message = f"IK with the residual map did not settle within {tolerance_m:g} m ({miss:.3g} m)"
         return result
 
     # ----------------------------------------------------------------- dynamics
