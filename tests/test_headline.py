@@ -148,3 +148,11 @@ def test_calibration_row_judges_against_the_total_noise_not_the_sensor_alone():
                "noise_total_sigma_m": 30e-6, "validation_source": "simulated tracker (held-out)"}
     (row, *_) = hl.stage_rows("calibration", summary)
     assert row.verdict == hl.ratio(2.0)
+
+
+def test_cross_validated_error_is_compared_with_the_cross_validated_prediction():
+    summary = {"cross_validation": {"folds": 5, "rms_position_error_m": 3e-3, "predicted_rms_position_error_m": 3e-3},
+               "predicted_rms_position_error_m": 40e-3, "measurement_source": "/data/mocap.csv",
+               "heldout_rms_position_error_after_m": None}
+    (row,) = [r for r in hl.stage_rows("calibration", summary) if "actual / predicted" in r.figure]
+    assert row.verdict == hl.ratio(1.0)

@@ -12,7 +12,9 @@ covariance) is counted (``n_rejected``) and left out of the statistics, as for a
 Per left-out pose the error ``|e|`` and its prediction ``E|e|^2 = trace(J C J^T) + 3 sigma^2``
 (:func:`pipeline.calibration.validate.predicted_covariance`) give the cross-validated
 ``actual_over_predicted = sqrt(mean |e|^2 / mean E|e|^2)``; the nominal model with the fold's
-registered tracker pose gives the error "before". The RMS of the left-out errors is an honest
+registered tracker pose gives the error "before". Readings fitted with weights other than their noise
+(``noise_sigma_m``: a 6-D record's orientation weight) give each fold's covariance as the weighted
+estimator's sandwich (:func:`pipeline.calibration.noise_model.reweighted`). The RMS of the left-out errors is an honest
 out-of-sample accuracy; it exceeds the in-sample fit residual by the estimation noise.
 
 With the residual map (``map_rng`` given: the model selection chose it) each fold also fits the map
@@ -28,6 +30,7 @@ import numpy as np
 from pipeline.calibration import measure as ms
 from pipeline.calibration.error_model import MeasurementModel
 from pipeline.calibration.gravity_uncertainty import GravityCovariance
+from pipeline.calibration.noise_model import reweighted
 from pipeline.calibration.residual_map import fit_residual_map
 from pipeline.calibration.robust import robust_estimate
 from pipeline.calibration.validate import gross_error_rows, predicted_covariance
@@ -41,7 +44,7 @@ def _rms(e: np.ndarray) -> float | None:
 def cross_validate(mm: MeasurementModel, rec: ms.Measurements, basis: np.ndarray, sigma_m: np.ndarray,
                    folds: int, max_iterations: int, *, loss: str = "huber", confidence: float = 0.999,
                    max_fraction: float = 0.1, gravity: GravityCovariance | None = None,
-                   map_rng: np.random.Generator | None = None) -> dict:
+                   map_rng: np.random.Generator | None = None, noise_sigma_m: np.ndarray | None = None) -> dict:
     """Per-fold and overall RMS position error (m) of the left-out poses, before and after, with
     the predicted RMS and the left-out readings rejected (module docstring)."""
     pose = rec.pose_index if rec.pose_index is not None else np.arange(len(rec))
@@ -64,12 +67,17 @@ def cross_validate(mm: MeasurementModel, rec: ms.Measurements, basis: np.ndarray
             per_fold.append(None)
             continue
         try:
-            est, _ = robust_estimate(mm, rec.Q[train], rec.Y[train], sigma_m[train], basis, f"fold {f + 1}",
-                                     max_iterations, part(rec.payload_mounted, train), loss, confidence,
-                                     max_fraction, part(rec.offset_m, train), gravity)
+            est, rejection = robust_estimate(mm, rec.Q[train], rec.Y[train], sigma_m[train], basis, f"fold {f + 1}",
+                                             max_iterations, part(rec.payload_mounted, train), loss, confidence,
+                                             max_fraction, part(rec.offset_m, train), gravity)
         except PipelineError:
             per_fold.append(None)   # this fold's training poses do not excite every parameter
             continue
+        if noise_sigma_m is not None:     # weights other than the noise model's (6-D orientation weight)
+            fit = np.flatnonzero(train)
+            fit = np.delete(fit, rejection.rejected)
+            est = reweighted(mm, est, rec.Q[fit], rec.Y[fit], sigma_m[fit], np.asarray(noise_sigma_m, float)[fit],
+                             part(rec.payload_mounted, fit), part(rec.offset_m, fit))
         held = ms.Measurements(rec.Q[test], rec.Y[test], sigma_m[test], f"fold {f + 1}")
         bad = gross_error_rows(mm, est, held, confidence, gravity)
         ok = np.ones(len(held), bool)

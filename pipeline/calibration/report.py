@@ -179,6 +179,9 @@ def noise_markdown(out: CalibrationOutcome) -> list[str]:
             f"remainder {1e3 * noise.remainder_sigma_m[0]:.4f} mm (REML on the fit residuals)")
     if noise.remainder_sigma_m[1]:
         line += f", remainder of the marker-point rows {1e3 * noise.remainder_sigma_m[1]:.4f} mm"
+    if noise.orientation_scale != 1.0:
+        line += (f"; the marker-point rows' sigma times {noise.orientation_scale:g} in the fit (orientation weight "
+                 "chosen by cross-validation)")
     return [line + ".", ""]
 
 

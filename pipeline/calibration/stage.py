@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -308,9 +309,11 @@ def _calibrate(robot: RobotModel, real, cfg: Config, rng: np.random.Generator, p
     notes["residual_map"] = msel.final_residual_map(sel, mm, est, user, rec, rejection.rejected, rng)
     folds = cfg.cross_validation_folds or (DEFAULT_FOLDS if user is not None and val_user is None else 0)
     if user is not None and (folds or sel is not None):
-        cv = cross_validate(mm, rec, basis, noise.total(rec.sigma_m, nm.row_groups(rec.offset_m, len(rec))),
-                            folds or sel.folds, cfg.max_lm_iterations, gravity=gravity,
-                            map_rng=rng if notes["residual_map"] is not None else None, **robust)
+        groups = nm.row_groups(rec.offset_m, len(rec))
+        cv = cross_validate(mm, rec, basis, noise.total(rec.sigma_m, groups), folds or sel.folds,
+                            cfg.max_lm_iterations, gravity=gravity,
+                            map_rng=rng if notes["residual_map"] is not None else None,
+                            noise_sigma_m=replace(noise, orientation_scale=1.0).total(rec.sigma_m, groups), **robust)
         # the model selection's figures of the chosen model; the gates' actual/predicted from this fit's noise model
         notes["cross_validation"] = cv | sel.cross_validation() if sel is not None else cv
     if upstream_gravity is not None:
