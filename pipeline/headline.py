@@ -137,20 +137,24 @@ def _calibration_rows(s: dict) -> list[Row]:
     """Held-out error (simulated validation poses), else the k-fold cross-validated error of a
     recorded file, against the tracker noise and the predicted error."""
     after, label = _finite(s.get("heldout_rms_position_error_after_m")), "held-out TCP error RMS"
+    predicted = _finite(s.get("predicted_rms_position_error_m"))
     if after is None:
         after = _finite(_get(s, "cross_validation.rms_position_error_m"))
         label = f"{_get(s, 'cross_validation.folds')}-fold cross-validated TCP error RMS"
+        # the same held-out poses' prediction (the summary's is over random poses of the whole workspace)
+        predicted = _finite(_get(s, "cross_validation.predicted_rms_position_error_m")) or predicted
     if after is None:
         return []
     before = _finite(s.get("heldout_rms_position_error_before_m"))
     value = length(after) + (f" (before {length(before)})" if before is not None else "")
     source = provenance(s.get("validation_source") or s.get("measurement_source"))
     rows = []
-    sigma = _finite(s.get("tracker_noise_sigma_m"))
+    # the readings' total noise (sensor + repeatability + remainder); runs saved before it had its own
+    # key held the total as tracker_noise_sigma_m
+    sigma = _finite(s.get("noise_total_sigma_m", s.get("tracker_noise_sigma_m")))
     if sigma:
-        rows.append(Row("calibration", f"{label} / tracker noise", value, f"noise σ {length(sigma)}",
+        rows.append(Row("calibration", f"{label} / noise", value, f"noise σ {length(sigma)}",
                         ratio(after / sigma), source))
-    predicted = _finite(s.get("predicted_rms_position_error_m"))
     if predicted:
         rows.append(Row("calibration", f"{label}, actual / predicted", length(after),
                         f"predicted {length(predicted)}", ratio(after / predicted), source))

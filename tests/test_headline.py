@@ -52,7 +52,7 @@ def _rows(headline, stage, figure_start):
 def test_each_stage_figure_stands_against_its_anchor_with_a_verdict(tmp_path):
     run = _write_run(tmp_path)
     headline = hl.read_headline(run, list(SUMMARIES))
-    (noise,) = _rows(headline, "calibration", "held-out TCP error RMS / tracker noise")
+    (noise,) = _rows(headline, "calibration", "held-out TCP error RMS / noise")
     assert noise.verdict == hl.ratio(26e-6 / 13e-6) and noise.source == "simulated"
     (predicted,) = _rows(headline, "calibration", "held-out TCP error RMS, actual / predicted")
     assert predicted.verdict == hl.ratio(0.5) and "52.0 µm" in predicted.against
@@ -99,7 +99,7 @@ def test_report_opens_with_the_headline_then_assumptions_and_warnings(tmp_path):
     assert text.startswith("# Run `arm-quick`") and "## Headline" in head
     assert head.index("## Headline") < head.index("**Assumptions still in force**") < head.index("**Warnings**")
     assert "* payload 0 kg assumed" in head and "* moving mass 12 kg is light" in head
-    assert "| calibration | held-out TCP error RMS / tracker noise |" in head
+    assert "| calibration | held-out TCP error RMS / noise |" in head
 
 
 def test_console_table_shows_every_row_and_the_warnings(tmp_path):
@@ -141,3 +141,18 @@ def test_recorded_calibration_stands_on_its_cross_validation(tmp_path):
     (row,) = hl.stage_rows("calibration", summary)
     assert row.figure.startswith("5-fold cross-validated") and row.verdict == hl.ratio(2.0)
     assert row.source == "recorded (tracker_readings.csv)"
+
+
+def test_calibration_row_judges_against_the_total_noise_not_the_sensor_alone():
+    summary = {"heldout_rms_position_error_after_m": 60e-6, "tracker_noise_sigma_m": 10e-6,
+               "noise_total_sigma_m": 30e-6, "validation_source": "simulated tracker (held-out)"}
+    (row, *_) = hl.stage_rows("calibration", summary)
+    assert row.verdict == hl.ratio(2.0)
+
+
+def test_cross_validated_error_is_compared_with_the_cross_validated_prediction():
+    summary = {"cross_validation": {"folds": 5, "rms_position_error_m": 3e-3, "predicted_rms_position_error_m": 3e-3},
+               "predicted_rms_position_error_m": 40e-3, "measurement_source": "/data/mocap.csv",
+               "heldout_rms_position_error_after_m": None}
+    (row,) = [r for r in hl.stage_rows("calibration", summary) if "actual / predicted" in r.figure]
+    assert row.verdict == hl.ratio(1.0)

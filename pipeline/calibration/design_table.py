@@ -51,7 +51,7 @@ def baseline_designs(cs: cd.CandidateSet, n: int, rng: np.random.Generator) -> d
 def model_rms(validation: dict) -> tuple[float, float]:
     """(actual, predicted) model RMS of a validation: measured RMS with the tracker noise removed,
     and the covariance-predicted model part."""
-    noise2 = 3.0 * validation["tracker_noise_sigma_m"] ** 2
+    noise2 = 3.0 * validation["noise_total_sigma_m"] ** 2
     actual = math.sqrt(max(validation["after"]["rms"] ** 2 - noise2, 0.0))
     return actual, float(validation["predicted_model_rms_m"])
 

@@ -22,6 +22,19 @@ within one standard error of the smallest, and for 6-D readings whose orientatio
 within one standard error of the smallest among those, the simplest is chosen: fewest identifiable
 parameters, then without the map. A richer model must beat a simpler one by more than the noise of
 the cross-validation estimate itself.
+
+Noise and weights. Each training fold is fitted with the readings' noise model
+(:func:`pipeline.calibration.noise_model.fit_with_noise_model`: sensor + repeatability + a REML
+remainder per row group, estimated on the training fold alone), so position and orientation
+readings are weighted by the data, not by a data-sheet sigma. For 6-D readings the weight of the
+orientation (the marker-point rows) against the position is then chosen by cross-validation
+(:func:`orientation_weight`): the marker-point rows' 1-sigma is multiplied by a factor ``kappa``
+walked from 1 over :data:`ORIENTATION_SCALES` while the held-out score improves; the score
+is ``MSE_pos(kappa) / MSE_pos(1) + MSE_rot(kappa) / MSE_rot(1)`` (both errors count alike, free of
+units). The REML variances alone are not the best weights here: a marker-point row repeats its
+pose's position error (its reading is the origin plus a lever along the marker axes), a correlation
+the row-wise noise model neglects. The factor is chosen on :data:`WEIGHT_SUBSET` and used by every
+candidate and by the final fit.
 """
 
 from __future__ import annotations
@@ -39,16 +52,23 @@ from pipeline.calibration.config import Config
 from pipeline.calibration.elastostatic import measurement_model
 from pipeline.calibration.error_model import MeasurementModel
 from pipeline.calibration.estimate import Estimate
+from pipeline.calibration.noise_model import NoiseModel, fit_with_noise_model
 from pipeline.calibration.residual_map import fit_residual_map
-from pipeline.calibration.robust import robust_estimate
 from pipeline.errors import PipelineError
 from pipeline.robot.model import RobotModel
+from pipeline.robot.repeatability import repeatability_sigma_m
 from pipeline.robot.residual_map import ResidualMap
 
 #: the named parameter subsets compared (pipeline.calibration.subsets), simplest first
 SUBSETS = ("joint_offsets", "geometric", "all")
 #: folds of the model selection when calibration.cross_validation_folds is 0
 DEFAULT_FOLDS = 5
+#: factors on the marker-point rows' 1-sigma tried by the orientation weight (module docstring)
+ORIENTATION_SCALES = (0.25, 0.5, 1.0, 2.0, 4.0)
+#: the parameter subset whose cross-validation chooses the orientation weight (else the first that fits)
+WEIGHT_SUBSET = "geometric"
+#: the robust fit's settings when the caller gives none (calibration config defaults)
+ROBUST_DEFAULTS = {"loss": "huber", "confidence": 0.999, "max_fraction": 0.1}
 
 
 @dataclass(frozen=True)
@@ -114,6 +134,10 @@ class ModelSelection:
     scores: list[CandidateScore]
     chosen: Candidate
     notes: list[str] = field(default_factory=list)
+    #: factor on the marker-point rows' 1-sigma chosen by cross-validation (1: positions only)
+    orientation_scale: float = 1.0
+    #: (kappa, CV RMS position m, CV RMS orientation rad) of each factor tried
+    orientation_scales_tried: list[tuple[float, float, float]] = field(default_factory=list)
 
     def score_of(self, c: Candidate) -> CandidateScore:
         return next(s for s in self.scores if s.candidate == c)
@@ -129,11 +153,19 @@ class ModelSelection:
                 "model": self.chosen.name,
                 "rms_position_error_m": d["rms_position_error_m"],
                 "rms_orientation_error_rad": d["rms_orientation_error_rad"],
+                # every held-out pose, the gross ones too (the figure to compare with published ones)
+                "rms_position_error_all_poses_m": _rms(s.position_error_m),
+                "rms_orientation_error_all_poses_rad": (None if s.orientation_error_rad is None
+                                                        else _rms(s.orientation_error_rad)),
+                "orientation_weight_scale": self.orientation_scale,
                 "per_fold_rms_m": per_fold, "n_folds_not_regular": 0}
 
     def as_dict(self) -> dict:
         return {"folds": self.folds, "chosen": self.chosen.name, "rule": "one standard error",
-                "candidates": [s.as_dict() for s in self.scores], "notes": self.notes}
+                "candidates": [s.as_dict() for s in self.scores], "notes": self.notes,
+                "orientation_weight_scale": self.orientation_scale,
+                "orientation_scales_tried": [{"scale": k, "rms_position_error_m": p, "rms_orientation_error_rad": r}
+                                             for k, p, r in self.orientation_scales_tried]}
 
     def markdown(self) -> str:
         six_d = any(s.orientation_error_rad is not None for s in self.scores)
@@ -159,8 +191,18 @@ class ModelSelection:
                 row += (f" {np.degrees(d['rms_orientation_error_rad']):.3f} | "
                         f"{np.degrees(1.0) ** 2 * d['se_orientation_mse_rad2']:.4f} |")
             lines.append(row)
+        if self.orientation_scales_tried:
+            tried = ", ".join(f"{k:g}: {1e3 * p:.3f} mm / {np.degrees(r):.3f}°"
+                              for k, p, r in self.orientation_scales_tried)
+            lines.append(f"- orientation weight: the marker-point rows' REML sigma times {self.orientation_scale:g}, "
+                         f"chosen by cross-validation of {WEIGHT_SUBSET} (factor: CV RMS position / orientation: "
+                         f"{tried})")
         lines += [f"- {n}" for n in self.notes]
         return "\n".join(lines + [""])
+
+
+def _rms(e: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.asarray(e, float) ** 2)))
 
 
 def one_standard_error(scores: list[CandidateScore]) -> Candidate:
@@ -201,13 +243,14 @@ def heldout_errors(mm: MeasurementModel, est: Estimate, meas: ms.Measurements, r
 
 
 def score_subset(mm: MeasurementModel, basis: np.ndarray, meas: ms.Measurements, orientation_sigma_rad: float,
-                 folds: int, max_iterations: int, rng: np.random.Generator, robust: dict | None = None
-                 ) -> tuple[CandidateScore, CandidateScore]:
+                 folds: int, max_iterations: int, rng: np.random.Generator, robust: dict | None = None,
+                 noise: NoiseModel | None = None) -> tuple[CandidateScore, CandidateScore]:
     """Held-out errors of one parameter subset without and with the residual map; each training fold
-    is fitted by :func:`pipeline.calibration.robust.robust_estimate` (``robust``: its loss,
+    is fitted with the noise model ``noise`` (its REML remainder estimated on the training fold,
+    :func:`pipeline.calibration.noise_model.fit_with_noise_model`; ``robust``: the robust fit's loss,
     confidence and max_fraction), so gross errors are rejected inside the training folds only and
     every held-out pose is scored."""
-    robust = robust or {}
+    robust = ROBUST_DEFAULTS | (robust or {})
     n = len(meas)
     six_d = meas.rotvec is not None and mm.marker_points
     rec = ms.expand_orientation(meas, orientation_sigma_rad) if six_d else meas
@@ -226,10 +269,11 @@ def score_subset(mm: MeasurementModel, basis: np.ndarray, meas: ms.Measurements,
         def part(a: np.ndarray | None, m: np.ndarray = train) -> np.ndarray | None:
             return None if a is None else a[m]
 
+        fold = ms.Measurements(rec.Q[train], rec.Y[train], rec.sigma_m[train], f"fold {f + 1}",
+                               payload_mounted=part(rec.payload_mounted), offset_m=part(rec.offset_m))
         try:
-            est, _ = robust_estimate(mm, rec.Q[train], rec.Y[train], rec.sigma_m[train], basis, f"fold {f + 1}",
-                                     max_iterations, part(rec.payload_mounted), offsets=part(rec.offset_m),
-                                     **robust)
+            est, _, _ = fit_with_noise_model(mm, fold, basis, noise or NoiseModel(), None,
+                                             max_iterations=max_iterations, **robust)
         except PipelineError:
             continue   # this fold's training poses do not excite every parameter
         e, R_tb, ang = heldout_errors(mm, est, meas, test)
@@ -246,19 +290,35 @@ def score_subset(mm: MeasurementModel, basis: np.ndarray, meas: ms.Measurements,
 
 def select_model(meas: ms.Measurements, setup: Callable[[str], tuple[MeasurementModel, np.ndarray]],
                  orientation_sigma_rad: float, folds: int, max_iterations: int,
-                 rng: np.random.Generator, robust: dict | None = None) -> ModelSelection:
+                 rng: np.random.Generator, robust: dict | None = None, noise: NoiseModel | None = None
+                 ) -> ModelSelection:
     """Score every candidate (module docstring) and choose one. ``setup(parameters)`` gives the
     measurement model and identifiable basis of a parameter subset."""
     folds = min(folds, len(meas))
     scores: list[CandidateScore] = []
     notes: list[str] = []
+    noise = noise or NoiseModel()
+    models: dict[str, tuple[MeasurementModel, np.ndarray]] = {}
     for subset in SUBSETS:
         try:
-            mm, basis = setup(subset)
+            models[subset] = setup(subset)
         except PipelineError as exc:
             notes.append(f"{subset}: not fitted ({exc})")
-            continue
-        plain, mapped = score_subset(mm, basis, meas, orientation_sigma_rad, folds, max_iterations, rng, robust)
+
+    def scored_with(subset: str, kappa: float) -> tuple[CandidateScore, CandidateScore]:
+        mm, basis = models[subset]
+        return score_subset(mm, basis, meas, orientation_sigma_rad, folds, max_iterations, rng, robust,
+                            replace(noise, orientation_scale=kappa))
+
+    kappa = 1.0
+    tried: list[tuple[float, float, float]] = []
+    done: dict[float, tuple[CandidateScore, CandidateScore]] = {}
+    weight_subset = WEIGHT_SUBSET if WEIGHT_SUBSET in models else next(iter(models), "")
+    if meas.rotvec is not None and weight_subset and models[weight_subset][0].marker_points:
+        kappa, done = orientation_weight(lambda k: scored_with(weight_subset, k))
+        tried = [(k, *rms_errors(pair[0])) for k, pair in sorted(done.items())]
+    for subset in models:
+        plain, mapped = done[kappa] if subset == weight_subset and kappa in done else scored_with(subset, kappa)
         plain.candidate, mapped.candidate = Candidate(subset, False), Candidate(subset, True)
         scores += [plain, mapped]
     gross = gross_heldout_poses(scores, float((robust or {}).get("confidence", 0.999)))
@@ -268,7 +328,46 @@ def select_model(meas: ms.Measurements, setup: Callable[[str], tuple[Measurement
         notes.append(f"{int(gross.sum())} held-out pose(s) beyond the chi-square bound of the best candidate's "
                      "robust error scale (gross errors) left out of every candidate's score")
     chosen = one_standard_error(scores)
-    return ModelSelection(folds, scores, chosen, notes)
+    return ModelSelection(folds, scores, chosen, notes, kappa, tried)
+
+
+def rms_errors(score: CandidateScore) -> tuple[float, float]:
+    """CV RMS position (m) and orientation (rad) error of a 6-D score over its poses (NaN: a fold failed)."""
+    rot = score.orientation_error_rad if score.orientation_error_rad is not None else np.full(1, np.nan)
+    return float(np.sqrt(np.mean(score.position_error_m ** 2))), float(np.sqrt(np.mean(rot ** 2)))
+
+
+def orientation_weight(scored: Callable[[float], tuple[CandidateScore, CandidateScore]]
+                       ) -> tuple[float, dict[float, tuple[CandidateScore, CandidateScore]]]:
+    """The factor ``kappa`` on the marker-point rows' 1-sigma (module docstring) and the scores of
+    every factor tried; ``scored(kappa)`` gives the (plain, mapped) scores of the weight subset. From
+    1 the walk goes down :data:`ORIENTATION_SCALES` (heavier orientation) while the score
+    ``MSE_pos / MSE_pos(1) + MSE_rot / MSE_rot(1)`` decreases, else up while it decreases."""
+    done = {1.0: scored(1.0)}
+    ref_p, ref_r = rms_errors(done[1.0][0])
+    if not (np.isfinite(ref_p) and np.isfinite(ref_r)) or ref_p <= 0 or ref_r <= 0:
+        return 1.0, done
+
+    def value(k: float) -> float:
+        if k not in done:
+            done[k] = scored(k)
+        p, r = rms_errors(done[k][0])
+        v = (p / ref_p) ** 2 + (r / ref_r) ** 2
+        return v if np.isfinite(v) else np.inf
+
+    i0 = ORIENTATION_SCALES.index(1.0)
+    best_i, best_v = i0, value(1.0)
+    for step in (-1, 1):
+        i = i0 + step
+        while 0 <= i < len(ORIENTATION_SCALES):
+            v = value(ORIENTATION_SCALES[i])
+            if v >= best_v:
+                break
+            best_i, best_v = i, v
+            i += step
+        if best_i != i0:
+            break
+    return ORIENTATION_SCALES[best_i], done
 
 
 def gross_heldout_poses(scores: list[CandidateScore], confidence: float) -> np.ndarray:
@@ -302,7 +401,8 @@ def choose_parameters(robot: RobotModel, cfg: Config, user: ms.Measurements | No
 
     sel = select_model(user, setup, cfg.orientation_sigma_rad, cfg.cross_validation_folds or DEFAULT_FOLDS,
                        cfg.max_lm_iterations, rng, {"loss": cfg.robust_loss, "confidence": cfg.outlier_confidence,
-                                                    "max_fraction": cfg.max_outlier_fraction})
+                                                    "max_fraction": cfg.max_outlier_fraction},
+                       NoiseModel(repeatability_sigma_m(robot.spec.repeatability_m or 0.0)))
     p = sel.chosen.parameters
     return replace(cfg, parameters=p,
                    gravity_model=cfg.gravity_model if subsets.wants_compliance(p) else None), sel

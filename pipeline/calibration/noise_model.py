@@ -19,6 +19,15 @@ per axis:
 So ``Sigma_k = (sigma_s,k^2 + sigma_r^2 + tau_g(k)^2) I (+ B_k B_k^T`` of the gravity-model prior,
 :mod:`pipeline.calibration.gravity_uncertainty`).
 
+For 6-D readings the fit may weight the marker-point rows differently from this noise model (a
+factor ``kappa`` on their sigma, chosen by cross-validation,
+:mod:`pipeline.calibration.model_selection`). The estimate is then a weighted least-squares
+estimate with weights ``W = diag(1 / (kappa_k sigma_k)^2)`` of readings whose covariance is still
+``S = diag(sigma_k^2)``: its covariance is the sandwich ``A^-1 J^T W S W J A^-1`` with
+``A = J^T W J`` (plus the gravity-model gain ``M M^T``), and chi² is taken under ``S``
+(:func:`reweighted`), so neither the predicted errors nor the chi² gate take the weight for a
+claim about the noise.
+
 ``tau^2`` is a variance component estimated by restricted maximum likelihood (REML, Patterson &
 Thompson 1971, "Recovery of inter-block information when block sizes are unequal", Biometrika 58;
 in geodetic adjustment the same estimate is Förstner's / Koch's variance component estimation,
@@ -37,7 +46,7 @@ each is updated in turn (two sweeps). ``tau = 0`` is kept when it minimises ``l`
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import minimize_scalar
@@ -57,18 +66,24 @@ class NoiseModel:
     repeatability_sigma_m: float = 0.0
     #: remainder 1-sigma per row group (0: position rows, 1: virtual marker-point rows)
     remainder_sigma_m: tuple[float, float] = (0.0, 0.0)
+    #: factor on the 1-sigma of the marker-point rows in the fit (the orientation weight, chosen by
+    #: cross-validation, :func:`pipeline.calibration.model_selection.orientation_weight`)
+    orientation_scale: float = 1.0
 
     def total(self, sensor_sigma_m: np.ndarray, groups: np.ndarray | None = None) -> np.ndarray:
-        """``(N,)`` 1-sigma per axis of each reading: sensor, repeatability and remainder combined."""
+        """``(N,)`` 1-sigma per axis of each reading: sensor, repeatability and remainder combined
+        (marker-point rows times ``orientation_scale``)."""
         s = np.asarray(sensor_sigma_m, float)
         g = np.zeros(len(s), int) if groups is None else np.asarray(groups, int)
         tau = np.asarray(self.remainder_sigma_m, float)[g]
-        return np.sqrt(s ** 2 + self.repeatability_sigma_m ** 2 + tau ** 2)
+        scale = np.where(g == 1, self.orientation_scale, 1.0)
+        return scale * np.sqrt(s ** 2 + self.repeatability_sigma_m ** 2 + tau ** 2)
 
     def as_dict(self) -> dict[str, float]:
         return {"repeatability_sigma_m": float(self.repeatability_sigma_m),
                 "remainder_sigma_m": float(self.remainder_sigma_m[0]),
-                "remainder_orientation_points_sigma_m": float(self.remainder_sigma_m[1])}
+                "remainder_orientation_points_sigma_m": float(self.remainder_sigma_m[1]),
+                "orientation_weight_scale": float(self.orientation_scale)}
 
 
 def row_groups(offset_m: np.ndarray | None, n: int) -> np.ndarray:
@@ -148,6 +163,27 @@ def _remainder_at(mm: MeasurementModel, est: Estimate, rec: Measurements, known_
     return reml_remainder(rec.Y[kept] - pred, J, known_sigma_m[kept], groups[kept], factors)
 
 
+def reweighted(mm: MeasurementModel, est: Estimate, Q: np.ndarray, Y: np.ndarray, weight_sigma_m: np.ndarray,
+               noise_sigma_m: np.ndarray, mounted: np.ndarray | None = None, offsets: np.ndarray | None = None
+               ) -> Estimate:
+    """``est`` (fitted with the 1-sigma ``weight_sigma_m`` of readings ``Q, Y``) with the covariance and
+    chi²/dof of the weighted estimator under the readings' noise ``noise_sigma_m`` (module docstring)."""
+    w = np.asarray(weight_sigma_m, float)
+    s = np.asarray(noise_sigma_m, float)
+    if np.array_equal(w, s):
+        return est
+    pred, J = mm.jacobian(Q, est.x, est.registration, est.basis, mounted, offsets)
+    Jw = (J / w[:, None, None]).reshape(-1, J.shape[2])
+    A_inv = np.linalg.inv(Jw.T @ Jw)
+    G = (J * (s / w ** 2)[:, None, None]).reshape(-1, J.shape[2])     # W S^(1/2) J, stacked
+    C = A_inv @ (G.T @ G) @ A_inv
+    if est.gravity_gain is not None:
+        C = C + est.gravity_gain @ est.gravity_gain.T
+    dof = max(Jw.shape[0] - Jw.shape[1], 1)
+    chi2 = float(np.sum(((np.asarray(Y, float) - pred) / s[:, None]) ** 2) / dof)
+    return replace(est, covariance=0.5 * (C + C.T), chi2_per_dof=chi2)
+
+
 def fit_with_noise_model(mm: MeasurementModel, rec: Measurements, basis: np.ndarray, noise: NoiseModel,
                          gravity: GravityCovariance | None, *, max_iterations: int, loss: str, confidence: float,
                          max_fraction: float, rounds: int = 3, tolerance: float = 0.05
@@ -165,9 +201,20 @@ def fit_with_noise_model(mm: MeasurementModel, rec: Measurements, basis: np.ndar
                                          rec.payload_mounted, loss, confidence, max_fraction, rec.offset_m, gravity)
         kept = np.ones(len(rec), bool)
         kept[rejection.rejected] = False
-        new = NoiseModel(noise.repeatability_sigma_m, _remainder_at(mm, est, rec, known, groups, kept, gravity))
+        new = NoiseModel(noise.repeatability_sigma_m, _remainder_at(mm, est, rec, known, groups, kept, gravity),
+                         noise.orientation_scale)
         change = float(np.mean(np.abs(new.total(rec.sigma_m, groups) ** 2 - sigma ** 2)) / np.mean(sigma ** 2))
         current = new
         if change < tolerance:
             break
+    if current.orientation_scale != 1.0:     # the weight is not a claim about the noise: reweighted()
+        kept = np.ones(len(rec), bool)
+        kept[rejection.rejected] = False
+        unit = replace(current, orientation_scale=1.0)
+
+        def part(a: np.ndarray | None) -> np.ndarray | None:
+            return None if a is None else a[kept]
+
+        est = reweighted(mm, est, rec.Q[kept], rec.Y[kept], current.total(rec.sigma_m, groups)[kept],
+                         unit.total(rec.sigma_m, groups)[kept], part(rec.payload_mounted), part(rec.offset_m))
     return est, rejection, current

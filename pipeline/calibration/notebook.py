@@ -35,7 +35,7 @@ print(f"selected {s['n_configurations']} of {s['n_candidates']} candidates by {s
       f"on {s['index_name']} = {s['index_value']:.4g} in {s['selection_time_s']:.2f} s")
 print(f"held-out RMS error before {1e3 * s['heldout_rms_position_error_before_m']:.3f} mm, "
       f"after {1e6 * s['heldout_rms_position_error_after_m']:.1f} µm "
-      f"(= {s['rms_after_over_sigma']:.2f} x tracker sigma), "
+      f"(= {s['rms_after_over_sigma']:.2f} x noise sigma: sensor + repeatability + remainder), "
       f"predicted {1e6 * s['predicted_rms_position_error_m']:.1f} µm")
 display(Markdown(va.table_markdown(out.validation)))"""),
     ("markdown", """## The same candidates, other selection algorithms and indices
@@ -49,7 +49,7 @@ for method in ("remove_and_replace", "detmax", "bsaa", "random"):
         rows.append(f"| {method} | {name} | {res.index_value:.4g} | {res.run_time_s:.2f} | {res.evaluations} |")
 display(Markdown("\\n".join(rows)))"""),
     ("code", """fig1 = plots.error_histograms(out.validation["errors_before_m"], out.validation["errors_after_m"],
-                              out.validation["tracker_noise_sigma_m"], out.validation["predicted_rms_m"])
+                              out.validation["noise_total_sigma_m"], out.validation["predicted_rms_m"])
 fig2 = plots.index_history(out.selection.history, out.selection.index_name, out.selection.method)"""),
     ("markdown", """## 3-D view (meshcat)
 

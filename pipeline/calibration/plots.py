@@ -60,7 +60,7 @@ def stage_figures(out) -> dict:
     figs = {}
     if v is not None:
         figs["heldout_errors"] = error_histograms(v["errors_before_m"], v["errors_after_m"],
-                                                  v["tracker_noise_sigma_m"], v["predicted_rms_m"])
+                                                  v["noise_total_sigma_m"], v["predicted_rms_m"])
     if out.fit is not None:
         sigma = float(np.sqrt(np.mean(out.measurements.sigma_m ** 2)))
         figs["fit_residuals"] = fit_residual_histogram(out.fit["residuals_after_m"], sigma)

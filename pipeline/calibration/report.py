@@ -32,9 +32,9 @@ def summary_of(out: CalibrationOutcome, cfg: Config) -> dict:
     design = out.measured_design or {}
     pred = v if v is not None else out.prediction
     predicted = pred["predicted_rms_m"] if pred is not None else None
-    sigma = pred["tracker_noise_sigma_m"] if pred is not None else None
+    sigma = pred["noise_total_sigma_m"] if pred is not None else None
     fit = out.fit or {}
-    return {
+    return noise_components(out.notes.get("noise_model"), sigma) | {
         "n_configurations": int(len(out.measurements)),
         "n_configurations_commanded": None if user else int(out.measurements.n_requested),
         "n_configurations_not_visible": n_not_visible(out),
@@ -60,11 +60,10 @@ def summary_of(out: CalibrationOutcome, cfg: Config) -> dict:
         "heldout_max_position_error_before_m": v["before"]["max"] if v is not None else None,
         "predicted_rms_position_error_m": predicted,
         "actual_over_predicted": v["after"]["rms"] / v["predicted_rms_m"] if v is not None else None,
-        "tracker_noise_sigma_m": sigma,
         "predicted_gravity_model_rms_m": pred.get("predicted_gravity_model_rms_m") if pred is not None else None,
         "gravity_model_share": pred.get("gravity_model_share") if pred is not None else None,
         "gravity_model_prior": gravity_prior_of(out, cfg),
-        "rms_after_over_sigma": v["after"]["rms"] / v["tracker_noise_sigma_m"] if v is not None else None,
+        "rms_after_over_sigma": v["after"]["rms"] / v["noise_total_sigma_m"] if v is not None else None,
         "fit_rms_residual_before_m": fit.get("rms_residual_before_m"),
         "fit_rms_residual_after_m": fit.get("rms_residual_after_m"),
         "chi2_per_dof": out.estimate.chi2_per_dof,
@@ -82,6 +81,19 @@ def summary_of(out: CalibrationOutcome, cfg: Config) -> dict:
         "lm_iterations": out.estimate.iterations,
         "timings_s": {k: round(t, 3) for k, t in out.timings_s.items()},
     }
+
+
+def noise_components(noise, total_sigma_m: float | None) -> dict[str, float | None]:
+    """Summary keys of a position reading's 1-sigma per axis at the held-out (or predicted) poses:
+    ``noise_total_sigma_m`` (RMS over the poses) = sqrt(sensor^2 + repeatability^2 + remainder^2)
+    and its parts (:mod:`pipeline.calibration.noise_model`); the sensor's part is what the total
+    leaves, so the parts add up exactly. ``tracker_noise_sigma_m`` is the sensor's own noise (runs
+    saved before the parts had their keys held the total under that name)."""
+    rep = float(noise.repeatability_sigma_m) if noise is not None else 0.0
+    rem = float(noise.remainder_sigma_m[0]) if noise is not None else 0.0
+    sensor = None if total_sigma_m is None else math.sqrt(max(total_sigma_m ** 2 - rep ** 2 - rem ** 2, 0.0))
+    return {"noise_total_sigma_m": total_sigma_m, "noise_sensor_sigma_m": sensor,
+            "noise_repeatability_sigma_m": rep, "noise_remainder_sigma_m": rem, "tracker_noise_sigma_m": sensor}
 
 
 #: gravity-model share of the predicted mean-square error above which the report suggests the
@@ -167,6 +179,9 @@ def noise_markdown(out: CalibrationOutcome) -> list[str]:
             f"remainder {1e3 * noise.remainder_sigma_m[0]:.4f} mm (REML on the fit residuals)")
     if noise.remainder_sigma_m[1]:
         line += f", remainder of the marker-point rows {1e3 * noise.remainder_sigma_m[1]:.4f} mm"
+    if noise.orientation_scale != 1.0:
+        line += (f"; the marker-point rows' sigma times {noise.orientation_scale:g} in the fit (orientation weight "
+                 "chosen by cross-validation)")
     return [line + ".", ""]
 
 

@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -72,6 +73,7 @@ from pipeline.progress import task
 from pipeline.quality import QualityGates
 from pipeline.robot.iso_search import POSE_AXES
 from pipeline.robot.model import RobotModel
+from pipeline.robot.residual_map import ResidualMap
 from pipeline.stage_api import StageResult
 
 NAME = "calibration"
@@ -195,14 +197,14 @@ def measured_design(robot: RobotModel, mm: em.MeasurementModel, basis: np.ndarra
 
 def predicted_on_random_poses(robot: RobotModel, mm: em.MeasurementModel, est: Estimate, cfg: Config,
                               rng: np.random.Generator, gravity: GravityCovariance | None = None,
-                              noise: nm.NoiseModel | None = None) -> dict:
+                              noise: nm.NoiseModel | None = None, residual_map: ResidualMap | None = None) -> dict:
     """Covariance-predicted error over ``n_heldout`` random collision-free poses visible to the
     identified tracker (nominal model only: nothing is measured)."""
     chain = cd.chain_from_robot(robot, est.transform_tracker_to_base)
     margins = cd.FilterMargins(cfg.margin_collision_m, math.radians(1.0), 0.005)
     Q, _ = cd.random_candidates(chain, cfg.n_heldout, rng, margins)
     sigma = (noise or nm.NoiseModel()).total(ms.noise_model_sigma(robot, mm.predict(Q, est.x, est.registration)))
-    return va.predicted_error(mm, est, Q, sigma, gravity)
+    return va.predicted_error(mm, est, Q, sigma, gravity, residual_map)
 
 
 def calibrate(robot: RobotModel, real, cfg: Config, rng: np.random.Generator, progress=None,
@@ -297,16 +299,21 @@ def _calibrate(robot: RobotModel, real, cfg: Config, rng: np.random.Generator, p
     gravity = GravityCovariance(mm, cfg.gravity_prior())
     robust: dict[str, Any] = {"loss": cfg.robust_loss, "confidence": cfg.outlier_confidence,
                               "max_fraction": cfg.max_outlier_fraction}
+    kappa = notes["model_selection"].orientation_scale if notes["model_selection"] is not None else 1.0
     est, rejection, noise = nm.fit_with_noise_model(mm, rec, basis, nm.NoiseModel(nm.repeatability_sigma_m(
-        robot.spec.repeatability_m or 0.0)), gravity, max_iterations=cfg.max_lm_iterations, **robust)
+        robot.spec.repeatability_m or 0.0), orientation_scale=kappa), gravity, max_iterations=cfg.max_lm_iterations,
+        **robust)
     notes |= {"fit_record": rec} if six_d else {}
     notes["noise_model"] = noise
     sel = notes["model_selection"]
     notes["residual_map"] = msel.final_residual_map(sel, mm, est, user, rec, rejection.rejected, rng)
     folds = cfg.cross_validation_folds or (DEFAULT_FOLDS if user is not None and val_user is None else 0)
     if user is not None and (folds or sel is not None):
-        cv = cross_validate(mm, rec, basis, noise.total(rec.sigma_m, nm.row_groups(rec.offset_m, len(rec))),
-                            folds or sel.folds, cfg.max_lm_iterations, gravity=gravity, **robust)
+        groups = nm.row_groups(rec.offset_m, len(rec))
+        cv = cross_validate(mm, rec, basis, noise.total(rec.sigma_m, groups), folds or sel.folds,
+                            cfg.max_lm_iterations, gravity=gravity,
+                            map_rng=rng if notes["residual_map"] is not None else None,
+                            noise_sigma_m=replace(noise, orientation_scale=1.0).total(rec.sigma_m, groups), **robust)
         # the model selection's figures of the chosen model; the gates' actual/predicted from this fit's noise model
         notes["cross_validation"] = cv | sel.cross_validation() if sel is not None else cv
     if upstream_gravity is not None:
@@ -325,8 +332,8 @@ def _calibrate(robot: RobotModel, real, cfg: Config, rng: np.random.Generator, p
             raise PipelineError(None, "calibration.validation_csv", "no validation file and no simulated robot")
         held = heldout_measurements(robot, real, est, cfg, rng)
         held.sigma_m = noise.total(held.sigma_m)
-    validation = (va.validate(mm, est, held, cfg.outlier_confidence, gravity, cfg.orientation_sigma_rad)
-                  if held is not None else None)
+    validation = (va.validate(mm, est, held, cfg.outlier_confidence, gravity, cfg.orientation_sigma_rad,
+                              notes["residual_map"]) if held is not None else None)
     if held is not None:
         notes["heldout_configurations"] = held.Q      # drawn by the viewer
     timings["validate_s"] = time.perf_counter() - t
@@ -335,8 +342,10 @@ def _calibrate(robot: RobotModel, real, cfg: Config, rng: np.random.Generator, p
     design = measured_design(robot, mm, dbasis, meas.Q, spec, est.transform_tracker_to_base,
                              "user file" if user is not None else "measured subset", meas.payload_mounted)
     fit = va.fit_residuals(mm, est, rec, rejection.rejected)
-    prediction = predicted_on_random_poses(robot, mm, est, cfg, rng, gravity, noise) if validation is None else None
+    prediction = (predicted_on_random_poses(robot, mm, est, cfg, rng, gravity, noise, notes["residual_map"])
+                  if validation is None else None)
     new_robot = calibrated_robot(robot, mm, est.x, basis, est.covariance)
+    new_robot.residual_map = notes["residual_map"]   # later stages' forward kinematics (pipeline.robot)
     table = dtab.for_run(cfg, robot, real if user is None else None, mm, basis, spec, meas.Q, est, cs, region, rng,
                          dbasis)
     return CalibrationOutcome(report, mm.names, cs, selection, meas, est, validation, new_robot, timings, grad, Qw,

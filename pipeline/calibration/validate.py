@@ -33,6 +33,7 @@ from pipeline.calibration.estimate import MAX_COMPLIANCE_RELATIVE_STD, Estimate
 from pipeline.calibration.gravity_uncertainty import GravityCovariance
 from pipeline.calibration.measure import MARKER_LEVER_M, Measurements
 from pipeline.quality import QualityGates
+from pipeline.robot.residual_map import ResidualMap
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 
 
@@ -145,18 +146,21 @@ def predicted_orientation_covariance(mm: MeasurementModel, est: Estimate, Q: np.
 
 
 def predicted_error(mm: MeasurementModel, est: Estimate, Q: np.ndarray, sigma_m: np.ndarray,
-                    gravity: GravityCovariance | None = None) -> dict:
+                    gravity: GravityCovariance | None = None, residual_map: ResidualMap | None = None) -> dict:
     """Covariance-predicted tracker-measured position error at configurations ``Q`` (no measurement
     needed): ``E|e_k|^2 = trace(J_k C J_k^T) + 3 sigma_k^2`` (paper 000 eq. 16), with ``gravity``
-    the gravity-model term of the module docstring."""
+    the gravity-model term of the module docstring and, with the calibration's ``residual_map``
+    applied, its posterior variance ``3 s_map(q_k)^2`` (:mod:`pipeline.robot.residual_map`)."""
     cov, var_gravity = predicted_covariance(mm, est, Q, sigma_m, gravity)
-    var_total = np.trace(cov, axis1=1, axis2=2)
-    var_model = var_total - var_gravity - 3 * np.asarray(sigma_m, float) ** 2
+    var_map = 3.0 * residual_map.predict(Q)[1] ** 2 if residual_map is not None else np.zeros(len(Q))
+    var_total = np.trace(cov, axis1=1, axis2=2) + var_map
+    var_model = var_total - var_gravity - var_map - 3 * np.asarray(sigma_m, float) ** 2
     return {"n_poses": int(len(Q)), "predicted_rms_m": float(np.sqrt(np.mean(var_total))),
+            "predicted_residual_map_rms_m": float(np.sqrt(np.mean(var_map))),
             "predicted_model_rms_m": float(np.sqrt(max(np.mean(var_model), 0.0))),
             "predicted_gravity_model_rms_m": float(np.sqrt(np.mean(var_gravity))),
             "gravity_model_share": float(np.mean(var_gravity) / np.mean(var_total)),
-            "tracker_noise_sigma_m": float(np.sqrt(np.mean(np.asarray(sigma_m, float) ** 2))),
+            "noise_total_sigma_m": float(np.sqrt(np.mean(np.asarray(sigma_m, float) ** 2))),
             "predicted_std_m": np.sqrt(var_total)}
 
 
@@ -213,13 +217,16 @@ def gross_error_rows(mm: MeasurementModel, est: Estimate, meas: Measurements, co
 
 
 def validate(mm: MeasurementModel, est: Estimate, meas: Measurements, outlier_confidence: float | None = None,
-             gravity: GravityCovariance | None = None, orientation_sigma_rad: float = 0.0) -> dict:
+             gravity: GravityCovariance | None = None, orientation_sigma_rad: float = 0.0,
+             residual_map: ResidualMap | None = None) -> dict:
     """Held-out statistics before/after calibration and the covariance prediction (with the
     gravity-model term when ``gravity`` is given); with ``outlier_confidence`` the held-out readings
     failing the outlier test are left out and counted (``n_rejected``, ``rejected_rows``). 6-D
     held-out readings give orientation errors; with a marker-point model (orientation fitted) also
     their prediction, ``after.orientation_rad.predicted_rms`` (``orientation_sigma_rad`` the 1-sigma
-    per axis of a held-out reading) and ``predicted_model_rms`` (the model part alone)."""
+    per axis of a held-out reading) and ``predicted_model_rms`` (the model part alone). With the
+    calibration's ``residual_map`` the "after" errors are those of the model plus the map, and the
+    prediction includes the map's posterior variance (:func:`predicted_error`)."""
     rejected = np.zeros(0, int)
     n_measured = len(meas)
     if outlier_confidence is not None:
@@ -235,7 +242,9 @@ def validate(mm: MeasurementModel, est: Estimate, meas: Measurements, outlier_co
     R_after = est.transform_tracker_to_base.rotation
     e_before = (Y - mm.predict(Q, x0, est.registration)) @ R_before.T
     e_after = (Y - mm.predict(Q, est.x, est.registration)) @ R_after.T
-    pred = predicted_error(mm, est, Q, meas.sigma_m, gravity)
+    if residual_map is not None:       # the calibrated model handed on: rigid/elastic model + map
+        e_after = e_after - residual_map.predict(Q)[0]
+    pred = predicted_error(mm, est, Q, meas.sigma_m, gravity, residual_map)
     out = {
         "n_poses": int(n_measured),
         "source": meas.source,
@@ -245,7 +254,7 @@ def validate(mm: MeasurementModel, est: Estimate, meas: Measurements, outlier_co
         "predicted_model_rms_m": pred["predicted_model_rms_m"],
         "predicted_gravity_model_rms_m": pred["predicted_gravity_model_rms_m"],
         "gravity_model_share": pred["gravity_model_share"],
-        "tracker_noise_sigma_m": pred["tracker_noise_sigma_m"],
+        "noise_total_sigma_m": pred["noise_total_sigma_m"],
         "errors_before_m": np.linalg.norm(e_before, axis=1),
         "errors_after_m": np.linalg.norm(e_after, axis=1),
         "predicted_std_m": pred["predicted_std_m"],

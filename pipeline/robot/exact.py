@@ -24,10 +24,13 @@ import pinocchio as pin
 from pipeline.artefacts import read_npz, write_bytes, write_npz
 from pipeline.errors import RobotFileError
 from pipeline.robot.model import RobotModel
+from pipeline.robot.residual_map import ResidualMap
 
 #: file names inside a saved robot folder
 MODEL_TEXT = "model.pinocchio.txt"
 SPEC_NPZ = "spec_exact.npz"
+#: the calibration's residual map a calibrated robot carries (:mod:`pipeline.robot.residual_map`)
+RESIDUAL_MAP_NPZ = "residual_map.npz"
 
 
 def _float_fields(value: object, path: str) -> Iterator[tuple[str, np.ndarray]]:
@@ -55,11 +58,23 @@ def _model_bytes(model: pin.Model) -> bytes:
 
 
 def save_exact_robot(robot: RobotModel, folder: str | Path) -> Path:
-    """``robot.save(folder)`` plus the exact numbers (:data:`MODEL_TEXT`, :data:`SPEC_NPZ`)."""
+    """``robot.save(folder)`` plus the exact numbers (:data:`MODEL_TEXT`, :data:`SPEC_NPZ`) and the
+    residual map the robot carries (:data:`RESIDUAL_MAP_NPZ`, absent without one)."""
     folder = Path(robot.save(folder))
     write_bytes(folder / MODEL_TEXT, _model_bytes(robot.model))
     write_npz(folder / SPEC_NPZ, dict(_float_fields(robot.spec, "")))
+    if robot.residual_map is not None:
+        write_npz(folder / RESIDUAL_MAP_NPZ, robot.residual_map.to_arrays())
+    elif (folder / RESIDUAL_MAP_NPZ).exists():
+        (folder / RESIDUAL_MAP_NPZ).unlink()
     return folder
+
+
+def attach_residual_map(robot: RobotModel, folder: Path) -> RobotModel:
+    """``robot`` with the residual map saved in ``folder`` (if any)."""
+    path = folder / RESIDUAL_MAP_NPZ
+    robot.residual_map = ResidualMap.from_arrays(read_npz(path)) if path.is_file() else None
+    return robot
 
 
 def _set_path(root: object, path: str, array: np.ndarray) -> bool:
@@ -101,7 +116,7 @@ def load_exact_robot(folder: str | Path) -> RobotModel:
     robot = RobotModel.load(folder)
     stored, spec_npz = folder / MODEL_TEXT, folder / SPEC_NPZ
     if not stored.exists() or not spec_npz.exists():
-        return robot
+        return attach_residual_map(robot, folder)
     model = pin.Model()
     try:
         model.loadFromString(stored.read_bytes().decode("utf-8"))
@@ -114,7 +129,7 @@ def load_exact_robot(folder: str | Path) -> RobotModel:
     for path, array in read_npz(spec_npz).items():
         if not _set_path(spec, path, array):
             raise RobotFileError(spec_npz, path, "does not match a field of robot.yaml")
-    return robot.with_model(model, spec)
+    return attach_residual_map(robot.with_model(model, spec), folder)
 
 
 def robots_equal(a: RobotModel, b: RobotModel) -> bool:
@@ -122,4 +137,6 @@ def robots_equal(a: RobotModel, b: RobotModel) -> bool:
     if _model_bytes(a.model) != _model_bytes(b.model):
         return False
     fa, fb = dict(_float_fields(a.spec, "")), dict(_float_fields(b.spec, ""))
-    return fa.keys() == fb.keys() and all(np.array_equal(fa[k], fb[k]) for k in fa)
+    ma, mb = (dict(r.residual_map.to_arrays()) if r.residual_map is not None else {} for r in (a, b))
+    return (fa.keys() == fb.keys() and all(np.array_equal(fa[k], fb[k]) for k in fa)
+            and ma.keys() == mb.keys() and all(np.array_equal(ma[k], mb[k]) for k in ma))

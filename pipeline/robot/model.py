@@ -26,6 +26,7 @@ from pipeline.robot.friction import joint_friction_torque
 from pipeline.robot.ik import IKResult, solve_ik
 from pipeline.robot.loading import ROBOTS_DIR, JointLimits, load_robot_files, resolve_robot_files, validate_joint_limits
 from pipeline.robot.reflector_check import capsules_holding, describe, marker_points
+from pipeline.robot.residual_map import ResidualMap
 from pipeline.robot.spec import ActuationSpec, Capsule, RobotSpec, TrackerSpec
 from pipeline.robot.spec_yaml import robot_spec_to_yaml
 from pipeline.robot.urdf_export import export_urdf
@@ -69,6 +70,8 @@ class RobotModel:
                             if abs(capsule_joints[i] - capsule_joints[k]) > 1
                             and frozenset((names[i], names[k])) not in ignored]
         self._floor_capsules = [i for i, j in enumerate(capsule_joints) if j >= spec.collision.floor_check_from_joint]
+        #: the calibration's non-geometric residual map (None: not chosen), added to the tool frames
+        self.residual_map: ResidualMap | None = None
 
     # ------------------------------------------------------------------ loading
     @classmethod
@@ -236,11 +239,25 @@ class RobotModel:
         return self._frame_ids[frame]
 
     # --------------------------------------------------------------- kinematics
+    def residual_map_of(self, frame: str) -> ResidualMap | None:
+        """The residual map where it applies: the tool frames (flange, TCP, reflector), which move with
+        the marker it was fitted at (a position correction, the same for points a tool's length apart)."""
+        tool = frame in (self.frame_flange, self.frame_tcp, self.frame_reflector, self.spec.flange_frame)
+        return self.residual_map if tool else None
+
+    def _offsets(self, Q: np.ndarray, frame: str) -> np.ndarray | float:
+        rmap = self.residual_map_of(frame)
+        return 0.0 if rmap is None else rmap.predict(Q)[0]
+
     def fk(self, q: np.ndarray, frame: str = "tcp") -> pin.SE3:
-        """Pose of ``frame`` in the base frame."""
+        """Pose of ``frame`` in the base frame (a tool frame with the residual map's correction)."""
         fid = self.frame_id(frame)
         pin.forwardKinematics(self.model, self._data, np.asarray(q, float))
-        return pin.updateFramePlacement(self.model, self._data, fid).copy()
+        pose = pin.updateFramePlacement(self.model, self._data, fid).copy()
+        rmap = self.residual_map_of(frame)
+        if rmap is not None:
+            pose.translation = pose.translation + rmap.mean(q)
+        return pose
 
     def positions(self, Q: np.ndarray, frame: str = "tcp") -> np.ndarray:
         """Positions ``(N, 3)`` of ``frame`` for configurations ``Q (N, nq)``."""
@@ -251,7 +268,7 @@ class RobotModel:
         for k, q in enumerate(Q):
             pin.forwardKinematics(model, data, q)
             out[k] = pin.updateFramePlacement(model, data, fid).translation
-        return out
+        return out + self._offsets(Q, frame)
 
     def poses(self, Q: np.ndarray, frame: str = "tcp") -> tuple[np.ndarray, np.ndarray]:
         """Positions ``(N, 3)`` and rotations ``(N, 3, 3)`` of ``frame``."""
@@ -262,11 +279,15 @@ class RobotModel:
             pin.forwardKinematics(self.model, self._data, q)
             placement = pin.updateFramePlacement(self.model, self._data, fid)
             pos[k], rot[k] = placement.translation, placement.rotation
-        return pos, rot
+        return pos + self._offsets(Q, frame), rot
 
     def jacobian(self, q: np.ndarray, frame: str = "tcp") -> np.ndarray:
-        """Frame Jacobian ``(6, nq)`` in LOCAL_WORLD_ALIGNED (linear rows first)."""
-        return pin.computeFrameJacobian(self.model, self._data, np.asarray(q, float), self.frame_id(frame), WORLD)
+        """Frame Jacobian ``(6, nq)`` in LOCAL_WORLD_ALIGNED (linear rows first, with the residual map's)."""
+        J = pin.computeFrameJacobian(self.model, self._data, np.asarray(q, float), self.frame_id(frame), WORLD)
+        rmap = self.residual_map_of(frame)
+        if rmap is not None:
+            J[:3] += rmap.jacobian(q)
+        return J
 
     def within_limits(self, q: np.ndarray, margin_rad: float = 0.0) -> bool:
         q = np.asarray(q, float)
@@ -276,10 +297,28 @@ class RobotModel:
     def ik(self, target: pin.SE3, q0: np.ndarray, frame: str = "tcp", *, position_only: bool = False,
            tolerance_m: float = 1e-9, tolerance_rad: float = 1e-9, max_iterations: int = 200,
            restarts: int = 8, rng: np.random.Generator | None = None) -> IKResult:
-        """Inverse kinematics inside the joint limits (:func:`pipeline.robot.ik.solve_ik`)."""
-        return solve_ik(self.model, self._data, self.frame_id(frame), target, q0, position_only=position_only,
-                        tolerance_m=tolerance_m, tolerance_rad=tolerance_rad, max_iterations=max_iterations,
-                        restarts=restarts, rng=rng)
+        """Inverse kinematics inside the joint limits (:func:`pipeline.robot.ik.solve_ik`); with a residual
+        map the rigid model's target is shifted by the map at the solution until the corrected tool
+        frame reaches ``target`` (a fixed point: the map changes by far less than the arm over a step)."""
+        def solve(goal: pin.SE3, start: np.ndarray, tries: int) -> IKResult:
+            return solve_ik(self.model, self._data, self.frame_id(frame), goal, start, position_only=position_only,
+                            tolerance_m=tolerance_m, tolerance_rad=tolerance_rad, max_iterations=max_iterations,
+                            restarts=tries, rng=rng)
+
+        result = solve(target, q0, restarts)
+        rmap = self.residual_map_of(frame)
+        if rmap is None:
+            return result
+        for _ in range(10):
+            miss = float(np.linalg.norm(self.fk(result.q, frame).translation - target.translation))
+            if not result.success or miss <= tolerance_m:
+                break
+            result = solve(pin.SE3(target.rotation, target.translation - rmap.mean(result.q)), result.q, 0)
+        miss = float(np.linalg.norm(self.fk(result.q, frame).translation - target.translation))
+        if result.success and miss > tolerance_m:
+            result.success, result.position_error_m = False, miss
+            result.message = f"IK with the residual map did not settle within {tolerance_m:g} m ({miss:.3g} m)"
+        return result
 
     # ----------------------------------------------------------------- dynamics
     def friction_torque(self, v: np.ndarray) -> np.ndarray:
@@ -399,11 +438,16 @@ class RobotModel:
 
     # ------------------------------------------------------------ copy and save
     def copy(self) -> RobotModel:
-        return RobotModel(_copy.deepcopy(self.spec), self.model.copy(), self.urdf_text)
+        out = RobotModel(_copy.deepcopy(self.spec), self.model.copy(), self.urdf_text)
+        out.residual_map = self.residual_map     # frozen: shared
+        return out
 
     def with_model(self, model: pin.Model, spec: RobotSpec | None = None) -> RobotModel:
-        """A RobotModel sharing this one's facts but with another Pinocchio model (same frames)."""
-        return RobotModel(_copy.deepcopy(spec if spec is not None else self.spec), model, self.urdf_text)
+        """A RobotModel sharing this one's facts (and residual map) but with another Pinocchio model
+        (same frames)."""
+        out = RobotModel(_copy.deepcopy(spec if spec is not None else self.spec), model, self.urdf_text)
+        out.residual_map = self.residual_map
+        return out
 
     def save(self, folder: str | Path) -> Path:
         """Write ``<folder>/<name>.urdf`` and ``robot.yaml`` that :meth:`load` reads back.

@@ -223,13 +223,10 @@ def ik_track(robot: RobotModel, poses: list[pin.SE3], q0: np.ndarray, frame: str
     for k, T in enumerate(poses):
         err_n = np.inf
         for _ in range(max_iterations):
-            pin.framesForwardKinematics(model, data, q)
-            cur = data.oMf[fid]
-            e = np.concatenate([T.translation - cur.translation, pin.log3(T.rotation @ cur.rotation.T)])
+            e, J = pose_error(robot, model, data, fid, frame, q, T)
             err_n = float(np.linalg.norm(e[:3]) + 0.1 * np.linalg.norm(e[3:]))
             if err_n < tolerance_m:
                 break
-            J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
             q = q + J.T @ np.linalg.solve(J @ J.T + lam2 * np.eye(6), e)
         where = f"t = {times_s[k]:.4f} s" if times_s is not None else f"sample {k}"
         p = np.array2string(T.translation, precision=4)
@@ -242,6 +239,22 @@ def ik_track(robot: RobotModel, poses: list[pin.SE3], q0: np.ndarray, frame: str
         where = f"t = {times_s[k]:.4f} s" if times_s is not None else f"sample {k}"
         check_within_limits(robot, q, f"TCP point {np.array2string(poses[k].translation, precision=4)} m at {where}")
     return out
+
+
+def pose_error(robot: RobotModel, model: pin.Model, data: pin.Data, fid: int, frame: str, q: np.ndarray,
+               target: pin.SE3) -> tuple[np.ndarray, np.ndarray]:
+    """``e = [p* - p, log3(R* R^T)]`` of ``frame`` at ``q`` and its LOCAL_WORLD_ALIGNED Jacobian ``(6, nq)``;
+    a tool frame's position and linear rows include the calibration's residual map
+    (:meth:`RobotModel.residual_map_of`)."""
+    pin.framesForwardKinematics(model, data, q)
+    cur = data.oMf[fid]
+    J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
+    p = cur.translation
+    rmap = robot.residual_map_of(frame)
+    if rmap is not None:
+        p = p + rmap.mean(q)
+        J[:3] += rmap.jacobian(q)
+    return np.concatenate([target.translation - p, pin.log3(target.rotation @ cur.rotation.T)]), J
 
 
 def wrap_into_limits(robot: RobotModel, Q: np.ndarray) -> np.ndarray:
@@ -305,12 +318,9 @@ def start_configuration(robot: RobotModel, pose: pin.SE3, seeds: npt.ArrayLike, 
     for seed in np.atleast_2d(seeds):
         q = np.array(seed, float)
         for _ in range(500):
-            pin.framesForwardKinematics(model, data, q)
-            cur = data.oMf[fid]
-            e = np.concatenate([pose.translation - cur.translation, pin.log3(pose.rotation @ cur.rotation.T)])
+            e, J = pose_error(robot, model, data, fid, frame, q, pose)
             if np.linalg.norm(e) < tolerance_m:
                 break
-            J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
             dq = J.T @ np.linalg.solve(J @ J.T + 1e-6 * np.eye(6), e)
             q = q + dq * min(1.0, 0.3 / max(np.abs(dq).max(), 1e-12))
         if np.linalg.norm(e) < tolerance_m * 1e3 and np.all(q >= lo) and np.all(q <= hi):

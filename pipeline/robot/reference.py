@@ -28,7 +28,7 @@ from ruckig import InputParameter, Result, Ruckig, Trajectory
 
 from pipeline.errors import InfeasibleError, SolverError
 from pipeline.robot.model import RobotModel
-from pipeline.robot.paths import CartesianPath, check_within_limits, limiting_joint
+from pipeline.robot.paths import CartesianPath, check_within_limits, limiting_joint, pose_error
 
 
 @dataclass
@@ -127,6 +127,7 @@ def track(robot: RobotModel, rotation: np.ndarray, P: np.ndarray, Pd: np.ndarray
     model = robot.model
     data = model.createData()
     fid = model.getFrameId(frame)
+    rmap = robot.residual_map_of(frame)
     nq = model.nq
     N = len(P)
     q_out, v_out, a_out = np.empty((N, nq)), np.empty((N, nq)), np.empty((N, nq))
@@ -141,11 +142,8 @@ def track(robot: RobotModel, rotation: np.ndarray, P: np.ndarray, Pd: np.ndarray
             q = q + dt * v_prev + 0.5 * dt * dt * a_prev
         err = np.inf
         for _ in range(max_iterations):
-            pin.framesForwardKinematics(model, data, q)
-            cur = data.oMf[fid]
-            e = np.concatenate([P[k] - cur.translation, pin.log3(rotation @ cur.rotation.T)])
+            e, J = pose_error(robot, model, data, fid, frame, q, pin.SE3(rotation, P[k]))
             err = float(np.linalg.norm(e))
-            J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
             if err < tolerance_m:
                 break
             q = q + resolved_rate(J, e)
@@ -160,6 +158,8 @@ def track(robot: RobotModel, rotation: np.ndarray, P: np.ndarray, Pd: np.ndarray
         v = resolved_rate(J, np.concatenate([Pd[k], np.zeros(3)]))
         pin.forwardKinematics(model, data, q, v, zero)
         drift = pin.getFrameClassicalAcceleration(model, data, fid, pin.LOCAL_WORLD_ALIGNED).vector
+        if rmap is not None:      # the residual map's share of J_dot v (pipeline.robot.residual_map)
+            drift[:3] += rmap.drift(q, v)
         a = resolved_rate(J, np.concatenate([Pdd[k], np.zeros(3)]) - drift)
         over = np.nonzero(np.abs(v) > vlim)[0]
         if len(over):

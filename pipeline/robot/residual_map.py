@@ -17,6 +17,16 @@ configuration ``q*`` (ibid. Algorithm 2.1, with ``L = chol(K + s_n^2 I)``, ``alp
 gives its standard deviation, which joins the model's predicted error. Far from the calibration
 poses the correction fades to zero and its variance grows back to ``s^2``: the map never claims
 knowledge it does not have.
+
+Later stages' kinematics (:class:`pipeline.robot.model.RobotModel` carries the map of a calibrated
+robot; its tool frames' positions, Jacobian and the IK of :mod:`pipeline.robot.paths` and
+:mod:`pipeline.robot.reference` add it) need the mean's derivatives, in closed form for the
+squared-exponential kernel with ``d_i = q - q_i``, ``k_i = k(q, q_i)``:
+
+    d mean / dq = -sum_i alpha_i k_i d_i^T / l^2,
+    v^T (d^2 mean / dq^2) v = sum_i alpha_i k_i ((d_i . v)^2 / l^4 - |v|^2 / l^2)
+
+(the second is the map's share of the drift ``J_dot v`` of a joint-space velocity ``v``).
 """
 
 from __future__ import annotations
@@ -55,6 +65,24 @@ class ResidualMap:
         v = np.linalg.solve(self.cholesky, k.T)
         var = np.maximum(self.signal_std_m ** 2 - (v ** 2).sum(0), 0.0)
         return mean, np.sqrt(var)
+
+    def mean(self, q: np.ndarray) -> np.ndarray:
+        """Posterior mean ``(3,)`` (m, base frame) at one configuration."""
+        return self._cross(q)[0] @ self.alpha_m
+
+    def jacobian(self, q: np.ndarray) -> np.ndarray:
+        """``(3, nq)`` derivative of the mean at one configuration (module docstring)."""
+        d = np.asarray(q, float)[None, :] - self.inputs_rad
+        k = self._cross(q)[0]
+        return -(self.alpha_m * k[:, None]).T @ d / self.length_scale_rad ** 2
+
+    def drift(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """``(3,)`` second derivative of the mean along the joint velocity ``v`` (module docstring)."""
+        d = np.asarray(q, float)[None, :] - self.inputs_rad
+        v = np.asarray(v, float)
+        l2 = self.length_scale_rad ** 2
+        w = self._cross(q)[0] * ((d @ v) ** 2 / l2 ** 2 - float(v @ v) / l2)
+        return w @ self.alpha_m
 
     def correct(self, positions_m: np.ndarray, Q: np.ndarray) -> np.ndarray:
         """Base-frame positions ``(N, 3)`` of the calibrated model at ``Q`` plus the mapped residual."""

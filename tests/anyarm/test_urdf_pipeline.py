@@ -29,7 +29,7 @@ def _summary(run: Path, stage: str) -> dict:
 
 def _check_run(run: Path) -> None:
     cal = _summary(run, "calibration")
-    assert cal["heldout_rms_position_error_after_m"] <= 3.0 * cal["tracker_noise_sigma_m"]
+    assert cal["heldout_rms_position_error_after_m"] <= 3.0 * cal["noise_total_sigma_m"]
     ident = _summary(run, "identification")
     assert max(ident["validation_rms_over_noise"]) <= 1.3
     control = _summary(run, "control")

@@ -223,7 +223,7 @@ def _check_targets(summary):
     assert summary["n_configurations"] <= 50
     assert summary["heldout_n_poses"] >= 1000
     assert summary["heldout_rms_position_error_before_m"] > 5e-4           # millimetres before
-    assert summary["heldout_rms_position_error_after_m"] <= 3 * summary["tracker_noise_sigma_m"]
+    assert summary["heldout_rms_position_error_after_m"] <= 3 * summary["noise_total_sigma_m"]
     ratio = summary["heldout_rms_position_error_after_m"] / summary["predicted_rms_position_error_m"]
     assert 1 / 1.5 <= ratio <= 1.5
 
@@ -251,7 +251,8 @@ def test_quick_profile_stage_through_runner(tmp_path):
     s = out.summary
     for key in ("n_configurations", "selection_method", "index_name", "index_value",
                 "heldout_rms_position_error_before_m", "heldout_rms_position_error_after_m",
-                "heldout_max_position_error_after_m", "predicted_rms_position_error_m", "tracker_noise_sigma_m"):
+                "heldout_max_position_error_after_m", "predicted_rms_position_error_m", "tracker_noise_sigma_m",
+                "noise_total_sigma_m", "noise_sensor_sigma_m"):
         assert key in s
     _check_targets(s)
     assert s["n_configurations_not_visible"] == s["n_configurations_commanded"] - s["n_configurations"] >= 0
@@ -396,7 +397,7 @@ def test_measurement_and_validation_files_validate_on_the_validation_file(robot,
     assert out.prediction is None and out.validation["source"] == str(vpath)
     # the held-out errors are those of the file's poses: nominal model mm-level, calibrated at noise level
     assert s["heldout_rms_position_error_before_m"] > 5e-4
-    assert s["heldout_rms_position_error_after_m"] <= 3 * s["tracker_noise_sigma_m"]
+    assert s["heldout_rms_position_error_after_m"] <= 3 * s["noise_total_sigma_m"]
     assert 1 / 1.5 <= s["actual_over_predicted"] <= 1.5
     res = st.run(_Ctx(cfg, robot, 6))
     assert "Held-out validation" in res.report_md and str(vpath) in res.report_md

@@ -8,7 +8,14 @@ import pytest
 from pipeline.calibration import marker_frame as mf
 from pipeline.calibration import subsets
 from pipeline.calibration.config import Config
-from pipeline.calibration.model_selection import Candidate, CandidateScore, one_standard_error
+from pipeline.calibration.model_selection import (
+    ORIENTATION_SCALES,
+    Candidate,
+    CandidateScore,
+    one_standard_error,
+    orientation_weight,
+)
+from pipeline.calibration.noise_model import NoiseModel
 from pipeline.calibration.residual_map import fit_residual_map
 from pipeline.robot.residual_map import ResidualMap
 
@@ -105,3 +112,34 @@ def test_project_to_rotation_returns_the_rotation_of_a_perturbed_one():
     P = mf.project_to_rotation(R + 1e-3 * rng.standard_normal((3, 3)))
     assert np.allclose(P @ P.T, np.eye(3), atol=1e-12) and np.linalg.det(P) > 0
     assert np.abs(P - R).max() < 5e-3
+
+
+def _weighted_scores(best_kappa: float):
+    """(plain, mapped) scores whose position and orientation errors grow with |log(kappa / best)|."""
+    calls: list[float] = []
+
+    def scored(kappa: float):
+        calls.append(kappa)
+        grow = 1.0 + 0.2 * abs(np.log2(kappa / best_kappa))
+        s = CandidateScore(Candidate("geometric", False), 30, FOLDS, 1e-3 * grow * SPREAD, 5e-3 * grow * SPREAD)
+        return s, s
+
+    return scored, calls
+
+
+@pytest.mark.parametrize("best", [0.25, 1.0, 4.0])
+def test_orientation_weight_walks_to_the_best_factor(best):
+    scored, calls = _weighted_scores(best)
+    kappa, done = orientation_weight(scored)
+    assert kappa == best and set(done) == set(calls) and len(calls) == len(set(calls))
+    # the walk stops one step past the optimum: it never scores the whole grid
+    assert len(calls) <= len(ORIENTATION_SCALES) - 1
+
+
+def test_orientation_scale_weights_only_the_marker_point_rows():
+    noise = NoiseModel(1e-5, (2e-3, 3e-3), orientation_scale=0.5)
+    sensor = np.full(4, 1e-5)
+    groups = np.array([0, 0, 1, 1])
+    total = noise.total(sensor, groups)
+    plain = NoiseModel(1e-5, (2e-3, 3e-3)).total(sensor, groups)
+    assert np.allclose(total[:2], plain[:2]) and np.allclose(total[2:], 0.5 * plain[2:])

@@ -12,6 +12,7 @@ from pipeline.calibration import candidates as cd
 from pipeline.calibration import error_model as em
 from pipeline.calibration import measure as ms
 from pipeline.calibration import noise_model as nm
+from pipeline.calibration import report
 from pipeline.calibration import stage as st
 from pipeline.calibration.robust import robust_estimate
 from pipeline.calibration.validate import gate_figures
@@ -149,3 +150,15 @@ def test_clean_record_loses_no_more_than_the_confidence_implies():
     _, rej = robust_estimate(mm, meas.Q, meas.Y, meas.sigma_m, basis, confidence=0.9, max_fraction=0.4)
     n = len(meas)
     assert rej.n_rejected <= binom.ppf(0.999, n, 0.1)
+
+
+def test_summary_noise_parts_add_up_to_the_total():
+    from_parts = nm.NoiseModel(12e-6, (1.5e-3, 3e-3))
+    total = float(from_parts.total(np.array([20e-6]))[0])
+    parts = report.noise_components(from_parts, total)
+    assert parts["noise_total_sigma_m"] == total
+    assert parts["tracker_noise_sigma_m"] == parts["noise_sensor_sigma_m"] == pytest.approx(20e-6, rel=1e-6)
+    squares = [parts[k] ** 2 for k in ("noise_sensor_sigma_m", "noise_repeatability_sigma_m",
+                                       "noise_remainder_sigma_m")]
+    assert sum(squares) == pytest.approx(total ** 2, rel=1e-9)
+    assert report.noise_components(None, None)["noise_sensor_sigma_m"] is None

@@ -1,0 +1,85 @@
+"""The residual map's uncertainty in the calibration's predicted errors, and its hand-on only when
+the model selection chose it."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from pipeline.calibration import error_model as em
+from pipeline.calibration import measure as ms
+from pipeline.calibration import model_selection as msel
+from pipeline.calibration import stage as st
+from pipeline.calibration import validate as va
+from pipeline.calibration.crossval import cross_validate
+from pipeline.calibration.estimate import estimate
+from pipeline.calibration.residual_map import fit_residual_map
+from pipeline.robot.model import RobotModel
+
+SIGMA_M = 10e-6
+
+
+def _field_m(Q: np.ndarray) -> np.ndarray:
+    """A smooth non-geometric error of the arm (base frame), 0.2 mm: what no kinematic parameter fits."""
+    return 2e-4 * np.column_stack([np.sin(2 * Q[:, 0]) * np.cos(Q[:, 1]), np.cos(2 * Q[:, 2]),
+                                   np.sin(Q[:, 1] + 2 * Q[:, 3])])
+
+
+@pytest.fixture(scope="module")
+def setting():
+    robot = RobotModel.load("rx130l")
+    mm = em.MeasurementModel(robot)
+    rng = np.random.default_rng(7)
+    _, basis = st.identify_parameter_set(robot, mm, st.Config(parameters="geometric"), rng)
+    T = robot.tracker.transform_tracker_to_base
+    lo, hi = robot.limits.lower_rad, robot.limits.upper_rad
+    mid, half = 0.5 * (lo + hi), 0.25 * (hi - lo)      # a working region the map can cover
+    Q = rng.uniform(mid - half, mid + half, (120, robot.nq))
+    Y = (mm.predict(Q, np.zeros(mm.n), T) + _field_m(Q) @ T.rotation
+         + SIGMA_M * rng.standard_normal((len(Q), 3)))
+    meas = ms.Measurements(Q, Y, np.full(len(Q), SIGMA_M), "simulated (field)")
+    return robot, mm, basis, meas, rng
+
+
+def test_predicted_error_adds_the_maps_posterior_variance(setting):
+    robot, mm, basis, meas, rng = setting
+    est = estimate(mm, meas.Q, meas.Y, meas.sigma_m, basis)
+    R_tb = est.transform_tracker_to_base.rotation
+    residual = (meas.Y - mm.predict(meas.Q, est.x, est.registration)) @ R_tb.T
+    rmap = fit_residual_map(meas.Q, residual, rng)
+    Qh = meas.Q[:10] + 0.3
+    plain = va.predicted_error(mm, est, Qh, np.full(10, SIGMA_M))
+    mapped = va.predicted_error(mm, est, Qh, np.full(10, SIGMA_M), residual_map=rmap)
+    var_map = 3 * np.mean(rmap.predict(Qh)[1] ** 2)
+    assert var_map > 0
+    assert mapped["predicted_rms_m"] ** 2 == pytest.approx(plain["predicted_rms_m"] ** 2 + var_map, rel=1e-9)
+    assert mapped["predicted_residual_map_rms_m"] ** 2 == pytest.approx(var_map, rel=1e-9)
+    assert mapped["predicted_model_rms_m"] == pytest.approx(plain["predicted_model_rms_m"], rel=1e-9)
+
+
+def test_cross_validation_with_the_map_scores_model_plus_map_and_predicts_its_uncertainty(setting):
+    robot, mm, basis, meas, _ = setting
+    sigma = np.full(len(meas), SIGMA_M)
+    plain = cross_validate(mm, meas, basis, sigma, 5, 50)
+    mapped = cross_validate(mm, meas, basis, sigma, 5, 50, map_rng=np.random.default_rng(1))
+    assert mapped["n_poses"] == plain["n_poses"] == len(meas)
+    assert mapped["rms_position_error_m"] < 0.9 * plain["rms_position_error_m"]
+    assert mapped["predicted_rms_position_error_m"] > plain["predicted_rms_position_error_m"]
+    # with its own uncertainty the map's prediction stays honest
+    assert 1 / 1.5 <= mapped["actual_over_predicted"] <= 1.5
+
+
+def test_the_map_is_handed_on_only_when_chosen(setting):
+    robot, mm, basis, meas, rng = setting
+    est = estimate(mm, meas.Q, meas.Y, meas.sigma_m, basis)
+    rejected = np.zeros(0, int)
+
+    def selection(with_map: bool):
+        return SimpleNamespace(chosen=msel.Candidate("geometric", with_map))
+
+    assert msel.final_residual_map(selection(False), mm, est, meas, meas, rejected, rng) is None
+    assert msel.final_residual_map(None, mm, est, meas, meas, rejected, rng) is None
+    rmap = msel.final_residual_map(selection(True), mm, est, meas, meas, rejected, rng)
+    assert rmap is not None and len(rmap.inputs_rad) == len(meas)
