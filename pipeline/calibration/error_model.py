@@ -38,6 +38,7 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
+from pipeline.casadi_buffers import BufferedFunction
 from pipeline.robot import spatial_sx as sx
 from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import KINEMATIC_COMPONENTS
@@ -109,7 +110,7 @@ class MeasurementModel:
         # sensitivity of the reading to the gravity torques (gravity-model uncertainty)
         if self.compliance:
             self.ht = ca.Function("ht", [q, x, t0, *extra], [ca.jacobian(y, tau)])
-        self._maps: dict[tuple[str, int], ca.Function] = {}
+        self._maps: dict[tuple[str, int], BufferedFunction] = {}
 
     @property
     def gravity_model(self) -> pin.Model:
@@ -138,11 +139,11 @@ class MeasurementModel:
             out.append(np.zeros((3, len(Q))) if offsets is None else np.asarray(offsets, float).T)
         return out
 
-    def _mapped(self, name: str, n: int) -> ca.Function:
+    def _mapped(self, name: str, n: int) -> BufferedFunction:
         key = (name, n)
         if key not in self._maps:
             f = {"h": self.h, "hj": self.hj, "pb": self.base_pos, "ht": getattr(self, "ht", None)}[name]
-            self._maps[key] = f.map(n)
+            self._maps[key] = BufferedFunction(f.map(n))
         return self._maps[key]
 
     def predict(self, Q: np.ndarray, x: np.ndarray, T0: pin.SE3, mounted: np.ndarray | None = None,
@@ -156,7 +157,7 @@ class MeasurementModel:
             f = self._mapped("h", len(Qc))
             mc = None if mounted is None else mounted[s : s + self.chunk]
             oc = None if offsets is None else offsets[s : s + self.chunk]
-            out[s : s + len(Qc)] = np.asarray(f(Qc.T, x, t0, *self._extra(Qc, mc, oc))).T
+            out[s : s + len(Qc)] = f(Qc.T, x, t0, *self._extra(Qc, mc, oc))[0].T
         return out
 
     def jacobian(self, Q: np.ndarray, x: np.ndarray, T0: pin.SE3,
@@ -175,8 +176,8 @@ class MeasurementModel:
             mc = None if mounted is None else mounted[s : s + self.chunk]
             oc = None if offsets is None else offsets[s : s + self.chunk]
             y, jac = self._mapped("hj", n)(Qc.T, x, t0, *self._extra(Qc, mc, oc))
-            Y[s : s + n] = np.asarray(y).T
-            jac = np.asarray(jac).reshape(3, n, self.n).transpose(1, 0, 2)  # hcat of (3 x n_x) blocks
+            Y[s : s + n] = y.T
+            jac = jac.reshape(3, n, self.n).transpose(1, 0, 2)  # hcat of (3 x n_x) blocks
             J[s : s + n] = jac @ P
         return Y, J
 
@@ -194,8 +195,8 @@ class MeasurementModel:
             n = len(Qc)
             mc = None if mounted is None else mounted[s : s + self.chunk]
             oc = None if offsets is None else offsets[s : s + self.chunk]
-            jac = self._mapped("ht", n)(Qc.T, x, t0, *self._extra(Qc, mc, oc))
-            out[s : s + n] = np.asarray(jac).reshape(3, n, self.nq).transpose(1, 0, 2)
+            jac = self._mapped("ht", n)(Qc.T, x, t0, *self._extra(Qc, mc, oc))[0]
+            out[s : s + n] = jac.reshape(3, n, self.nq).transpose(1, 0, 2)
         return out
 
     def base_positions(self, Q: np.ndarray, x: np.ndarray, mounted: np.ndarray | None = None,
@@ -210,8 +211,8 @@ class MeasurementModel:
             mc = None if mounted is None else mounted[s : s + self.chunk]
             oc = None if offsets is None else offsets[s : s + self.chunk]
             p, r = self._mapped("pb", n)(Qc.T, x, *self._extra(Qc, mc, oc))
-            P[s : s + n] = np.asarray(p).T
-            R[s : s + n] = np.asarray(r).reshape(3, n, 3).transpose(1, 0, 2)
+            P[s : s + n] = p.T
+            R[s : s + n] = r.reshape(3, n, 3).transpose(1, 0, 2)
         return P, R
 
 
