@@ -13,7 +13,8 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 ARGS ?=
 PYTEST_ARGS ?=
-# pytest workers (pytest-xdist): one per core of the 2-core machines this is measured on
+# pytest workers (pytest-xdist): one per core of the 2-core machines this is measured on; worksteal:
+# an idle worker takes queued tests from the busy one, so one long test at the end does not hold the run
 PYTEST_WORKERS ?= 2
 # one BLAS thread: reproducible numbers (see pipeline/__init__.py)
 export OPENBLAS_NUM_THREADS ?= 1
@@ -37,10 +38,10 @@ test: $(VENV)/.stamp-dev
 	    (sudo apt-get update -qq && sudo DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null) \
 	      || echo "warning: could not install chromium; the viewer screenshot test will be skipped"; \
 	  else echo "warning: no chromium and no root/apt; the viewer screenshot test will be skipped"; fi; }
-	$(PY) -m pytest -n $(PYTEST_WORKERS) --durations=15 $(PYTEST_ARGS)
+	$(PY) -m pytest -n $(PYTEST_WORKERS) --dist worksteal --durations=15 $(PYTEST_ARGS)
 
 test-slow: $(VENV)/.stamp-dev
-	$(PY) -m pytest -n $(PYTEST_WORKERS) --durations=15 -m 'slow and not study' $(PYTEST_ARGS)
+	$(PY) -m pytest -n $(PYTEST_WORKERS) --dist worksteal --durations=15 -m 'slow and not study' $(PYTEST_ARGS)
 
 typecheck: $(VENV)/.stamp-dev
 	$(PY) tools/mypy_ratchet.py
