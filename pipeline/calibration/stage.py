@@ -124,7 +124,8 @@ def run(ctx: StageContext) -> StageResult:
     result = outputs(out, cfg, ctx.robot, t0)
     gates = QualityGates(NAME, accept_poor=ctx.run.accept_poor)
     va.check_gates(gates, result.summary, cfg)
-    return gates.finish(result)
+    gates.finish(result)   # records the gates in the summary; raises unless passed or accepted
+    return result
 
 
 def outputs(out: CalibrationOutcome, cfg: Config, robot: RobotModel, t0: float) -> StageResult:
