@@ -14,6 +14,9 @@ file, wrong column count, non-numeric or NaN/inf value, too few rows, joint angl
 limits, values in the wrong unit: positions in mm, angles in degrees) raises
 :class:`pipeline.errors.DataFileError` naming the file, the file line (1-based, as an editor shows
 it) and column and the problem, before anything is written.
+
+Without a file the simulated tracker measures the designed configurations
+(:func:`measure_simulated`) and the held-out poses of the validation (:func:`heldout_measurements`).
 """
 
 from __future__ import annotations

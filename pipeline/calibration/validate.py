@@ -20,6 +20,9 @@ expand_orientation`): the errors ``e_0, e_x, e_y`` of the marker origin and of t
 the tracker frame), so ``w = (g_y[z], -g_x[z], g_x[y])`` with ``g_k = R^T (e_k - e_0) / L``: a linear
 map ``S`` of the point errors, whose covariance follows as above with ``J_h, B_h`` replaced by
 ``S J_h, S B_h``; ``E|w|^2`` adds ``3 sigma_rot^2`` of a noisy reading.
+
+Without a held-out set (a measurement file, no validation file) only the prediction is reported,
+over random visible poses (:func:`predicted_on_random_poses`).
 """
 
 from __future__ import annotations
