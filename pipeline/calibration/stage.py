@@ -37,6 +37,7 @@ from pipeline.blas import single_thread_blas
 from pipeline.calibration import design as ds
 from pipeline.calibration import design_rounding as dr
 from pipeline.calibration import design_table as dtab
+from pipeline.calibration import indices as ix
 from pipeline.calibration import marker_frame as mf
 from pipeline.calibration import measure as ms
 from pipeline.calibration import model_selection as msel
@@ -243,7 +244,7 @@ def design_configurations(robot: RobotModel, real, model: ModelSetUp, rng: np.ra
     return Design(cs, spec, Qw, selection, pilot, Q_sel, grad)
 
 
-def select_configurations(G: np.ndarray, positions: np.ndarray | None, spec, n_design: int, cfg: Config,
+def select_configurations(G: np.ndarray, positions: np.ndarray | None, spec: ix.IndexSpec, n_design: int, cfg: Config,
                           rng: np.random.Generator) -> ds.SelectionResult:
     """``n_design`` of the candidates' blocks ``G`` by ``calibration.selection_method``
     (remove-and-replace from the rounded approximate design, or :func:`pipeline.calibration.design.select`)."""
@@ -255,7 +256,7 @@ def select_configurations(G: np.ndarray, positions: np.ndarray | None, spec, n_d
     return ds.select(method, G, spec, n_design, rng, positions=positions, **kw)
 
 
-def refine_by_gradient(robot: RobotModel, model: ModelSetUp, Q_sel: np.ndarray, spec,
+def refine_by_gradient(robot: RobotModel, model: ModelSetUp, Q_sel: np.ndarray, spec: ix.IndexSpec,
                        pilot: ms.Measurements) -> GradientDesignResult:
     """The gradient-based design (paper 000) from the selected configurations, with the tracker
     pose registered on the pilot measurement (at least 3 readings, else the nominal pose)."""
