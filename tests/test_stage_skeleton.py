@@ -16,8 +16,6 @@ STAGES = ("calibration", "identification", "control", "trajectory")
 SKELETON = ("config.py", "design.py", "measure.py", "validate.py", "report.py", "stage.py")
 #: longest function of a stage.py (lines of its definition, docstring included)
 MAX_STEP_LINES = 40
-#: stages whose stage.py still holds longer functions: function name -> its length now (may only shrink)
-LONG_STEPS_LEFT = {"calibration": {"_calibrate": 126, "check": 51, "run": 66}}
 
 
 def _functions(stage: str) -> dict[str, int]:
@@ -47,16 +45,7 @@ def test_stage_module_names_its_config_class_config(stage):
 def test_stage_py_is_a_sequence_of_short_steps(stage):
     lengths = _functions(stage)
     assert "run" in lengths
-    allowed = LONG_STEPS_LEFT.get(stage, {})
-    too_long = {name: n for name, n in lengths.items() if n > max(MAX_STEP_LINES, allowed.get(name, 0))}
+    too_long = {name: n for name, n in lengths.items() if n > MAX_STEP_LINES}
     assert not too_long, (f"pipeline/{stage}/stage.py: {too_long} longer than {MAX_STEP_LINES} lines; "
                           "split into named steps, move the work to design/measure/estimate/validate/report")
 
-
-def test_long_steps_left_are_still_there():
-    """An entry of LONG_STEPS_LEFT that was shortened is removed from it, so the limit holds from then on."""
-    for stage, allowed in LONG_STEPS_LEFT.items():
-        lengths = _functions(stage)
-        shortened = {name: lengths.get(name) for name in allowed if lengths.get(name, 0) <= MAX_STEP_LINES}
-        assert not shortened, (f"pipeline/{stage}/stage.py: {shortened} now within the limit; "
-                               "drop it from LONG_STEPS_LEFT")

@@ -2,7 +2,7 @@
 
 Robot-independent checks in :meth:`Config.validate` (called at load time); the ones that need the
 robot (the number of identifiable parameters, the tracker's incidence limit) in
-:func:`pipeline.calibration.stage.check`.
+:func:`check_robot_fields` and :func:`check_design_size`, which :func:`pipeline.calibration.stage.check` calls.
 """
 
 from __future__ import annotations
@@ -16,6 +16,8 @@ from pipeline.calibration.robust import LOSSES
 from pipeline.calibration.subsets import check_parameters
 from pipeline.calibration.task_space import check_task_fields
 from pipeline.errors import ConfigError
+from pipeline.robot.iso_search import POSE_AXES
+from pipeline.robot.model import RobotModel
 from pipeline.robot.payload import Payload
 
 #: values per axis of the paper's 6-axis grid (paper 004 §3: 13⁶ configurations)
@@ -275,3 +277,53 @@ class Config:
         if self.payload_fraction == 0 and not self.measurements_csv:
             raise bad("payload_fraction", "a payload is given but no configuration is measured with it: "
                       "set payload_fraction in (0, 1]")
+
+
+def check_robot_fields(cfg: Config, robot: RobotModel, n_model_params: int) -> None:
+    """Fields that need the robot: enough identifiability samples for the ``n_model_params``
+    parameters (3 equations per configuration), a working region the arm can follow, a margin
+    below the tracker's incidence limit, a grid of at most :data:`MAX_CANDIDATES`."""
+    need_samples = -(-n_model_params // 3)
+    if cfg.identifiability_samples < need_samples:
+        raise ConfigError(None, "calibration.identifiability_samples",
+                          f"{cfg.identifiability_samples} random configurations give {3 * cfg.identifiability_samples} "
+                          f"equations for the {n_model_params} model parameters of {robot.name}; need at least "
+                          f"{need_samples} (default 200)")
+    if cfg.working_region == "iso_cube" and robot.nq < POSE_AXES:
+        raise ConfigError(None, "calibration.working_region", f"iso_cube: the ISO 9283 path holds a 6-D tool pose, "
+                          f"which the {robot.nq} axes of {robot.name} cannot follow; use box (working_box_m) or csv")
+    max_inc = math.degrees(robot.tracker.max_incidence_rad)
+    if cfg.margin_incidence_deg >= max_inc:
+        raise ConfigError(None, "calibration.margin_incidence_deg",
+                          f"{cfg.margin_incidence_deg} deg leaves no visible pose: the tracker's maximum incidence "
+                          f"angle of {robot.name} is {max_inc:g} deg; the margin must be smaller")
+    if not cfg.measurements_csv and cfg.candidates == "grid":
+        per_axis = cfg.grid_points_per_axis(robot.nq)
+        n_grid = per_axis ** robot.nq
+        if n_grid > MAX_CANDIDATES:
+            raise ConfigError(None, "calibration.grid_per_axis",
+                              f"{per_axis}^{robot.nq} = {n_grid:.3g} grid configurations, at most "
+                              f"{MAX_CANDIDATES:.3g} (time and memory); lower grid_per_axis or use candidates: random")
+
+
+def check_design_size(cfg: Config, robot: RobotModel, p: int, n_min: int) -> None:
+    """Design fields (used only without a measurement file) against the ``p`` identifiable
+    parameters: at least ``n_min`` configurations measured, designed after the pilot, and in the
+    start subset."""
+    if cfg.measurements_csv:
+        return
+    why = f"3 tracker coordinates per configuration for the {p} identifiable parameters of {robot.name}"
+    if cfg.n_configurations < n_min:
+        raise ConfigError(None, "calibration.n_configurations",
+                          f"need at least {n_min} ({why}; more for redundancy and for poses the "
+                          f"tracker cannot see), got {cfg.n_configurations}")
+    if cfg.selection_method == "gradient" and cfg.n_configurations - cfg.n_pilot < n_min:
+        raise ConfigError(None, "calibration.n_pilot",
+                          f"n_configurations - n_pilot = {cfg.n_configurations} - {cfg.n_pilot} designed "
+                          f"configurations, need at least {n_min} ({why}): lower n_pilot or raise "
+                          "n_configurations")
+    if (cfg.n_initial is not None and cfg.selection_method in ("remove_and_replace", "gradient")
+            and cfg.n_initial < n_min):
+        raise ConfigError(None, "calibration.n_initial",
+                          f"the start subset must be regular: need at least {n_min} ({why}) or null "
+                          f"(2/3 of n_configurations), got {cfg.n_initial}")

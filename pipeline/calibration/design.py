@@ -9,6 +9,11 @@ updates of every candidate at once for the trace and log-det indices, branch and
 Algorithms: :func:`remove_and_replace` (paper 004 §3.3.1 steps 1-4), :func:`detmax` (Mitchell's
 excursion algorithm, as used in paper 003), :func:`bsaa` (paper 003 §3.2: swap one selected for one
 unselected, Metropolis acceptance, geometric cooling 0.98, Markov chain length 1).
+
+The stage's design steps before them: the identifiable parameter set (:func:`identify_parameter_set`),
+the filtered candidate set (:func:`build_candidates`), the observability index with its working
+poses (:func:`index_spec`), and afterwards the index of the configurations actually measured
+(:func:`measured_design`).
 """
 
 from __future__ import annotations
@@ -16,14 +21,25 @@ from __future__ import annotations
 import functools
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from pipeline.blas import single_thread_blas
+from pipeline.calibration import candidates as cd
+from pipeline.calibration import error_model as em
+from pipeline.calibration import feasibility as fz
+from pipeline.calibration import grid_cache, subsets
 from pipeline.calibration import indices as ix
+from pipeline.calibration import measure as ms
+from pipeline.calibration import task_space as ts
+from pipeline.calibration.config import Config
 from pipeline.calibration.design_state import DesignState
-from pipeline.errors import InfeasibleError
+from pipeline.calibration.elastostatic import design_blocks, negligible_compliances
+from pipeline.errors import ConfigError, InfeasibleError
+from pipeline.progress import task
+from pipeline.robot.model import RobotModel
 
 
 def _one_blas_thread(fn):
@@ -284,3 +300,109 @@ def select(method: str, G: np.ndarray, spec: ix.IndexSpec, n: int, rng: np.rando
     if method not in METHODS:
         raise ValueError(f"unknown selection method {method!r}; choose from {sorted(METHODS)}")
     return METHODS[method](G, spec, n, rng, positions=positions, **kw)
+
+
+def identify_parameter_set(robot: RobotModel, mm: em.MeasurementModel, cfg: Config, rng: np.random.Generator
+                           ) -> tuple[em.IdentifiabilityReport, np.ndarray]:
+    """Identifiability analysis on random configurations (paper 002 SVD, paper 003 correlations)
+    of the parameters in ``calibration.parameters`` (:mod:`pipeline.calibration.subsets`).
+
+    Returns the report (in the error model's own parameters) and the basis ``P`` (n_full, p) of
+    the identifiable parameters, ``x = P theta``.
+    """
+    Q = em.random_configurations(robot, cfg.identifiability_samples, rng)
+    if mm.marker_points:   # 6-D readings: the marker origin and the two virtual axis points
+        n = len(Q)
+        offsets = np.repeat(ms.MARKER_LEVER_M * np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]), n, 0)
+        _, J = mm.jacobian(np.concatenate([Q] * 3), np.zeros(mm.n), robot.tracker.transform_tracker_to_base,
+                           offsets=offsets)
+    elif mm.compliance:   # the elastostatic columns need the gravity torques: the CasADi model
+        _, J = mm.jacobian(Q, np.zeros(mm.n), robot.tracker.transform_tracker_to_base)
+    else:
+        _, J = cd.nominal_jacobian(cd.chain_from_robot(robot), Q, robot.tracker.transform_tracker_to_base)
+    J = J.reshape(-1, mm.n)
+    if mm.compliance:   # no gravity torque on a joint: its compliance has no effect
+        J[:, np.arange(mm.n)[mm.sl_compliance][negligible_compliances(mm, J)]] = 0.0
+    if cfg.error_model == "se3":
+        B, names = np.eye(mm.n), mm.names
+    else:
+        try:
+            B, names = em.mdh_basis(robot, mm.names)
+        except ValueError as exc:
+            raise ConfigError(None, "calibration.error_model", f"mdh_hayati: {exc}") from None
+    cols = subsets.select(cfg.parameters, names)
+    rep = em.identifiability((J @ B)[:, cols], [names[i] for i in cols], cfg.identifiability_rel_tol)
+    return rep, em.parameter_basis(rep, mm.n, B[:, cols])
+
+
+def build_candidates(robot: RobotModel, cfg: Config, basis: np.ndarray, rng: np.random.Generator,
+                     static_torques: Callable[[np.ndarray], np.ndarray] | None = None) -> cd.CandidateSet:
+    """Filtered candidate set with whitened Jacobians (nominal model, nominal tracker pose;
+    ``static_torques`` for a basis with compliances, :func:`cd.build_candidate_set`)."""
+    chain = cd.chain_from_robot(robot)
+    margins = cd.FilterMargins(cfg.margin_collision_m, math.radians(cfg.margin_incidence_deg), cfg.margin_beam_m)
+    grid_index = None
+    # a first 1 % of random configurations: none feasible -> stop with the cause, not after minutes
+    first = fz.probe(chain, margins, [c.name for c in robot.capsules])
+    if first.n_feasible == 0:
+        raise fz.infeasible_error(first, robot.spec.path)
+    if cfg.candidates == "grid":
+        per_axis = cfg.grid_points_per_axis(robot.nq)
+        with task(f"calibration: filtering the {per_axis}^{robot.nq} grid") as bar:
+            Q, grid_index, counts = grid_cache.filter_grid(chain, per_axis, margins, progress=bar)
+    else:
+        Q, counts = cd.random_candidates(chain, cfg.n_random_candidates, rng, margins)
+    if len(Q) == 0:
+        counts_text = ", ".join(f"{k} {v}" for k, v in counts.items() if k != "time_s")
+        key = "calibration.grid_per_axis" if cfg.candidates == "grid" else "calibration.candidates"
+        raise InfeasibleError(None, key,
+                              f"no feasible candidate configuration (joint limits, collisions, floor, tracker "
+                              f"visibility with the calibration.margin_* values; {counts_text})")
+    return cd.build_candidate_set(chain, Q, basis, robot.tracker.transform_tracker_to_base, counts, grid_index,
+                                  static_torques=static_torques)
+
+
+def too_few_candidates(cfg: Config, robot: RobotModel, n_feasible: int) -> str:
+    """Message for a candidate set smaller than ``n_configurations``, in the user's fields."""
+    rules = "joint limits, collisions, floor, tracker visibility with the calibration.margin_* values"
+    if cfg.candidates == "random":
+        return (f"only {n_feasible} feasible random configurations were found ({rules}; n_random_candidates = "
+                f"{cfg.n_random_candidates}), fewer than the {cfg.n_configurations} configurations asked for: "
+                "lower n_configurations or the margins, or check the robot's limits, capsules and tracker pose")
+    per_axis = cfg.grid_points_per_axis(robot.nq)
+    return (f"only {n_feasible} of the {per_axis}^{robot.nq} grid configurations (grid_per_axis = "
+            f"{per_axis}) are feasible ({rules}), fewer than the {cfg.n_configurations} configurations "
+            "asked for: raise grid_per_axis or lower n_configurations")
+
+
+def working_jacobian(robot: RobotModel, mm: em.MeasurementModel, Qw: np.ndarray, basis: np.ndarray) -> np.ndarray:
+    """TCP-position Jacobian rows (3 n_w, p) at working configurations wrt ``theta`` (base frame;
+    tracker and reflector parameters do not move the TCP; compliances by the gravity deflection,
+    :func:`pipeline.calibration.task_space.tcp_jacobian`)."""
+    return ts.tcp_jacobian(mm, Qw, basis, robot.frame_tcp)
+
+
+def index_spec(cfg: Config, robot: RobotModel, mm: em.MeasurementModel, basis: np.ndarray, rng: np.random.Generator,
+               region: ts.WorkingRegion | None = None) -> tuple[ix.IndexSpec, np.ndarray | None]:
+    """The observability index; for the TCP criteria random collision-free working poses (``V``: in
+    the working region, :mod:`pipeline.calibration.task_space`)."""
+    if cfg.index_name == "V":
+        Qw = ts.sample_region(robot, region or ts.default_region(robot), cfg.n_region_configurations, rng)
+        return ts.task_space_spec(mm, Qw, basis, cfg.design_figure), Qw
+    if not cfg.index_name.startswith("tcp_A"):
+        return ix.IndexSpec(cfg.index_name), None
+    chain = cd.chain_from_robot(robot)
+    Qw, _ = cd.random_candidates(chain, cfg.n_working_configurations, rng, visibility=False)
+    Jw = working_jacobian(robot, mm, Qw, basis)
+    return ix.IndexSpec(cfg.index_name, working_jacobian=Jw, n_working=len(Qw)), Qw
+
+
+def measured_design(robot: RobotModel, mm: em.MeasurementModel, basis: np.ndarray, Q: np.ndarray, spec: ix.IndexSpec,
+                    T_tb, method: str, mounted: np.ndarray | None = None) -> dict:
+    """Observability index of the configurations ``Q`` actually measured (nominal model, whitened
+    by the tracker noise model, tracker pose ``T_tb``, the payload's torque where ``mounted``);
+    same conventions as the selection."""
+    G = design_blocks(mm, Q, basis, T_tb, mounted).reshape(-1, basis.shape[1])
+    Y = cd.nominal_jacobian(cd.chain_from_robot(robot), Q, T_tb)[0] if spec.needs_positions else None
+    value = ix.evaluate(spec, G.T @ G, len(Q), Y)
+    return {"method": method, "index_name": spec.name, "n_configurations": int(len(Q)), "index_value": float(value)}

@@ -14,18 +14,25 @@ file, wrong column count, non-numeric or NaN/inf value, too few rows, joint angl
 limits, values in the wrong unit: positions in mm, angles in degrees) raises
 :class:`pipeline.errors.DataFileError` naming the file, the file line (1-based, as an editor shows
 it) and column and the problem, before anything is written.
+
+Without a file the simulated tracker measures the designed configurations
+(:func:`measure_simulated`) and the held-out poses of the validation (:func:`heldout_measurements`).
 """
 
 from __future__ import annotations
 
 import csv
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from pipeline.errors import DataFileError
+from pipeline.calibration import candidates as cd
+from pipeline.calibration.config import Config
+from pipeline.calibration.estimate import Estimate
+from pipeline.errors import DataFileError, InfeasibleError
 from pipeline.robot.model import RobotModel
 from pipeline.robot.payload import Payload
 
@@ -77,6 +84,29 @@ def concatenate(parts: list[Measurements], source: str) -> Measurements:
     return Measurements(np.vstack([p.Q for p in parts]), np.vstack([p.Y for p in parts]),
                         np.concatenate([p.sigma_m for p in parts]), source, rot,
                         sum(p.n_requested for p in parts), invisible, mounted)
+
+
+def heldout_measurements(robot: RobotModel, real, est: Estimate, cfg: Config,
+                         rng: np.random.Generator) -> Measurements:
+    """>= n_heldout visible random poses (predicted with the identified tracker pose), measured."""
+    chain = cd.chain_from_robot(robot, est.transform_tracker_to_base)
+    margins = cd.FilterMargins(cfg.margin_collision_m, math.radians(1.0), 0.005)
+    parts: list[Measurements] = []
+    have = 0
+    for _ in range(10):
+        need = cfg.n_heldout - have
+        Q, _ = cd.random_candidates(chain, int(need * 1.1) + 10, rng, margins)
+        m = measure_simulated(real, Q, rng)
+        parts.append(m)
+        have += len(m)
+        if have >= cfg.n_heldout:
+            break
+    Q = np.concatenate([p.Q for p in parts])[: cfg.n_heldout]
+    Y = np.concatenate([p.Y for p in parts])[: cfg.n_heldout]
+    s = np.concatenate([p.sigma_m for p in parts])[: cfg.n_heldout]
+    if len(Q) < cfg.n_heldout:
+        raise InfeasibleError(None, "calibration.n_heldout", f"only {len(Q)} visible held-out poses found")
+    return Measurements(Q, Y, s, "simulated tracker (held-out)", None, sum(p.n_requested for p in parts))
 
 
 #: lever of the virtual marker points of a 6-D reading (m)

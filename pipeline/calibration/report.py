@@ -1,4 +1,5 @@
-"""Summary (``summary.json``) and report (``report.md``) of the calibration stage."""
+"""Summary (``summary.json``), report (``report.md``), arrays (``results.npz``) and data of the
+calibration stage."""
 
 from __future__ import annotations
 
@@ -242,3 +243,63 @@ def report_markdown(out: CalibrationOutcome, cfg: Config, robot: RobotModel) -> 
         md += [f"### Held-out validation (paper 004 Table 2 layout; {out.validation['source']})", "",
                va.table_markdown(out.validation)]
     return "\n".join(md)
+
+
+#: at most about this many candidates are saved for the viewer (every k-th)
+VIEWER_CANDIDATES = 2000
+
+
+def stage_arrays(out: CalibrationOutcome) -> dict[str, np.ndarray]:
+    """``results.npz``: the measured record, the fit, the identified parameters, the held-out
+    errors and the viewer's layers (candidates thinned to about :data:`VIEWER_CANDIDATES`)."""
+    est = out.estimate
+    arrays = {
+        "configurations_selected": out.measurements.Q,
+        "tracker_readings_m": out.measurements.Y,
+        "tracker_sigma_m": out.measurements.sigma_m,
+        "fit_residuals_m": out.fit["residuals_after_m"],
+        "parameters_identified": est.theta,
+        "parameters_std": est.std,
+        "parameter_covariance": est.covariance,
+        "transform_tracker_to_base": est.transform_tracker_to_base.homogeneous,
+    }
+    if out.rejection is not None and out.rejection.n_rejected:
+        arrays["outliers_rejected_rows"] = np.asarray(out.rejection.rejected, int)
+    if out.measurements.invisible is not None and len(out.measurements.invisible):
+        arrays["configurations_not_visible"] = out.measurements.invisible
+    if out.validation is not None:
+        arrays["heldout_errors_before_m"] = out.validation["errors_before_m"]
+        arrays["heldout_errors_after_m"] = out.validation["errors_after_m"]
+        arrays["heldout_predicted_std_m"] = out.validation["predicted_std_m"]
+    if "static_torques" in out.notes:                     # elastostatic model: for later gravity models
+        arrays.update(out.notes["static_torques"].to_arrays())
+    if out.notes.get("heldout_configurations") is not None:   # for the viewer's layers
+        arrays["configurations_heldout"] = out.notes["heldout_configurations"]
+    if out.candidates is not None and len(out.candidates):
+        arrays["configurations_candidates"] = out.candidates.Q[:: max(1, len(out.candidates) // VIEWER_CANDIDATES)]
+    if out.selection is not None:
+        arrays["index_history"] = np.array(out.selection.history, float).reshape(-1, 2)
+    return arrays
+
+
+def _scalars(d: dict | None) -> dict | None:
+    return None if d is None else {k: v for k, v in d.items() if not isinstance(v, np.ndarray)}
+
+
+def stage_data(out: CalibrationOutcome) -> dict:
+    """``data.json``: the identifiability report, the identified values with their std, the
+    scalar parts of validation, fit and prediction, the design's records."""
+    est = out.estimate
+    return {
+        "identifiability": out.report.as_dict(),
+        "identified": {n: [float(v), float(s)] for n, v, s in
+                       zip(out.report.identifiable_names, est.theta, est.std, strict=True)},
+        "validation": _scalars(out.validation),
+        "fit": _scalars(out.fit),
+        "prediction": _scalars(out.prediction),
+        "selection": out.selection.as_dict() if out.selection is not None else None,
+        "measured_design": out.measured_design,
+        "candidate_counts": out.candidates.counts if out.candidates is not None else None,
+        "gradient_design": out.gradient.as_dict() if out.gradient is not None else None,
+        "design_table": out.design_table,
+    }

@@ -20,19 +20,28 @@ expand_orientation`): the errors ``e_0, e_x, e_y`` of the marker origin and of t
 the tracker frame), so ``w = (g_y[z], -g_x[z], g_x[y])`` with ``g_k = R^T (e_k - e_0) / L``: a linear
 map ``S`` of the point errors, whose covariance follows as above with ``J_h, B_h`` replaced by
 ``S J_h, S B_h``; ``E|w|^2`` adds ``3 sigma_rot^2`` of a noisy reading.
+
+Without a held-out set (a measurement file, no validation file) only the prediction is reported,
+over random visible poses (:func:`predicted_on_random_poses`).
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
+from pipeline.calibration import candidates as cd
+from pipeline.calibration import noise_model as nm
+from pipeline.calibration.config import Config
 from pipeline.calibration.error_model import MeasurementModel
 from pipeline.calibration.estimate import MAX_COMPLIANCE_RELATIVE_STD, Estimate
 from pipeline.calibration.gravity_uncertainty import GravityCovariance
-from pipeline.calibration.measure import MARKER_LEVER_M, Measurements
+from pipeline.calibration.measure import MARKER_LEVER_M, Measurements, noise_model_sigma
 from pipeline.quality import QualityGates
+from pipeline.robot.model import RobotModel
 from pipeline.robot.residual_map import ResidualMap
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 
@@ -162,6 +171,19 @@ def predicted_error(mm: MeasurementModel, est: Estimate, Q: np.ndarray, sigma_m:
             "gravity_model_share": float(np.mean(var_gravity) / np.mean(var_total)),
             "noise_total_sigma_m": float(np.sqrt(np.mean(np.asarray(sigma_m, float) ** 2))),
             "predicted_std_m": np.sqrt(var_total)}
+
+
+def predicted_on_random_poses(robot: RobotModel, mm: MeasurementModel, est: Estimate, cfg: Config,
+                              rng: np.random.Generator, gravity: GravityCovariance | None = None,
+                              noise: nm.NoiseModel | None = None, residual_map: ResidualMap | None = None) -> dict:
+    """Covariance-predicted error over ``n_heldout`` random collision-free poses visible to the
+    identified tracker (nominal model only: nothing is measured)."""
+    chain = cd.chain_from_robot(robot, est.transform_tracker_to_base)
+    margins = cd.FilterMargins(cfg.margin_collision_m, math.radians(1.0), 0.005)
+    Q, _ = cd.random_candidates(chain, cfg.n_heldout, rng, margins)
+    sigma = (noise or nm.NoiseModel()).total(noise_model_sigma(robot, mm.predict(Q, est.x, est.registration)))
+    return predicted_error(mm, est, Q, sigma, gravity, residual_map)
+
 
 
 def fit_residuals(mm: MeasurementModel, est: Estimate, meas: Measurements,
