@@ -45,6 +45,7 @@ from pipeline.calibration import design as ds
 from pipeline.calibration import design_bound as db
 from pipeline.calibration import design_rounding as dr
 from pipeline.calibration import indices as ix
+from pipeline.calibration import measure as ms
 from pipeline.calibration import stage as st
 from pipeline.calibration import task_space as ts
 from pipeline.papers.calib_design import study_pool
@@ -82,7 +83,7 @@ def robot_case(name: str, a: argparse.Namespace) -> dict:
         cfg = st.Config(candidates="random", n_random_candidates=a.large_pool)
         large = st.build_candidates(pool.robot, cfg, pool.basis, np.random.default_rng([7, a.n, a.large_pool]))
     # the V design at fewer configurations, for the effort question (own stream per size)
-    sizes = range(st.min_configurations(p) + 1, a.n + 1)
+    sizes = range(ms.min_configurations(p) + 1, a.n + 1)
     opt_v = db.optimal_approximate_design(G, spec_v.weight_matrix(p), tol=dr.START_TOL,
                                           max_iterations=dr.START_MAX_ITERATIONS)
     rr_sizes = {k: dr.approximate_remove_and_replace(G, spec_v, k, np.random.default_rng([7, k, 1]),

@@ -39,15 +39,15 @@ class BufferedFunction:
 
     def __call__(self, *args: npt.ArrayLike) -> list[np.ndarray]:
         if not self.dense:
-            out = self.function(*args)
-            outs: Sequence[ca.DM] = out if isinstance(out, (list, tuple)) else [out]
+            outs: Sequence[ca.DM] = self.function.call([ca.DM(np.asarray(a, float)) for a in args])
             return [np.asarray(o, float) for o in outs]
         inputs = [self._column_major(i, a) for i, a in enumerate(args)]
+        # casadi's stubs name a third argument (the size in bytes) that its SWIG typemap takes from the buffer
         for i, a in enumerate(inputs):
-            self._buffer.set_arg(i, memoryview(a))
+            self._buffer.set_arg(i, memoryview(a))  # type: ignore[call-arg, arg-type]
         outputs = [np.empty(r * c) for r, c in self.out_shapes]
         for i, o in enumerate(outputs):
-            self._buffer.set_res(i, memoryview(o))
+            self._buffer.set_res(i, memoryview(o))  # type: ignore[call-arg, arg-type]
         self._evaluate()
         return [o.reshape((c, r)).T for o, (r, c) in zip(outputs, self.out_shapes, strict=True)]
 

@@ -9,7 +9,7 @@ import nbformat
 
 def test_calibration_notebook_executes(tmp_path, execute_notebook):
     text = execute_notebook("01_calibration.ipynb", tmp_path)
-    assert "held-out RMS error before" in text and "x tracker sigma" in text
+    assert "held-out RMS error before" in text and "x noise sigma" in text
 
 
 def test_notebook_file_is_up_to_date():
