@@ -36,7 +36,7 @@ from pipeline.config import load_config
 from pipeline.runner import run_pipeline
 
 TARGET_S = 150.0
-_TIME_WORDS = ("time_s", "runtime_s", "realtime_factor", "speedup", "per_s", "duration_s")
+_TIME_WORDS = ("time_s", "runtime_s", "realtime_factor", "speedup", "per_s", "duration_s", "cpu_ratio")
 
 
 def _cpu_s() -> float:

@@ -18,15 +18,16 @@ from pipeline.viewer import Viewer, find_saved_motions
 CHROMIUM = shutil.which("chromium") or ("/usr/bin/chromium" if Path("/usr/bin/chromium").exists() else None)
 
 
-def screenshot(url: str, out: Path, tmp_path: Path, size: str = "800,600") -> np.ndarray:
-    """Load ``url`` in headless Chromium and return the screenshot as an (H, W, C) float array."""
+def screenshot(url: str, out: Path, tmp_path: Path, size: str = "800,600", budget_ms: int = 5000) -> np.ndarray:
+    """Load ``url`` in headless Chromium and return the screenshot as an (H, W, C) float array
+    (``budget_ms``: the page's virtual time before the shot, for the scene to arrive)."""
     from matplotlib.image import imread
 
     profile = tmp_path / f"chromium-profile-{out.stem}"
     cmd = [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
            "--disable-background-networking", "--disable-component-update", "--disable-sync",
            f"--user-data-dir={profile}", f"--screenshot={out}", f"--window-size={size}",
-           "--virtual-time-budget=5000", url]
+           f"--virtual-time-budget={budget_ms}", url]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0 and out.exists(), proc.stderr[-2000:]
     return imread(out)[..., :3]
@@ -140,7 +141,7 @@ def robot_box(with_robot: np.ndarray, without_robot: np.ndarray, threshold: floa
 
 def framed_screenshots(robot, q: np.ndarray, tmp_path: Path) -> tuple[np.ndarray, np.ndarray, Viewer]:
     """Screenshots of the viewer with ``robot`` at ``q`` and with the robot hidden (up to three
-    tries while a heavy mesh scene has not reached the browser)."""
+    tries while a heavy mesh scene has not reached the browser, each waiting three times longer)."""
     import meshcat
 
     vis = meshcat.Visualizer()
@@ -148,9 +149,10 @@ def framed_screenshots(robot, q: np.ndarray, tmp_path: Path) -> tuple[np.ndarray
         viewer = Viewer(robot, viewer=vis)
         viewer.show(q)
         for attempt in range(3):
-            with_robot = screenshot(vis.url(), tmp_path / f"robot{attempt}.png", tmp_path)
+            budget_ms = 5000 * 3 ** attempt
+            with_robot = screenshot(vis.url(), tmp_path / f"robot{attempt}.png", tmp_path, budget_ms=budget_ms)
             vis[viewer.root].set_property("visible", False)
-            without = screenshot(vis.url(), tmp_path / f"hidden{attempt}.png", tmp_path)
+            without = screenshot(vis.url(), tmp_path / f"hidden{attempt}.png", tmp_path, budget_ms=budget_ms)
             vis[viewer.root].set_property("visible", True)
             if changed_fraction(with_robot, without) > 0.005:
                 break

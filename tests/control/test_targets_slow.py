@@ -36,7 +36,7 @@ def test_feedforward_targets_on_the_rigid_arm(tmp_path):
     assert s["tcp_tracking_error_max_m"][none] >= 5 * s["tcp_tracking_error_max_m"][ff]
     assert s["tcp_error_registered_max_m"][none] >= 5 * s["tcp_error_registered_max_m"][ff]
     assert np.all(np.asarray(s["lag_error_max_rad"][none]) >= 5 * np.asarray(s["lag_error_max_rad"][ff]))
-    assert s["realtime_factor"] >= 10
+    assert s["realtime_factor_cpu"] >= 10      # CPU time: the wall clock of a loaded machine says little
     assert s["tcp_error_rms_calibrated_kinematics_m"] < s["tcp_error_rms_nominal_kinematics_m"]
     assert max(s["max_torque_ratio"].values()) <= 1.0
 

@@ -46,7 +46,7 @@ def test_saved_robot_reloads_bit_for_bit(tmp_path, name):
 
 #: keys of wall-clock measurements (results such as plan durations or settling times are compared)
 TIMING_WORDS = ("solve_time", "search_time", "compile_time", "stage_time", "selection_time", "reference_time",
-                "cpu_time", "run_time", "runtime", "realtime", "speedup", "timings", "compile_s")
+                "cpu_time", "cpu_ratio", "run_time", "runtime", "realtime", "speedup", "timings", "compile_s")
 
 
 def _drop_timings(value: object) -> object:

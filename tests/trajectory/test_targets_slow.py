@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from pipeline.robot.defaults import ptp_move_rad
 from pipeline.trajectory.config import TrajectoryConfig
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.solve import cp_joint_path, plan_cp, plan_ptp, ptp_problem, solve_ptp_verified
@@ -36,7 +37,8 @@ def test_cp_targets(rx130l, setup):
 def ptp(rx130l, setup):
     cfg, pm = setup
     problem = ptp_problem(pm, rx130l, cfg)
-    q0, q1 = np.radians(cfg.ptp_start_deg), np.radians(cfg.ptp_goal_deg)
+    q0, q1 = (ptp_move_rad(rx130l) if cfg.ptp_start_deg is None       # None: derived from the robot
+              else (np.radians(cfg.ptp_start_deg), np.radians(cfg.ptp_goal_deg)))
     return problem, q0, q1, plan_ptp(pm, problem, q0, q1, cfg, pareto=False)
 
 
