@@ -42,6 +42,7 @@ STUDIES: dict[str, str] = {
     "calib-000": "pipeline.papers.calib_000:study",
     "calib-002": "pipeline.papers.calib_002:study_002",
     "calib-003": "pipeline.papers.calib_003:study_003",
+    "calib-003-sizes": "pipeline.papers.calib_003_sizes:study",
     "calib-design": "pipeline.papers.calib_design:study_design",
     # whole-chain paper reproductions
     "paper-004": "pipeline.papers.chain_004:study_paper_004",

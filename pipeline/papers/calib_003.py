@@ -116,6 +116,24 @@ def _errors(e: np.ndarray) -> dict:
     return {"mean": float(e.mean()), "rms": float(np.sqrt(np.mean(e ** 2))), "max": float(e.max())}
 
 
+def pool_setup(seed: int, pool: int, n_val: int) -> tuple:
+    """The seed's UR10, error model, parameter-set report and identifiable basis, pool and validation
+    poses, the pool's Jacobian in the paper's units and its positions (mm), and the seed's generator
+    after drawing them."""
+    robot = ur10_robot()
+    mm = em.MeasurementModel(robot)
+    rng = np.random.default_rng([seed, 3])
+    cfg = st.Config(candidates="random")
+    rep, basis = st.identify_parameter_set(robot, mm, cfg, rng)
+    chain = cd.chain_from_robot(robot)
+    margins = cd.FilterMargins(cfg.margin_collision_m, math.radians(cfg.margin_incidence_deg), cfg.margin_beam_m)
+    Q_all, _ = cd.random_candidates(chain, pool + n_val, rng, margins)
+    Qp, Qv = Q_all[:pool], Q_all[pool:]
+    cs = cd.build_candidate_set(chain, Qp, basis, robot.tracker.transform_tracker_to_base)
+    J = paper_units_jacobian(cs.G, cs.sigma_m, rep.identifiable_names)
+    return robot, mm, rep, basis, Qp, Qv, J, 1e3 * cs.Y, rng
+
+
 def run_seed(seed: int, pool: int, n_sel: int, n_val: int, truths: dict[str, TruthConfig],
              sweep_truths: dict[str, TruthConfig], sweep_keys: tuple[str, ...] = ("none", "bsaa_Oc"),
              small_n: int = 0) -> dict:
@@ -123,18 +141,7 @@ def run_seed(seed: int, pool: int, n_sel: int, n_val: int, truths: dict[str, Tru
     (the sweep seeds) also the Oc searches in the paper's units and, when ``small_n``, the searches for
     ``small_n`` poses of the same pool (calibrated under the last of ``truths``)."""
     with single_thread_blas():
-        robot = ur10_robot()
-        mm = em.MeasurementModel(robot)
-        rng = np.random.default_rng([seed, 3])
-        cfg = st.Config(candidates="random")
-        rep, basis = st.identify_parameter_set(robot, mm, cfg, rng)
-        chain = cd.chain_from_robot(robot)
-        margins = cd.FilterMargins(cfg.margin_collision_m, math.radians(cfg.margin_incidence_deg), cfg.margin_beam_m)
-        Q_all, _ = cd.random_candidates(chain, pool + n_val, rng, margins)
-        Qp, Qv = Q_all[:pool], Q_all[pool:]
-        cs = cd.build_candidate_set(chain, Qp, basis, robot.tracker.transform_tracker_to_base)
-        J = paper_units_jacobian(cs.G, cs.sigma_m, rep.identifiable_names)
-        pos_mm = 1e3 * cs.Y
+        robot, mm, rep, basis, Qp, Qv, J, pos_mm, rng = pool_setup(seed, pool, n_val)
         scale = ps.reference_scale(J, pos_mm, n_sel, rng)
         designs: dict[str, ps.SearchResult | np.ndarray] = {"none": ps.random_subset(J, n_sel, rng)}
         for alg, fn in (("detmax", ps.detmax), ("bsaa", ps.bsaa)):

@@ -46,6 +46,7 @@ from typing import Any
 
 from pipeline.config import CONFIGS_DIR, RunConfig, load_config
 from pipeline.errors import PipelineError
+from pipeline.papers import chain_004_stiffness as stiff
 from pipeline.papers.chain_004_rows import Row, Run, all_rows, markdown
 from pipeline.progress import Progress
 from pipeline.runner import run_pipeline
@@ -192,6 +193,26 @@ def stored_rows(seeds: Sequence[int], quick: bool, out: Path, failures: dict[str
     return all_rows(main, found["rigid"], found["acceleration_limits"], found["full_torque"], failures or {})
 
 
+def stiffness_study(scales: Sequence[float], seeds: Sequence[int], out: Path) -> int:
+    """Fig. 2(b) against the joint stiffness (:mod:`pipeline.papers.chain_004_stiffness`)."""
+    t0 = time.perf_counter()
+    print(f"paper 004 Fig. 2(b) against the joint stiffness (quick sizes, the paper's settings, seeds {list(seeds)}, "
+          f"joint compliance x {list(scales)}); runs under {out}")
+    settings = {**PAPER_SETTINGS, **QUICK_SETTINGS}
+    points = stiff.run_stiffness(scales, seeds, lambda cfg: run_chain(cfg, out, print),
+                                 lambda seed, s: stiff.stiffness_config(seed, s, QUICK_CONFIG, settings))
+    print("\n" + stiff.markdown(points))
+    drastic = stiff.largest_drastic_scale(points)
+    print("\nlargest compliance scale with a drastic cut on every seed: "
+          + ("none of those run" if drastic is None else f"{drastic:g} (stiffness x {1 / drastic:g})"))
+    elapsed = time.perf_counter() - t0
+    print(f"study time {elapsed:.0f} s")
+    save_result(NAME, {"args": {"compliance_scales": list(scales), "seeds": list(seeds)},
+                       "paper_settings": settings, "points": points, "largest_drastic_scale": drastic,
+                       "time_s": elapsed}, "result-stiffness.json")
+    return 0
+
+
 def study_paper_004(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(prog=f"study {NAME}", description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="configs/quick.yaml sizes (the test)")
@@ -200,10 +221,15 @@ def study_paper_004(argv: list[str]) -> int:
     ap.add_argument("--no-experiments", action="store_true", help="only the main chain (no rigid / acceleration runs)")
     ap.add_argument("--jobs", type=int, default=1, help="accepted for uniformity; the runs are sequential")
     ap.add_argument("--report", action="store_true", help="only print the table from the runs under --out")
+    ap.add_argument("--compliance-scales", type=float, nargs="+", default=None,
+                    help="only the Fig. 2(b) stiffness experiment: the chain up to control (quick sizes) on hidden "
+                         "robots with joint compliance x S (pipeline.papers.chain_004_stiffness)")
     a = ap.parse_args(argv)
     if a.seeds is None:
-        a.seeds = [1] if a.quick else [1, 2, 3]
+        a.seeds = [1] if a.quick or a.compliance_scales else [1, 2, 3]
     out = a.out if a.out is not None else study_dir(NAME) / ("runs-quick" if a.quick else "runs")
+    if a.compliance_scales:
+        return stiffness_study(a.compliance_scales, a.seeds, out)
     t0 = time.perf_counter()
     print(f"paper 004 §2.3.3, §4, §5 on the RX130L ({'quick' if a.quick else 'full'} sizes, seeds {a.seeds}); "
           f"runs under {out}")

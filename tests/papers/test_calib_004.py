@@ -7,7 +7,7 @@ import pytest
 
 from pipeline.papers import calib_004 as p4
 from pipeline.papers import calib_004_optical as op
-from pipeline.robot.instruments import OpticalMargins
+from pipeline.robot.instruments import OpticalMargins, optical_spec, stated_sigmas
 from pipeline.robot.model import RobotModel
 
 MARGINS = OpticalMargins(np.radians(1.0), 0.05, 0.01)
@@ -16,7 +16,7 @@ MARGINS = OpticalMargins(np.radians(1.0), 0.05, 0.01)
 @pytest.fixture(scope="module")
 def quick() -> tuple[dict, dict]:
     grid = p4.visible_grid("rx130l", 7, MARGINS)
-    row = p4._seed(("rx130l", 1, "ideal", grid, 32, 60, ["O3"], MARGINS, "registered", 1.0, None))
+    row = p4._seed(("rx130l", 1, "ideal", grid, 32, 60, ["O3"], MARGINS, "registered", 1.0, None, 1.0, True))
     return grid, row
 
 
@@ -55,3 +55,29 @@ def test_calibration_reduces_the_held_out_errors(quick):
         assert {"max_abs", "half_peak_to_peak"} <= r["after"][ax].keys()
     assert r["after"]["position"]["rms"] < 0.5 * r["before"]["position"]["rms"]
     assert r["after"]["orientation"]["rms"] < r["before"]["orientation"]["rms"]
+
+
+def test_whole_grid_has_the_largest_index_but_not_per_pose(quick):
+    """Information adds up: the whole candidate set's Lambda dominates every subset's, so its B =
+    lambda_min is at least R&R's; per measured pose the R&R optimum is the better design."""
+    _, row = quick
+    d = row["designs"]
+    whole = d[p4.WHOLE_GRID]
+    assert whole["commanded"] == row["n_candidates"]
+    for key in ("rr_O3", *p4.BASELINES):
+        assert whole["B"] >= d[key]["B"] * (1 - 1e-9)
+    assert d["rr_O3"]["B_per_pose"] > whole["B_per_pose"]
+
+
+def test_larger_probe_halves_the_orientation_noise_only():
+    """A probe twice as large (diodes about the marker origin x 2): the Kabsch fit's stated
+    orientation sigma halves, the position sigma (mean of the diodes' noise) stays."""
+    sig = np.array([1e-4])
+    out = {}
+    for scale in (1.0, 2.0):
+        spec = optical_spec(p4.load_robot("rx130l", scale))
+        out[scale] = stated_sigmas(spec, np.ones((1, len(spec.probe_diodes_m)), bool), sig)
+    assert np.isclose(out[2.0][0][0], out[1.0][0][0], rtol=1e-9)
+    assert np.isclose(out[2.0][1][0], 0.5 * out[1.0][1][0], rtol=1e-9)
+    scaled, fresh = optical_spec(p4.load_robot("rx130l", 2.0)), optical_spec(RobotModel.load("rx130l"))
+    assert np.allclose(scaled.probe_diodes_m, 2.0 * fresh.probe_diodes_m)    # a later load is unchanged

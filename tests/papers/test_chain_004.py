@@ -15,6 +15,7 @@ import pytest
 from pipeline.config import load_config
 from pipeline.papers import chain_004 as study
 from pipeline.papers import chain_004_rows as rows_mod
+from pipeline.papers import chain_004_stiffness as stiff
 from pipeline.sim.truth import TruthConfig
 from pipeline.studies import resolve
 
@@ -53,6 +54,25 @@ def test_experiment_configs():
         assert _get(main, key) == value, key
     with pytest.raises(ValueError):
         study.chain_config(1, quick=True, variant="other")
+
+
+def test_stiffness_configs_scale_only_the_joint_compliance():
+    """The Fig. 2(b) stiffness runs: the quick chain up to control with the paper's settings, the
+    default hidden robot except its joint compliance, one run name per (scale, seed)."""
+    settings = {**study.PAPER_SETTINGS, **study.QUICK_SETTINGS}
+    a = stiff.stiffness_config(1, 0.1, study.QUICK_CONFIG, settings)
+    b = stiff.stiffness_config(1, 1.0, study.QUICK_CONFIG, settings)
+    assert a.truth.joint_compliance_scale == 0.1 and b.truth == TruthConfig()
+    assert a.name != b.name and a.stages == list(stiff.STIFFNESS_STAGES)
+    for key, value in study.PAPER_SETTINGS.items():
+        assert _get(a, key) == value, key
+
+
+def test_largest_drastic_scale_needs_every_seed():
+    pts = [{"compliance_scale": s, "seed": k, "tcp_reduction": r}
+           for s, k, r in ((1.0, 1, 1.0), (0.1, 1, 3.0), (0.1, 2, 1.5), (0.01, 1, 9.0), (0.01, 2, 8.0))]
+    assert stiff.largest_drastic_scale(pts) == 0.01
+    assert stiff.largest_drastic_scale(pts[:1]) is None
 
 
 def test_stat_formats_one_and_many_seeds():
