@@ -23,7 +23,7 @@ from __future__ import annotations
 import argparse
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -47,7 +47,7 @@ def select(J: np.ndarray, pos_mm: np.ndarray, n: int, rng: np.random.Generator) 
     """The random subset and every search of :data:`SEARCHES` for ``n`` poses of the pool."""
     scale = ps.reference_scale(J, pos_mm, n, rng)
     out = {"none": np.sort(ps.random_subset(J, n, rng))}
-    fns = {"detmax": ps.detmax, "bsaa": ps.bsaa}
+    fns: dict[str, Callable[..., ps.SearchResult]] = {"detmax": ps.detmax, "bsaa": ps.bsaa}
     for alg, name in SEARCHES:
         out[f"{alg}_{name}"] = np.sort(fns[alg](J, pos_mm, name, n, rng, scale).selected)
     return out
@@ -157,9 +157,9 @@ def study(argv: list[str]) -> int:
     ap.add_argument("--pool", type=int, default=583, help="pool size (the paper's real experiment: 583)")
     ap.add_argument("--sizes", type=int, nargs="+", default=[30, 60, 100, 200])
     ap.add_argument("--validation", type=int, default=50)
-    ap.add_argument("--quick", action="store_true", help="2 seeds, 20 and 40 of 120 poses (the test)")
+    ap.add_argument("--quick", action="store_true", help="at most 2 seeds, 20 and 40 of 120 poses (the test)")
     a = ap.parse_args(argv)
     if a.quick:
-        a.seeds, a.pool, a.sizes = 2, 120, [20, 40]
+        a.seeds, a.pool, a.sizes = min(a.seeds, 2), 120, [20, 40]
     save_result("calib-003-sizes", study_sizes(a.seeds, a.pool, a.sizes, a.validation))
     return 0

@@ -11,6 +11,7 @@ from pipeline import studies
 from pipeline.calibration import indices as ix
 from pipeline.papers import calib_003 as p3
 from pipeline.papers import calib_003_search as ps
+from pipeline.papers import calib_003_sizes as p3s
 
 
 def _pool(seed: int = 0, N: int = 120, p: int = 12) -> tuple[np.ndarray, np.ndarray]:
@@ -107,3 +108,22 @@ def test_quick_study_prints_every_row_and_calibrates(tmp_path, monkeypatch, caps
             assert d[f"{alg}_{name}"]["indices"][name] >= d["none"]["indices"][name]
     # without unmodelled effects the calibrated error is at the tracker-noise level (micrometres)
     assert res["rows"][0]["truths"]["literal"]["none"]["mean"] < 50e-6
+
+
+@pytest.mark.slow
+def test_quick_sizes_study_calibrates_every_design_to_the_noise_floor(tmp_path, monkeypatch):
+    """The literal (model-consistent) truth at small subset sizes: every design calibrates, its model
+    error is micrometres, "none" is its own paired reference, and each search raises its index."""
+    monkeypatch.setattr(studies, "study_dir", lambda name, root=None: tmp_path)
+    assert p3s.study(["--quick", "--seeds", "1"]) == 0
+    res = json.loads((tmp_path / "result.json").read_text())
+    assert res["args"]["sizes"] == [20, 40] and set(res["table_sizes"]) == {"20", "40"}
+    for n, per in res["rows"][0]["sizes"].items():
+        err = per["errors"]
+        for key in p3s.design_keys():
+            assert err[key]["measured"] == int(n)
+            assert err[key]["mean"] < err["uncalibrated"]["mean"] / 20
+            assert err[key]["model"] < 50e-6
+        assert per["indices"]["detmax_O1"]["O1"] >= per["indices"]["none"]["O1"]
+        assert per["indices"]["detmax_O3"]["O3"] >= per["indices"]["none"]["O3"]
+        assert res["table_sizes"][n]["none"]["paired_model_um"][0] == 0.0
