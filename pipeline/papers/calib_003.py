@@ -86,9 +86,12 @@ def ur10_urdf() -> Path:
 
 
 def ur10_robot(tracker_distance_m: float = TRACKER_DISTANCE_M) -> RobotModel:
-    """UR10 with the paper's tracker: 2.5 m away, isotropic noise of a uniform +-10 µm reading (σ = 10/√3 µm)."""
+    """UR10 with the paper's tracker: 2.5 m away, isotropic noise of a uniform +-10 µm reading (σ = 10/√3 µm).
+    Paper 003 §4.2 simulates the readings with that noise alone, so the arm's repeatability scatter
+    (robot.yaml ``repeatability_m``, 0.05 mm for this UR10, added by the simulated tracker) is off."""
     robot = RobotModel.load(ur10_urdf())
     spec = copy.deepcopy(robot.spec)
+    spec.repeatability_m = None
     old = spec.tracker
     t = np.array(old.transform_tracker_to_base.translation)
     t[:2] *= tracker_distance_m / max(float(np.linalg.norm(t[:2])), 1e-9)
