@@ -105,7 +105,7 @@ def test_no_search_beats_random_poses_at_500_of_583():
     assert res["args"]["select"] == 500 and res["args"]["pool"] == 583 and res["args"]["seeds"] >= 10
     for key, v in res["table_realistic"].items():
         if key != "uncalibrated":
-            assert v["paired_diff"][0] > -2 * v["paired_diff"][1], key
+            assert v["paired_diff"][0] >= -2 * v["paired_diff"][1], key
     for key, v in res["table_literal"].items():
         if key != "uncalibrated":
             assert abs(v["paired_diff"][0]) < 0.1, key              # µm
