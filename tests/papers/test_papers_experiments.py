@@ -109,3 +109,18 @@ def test_no_search_beats_random_poses_at_500_of_583():
     for key, v in res["table_literal"].items():
         if key != "uncalibrated":
             assert abs(v["paired_diff"][0]) < 0.1, key              # µm
+
+
+def test_tcp_criterion_beats_random_and_parameter_designs_on_every_arm():
+    """Paper 000 at full sizes: on each KUKA arm the C_s (TCP) design has a smaller mean TCP variance
+    than the random and every C_p design, and over the 90 notional arms its mean gain over random
+    exceeds five standard errors."""
+    res = result("calib-000-full")
+    assert [a["arm"] for a in res["kuka"]] == ["kuka_kr15", "kuka_kr300", "kuka_kr500"]
+    for arm in res["kuka"]:
+        cs = arm["tcp_ca"]["tcp_var"]
+        assert cs < arm["random"], arm["arm"]
+        for p in ("param_literal_ca", "param_scaled_ca", "param_legacy_ca"):
+            assert cs < arm[p]["tcp_var"], (arm["arm"], p)
+    gain = res["headline"]["notional.tcp_vs_heuristic"]["ours_ca_vs_random_var"]
+    assert gain["n"] == 90 and gain["mean"] > 5 * gain["sem"] > 0
