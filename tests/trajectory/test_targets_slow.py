@@ -12,7 +12,7 @@ import pytest
 from pipeline.robot.defaults import ptp_move_rad
 from pipeline.trajectory.config import TrajectoryConfig
 from pipeline.trajectory.dynamics import PlanningModel
-from pipeline.trajectory.solve import cp_joint_path, plan_cp, plan_ptp, ptp_problem, solve_ptp_verified
+from pipeline.trajectory.solve import cp_joint_path, plan_cp, plan_ptp, ptp_problem
 from pipeline.trajectory.trajectories import check_trajectory
 
 pytestmark = pytest.mark.slow
@@ -48,8 +48,7 @@ def test_ptp_targets(setup, ptp):
     s = plan.summary()
     assert s["ptp_duration_vs_ruckig_ratio"] <= 0.87
     assert s["ptp_fine_violation"] <= 0.005
-    again = solve_ptp_verified(pm, problem, q0, q1, cfg, cfg.ptp_k1, cfg.ptp_k2, plan.weights)
-    assert again.info["cpu_time_s"] <= 2.0        # CPU time: the box is shared
+    # the solve time is a benchmark's figure (benchmarks/bench_trajectory.py), not a test's
 
 
 def test_ptp_energy_at_ruckig_duration(setup, ptp):
