@@ -11,7 +11,6 @@ speed of the compiled loop against the plain Python loop.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -24,7 +23,7 @@ from pipeline.errors import PipelineError
 from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import start_configuration
 from pipeline.robot.reference import cartesian_reference
-from pipeline.stage_api import StageContext
+from pipeline.stage_api import RealRobot, StageContext
 
 
 @dataclass
@@ -46,8 +45,8 @@ def measured_tcp(res: ClosedLoopResult) -> np.ndarray:
     return res.tcp_position_m
 
 
-def run_variant(real: Any, model: RobotModel, iso: IsoReference, q_d: np.ndarray, v_d: np.ndarray,  # Any: the
-                a_d: np.ndarray, cfg: ControlConfig, variant: str, servo: ServoDesign,  # simulated hidden robot
+def run_variant(real: RealRobot, model: RobotModel, iso: IsoReference, q_d: np.ndarray, v_d: np.ndarray,
+                a_d: np.ndarray, cfg: ControlConfig, variant: str, servo: ServoDesign,
                 noise_seed: int) -> ClosedLoopResult:
     """One closed-loop run of ``(q_d, v_d, a_d)`` on the reference's time grid with ``model``'s
     ``variant`` feedforward."""
@@ -88,6 +87,7 @@ def kinematics_comparison(ctx: StageContext, models: ControlModels, iso: IsoRefe
     main run itself): its TCP RMS error, and the registered RMS errors of both kinematics."""
     cfg: ControlConfig = ctx.config
     ref, main = iso.ref, measured.main
+    assert ctx.real is not None          # the stage checked it before any step
     if models.calibrated:
         nom_kin = with_dynamics_of(models.nominal, models.robot)
         q_start_n = start_configuration(nom_kin, iso.path.poses(np.array([0.0]))[0],

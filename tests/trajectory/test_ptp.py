@@ -10,8 +10,9 @@ import pytest
 from pipeline.errors import InfeasibleError, PipelineError, SolverError
 from pipeline.trajectory import solve as solve_mod
 from pipeline.trajectory.baselines import ruckig_torque_feasible
-from pipeline.trajectory.pareto import settle_pareto
+from pipeline.trajectory.pareto import dominated_flags, settle_pareto
 from pipeline.trajectory.ptp import energy_weights
+from pipeline.trajectory.report import pareto_figure
 from pipeline.trajectory.solve import plan_ptp
 from pipeline.trajectory.trajectories import check_trajectory
 
@@ -100,8 +101,6 @@ def test_pareto_front_monotone_and_flags_true(plan):
 
 
 def test_dominated_flags():
-    from pipeline.trajectory.pareto import dominated_flags
-
     # k2 = 0.003 of the review: 0.629 s / 1.760 is worse in both than 0.628 s / 1.416
     pts = [(0.629, 1.760), (0.628, 1.416), (0.64, 1.3), (0.64, 1.3), (0.70, 1.35)]
     assert dominated_flags(pts) == [True, False, False, False, True]   # equal points do not dominate
@@ -155,8 +154,6 @@ def test_settle_pareto_flags_a_dominated_main_solution():
 
 
 def test_pareto_figure_marks_dominated_points():
-    from pipeline.trajectory.report import pareto_figure
-
     fig = pareto_figure([(0.003, 0.629, 1.76), (0.01, 0.628, 1.416), (0.1, 0.64, 1.3)], (0.9, 1.2), "energy [s]")
     ax = fig.axes[0]
     lines = {ln.get_label(): ln for ln in ax.get_lines()}
