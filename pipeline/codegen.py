@@ -148,6 +148,24 @@ def _compile(sources: list[str], name: str, flags: Sequence[str], tmp: Path, lib
                       str(c_files[0]), name, tmp)
 
 
+def _library_path(name: str, functions: Sequence[ca.Function] | Callable[[], Sequence[ca.Function]], subdir: str,
+                  flags: Sequence[str], key: str | None, cache_dir: Path | None) -> tuple[Path, list[str] | None]:
+    """Where the library of ``functions`` is cached, and their C code when the key needed it."""
+    cache = _writable_cache((cache_dir if cache_dir is not None else cache_root()) / subdir)
+    sources = None
+    if key is None:
+        sources = _sources(functions() if callable(functions) else functions, name)
+        key = hashlib.sha256(("".join(sources) + " ".join(flags) + ca.__version__).encode()).hexdigest()[:20]
+    return cache / f"{name}_{key}.so", sources
+
+
+def cached_library(name: str, functions: Sequence[ca.Function], *, subdir: str = "casadi",
+                   flags: Sequence[str] = DEFAULT_FLAGS, cache_dir: Path | None = None) -> Path | None:
+    """The intact cached library of ``functions`` (as :func:`build_library` names it), else None."""
+    library, _ = _library_path(name, functions, subdir, flags, None, cache_dir)
+    return library if _intact(library) else None
+
+
 def build_library(name: str, functions: Sequence[ca.Function] | Callable[[], Sequence[ca.Function]], *,
                   subdir: str = "casadi", flags: Sequence[str] = DEFAULT_FLAGS, key: str | None = None,
                   cache_dir: Path | None = None) -> Path:
@@ -156,17 +174,12 @@ def build_library(name: str, functions: Sequence[ca.Function] | Callable[[], Seq
     Several functions are compiled in files of their own by up to :func:`compile_jobs` gcc
     processes side by side (the PtP NLP of a 6-axis arm: its Lagrangian Hessian is most of the
     code, so two cores take the time of the Hessian alone); the key does not depend on the cores."""
-    cache = _writable_cache((cache_dir if cache_dir is not None else cache_root()) / subdir)
-    sources = None
-    if key is None:
-        sources = _sources(functions() if callable(functions) else functions, name)
-        key = hashlib.sha256(("".join(sources) + " ".join(flags) + ca.__version__).encode()).hexdigest()[:20]
-    library = cache / f"{name}_{key}.so"
+    library, sources = _library_path(name, functions, subdir, flags, key, cache_dir)
     if _intact(library):
         return library
     if sources is None:
         sources = _sources(functions() if callable(functions) else functions, name)
-    with tempfile.TemporaryDirectory(dir=cache) as tmp:
+    with tempfile.TemporaryDirectory(dir=library.parent) as tmp:
         tmp_library = Path(tmp) / library.name
         _compile(sources, name, flags, Path(tmp), tmp_library)
         stamp = Path(tmp) / (library.name + ".sha256")

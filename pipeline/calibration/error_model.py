@@ -39,6 +39,7 @@ import numpy as np
 import pinocchio as pin
 
 from pipeline.casadi_buffers import BufferedFunction
+from pipeline.compiled_on_demand import CompiledOnDemand
 from pipeline.robot import spatial_sx as sx
 from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import KINEMATIC_COMPONENTS
@@ -65,7 +66,8 @@ class MeasurementModel:
 
     ``h(q, x, T0) -> y`` and ``hj(q, x, T0) -> (y, dy/dx)``; numeric batched helpers
     :meth:`predict` and :meth:`jacobian` evaluate them on ``(N, nq)`` configurations with
-    ``Function.map`` in chunks.
+    ``Function.map`` in chunks, compiled by gcc once their use pays for it
+    (:class:`pipeline.compiled_on_demand.CompiledOnDemand`; same numbers).
     """
 
     def __init__(self, robot: RobotModel, sym: SymbolicRobot | None = None, chunk: int = 4096, compliance: bool = False,
@@ -110,7 +112,7 @@ class MeasurementModel:
         # sensitivity of the reading to the gravity torques (gravity-model uncertainty)
         if self.compliance:
             self.ht = ca.Function("ht", [q, x, t0, *extra], [ca.jacobian(y, tau)])
-        self._maps: dict[tuple[str, int], BufferedFunction] = {}
+        self._functions: dict[str, CompiledOnDemand] = {}
 
     @property
     def gravity_model(self) -> pin.Model:
@@ -140,11 +142,10 @@ class MeasurementModel:
         return out
 
     def _mapped(self, name: str, n: int) -> BufferedFunction:
-        key = (name, n)
-        if key not in self._maps:
+        if name not in self._functions:
             f = {"h": self.h, "hj": self.hj, "pb": self.base_pos, "ht": getattr(self, "ht", None)}[name]
-            self._maps[key] = BufferedFunction(f.map(n))
-        return self._maps[key]
+            self._functions[name] = CompiledOnDemand(f, subdir="measurement_model")
+        return self._functions[name].mapped(n)
 
     def predict(self, Q: np.ndarray, x: np.ndarray, T0: pin.SE3, mounted: np.ndarray | None = None,
                 offsets: np.ndarray | None = None) -> np.ndarray:
