@@ -179,20 +179,9 @@ class Plant:
         if engine == "python":
             _, Y = loop.python_rollout(ls, self._link_model, self._p, x0, U, P, self._friction)
         elif engine == "compiled":
-            roll = loop.compiled_rollout(ls)
+            loop.buffered_rollout(ls)
             t0, c0 = time.perf_counter(), time.thread_time()  # compile/cache load is not loop time
-            c = ls.chunk_samples
-            n_chunks = -(-N // c)
-            Upad = np.vstack([U, np.repeat(U[-1:], n_chunks * c - N, axis=0)])
-            Upad[N:, (1 + 2 * velocity_samples) * n:] = 0.0
-            Ys = []
-            x = x0
-            for i in range(n_chunks):
-                X, Yc = roll(x, Upad[i * c:(i + 1) * c].T, P)
-                X = np.asarray(X)
-                x = X[:, -1]
-                Ys.append(np.asarray(Yc).T)
-            Y = np.vstack(Ys)[:N]
+            _, Y = loop.rollout(ls, x0, U, P)
         else:
             raise ConfigError(None, "control.engine", f"unknown engine {engine!r} (compiled|python)")
         wall, cpu = time.perf_counter() - t0, time.thread_time() - c0
