@@ -218,9 +218,10 @@ def buffered_rollout(ls: LoopStructure) -> BufferedFunction:
 def rollout(ls: LoopStructure, x0: np.ndarray, U: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Run the compiled loop over all rows of ``U`` (samples x n_input) from state ``x0``.
 
-    Returns the final state and the outputs (samples x n_output). The last chunk is padded with
-    the last input row and zero encoder noise (the padded samples are dropped). The numbers are those
-    of a plain call of :func:`compiled_rollout` chunk after chunk (the same generated code)."""
+    Returns the state after the last row and the outputs (samples x n_output). The last chunk is
+    padded with the last input row and zero encoder noise (the padded samples are dropped). The
+    numbers are those of a plain call of :func:`compiled_rollout` chunk after chunk (the same
+    generated code)."""
     roll = buffered_rollout(ls)
     N, c = len(U), ls.chunk_samples
     n_chunks = -(-N // c)
@@ -232,7 +233,7 @@ def rollout(ls: LoopStructure, x0: np.ndarray, U: np.ndarray, P: np.ndarray) -> 
     x = np.asarray(x0, float)
     for i in range(n_chunks):
         X, Yc = roll(x, Upad[i * c:(i + 1) * c].T, P)   # (n_state x c), (n_output x c): views of C-ordered rows
-        x = X[:, -1]
+        x = X[:, min(c, N - i * c) - 1]
         Y[i * c:(i + 1) * c] = Yc.T
     return x, Y[:N]
 
