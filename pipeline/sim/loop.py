@@ -230,9 +230,12 @@ def rollout(ls: LoopStructure, x0: np.ndarray, U: np.ndarray, P: np.ndarray) -> 
     Upad[N:] = U[-1]
     Upad[N:, (1 + 2 * ls.velocity_samples_per_position_sample) * ls.nq:] = 0.0
     Y = np.empty((n_chunks * c, ls.n_output))
+    # mapaccum maps P with the samples: one column per sample, repeated once here (its transpose is
+    # C-ordered, as the slices of U: the buffers take them without a copy)
+    P_cols = np.repeat(np.asarray(P, float)[None, :], c, axis=0).T
     x = np.asarray(x0, float)
     for i in range(n_chunks):
-        X, Yc = roll(x, Upad[i * c:(i + 1) * c].T, P)   # (n_state x c), (n_output x c): views of C-ordered rows
+        X, Yc = roll(x, Upad[i * c:(i + 1) * c].T, P_cols)   # (n_state x c), (n_output x c)
         x = X[:, min(c, N - i * c) - 1]
         Y[i * c:(i + 1) * c] = Yc.T
     return x, Y[:N]
