@@ -228,16 +228,18 @@ def ik_track(robot: RobotModel, poses: list[pin.SE3], q0: np.ndarray, frame: str
             if err_n < tolerance_m:
                 break
             q = q + J.T @ np.linalg.solve(J @ J.T + lam2 * np.eye(6), e)
-        where = f"t = {times_s[k]:.4f} s" if times_s is not None else f"sample {k}"
-        p = np.array2string(T.translation, precision=4)
         if err_n >= max(tolerance_m * 100, 1e-7):
+            where = f"t = {times_s[k]:.4f} s" if times_s is not None else f"sample {k}"
+            p = np.array2string(T.translation, precision=4)
             raise InfeasibleError(None, "ik", f"TCP point {p} m at {where} not reached (error {err_n:.2e} m; "
                                   f"{limiting_joint(robot, q)})")
         out[k] = q
     out = wrap_into_limits(robot, out)
-    for k, q in enumerate(out):
+    lo, hi = robot.limits.lower_rad, robot.limits.upper_rad
+    for k in np.nonzero(np.any((out < lo) | (out > hi), axis=1))[0][:1]:   # the first sample outside, if any
         where = f"t = {times_s[k]:.4f} s" if times_s is not None else f"sample {k}"
-        check_within_limits(robot, q, f"TCP point {np.array2string(poses[k].translation, precision=4)} m at {where}")
+        point = np.array2string(poses[k].translation, precision=4)
+        check_within_limits(robot, out[k], f"TCP point {point} m at {where}")
     return out
 
 

@@ -132,6 +132,7 @@ def track(robot: RobotModel, rotation: np.ndarray, P: np.ndarray, Pd: np.ndarray
     N = len(P)
     q_out, v_out, a_out = np.empty((N, nq)), np.empty((N, nq)), np.empty((N, nq))
     vlim = robot.limits.velocity_rad_s
+    lo, hi = robot.limits.lower_rad, robot.limits.upper_rad
     zero = np.zeros(nq)
     q = np.array(q_start, float)
     v_prev = np.zeros(nq)
@@ -154,7 +155,8 @@ def track(robot: RobotModel, rotation: np.ndarray, P: np.ndarray, Pd: np.ndarray
         if err >= tolerance_m or not np.isfinite(cond) or cond > 1e6:
             raise InfeasibleError(None, "ik", f"{where()} not reached (error {err:.1e} m, cond(J) {cond:.1e}; "
                                   f"{limiting_joint(robot, q)})")
-        check_within_limits(robot, q, where())
+        if np.any(q < lo) or np.any(q > hi):
+            check_within_limits(robot, q, where())
         v = resolved_rate(J, np.concatenate([Pd[k], np.zeros(3)]))
         pin.forwardKinematics(model, data, q, v, zero)
         drift = pin.getFrameClassicalAcceleration(model, data, fid, pin.LOCAL_WORLD_ALIGNED).vector
