@@ -15,6 +15,7 @@ from collections.abc import Mapping, Sequence
 import casadi as ca
 import numpy as np
 
+from pipeline.compiled_on_demand import CompiledOnDemand
 from pipeline.identification.regressor import BaseParameters, RegressorModel
 from pipeline.robot.symbolic import SymbolicRobot
 
@@ -82,8 +83,8 @@ class ExcitationCriterion:
         state = ca.vertcat(q, v, a)
         y_s = ca.Function("y_s", [state], [yb])
         vjp = ca.Function("vjp", [state, gbar], [ca.gradient(inner, state)])
-        self._y = y_s.map(self.n)
-        self._vjp = vjp.map(self.n)
+        self._y = CompiledOnDemand(y_s, subdir="excitation")
+        self._vjp = CompiledOnDemand(vjp, subdir="excitation")
         self.n_evals = 0
 
     def states(self, x: np.ndarray) -> np.ndarray:
@@ -92,7 +93,7 @@ class ExcitationCriterion:
         return np.vstack([c @ self.bq.T, c @ self.bv.T, c @ self.ba.T])
 
     def matrix_states(self, S: np.ndarray) -> np.ndarray:
-        yb = np.asarray(self._y(S))  # (nq, N*nb), blocks per sample
+        yb = self._y.mapped(self.n)(S)[0]  # (nq, N*nb), blocks per sample
         return yb.reshape(self.nq, self.n, self.nb).transpose(1, 0, 2).reshape(-1, self.nb)
 
     def matrix(self, x: np.ndarray) -> np.ndarray:
@@ -126,7 +127,7 @@ class ExcitationCriterion:
             return f, None
         dW = 2.0 * W @ dG  # df/dW, (N*nq, nb)
         gbar = dW.reshape(self.n, self.nq, self.nb).transpose(1, 0, 2).reshape(self.nq, -1)
-        return f, np.asarray(self._vjp(S, gbar))  # (3 nq, N)
+        return f, self._vjp.mapped(self.n)(S, gbar)[0]  # (3 nq, N)
 
     def value_and_gradient(self, x: np.ndarray, gradient: bool = True) -> tuple[float, np.ndarray | None]:
         """Criterion and gradient with respect to the Fourier coefficients."""
