@@ -28,7 +28,7 @@ def screenshot(url: str, out: Path, tmp_path: Path, size: str = "800,600", budge
            "--disable-background-networking", "--disable-component-update", "--disable-sync",
            f"--user-data-dir={profile}", f"--screenshot={out}", f"--window-size={size}",
            f"--virtual-time-budget={budget_ms}", url]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=max(120.0, 2 * budget_ms / 1000))
     assert proc.returncode == 0 and out.exists(), proc.stderr[-2000:]
     return imread(out)[..., :3]
 
@@ -140,15 +140,16 @@ def robot_box(with_robot: np.ndarray, without_robot: np.ndarray, threshold: floa
 
 
 def framed_screenshots(robot, q: np.ndarray, tmp_path: Path) -> tuple[np.ndarray, np.ndarray, Viewer]:
-    """Screenshots of the viewer with ``robot`` at ``q`` and with the robot hidden (up to three
-    tries while a heavy mesh scene has not reached the browser, each waiting three times longer)."""
+    """Screenshots of the viewer with ``robot`` at ``q`` and with the robot hidden (up to four
+    tries while a heavy mesh scene has not reached the browser, each waiting three times longer:
+    5 s to 135 s of page time, for a loaded machine)."""
     import meshcat
 
     vis = meshcat.Visualizer()
     try:
         viewer = Viewer(robot, viewer=vis)
         viewer.show(q)
-        for attempt in range(3):
+        for attempt in range(4):
             budget_ms = 5000 * 3 ** attempt
             with_robot = screenshot(vis.url(), tmp_path / f"robot{attempt}.png", tmp_path, budget_ms=budget_ms)
             vis[viewer.root].set_property("visible", False)
