@@ -80,6 +80,9 @@ MIN_CHI2_GAIN = 13.8
 MAX_EXCESS_OVER_LIMIT = 0.1
 #: fits with the load-dependent term after the one without it, each with the load torque of the previous
 LOAD_REFITS = 1
+#: largest plausible load-dependent coefficient: a gear losing more than half the torque it carries to
+#: friction (efficiency below about 2/3) is not a robot joint's; larger fits are refused (term dropped)
+MAX_LOAD_COEFFICIENT = 0.5
 
 
 @dataclass
@@ -315,12 +318,13 @@ def fit_load_friction(Wb: np.ndarray, y: np.ndarray, v: np.ndarray, beta0: np.nd
     """Weighted least squares of ``beta`` and ``fl`` (module doc), nested in the fit ``beta0`` (with its
     Stribeck term ``stribeck0``, refitted jointly by :func:`fit_stribeck`; None: viscous + Coulomb).
     The load torque of each of the :data:`LOAD_REFITS` fits is the previous fit's
-    :func:`load_free_torque`. Joints whose term is not physical (``fl <= 0``: friction falling with load)
-    lose it and the rest is refitted once more with the same load torque. A term that is not significant
-    is kept: on a joint whose load varies little its column is nearly the Coulomb one, so dropping it
-    hardly changes the fit but moves ``fc`` (and the offset) by ``fl`` times the mean load, away from the
-    zero-load Coulomb friction the parameter means. ``chi2_gain``: per joint likelihood-ratio statistic
-    of the term (base parameters refitted both ways), reported."""
+    :func:`load_free_torque`. Joints whose term is not physical (``fl <= 0``: friction falling with
+    load; ``fl > MAX_LOAD_COEFFICIENT``) lose it and the rest is refitted once more with the same load
+    torque. A term that is not significant is kept: on a joint whose load varies little its column is
+    nearly the Coulomb one, so dropping it hardly changes the fit but moves ``fc`` (and the offset) by
+    ``fl`` times the mean load, away from the zero-load Coulomb friction the parameter means.
+    ``chi2_gain``: per joint likelihood-ratio statistic of the term (base parameters refitted both
+    ways), reported."""
     sigma = np.asarray(joint_sigma_Nm, float)
     nr, nb = len(sigma), Wb.shape[1]
     beta, fit, joints = np.asarray(beta0, float), stribeck0, np.arange(nr)
@@ -345,7 +349,7 @@ def fit_load_friction(Wb: np.ndarray, y: np.ndarray, v: np.ndarray, beta0: np.nd
     st = 0.0 if fit is None else fit.stribeck_torque(v)
     gain = stribeck_chi2_gain(Wb, np.asarray(y, float) - np.ravel(np.broadcast_to(st, load.shape)),
                               term.torque(load, v), sigma)
-    keep = fl > 0
+    keep = (fl > 0) & (fl <= MAX_LOAD_COEFFICIENT)
     if not np.all(keep):
         beta, fl, fit = solve(load, np.flatnonzero(keep))
     return LoadFit(beta, fit, LoadFriction(fl, float(coulomb_width_rad_s), np.where(keep, gain, 0.0)), load)
@@ -389,6 +393,7 @@ def load_summary(load: LoadFriction, status: str, per_joint: Callable[[np.ndarra
     """Summary entries of the load-dependent candidate: ``fl`` per joint (0: no term), its likelihood-ratio
     gains and the status of its physically consistent fit. JSON-able."""
     return {"load_friction_coefficient": per_joint(load.coefficient),
+            "load_friction_coefficient_bound": MAX_LOAD_COEFFICIENT,
             "load_friction_chi2_gain": None if load.chi2_gain is None else per_joint(load.chi2_gain),
             "load_friction_status": status}
 
@@ -424,6 +429,7 @@ def friction_summary(rms_Nm: dict[str, np.ndarray], sigma_Nm: np.ndarray | None,
     })
 
 
-__all__ = ["FRICTION_MODELS", "best_friction_model", "LOAD_REFITS", "MAX_EXCESS_OVER_LIMIT", "LoadFit", "LoadFriction", "StribeckFit",
-           "expand_to_joints", "fit_load_friction", "fit_stribeck", "friction_summary", "load_columns",
-           "load_free_torque", "load_heldout", "load_summary", "stribeck_heldout", "stribeck_torque"]
+__all__ = ["FRICTION_MODELS", "LOAD_REFITS", "MAX_EXCESS_OVER_LIMIT", "MAX_LOAD_COEFFICIENT", "LoadFit",
+           "LoadFriction", "StribeckFit", "best_friction_model", "expand_to_joints", "fit_load_friction",
+           "fit_stribeck", "friction_summary", "load_columns", "load_free_torque", "load_heldout", "load_summary",
+           "stribeck_heldout", "stribeck_torque"]
