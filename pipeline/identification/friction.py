@@ -226,18 +226,32 @@ def stribeck_heldout(data: ProcessedData, base: BaseParameters, p_nominal: np.nd
     with the base parameters on the first ``train_fraction`` of the samples, taken off the torques,
     then :func:`~pipeline.identification.tx40.heldout_validation`'s fits; their predictions on the
     rest plus the Stribeck term (keys ``ols``, ``wls``, ``physical``)."""
-    n_train = int(train_fraction * data.n_samples)
-    nr = data.tau.shape[1]
-    rows = n_train * nr
-    Wb = base.base_regressor(data.Y)
-    wls = est_mod.wls(Wb[:rows], data.y[:rows], nr)
+    n_train, rows, Wb, wls = _train_part(data, base, train_fraction)
     vb = data.v_blocks
     fit = fit_stribeck(Wb[:rows], data.y[:rows], vb[:n_train], wls.beta, wls.joint_sigma_Nm, coulomb_width_rad_s,
                        max_excess_Nm=max_excess_Nm)
-    st = fit.stribeck_torque(vb)
-    ho = heldout_validation(replace(data, tau=data.tau - st), base, p_nominal, nq, train_fraction, regularization,
-                            max_iter, field_name, n_rows=nr)
-    return {k: pred + st[n_train:] for k, pred in ho.pred.items()}
+    return _heldout_less(data, fit.stribeck_torque(vb), base, p_nominal, nq, train_fraction, regularization,
+                         max_iter, field_name)
+
+
+def _train_part(data: ProcessedData, base: BaseParameters, train_fraction: float,
+                ) -> tuple[int, int, np.ndarray, est_mod.LeastSquaresEstimate]:
+    """Samples and rows of the first ``train_fraction`` of a record, the base regressor of all samples
+    and the WLS fit on those rows."""
+    n_train = int(train_fraction * data.n_samples)
+    nr = data.tau.shape[1]
+    Wb = base.base_regressor(data.Y)
+    return n_train, n_train * nr, Wb, est_mod.wls(Wb[: n_train * nr], data.y[: n_train * nr], nr)
+
+
+def _heldout_less(data: ProcessedData, friction_Nm: np.ndarray, base: BaseParameters, p_nominal: np.ndarray,
+                  nq: int, train_fraction: float, regularization: float, max_iter: int,
+                  field_name: str) -> dict[str, np.ndarray]:
+    """:func:`~pipeline.identification.tx40.heldout_validation` on the torques less ``friction_Nm``
+    (N, nr); its predictions on the held-out tail plus that friction."""
+    ho = heldout_validation(replace(data, tau=data.tau - friction_Nm), base, p_nominal, nq, train_fraction,
+                            regularization, max_iter, field_name, n_rows=data.tau.shape[1])
+    return {k: pred + friction_Nm[ho.n_train:] for k, pred in ho.pred.items()}
 
 
 def load_column_values(load_Nm: np.ndarray, v: np.ndarray, coulomb_width_rad_s: float) -> np.ndarray:
@@ -364,21 +378,15 @@ def load_heldout(data: ProcessedData, base: BaseParameters, p_nominal: np.ndarra
     first ``train_fraction`` of the samples, its friction on every sample (load torque from that
     fit's base model, :func:`load_free_torque`) taken off the torques, then
     :func:`~pipeline.identification.tx40.heldout_validation`'s fits, their predictions plus it."""
-    n_train = int(train_fraction * data.n_samples)
-    nr = data.tau.shape[1]
-    rows = n_train * nr
-    Wb = base.base_regressor(data.Y)
-    wls = est_mod.wls(Wb[:rows], data.y[:rows], nr)
+    n_train, rows, Wb, wls = _train_part(data, base, train_fraction)
     vb = data.v_blocks
     fit0 = (fit_stribeck(Wb[:rows], data.y[:rows], vb[:n_train], wls.beta, wls.joint_sigma_Nm, coulomb_width_rad_s,
                          max_excess_Nm=max_excess_Nm) if with_stribeck else None)
     lf = fit_load_friction(Wb[:rows], data.y[:rows], vb[:n_train], wls.beta if fit0 is None else fit0.beta, fit0,
                            wls.joint_sigma_Nm, coulomb_width_rad_s, offsets, max_excess_Nm)
-    lf.load_Nm = load_free_torque(Wb, lf.beta, offsets, nr, lf.stribeck, vb)
-    fr = lf.torque(Wb, vb)
-    ho = heldout_validation(replace(data, tau=data.tau - fr), base, p_nominal, nq, train_fraction, regularization,
-                            max_iter, field_name, n_rows=nr)
-    return {k: pred + fr[n_train:] for k, pred in ho.pred.items()}
+    lf.load_Nm = load_free_torque(Wb, lf.beta, offsets, data.tau.shape[1], lf.stribeck, vb)
+    return _heldout_less(data, lf.torque(Wb, vb), base, p_nominal, nq, train_fraction, regularization, max_iter,
+                         field_name)
 
 
 def expand_to_joints(fit: StribeckFit, used: np.ndarray, nq: int) -> StribeckFit:
