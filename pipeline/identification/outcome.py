@@ -96,6 +96,8 @@ class Fits:
     load_candidate: LoadCandidate | None = None
     #: its fit when it is the handed-on model, else None
     load: LoadFit | None = None
+    #: why the candidate was not fitted or not scored ("": it was)
+    load_note: str = ""
 
 
 @dataclass

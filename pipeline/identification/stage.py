@@ -45,7 +45,7 @@ import numpy as np
 
 from pipeline.blas import single_thread_blas
 from pipeline.config import resolve_robot_dir
-from pipeline.errors import ConfigError, InfeasibleError, PipelineError
+from pipeline.errors import ConfigError, InfeasibleError, PipelineError, SolverError
 from pipeline.identification import design as design_mod
 from pipeline.identification import estimate as est_mod
 from pipeline.identification import fourier, report
@@ -273,24 +273,33 @@ def estimate(robot: RobotModel, cfg: Config, regs: Regressors, measured: Measure
     timings["estimation_s"] = time.perf_counter() - t1
     fits = Fits(Wb, y, cond_data, cond_data_structural, wls_vc, max_excess, fit, y_fit, ols, wls, p_nom, phys,
                 phys_vc)
-    if load_candidate_fitted(regs):
-        t1 = time.perf_counter()
-        lf = fit_load_friction(Wb, y, data.v_blocks, wls_vc.beta if fit is None else fit.beta, fit,
-                               wls_vc.joint_sigma_Nm, regs.reg.coulomb_width_rad_s, offset_mask(regs, nq), max_excess)
-        y_l = y - lf.torque(Wb, data.v_blocks).ravel()
-        wls_l = est_mod.wls(Wb, y_l, nm)
-        phys_l = est_mod.physical_fit(data.Y, y_l, nq, p_nom, wls_l.joint_sigma_Nm, cfg.regularization,
-                                      cfg.physical_max_iter, n_rows=nm)
-        fits.load_candidate = LoadCandidate(lf, y_l, wls_l, phys_l)
-        timings["load_friction_fit_s"] = time.perf_counter() - t1
+    fit_load_candidate(cfg, regs, data, fits, nq, timings)
     return fits
 
 
-def load_candidate_fitted(regs: Regressors) -> bool:
-    """The load-dependent friction candidate is fitted on joint-side (diagonal) actuator columns only:
-    with coupled axes a motor's load is not one joint's torque."""
+def fit_load_candidate(cfg: Config, regs: Regressors, data: meas_mod.ProcessedData, fits: Fits, nq: int,
+                       timings: dict[str, float]) -> None:
+    """The candidate with load-dependent Coulomb friction (:func:`.friction.fit_load_friction`), nested in
+    the configured model's fit, and its WLS and physically consistent fits (``fits.load_candidate``);
+    on joint-side (diagonal) actuator columns only, else ``fits.load_note`` says why not."""
     K = regs.reg.gear_matrix
-    return bool(np.allclose(K, np.diag(np.diag(K))))
+    if not np.allclose(K, np.diag(np.diag(K))):
+        fits.load_note = "not fitted: coupled axes (a motor's load is not one joint's torque)"
+        return
+    t1 = time.perf_counter()
+    Wb, y, fit, nm = fits.Wb, fits.y, fits.stribeck, regs.n_used
+    try:
+        lf = fit_load_friction(Wb, y, data.v_blocks, fits.wls_vc.beta if fit is None else fit.beta, fit,
+                               fits.wls_vc.joint_sigma_Nm, regs.reg.coulomb_width_rad_s, offset_mask(regs, nq),
+                               fits.max_excess_Nm)
+        y_l = y - lf.torque(Wb, data.v_blocks).ravel()
+        wls_l = est_mod.wls(Wb, y_l, nm)
+        phys_l = est_mod.physical_fit(data.Y, y_l, nq, fits.p_nom, wls_l.joint_sigma_Nm, cfg.regularization,
+                                      cfg.physical_max_iter, n_rows=nm)
+        fits.load_candidate = LoadCandidate(lf, y_l, wls_l, phys_l)
+    except SolverError as exc:   # a candidate only: the others stand
+        fits.load_note = f"not fitted: {exc}"
+    timings["load_friction_fit_s"] = time.perf_counter() - t1
 
 
 def offset_mask(regs: Regressors, nq: int) -> np.ndarray:
@@ -323,9 +332,12 @@ def validate_on_record(robot: RobotModel, cfg: Config, regs: Regressors, measure
         pred_phys, pred_wls = pred_s["physical"], pred_s["wls"]
     pred_l = None
     if fits.load_candidate is not None:
-        pred_l = load_heldout(data, regs.base, fits.p_nom, nq, cfg.data_train_fraction, cfg.regularization,
-                              cfg.physical_max_iter, regs.reg.coulomb_width_rad_s, offset_mask(regs, nq),
-                              fits.stribeck is not None, "identification.data_train_fraction", fits.max_excess_Nm)
+        try:
+            pred_l = load_heldout(data, regs.base, fits.p_nom, nq, cfg.data_train_fraction, cfg.regularization,
+                                  cfg.physical_max_iter, regs.reg.coulomb_width_rad_s, offset_mask(regs, nq),
+                                  fits.stribeck is not None, "identification.data_train_fraction", fits.max_excess_Nm)
+        except SolverError as exc:   # not scored: not handed on
+            fits.load_note = f"not scored on the held-out tail: {exc}"
     rms_phys, rel_phys = val_mod.torque_rms(tau_v, pred_phys)
     rms_wls, rel_wls = val_mod.torque_rms(tau_v, pred_wls)
     # residual sigma per joint of the WLS fit on all samples (processed torques, like the RMS)
@@ -397,7 +409,9 @@ def choose_friction_model(robot: RobotModel, regs: Regressors, fits: Fits, val: 
                   else {}) | scored
         friction["friction_viscous_coulomb_status"] = vc_status   # not scored unless IPOPT succeeded
     c, with_load = fits.load_candidate, f"{configured}_load"
-    if c is not None and val.pred_load is not None:
+    if fits.load_note:
+        friction["load_friction_status"] = fits.load_note
+    elif c is not None and val.pred_load is not None:
         friction |= load_summary(c.fit.load, c.phys.status, regs.selection.per_joint)
         if is_success(c.phys.status):   # not scored unless IPOPT succeeded
             scored[with_load] = val_mod.torque_rms(val.tau_Nm, val.pred_load)[0]
