@@ -337,6 +337,8 @@ class RobotModel:
         includes the rotor inertia (armature)."""
         tau = pin.rnea(self.model, self._data, np.asarray(q, float), np.asarray(v, float), np.asarray(a, float))
         tau0 = tau + self.friction_torque(v)
+        if self.spec.actuation.coulomb_load_coefficient is None:
+            return tau0
         return tau0 + self.load_friction_torque(tau0, v)
 
     def forward_dynamics(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray) -> np.ndarray:
