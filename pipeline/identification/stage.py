@@ -23,7 +23,8 @@ and the real Stäubli TX40 record (paper ``004_abbe750b8bbcc3aa.txt`` §4).
    (:mod:`.friction`), taken off the torques and handed on in the model's actuation; the
    viscous + Coulomb fit is kept beside it, and the configured model with load-dependent Coulomb
    friction (:func:`.friction.fit_load_friction`, joint-side actuator columns only); all are scored
-   on the validation torques and the best one is handed on. Base-parameter sigmas: HAC sandwich (:func:`.estimate.hac_covariance`).
+   on the validation torques and the best one is handed on. Base-parameter sigmas: HAC sandwich
+   (:func:`.estimate.hac_covariance`).
 6. Validation on the run's ISO 9283 path (``control.iso`` from the run's ``control.ik_seeds_deg``,
    measured vs predicted torques; a random Fourier trajectory, with the real reason in the report,
    when that path cannot be used), or the held-out tail of a record.
