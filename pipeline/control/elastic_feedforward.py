@@ -64,4 +64,5 @@ def elastic_feedforward(model, sample_time_s: float, q_d: np.ndarray, v_d: np.nd
     omega = v_d + d1 / k
     alpha = a_d + d2 / k
     tau = np.asarray(model.model.armature) * alpha + tau_l + model.friction_torque(omega)
+    tau = tau + model.load_friction_torque(tau, omega)   # load: the motor torque without that term
     return theta, omega, tau

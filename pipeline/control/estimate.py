@@ -59,7 +59,8 @@ def with_dynamics_of(kinematics_robot: RobotModel, dynamics_robot: RobotModel) -
     out.model.armature = np.array(dynamics_robot.model.armature).copy()
     for name in ("viscous_Nms_rad", "coulomb_Nm", "rotor_inertia_kgm2"):
         setattr(out.actuation, name, np.array(getattr(dynamics_robot.actuation, name)).copy())
-    for name in ("static_friction_excess_Nm", "stribeck_velocity_rad_s"):    # identified Stribeck term, or None
+    for name in ("static_friction_excess_Nm", "stribeck_velocity_rad_s",    # identified Stribeck term, or None
+                 "coulomb_load_coefficient"):                               # and load-dependent Coulomb term
         value = getattr(dynamics_robot.actuation, name)
         setattr(out.actuation, name, None if value is None else np.array(value).copy())
     out.spec.actuation.joint_stiffness_Nm_rad = nominal_joint_stiffness_Nm_rad(dynamics_robot)

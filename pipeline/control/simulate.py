@@ -73,6 +73,7 @@ def feedforward_torque(model, q_d: np.ndarray, v_d: np.ndarray, a_d: np.ndarray,
             out[k] = pin.rnea(model.model, data, q_d[k], v_d[k], a_d[k])
     if variant in ("full_friction", *ELASTIC_VARIANTS):
         out += model.friction_torque(v_d)
+        out += model.load_friction_torque(out, v_d)   # load: the model's torque without that term
     return out
 
 

@@ -17,7 +17,7 @@ import numpy as np
 from pipeline.identification.design import ExcitationResult
 from pipeline.identification.estimate import HacCovariance, LeastSquaresEstimate, PhysicalEstimate
 from pipeline.identification.fourier import ExcitationLimits, FourierTrajectory
-from pipeline.identification.friction import StribeckFit
+from pipeline.identification.friction import LoadFit, LoadFriction, StribeckFit
 from pipeline.identification.joints import JointSelection
 from pipeline.identification.measure import JointRecord, ProcessedData
 from pipeline.identification.regressor import BaseParameters, RegressorModel
@@ -63,6 +63,17 @@ class Measured:
 
 
 @dataclass
+class LoadCandidate:
+    """The friction model with load-dependent Coulomb friction (:func:`.friction.fit_load_friction`):
+    its fit, the torques without its friction terms, the WLS and the physically consistent fits on them."""
+
+    fit: LoadFit
+    y_fit: np.ndarray
+    wls: LeastSquaresEstimate
+    phys: PhysicalEstimate
+
+
+@dataclass
 class Fits:
     """Fits on all samples: base regressor and torques, condition numbers, OLS / WLS, the optional
     Stribeck term (``stribeck``) and the physically consistent fits with (``phys``) and without it
@@ -81,6 +92,12 @@ class Fits:
     p_nom: np.ndarray
     phys: PhysicalEstimate
     phys_vc: PhysicalEstimate
+    #: the candidate with load-dependent Coulomb friction (None: not fitted, coupled axes)
+    load_candidate: LoadCandidate | None = None
+    #: its fit when it is the handed-on model, else None
+    load: LoadFit | None = None
+    #: why the candidate was not fitted or not scored ("": it was)
+    load_note: str = ""
 
 
 @dataclass
@@ -101,6 +118,9 @@ class Validation:
     noise_source: str
     markdown: str = ""
     heldout: HeldOutValidation | None = None    # a record's held-out tail
+    #: predictions of the load-dependent candidate (physical, WLS), None when it was not fitted
+    pred_load: np.ndarray | None = None
+    pred_load_wls: np.ndarray | None = None
 
     @property
     def rms_over_noise(self) -> np.ndarray:
@@ -128,23 +148,28 @@ class Outcome:
     timings: dict[str, float]
 
 
-def identified_friction(p: np.ndarray, nq: int, stribeck: StribeckFit | None = None) -> JointFriction:
+def identified_friction(p: np.ndarray, nq: int, stribeck: StribeckFit | None = None,
+                        load: LoadFriction | None = None) -> JointFriction:
     """The friction handed on: viscous and Coulomb from the standard parameters ``p``, the Stribeck
-    term from ``stribeck`` (``friction_model: stribeck``; else none)."""
+    term from ``stribeck`` (``friction_model: stribeck``; else none), the load-dependent Coulomb
+    coefficient from ``load`` (when the held-out data chose it; else none)."""
     layout = DynamicLayout(nq)
     return JointFriction(p[layout.viscous].copy(), p[layout.coulomb].copy(),
                          None if stribeck is None else stribeck.static_excess_Nm.copy(),
-                         None if stribeck is None else stribeck.stribeck_velocity_rad_s.copy())
+                         None if stribeck is None else stribeck.stribeck_velocity_rad_s.copy(),
+                         None if load is None else load.coefficient.copy())
 
 
-def identified_robot(robot: RobotModel, p: np.ndarray, stribeck: StribeckFit | None = None) -> RobotModel:
+def identified_robot(robot: RobotModel, p: np.ndarray, stribeck: StribeckFit | None = None,
+                     load: LoadFriction | None = None) -> RobotModel:
     """Copy of ``robot`` with the standard parameters ``p`` (inertias, rotor inertia, viscous and
     Coulomb friction; torque offsets are not part of a RobotModel) and, with a Stribeck fit, its
-    static excess and Stribeck velocity (``friction_model: stribeck``; else none)."""
+    static excess and Stribeck velocity (``friction_model: stribeck``; else none), with a
+    load-dependent term its coefficient (all joints, 0 where none)."""
     nq = robot.nq
     model = set_dynamic_parameters(robot.model, p)
     spec = copy.deepcopy(robot.spec)
     off = 10 * (robot.model.njoints - 1)
     spec.actuation.rotor_inertia_kgm2 = p[off : off + nq].copy()
-    identified_friction(p, nq, stribeck).apply_to(spec.actuation)
+    identified_friction(p, nq, stribeck, load).apply_to(spec.actuation)
     return robot.with_model(model, spec)

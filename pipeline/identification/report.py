@@ -122,11 +122,15 @@ def report_markdown(summary: dict, tx: Tx40Result | None) -> str:
                   f"{summary['base_sigma_hac_over_white_median']:.2f} x the white-residual WLS sigma."]
     by_model = summary.get("friction_heldout_rms_over_noise")
     if by_model:
+        stribeck = ("" if summary.get("stribeck_static_excess_Nm") is None else
+                    f"; Stribeck static excess {_numbers(summary['stribeck_static_excess_Nm'])} N m, at most "
+                    f"{summary.get('stribeck_static_excess_bound_over_limit', float('nan')):.0%} of the torque limit, "
+                    f"Stribeck velocity {_numbers(summary['stribeck_velocity_rad_s'])} rad/s")
+        load = ("" if summary.get("load_friction_coefficient") is None else
+                f"; load-dependent Coulomb coefficient (N m per N m of load) "
+                f"{_numbers(summary['load_friction_coefficient'])}")
         lines += ["", f"Friction models on the same validation torques (handed on, chosen by them: "
-                  f"`{summary.get('friction_model_handed_on', summary['friction_model'])}`; Stribeck static excess "
-                  f"{_numbers(summary['stribeck_static_excess_Nm'])} N m, at most "
-                  f"{summary.get('stribeck_static_excess_bound_over_limit', float('nan')):.0%} of the torque limit, "
-                  f"Stribeck velocity {_numbers(summary['stribeck_velocity_rad_s'])} rad/s):", "",
+                  f"`{summary.get('friction_model_handed_on', summary['friction_model'])}`{stribeck}{load}):", "",
                   "| joint | " + " | ".join(f"{k} RMS / sigma" for k in by_model) + " |",
                   "|---|" + "---|" * len(by_model)]
         lines += [f"| {j + 1} | " + " | ".join("unmeasured" if by_model[k][j] is None else f"{by_model[k][j]:.2f}"
@@ -246,6 +250,11 @@ def arrays(cfg: Config, o: Outcome) -> dict[str, np.ndarray]:
     if truth is not None:
         out["base_beta_true"] = truth["beta_true"]
         out["base_z"] = truth["z"]
+    if f.load is not None:   # handed on: fl per measured joint and its HAC sigma (0 / NaN: no term)
+        term = f.load.load
+        sigma = np.full(len(term.coefficient), np.nan)
+        sigma[term.joints] = o.hac.sigma[len(o.hac.sigma) - len(term.joints):]
+        out["load_friction_coefficient"], out["load_friction_sigma"] = term.coefficient, sigma
     return out
 
 

@@ -21,8 +21,10 @@ and the real Stäubli TX40 record (paper ``004_abbe750b8bbcc3aa.txt`` §4).
    (log-Cholesky, IPOPT) whose standard parameters become the handed-on ``RobotModel``. With
    ``friction_model: stribeck`` (default) a Stribeck term is fitted first with the base parameters
    (:mod:`.friction`), taken off the torques and handed on in the model's actuation; the
-   viscous + Coulomb fit is kept beside it, both are scored on the validation torques and the
-   better one is handed on. Base-parameter sigmas: HAC sandwich (:func:`.estimate.hac_covariance`).
+   viscous + Coulomb fit is kept beside it, and the configured model with load-dependent Coulomb
+   friction (:func:`.friction.fit_load_friction`, joint-side actuator columns only); all are scored
+   on the validation torques and the best one is handed on. Base-parameter sigmas: HAC sandwich
+   (:func:`.estimate.hac_covariance`).
 6. Validation on the run's ISO 9283 path (``control.iso`` from the run's ``control.ik_seeds_deg``,
    measured vs predicted torques; a random Fourier trajectory, with the real reason in the report,
    when that path cannot be used), or the held-out tail of a record.
@@ -45,7 +47,7 @@ import numpy as np
 
 from pipeline.blas import single_thread_blas
 from pipeline.config import resolve_robot_dir
-from pipeline.errors import ConfigError, InfeasibleError, PipelineError
+from pipeline.errors import ConfigError, InfeasibleError, PipelineError, SolverError
 from pipeline.identification import design as design_mod
 from pipeline.identification import estimate as est_mod
 from pipeline.identification import fourier, report
@@ -55,15 +57,22 @@ from pipeline.identification.base_set import structural_base_parameters
 from pipeline.identification.config import DATA_BORDER_SAMPLES, Config, ExcitationConfig
 from pipeline.identification.friction import (
     MAX_EXCESS_OVER_LIMIT,
+    LoadFriction,
+    best_friction_model,
     expand_to_joints,
+    fit_load_friction,
     fit_stribeck,
     friction_summary,
+    load_free_torque,
+    load_heldout,
+    load_summary,
     stribeck_heldout,
 )
 from pipeline.identification.gates import add_result_gates, check_data_excites
 from pipeline.identification.joints import select_joints
 from pipeline.identification.outcome import (
     Fits,
+    LoadCandidate,
     Measured,
     Outcome,
     Regressors,
@@ -163,7 +172,8 @@ def _run(ctx: StageContext) -> StageResult:
     friction = choose_friction_model(ctx.robot, regs, fits, val)
     hac, white_sigma = base_covariance(regs, measured, fits)
     new_robot = identified_robot(ctx.robot, fits.phys.p, None if fits.stribeck is None
-                                 else expand_to_joints(fits.stribeck, regs.used, ctx.robot.nq))
+                                 else expand_to_joints(fits.stribeck, regs.used, ctx.robot.nq),
+                                 None if fits.load is None else load_to_joints(fits.load.load, regs.used, ctx.robot.nq))
     timings["validation_s"] = time.perf_counter() - t1
     truth = None
     if cfg.score_against_truth and regs.record is None and ctx.real is not None:
@@ -263,8 +273,47 @@ def estimate(robot: RobotModel, cfg: Config, regs: Regressors, measured: Measure
     phys_vc = phys if fit is None else est_mod.physical_fit(data.Y, y, nq, p_nom, wls_vc.joint_sigma_Nm,
                                                             cfg.regularization, cfg.physical_max_iter, n_rows=nm)
     timings["estimation_s"] = time.perf_counter() - t1
-    return Fits(Wb, y, cond_data, cond_data_structural, wls_vc, max_excess, fit, y_fit, ols, wls, p_nom, phys,
+    fits = Fits(Wb, y, cond_data, cond_data_structural, wls_vc, max_excess, fit, y_fit, ols, wls, p_nom, phys,
                 phys_vc)
+    fit_load_candidate(cfg, regs, data, fits, nq, timings)
+    return fits
+
+
+def fit_load_candidate(cfg: Config, regs: Regressors, data: meas_mod.ProcessedData, fits: Fits, nq: int,
+                       timings: dict[str, float]) -> None:
+    """The candidate with load-dependent Coulomb friction (:func:`.friction.fit_load_friction`), nested in
+    the configured model's fit, and its WLS and physically consistent fits (``fits.load_candidate``);
+    on joint-side (diagonal) actuator columns only, else ``fits.load_note`` says why not."""
+    K = regs.reg.gear_matrix
+    if not np.allclose(K, np.diag(np.diag(K))):
+        fits.load_note = "not fitted: coupled axes (a motor's load is not one joint's torque)"
+        return
+    t1 = time.perf_counter()
+    Wb, y, fit, nm = fits.Wb, fits.y, fits.stribeck, regs.n_used
+    try:
+        lf = fit_load_friction(Wb, y, data.v_blocks, fits.wls_vc.beta if fit is None else fit.beta, fit,
+                               fits.wls_vc.joint_sigma_Nm, regs.reg.coulomb_width_rad_s, offset_mask(regs, nq),
+                               fits.max_excess_Nm)
+        y_l = y - lf.torque(Wb, data.v_blocks).ravel()
+        wls_l = est_mod.wls(Wb, y_l, nm)
+        phys_l = est_mod.physical_fit(data.Y, y_l, nq, fits.p_nom, wls_l.joint_sigma_Nm, cfg.regularization,
+                                      cfg.physical_max_iter, n_rows=nm)
+        fits.load_candidate = LoadCandidate(lf, y_l, wls_l, phys_l)
+    except SolverError as exc:   # a candidate only: the others stand
+        fits.load_note = f"not fitted: {exc}"
+    timings["load_friction_fit_s"] = time.perf_counter() - t1
+
+
+def offset_mask(regs: Regressors, nq: int) -> np.ndarray:
+    """Base parameters that are torque offsets (the last ``nq`` standard parameters): left out of the load."""
+    return regs.base.independent >= len(regs.base.standard_names) - nq
+
+
+def load_to_joints(load: LoadFriction, used: np.ndarray, nq: int) -> LoadFriction:
+    """The term of the measured joints ``used`` on all ``nq`` joints (0 on the others)."""
+    coef = np.zeros(nq)
+    coef[used] = load.coefficient
+    return LoadFriction(coef, load.coulomb_width_rad_s)
 
 
 def validate_on_record(robot: RobotModel, cfg: Config, regs: Regressors, measured: Measured, fits: Fits) -> Validation:
@@ -283,12 +332,21 @@ def validate_on_record(robot: RobotModel, cfg: Config, regs: Regressors, measure
                                   cfg.physical_max_iter, regs.reg.coulomb_width_rad_s,
                                   "identification.data_train_fraction", fits.max_excess_Nm)
         pred_phys, pred_wls = pred_s["physical"], pred_s["wls"]
+    pred_l = None
+    if fits.load_candidate is not None:
+        try:
+            pred_l = load_heldout(data, regs.base, fits.p_nom, nq, cfg.data_train_fraction, cfg.regularization,
+                                  cfg.physical_max_iter, regs.reg.coulomb_width_rad_s, offset_mask(regs, nq),
+                                  fits.stribeck is not None, "identification.data_train_fraction", fits.max_excess_Nm)
+        except SolverError as exc:   # not scored: not handed on
+            fits.load_note = f"not scored on the held-out tail: {exc}"
     rms_phys, rel_phys = val_mod.torque_rms(tau_v, pred_phys)
     rms_wls, rel_wls = val_mod.torque_rms(tau_v, pred_wls)
     # residual sigma per joint of the WLS fit on all samples (processed torques, like the RMS)
     return Validation(vt, tau_v, pred_phys, pred_wls, pred_vc, rms_phys, rel_phys, rms_wls, rel_wls,
                       np.asarray(fits.wls.joint_sigma_Nm, float), "residuals of the WLS fit (processed torques)",
-                      heldout=ho)
+                      heldout=ho, pred_load=None if pred_l is None else pred_l["physical"],
+                      pred_load_wls=None if pred_l is None else pred_l["wls"])
 
 
 def validate_on_path(ctx: StageContext, cfg: Config, regs: Regressors, measured: Measured, fits: Fits) -> Validation:
@@ -314,42 +372,88 @@ def validate_on_path(ctx: StageContext, cfg: Config, regs: Regressors, measured:
     pred_phys = (Yv @ fits.phys.p).reshape(-1, nm) + st_v
     pred_wls = (regs.base.base_regressor(Yv) @ fits.wls.beta).reshape(-1, nm) + st_v
     pred_vc = (Yv @ fits.phys_vc.p).reshape(-1, nm)
+    pred_l, pred_l_wls = (None, None) if fits.load_candidate is None else load_candidate_predictions(
+        regs, fits.load_candidate, Yv, vt.v[:, regs.used], robot.nq)
     rms_phys, rel_phys = val_mod.torque_rms(tau_v, pred_phys)
     rms_wls, rel_wls = val_mod.torque_rms(tau_v, pred_wls)
     if noise_sigma is None or not np.all(np.isfinite(noise_sigma)):
         noise_sigma = np.asarray(meas_v.tau_sigma_Nm, float)[regs.used]
         noise_source = "torque sensor of the simulation"
     return Validation(vt, tau_v, pred_phys, pred_wls, pred_vc, rms_phys, rel_phys, rms_wls, rel_wls,
-                      noise_sigma, noise_source, validation_md)
+                      noise_sigma, noise_source, validation_md, pred_load=pred_l, pred_load_wls=pred_l_wls)
+
+
+def load_candidate_predictions(regs: Regressors, c: LoadCandidate, Y: np.ndarray, v: np.ndarray,
+                               nq: int) -> tuple[np.ndarray, np.ndarray]:
+    """Torques (N, n_used) the load-dependent candidate's physically consistent and WLS fits predict at
+    the standard regressor ``Y`` and the measured joints' velocities ``v``; the load torque of each is
+    its own torque without the load term and the offsets (:mod:`.friction`)."""
+    nm = regs.n_used
+    st = 0.0 if c.fit.stribeck is None else c.fit.stribeck.stribeck_torque(v)
+    p_free = c.phys.p.copy()
+    p_free[len(p_free) - nq:] = 0.0
+    pred = (Y @ c.phys.p).reshape(-1, nm) + st + c.fit.load.torque((Y @ p_free).reshape(-1, nm) + st, v)
+    W = regs.base.base_regressor(Y)
+    load = load_free_torque(W, c.wls.beta, offset_mask(regs, nq), nm, c.fit.stribeck, v)
+    return pred, (W @ c.wls.beta).reshape(-1, nm) + st + c.fit.load.torque(load, v)
 
 
 def choose_friction_model(robot: RobotModel, regs: Regressors, fits: Fits, val: Validation) -> dict[str, Any]:
-    """Both friction models' physically consistent fits scored on the same held-out torques; the
-    better one is handed on (``fits`` and ``val`` switched to it). Returns the summary's friction part."""
+    """The friction models' physically consistent fits (viscous + Coulomb, Stribeck, the configured one
+    with load-dependent Coulomb friction) scored on the same held-out torques; the best one is handed on
+    (``fits`` and ``val`` switched to it). Returns the summary's friction part."""
     friction: dict[str, Any] = {}
+    configured = "viscous_coulomb" if fits.stribeck is None else "stribeck"
+    scored: dict[str, np.ndarray] = {configured: val.rms_phys}
     if fits.stribeck is not None:
         vc_status = fits.phys_vc.status if val.heldout is None else val.heldout.phys.status   # a record's tail
         scored = ({"viscous_coulomb": val_mod.torque_rms(val.tau_Nm, val.pred_vc)[0]} if is_success(vc_status)
-                  else {})
-        friction = friction_summary(scored | {"stribeck": val.rms_phys}, val.noise_sigma, fits.stribeck,
-                                    regs.selection.per_joint, robot.limits.effort_Nm[regs.used])
+                  else {}) | scored
         friction["friction_viscous_coulomb_status"] = vc_status   # not scored unless IPOPT succeeded
-        if friction["friction_model_best"] == "viscous_coulomb":   # the held-out data select the handed-on model
-            fits.stribeck, fits.phys, val.pred_phys = None, fits.phys_vc, val.pred_vc
-            val.rms_phys, val.rel_phys = val_mod.torque_rms(val.tau_Nm, val.pred_phys)
-    friction["friction_model_handed_on"] = "viscous_coulomb" if fits.stribeck is None else "stribeck"
-    if fits.stribeck is None and fits.wls is not fits.wls_vc:   # the base estimate of the handed-on friction model
+    c, with_load = fits.load_candidate, f"{configured}_load"
+    if fits.load_note:
+        friction["load_friction_status"] = fits.load_note
+    elif c is not None and val.pred_load is not None:
+        friction |= load_summary(c.fit.load, c.phys.status, regs.selection.per_joint)
+        if is_success(c.phys.status):   # not scored unless IPOPT succeeded
+            scored[with_load] = val_mod.torque_rms(val.tau_Nm, val.pred_load)[0]
+    best = best_friction_model(scored, val.noise_sigma)     # the held-out data select the handed-on model
+    reported = fits.stribeck
+    if best == "viscous_coulomb" and fits.stribeck is not None:
+        fits.stribeck, fits.phys, val.pred_phys = None, fits.phys_vc, val.pred_vc
+        val.rms_phys, val.rel_phys = val_mod.torque_rms(val.tau_Nm, val.pred_phys)
+    elif best == with_load and c is not None:
+        hand_on_load_candidate(regs, fits, val, c)
+        reported = fits.stribeck
+    friction = friction_summary(scored, val.noise_sigma, reported, regs.selection.per_joint,
+                                robot.limits.effort_Nm[regs.used]) | friction
+    friction["friction_model_handed_on"] = ("viscous_coulomb" if fits.stribeck is None else "stribeck") + (
+        "" if fits.load is None else "_load")
+    if fits.stribeck is None and fits.load is None and fits.wls is not fits.wls_vc:   # the handed-on base estimate
         fits.wls, fits.y_fit, fits.ols = fits.wls_vc, fits.y, est_mod.ols(fits.Wb, fits.y, regs.n_used)
     return friction
 
 
+def hand_on_load_candidate(regs: Regressors, fits: Fits, val: Validation, c: LoadCandidate) -> None:
+    """Switch ``fits`` and ``val`` to the load-dependent candidate (its Stribeck term, if any, refitted with it)."""
+    fits.stribeck, fits.load, fits.phys, fits.wls, fits.y_fit = c.fit.stribeck, c.fit, c.phys, c.wls, c.y_fit
+    fits.ols = est_mod.ols(fits.Wb, fits.y_fit, regs.n_used)
+    if val.pred_load is not None and val.pred_load_wls is not None:
+        val.pred_phys, val.pred_wls = val.pred_load, val.pred_load_wls
+        val.rms_phys, val.rel_phys = val_mod.torque_rms(val.tau_Nm, val.pred_phys)
+        val.rms_wls, val.rel_wls = val_mod.torque_rms(val.tau_Nm, val.pred_wls)
+
+
 def base_covariance(regs: Regressors, measured: Measured, fits: Fits) -> tuple[est_mod.HacCovariance, np.ndarray]:
     """Correlated residuals: the covariance reported and scored is the HAC sandwich, for a handed-on
-    Stribeck term the joint one of the nested fit (base parameters with fs, log vs), marginal in beta;
+    Stribeck term the joint one of the nested fit (base parameters with fs, log vs, and fl of a handed-on
+    load-dependent term; its column's load torque taken as given), marginal in beta;
     set on ``fits.wls``. Returns it and the white-residual WLS sigmas it replaced."""
     wls = fits.wls
     white_sigma = wls.sigma
-    J = fits.Wb if fits.stribeck is None else np.hstack([fits.Wb, fits.stribeck.jacobian(measured.data.v_blocks)])
+    vb = measured.data.v_blocks
+    J = np.hstack([fits.Wb, *([] if fits.stribeck is None else [fits.stribeck.jacobian(vb)]),
+                   *([] if fits.load is None else [fits.load.load.jacobian(fits.load.load_Nm, vb)])])
     hac = est_mod.hac_covariance(J, fits.y_fit - fits.Wb @ wls.beta, wls.joint_sigma_Nm, wls.covariance)
     wls.covariance = hac.covariance[: regs.base.n_base, : regs.base.n_base]
     return hac, white_sigma

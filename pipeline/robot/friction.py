@@ -9,6 +9,17 @@ steady-state "Stribeck" curve; ``w`` the Coulomb smoothing width of DESIGN.md). 
 ``v_s`` are ``actuation.static_friction_excess_Nm`` and ``actuation.stribeck_velocity_rad_s``
 (written by the identification with ``friction_model: stribeck``); without them the model is
 viscous + Coulomb. The hidden robot's own friction is :class:`pipeline.sim.transmission.Transmission`.
+
+Load-dependent Coulomb friction (identified when the held-out data prefer it,
+``actuation.coulomb_load_coefficient`` ``fl``; Bittencourt & Gunnarsson 2012, J. Dyn. Sys. Meas.
+Control 134(5)): Coulomb friction grows with the torque the transmission carries,
+
+    tau = tau_0 + fl |tau_0| tanh(v / w),   tau_0 = rigid-body torque + tau_f
+
+with the load torque ``tau_0`` the model's torque without this term (explicit: the same load the
+identification used, :mod:`pipeline.identification.friction`). Given the applied torque ``tau`` the
+load is exact: ``tau_0 = tau / (1 + c sign(tau))``, ``c = fl tanh(v / w)`` (:func:`load_free_from_applied`,
+``|c| < 1``).
 """
 
 from __future__ import annotations
@@ -41,8 +52,28 @@ def has_stribeck(act: ActuationSpec) -> bool:
     return act.static_friction_excess_Nm is not None and act.stribeck_velocity_rad_s is not None
 
 
+def load_friction_torque(act: ActuationSpec, load_Nm: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``fl |tau_0| tanh(v / w)`` at load torques ``load_Nm`` (the model's torque without this term)
+    and joint velocities ``v`` (..., nq) (module doc); zero without an identified coefficient."""
+    v = np.asarray(v, float)
+    if act.coulomb_load_coefficient is None:
+        return np.zeros(np.broadcast_shapes(np.shape(load_Nm), v.shape))
+    return act.coulomb_load_coefficient * np.abs(load_Nm) * np.tanh(v / act.coulomb_smoothing_rad_s)
+
+
+def load_free_from_applied(act: ActuationSpec, tau_Nm: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """The load torque ``tau_0`` behind an applied torque ``tau = tau_0 + fl |tau_0| tanh(v / w)``:
+    ``tau / (1 + c sign(tau))`` with ``c = fl tanh(v / w)`` (module doc); ``tau`` without a coefficient."""
+    tau = np.asarray(tau_Nm, float)
+    if act.coulomb_load_coefficient is None:
+        return tau
+    c = act.coulomb_load_coefficient * np.tanh(np.asarray(v, float) / act.coulomb_smoothing_rad_s)
+    return tau / (1.0 + c * np.sign(tau))
+
+
 def joint_friction_torque(act: ActuationSpec, v: np.ndarray) -> np.ndarray:
-    """Friction torque at joint velocities ``v`` (..., nq) of the model's actuation (module doc)."""
+    """Friction torque at joint velocities ``v`` (..., nq) of the model's actuation (module doc), without
+    the load-dependent term (:func:`load_friction_torque`, which needs the load torque)."""
     v = np.asarray(v, float)
     tau = act.viscous_Nms_rad * v + act.coulomb_Nm * np.tanh(v / act.coulomb_smoothing_rad_s)
     if act.static_friction_excess_Nm is not None and act.stribeck_velocity_rad_s is not None:  # has_stribeck

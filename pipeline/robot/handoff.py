@@ -76,22 +76,27 @@ class ElastostaticRecord:
 
 @dataclass(frozen=True)
 class JointFriction:
-    """Identified joint friction ``tau_f = fv v + fc sign(v) + fs exp(-(v/vs)^2) sign(v)`` per joint.
+    """Identified joint friction ``tau_f = fv v + fc sign(v) + fs exp(-(v/vs)^2) sign(v)
+    + fl |tau_load| sign(v)`` per joint.
 
     ``viscous_Nms_rad`` (fv) and ``coulomb_Nm`` (fc) always; the Stribeck excess ``static_excess_Nm``
     (fs) and velocity ``stribeck_velocity_rad_s`` (vs) only when a Stribeck term was fitted
-    (Armstrong-Helouvry et al. 1994), else both None.
+    (Armstrong-Helouvry et al. 1994), else both None; the load-dependent Coulomb coefficient
+    ``load_coefficient`` (fl, Bittencourt & Gunnarsson 2012; the load torque is the model's torque
+    without this term, :func:`pipeline.robot.friction.load_friction_torque`) only when fitted, else None.
     """
 
     viscous_Nms_rad: np.ndarray
     coulomb_Nm: np.ndarray
     static_excess_Nm: np.ndarray | None = None
     stribeck_velocity_rad_s: np.ndarray | None = None
+    load_coefficient: np.ndarray | None = None
 
     KEYS = {"viscous_Nms_rad": "friction_viscous_Nms_rad",
             "coulomb_Nm": "friction_coulomb_Nm",
             "static_excess_Nm": "friction_static_excess_Nm",
-            "stribeck_velocity_rad_s": "friction_stribeck_velocity_rad_s"}
+            "stribeck_velocity_rad_s": "friction_stribeck_velocity_rad_s",
+            "load_coefficient": "friction_coulomb_load_coefficient"}
 
     def __post_init__(self) -> None:
         if (self.static_excess_Nm is None) != (self.stribeck_velocity_rad_s is None):
@@ -113,7 +118,8 @@ class JointFriction:
             return None if x is None else np.array(x, float)
 
         return cls(np.array(actuation.viscous_Nms_rad, float), np.array(actuation.coulomb_Nm, float),
-                   copy(actuation.static_friction_excess_Nm), copy(actuation.stribeck_velocity_rad_s))
+                   copy(actuation.static_friction_excess_Nm), copy(actuation.stribeck_velocity_rad_s),
+                   copy(actuation.coulomb_load_coefficient))
 
     def apply_to(self, actuation: ActuationSpec) -> None:
         """Write the friction into ``actuation`` (how the identified model hands it on)."""
@@ -122,3 +128,4 @@ class JointFriction:
         actuation.static_friction_excess_Nm = None if self.static_excess_Nm is None else self.static_excess_Nm.copy()
         actuation.stribeck_velocity_rad_s = (None if self.stribeck_velocity_rad_s is None
                                              else self.stribeck_velocity_rad_s.copy())
+        actuation.coulomb_load_coefficient = None if self.load_coefficient is None else self.load_coefficient.copy()

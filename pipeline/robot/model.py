@@ -22,7 +22,7 @@ from pipeline.artefacts import write_text
 from pipeline.errors import RobotFileError
 from pipeline.robot.assumed_values import assumed_sentences
 from pipeline.robot.collision import CapsuleDistances, segment_distances
-from pipeline.robot.friction import joint_friction_torque
+from pipeline.robot.friction import joint_friction_torque, load_free_from_applied, load_friction_torque
 from pipeline.robot.ik import IKResult, solve_ik
 from pipeline.robot.loading import ROBOTS_DIR, JointLimits, load_robot_files, resolve_robot_files, validate_joint_limits
 from pipeline.robot.reflector_check import capsules_holding, describe, marker_points
@@ -323,18 +323,30 @@ class RobotModel:
     # ----------------------------------------------------------------- dynamics
     def friction_torque(self, v: np.ndarray) -> np.ndarray:
         """Joint friction ``f_v v + f_c tanh(v / width)`` (smooth Coulomb, DESIGN.md) plus the
-        identified Stribeck excess when the actuation has one (:mod:`pipeline.robot.friction`)."""
+        identified Stribeck excess when the actuation has one (:mod:`pipeline.robot.friction`); the
+        load-dependent term is :meth:`load_friction_torque`."""
         return joint_friction_torque(self.spec.actuation, v)
 
+    def load_friction_torque(self, load_Nm: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """The identified load-dependent Coulomb friction at the load torque ``load_Nm`` (the model's
+        torque without it: rigid body + :meth:`friction_torque`); zero without one."""
+        return load_friction_torque(self.spec.actuation, load_Nm, v)
+
     def inverse_dynamics(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
-        """``tau = M(q) a + h(q, v) + friction(v)``; M includes the rotor inertia (armature)."""
+        """``tau_0 = M(q) a + h(q, v) + friction(v)``, ``tau = tau_0 + load friction(tau_0, v)``; M
+        includes the rotor inertia (armature)."""
         tau = pin.rnea(self.model, self._data, np.asarray(q, float), np.asarray(v, float), np.asarray(a, float))
-        return tau + self.friction_torque(v)
+        tau0 = tau + self.friction_torque(v)
+        if self.spec.actuation.coulomb_load_coefficient is None:
+            return tau0
+        return tau0 + self.load_friction_torque(tau0, v)
 
     def forward_dynamics(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray) -> np.ndarray:
-        """Joint accelerations under ``tau`` minus friction (ABA, armature included)."""
+        """Joint accelerations under ``tau`` minus friction (ABA, armature included); the load-dependent
+        friction from the load behind ``tau`` (:func:`pipeline.robot.friction.load_free_from_applied`)."""
+        tau0 = load_free_from_applied(self.spec.actuation, tau, v)
         return pin.aba(self.model, self._data, np.asarray(q, float), np.asarray(v, float),
-                       np.asarray(tau, float) - self.friction_torque(v)).copy()
+                       tau0 - self.friction_torque(v)).copy()
 
     def mass_matrix(self, q: np.ndarray) -> np.ndarray:
         mass = pin.crba(self.model, self._data, np.asarray(q, float))

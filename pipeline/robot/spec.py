@@ -57,6 +57,9 @@ class ActuationSpec:
     #: ``f_s`` (N m) and Stribeck velocity ``v_s`` (rad/s) per joint; None: viscous + Coulomb only
     static_friction_excess_Nm: np.ndarray | None = None
     stribeck_velocity_rad_s: np.ndarray | None = None
+    #: load-dependent Coulomb friction (identified): ``fl`` per joint, the friction grows by
+    #: ``fl |tau_load| tanh(v / w)`` (pipeline.robot.friction); None: no load dependence
+    coulomb_load_coefficient: np.ndarray | None = None
     #: where logged torques are measured: "motor" (from motor currents: rotor inertia and drive
     #: friction are in them) or "link" (joint torque sensors after the gear: they are not)
     torque_side: str = "motor"
@@ -285,7 +288,7 @@ def load_robot_spec(path: Path, nq: int | None = None) -> RobotSpec:
     act.check_keys(
         {"gear_ratio", "gear_coupling", "rotor_inertia_kgm2", "viscous_Nms_rad", "coulomb_Nm",
          "coulomb_smoothing_rad_s", "joint_stiffness_Nm_rad", "static_friction_excess_Nm",
-         "stribeck_velocity_rad_s", "torque_side"},
+         "stribeck_velocity_rad_s", "torque_side", "coulomb_load_coefficient"},
         {"gear_ratio", "rotor_inertia_kgm2", "viscous_Nms_rad", "coulomb_Nm"},
     )
     per_joint = [len(v) for k in ("gear_ratio", "rotor_inertia_kgm2", "viscous_Nms_rad", "coulomb_Nm")
@@ -334,6 +337,8 @@ def load_robot_spec(path: Path, nq: int | None = None) -> RobotSpec:
     if "static_friction_excess_Nm" in act.data:
         actuation.static_friction_excess_Nm = act.vector("static_friction_excess_Nm", n, nonnegative=True)
         actuation.stribeck_velocity_rad_s = act.vector("stribeck_velocity_rad_s", n, positive=True)
+    if "coulomb_load_coefficient" in act.data:
+        actuation.coulomb_load_coefficient = act.vector("coulomb_load_coefficient", n, nonnegative=True)
 
     lim = top.sub("limits")
     overridable = ("lower_rad", "upper_rad", "velocity_rad_s", "effort_Nm")

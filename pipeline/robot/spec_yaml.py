@@ -54,7 +54,9 @@ def robot_spec_to_yaml(spec: RobotSpec, urdf_name: str) -> dict[str, object]:
              else {"joint_stiffness_Nm_rad": [float(v) for v in act.joint_stiffness_Nm_rad]})
         | ({} if act.static_friction_excess_Nm is None or act.stribeck_velocity_rad_s is None
            else {"static_friction_excess_Nm": [float(v) for v in act.static_friction_excess_Nm],
-                 "stribeck_velocity_rad_s": [float(v) for v in act.stribeck_velocity_rad_s]}),
+                 "stribeck_velocity_rad_s": [float(v) for v in act.stribeck_velocity_rad_s]})
+        | ({} if act.coulomb_load_coefficient is None
+           else {"coulomb_load_coefficient": [float(v) for v in act.coulomb_load_coefficient]}),
         "limits": {"acceleration_rad_s2": [float(v) for v in spec.acceleration_rad_s2]}
         | {k: [float(x) for x in v] for k, v in spec.limit_overrides.items()},
         "tracker": None if not spec.has_tracker else {

@@ -54,7 +54,10 @@ class PlanningModel:
         """Build from a :class:`pipeline.robot.model.RobotModel` (docs/ARCHITECTURE.md).
 
         ``torque_reserve`` (fraction) is kept free for the feedback controller: the planners see
-        ``effort_Nm = (1 - torque_reserve) * limit``.
+        ``effort_Nm = (1 - torque_reserve) * limit``. The friction is viscous + Coulomb: an identified
+        Stribeck excess and load-dependent Coulomb friction (``actuation.coulomb_load_coefficient`` fl,
+        which adds at most ``fl |tau|``, fl of order 1e-3..1e-2) are left out of the plan; the reserve
+        covers them (the control stage's feedforward evaluates both).
         """
         if not 0.0 <= torque_reserve < 1.0:
             raise ConfigError(None, "trajectory.torque_reserve", f"must be in [0, 1), got {torque_reserve}")

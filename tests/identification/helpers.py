@@ -26,9 +26,9 @@ def calibrated_robot(nominal: RobotModel, real: RealRobot) -> RobotModel:
     return nominal.with_model(model)
 
 
-#: the default hidden robot without load-dependent Coulomb friction, which no friction model of the
-#: identification contains: with it the fitted Coulomb parameters are biased by a few per cent, so
-#: scores of the base parameters against the truth (z-scores) need this truth
+#: the default hidden robot without load-dependent Coulomb friction: the truth of the tests whose
+#: friction models (viscous + Coulomb, Stribeck) contain the truth's (without the load-dependent
+#: candidate the fitted Coulomb parameters are biased by a few per cent)
 NO_LOAD_FRICTION = TruthConfig(coulomb_load_coefficient=0.0)
 
 

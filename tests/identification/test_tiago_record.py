@@ -13,7 +13,7 @@ import pytest
 
 from pipeline.config import CONFIGS_DIR, REPO_ROOT, load_config
 from pipeline.identification import stage
-from pipeline.identification.friction import MAX_EXCESS_OVER_LIMIT
+from pipeline.identification.friction import MAX_EXCESS_OVER_LIMIT, MAX_LOAD_COEFFICIENT
 from pipeline.progress import Progress
 from pipeline.robot.model import RobotModel
 from pipeline.stage_api import StageContext, stage_rng
@@ -77,6 +77,10 @@ def test_handed_on_friction_is_the_held_out_choice_and_plausible(tiago_result):
     gains = [g for g in s["stribeck_chi2_gain"] if g is not None]
     assert all(g >= 0 for g in gains)
     assert np.all(res.robot.actuation.viscous_Nms_rad > 0) and np.all(res.robot.actuation.coulomb_Nm > 0)
+    load = res.robot.actuation.coulomb_load_coefficient      # friction grows with load, by a plausible loss
+    assert (load is not None) == s["friction_model_handed_on"].endswith("_load")
+    if load is not None:
+        assert np.all(load >= 0) and np.all(load <= MAX_LOAD_COEFFICIENT)
 
 
 def test_held_out_torques_of_joints_1_to_4(tiago_result):
