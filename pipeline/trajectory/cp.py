@@ -42,6 +42,12 @@ CP_ACTIVE_LEVEL = 0.98
 
 _IPOPT = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
           "ipopt.tol": 1e-9, "ipopt.acceptable_tol": 1e-6, "ipopt.max_iter": 3000}
+#: IPOPT starts from the given primal and dual point with a small barrier parameter: a re-solve from
+#: the previous solution's multipliers takes 1-3 iterations instead of ~30; the first solve starts
+#: from the convex optimum (zero multipliers, pushed to 1e-9), which is already close
+_WARM_START = {"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-6,
+               "ipopt.warm_start_bound_push": 1e-9, "ipopt.warm_start_mult_bound_push": 1e-9,
+               "ipopt.warm_start_slack_bound_push": 1e-9}
 
 
 @dataclass
@@ -55,6 +61,10 @@ class CPProfile:
     duration_s: float
     solve_time_s: float
     info: dict = field(default_factory=dict)
+    #: IPOPT's (lam_x, lam_g) of an NLP solution: the dual warm start of a re-solve
+    multipliers: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
+    #: the built NLP that produced it (re-solves with other limits reuse it)
+    nlp: object = field(default=None, repr=False)
 
     def grid_times(self) -> np.ndarray:
         ds = np.diff(self.s)
@@ -205,25 +215,28 @@ def _fric_sx(pm: PlanningModel, dq: np.ndarray, x: ca.SX) -> ca.SX:
             + np.tile(pm.coulomb_Nm, (n, 1)) * ca.tanh(qd / pm.coulomb_smoothing_rad_s))
 
 
-def solve_cp_refined(pm: PlanningModel, path: JointPath, warm: CPProfile, midpoints: bool = True,
-                     name: str = "cp", torque_margin: float = 0.0,
-                     torque_scale: np.ndarray | None = None, acceleration_limits: bool = False) -> CPProfile:
-    """Non-convex refinement in ``x = sdot`` with viscous + smooth Coulomb friction.
+@dataclass
+class _RefinedNLP:
+    """The refinement NLP of one path, grid and model, built once: the torque limits enter as the
+    bounds ``-scale <= tau / tau_max <= scale`` of its first ``n_tau`` rows, so a re-solve with
+    tightened limits calls the same solver (building it costs more than a solve)."""
 
-    Warm-started from ``warm`` (same grid). ``torque_margin`` (e.g. 0.002) or the per-joint
-    ``torque_scale`` tighten the torque limits to keep the fine-grid violation below tolerance
-    between the checked points; ``acceleration_limits`` adds the joint acceleration rows.
-    """
-    t0 = time.perf_counter()
-    s = warm.s
+    key: tuple
+    solver: ca.Function
+    lbg: np.ndarray
+    ubg: np.ndarray
+    ubx: np.ndarray
+    n_kinds: int
+
+
+def _refined_nlp(pm: PlanningModel, path: JointPath, s: np.ndarray, midpoints: bool, name: str,
+                 torque_margin: float, acceleration_limits: bool) -> _RefinedNLP:
     N = len(s) - 1
     ds = s[1] - s[0]
     pts, kinds = _eval_points(path, s, midpoints)
     q, dq, ddq = path.derivatives(pts)
     pc = path_coefficients(pm, pts, q, dq, ddq)
     tau_max = pm.effort_Nm * (1.0 - torque_margin)
-    if torque_scale is not None:
-        tau_max = tau_max * np.asarray(torque_scale, float)
     x = ca.SX.sym("x", N + 1)
     b = x**2
     a = (b[1:] - b[:-1]) / (2 * ds)
@@ -255,10 +268,43 @@ def solve_cp_refined(pm: PlanningModel, path: JointPath, warm: CPProfile, midpoi
         ubg.append(vb[N:2 * N])
     ubx[0] = ubx[-1] = 0.0
     f = ca.sum1(2 * ds / (x[:-1] + x[1:] + 1e-12))
-    solver = ca.nlpsol(name, "ipopt", {"x": x, "f": f, "g": ca.vertcat(*g_list)}, _IPOPT)
-    x0 = np.minimum(warm.sdot, ubx)
-    sol = solver(x0=x0, lbx=np.zeros(N + 1), ubx=ubx, lbg=np.concatenate(lbg), ubg=np.concatenate(ubg))
-    stats = _check_solver(solver, f"{name} (CP refinement with friction, N={N})")
+    solver = ca.nlpsol(name, "ipopt", {"x": x, "f": f, "g": ca.vertcat(*g_list)}, {**_IPOPT, **_WARM_START})
+    return _RefinedNLP((pm, path, N, midpoints, torque_margin, acceleration_limits), solver,
+                       np.concatenate(lbg), np.concatenate(ubg), ubx, len(kinds))
+
+
+def solve_cp_refined(pm: PlanningModel, path: JointPath, warm: CPProfile, midpoints: bool = True,
+                     name: str = "cp", torque_margin: float = 0.0,
+                     torque_scale: np.ndarray | None = None, acceleration_limits: bool = False) -> CPProfile:
+    """Non-convex refinement in ``x = sdot`` with viscous + smooth Coulomb friction.
+
+    Warm-started from ``warm`` (same grid): its speeds, and when ``warm`` is a solution of this
+    problem (a re-solve with tightened limits) its multipliers too (``warm.multipliers``, IPOPT
+    ``warm_start_init_point``) and its built solver (the limits are bounds of the NLP), so a
+    re-solve that moves a few intervals takes a few iterations and no build. ``torque_margin``
+    (e.g. 0.002) or ``torque_scale`` tighten the torque limits to keep the fine-grid violation below
+    tolerance between the checked points: per joint (nq,), or per grid interval and joint (N, nq)
+    to tighten only the intervals whose fine samples exceed; ``acceleration_limits`` adds the joint
+    acceleration rows.
+    """
+    t0 = time.perf_counter()
+    s = warm.s
+    N = len(s) - 1
+    ds = s[1] - s[0]
+    nlp = warm.nlp
+    key = (N, midpoints, torque_margin, acceleration_limits)
+    if not (isinstance(nlp, _RefinedNLP) and nlp.key[0] is pm and nlp.key[1] is path and nlp.key[2:] == key):
+        nlp = _refined_nlp(pm, path, s, midpoints, name, torque_margin, acceleration_limits)
+    bound = np.ones((nlp.n_kinds * N, pm.nq))
+    if torque_scale is not None:
+        scale = np.asarray(torque_scale, float)              # (nq,) or per interval (N, nq)
+        bound = bound * (np.tile(scale, (nlp.n_kinds, 1)) if scale.ndim == 2 else scale)
+    lbg, ubg = nlp.lbg.copy(), nlp.ubg.copy()
+    lbg[: bound.size], ubg[: bound.size] = -bound.ravel(order="F"), bound.ravel(order="F")
+    lam = warm.multipliers if warm.nlp is nlp else None
+    extra = {"lam_x0": lam[0], "lam_g0": lam[1]} if lam is not None else {}
+    sol = nlp.solver(x0=np.minimum(warm.sdot, nlp.ubx), lbx=np.zeros(N + 1), ubx=nlp.ubx, lbg=lbg, ubg=ubg, **extra)
+    stats = _check_solver(nlp.solver, f"{name} (CP refinement with friction, N={N})")
     sd = np.maximum(np.asarray(sol["x"]).ravel(), 0.0)
     sdd = np.diff(sd**2) / (2 * ds)
     dur = float(np.sum(2 * ds / np.maximum(sd[:-1] + sd[1:], 1e-300)))
@@ -266,8 +312,9 @@ def solve_cp_refined(pm: PlanningModel, path: JointPath, warm: CPProfile, midpoi
                      info={"iterations": int(stats["iter_count"]), "midpoints": midpoints, "method": "nlp",
                            "solver_status": stats["return_status"], "acceleration_limits": acceleration_limits,
                            "friction": "viscous+tanh coulomb", "n_grid": N,
-                           "torque_margin": torque_margin,
-                           "torque_scale": None if torque_scale is None else np.asarray(torque_scale).tolist()})
+                           "torque_margin": torque_margin, "warm_started_multipliers": lam is not None,
+                           "torque_scale": None if torque_scale is None else np.asarray(torque_scale).tolist()},
+                     multipliers=(np.asarray(sol["lam_x"]).ravel(), np.asarray(sol["lam_g"]).ravel()), nlp=nlp)
 
 
 def cp_constraint_activity(pm: PlanningModel, path: JointPath, traj: JointTrajectory,
