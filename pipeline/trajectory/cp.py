@@ -42,9 +42,8 @@ CP_ACTIVE_LEVEL = 0.98
 
 _IPOPT = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
           "ipopt.tol": 1e-9, "ipopt.acceptable_tol": 1e-6, "ipopt.max_iter": 3000}
-#: IPOPT starts from the given primal and dual point with a small barrier parameter: a re-solve from
-#: the previous solution's multipliers takes 1-3 iterations instead of ~30; the first solve starts
-#: from the convex optimum (zero multipliers, pushed to 1e-9), which is already close
+#: IPOPT from the given primal and dual point, small barrier: a re-solve from the previous solution
+#: takes 1-3 iterations instead of ~30; the first solve starts from the (close) convex optimum
 _WARM_START = {"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-6,
                "ipopt.warm_start_bound_push": 1e-9, "ipopt.warm_start_mult_bound_push": 1e-9,
                "ipopt.warm_start_slack_bound_push": 1e-9}
@@ -217,9 +216,9 @@ def _fric_sx(pm: PlanningModel, dq: np.ndarray, x: ca.SX) -> ca.SX:
 
 @dataclass
 class _RefinedNLP:
-    """The refinement NLP of one path, grid and model, built once: the torque limits enter as the
-    bounds ``-scale <= tau / tau_max <= scale`` of its first ``n_tau`` rows, so a re-solve with
-    tightened limits calls the same solver (building it costs more than a solve)."""
+    """The refinement NLP of one path, grid and model, built once: the torque limits are the bounds
+    ``-scale <= tau / tau_max <= scale`` of its first rows, so a re-solve with tightened limits
+    calls the same solver (building it costs more than a solve)."""
 
     key: tuple
     solver: ca.Function
@@ -243,20 +242,15 @@ def _refined_nlp(pm: PlanningModel, path: JointPath, s: np.ndarray, midpoints: b
     bm = 0.5 * (b[:-1] + b[1:])
     xs = [x[:-1], ca.sqrt(bm + 1e-14), x[1:]][: len(kinds)]
     bs = [b[:-1], bm, b[1:]][: len(kinds)]
-    x_p = ca.vertcat(*xs)
-    b_p = ca.vertcat(*bs)
-    a_p = ca.vertcat(*([a] * len(kinds)))
+    x_p, B_p = ca.vertcat(*xs), ca.repmat(ca.vertcat(*bs), 1, pm.nq)
+    A_p = ca.repmat(ca.vertcat(*([a] * len(kinds))), 1, pm.nq)
     n_p = pts.size
-    tau = pc.m * ca.repmat(a_p, 1, pm.nq) + pc.c * ca.repmat(b_p, 1, pm.nq) + pc.g + _fric_sx(pm, dq, x_p)
-    tau_scaled = tau / np.tile(tau_max, (n_p, 1))
+    tau = pc.m * A_p + pc.c * B_p + pc.g + _fric_sx(pm, dq, x_p)
     vb = np.sqrt(_velocity_bound_b(pm, dq))
-    g_list = [ca.vec(tau_scaled)]
-    lbg = [-np.ones(n_p * pm.nq)]
-    ubg = [np.ones(n_p * pm.nq)]
+    g_list = [ca.vec(tau / np.tile(tau_max, (n_p, 1)))]
+    lbg, ubg = [-np.ones(n_p * pm.nq)], [np.ones(n_p * pm.nq)]
     if acceleration_limits:
-        acc = (ddq * ca.repmat(b_p, 1, pm.nq) + dq * ca.repmat(a_p, 1, pm.nq)) / np.tile(pm.acceleration_rad_s2,
-                                                                                         (n_p, 1))
-        g_list.append(ca.vec(acc))
+        g_list.append(ca.vec((ddq * B_p + dq * A_p) / np.tile(pm.acceleration_rad_s2, (n_p, 1))))
         lbg.append(-np.ones(n_p * pm.nq))
         ubg.append(np.ones(n_p * pm.nq))
     ubx = np.full(N + 1, np.inf)
@@ -278,14 +272,11 @@ def solve_cp_refined(pm: PlanningModel, path: JointPath, warm: CPProfile, midpoi
                      torque_scale: np.ndarray | None = None, acceleration_limits: bool = False) -> CPProfile:
     """Non-convex refinement in ``x = sdot`` with viscous + smooth Coulomb friction.
 
-    Warm-started from ``warm`` (same grid): its speeds, and when ``warm`` is a solution of this
-    problem (a re-solve with tightened limits) its multipliers too (``warm.multipliers``, IPOPT
-    ``warm_start_init_point``) and its built solver (the limits are bounds of the NLP), so a
-    re-solve that moves a few intervals takes a few iterations and no build. ``torque_margin``
-    (e.g. 0.002) or ``torque_scale`` tighten the torque limits to keep the fine-grid violation below
-    tolerance between the checked points: per joint (nq,), or per grid interval and joint (N, nq)
-    to tighten only the intervals whose fine samples exceed; ``acceleration_limits`` adds the joint
-    acceleration rows.
+    Warm-started from ``warm`` (same grid): its speeds; when ``warm`` came from this problem (a
+    re-solve with tightened limits) also its multipliers and its built solver, so such a re-solve
+    takes a few iterations and no build. ``torque_margin`` (e.g. 0.002) or ``torque_scale`` (per
+    joint (nq,), or per grid interval and joint (N, nq): only the intervals whose fine samples
+    exceed) tighten the torque limits; ``acceleration_limits`` adds the joint acceleration rows.
     """
     t0 = time.perf_counter()
     s = warm.s
