@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -40,13 +41,13 @@ from pipeline.trajectory.trajectories import JointTrajectory
 #: a constraint counts as active at this fraction of its limit (paper 004 Fig. 8)
 CP_ACTIVE_LEVEL = 0.98
 
-_IPOPT = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
-          "ipopt.tol": 1e-9, "ipopt.acceptable_tol": 1e-6, "ipopt.max_iter": 3000}
+_IPOPT: dict[str, Any] = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
+                          "ipopt.tol": 1e-9, "ipopt.acceptable_tol": 1e-6, "ipopt.max_iter": 3000}
 #: IPOPT from the given primal and dual point, small barrier: a re-solve from the previous solution
 #: takes 1-3 iterations instead of ~30; the first solve starts from the (close) convex optimum
-_WARM_START = {"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-6,
-               "ipopt.warm_start_bound_push": 1e-9, "ipopt.warm_start_mult_bound_push": 1e-9,
-               "ipopt.warm_start_slack_bound_push": 1e-9}
+_WARM_START: dict[str, Any] = {"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-6,
+                               "ipopt.warm_start_bound_push": 1e-9, "ipopt.warm_start_mult_bound_push": 1e-9,
+                               "ipopt.warm_start_slack_bound_push": 1e-9}
 
 
 @dataclass
