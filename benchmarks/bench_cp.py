@@ -21,7 +21,8 @@ are cleared before each of our timings, toppra is timed as its best of 3):
 
 Then scaling (CPU time, each the best of 3, fitted exponent ``k`` of ``time ~ x^k`` by a
 least-squares line in log-log): against the grid N = 100 ... 1600 and the path length (ISO cube
-edges 0.4 ... 1 x the default) on the first robot, and against the number of joints (joint-space
+edges 0.4 ... 1 x the default; one solve and the verified plan, whose fine-grid check grows with
+the motion's duration) on the first robot, and against the number of joints (joint-space
 moves with a detour on the 6- and 7-axis example-robot-data arms, N = 400).
 """
 
@@ -175,15 +176,19 @@ def scaling(robot: RobotModel, name: str) -> None:
     fitted_pair("grid N", SCALING_N, ours, theirs)
     cube = iso_cube(robot, cfg.cp_plane, None, frame=robot.frame_tcp)
     lengths: list[float] = []
-    ours, theirs = [], []
+    ours, theirs, checked = [], [], []
     for f in (0.4, 0.6, 0.8, 1.0):
         cfg.cp_edge_m, cfg.cp_centre_m = f * cube.edge_m, list(cube.centre_m)
         path, piece = cp_joint_path(robot, cfg)
         t_ra, ra, t_tp = both_times(pm, path, N_GRID, ours, theirs)
+        t_ver, _ = best_time(lambda path=path: verified(pm, path, cfg, False), 3)
+        checked.append(t_ver)
         lengths.append(piece.length_m)
         print(f"  path {piece.length_m:.3f} m: reachability {1e3 * t_ra:.1f} ms ({ra.duration_s:.4f} s motion), "
-              f"toppra {1e3 * t_tp:.1f} ms")
+              f"verified plan {1e3 * t_ver:.1f} ms, toppra {1e3 * t_tp:.1f} ms")
     fitted_pair("path length (N fixed)", lengths, ours, theirs)
+    # the fine-grid check grows with the motion's duration (one sample every fine_dt_s)
+    fitted("path length (N fixed), verified plan", lengths, checked)
     joints: list[int] = []
     ours, theirs = [], []
     for arm in ("ur5", "z1", "ur10", "panda", "xarm7"):
