@@ -204,31 +204,35 @@ def _argmax_concave(p: np.ndarray, sl: np.ndarray, hi: np.ndarray, start: np.nda
 
 
 @lru_cache(maxsize=16)
-def _passes(n_rows: int, n_stages: int) -> tuple[ca.Function, ca.Function]:
-    """The backward and forward recursions as CasADi folds (``mapaccum``: one C loop over stages).
+def _passes(n_rows: int, n_stages: int) -> ca.Function:
+    """Both recursions as ONE CasADi fold (``mapaccum``: one C loop over stages; building a fold
+    costs more than a round, so the two passes share it) of the stage step
 
-    backward:  kmax_k = max(0, min_r (p_r + s_r min(kmax_{k+1}, y*_k)))
-    forward:   b_{k+1} = max(0, min(kmax_{k+1}, min_r (u_r + t_r b_k)))
+        x' = max(0, min(c, min_r (a_r + e_r min(x, d))))
+
+    backward (stages reversed):  kmax_k = max(0, min_r (p_r + s_r min(kmax_{k+1}, y*_k)))
+        (a, e, c, d) = (p, s, inf, y*_k);
+    forward:  b_{k+1} = max(0, min(kmax_{k+1}, min_r (u_r + t_r b_k)))
+        (a, e, c, d) = (u, t, kmax_{k+1}, inf).
     """
     x = ca.SX.sym("x")
-    p, s, u, t = (ca.SX.sym(n, n_rows) for n in "pslt")
-    y_star, k_next = ca.SX.sym("y_star"), ca.SX.sym("k_next")
-    back = ca.Function("cp_backward", [x, ca.vertcat(p, s, y_star)],
-                       [ca.fmax(0.0, ca.mmin(p + s * ca.fmin(x, y_star)))])
-    fwd = ca.Function("cp_forward", [x, ca.vertcat(u, t, k_next)],
-                      [ca.fmax(0.0, ca.fmin(k_next, ca.mmin(u + t * x)))])
-    return back.mapaccum("cp_backward_pass", n_stages), fwd.mapaccum("cp_forward_pass", n_stages)
+    a, e = ca.SX.sym("a", n_rows), ca.SX.sym("e", n_rows)
+    c, d = ca.SX.sym("c"), ca.SX.sym("d")
+    step = ca.Function("cp_stage", [x, ca.vertcat(a, e, c, d)],
+                       [ca.fmax(0.0, ca.fmin(c, ca.mmin(a + e * ca.fmin(x, d))))])
+    return step.mapaccum("cp_pass", n_stages)
 
 
 def _topp_ra(p: np.ndarray, sl: np.ndarray, u: np.ndarray, t: np.ndarray,
              y_star: np.ndarray) -> np.ndarray:
     """Exact TOPP-RA for frozen-friction (linear) stage constraints: b at the N+1 grid points."""
     N, R = p.shape
-    back, fwd = _passes(R, N)
+    fold = _passes(R, N)
+    inf = np.full((N, 1), np.inf)
     K = np.zeros(N + 1)                      # rest at s = 1
-    K[:-1] = _call(back, np.hstack([p, sl, y_star[:, None]])[::-1], N)[::-1]
+    K[:-1] = _call(fold, np.hstack([p, sl, inf, y_star[:, None]])[::-1], N)[::-1]
     b = np.zeros(N + 1)                      # rest at s = 0
-    b[1:] = _call(fwd, np.hstack([u, t, K[1:, None]]), N)
+    b[1:] = _call(fold, np.hstack([u, t, K[1:, None], inf]), N)
     return b
 
 
