@@ -1,7 +1,9 @@
 """Scaling curves: how the run time of a building block grows with the problem size.
 
 Run: ``.venv/bin/python benchmarks/bench_scaling.py [robot] [--quick]`` (default rx130l).
-(The CP solve time against the grid size is in ``bench_trajectory.py``.)
+(CP and PtP: ``bench_cp.py`` prints the CP solve time against grid N, path length and number of
+joints, ``bench_trajectory.py scaling`` the PtP solve time against grid N, move length and joints,
+each with fitted exponents.)
 
 Each curve prints the times and the fitted exponent ``k`` of ``time ∝ N^k`` (least squares on
 ``log t = k log N + c``), so a regression (e.g. a quadratic step in a linear algorithm) shows:

@@ -21,17 +21,25 @@ Prints, each as a ratio measured here:
 Torque and speed limits only (``acceleration_limits = False``: the torque-limited study of paper 004
 section 5); ``benchmarks/bench_cp.py`` measures the CP solvers with and without acceleration limits.
 
-``bench_trajectory.py moves [n] [arm ...]``: ``n`` random feasible PtP moves per arm (default 50;
-arms: the robot folders rx130l, staubli_tx40, kuka_kr15 and the example-robot-data URDFs ur5, panda,
-z1), quick profile (``configs/quick.yaml``). Per move the plan handed on (:func:`best_ptp_candidate`:
-NLP from the quintic, from ruckig's profile, or ruckig's profile itself) / the torque-feasible ruckig
-duration, both on the fine grid; prints per arm the median and worst ratio and how often each
-candidate won (target: ratio <= 1 on every move). ``bench_trajectory.py scaling``: PtP solve time
-(process CPU) against move length, grid N and number of joints (6 and 7 axes) with fitted exponents.
+``bench_trajectory.py moves [--moves N] [--refine K] [arm ...]``: ``N`` random feasible PtP moves per
+arm (default 5, a quick look; the acceptance run is ``bench_trajectory.py moves --moves 50``, about
+10 s of CPU per move), quick profile (``configs/quick.yaml``), torque and speed limits only. Arms
+(default all): the robot folders rx130l and staubli_tx40, the example-robot-data URDFs ur5 and panda
+(the public arms the tests use), and two public arms from another source, FIGAROH's UR10
+(``data/figaroh_ur10_mocap/robot.urdf``) and TIAGo arm (``data/figaroh_tiago/tiago_48_schunk.urdf``,
+7 axes); any other robot folder, example arm or URDF path may be named. Each arm's NLP is built and
+compiled once, start and goal are its parameters. Per move the plan handed on
+(:func:`best_ptp_candidate`: NLP from the quintic, from ruckig's profile, or ruckig's profile itself)
+/ the torque-feasible ruckig duration, both on the fine grid; per arm the median and worst ratio and
+how often each candidate won. Target: ratio <= 1 on every move; a move above 1 prints a ``FAIL`` line
+and the exit code is 1. ``--refine K`` sets ``ruckig_refine_evaluations`` (0: bisection and joint
+rounds only, faster). ``bench_trajectory.py scaling``: PtP solve time (process CPU) against move
+length, grid N and number of joints (6 and 7 axes) with fitted exponents.
 """
 
 from __future__ import annotations
 
+import argparse
 import sys
 import time
 from pathlib import Path
@@ -56,8 +64,12 @@ from pipeline.trajectory.solve import (
 )
 from pipeline.trajectory.trajectories import check_trajectory
 
-QUICK = Path(__file__).resolve().parent.parent / "configs" / "quick.yaml"
-MOVE_ARMS = ("rx130l", "staubli_tx40", "kuka_kr15", "ur5", "panda", "z1")
+REPO = Path(__file__).resolve().parent.parent
+QUICK = REPO / "configs" / "quick.yaml"
+#: public arms from another source than example-robot-data (FIGAROH's published records)
+PUBLIC_URDFS = {"figaroh_ur10": REPO / "data" / "figaroh_ur10_mocap" / "robot.urdf",
+                "figaroh_tiago": REPO / "data" / "figaroh_tiago" / "tiago_48_schunk.urdf"}
+MOVE_ARMS = ("rx130l", "staubli_tx40", "ur5", "panda", "figaroh_ur10", "figaroh_tiago")
 
 
 def perturbed_starts(problem, q0: np.ndarray, q1: np.ndarray, duration_s: float, n: int, seed: int = 0):
@@ -168,7 +180,10 @@ def main(robot_name: str = "rx130l", segment: str = "circle_large", torque_reser
 
 
 def load_arm(name: str) -> RobotModel | None:
-    """A robot folder by name, else an example-robot-data URDF by short name (None: not installed)."""
+    """A public URDF of :data:`PUBLIC_URDFS`, a robot folder or URDF path, else an example-robot-data
+    URDF by short name (None: not installed)."""
+    if name in PUBLIC_URDFS:
+        return RobotModel.load(PUBLIC_URDFS[name]) if PUBLIC_URDFS[name].is_file() else None
     try:
         return RobotModel.load(name)
     except PipelineError:
@@ -193,28 +208,34 @@ def random_moves(pm: PlanningModel, n: int, rng: np.random.Generator, min_step_r
             yield q0, q1
 
 
-def moves(n: str = "50", *arms: str) -> None:
-    """Random moves per arm: plan handed on / torque-feasible ruckig (module docstring); an argument
-    ``refine=K`` sets ``ruckig_refine_evaluations`` (0: bisection and joint rounds only, faster)."""
+def moves(*argv: str) -> int:
+    """Random moves per arm: plan handed on / torque-feasible ruckig (module docstring). Returns the
+    exit code: 1 when a move is slower than ruckig, else 0."""
+    ap = argparse.ArgumentParser(prog="bench_trajectory.py moves")
+    ap.add_argument("--moves", type=int, default=5, help="random moves per arm (acceptance: 50)")
+    ap.add_argument("--refine", type=int, default=None, help="ruckig_refine_evaluations")
+    ap.add_argument("arms", nargs="*", default=list(MOVE_ARMS))
+    args = ap.parse_args(argv)
     cfg = load_config(QUICK).trajectory
     cfg.acceleration_limits = False                 # torque and speed limits: the full-dynamics case
-    for a in [a for a in arms if a.startswith("refine=")]:
-        cfg.ruckig_refine_evaluations = int(a.split("=", 1)[1])
-    arms = tuple(a for a in arms if not a.startswith("refine="))
+    if args.refine is not None:
+        cfg.ruckig_refine_evaluations = args.refine
     print(f"quick profile: N = {cfg.ptp_n_intervals}, ruckig jerk ratios {cfg.ruckig_jerk_ratios_1_s}, "
           f"{cfg.ruckig_refine_evaluations} ruckig refinement evaluations, fine grid "
           f"{1e3 * cfg.fine_dt_s:g} ms, torque and speed limits only; ratio = plan handed on / ruckig (both on the "
-          "fine grid)")
-    for name in arms or MOVE_ARMS:
+          f"fine grid); {args.moves} random moves per arm (seeded)")
+    slower: list[str] = []
+    table: list[str] = []
+    for name in args.arms:
         robot = load_arm(name)
         if robot is None:
             print(f"{name}: not installed; skipped")
             continue
         pm = PlanningModel.from_robot(robot, cfg.torque_reserve)
-        problem = ptp_problem(pm, robot, cfg)
+        problem = ptp_problem(pm, robot, cfg)          # built and compiled once; start and goal are parameters
         w = energy_weights(pm, cfg.ptp_energy)
-        ratios, sources, cpu = [], {}, 0.0
-        for i, (q0, q1) in enumerate(random_moves(pm, int(n), np.random.default_rng(7))):
+        ratios, sources, cpu, failed = [], {}, 0.0, 0
+        for i, (q0, q1) in enumerate(random_moves(pm, args.moves, np.random.default_rng(7))):
             c0 = time.process_time()
             try:
                 rk = ruckig_torque_feasible(pm, q0, q1, cfg.ruckig_check_dt_s, tuple(cfg.ruckig_jerk_ratios_1_s),
@@ -223,6 +244,7 @@ def moves(n: str = "50", *arms: str) -> None:
                 rk_fine = ruckig_resampled(pm, q0, q1, rk, cfg.fine_dt_s)
                 res, tr, _ = best_ptp_candidate(pm, problem, q0, q1, cfg, w, rk_fine)
             except PipelineError as exc:
+                failed += 1
                 print(f"  {name} move {i}: {exc}")
                 continue
             cpu += time.process_time() - c0
@@ -232,11 +254,25 @@ def moves(n: str = "50", *arms: str) -> None:
             sources[key] = sources.get(key, 0) + 1
             print(f"  {name} move {i}: ours {tr.duration_s:.4f} s / ruckig {rk.duration_s:.4f} s = "
                   f"{ratios[-1]:.4f} ({key}; NLP candidates {tr.info['nlp_candidates_s']})", flush=True)
+            if ratios[-1] > 1.0:
+                slower.append(f"{name} move {i} ({ratios[-1]:.4f})")
+                print(f"FAIL: {name} move {i}: ours {tr.duration_s:.4f} s is slower than ruckig's "
+                      f"{rk.duration_s:.4f} s", flush=True)
         if ratios:
             r = np.asarray(ratios)
-            print(f"{name} ({robot.nq} axes): {r.size} moves, ours / ruckig median {np.median(r):.4f}, worst "
-                  f"{r.max():.4f}, moves slower than ruckig {int(np.sum(r > 1.0))}; plan from {sources}; "
-                  f"{cpu / r.size:.1f} s CPU per move", flush=True)
+            line = (f"{name} ({robot.nq} axes): {r.size} moves ({failed} not planned), ours / ruckig median "
+                    f"{np.median(r):.4f}, max {r.max():.4f}, moves slower than ruckig {int(np.sum(r > 1.0))}; "
+                    f"plan from {sources}; {cpu / r.size:.1f} s CPU per move")
+            table.append(line)
+            print(line, flush=True)
+    print("summary (ours / ruckig per move, target <= 1 on every move):")
+    for line in table:
+        print(f"  {line}")
+    if slower:
+        print(f"FAIL: {len(slower)} moves slower than ruckig: " + ", ".join(slower))
+        return 1
+    print("PASS: no move slower than ruckig")
+    return 0
 
 
 def fitted(label: str, x, t) -> None:
@@ -297,7 +333,7 @@ def scaling(*_: str) -> None:
 
 if __name__ == "__main__":
     if sys.argv[1:2] == ["moves"]:
-        moves(*sys.argv[2:])
+        sys.exit(moves(*sys.argv[2:]))
     elif sys.argv[1:2] == ["scaling"]:
         scaling(*sys.argv[2:])
     else:

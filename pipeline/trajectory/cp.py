@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -40,8 +41,13 @@ from pipeline.trajectory.trajectories import JointTrajectory
 #: a constraint counts as active at this fraction of its limit (paper 004 Fig. 8)
 CP_ACTIVE_LEVEL = 0.98
 
-_IPOPT = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
-          "ipopt.tol": 1e-9, "ipopt.acceptable_tol": 1e-6, "ipopt.max_iter": 3000}
+_IPOPT: dict[str, Any] = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
+                          "ipopt.tol": 1e-9, "ipopt.acceptable_tol": 1e-6, "ipopt.max_iter": 3000}
+#: IPOPT from the given primal and dual point, small barrier: a re-solve from the previous solution
+#: takes 1-3 iterations instead of ~30; the first solve starts from the (close) convex optimum
+_WARM_START: dict[str, Any] = {"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-6,
+                               "ipopt.warm_start_bound_push": 1e-9, "ipopt.warm_start_mult_bound_push": 1e-9,
+                               "ipopt.warm_start_slack_bound_push": 1e-9}
 
 
 @dataclass
@@ -55,6 +61,10 @@ class CPProfile:
     duration_s: float
     solve_time_s: float
     info: dict = field(default_factory=dict)
+    #: IPOPT's (lam_x, lam_g) of an NLP solution: the dual warm start of a re-solve
+    multipliers: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
+    #: the built NLP that produced it (re-solves with other limits reuse it)
+    nlp: object = field(default=None, repr=False)
 
     def grid_times(self) -> np.ndarray:
         ds = np.diff(self.s)
@@ -205,45 +215,43 @@ def _fric_sx(pm: PlanningModel, dq: np.ndarray, x: ca.SX) -> ca.SX:
             + np.tile(pm.coulomb_Nm, (n, 1)) * ca.tanh(qd / pm.coulomb_smoothing_rad_s))
 
 
-def solve_cp_refined(pm: PlanningModel, path: JointPath, warm: CPProfile, midpoints: bool = True,
-                     name: str = "cp", torque_margin: float = 0.0,
-                     torque_scale: np.ndarray | None = None, acceleration_limits: bool = False) -> CPProfile:
-    """Non-convex refinement in ``x = sdot`` with viscous + smooth Coulomb friction.
+@dataclass
+class _RefinedNLP:
+    """The refinement NLP of one path, grid and model, built once: the torque limits are the bounds
+    ``-scale <= tau / tau_max <= scale`` of its first rows, so a re-solve with tightened limits
+    calls the same solver (building it costs more than a solve)."""
 
-    Warm-started from ``warm`` (same grid). ``torque_margin`` (e.g. 0.002) or the per-joint
-    ``torque_scale`` tighten the torque limits to keep the fine-grid violation below tolerance
-    between the checked points; ``acceleration_limits`` adds the joint acceleration rows.
-    """
-    t0 = time.perf_counter()
-    s = warm.s
+    key: tuple
+    solver: ca.Function
+    lbg: np.ndarray
+    ubg: np.ndarray
+    ubx: np.ndarray
+    n_kinds: int
+
+
+def _refined_nlp(pm: PlanningModel, path: JointPath, s: np.ndarray, midpoints: bool, name: str,
+                 torque_margin: float, acceleration_limits: bool) -> _RefinedNLP:
     N = len(s) - 1
     ds = s[1] - s[0]
     pts, kinds = _eval_points(path, s, midpoints)
     q, dq, ddq = path.derivatives(pts)
     pc = path_coefficients(pm, pts, q, dq, ddq)
     tau_max = pm.effort_Nm * (1.0 - torque_margin)
-    if torque_scale is not None:
-        tau_max = tau_max * np.asarray(torque_scale, float)
     x = ca.SX.sym("x", N + 1)
     b = x**2
     a = (b[1:] - b[:-1]) / (2 * ds)
     bm = 0.5 * (b[:-1] + b[1:])
     xs = [x[:-1], ca.sqrt(bm + 1e-14), x[1:]][: len(kinds)]
     bs = [b[:-1], bm, b[1:]][: len(kinds)]
-    x_p = ca.vertcat(*xs)
-    b_p = ca.vertcat(*bs)
-    a_p = ca.vertcat(*([a] * len(kinds)))
+    x_p, B_p = ca.vertcat(*xs), ca.repmat(ca.vertcat(*bs), 1, pm.nq)
+    A_p = ca.repmat(ca.vertcat(*([a] * len(kinds))), 1, pm.nq)
     n_p = pts.size
-    tau = pc.m * ca.repmat(a_p, 1, pm.nq) + pc.c * ca.repmat(b_p, 1, pm.nq) + pc.g + _fric_sx(pm, dq, x_p)
-    tau_scaled = tau / np.tile(tau_max, (n_p, 1))
+    tau = pc.m * A_p + pc.c * B_p + pc.g + _fric_sx(pm, dq, x_p)
     vb = np.sqrt(_velocity_bound_b(pm, dq))
-    g_list = [ca.vec(tau_scaled)]
-    lbg = [-np.ones(n_p * pm.nq)]
-    ubg = [np.ones(n_p * pm.nq)]
+    g_list = [ca.vec(tau / np.tile(tau_max, (n_p, 1)))]
+    lbg, ubg = [-np.ones(n_p * pm.nq)], [np.ones(n_p * pm.nq)]
     if acceleration_limits:
-        acc = (ddq * ca.repmat(b_p, 1, pm.nq) + dq * ca.repmat(a_p, 1, pm.nq)) / np.tile(pm.acceleration_rad_s2,
-                                                                                         (n_p, 1))
-        g_list.append(ca.vec(acc))
+        g_list.append(ca.vec((ddq * B_p + dq * A_p) / np.tile(pm.acceleration_rad_s2, (n_p, 1))))
         lbg.append(-np.ones(n_p * pm.nq))
         ubg.append(np.ones(n_p * pm.nq))
     ubx = np.full(N + 1, np.inf)
@@ -255,10 +263,40 @@ def solve_cp_refined(pm: PlanningModel, path: JointPath, warm: CPProfile, midpoi
         ubg.append(vb[N:2 * N])
     ubx[0] = ubx[-1] = 0.0
     f = ca.sum1(2 * ds / (x[:-1] + x[1:] + 1e-12))
-    solver = ca.nlpsol(name, "ipopt", {"x": x, "f": f, "g": ca.vertcat(*g_list)}, _IPOPT)
-    x0 = np.minimum(warm.sdot, ubx)
-    sol = solver(x0=x0, lbx=np.zeros(N + 1), ubx=ubx, lbg=np.concatenate(lbg), ubg=np.concatenate(ubg))
-    stats = _check_solver(solver, f"{name} (CP refinement with friction, N={N})")
+    solver = ca.nlpsol(name, "ipopt", {"x": x, "f": f, "g": ca.vertcat(*g_list)}, {**_IPOPT, **_WARM_START})
+    return _RefinedNLP((pm, path, N, midpoints, torque_margin, acceleration_limits), solver,
+                       np.concatenate(lbg), np.concatenate(ubg), ubx, len(kinds))
+
+
+def solve_cp_refined(pm: PlanningModel, path: JointPath, warm: CPProfile, midpoints: bool = True,
+                     name: str = "cp", torque_margin: float = 0.0,
+                     torque_scale: np.ndarray | None = None, acceleration_limits: bool = False) -> CPProfile:
+    """Non-convex refinement in ``x = sdot`` with viscous + smooth Coulomb friction.
+
+    Warm-started from ``warm`` (same grid): its speeds; when ``warm`` came from this problem (a
+    re-solve with tightened limits) also its multipliers and its built solver, so such a re-solve
+    takes a few iterations and no build. ``torque_margin`` (e.g. 0.002) or ``torque_scale`` (per
+    joint (nq,), or per grid interval and joint (N, nq): only the intervals whose fine samples
+    exceed) tighten the torque limits; ``acceleration_limits`` adds the joint acceleration rows.
+    """
+    t0 = time.perf_counter()
+    s = warm.s
+    N = len(s) - 1
+    ds = s[1] - s[0]
+    nlp = warm.nlp
+    key = (N, midpoints, torque_margin, acceleration_limits)
+    if not (isinstance(nlp, _RefinedNLP) and nlp.key[0] is pm and nlp.key[1] is path and nlp.key[2:] == key):
+        nlp = _refined_nlp(pm, path, s, midpoints, name, torque_margin, acceleration_limits)
+    bound = np.ones((nlp.n_kinds * N, pm.nq))
+    if torque_scale is not None:
+        scale = np.asarray(torque_scale, float)              # (nq,) or per interval (N, nq)
+        bound = bound * (np.tile(scale, (nlp.n_kinds, 1)) if scale.ndim == 2 else scale)
+    lbg, ubg = nlp.lbg.copy(), nlp.ubg.copy()
+    lbg[: bound.size], ubg[: bound.size] = -bound.ravel(order="F"), bound.ravel(order="F")
+    lam = warm.multipliers if warm.nlp is nlp else None
+    extra = {"lam_x0": lam[0], "lam_g0": lam[1]} if lam is not None else {}
+    sol = nlp.solver(x0=np.minimum(warm.sdot, nlp.ubx), lbx=np.zeros(N + 1), ubx=nlp.ubx, lbg=lbg, ubg=ubg, **extra)
+    stats = _check_solver(nlp.solver, f"{name} (CP refinement with friction, N={N})")
     sd = np.maximum(np.asarray(sol["x"]).ravel(), 0.0)
     sdd = np.diff(sd**2) / (2 * ds)
     dur = float(np.sum(2 * ds / np.maximum(sd[:-1] + sd[1:], 1e-300)))
@@ -266,8 +304,9 @@ def solve_cp_refined(pm: PlanningModel, path: JointPath, warm: CPProfile, midpoi
                      info={"iterations": int(stats["iter_count"]), "midpoints": midpoints, "method": "nlp",
                            "solver_status": stats["return_status"], "acceleration_limits": acceleration_limits,
                            "friction": "viscous+tanh coulomb", "n_grid": N,
-                           "torque_margin": torque_margin,
-                           "torque_scale": None if torque_scale is None else np.asarray(torque_scale).tolist()})
+                           "torque_margin": torque_margin, "warm_started_multipliers": lam is not None,
+                           "torque_scale": None if torque_scale is None else np.asarray(torque_scale).tolist()},
+                     multipliers=(np.asarray(sol["lam_x"]).ravel(), np.asarray(sol["lam_g"]).ravel()), nlp=nlp)
 
 
 def cp_constraint_activity(pm: PlanningModel, path: JointPath, traj: JointTrajectory,

@@ -22,17 +22,21 @@ frozen at the speeds of the previous profile, which makes every stage's constrai
 at its speeds; repeat until the profile moves by less than ``tol`` (relative, in ``sdot``). At
 the fixed point the torques at the check points are exactly those of the full model at the
 profile's own speeds. Friction changes slowly with ``b`` compared with the ``m a`` term
-(``a`` carries a factor ``1 / (2 ds)``), so the map is a strong contraction: 3-6 rounds.
+(``a`` carries a factor ``1 / (2 ds)``), so the map is a strong contraction: 2-6 rounds to
+``tol = 1e-4`` (the duration then agrees with the converged one to ~1e-6 relative on the
+RX130L, TX40, UR5 and Panda paths of ``benchmarks/bench_cp.py``).
 
 Per stage both passes are closed-form (no LP solver): with frozen friction each row
 ``-1 <= cb b + cy y + h <= 1`` bounds ``b`` (given ``y = b_{k+1}``) by a line in ``y``, so the
 largest controllable ``b`` is the maximum of the concave piecewise-linear ``H_k(y) = min_r
 (p_r + s_r y)`` over ``0 <= y <= kmax_{k+1}``, i.e. ``H_k(min(kmax_{k+1}, y*_k))`` with the
-unconstrained maximiser ``y*_k`` found for all stages at once (vectorised bisection on the slope
-of the active line); the forward step is the minimum of the rows' upper bounds on ``y``.
+unconstrained maximiser ``y*_k`` found for all stages at once (vectorised safeguarded Newton on
+the crossing of the active rising and falling lines, exact on a piecewise-linear ``H``, warm-started
+from the previous round's maximiser: :func:`_argmax_concave`); the forward step is the minimum
+of the rows' upper bounds on ``y``.
 Lower bounds (rows that would demand a minimum speed) are not propagated; the caller's
-fine-grid re-check catches such (rare) cases. The two sequential passes run as expanded CasADi
-folds (one unrolled SX function per grid size, cached), so a round costs about a millisecond at
+fine-grid re-check catches such (rare) cases. The two sequential passes run as CasADi folds
+(``mapaccum``, one per row count and grid size, cached), so a round costs about a millisecond at
 N = 400 and the whole solve is linear in N; ``benchmarks/bench_cp.py`` measures it against
 toppra and against the NLP reference (same durations to ~1e-5 relative).
 """
@@ -90,7 +94,7 @@ def _rows(pm: PlanningModel, path: JointPath, s: np.ndarray, tau_max: np.ndarray
         scale = np.ones((N, A.shape[1]))
         scale[:, :pm.nq] = tau_pts[P]
         out[P] = {"A": A[i] / scale, "C": C[i] / scale, "G": G[i] / scale, "FV": FV[i] / scale,
-                  "FC": FC[i] / scale, "D": D[i], "vb": vb[i]}
+                  "FC": FC[i] / scale, "D": D[i], "vb": vb[i], "nq": pm.nq}
     return out
 
 
@@ -98,78 +102,137 @@ _W = {0: (1.0, 0.0), 1: (0.5, 0.5), 2: (0.0, 1.0)}   # b_P = w0 b_k + w1 b_{k+1}
 
 
 def _friction(row: dict, x: np.ndarray, width: float) -> np.ndarray:
-    v = row["D"] * x[:, None]
-    return row["FV"] * v + row["FC"] * np.tanh(v / width)
+    """Normalised friction of the torque rows (the first ``nq`` columns; acceleration rows have none)."""
+    nq = row["nq"]
+    v = row["D"][:, :nq] * x[:, None]
+    return row["FV"][:, :nq] * v + row["FC"][:, :nq] * np.tanh(v / width)
 
 
-def _stage_lines(rows: dict, ds: float, fr: dict) -> tuple[np.ndarray, ...]:
-    """Per stage: lines bounding b (``b <= p + s y``) and y (``y <= u + t b``), (N, R')."""
-    ps, ss, us, ts = [], [], [], []
-    for P, row in rows.items():
-        w0, w1 = _W[P]
-        cb = -row["A"] / (2 * ds) + row["C"] * w0
-        cy = row["A"] / (2 * ds) + row["C"] * w1
-        h = row["G"] + fr[P]
+class _StageLines:
+    """Per stage the lines bounding b (``b <= p + s y``) and y (``y <= u + t b``), (N, R').
+
+    Row ``-1 <= cb b + cy y + h <= 1`` with ``h = G + friction``: only ``h`` changes between the
+    friction rounds, so the slopes, the reciprocals and the speed-limit lines are computed once and
+    a round costs two multiply-adds (:meth:`lines`)."""
+
+    def __init__(self, rows: dict, ds: float) -> None:
+        inv_b, sgn_b, inv_y, sgn_y, sl, t = [], [], [], [], [], []
+        for P, row in rows.items():
+            w0, w1 = _W[P]
+            cb = -row["A"] / (2 * ds) + row["C"] * w0
+            cy = row["A"] / (2 * ds) + row["C"] * w1
+            okb, oky = np.abs(cb) > 1e-12, np.abs(cy) > 1e-12
+            ib = np.where(okb, 1.0 / np.where(okb, cb, 1.0), 0.0)
+            iy = np.where(oky, 1.0 / np.where(oky, cy, 1.0), 0.0)
+            inv_b.append(ib)
+            inv_y.append(iy)
+            # a row without b (or y) bounds nothing: its line sits at _BIG
+            sgn_b.append(np.where(okb, np.sign(cb) * ib, _BIG))
+            sgn_y.append(np.where(oky, np.sign(cy) * iy, _BIG))
+            sl.append(-cy * ib)
+            t.append(-cb * iy)
+        N = rows[0]["A"].shape[0]
+        # speed limits: b <= vb_start, (b + y)/2 <= vb_mid, y <= vb_end
+        self.p_speed = np.hstack([rows[0]["vb"][:, None], 2 * rows[1]["vb"][:, None]])
+        self.u_speed = np.hstack([rows[2]["vb"][:, None], 2 * rows[1]["vb"][:, None]])
+        self.inv_b, self.sgn_b = np.hstack(inv_b), np.hstack(sgn_b)
+        self.inv_y, self.sgn_y = np.hstack(inv_y), np.hstack(sgn_y)
+        self.sl = np.hstack([*sl, np.zeros((N, 1)), -np.ones((N, 1))])
+        self.t = np.hstack([*t, np.zeros((N, 1)), -np.ones((N, 1))])
+
+    def lines(self, rows: dict, fr: dict) -> tuple[np.ndarray, ...]:
+        h = np.hstack([rows[P]["G"] for P in rows])
+        width = rows[0]["G"].shape[1]
+        for P in rows:
+            h[:, P * width: P * width + rows[P]["nq"]] += fr[P]
+        p = np.hstack([self.sgn_b - h * self.inv_b, self.p_speed])
+        u = np.hstack([self.sgn_y - h * self.inv_y, self.u_speed])
+        return p, self.sl, u, self.t
+
+
+def _argmax_concave(p: np.ndarray, sl: np.ndarray, hi: np.ndarray, start: np.ndarray | None = None,
+                    iters: int = 60, tol: float = 1e-12) -> np.ndarray:
+    """Maximiser in [0, hi] of H(y) = min_r (p_r + s_r y) for every stage.
+
+    H is concave and piecewise linear: its maximiser is where the lowest rising line
+    (``U(y) = min_{s_r > 0} (p_r + s_r y)``) meets the lowest falling one (``D``, ``s_r <= 0``),
+    or an end of [0, hi] (H rising at ``hi``: ``hi``; falling at 0: 0). Inside, a safeguarded
+    Newton step: a bracket ``[lo, hi]`` with ``U < D`` (H rising) at ``lo`` and ``U >= D`` at
+    ``hi``; the next trial point is the crossing of the two lines active at the current one when
+    that lies inside the bracket, else the midpoint. On a piecewise-linear function the crossing
+    is exact once the active pair is the final one, so a warm ``start`` (the previous friction
+    round's maximiser) ends in 1-3 steps and a cold one in a few more, instead of the ~30
+    halvings of plain bisection."""
+    n = p.shape[0]
+    rows = np.arange(n)
+    rising = sl > 0
+    p_up, p_dn = np.where(rising, p, np.inf), np.where(rising, np.inf, p)
+
+    def at(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """H rising at y, and the crossing of the active rising and falling lines there."""
+        i = np.argmin(p_up + sl * y[:, None], axis=1)
+        j = np.argmin(p_dn + sl * y[:, None], axis=1)
+        pu, su, pd, sd = p_up[rows, i], sl[rows, i], p_dn[rows, j], sl[rows, j]
         with np.errstate(divide="ignore", invalid="ignore"):
-            okb = np.abs(cb) > 1e-12
-            p = np.where(okb, (np.sign(cb) - h) / np.where(okb, cb, 1.0), _BIG)
-            sl = np.where(okb, -cy / np.where(okb, cb, 1.0), 0.0)
-            oky = np.abs(cy) > 1e-12
-            u = np.where(oky, (np.sign(cy) - h) / np.where(oky, cy, 1.0), _BIG)
-            t = np.where(oky, -cb / np.where(oky, cy, 1.0), 0.0)
-        ps.append(p)
-        ss.append(sl)
-        us.append(u)
-        ts.append(t)
-    N = rows[0]["A"].shape[0]
-    # speed limits: b <= vb_start, (b + y)/2 <= vb_mid, y <= vb_end
-    ps += [rows[0]["vb"][:, None], 2 * rows[1]["vb"][:, None]]
-    ss += [np.zeros((N, 1)), -np.ones((N, 1))]
-    us += [rows[2]["vb"][:, None], 2 * rows[1]["vb"][:, None]]
-    ts += [np.zeros((N, 1)), -np.ones((N, 1))]
-    return np.hstack(ps), np.hstack(ss), np.hstack(us), np.hstack(ts)
+            return (pu + su * y) < (pd + sd * y), (pd - pu) / (su - sd)
 
-
-def _argmax_concave(p: np.ndarray, sl: np.ndarray, hi: np.ndarray, iters: int = 30) -> np.ndarray:
-    """Maximiser in [0, hi] of H(y) = min_r (p_r + s_r y) for every stage (bisection on the slope)."""
-    lo = np.zeros(p.shape[0])
-    hi = hi.copy()
-    rows = np.arange(p.shape[0])
+    hi = hi.astype(float).copy()
+    lo = np.zeros(n)
+    at_hi, _ = at(hi)
+    at_lo, cross = at(lo)
+    y = np.where(at_hi, hi, 0.0)
+    done = at_hi | ~at_lo                                 # maximiser at an end
+    if start is not None:
+        trial = np.clip(start, lo, hi)
+        left, c_start = at(trial)
+        lo, hi = np.where(left & ~done, trial, lo), np.where(~left & ~done, trial, hi)
+        cross = c_start
+        y = np.where(done, y, trial)
+        done |= np.abs(cross - trial) <= tol * np.maximum(hi, 1.0)
     for _ in range(iters):
-        mid = 0.5 * (lo + hi)
-        act = np.argmin(p + sl * mid[:, None], axis=1)
-        up = sl[rows, act] > 0
-        lo = np.where(up, mid, lo)
-        hi = np.where(up, hi, mid)
-    return 0.5 * (lo + hi)
+        if done.all():
+            break
+        inside = np.isfinite(cross) & (cross > lo) & (cross < hi)
+        y_new = np.where(done, y, np.where(inside, cross, 0.5 * (lo + hi)))
+        left, cross = at(y_new)
+        lo, hi = np.where(left & ~done, y_new, lo), np.where(~left & ~done, y_new, hi)
+        # converged: the active pair crosses at the trial point (exact), or the bracket is closed
+        scale = tol * np.maximum(hi, 1.0)
+        done |= (np.abs(cross - y_new) <= scale) | (hi - lo <= scale)
+        y = y_new
+    return y
 
 
 @lru_cache(maxsize=16)
-def _passes(n_rows: int, n_stages: int) -> tuple[ca.Function, ca.Function]:
-    """The backward and forward recursions as CasADi folds (``mapaccum``: one C loop over stages).
+def _passes(n_rows: int, n_stages: int) -> ca.Function:
+    """Both recursions as ONE CasADi fold (``mapaccum``: one C loop over stages; building a fold
+    costs more than a round, so the two passes share it) of the stage step
 
-    backward:  kmax_k = max(0, min_r (p_r + s_r min(kmax_{k+1}, y*_k)))
-    forward:   b_{k+1} = max(0, min(kmax_{k+1}, min_r (u_r + t_r b_k)))
+        x' = max(0, min(c, min_r (a_r + e_r min(x, d))))
+
+    backward (stages reversed):  kmax_k = max(0, min_r (p_r + s_r min(kmax_{k+1}, y*_k)))
+        (a, e, c, d) = (p, s, inf, y*_k);
+    forward:  b_{k+1} = max(0, min(kmax_{k+1}, min_r (u_r + t_r b_k)))
+        (a, e, c, d) = (u, t, kmax_{k+1}, inf).
     """
     x = ca.SX.sym("x")
-    p, s, u, t = (ca.SX.sym(n, n_rows) for n in "pslt")
-    y_star, k_next = ca.SX.sym("y_star"), ca.SX.sym("k_next")
-    back = ca.Function("cp_backward", [x, ca.vertcat(p, s, y_star)],
-                       [ca.fmax(0.0, ca.mmin(p + s * ca.fmin(x, y_star)))])
-    fwd = ca.Function("cp_forward", [x, ca.vertcat(u, t, k_next)],
-                      [ca.fmax(0.0, ca.fmin(k_next, ca.mmin(u + t * x)))])
-    return back.mapaccum("cp_backward_pass", n_stages), fwd.mapaccum("cp_forward_pass", n_stages)
+    a, e = ca.SX.sym("a", n_rows), ca.SX.sym("e", n_rows)
+    c, d = ca.SX.sym("c"), ca.SX.sym("d")
+    step = ca.Function("cp_stage", [x, ca.vertcat(a, e, c, d)],
+                       [ca.fmax(0.0, ca.fmin(c, ca.mmin(a + e * ca.fmin(x, d))))])
+    return step.mapaccum("cp_pass", n_stages)
 
 
 def _topp_ra(p: np.ndarray, sl: np.ndarray, u: np.ndarray, t: np.ndarray,
              y_star: np.ndarray) -> np.ndarray:
     """Exact TOPP-RA for frozen-friction (linear) stage constraints: b at the N+1 grid points."""
     N, R = p.shape
-    back, fwd = _passes(R, N)
+    fold = _passes(R, N)
+    inf = np.full((N, 1), np.inf)
     K = np.zeros(N + 1)                      # rest at s = 1
-    K[:-1] = _call(back, np.hstack([p, sl, y_star[:, None]])[::-1], N)[::-1]
+    K[:-1] = _call(fold, np.hstack([p, sl, inf, y_star[:, None]])[::-1], N)[::-1]
     b = np.zeros(N + 1)                      # rest at s = 0
-    b[1:] = _call(fwd, np.hstack([u, t, K[1:, None]]), N)
+    b[1:] = _call(fold, np.hstack([u, t, K[1:, None], inf]), N)
     return b
 
 
@@ -189,7 +252,7 @@ def _call(fold: ca.Function, stages: np.ndarray, n: int) -> np.ndarray:
 
 def solve_cp_reachability(pm: PlanningModel, path: JointPath, n_grid: int = 400, name: str = "cp",
                           torque_margin: float = 0.0, torque_scale: np.ndarray | None = None,
-                          acceleration_limits: bool = True, tol: float = 1e-5,
+                          acceleration_limits: bool = True, tol: float = 1e-4,
                           max_rounds: int = 30, warm: CPProfile | None = None) -> CPProfile:
     """Time-optimal profile with viscous + smooth Coulomb friction (module docstring).
 
@@ -220,7 +283,8 @@ def solve_cp_reachability(pm: PlanningModel, path: JointPath, n_grid: int = 400,
                                   f"{limits[k, j]:.1f} N·m even at crawling speed")
     width = pm.coulomb_smoothing_rad_s
     # round 0: Coulomb friction saturated in the direction of motion (toppra's model), no viscous
-    fr = {P: row["FC"] * np.sign(np.where(np.abs(row["D"]) < 1e-9, 0.0, row["D"])) for P, row in rows.items()}
+    fr = {P: row["FC"][:, :nq] * np.sign(np.where(np.abs(row["D"][:, :nq]) < 1e-9, 0.0, row["D"][:, :nq]))
+          for P, row in rows.items()}
     if warm is not None and len(warm.sdot) == N + 1:
         xw = warm.sdot
         xwm = np.sqrt(0.5 * (xw[:-1] ** 2 + xw[1:] ** 2))
@@ -228,10 +292,12 @@ def solve_cp_reachability(pm: PlanningModel, path: JointPath, n_grid: int = 400,
               2: _friction(rows[2], xw[1:], width)}
     x_prev = None
     rounds = 0
+    stage = _StageLines(rows, ds)
+    y_star = None
     for _ in range(max_rounds):
         rounds += 1
-        p, sl, u, t = _stage_lines(rows, ds, fr)
-        y_star = _argmax_concave(p, sl, np.minimum(rows[2]["vb"], _BIG))
+        p, sl, u, t = stage.lines(rows, fr)
+        y_star = _argmax_concave(p, sl, np.minimum(rows[2]["vb"], _BIG), y_star)
         b = _topp_ra(p, sl, u, t, y_star)
         x = np.sqrt(b)
         xm = np.sqrt(0.5 * (b[:-1] + b[1:]))

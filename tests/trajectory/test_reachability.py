@@ -13,10 +13,10 @@ from pipeline.errors import InfeasibleError
 from pipeline.interrupts import INTERRUPT_STATUSES, raise_if_interrupted
 from pipeline.robot.example_robots import example_arm_urdf
 from pipeline.trajectory.baselines import ruckig_torque_feasible, toppra_cp
-from pipeline.trajectory.cp import solve_cp_convex, solve_cp_refined
+from pipeline.trajectory.cp import cp_grid_activity, solve_cp_convex, solve_cp_refined
 from pipeline.trajectory.design import JointPath
 from pipeline.trajectory.dynamics import PlanningModel
-from pipeline.trajectory.reachability import solve_cp_reachability
+from pipeline.trajectory.reachability import _argmax_concave, solve_cp_reachability
 from pipeline.trajectory.solve import plan_cp, solve_ptp_verified
 from pipeline.trajectory.trajectories import check_trajectory
 
@@ -112,3 +112,50 @@ def test_seven_axes_match_the_nlp():
         nlp = solve_cp_refined(pm7, path, solve_cp_convex(pm7, path, 60, acceleration_limits=acc),
                                acceleration_limits=acc)
         assert abs(ra.duration_s / nlp.duration_s - 1.0) <= 1e-3
+
+
+def test_stage_maximiser_is_the_maximum_of_the_lower_envelope():
+    """The maximiser of every stage's concave H(y) = min_r (p_r + s_r y) on [0, hi] reaches the
+    largest value of H on a fine grid of [0, hi], from a cold start and from a perturbed warm start,
+    also when H only rises (maximiser hi) or only falls (maximiser 0) on [0, hi]."""
+    rng = np.random.default_rng(3)
+    n, r = 300, 12
+    p = rng.uniform(0.5, 2.0, (n, r))
+    sl = rng.uniform(-3.0, 3.0, (n, r))
+    sl[0] = np.abs(sl[0]) + 0.1                      # rising throughout
+    sl[1] = -np.abs(sl[1])                           # falling throughout
+    hi = rng.uniform(0.1, 2.0, n)
+    grid = np.linspace(0.0, 1.0, 4001)[None, :] * hi[:, None]
+    h_grid = np.min(p[:, :, None] + sl[:, :, None] * grid[:, None, :], axis=1).max(axis=1)
+    cold = _argmax_concave(p, sl, hi)
+    warm = _argmax_concave(p, sl, hi, cold * rng.uniform(0.9, 1.1, n))
+    for y in (cold, warm):
+        assert np.all((y >= 0.0) & (y <= hi))
+        assert np.all(np.min(p + sl * y[:, None], axis=1) >= h_grid - 1e-12)
+    assert cold[0] == hi[0] and cold[1] == 0.0
+
+
+def test_local_tightening_reuses_the_solver_and_meets_the_tightened_limits(pm, line_path):
+    """A re-solve of the NLP with the limits of some grid intervals tightened reuses the built solver
+    with the previous primal and dual solution (fewer IPOPT iterations than the cold solve), keeps
+    the tightened torques within their new limits at the check points, and is no faster."""
+    cold = solve_cp_refined(pm, line_path, solve_cp_convex(pm, line_path, N_SMALL))
+    level = cp_grid_activity(pm, line_path, cold)
+    k = int(np.argmax(level[1:-1])) + 1                 # an interval with a binding limit
+    scale = np.ones((N_SMALL, pm.nq))
+    scale[max(k - 3, 0):k + 3] = 0.97
+    again = solve_cp_refined(pm, line_path, cold, torque_scale=scale)
+    assert again.nlp is cold.nlp and again.info["warm_started_multipliers"]
+    assert again.info["iterations"] < cold.info["iterations"]
+    assert again.duration_s >= cold.duration_s
+    assert cp_grid_activity(pm, line_path, again).max() <= 1.0 + 1e-6
+    assert again.info["solver_status"] == "Solve_Succeeded"
+
+
+def test_batched_inverse_dynamics_equals_one_call_per_sample(pm):
+    """The batched RNEA of the fine-grid check and the path coefficients gives pin.rnea's torques."""
+    rng = np.random.default_rng(5)
+    q, v, a = (rng.uniform(-1.0, 1.0, (40, pm.nq)) for _ in range(3))
+    data = pm.model.createData()
+    one_by_one = np.array([pin.rnea(pm.model, data, q[k], v[k], a[k]) for k in range(40)])
+    assert np.allclose(pm.rigid_torques(q, v, a), one_by_one, rtol=1e-12, atol=1e-9)
