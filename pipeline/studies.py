@@ -31,7 +31,7 @@ import sys
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
-from pipeline.artefacts import write_json, write_text
+from pipeline.artefacts import write_text
 from pipeline.config import REPO_ROOT
 from pipeline.errors import PipelineError
 
@@ -136,6 +136,18 @@ def _finite(node: object) -> object:
     return node
 
 
+def shallow_json(node: object, depth: int = 3, level: int = 0) -> str:
+    """JSON indented down to ``depth`` levels, each deeper value on one line: a committed result
+    with thousands of rows stays readable and diffable at a third of its fully indented size."""
+    if level >= depth or not isinstance(node, (dict, list)) or not node:
+        return json.dumps(node, separators=(",", ":"), allow_nan=False)
+    pad, end = " " * (level + 1), " " * level
+    if isinstance(node, dict):
+        items = [f"{pad}{json.dumps(k)}: {shallow_json(v, depth, level + 1)}" for k, v in node.items()]
+        return "{\n" + ",\n".join(items) + "\n" + end + "}"
+    return "[\n" + ",\n".join(pad + shallow_json(v, depth, level + 1) for v in node) + "\n" + end + "]"
+
+
 def save_result(name: str, result: dict, filename: str = "result.json") -> Path:
     """Write ``result`` to ``data/studies/<name>/<filename>``; under ``--results DIR`` also
     ``DIR/results.json`` with the command, variant and provenance of the run."""
@@ -145,7 +157,7 @@ def save_result(name: str, result: dict, filename: str = "result.json") -> Path:
     evidence = _EVIDENCE["dir"]
     if evidence is not None:
         text = json.dumps({**_EVIDENCE_META, "result": result}, indent=1, default=float)
-        write_json(evidence / "results.json", _finite(json.loads(text)))
+        write_text(evidence / "results.json", shallow_json(_finite(json.loads(text))) + "\n")
         print(f"written {evidence / 'results.json'}")
     return path
 

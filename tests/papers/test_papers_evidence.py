@@ -179,3 +179,15 @@ def test_study_results_folder_holds_the_printed_tables_and_the_result(tmp_path, 
     assert json.loads((folder / "results.json").read_text(encoding="utf-8"))["variant"] == "custom"
     assert cli.main(["study", "demo", "--results"]) == 2
     assert "error: study: --results: expected a folder" in capsys.readouterr().err
+
+
+def test_shallow_json_keeps_every_value_and_puts_deep_values_on_one_line():
+    result = {"args": {"seeds": 3}, "rows": [{"seed": k, "error_m": [1e-3 * k, 2.5e-4], "tag": "a"} for k in range(3)],
+              "empty": [], "nothing": None}
+    text = studies.shallow_json(result, depth=2)
+    assert json.loads(text) == result
+    lines = text.splitlines()
+    assert '  {"seed":1,"error_m":[0.001,0.00025],"tag":"a"},' in lines      # one row, one line
+    assert ' "args": {' in lines and '  "seeds": 3' in lines                  # shallow levels indented
+    with pytest.raises(ValueError):
+        studies.shallow_json({"x": math.nan})                                 # no NaN in committed evidence
