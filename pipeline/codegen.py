@@ -155,14 +155,22 @@ def _library_path(name: str, functions: Sequence[ca.Function] | Callable[[], Seq
     sources = None
     if key is None:
         sources = _sources(functions() if callable(functions) else functions, name)
-        key = hashlib.sha256(("".join(sources) + " ".join(flags) + ca.__version__).encode()).hexdigest()[:20]
+        key = _key_of(sources, flags)
     return cache / f"{name}_{key}.so", sources
 
 
-def cached_library(name: str, functions: Sequence[ca.Function], *, subdir: str = "casadi",
-                   flags: Sequence[str] = DEFAULT_FLAGS, cache_dir: Path | None = None) -> Path | None:
-    """The intact cached library of ``functions`` (as :func:`build_library` names it), else None."""
-    library, _ = _library_path(name, functions, subdir, flags, None, cache_dir)
+def library_key(functions: Sequence[ca.Function], name: str, flags: Sequence[str] = DEFAULT_FLAGS) -> str:
+    """The key :func:`build_library` names the library of ``functions`` by (SHA-256 of their code)."""
+    return _key_of(_sources(functions, name), flags)
+
+
+def _key_of(sources: list[str], flags: Sequence[str]) -> str:
+    return hashlib.sha256(("".join(sources) + " ".join(flags) + ca.__version__).encode()).hexdigest()[:20]
+
+
+def cached_library(name: str, key: str, *, subdir: str = "casadi", cache_dir: Path | None = None) -> Path | None:
+    """The intact cached library ``name`` with ``key`` (:func:`library_key`), else None."""
+    library = _writable_cache((cache_dir if cache_dir is not None else cache_root()) / subdir) / f"{name}_{key}.so"
     return library if _intact(library) else None
 
 

@@ -16,6 +16,7 @@ missing or fails, the function stays interpreted (one warning on stderr): slower
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 import casadi as ca
 
@@ -40,7 +41,7 @@ class CompiledOnDemand:
         self.after_columns = after_columns
         self.columns_interpreted = 0
         self.compiled: ca.Function | None = None
-        self._looked_up = False
+        self._key: str | None = None
         self._maps: dict[int, BufferedFunction] = {}
 
     def mapped(self, n: int) -> BufferedFunction:
@@ -52,17 +53,17 @@ class CompiledOnDemand:
         return self._maps[n]
 
     def _maybe_compile(self, n: int) -> None:
-        if not self._looked_up:
-            self._looked_up = True
-            cached = codegen.cached_library(self.function.name(), [self.function], subdir=self.subdir, flags=FLAGS)
+        name = self.function.name()
+        if self._key is None:       # the C code is generated once: its hash names the library
+            self._key = codegen.library_key([self.function], name, FLAGS)
+            cached = codegen.cached_library(name, self._key, subdir=self.subdir)
             if cached is not None:
                 self._load(cached)
                 return
         self.columns_interpreted += n
         if self.columns_interpreted >= self.after_columns:
             try:
-                library = codegen.build_library(self.function.name(), [self.function], subdir=self.subdir,
-                                                flags=FLAGS)
+                library = codegen.build_library(name, [self.function], subdir=self.subdir, flags=FLAGS, key=self._key)
             except (SolverError, OSError) as exc:
                 if not _WARNED:
                     _WARNED.append(str(exc))
@@ -71,6 +72,6 @@ class CompiledOnDemand:
                 return
             self._load(library)
 
-    def _load(self, library: object) -> None:
+    def _load(self, library: Path) -> None:
         self.compiled = ca.external(self.function.name(), str(library))
         self._maps.clear()

@@ -364,8 +364,9 @@ def fit_load_friction(Wb: np.ndarray, y: np.ndarray, v: np.ndarray, beta0: np.nd
     gain = stribeck_chi2_gain(Wb, np.asarray(y, float) - np.ravel(np.broadcast_to(st, load.shape)),
                               term.torque(load, v), sigma)
     keep = (fl > 0) & (fl <= MAX_LOAD_COEFFICIENT)
-    if not np.all(keep):
+    while not np.all(keep | (fl == 0)):     # drop and refit until every kept term is in its bounds
         beta, fl, fit = solve(load, np.flatnonzero(keep))
+        keep &= (fl > 0) & (fl <= MAX_LOAD_COEFFICIENT)
     return LoadFit(beta, fit, LoadFriction(fl, float(coulomb_width_rad_s), np.where(keep, gain, 0.0)), load)
 
 

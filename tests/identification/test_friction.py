@@ -75,7 +75,7 @@ def test_stage_reports_both_friction_models(tmp_path):
     assert s["stribeck_status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
     np.testing.assert_allclose(ratio[best], s["validation_rms_over_noise"])   # the handed-on model
     assert np.all(ratio[best] <= 1.3) and np.max(ratio["viscous_coulomb"] - ratio[best]) > 0.1
-    assert res.robot.actuation.static_friction_excess_Nm is not None
+    np.testing.assert_allclose(res.robot.actuation.static_friction_excess_Nm, s["stribeck_static_excess_Nm"])
     assert (res.robot.actuation.coulomb_load_coefficient is not None) == (best == "stribeck_load")
 
 
