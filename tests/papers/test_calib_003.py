@@ -113,7 +113,7 @@ def test_quick_study_prints_every_row_and_calibrates(tmp_path, monkeypatch, caps
 @pytest.mark.slow
 def test_quick_sizes_study_calibrates_every_design_to_the_noise_floor(tmp_path, monkeypatch):
     """The literal (model-consistent) truth at small subset sizes: every design calibrates, its model
-    error is micrometres, "none" is its own paired reference, and each search raises its index."""
+    error is micrometres, and each search raises its index."""
     monkeypatch.setattr(studies, "study_dir", lambda name, root=None: tmp_path)
     assert p3s.study(["--quick", "--seeds", "1"]) == 0
     res = json.loads((tmp_path / "result.json").read_text())
@@ -126,4 +126,3 @@ def test_quick_sizes_study_calibrates_every_design_to_the_noise_floor(tmp_path, 
             assert err[key]["model"] < 50e-6
         assert per["indices"]["detmax_O1"]["O1"] >= per["indices"]["none"]["O1"]
         assert per["indices"]["detmax_O3"]["O3"] >= per["indices"]["none"]["O3"]
-        assert res["table_sizes"][n]["none"]["paired_model_um"][0] == 0.0

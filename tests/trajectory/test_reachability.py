@@ -138,7 +138,7 @@ def test_stage_maximiser_is_the_maximum_of_the_lower_envelope():
 def test_local_tightening_reuses_the_solver_and_meets_the_tightened_limits(pm, line_path):
     """A re-solve of the NLP with the limits of some grid intervals tightened reuses the built solver
     with the previous primal and dual solution (fewer IPOPT iterations than the cold solve), keeps
-    the tightened torques within their new limits at the check points, and is no faster."""
+    the torques within their limits at the check points, and is slower (a binding limit was tightened)."""
     cold = solve_cp_refined(pm, line_path, solve_cp_convex(pm, line_path, N_SMALL))
     level = cp_grid_activity(pm, line_path, cold)
     k = int(np.argmax(level[1:-1])) + 1                 # an interval with a binding limit
@@ -147,7 +147,7 @@ def test_local_tightening_reuses_the_solver_and_meets_the_tightened_limits(pm, l
     again = solve_cp_refined(pm, line_path, cold, torque_scale=scale)
     assert again.nlp is cold.nlp and again.info["warm_started_multipliers"]
     assert again.info["iterations"] < cold.info["iterations"]
-    assert again.duration_s >= cold.duration_s
+    assert again.duration_s > cold.duration_s * (1 + 1e-6)     # a binding limit tightened: the plan slows
     assert cp_grid_activity(pm, line_path, again).max() <= 1.0 + 1e-6
     assert again.info["solver_status"] == "Solve_Succeeded"
 
