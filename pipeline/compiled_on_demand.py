@@ -82,21 +82,18 @@ class CompiledOnDemand:
 
 
 #: Jacobian columns (one evaluation of a function's Jacobian at one point) after which
-#: :func:`compiled_with_jacobian` compiles: interpreting a forward-mode Jacobian of ``n`` input
-#: directions costs about ``1e-8 * n * 1.4`` s per instruction of the function, compiled it costs
-#: a sixth of that, and the build (the function and its forward derivative, about 3.5 times its
-#: instructions) about ``3e-4 * 3.5`` s per instruction: break-even near ``1e4`` columns for
-#: ``n = 18`` (the excitation constraints of a 6-axis arm: 0.46 ms interpreted, 0.075 ms compiled
-#: per column, a 4 s build)
+#: :func:`compiled_with_jacobian` compiles: the break-even of the gcc build, measured on the
+#: excitation constraints of a 6-axis arm (18 inputs, 2600 instructions): 0.46 ms per column
+#: interpreted, 0.075 ms compiled, 3.6 s of CPU for the code and the build, so about 9 000 columns
 JACOBIAN_COMPILE_AFTER_COLUMNS = 10_000
 
 
 def forward_mode_jacobian(function: ca.Function) -> ca.Function:
-    """``jac_<name>(x, out) = dF/dx`` of a function of one input and one output (column vectors), column ``j`` being
-    ``function.forward(1)`` seeded with the unit vector ``e_j``, on the structural sparsity of the
-    Jacobian: the numbers CasADi's forward mode gives inside an expression graph (its symbolic
-    Jacobian simplifies the seeded expressions and differs in the last bits). The signature is the
-    one ``ca.external`` looks for beside ``<name>`` in a library (``jac_<name>``)."""
+    """``jac_<name>(x, out) = dF/dx`` of a function of one input and one output (column vectors),
+    column ``j`` being ``function.forward(1)`` seeded with the unit vector ``e_j``, on the structural
+    sparsity of the Jacobian: the numbers CasADi's forward mode gives inside an expression graph
+    (its symbolic Jacobian simplifies the seeded expressions and differs in the last bits). The
+    signature is the one ``ca.external`` looks for beside ``<name>`` in a library (``jac_<name>``)."""
     name, n_x = function.name(), function.nnz_in(0)
     x = ca.MX.sym(function.name_in(0), function.sparsity_in(0))
     out = ca.MX.sym("out_" + function.name_out(0), ca.Sparsity(*function.size_out(0)))
@@ -110,13 +107,15 @@ def forward_mode_jacobian(function: ca.Function) -> ca.Function:
 
 
 def compiled_with_jacobian(function: ca.Function, columns: int, *, subdir: str = "on_demand",
-                           after_columns: int = JACOBIAN_COMPILE_AFTER_COLUMNS) -> ca.Function:
+                           after_columns: int | None = None) -> ca.Function:
     """``function`` (one input, one output) and its :func:`forward_mode_jacobian` compiled into one
     library and loaded with ``ca.external``, which differentiates it with the compiled Jacobian
     (forward derivatives ``J seed``: the same numbers as the interpreter's forward mode, since a
     forward-mode colouring seeds at most one structural non-zero per row). Compiled when the library
-    is cached or when the caller expects at least ``after_columns`` Jacobian ``columns``; otherwise,
-    or when gcc fails (one warning), ``function`` itself (interpreted, same numbers)."""
+    is cached or when the caller expects at least ``after_columns`` (default
+    :data:`JACOBIAN_COMPILE_AFTER_COLUMNS`) Jacobian ``columns``; otherwise, or when gcc fails (one
+    warning), ``function`` itself (interpreted, same numbers)."""
+    after_columns = JACOBIAN_COMPILE_AFTER_COLUMNS if after_columns is None else after_columns
     name = function.name()
     functions = [function, forward_mode_jacobian(function)]
     key = codegen.library_key(functions, name, FLAGS)
