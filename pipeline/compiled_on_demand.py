@@ -111,16 +111,17 @@ def compiled_with_jacobian(function: ca.Function, columns: int, *, subdir: str =
     """``function`` (one input, one output) and its :func:`forward_mode_jacobian` compiled into one
     library and loaded with ``ca.external``, which differentiates it with the compiled Jacobian
     (forward derivatives ``J seed``: the same numbers as the interpreter's forward mode, since a
-    forward-mode colouring seeds at most one structural non-zero per row). Compiled when the library
-    is cached or when the caller expects at least ``after_columns`` (default
+    forward-mode colouring seeds at most one structural non-zero per row; reverse derivatives
+    ``J^T seed`` may differ from the interpreter's reverse mode in the last bits). Compiled when the
+    library is cached or when the caller expects at least ``after_columns`` (default
     :data:`JACOBIAN_COMPILE_AFTER_COLUMNS`) Jacobian ``columns``; otherwise, or when gcc fails (one
-    warning), ``function`` itself (interpreted, same numbers)."""
+    warning, no further attempt in this process), ``function`` itself (interpreted, same numbers)."""
     after_columns = JACOBIAN_COMPILE_AFTER_COLUMNS if after_columns is None else after_columns
     name = function.name()
     functions = [function, forward_mode_jacobian(function)]
     key = codegen.library_key(functions, name, FLAGS)
     library = codegen.cached_library(name, key, subdir=subdir)
-    if library is None and columns >= after_columns:
+    if library is None and columns >= after_columns and not _WARNED:
         try:
             library = codegen.build_library(name, functions, subdir=subdir, flags=FLAGS, key=key)
         except (SolverError, OSError) as exc:
