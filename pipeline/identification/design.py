@@ -17,9 +17,10 @@ of one period, ``W = [Y_b(q(t_k), v(t_k), a(t_k))]_k`` (``cond(W)^2 = lambda_max
 
 The NLP is lifted: the sample states ``S = [q; v; a]_k`` are variables tied to the coefficients by
 linear equalities, so every nonlinear constraint touches one sample (block-sparse Jacobian from
-the per-sample CasADi function mapped with ``.map(N)``) and the kinematic limits are bounds. The
-capsule distance is Ericson's segment-segment distance written with ``if_else`` clamps (the
-symbolic twin of ``RobotModel.capsule_clearances``). The NLP works inside the checked limits
+the per-sample CasADi function mapped with ``.map(N)``, compiled with its Jacobian by gcc when the
+starts pay for the build) and the kinematic limits are bounds. The capsule distance is Ericson's
+segment-segment distance written with ``if_else`` clamps (the symbolic twin of
+``RobotModel.capsule_clearances``). The NLP works inside the checked limits
 (factor 0.98, +5 mm clearance); the result is re-checked on a fine grid (``check_trajectory``:
 limits, nominal torques, all capsules) and, if IPOPT stopped on a slightly infeasible iterate,
 its oscillation is shrunk until the check passes; a start that still fails is rejected.
@@ -47,6 +48,7 @@ import casadi as ca
 import numpy as np
 
 from pipeline.blas import single_thread_blas
+from pipeline.compiled_on_demand import compiled_with_jacobian
 from pipeline.forks import fork_map
 from pipeline.identification.excitation_criterion import (
     CriterionCallback,
@@ -73,6 +75,9 @@ from pipeline.robot.collision_sx import capsule_clearance_function
 from pipeline.robot.model import RobotModel
 from pipeline.robot.symbolic import SymbolicRobot
 from pipeline.solver_status import is_success
+
+#: cache folder of the compiled per-sample constraints (:mod:`pipeline.codegen`)
+CONSTRAINTS_CACHE = "excitation"
 
 
 @dataclass
@@ -123,10 +128,13 @@ def _build_nlp(
     harmonics: int,
     max_iter: int,
     objective_change_tol: float = 1e-2,
+    n_starts: int = 1,
 ) -> tuple[Any, dict, CriterionCallback]:
     """Lifted NLP: variables ``z = [c (nq (2L+1)); S (3 nq x N)]`` with ``S = B(c)`` as linear
     equalities, so every nonlinear constraint touches one sample (block-sparse Jacobian) and the
-    position/velocity/acceleration limits are simple bounds on ``S``."""
+    position/velocity/acceleration limits are simple bounds on ``S``. The per-sample constraints
+    and their Jacobian are compiled when the ``n_starts`` solves are expected to pay for the build
+    (:func:`~pipeline.compiled_on_demand.compiled_with_jacobian`: same numbers)."""
     nq, n = robot.nq, crit.n
     nc = nq * (2 * harmonics + 1)
     c = ca.MX.sym("c", nc)
@@ -136,7 +144,9 @@ def _build_nlp(
         ca.mtimes(X, ca.DM(crit.bq.T)), ca.mtimes(X, ca.DM(crit.bv.T)), ca.mtimes(X, ca.DM(crit.ba.T))
     )
     rest = ca.mtimes(X, ca.DM(rest_constraint_matrix(harmonics).T))
-    h = sample_constraint_function(robot, sym, limits).map(n)(S)
+    per_sample = compiled_with_jacobian(sample_constraint_function(robot, sym, limits),
+                                        n * (max_iter + 1) * n_starts, subdir=CONSTRAINTS_CACHE)
+    h = per_sample.map(n)(S)
     n_h = h.shape[0]
     n_tau = nq
     n_pair = len(robot.self_collision_pairs)
@@ -272,7 +282,7 @@ def _optimize_excitation_impl(
     starts = [randoms[i] for i in order[:n_starts]]
 
     inner = limits.tightened(NLP_LIMIT_FACTOR, NLP_EXTRA_CLEARANCE_M)
-    solver, bounds, _obj = _build_nlp(robot, sym, crit, inner, L, max_iter, objective_change_tol)
+    solver, bounds, _obj = _build_nlp(robot, sym, crit, inner, L, max_iter, objective_change_tol, len(starts))
     nc = nq * (2 * L + 1)
 
     def solve_start(k: int) -> _StartOutcome:
