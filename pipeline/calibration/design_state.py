@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.linalg import lapack
 
 from pipeline.calibration import indices as ix
 from pipeline.calibration import trace_updates as tu
@@ -37,6 +38,25 @@ def is_regular(M: np.ndarray) -> bool:
     """Smallest eigenvalue of ``M`` above 1e-12 of the largest (the indices' own test)."""
     ev = np.linalg.eigvalsh(M)
     return bool(ev[0] > 1e-12 * max(ev[-1], 1e-300))
+
+
+#: margin of :func:`above` relative to ``trace(A)``: Cholesky's backward error is about
+#: ``p^1.5 eps ||A||`` (Higham, *Accuracy and Stability of Numerical Algorithms*, 2nd ed., §10.1),
+#: ~3e-14 ||A|| for p = 40, and ``eigvalsh``'s is ``~p eps ||A||``: 1e-10 leaves a factor >1000
+ABOVE_MARGIN = 1e-10
+
+
+def above(A: np.ndarray, level: float) -> np.ndarray:
+    """(n,) bool for a stack of symmetric matrices ``A`` (n, p, p): False only where
+    ``lambda_min(A_k) <= level`` for certain, i.e. where ``A_k - s_k I`` with
+    ``s_k = level - ABOVE_MARGIN trace(A_k)`` is not positive definite (its Cholesky factorisation
+    fails). Every ``A_k`` whose computed smallest eigenvalue exceeds ``level`` is True (the margin
+    covers the round-off of both); a True may still be below ``level`` by up to the margin."""
+    n = A.shape[0]
+    if not math.isfinite(level):
+        return np.full(n, level < 0)
+    shifted = A - (level - ABOVE_MARGIN * np.trace(A, axis1=1, axis2=2))[:, None, None] * np.eye(A.shape[1])
+    return np.array([lapack.dpotrf(a, lower=1, clean=0)[1] == 0 for a in shifted], bool)
 
 
 class DesignState:
@@ -216,6 +236,8 @@ class DesignState:
         ``ub4 = lambda_min(diag(lambda_1..4) + (G V_4)^T (G V_4)) <= ub1``. Candidates are visited in
         order of decreasing ub1; ub4 is computed per block, exact eigenvalues only for candidates
         whose ub4 beats the best exact value so far; the search stops when ub1 falls below it.
+        Of those, only the ones :func:`above` passes (a Cholesky factorisation, several times
+        cheaper than the eigenvalues) get their exact eigenvalues: the others cannot beat the best.
         """
         ev, V = np.linalg.eigh(self.M)
         k = min(k_sub, self.p)
@@ -242,7 +264,10 @@ class DesignState:
                     break
                 Gc = G[blk[idx]]
                 Ms = self.M[None] + np.einsum("kmi,kmj->kij", Gc, Gc)
-                lam = np.linalg.eigvalsh(Ms)[:, 0]
+                lam = np.full(idx.size, -np.inf)
+                live = above(Ms, best_lam)
+                if live.any():
+                    lam[live] = np.linalg.eigvalsh(Ms[live])[:, 0]
                 n_eval += idx.size
                 i = int(np.argmax(lam))
                 if lam[i] > best_lam:

@@ -7,7 +7,7 @@ import pytest
 
 from pipeline.calibration import design as ds
 from pipeline.calibration import indices as ix
-from pipeline.calibration.design_state import DesignState
+from pipeline.calibration.design_state import DesignState, above
 from pipeline.errors import InfeasibleError
 
 
@@ -100,3 +100,19 @@ def test_weighted_a_criterion_fast_path_matches_brute_force():
     assert j == 8 + int(np.argmax(brute)) and s == pytest.approx(max(brute), rel=1e-8)
     M = st.M
     assert ix.evaluate(spec, M, 8) == pytest.approx(np.sum(w * np.diag(np.linalg.inv(M))))
+
+
+def test_cholesky_screen_keeps_every_matrix_above_the_level():
+    rng = np.random.default_rng(4)
+    B = rng.normal(size=(400, 12, 30)) * rng.uniform(0.1, 10.0, size=(400, 1, 1))
+    A = B @ B.transpose(0, 2, 1)
+    lam = np.linalg.eigvalsh(A)[:, 0]
+    for level in np.quantile(lam, [0.1, 0.5, 0.9]):
+        keep = above(A, float(level))
+        assert np.all(keep[lam > level])                    # never drops a matrix above the level
+        clearly_below = lam < level - 1e-8 * np.trace(A, axis1=1, axis2=2)
+        assert clearly_below.any() and not np.any(keep[clearly_below])
+    assert above(A, -np.inf).all()
+    # a matrix just above the level, by much less than the margin, is kept
+    edge = np.diag([1.0, 2.0, 3.0])[None]
+    assert above(edge, 1.0 - 1e-15)[0]

@@ -13,7 +13,7 @@ from pipeline.calibration import indices as ix
 from pipeline.calibration import stage as st
 from pipeline.calibration import task_space as ts
 from pipeline.calibration.config import Config
-from pipeline.errors import ConfigError
+from pipeline.errors import ConfigError, InfeasibleError
 from pipeline.robot.model import RobotModel
 
 
@@ -125,3 +125,27 @@ def tx40_setup():
     _, basis = st.identify_parameter_set(robot, mm, cfg, np.random.default_rng(3))
     Qw = ts.sample_region(robot, ts.default_region(robot), 20, np.random.default_rng(4))
     return mm, basis, Qw
+
+
+def test_side_by_side_runs_give_the_result_of_one_after_the_other(monkeypatch):
+    G, spec = _problem(7, N=150)
+    monkeypatch.setattr(dr, "SIDE_BY_SIDE_MIN_ENTRIES", 0)
+    results = {}
+    for jobs in ("1", "2"):
+        monkeypatch.setenv("PIPELINE_JOBS", jobs)
+        rng = np.random.default_rng(11)
+        r = dr.approximate_remove_and_replace(G, spec, 9, rng, restarts=2)
+        results[jobs] = (r, rng.bit_generator.state, rng.uniform())
+    (a, state_a, next_a), (b, state_b, next_b) = results["1"], results["2"]
+    np.testing.assert_array_equal(a.selected, b.selected)
+    assert (a.index_value, a.evaluations, a.history) == (b.index_value, b.evaluations, b.history)
+    assert state_a == state_b and next_a == next_b     # the caller's generator continues where the runs left it
+
+
+def test_an_error_of_a_forked_run_is_raised_with_its_field(monkeypatch):
+    G, spec = _problem(8, N=150)
+    G[:, :, 0] = 0.0                            # one parameter never excited
+    monkeypatch.setattr(dr, "SIDE_BY_SIDE_MIN_ENTRIES", 0)
+    monkeypatch.setenv("PIPELINE_JOBS", "2")
+    with pytest.raises(InfeasibleError, match="calibration.candidates: .*regular"):
+        dr.approximate_remove_and_replace(G, spec, 9, np.random.default_rng(0))

@@ -7,8 +7,10 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from pipeline import codegen
 from pipeline.calibration import error_model as em
 from pipeline.calibration.elastostatic import gravity_model_of, negligible_compliances
+from pipeline.compiled_on_demand import FLAGS
 from pipeline.robot.model import RobotModel
 
 
@@ -54,3 +56,21 @@ def test_joints_without_gravity_load_have_no_identifiable_compliance(robot):
     assert nominal[0] and nominal[5] and not nominal[1] and not nominal[2]   # vertical axis 1, wrist roll; axes 2, 3
     mm.set_gravity_model(gravity_model_of(robot, _upstream(robot)))   # small off-axis moments on every link
     assert np.array_equal(negligible(), nominal)
+
+
+def test_both_passes_share_one_compiled_library_per_function(robot):
+    """The gravity torques are an input of the compiled measurement functions, not constants in
+    their code: a first pass (nominal inertias) and a second pass (identified inertias) build the
+    same C code, hence one cached library per function and robot; the readings still move with
+    the gravity model."""
+    first = em.MeasurementModel(robot, compliance=True)
+    second = em.MeasurementModel(robot, compliance=True)
+    second.set_gravity_model(gravity_model_of(robot, _upstream(robot)))
+    for f, g in ((first.h, second.h), (first.hj, second.hj), (first.ht, second.ht), (first.base_pos, second.base_pos)):
+        assert codegen.library_key([f], f.name(), FLAGS) == codegen.library_key([g], g.name(), FLAGS)
+    Q = em.random_configurations(robot, 5, np.random.default_rng(2))
+    x = np.zeros(first.n)
+    x[first.sl_compliance] = 1e-6
+    T = robot.tracker.transform_tracker_to_base
+    assert not np.allclose(first.static_torques(Q), second.static_torques(Q), rtol=0, atol=1e-3)
+    assert not np.allclose(first.predict(Q, x, T), second.predict(Q, x, T), rtol=0, atol=1e-9)
