@@ -197,7 +197,8 @@ def ruckig_torque_feasible(pm: PlanningModel, q0: np.ndarray, q1: np.ndarray, ch
     def run(al: np.ndarray, ratio: float):
         nonlocal evals
         evals += 1
-        return checked(*limits(al, ratio), check_dt_s)
+        ap, am, jm = limits(al, ratio)
+        return checked(ap, am, jm, check_dt_s)
 
     def bisect(make, lo: float, hi: float):
         """Largest factor in [lo, hi] that is feasible, given feasible(lo) (or lo == 0)."""
@@ -289,7 +290,8 @@ def _refine(start: RuckigResult, limits, checked: _CheckedSamples, check_dt_s: f
     def run(log_alpha: np.ndarray, dt_s: float):
         nonlocal count
         count += 1
-        return checked(*limits(np.exp(log_alpha), ratio), dt_s)
+        ap, am, jm = limits(np.exp(log_alpha), ratio)
+        return checked(ap, am, jm, dt_s)
 
     def onto_boundary(x: np.ndarray, dt_s: float, lo: float, hi: float, steps: int):
         """Largest common log-shift in [lo, hi] keeping ``x`` feasible (None when lo is not)."""
