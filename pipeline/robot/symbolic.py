@@ -287,10 +287,13 @@ class SymbolicRobot:
     # ----------------------------------------------------------------- dynamics
 
     def rigid_body_torque_expression(
-        self, q: SymbolicArg, v: SymbolicArg, a: SymbolicArg, p_dyn: SymbolicArg, gravity: bool = True
+        self, q: SymbolicArg, v: SymbolicArg, a: SymbolicArg, p_dyn: SymbolicArg, gravity: bool = True,
+        placements: Sequence[tuple[SymbolicArg, SymbolicArg]] | None = None,
     ) -> ca.SX:
         """``M(q) a + C(q, v) v [+ g(q)] + Ia a``: RNEA (Featherstone 2008, table 5.1) with the
-        inertial parameters and rotor inertia of ``p_dyn`` (friction/offset not included)."""
+        inertial parameters and rotor inertia of ``p_dyn`` (friction/offset not included).
+        ``placements``: the joints' placements ``(R, p)`` in their parents (e.g. symbols, so that one
+        expression serves every calibration of the arm); default the model's own."""
         q, v, a, p_dyn = (ca.SX(x) if not isinstance(x, ca.SX) else x for x in (q, v, a, p_dyn))
         zero = ca.SX.zeros(3, 1)
         nj = self.nq + 1
@@ -304,7 +307,8 @@ class SymbolicRobot:
         for info in self.joints:
             i, k = info.index, info.idx_v
             rot_j, pos_j = info.motion(q[k])
-            rot, pos = sx.compose((info.rotation, info.translation), (rot_j, pos_j))
+            placement = (info.rotation, info.translation) if placements is None else placements[i - 1]
+            rot, pos = sx.compose(placement, (rot_j, pos_j))
             poses[i] = (rot, pos)
             s_lin = ca.SX(info.s_linear.reshape(3, 1))
             s_ang = ca.SX(info.s_angular.reshape(3, 1))

@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import time
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -128,6 +129,33 @@ def _ruckig_sample(q0: np.ndarray, q1: np.ndarray, vmax: np.ndarray, amax: np.nd
     return JointTrajectory("ptp_ruckig", t, Q, V, A)
 
 
+#: ruckig moves a search keeps (about 0.3 MB each): the bisections and the simplex come back to a
+#: limit at most 28 moves after trying it (RX130L's robot.yaml move)
+_KEPT_MOVES = 32
+
+
+class _CheckedSamples:
+    """ruckig moves of one search (start, goal, speed limits fixed) with their largest full-model torque
+    ratio, the last :data:`_KEPT_MOVES` kept: a move tried again is not computed again."""
+
+    def __init__(self, pm: PlanningModel, q0: np.ndarray, q1: np.ndarray) -> None:
+        self.pm, self.q0, self.q1 = pm, q0, q1
+        self._kept: OrderedDict[tuple[bytes, ...], tuple[JointTrajectory | None, float]] = OrderedDict()
+
+    def __call__(self, ap: np.ndarray, am: np.ndarray, jm: np.ndarray,
+                 dt_s: float) -> tuple[JointTrajectory | None, float]:
+        key = (*(np.asarray(x, float).tobytes() for x in (ap, am, jm)), np.float64(dt_s).tobytes())
+        if key in self._kept:
+            self._kept.move_to_end(key)
+            return self._kept[key]
+        tr = _ruckig_sample(self.q0, self.q1, self.pm.velocity_rad_s, ap, jm, dt_s, amin=am)
+        result = (None, np.inf) if tr is None else (tr, check_trajectory(self.pm, tr).max_torque_ratio)
+        self._kept[key] = result
+        if len(self._kept) > _KEPT_MOVES:
+            self._kept.popitem(last=False)
+        return result
+
+
 def ruckig_torque_feasible(pm: PlanningModel, q0: np.ndarray, q1: np.ndarray, check_dt_s: float = 5e-4,
                            jerk_ratios_1_s: tuple[float, ...] = (10.0, 25.0, 60.0),
                            bisection_steps: int = 12, joint_rounds: int = 6, tol: float = 0.0,
@@ -164,14 +192,13 @@ def ruckig_torque_feasible(pm: PlanningModel, q0: np.ndarray, q1: np.ndarray, ch
         ap, am = np.minimum(al[: pm.nq] * a_ref, a_cap), np.minimum(al[pm.nq:] * a_ref, a_cap)
         return ap, am, ratio * np.maximum(ap, am)
 
+    checked = _CheckedSamples(pm, q0, q1)
+
     def run(al: np.ndarray, ratio: float):
         nonlocal evals
         evals += 1
         ap, am, jm = limits(al, ratio)
-        tr = _ruckig_sample(q0, q1, pm.velocity_rad_s, ap, jm, check_dt_s, amin=am)
-        if tr is None:
-            return None, np.inf
-        return tr, check_trajectory(pm, tr).max_torque_ratio
+        return checked(ap, am, jm, check_dt_s)
 
     def bisect(make, lo: float, hi: float):
         """Largest factor in [lo, hi] that is feasible, given feasible(lo) (or lo == 0)."""
@@ -221,7 +248,7 @@ def ruckig_torque_feasible(pm: PlanningModel, q0: np.ndarray, q1: np.ndarray, ch
         raise InfeasibleError(None, "ptp ruckig baseline", "no torque-feasible kinematic limits found "
                               "(the static torques may exceed the limits)")
     if refine_evaluations > 0:
-        refined = _refine(best, limits, q0, q1, pm, check_dt_s, refine_dt_s, refine_evaluations, tol)
+        refined = _refine(best, limits, checked, check_dt_s, refine_dt_s, refine_evaluations, tol)
         evals += refined[1]
         if refined[0] is not None and refined[0].duration_s < best.duration_s:
             best = refined[0]
@@ -253,7 +280,7 @@ def _ruckig_result(tr: JointTrajectory, r: float, alpha: np.ndarray, ratio: floa
                               "jerk_rad_s3": jm.tolist(), "alpha": alpha.tolist(), "refined": False})
 
 
-def _refine(start: RuckigResult, limits, q0: np.ndarray, q1: np.ndarray, pm: PlanningModel, check_dt_s: float,
+def _refine(start: RuckigResult, limits, checked: _CheckedSamples, check_dt_s: float,
             search_dt_s: float, max_evaluations: int, tol: float) -> tuple[RuckigResult | None, int]:
     """Nelder-Mead over log(alpha) (see :func:`ruckig_torque_feasible`); returns (result or None, evals)."""
 
@@ -264,10 +291,7 @@ def _refine(start: RuckigResult, limits, q0: np.ndarray, q1: np.ndarray, pm: Pla
         nonlocal count
         count += 1
         ap, am, jm = limits(np.exp(log_alpha), ratio)
-        tr = _ruckig_sample(q0, q1, pm.velocity_rad_s, ap, jm, dt_s, amin=am)
-        if tr is None:
-            return None, np.inf
-        return tr, check_trajectory(pm, tr).max_torque_ratio
+        return checked(ap, am, jm, dt_s)
 
     def onto_boundary(x: np.ndarray, dt_s: float, lo: float, hi: float, steps: int):
         """Largest common log-shift in [lo, hi] keeping ``x`` feasible (None when lo is not)."""

@@ -20,10 +20,11 @@ bridge, but the smoothing width can be continued from wide to the model's value)
 (W = diag(1 / tau_max^2)), ``"electrical"`` (copper losses, W = diag(R_i / (k_t,i G_i)^2) with
 motor resistance R, torque constant k_t and gear ratio G).
 
-The NLP is built once per robot structure with start, goal, limits, weights, k1, k2 and the
-dynamic parameters as NLP parameters/bounds; with ``jit=True`` its C code (all derivative
-functions, size independent of N thanks to ``map``) is compiled once by gcc and cached on disk
-keyed by the SHA-256 of the generated code, so a user pays the compile at most once.
+The NLP is built once per robot structure with start, goal, limits, weights, k1, k2, the dynamic
+parameters and the joint placements (:func:`arm_parameters`) as NLP parameters/bounds; with
+``jit=True`` its C code (all derivative functions, size independent of N thanks to ``map``) is
+compiled once by gcc and cached on disk keyed by the SHA-256 of the generated code, which holds
+no parameter of the arm: every calibration and identification of the arm reuses one library.
 """
 
 from __future__ import annotations
@@ -115,17 +116,47 @@ def _check_duration_attainable(dq_rad: np.ndarray, duration_s: float, velocity_r
                               f"{np.degrees(distance[j]):.1f} deg need at the velocity/acceleration limits")
 
 
+def nlp_functions(solver: ca.Function) -> list[ca.Function]:
+    """What ``nlpsol(name, "ipopt", library)`` loads: the oracle, then nlp_f, nlp_g, nlp_grad_f, ..."""
+    return [solver.oracle(), *(solver.get_function(fn) for fn in solver.get_function())]
+
+
 def _compile_nlp(solver_sx: ca.Function, cache_dir: Path | None, name: str,
                  flags: tuple[str, ...] = JIT_FLAGS) -> Path:
     """C code of the NLP's functions (objective, constraints and their derivatives) -> .so.
 
-    Named by the SHA-256 of the code (:func:`pipeline.codegen.build_library`): the code contains
-    the robot's kinematic and dynamic parameters, so any model change compiles anew and an
-    unchanged model is never compiled twice."""
-    # what nlpsol(name, "ipopt", library) loads: the oracle, then nlp_f, nlp_g, nlp_grad_f, ...
-    functions = [solver_sx.oracle(), *(solver_sx.get_function(fn) for fn in solver_sx.get_function())]
-    return codegen.build_library(name, functions, subdir="trajectory", flags=flags,
+    Named by the SHA-256 of the code (:func:`pipeline.codegen.build_library`): the arm's parameters
+    are inputs of the code, so one library serves every calibration and identification of an arm
+    (its structure, grid size and velocity/acceleration scales name it), and is never compiled twice."""
+    return codegen.build_library(name, nlp_functions(solver_sx), subdir="trajectory", flags=flags,
                                  cache_dir=cache_dir)
+
+
+def arm_parameters(sym: SymbolicRobot, p_dyn: np.ndarray) -> np.ndarray:
+    """What the PtP NLP's RNEA reads of the arm: ``p_dyn`` with zero Coulomb friction (added outside
+    the RNEA), then every joint's placement in its parent, ``vec(R)`` (column-major) and ``p``."""
+    pd = np.asarray(p_dyn, float).copy()
+    pd[sym.dyn.coulomb] = 0.0
+    return np.concatenate([pd, *(np.concatenate([np.ravel(j.rotation, order="F"), np.ravel(j.translation)])
+                                 for j in sym.joints)])
+
+
+def _rnea_function(sym: SymbolicRobot, values: np.ndarray, parametric: bool) -> ca.Function:
+    """``rnea_ptp(q, v, a, arm) -> tau``: rigid body + rotor + viscous friction + offset of the arm
+    :func:`arm_parameters` describes. Only q, v and a are differentiable: the NLP needs no derivative
+    with respect to the arm, and none is generated. ``parametric=False``: ``rnea_ptp(q, v, a)`` with
+    the arm's ``values`` as constants of the code."""
+    qs, vs, as_ = (ca.SX.sym(nm, sym.nq) for nm in ("q", "v", "a"))
+    arm = ca.SX.sym("arm", values.size) if parametric else ca.SX(values)
+    n_dyn = sym.n_dyn
+    placements = [(ca.reshape(arm[n_dyn + 12 * k:n_dyn + 12 * k + 9], 3, 3),
+                   arm[n_dyn + 12 * k + 9:n_dyn + 12 * k + 12]) for k in range(sym.nq)]
+    p_dyn = arm[:n_dyn]
+    tau = (sym.rigid_body_torque_expression(qs, vs, as_, p_dyn, gravity=True, placements=placements)
+           + p_dyn[sym.dyn.viscous] * vs + p_dyn[sym.dyn.offset])
+    if not parametric:
+        return ca.Function("rnea_ptp", [qs, vs, as_], [tau])
+    return ca.Function("rnea_ptp", [qs, vs, as_, arm], [tau], {"is_diff_in": [True, True, True, False]})
 
 
 class PtpProblem:
@@ -138,7 +169,8 @@ class PtpProblem:
 
     def __init__(self, pm: PlanningModel, sym: SymbolicRobot, n_intervals: int = 50, jit: bool = True,
                  cache_dir: Path | None = None, ipopt_options: dict | None = None,
-                 jit_flags: tuple[str, ...] = JIT_FLAGS, p_dyn: np.ndarray | None = None) -> None:
+                 jit_flags: tuple[str, ...] = JIT_FLAGS, p_dyn: np.ndarray | None = None,
+                 parametric: bool = True) -> None:
         t0 = time.perf_counter()
         self.pm, self.sym, self.N, self.nq = pm, sym, int(n_intervals), pm.nq
         self.p_dyn_nominal = np.asarray(sym.nominal_dynamic_parameters() if p_dyn is None else p_dyn, float)
@@ -170,21 +202,21 @@ class PtpProblem:
         g_q = Q[:, 1:] - q0 - h * v0 - h**2 * (a0 / 3.0 + a1 / 6.0)
         g_v = (V[:, 1:] - v0 - 0.5 * h * (a0 + a1)) / ca.repmat(ca.DM(self.v_scale), 1, N)
         M = 2 * N + 1
-        # dynamic parameters are baked in as constants (derivatives w.r.t. a p_dyn input would
-        # multiply the generated code); Coulomb friction is added outside with its own parameters
-        pd = self.p_dyn_nominal.copy()
-        pd[self.coulomb_slice] = 0.0
-        qs, vs, as_ = (ca.SX.sym(nm, nq) for nm in ("q", "v", "a"))
-        rnea1 = ca.Function("rnea_ptp", [qs, vs, as_], [sym.rnea(qs, vs, as_, ca.DM(pd))])
-        rnea = rnea1.map(M)
+        # the arm's parameters (dynamic parameters, joint placements) are NLP parameters: one
+        # compiled library serves every identification and calibration of the arm (or, with
+        # parametric=False, constants of the code); Coulomb friction is added outside the RNEA
+        self.parametric = bool(parametric)
+        self.model_parameters = arm_parameters(sym, self.p_dyn_nominal)
+        arm = ca.MX.sym("arm", self.model_parameters.size if self.parametric else 0)
+        rnea = _rnea_function(sym, self.model_parameters, self.parametric).map(M)
         qa, va, aa = ca.horzcat(Q, q_mid), ca.horzcat(V, v_mid), ca.horzcat(A, a_mid)
-        tau = rnea(qa, va, aa) + ca.repmat(coulomb, 1, M) * ca.tanh(va * inv_width)
+        tau = rnea(qa, va, aa, *([arm] if self.parametric else [])) + ca.repmat(coulomb, 1, M) * ca.tanh(va * inv_width)
         tau_n = tau * ca.repmat(inv_tau_max, 1, M)
         wt = ca.sum1(tau**2 * ca.repmat(w, 1, M))
         e_n, e_m = wt[:N + 1], wt[N + 1:]
         energy = h / 6.0 * (ca.sum2(e_n[:-1] + e_n[1:]) + 4 * ca.sum2(e_m))
         x = ca.vertcat(T, ca.vec(Q), ca.vec(Vn), ca.vec(An))
-        p = ca.vertcat(coulomb, inv_width, inv_tau_max, inv_v_max, w, k1, k2)
+        p = ca.vertcat(coulomb, inv_width, inv_tau_max, inv_v_max, w, k1, k2, arm)
         g_vmid = v_mid * ca.repmat(inv_v_max, 1, N)
         g = ca.vertcat(ca.vec(g_q), ca.vec(g_v), ca.vec(tau_n), ca.vec(g_vmid))
         self.n_x, self.n_g, self.n_p = x.numel(), g.numel(), p.numel()
@@ -344,7 +376,8 @@ class PtpProblem:
         what = f"ptp move {np.round(np.degrees(q0), 1).tolist()} -> {np.round(np.degrees(q1), 1).tolist()} deg"
         solve_time, cpu_time, iters = 0.0, 0.0, 0
         for width in widths:
-            p = np.concatenate([coulomb, [1.0 / width], 1.0 / tmax, 1.0 / vmax, w, [k1, k2]])
+            p = np.concatenate([coulomb, [1.0 / width], 1.0 / tmax, 1.0 / vmax, w, [k1, k2],
+                                self.model_parameters if self.parametric else []])
             solver, duals = self.solver, {}
             if multipliers is not None and len(widths) == 1:
                 solver, duals = self.solver_warm, {"lam_x0": multipliers[0], "lam_g0": multipliers[1]}

@@ -1,0 +1,73 @@
+"""The PtP NLP with the arm's parameters (dynamic parameters, joint placements) as NLP parameters:
+the same plans as the NLP with them as constants of the code, and one generated code for every
+calibration and identification of the arm (interpreted, small grid: no gcc build)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from pipeline import codegen
+from pipeline.robot.symbolic import SymbolicRobot
+from pipeline.trajectory.dynamics import PlanningModel
+from pipeline.trajectory.ptp import PtpProblem, energy_weights, nlp_functions
+
+N_INTERVALS = 6
+#: tight tolerances: both NLPs converge to the same optimum (their code rounds differently, so a
+#: loose tolerance stops them at different points within it)
+IPOPT = {"ipopt.tol": 1e-10, "ipopt.constr_viol_tol": 1e-10, "ipopt.mu_strategy": "adaptive"}
+
+
+def recalibrated(robot, seed: int):
+    """A copy with masses, centres of mass, inertia tensors and joint placements moved as a calibration
+    and an identification move them (10 % mass, 1 cm lever, 1e-4 kg m^2 and 1 mrad and 1 mm placement)."""
+    arm = robot.copy()
+    rng = np.random.default_rng(seed)
+    model = arm.model
+    for i in range(1, model.njoints):
+        inertia = model.inertias[i]
+        spread = 0.01 * rng.standard_normal((3, 3))
+        model.inertias[i] = pin.Inertia(inertia.mass * (1.0 + 0.1 * rng.standard_normal()),
+                                        inertia.lever + 0.01 * rng.standard_normal(3),
+                                        inertia.inertia + spread @ spread.T)
+        placement = model.jointPlacements[i]
+        model.jointPlacements[i] = pin.SE3(placement.rotation @ pin.exp3(1e-3 * rng.standard_normal(3)),
+                                           placement.translation + 1e-3 * rng.standard_normal(3))
+    return arm
+
+
+def problem(arm, parametric: bool) -> tuple[PtpProblem, PlanningModel]:
+    pm = PlanningModel.from_robot(arm)
+    return PtpProblem(pm, SymbolicRobot(arm), N_INTERVALS, jit=False, ipopt_options=IPOPT,
+                      parametric=parametric), pm
+
+
+@pytest.fixture(scope="module")
+def problems(rx130l):
+    """(parametric, constant) problem pairs of two recalibrated arms."""
+    return [(problem(arm, True), problem(arm, False)) for arm in (recalibrated(rx130l, 1), recalibrated(rx130l, 2))]
+
+
+def code_key(p: PtpProblem) -> str:
+    return codegen.library_key(nlp_functions(p.solver), "ptp")
+
+
+def test_parametric_plans_equal_constant_ones(problems, big_move):
+    durations = []
+    for pair in problems:
+        plans = [p.solve(*big_move, k1=1.0, k2=0.01, weights=energy_weights(pm, "normalised")) for p, pm in pair]
+        assert plans[0].duration_s == pytest.approx(plans[1].duration_s, abs=1e-8)
+        assert np.allclose(plans[0].q_nodes, plans[1].q_nodes, atol=1e-7)
+        durations.append(plans[0].duration_s)
+    # the two arms are different problems: their parameters reach the plan
+    assert abs(durations[0] - durations[1]) > 1e-4
+
+
+def test_one_code_serves_every_arm(problems):
+    (parametric_1, _), (parametric_2, _) = (pair[0] for pair in problems)
+    assert code_key(parametric_1) == code_key(parametric_2)
+    assert not np.allclose(parametric_1.model_parameters, parametric_2.model_parameters)
+    # with the parameters as constants of the code, each arm needs its own build
+    (constant_1, _), (constant_2, _) = (pair[1] for pair in problems)
+    assert code_key(constant_1) != code_key(constant_2)
