@@ -60,6 +60,18 @@ def rx130l():
     return RobotModel.load("rx130l")
 
 
+@pytest.fixture(scope="session")
+def rx130l_generic_stiffness():
+    """The RX130L with the generic joint stiffness of :mod:`pipeline.robot.stiffness` (torque limit /
+    2 mrad) instead of the one its robot.yaml states, 33x softer: gravity deflections of tenths of a
+    millimetre and a low first mode, for the tests of the elastic models (nominal and hidden robot)."""
+    from pipeline.robot.model import RobotModel
+
+    robot = RobotModel.load("rx130l")
+    robot.spec.actuation.joint_stiffness_Nm_rad = None
+    return robot
+
+
 # ---------------------------------------------------------------------------- fake stages
 @dataclass
 class FakeConfig:
