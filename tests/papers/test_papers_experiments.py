@@ -41,10 +41,12 @@ def table2_after_mm(folder: str) -> np.ndarray:
 
 def test_table2_positions_hold_with_a_geometric_model_once_the_joints_are_stiff():
     """Table 2's maxima after calibration (0.272 / 0.310 / 0.414 mm) hold with a purely geometric
-    model on the hidden RX130L with joints 10x and 33x stiffer, not with the default stiffness."""
+    model on the hidden RX130L with its stated stiffness (S = 1) and with joints 10x stiffer than the
+    generic rule (S = 3.3), not with the rule itself (S = 33) or 3.3x it (S = 10)."""
     paper = np.array([0.272, 0.310, 0.414])
-    assert np.any(table2_after_mm("calib-004-stiffness-1.0") > paper)
-    for folder in ("calib-004-stiffness-0.1", "calib-004-stiffness-0.03"):
+    for folder in ("calib-004-stiffness-33", "calib-004-stiffness-10"):
+        assert np.any(table2_after_mm(folder) > paper), folder
+    for folder in ("calib-004-stiffness-3.3", "calib-004-stiffness-1"):
         assert np.all(table2_after_mm(folder) <= paper), folder
 
 
