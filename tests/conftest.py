@@ -25,6 +25,7 @@ import builtins
 import contextlib
 import io
 import os
+import shutil
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -58,6 +59,32 @@ def rx130l():
     from pipeline.robot.model import RobotModel
 
     return RobotModel.load("rx130l")
+
+
+@pytest.fixture(scope="session")
+def rx130l_generic_stiffness():
+    """The RX130L with the generic joint stiffness of :mod:`pipeline.robot.stiffness` (torque limit /
+    2 mrad) instead of the one its robot.yaml states, 33x softer: gravity deflections of tenths of a
+    millimetre and a low first mode, for the tests of the elastic models (nominal and hidden robot)."""
+    from pipeline.robot.model import RobotModel
+
+    robot = RobotModel.load("rx130l")
+    robot.spec.actuation.joint_stiffness_Nm_rad = None
+    return robot
+
+
+@pytest.fixture(scope="session")
+def rx130l_generic_stiffness_dir(tmp_path_factory) -> Path:
+    """A robot folder, for runs by ``robot=<folder>``: robots/rx130l/ without its stated joint stiffness
+    (the generic rule applies: an arm whose own weight deflects it by tenths of a millimetre)."""
+    source = Path(__file__).resolve().parents[1] / "robots" / "rx130l"
+    target = tmp_path_factory.mktemp("rx130l_generic_stiffness") / "rx130l"
+    shutil.copytree(source, target)
+    text = (target / "robot.yaml").read_text(encoding="utf-8")
+    kept = [line for line in text.splitlines() if not line.strip().startswith("joint_stiffness_Nm_rad:")]
+    assert len(kept) == len(text.splitlines()) - 1
+    (target / "robot.yaml").write_text("\n".join(kept) + "\n", encoding="utf-8")
+    return target
 
 
 # ---------------------------------------------------------------------------- fake stages

@@ -319,8 +319,8 @@ def study_004(argv: list[str]) -> int:
     ap.add_argument("--laser-grid", type=int, default=9,
                     help="grid per axis of the laser-tracker experiment (0: skip it)")
     ap.add_argument("--compliance-scale", type=float, default=1.0,
-                    help="default truth's joint compliance / nominal (k = torque limit / 2 mrad / scale; "
-                         "the stiffness experiment)")
+                    help="default truth's joint compliance / nominal (k = robot.yaml's joint stiffness / scale, "
+                         "spread 30 %%; the stiffness experiment)")
     ap.add_argument("--n-initial", type=int, default=None,
                     help="R&R start size (default --n; below it step 3, adding configurations, runs)")
     ap.add_argument("--probe-scale", type=float, default=1.0,

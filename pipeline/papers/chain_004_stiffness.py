@@ -3,10 +3,12 @@
 
 Paper ``004_abbe750b8bbcc3aa.txt`` §2.3.3 / Fig. 2(b): on the EN ISO 9283 path at 1 m/s and 5 m/s²
 the model-based (rigid-body) feedforward "drastically reduce[s] the TCP and joint errors". Its Table 2
-calibrates the same arm with a purely geometric model to 0.27 / 0.31 / 0.41 mm. On the default
-hidden robot (joint stiffness ``k = torque limit / 2 mrad``, 30 % spread; :mod:`pipeline.sim.truth`)
-neither holds: the joints' gravity deflection, which the motor-side servo does not see, dominates the
-TCP error whatever the feedforward. This experiment runs the chain up to the control stage (quick
+calibrates the same arm with a purely geometric model to 0.27 / 0.31 / 0.41 mm. With the generic
+joint stiffness of :mod:`pipeline.robot.stiffness` (``k = torque limit / 2 mrad``, 30 % spread;
+:mod:`pipeline.sim.truth`) neither holds: the joints' gravity deflection, which the motor-side servo
+does not see, dominates the TCP error whatever the feedforward. This experiment, with the one of
+``calib-004``, set the RX130L's stated stiffness (``robots/rx130l/robot.yaml``: 60 µrad at the torque
+limit, the rule's stiffness x 33); ``S = 33`` gives the rule back. It runs the chain up to the control stage (quick
 sizes, the paper's settings of :data:`pipeline.papers.chain_004.PAPER_SETTINGS`) on hidden robots
 whose joint compliance is scaled by ``S`` (``truth.joint_compliance_scale``: stiffness ``k / S``) and
 reads the control stage's maximum TCP error along the ISO path without feedforward and with the

@@ -82,9 +82,9 @@ def test_user_file_skips_the_design_checks(robot, tmp_path):
 # ------------------------------------------------------------------ check() (robot-dependent)
 @pytest.mark.parametrize(("values", "field", "words"), [
     # default parameters "all": 27 geometric + 4 compliances (joints 2-5; joint 1 and 6 carry no gravity load)
-    (["calibration.n_configurations=5"], "n_configurations", ("at least 11", "31 identifiable", "got 5")),
-    (["calibration.n_initial=4"], "n_initial", ("at least 11", "got 4")),
-    ([*GRADIENT, "calibration.n_pilot=35"], "n_pilot", ("40 - 35", "at least 11")),
+    (["calibration.n_configurations=5"], "n_configurations", ("at least 10", "29 identifiable", "got 5")),
+    (["calibration.n_initial=4"], "n_initial", ("at least 10", "got 4")),
+    ([*GRADIENT, "calibration.n_pilot=35"], "n_pilot", ("40 - 35", "at least 10")),
     (["calibration.parameters=geometric", "calibration.n_configurations=5"], "n_configurations",
      ("at least 9", "27 identifiable")),
     (["calibration.margin_incidence_deg=40"], "margin_incidence_deg", ("30 deg",)),
@@ -105,7 +105,7 @@ def test_cli_too_few_configurations_is_reported_before_anything_is_written(tmp_p
                  "--set", "calibration.n_configurations=5"])
     err = capsys.readouterr().err
     assert code == 2
-    assert "--set: calibration.n_configurations: need at least 11" in err
+    assert "--set: calibration.n_configurations: need at least 10" in err
     assert "Traceback" not in err
     assert not (tmp_path / "runs").exists()
 
@@ -206,7 +206,7 @@ def test_errors_give_the_file_line_counting_blank_lines(robot, measured, tmp_pat
 def test_too_few_rows_names_the_reason(robot, measured, tmp_path):
     path = ms.write_csv(tmp_path / "few.csv", _copy(measured, Q=measured.Q[:5], Y=measured.Y[:5]))
     cfg = _load(f"calibration.measurements_csv={path}").calibration
-    with pytest.raises(DataFileError, match="5 measurement rows, need at least 11 .3 equations per position row"):
+    with pytest.raises(DataFileError, match="5 measurement rows, need at least 10 .3 equations per position row"):
         st.check(cfg, robot)
 
 

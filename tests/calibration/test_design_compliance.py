@@ -26,13 +26,12 @@ from pipeline.calibration.elastostatic import (
     payload_poses,
 )
 from pipeline.calibration.error_model import se3_to_vector
-from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import pinocchio_dynamic_parameters
 
 
 @pytest.fixture(scope="module")
-def setup():
-    robot = RobotModel.load("rx130l")
+def setup(rx130l_generic_stiffness):
+    robot = rx130l_generic_stiffness
     cfg = st.Config(candidates="random", n_random_candidates=600, identifiability_samples=80,
                     n_region_configurations=80, payload_mass_kg=10.0, payload_com_m=[0.0, 0.0, 0.1],
                     payload_fraction=0.5)

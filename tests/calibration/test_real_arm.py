@@ -21,8 +21,9 @@ from pipeline.sim.truth import RealRobot, TruthConfig
 
 
 @pytest.fixture(scope="module")
-def robot() -> RobotModel:
-    return RobotModel.load("rx130l")
+def robot(rx130l_generic_stiffness) -> RobotModel:
+    """An arm whose joints deflect well beyond the tracker noise: the RX130L with the generic stiffness."""
+    return rx130l_generic_stiffness
 
 
 def _cfg(**kw) -> st.Config:

@@ -8,15 +8,15 @@ import pytest
 from pipeline.calibration import stage as st
 from pipeline.control.joint_stiffness import feedforward_stiffness
 from pipeline.robot.handoff import ElastostaticRecord
-from pipeline.robot.model import RobotModel
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 from pipeline.sim.truth import RealRobot
 
 
 @pytest.fixture(scope="module")
-def nominal_gravity_run():
-    """Default truth (elastic joints, inertias 15 % off), all parameters, the nominal gravity model."""
-    robot = RobotModel.load("rx130l")
+def nominal_gravity_run(rx130l_generic_stiffness):
+    """Default truth (elastic joints, inertias 15 % off) of the RX130L with the generic (softer) joint
+    stiffness, all parameters, the nominal gravity model."""
+    robot = rx130l_generic_stiffness
     real = RealRobot.create(robot, 4)
     cfg = st.Config(candidates="random", n_random_candidates=800, n_configurations=40, n_heldout=300,
                     figures=False)

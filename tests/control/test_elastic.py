@@ -26,8 +26,8 @@ Q0 = np.array([0.1, 0.3, 1.5, 0.2, 1.0, -0.3])
 
 
 @pytest.fixture(scope="module")
-def real(rx130l):
-    return RealRobot.create(rx130l, 2, TruthConfig())
+def real(rx130l_generic_stiffness):
+    return RealRobot.create(rx130l_generic_stiffness, 2, TruthConfig())
 
 
 def test_stribeck_friction_seeded_and_zero_is_viscous_coulomb(rx130l, real):

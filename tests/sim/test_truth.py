@@ -144,7 +144,9 @@ def test_joints_deflect_under_gravity_and_payload(rx130l: RobotModel) -> None:
     deflection = real.link_angles(Q) - Q
     expected = -gravity_torques_Nm(real.truth.model, Q) / k
     assert np.allclose(deflection, expected, atol=1e-2 * np.abs(expected).max())   # first order in 1/k
-    assert 1e-4 < np.abs(deflection[:, 1]).max() < 5e-3     # a fraction of a milliradian to milliradians
+    # joint 2 carries the arm: a good share of the twist its torque limit gives, never more than that twist
+    twist_at_limit_rad = rx130l.limits.effort_Nm[1] / nominal_joint_stiffness_Nm_rad(rx130l)[1]
+    assert 0.1 * twist_at_limit_rad < np.abs(deflection[:, 1]).max() < np.exp(4 * 0.3) * twist_at_limit_rad
     load = Payload(10.0, (0.0, 0.0, 0.1))
     heavy = with_payload(real.truth.model, rx130l.frame_flange, load)
     loaded = real.link_angles(Q, load) - Q
