@@ -29,6 +29,8 @@ def test_stiffer_joints_let_the_rigid_feedforward_cut_the_tcp_error():
     cut = [p["tcp_reduction"] for p in points]
     assert points[0]["compliance_scale"] == 33.0 and cut[0] < CLEAR_REDUCTION <= cut[-1]
     assert all(p["tcp_reduction"] >= CLEAR_REDUCTION for p in points if p["compliance_scale"] == 1.0)
+    # 10x the rule's stiffness (S = 3.3) is not yet enough: the cut passes 2x between 10x and 33x
+    assert all(p["tcp_reduction"] < CLEAR_REDUCTION for p in points if p["compliance_scale"] == 3.3)
     assert any(p["compliance_scale"] == 1.0 for p in points)
     assert all(b >= a for a, b in zip(cut, cut[1:], strict=False))
     # without feedforward the error falls towards the rigid robot's as the deflection shrinks
@@ -47,7 +49,7 @@ def test_table2_positions_hold_with_a_geometric_model_once_the_joints_are_stiff(
     generic rule (S = 3.3), not with the rule itself (S = 33) or 3.3x it (S = 10)."""
     paper = np.array([0.272, 0.310, 0.414])
     for folder in ("calib-004-stiffness-33", "calib-004-stiffness-10"):
-        assert np.any(table2_after_mm(folder) > paper), folder
+        assert table2_after_mm(folder)[2] > paper[2], folder          # ez: the gravity deflection's axis
     for folder in ("calib-004-stiffness-3.3", "calib-004-stiffness-1"):
         assert np.all(table2_after_mm(folder) <= paper), folder
 
