@@ -66,12 +66,8 @@ class CompiledOnDemand:
                 return
         self.columns_interpreted += n
         if self.columns_interpreted >= self.after_columns:
-            try:
-                library = codegen.build_library(name, [self.function], subdir=self.subdir, flags=FLAGS, key=self._key)
-            except (SolverError, OSError) as exc:
-                if not _WARNED:
-                    _WARNED.append(str(exc))
-                    print(f"warning: CasADi functions stay interpreted (compilation failed: {exc})", file=sys.stderr)
+            library = _build_or_warn(name, [self.function], self.subdir, self._key)
+            if library is None:
                 self.after_columns = sys.maxsize
                 return
             self._load(library)
@@ -122,10 +118,16 @@ def compiled_with_jacobian(function: ca.Function, columns: int, *, subdir: str =
     key = codegen.library_key(functions, name, FLAGS)
     library = codegen.cached_library(name, key, subdir=subdir)
     if library is None and columns >= after_columns and not _WARNED:
-        try:
-            library = codegen.build_library(name, functions, subdir=subdir, flags=FLAGS, key=key)
-        except (SolverError, OSError) as exc:
-            if not _WARNED:
-                _WARNED.append(str(exc))
-                print(f"warning: CasADi functions stay interpreted (compilation failed: {exc})", file=sys.stderr)
+        library = _build_or_warn(name, functions, subdir, key)
     return function if library is None else ca.external(name, str(library))
+
+
+def _build_or_warn(name: str, functions: list[ca.Function], subdir: str, key: str) -> Path | None:
+    """The library of ``functions`` built by gcc, or None after one warning per process when that fails."""
+    try:
+        return codegen.build_library(name, functions, subdir=subdir, flags=FLAGS, key=key)
+    except (SolverError, OSError) as exc:
+        if not _WARNED:
+            _WARNED.append(str(exc))
+            print(f"warning: CasADi functions stay interpreted (compilation failed: {exc})", file=sys.stderr)
+        return None

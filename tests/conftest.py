@@ -43,21 +43,21 @@ import pytest  # noqa: E402
 from IPython.core.interactiveshell import InteractiveShell  # noqa: E402
 from traitlets.config import Config  # noqa: E402
 
+from pipeline import config as config_module  # noqa: E402
+from pipeline.config import CONFIGS_DIR, load_config  # noqa: E402
+from pipeline.robot.model import RobotModel  # noqa: E402
+
 REPO = Path(__file__).resolve().parents[1]
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 
 @pytest.fixture
 def quick_config():
-    from pipeline.config import CONFIGS_DIR, load_config
-
     return load_config(CONFIGS_DIR / "quick.yaml")
 
 
 @pytest.fixture(scope="session")
 def rx130l():
-    from pipeline.robot.model import RobotModel
-
     return RobotModel.load("rx130l")
 
 
@@ -66,8 +66,6 @@ def rx130l_generic_stiffness():
     """The RX130L with the generic joint stiffness of :mod:`pipeline.robot.stiffness` (torque limit /
     2 mrad) instead of the one its robot.yaml states, 33x softer: gravity deflections of tenths of a
     millimetre and a low first mode, for the tests of the elastic models (nominal and hidden robot)."""
-    from pipeline.robot.model import RobotModel
-
     robot = RobotModel.load("rx130l")
     robot.spec.actuation.joint_stiffness_Nm_rad = None
     return robot
@@ -138,9 +136,6 @@ class FakeStages:
 def shipped_configs(rx130l):
     """(config, robot) pairs every shipped setting must pass: the defaults and configs/quick.yaml
     on the RX130L, and both on the TX40 with its robot.yaml run_defaults."""
-    from pipeline.config import CONFIGS_DIR, load_config
-    from pipeline.robot.model import RobotModel
-
     tx40 = RobotModel.load("staubli_tx40")
     return [(load_config(path, values={"robot": name} if name != "rx130l" else None), robot)
             for name, robot in (("rx130l", rx130l), ("staubli_tx40", tx40))
@@ -149,13 +144,11 @@ def shipped_configs(rx130l):
 
 @pytest.fixture
 def fake_stages(monkeypatch):
-    from pipeline import config
-
     fakes = FakeStages()
     registry = {"a": fakes.make("a"), "b": fakes.make("b", ("a",)), "c": fakes.make("c", ("b",))}
-    monkeypatch.setattr(config, "STAGES", registry)
+    monkeypatch.setattr(config_module, "STAGES", registry)
     # the built-in robots' run_defaults name the real stages' sections, which the fakes replace
-    monkeypatch.setattr(config, "robot_run_defaults", lambda cfg: None)
+    monkeypatch.setattr(config_module, "robot_run_defaults", lambda cfg: None)
     return fakes
 
 

@@ -139,10 +139,8 @@ def _rounded_start_run(G: np.ndarray, spec: ix.IndexSpec, n: int, rng: np.random
     try:
         opt = approximate or db.optimal_approximate_design(G, W, tol=START_TOL, max_iterations=START_MAX_ITERATIONS)
         start = rounded_start(opt.weights, n)
-    except ValueError:          # the whole pool is singular: the random starts say why
-        return None
-    except RuntimeError:        # the multiplicative algorithm lost monotonicity: no second start
-        return None
+    except (ValueError, RuntimeError):  # a singular pool (the random starts say why), or the
+        return None                     # multiplicative algorithm lost monotonicity: no second start
     if not is_regular(db.exact_information(G, start)):
         return None
     return ds.remove_and_replace(G, spec, n, rng, positions=positions, initial=start)

@@ -346,11 +346,16 @@ class SymbolicRobot:
             v / self.coulomb_smoothing_rad_s
         )
 
-    def inverse_dynamics_expression(self, q: SymbolicArg, v: SymbolicArg, a: SymbolicArg, p_dyn: SymbolicArg) -> ca.SX:
-        """Full joint torque: rigid body + rotor + friction + offset."""
+    def inverse_dynamics_expression(self, q: SymbolicArg, v: SymbolicArg, a: SymbolicArg, p_dyn: SymbolicArg,
+                                    placements: Sequence[tuple[SymbolicArg, SymbolicArg]] | None = None,
+                                    coulomb: bool = True) -> ca.SX:
+        """Full joint torque: rigid body + rotor + friction + offset. ``placements``: as in
+        :meth:`rigid_body_torque_expression`; ``coulomb=False``: viscous friction only (for a caller
+        that adds the Coulomb term with its own smoothing width)."""
+        friction = self.friction_expression(v, p_dyn) if coulomb else p_dyn[self.dyn.viscous] * v
         return (
-            self.rigid_body_torque_expression(q, v, a, p_dyn, gravity=True)
-            + self.friction_expression(v, p_dyn)
+            self.rigid_body_torque_expression(q, v, a, p_dyn, gravity=True, placements=placements)
+            + friction
             + p_dyn[self.dyn.offset]
         )
 

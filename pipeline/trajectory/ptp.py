@@ -152,8 +152,7 @@ def _rnea_function(sym: SymbolicRobot, values: np.ndarray, parametric: bool) -> 
     placements = [(ca.reshape(arm[n_dyn + 12 * k:n_dyn + 12 * k + 9], 3, 3),
                    arm[n_dyn + 12 * k + 9:n_dyn + 12 * k + 12]) for k in range(sym.nq)]
     p_dyn = arm[:n_dyn]
-    tau = (sym.rigid_body_torque_expression(qs, vs, as_, p_dyn, gravity=True, placements=placements)
-           + p_dyn[sym.dyn.viscous] * vs + p_dyn[sym.dyn.offset])
+    tau = sym.inverse_dynamics_expression(qs, vs, as_, p_dyn, placements=placements, coulomb=False)
     if not parametric:
         return ca.Function("rnea_ptp", [qs, vs, as_], [tau])
     return ca.Function("rnea_ptp", [qs, vs, as_, arm], [tau], {"is_diff_in": [True, True, True, False]})
