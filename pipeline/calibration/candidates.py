@@ -10,19 +10,13 @@ prediction conservative against the unknown tracker pose and kinematic errors.
 
 The full 13^6 grid (paper 004: 13 values per axis, ~4.8 million) is filtered coarse-first: the
 5-axis prefix grid (13^5) is checked for everything that does not depend on axis 6, then only the
-surviving prefixes are expanded along axis 6 in chunks. All kinematics is batched numpy on the
-Pinocchio model's joint placements (``Chain``, ``kinematics``, ``capsule_segments``), tested to
-1e-12 against ``RobotModel.positions`` / ``capsule_segments`` on random configurations of both
-robots (tests/calibration/test_candidates_fk.py).
-
-Why not Pinocchio here: ``RobotModel.capsule_segments`` / ``tracker_visibility`` loop over the
-configurations in Python (one ``pin.forwardKinematics`` per row). Measured on a slice of the
-13^6 grid (2 of the 13 axis-1 values: 57 122 prefixes, 433 160 expanded configurations, rx130l,
-shared 2-core machine): numpy 0.4 s + 4.0 s, Pinocchio 2.0 s + 24.5 s (without the beam margin),
-i.e. ~29 s vs ~172 s extrapolated to the full grid (staubli_tx40: ~13 s vs ~216 s), over the 2 min
-budget of grid filtering plus Jacobians (full rx130l grid measured: 32 s filter + 0.5 s Jacobians);
-so the vectorised chain stays, as a filter only (decisions that must match the sensor are
-re-checked with Pinocchio, e.g. :mod:`pipeline.calibration.gradient_design`).
+surviving prefixes are expanded along axis 6 in chunks (the frames of axes 1-5 computed once per
+prefix). All kinematics is batched numpy on the Pinocchio model's joint placements (``Chain``,
+``kinematics``, ``capsule_segments``), tested to 1e-12 against ``RobotModel.positions`` /
+``capsule_segments`` (tests/calibration/test_candidates_fk.py). Pinocchio loops over the rows in
+Python (one ``pin.forwardKinematics`` each): on a slice of the RX130L's grid ~6x slower, ~170 s
+extrapolated to the full grid; so the vectorised chain stays, as a filter only (decisions that must
+match the sensor are re-checked with Pinocchio, e.g. :mod:`pipeline.calibration.gradient_design`).
 
 The whitened candidate Jacobians use the exact first-order model of
 :mod:`pipeline.calibration.error_model` at ``x = 0`` in closed form (screw theory: a twist
@@ -182,6 +176,29 @@ def capsule_segments(chain: Chain, kin: Kinematics) -> np.ndarray:
     return out
 
 
+def _last_joint_expanded(chain: Chain, kin: Kinematics, seg: np.ndarray, q_last: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every row of ``kin`` (its last joint's angle unused) with each angle of ``q_last``: the prefix
+    row of each expanded row, the last joint's world rotation, the capsule segments (``seg`` of the
+    prefixes, those on the last link moved); row by row the arithmetic of :func:`kinematics`."""
+    rows = np.repeat(np.arange(len(seg)), len(q_last))
+    R_last = kin.Rpre[rows, -1] @ _axis_rotation(chain.axis[-1], np.tile(q_last, len(seg)))
+    seg_all = seg[rows]
+    o_last = kin.opre[rows, -1, None]
+    for c in np.flatnonzero(np.asarray(chain.capsule_joint) == chain.nq):
+        seg_all[:, c] = np.einsum("nij,kj->nki", R_last, chain.capsule_p[c]) + o_last
+    return rows, R_last, seg_all
+
+
+def _with_last_joint(chain: Chain, kin: Kinematics, rows: np.ndarray, R_last: np.ndarray) -> Kinematics:
+    """The :class:`Kinematics` of prefix rows ``rows`` with the last joint's world rotation ``R_last``."""
+    Rpost = kin.Rpost[rows]
+    Rpost[:, -1] = R_last
+    o = kin.opre[rows, -1]
+    return Kinematics(kin.Rpre[rows], kin.opre[rows], Rpost, o + R_last @ chain.reflector_p,
+                      R_last @ chain.flange_R, o + R_last @ chain.flange_p, R_last @ chain.reflector_axis_joint)
+
+
 @dataclass
 class FilterMargins:
     """Conservative margins of the predicted feasibility."""
@@ -321,18 +338,18 @@ def filter_grid(chain: Chain, n_per_axis: int | list[int] = 13, margins: FilterM
     def expand(k: int) -> tuple[np.ndarray, int, int]:
         """Chunk ``k`` of the prefixes along the last axis: (feasible rows, collisions, not visible)."""
         P = prefix[k * chunk : (k + 1) * chunk]
-        Q = np.concatenate([np.repeat(P, n_last, axis=0), np.tile(vals[-1], len(P))[:, None]], axis=1)
-        kin = kinematics(chain, Q)
-        seg = capsule_segments(chain, kin)
+        kin = kinematics(chain, np.concatenate([P, np.zeros((len(P), 1))], axis=1))
+        rows, R_last, seg = _last_joint_expanded(chain, kin, capsule_segments(chain, kin), vals[-1])
         ok = _collision_ok(chain, seg, margins, post_pairs, post_floor)
         idx = np.flatnonzero(ok)
         if not idx.size:
-            return Q[:0], int((~ok).sum()), 0
-        sub = Kinematics(kin.Rpre[idx], kin.opre[idx], kin.Rpost[idx], kin.p_reflector[idx],
-                         kin.R_flange[idx], kin.o_flange[idx], kin.reflector_axis[idx])
+            return np.zeros((0, nq)), int((~ok).sum()), 0
+        sub = _with_last_joint(chain, kin, rows[idx], R_last[idx])
         vis = (_visibility_ok(chain, sub, seg[idx], margins) if visibility is None
                else visibility(sub, seg[idx]))
-        return Q[idx[vis]], int((~ok).sum()), int((~vis).sum())
+        keep = idx[vis]
+        return (np.concatenate([P[rows[keep]], vals[-1][keep % n_last][:, None]], axis=1),
+                int((~ok).sum()), int((~vis).sum()))
 
     # the chunks are independent: side by side on the available cores, results in chunk order
     n_chunks = -(-len(prefix) // chunk)

@@ -9,6 +9,7 @@ import pytest
 
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import grid_cache
+from pipeline.robot.model import RobotModel
 
 PER_AXIS = 4
 MARGINS = cd.FilterMargins(0.01, np.radians(3.0), 0.02)
@@ -69,3 +70,16 @@ def test_chunks_filtered_side_by_side_give_the_serial_result(chain, fresh, monke
     serial = cd.filter_grid(chain, 5, MARGINS, chunk=64)
     monkeypatch.setenv("PIPELINE_JOBS", "2")
     _assert_same(cd.filter_grid(chain, 5, MARGINS, chunk=64), serial)
+
+
+@pytest.mark.parametrize("name", ["rx130l", "staubli_tx40"])
+def test_coarse_first_grid_is_the_whole_grid_filtered_row_by_row(name):
+    """Prefix frames computed once and expanded along the last axis: the configurations, in grid
+    order, that the plain batched filter accepts from the whole grid, bit for bit."""
+    chain = cd.chain_from_robot(RobotModel.load(name))
+    Q, index, counts = cd.filter_grid(chain, 5, MARGINS, chunk=50)
+    axes = np.meshgrid(*cd.grid_values(chain, 5), indexing="ij")
+    grid = np.stack([a.ravel() for a in axes], axis=1)
+    mask, plain = cd.filter_configurations(chain, grid, MARGINS)
+    assert Q.tobytes() == grid[mask].tobytes() and np.array_equal(index, np.flatnonzero(mask))
+    assert counts["feasible"] == plain["feasible"] > 0
