@@ -116,7 +116,7 @@ def _parser() -> argparse.ArgumentParser:
 def _cmd_run(ns: argparse.Namespace) -> int:
     cfg = load_config(ns.config, ns.overrides, ns.stages)
     cfg.accept_poor = ns.accept_poor
-    result = run_pipeline(cfg, out_root=ns.out, force=ns.force)
+    result = run_pipeline(cfg, out_root=ns.out, force=ns.force, warm_up=True)
     print_headline(read_headline(result.run_dir, list(result.outputs)))
     print(result.report)
     return 0

@@ -6,8 +6,9 @@ keeps it under ``$PIPELINE_CACHE_DIR`` (default ``$XDG_CACHE_HOME/pipeline``, el
 key: by default the SHA-256 of the generated code, the gcc flags and the CasADi version, so
 any change of the model or expression compiles anew and nothing is compiled twice. Callers
 whose code generation is itself costly pass their own ``key`` and a lazy ``functions``
-callable: the code is then generated only when the library is missing. Concurrent builders
-write the same file atomically (``os.replace``).
+callable: the code is then generated only when the library is missing. A library is built under
+an exclusive file lock beside it: a second process asking for it meanwhile waits and loads it
+(the file itself is written atomically, ``os.replace``).
 
 Faults: a cache folder that cannot be written falls back to a private temporary cache (with a
 warning on stderr); every library has its SHA-256 in ``<library>.sha256`` beside it and is
@@ -17,14 +18,16 @@ SIGBUS): a library that does not match is compiled again.
 
 from __future__ import annotations
 
+import contextlib
 import errno
+import fcntl
 import hashlib
 import os
 import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
 import casadi as ca
@@ -185,8 +188,33 @@ def build_library(name: str, functions: Sequence[ca.Function] | Callable[[], Seq
     library, sources = _library_path(name, functions, subdir, flags, key, cache_dir)
     if _intact(library):
         return library
-    if sources is None:
-        sources = _sources(functions() if callable(functions) else functions, name)
+    with _build_lock(library):      # another process building it: wait for its library
+        if _intact(library):
+            return library
+        if sources is None:
+            sources = _sources(functions() if callable(functions) else functions, name)
+        _build(sources, name, flags, library)
+    return library
+
+
+@contextlib.contextmanager
+def _build_lock(library: Path) -> Iterator[None]:
+    """An exclusive ``flock`` on ``.<library>.lock`` beside the library while it is built, so that two
+    processes (a run's background warm-up, :mod:`pipeline.warm_up`, and its stage) never compile the
+    same library side by side: the second waits and finds it built. No lock (a folder that refuses
+    the file) only costs a possible second build."""
+    try:
+        handle = open(library.with_name(f".{library.name}.lock"), "a")  # noqa: SIM115 (held across the yield)
+    except OSError:
+        yield
+        return
+    with handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        yield
+
+
+def _build(sources: list[str], name: str, flags: Sequence[str], library: Path) -> None:
+    """Compile ``sources`` into ``library``: in a temporary folder beside it, then renamed into place."""
     with tempfile.TemporaryDirectory(dir=library.parent) as tmp:
         tmp_library = Path(tmp) / library.name
         _compile(sources, name, flags, Path(tmp), tmp_library)
@@ -194,7 +222,6 @@ def build_library(name: str, functions: Sequence[ca.Function] | Callable[[], Seq
         stamp.write_text(_sha256(tmp_library) + "\n")
         os.replace(tmp_library, library)
         os.replace(stamp, library.with_name(library.name + ".sha256"))
-    return library
 
 
 def compile_function(function: ca.Function, *, subdir: str = "casadi", flags: Sequence[str] = DEFAULT_FLAGS,

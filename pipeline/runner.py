@@ -8,6 +8,7 @@ Each stage is a module (registry :data:`pipeline.config.STAGES`) exposing::
     Config = CalibrationConfig     # dataclass with defaults
     def run(ctx: StageContext) -> StageResult
     def check(config, robot) -> None   # optional: raise PipelineError early (bad data file...)
+    def warm_up(config, robot) -> None # optional: compiled code built in the background (pipeline.warm_up)
     CONFIG_READS = ("control.iso",)    # optional: settings of other sections run() reads
 
 :func:`run_pipeline` validates everything (stage modules, dependencies, the robot files, the
@@ -25,6 +26,7 @@ correctness beats reuse) plus the stage module's own folder when it lives outsid
 from __future__ import annotations
 
 import errno
+import functools
 import hashlib
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -60,6 +62,7 @@ from pipeline.stage_io import (
 )
 from pipeline.stage_plan import Plan as _Plan
 from pipeline.stage_plan import plan_stages, unavailable_stages
+from pipeline.warm_up import warmed_up
 
 __all__ = [
     "RunResult", "run_pipeline", "prepare_run", "stage_inputs_hashes", "package_code_hash", "config_reads",
@@ -81,9 +84,6 @@ class RunResult:
     reused: list[str]                     # stages loaded from disk
 
 
-# --------------------------------------------------------------------------------------------
-# Helpers
-# --------------------------------------------------------------------------------------------
 def _make_real(nominal: RobotModel, cfg: RunConfig) -> RealRobot:
     truth_cfg = cfg.sections.get("truth")
     if not isinstance(truth_cfg, TruthConfig):
@@ -280,6 +280,7 @@ def run_pipeline(
     force: bool | Sequence[str] = False,
     progress: Progress | None = None,
     log: Callable[[str], None] | None = None,
+    warm_up: bool = False,
 ) -> RunResult:
     """Run the stages of ``cfg`` into ``<out_root>/<cfg.name>/`` (default ``data/runs``).
 
@@ -288,24 +289,35 @@ def run_pipeline(
     Raises :class:`PipelineError` (nothing written when it comes from validation),
     :class:`QualityGateError` (the result kept in ``<run>/<stage>.rejected/``) or
     KeyboardInterrupt (SIGINT/SIGTERM: the stage being run is discarded).
+    ``warm_up``: build the compiled code of the stages that will run in the background meanwhile
+    (:mod:`pipeline.warm_up`; ``python -m pipeline run`` does).
     """
     prog = progress if progress is not None else Progress()
     say = log if log is not None else prog.log
     with handle_termination():
         prep = prepare_run(cfg, out_root, force)
-        available = [n for n in config_mod.stage_names() if n not in unavailable_stages(prep.nominal)]
-        copied: list[str] = []
-        first, why_not = second_pass.decision(cfg, [p.name for p in prep.plans], available)
-        if first:
-            prep, copied = _after_first_pass(prep, force, prog, say)
-        elif why_not:
-            say(f"calibration: {why_not}")
-            prep = replace(prep, second_pass=why_not)
-        result = _run_prepared(prep, out_root, prog, say)
-        if copied:   # stages this run took over from the first pass: written in this call
-            ran = [n for n in result.outputs if n in copied or n in result.ran]
-            result = replace(result, ran=ran, reused=[n for n in result.reused if n not in ran])
-        return result
+        tasks = [(p.name, functools.partial(fn, p.config, prep.nominal)) for p in prep.plans
+                 if prep.reasons[p.name] is not None and callable(fn := getattr(p.module, "warm_up", None))]
+        with warmed_up(tasks if warm_up else []):
+            return _run_passes(prep, cfg, out_root, force, prog, say)
+
+
+def _run_passes(prep: Prepared, cfg: RunConfig, out_root: str | Path | None, force: bool | Sequence[str],
+                prog: Progress, say: Callable[[str], None]) -> RunResult:
+    """The first calibration pass when the run needs one (:mod:`pipeline.second_pass`), then the run."""
+    available = [n for n in config_mod.stage_names() if n not in unavailable_stages(prep.nominal)]
+    copied: list[str] = []
+    first, why_not = second_pass.decision(cfg, [p.name for p in prep.plans], available)
+    if first:
+        prep, copied = _after_first_pass(prep, force, prog, say)
+    elif why_not:
+        say(f"calibration: {why_not}")
+        prep = replace(prep, second_pass=why_not)
+    result = _run_prepared(prep, out_root, prog, say)
+    if copied:   # stages this run took over from the first pass: written in this call
+        ran = [n for n in result.outputs if n in copied or n in result.ran]
+        result = replace(result, ran=ran, reused=[n for n in result.reused if n not in ran])
+    return result
 
 
 def _after_first_pass(prep: Prepared, force: bool | Sequence[str], prog: Progress,

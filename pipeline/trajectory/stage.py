@@ -43,7 +43,7 @@ NAME = "trajectory"
 DEPENDS: tuple[str, ...] = ("model", "identification", "control")  # plans are run in the servo simulation
 #: provenance (pipeline.stage_plan): what is simulated (this stage reads no recorded file)
 SIMULATES = "servo loop on the hidden robot"
-__all__ = ["NAME", "DEPENDS", "SIMULATES", "Config", "check", "run"]
+__all__ = ["NAME", "DEPENDS", "SIMULATES", "Config", "check", "warm_up", "run"]
 
 
 def check(config: TrajectoryConfig, robot: RobotModel) -> None:
@@ -66,6 +66,14 @@ def check(config: TrajectoryConfig, robot: RobotModel) -> None:
         if out.size:
             j = int(out[0])
             raise bad(field, f"joint {j + 1} = {q[j]:.1f} deg outside [{lo[j]:.1f}, {hi[j]:.1f}] deg")
+
+
+def warm_up(config: TrajectoryConfig, robot: RobotModel) -> None:
+    """Compile the PtP NLP while the upstream stages run (:mod:`pipeline.warm_up`): its code depends on
+    the arm's structure and this section only (the identified and calibrated parameters are inputs),
+    so the nominal robot's build is the library :func:`plan_ptp_step` loads."""
+    if config.ptp_jit:
+        ptp_problem(PlanningModel.from_robot(robot, config.torque_reserve), robot, config)
 
 
 def run(ctx: StageContext) -> StageResult:
