@@ -6,7 +6,10 @@ structure and the stage's own settings, never on an upstream result (the traject
 NLP: the arm's parameters are inputs of its code). With an empty cache such a build is the longest
 single step of a run (about a minute of gcc for a 6-axis arm's PtP Hessian), and the stages before
 it mostly keep one core busy: the runner starts the warm-ups of the stages that will run in one
-forked process at a lower CPU priority (``nice`` 10), so the build takes the idle core.
+forked process, so the build takes the idle core. It runs at the run's own priority: at a lower one
+a busy machine starves it (measured: a PtP build at ``nice`` 10 beside two test workers made no
+progress in minutes), and the stage that waits for its library would wait longer than its own
+build takes.
 
 Nothing depends on the warm-up finishing. A stage that asks for a library while the warm-up
 compiles it waits for the build's file lock (:func:`pipeline.codegen.build_library`) instead of
@@ -25,8 +28,6 @@ import sys
 from collections.abc import Callable, Iterator, Sequence
 from types import FrameType
 
-#: ``nice`` increment of the warm-up process: the stages keep their cores, the build takes idle time
-NICE_INCREMENT = 10
 #: seconds given to a stopped warm-up to clean its temporary build folder before it is killed
 STOP_TIMEOUT_S = 5.0
 
@@ -38,11 +39,9 @@ def _stop_quietly(signum: int, frame: FrameType | None) -> None:
 
 
 def _run_tasks(tasks: Sequence[Task]) -> None:
-    """The child: lower priority, no output, each task in turn; a failing task is left to its stage."""
+    """The child: no output, each task in turn; a failing task is left to its stage."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)       # Ctrl-C is the run's; it stops this process
     signal.signal(signal.SIGTERM, _stop_quietly)
-    with contextlib.suppress(OSError):
-        os.nice(NICE_INCREMENT)
     with open(os.devnull, "w") as sink:
         sys.stdout = sys.stderr = sink
         for _name, task in tasks:
