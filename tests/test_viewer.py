@@ -5,15 +5,17 @@ from __future__ import annotations
 import shutil
 import subprocess
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import pytest
 
+from pipeline import cli
 from pipeline.config import load_config
 from pipeline.robot.example_robots import example_arm_urdf
 from pipeline.robot.model import RobotModel
 from pipeline.runner import run_pipeline
-from pipeline.viewer import Viewer, find_saved_motions
+from pipeline.viewer import Viewer, find_saved_motions, view_run
 
 CHROMIUM = shutil.which("chromium") or ("/usr/bin/chromium" if Path("/usr/bin/chromium").exists() else None)
 
@@ -36,33 +38,6 @@ def screenshot(url: str, out: Path, tmp_path: Path, size: str = "800,600", budge
 def changed_fraction(a: np.ndarray, b: np.ndarray, threshold: float = 0.1) -> float:
     assert a.shape == b.shape
     return float(np.mean(np.abs(a - b).max(axis=-1) > threshold))
-
-
-@pytest.mark.skipif(CHROMIUM is None, reason="chromium not installed (make test installs it via apt)")
-def test_robot_is_drawn_in_meshcat(rx130l, tmp_path):
-    import meshcat
-
-    vis = meshcat.Visualizer()                    # starts a meshcat server on 127.0.0.1
-    proc = vis.window.server_proc
-    try:
-        assert vis.url().startswith("http://127.0.0.1:")
-        empty = screenshot(vis.url(), tmp_path / "empty.png", tmp_path)
-        viewer = Viewer(rx130l, viewer=vis)
-        robot_zero = screenshot(vis.url(), tmp_path / "robot.png", tmp_path)
-        viewer.show(np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0]) + np.deg2rad([90, 0, 0, 0, 0, 0]))
-        viewer.show(np.deg2rad([0, 60, 30, 0, 0, 0]))
-        robot_bent = screenshot(vis.url(), tmp_path / "bent.png", tmp_path)
-    finally:
-        proc.kill()
-        proc.wait(timeout=10)
-    drawn = changed_fraction(empty, robot_zero)
-    moved = changed_fraction(robot_zero, robot_bent)
-    assert drawn > 0.01, f"only {drawn:.4f} of the pixels changed when the robot was loaded"
-    assert moved > 0.005, f"only {moved:.4f} of the pixels changed when the robot moved"
-    # the URDF's yellow links are on screen now and were not before
-    yellow = (robot_zero[..., 0] > 0.7) & (robot_zero[..., 1] > 0.4) & (robot_zero[..., 2] < 0.3)
-    yellow_empty = (empty[..., 0] > 0.7) & (empty[..., 1] > 0.4) & (empty[..., 2] < 0.3)
-    assert yellow.sum() > 500 and yellow_empty.sum() < 50
 
 
 def test_configurations_and_trajectories_api(rx130l):
@@ -96,25 +71,36 @@ def test_saved_motions_found_in_run(fake_stages, tmp_path):
     assert t.shape == (5,) and q.shape == (5, 6)
 
 
-def test_view_command_on_a_run(fake_stages, tmp_path):
-    import subprocess
-    import sys
-
+def test_view_command_on_a_run(fake_stages, tmp_path, monkeypatch, capsys):
+    """``view`` through :func:`pipeline.cli.main` (the ``python -m pipeline`` entry point itself is run
+    in a child process by tests/test_cli.py)."""
     run_pipeline(load_config(None, ["name=r"]), out_root=tmp_path, log=lambda m: None)
-    proc = subprocess.run([sys.executable, "-m", "pipeline", "view", str(tmp_path / "r"), "--once"],
-                          capture_output=True, text=True, timeout=120)
-    # the fake stages are not registered in the subprocess: their directories are still read
-    assert proc.returncode == 0, proc.stderr
-    assert "http://127.0.0.1:" in proc.stdout
-    assert "configurations a/test" in proc.stderr and "trajectory c/move" in proc.stderr
-    assert "layers (" in proc.stdout and "  floor: " in proc.stdout
-    bad = subprocess.run([sys.executable, "-m", "pipeline", "view", str(tmp_path / "nope")],
-                         capture_output=True, text=True, timeout=120)
-    assert bad.returncode == 2 and "run directory not found" in bad.stderr and "Traceback" not in bad.stderr
+    monkeypatch.undo()          # the real stage registry: the fake stages' directories are still read
+    viewers: list[Viewer] = []
+
+    def view_and_keep(*args, **kwargs) -> Viewer:
+        viewers.append(view_run(*args, **kwargs))
+        return viewers[-1]
+
+    monkeypatch.setattr(cli, "view_run", view_and_keep)
+    capsys.readouterr()
+    try:
+        code = cli.main(["view", str(tmp_path / "r"), "--once"])
+    finally:
+        for viewer in viewers:
+            viewer.close()
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    assert len(viewers) == 1 and viewers[0].vis.window.server_proc.poll() is not None     # closed
+    assert "http://127.0.0.1:" in out
+    assert "configurations a/test" in err and "trajectory c/move" in err
+    assert "layers (" in out and "  floor: " in out
+    assert cli.main(["view", str(tmp_path / "nope")]) == 2
+    err = capsys.readouterr().err
+    assert err == f"error: {tmp_path / 'nope'}: run directory not found\n"
 
 
 def test_view_refuses_a_folder_that_is_not_a_run(tmp_path, capsys):
-    from pipeline import cli
     from pipeline.viewer import is_run_dir
 
     folder = tmp_path / "some_folder"
@@ -139,13 +125,22 @@ def robot_box(with_robot: np.ndarray, without_robot: np.ndarray, threshold: floa
     return rows.min() / h, (rows.max() + 1) / h, cols.min() / w, (cols.max() + 1) / w
 
 
-def framed_screenshots(robot, q: np.ndarray, tmp_path: Path) -> tuple[np.ndarray, np.ndarray, Viewer]:
+class Shots(NamedTuple):
+    with_robot: np.ndarray          # the robot at q
+    without: np.ndarray             # the same scene with the robot hidden (floor, legend)
+    viewer: Viewer
+    moved: np.ndarray | None        # the robot at the second pose, if one was given
+
+
+def framed_screenshots(robot, q: np.ndarray, tmp_path: Path, moved_q: np.ndarray | None = None) -> Shots:
     """Screenshots of the viewer with ``robot`` at ``q`` and with the robot hidden (up to four
     tries while a heavy mesh scene has not reached the browser, each waiting three times longer:
-    5 s to 135 s of page time, for a loaded machine)."""
+    5 s to 135 s of page time, for a loaded machine), then, with ``moved_q``, one with the robot
+    moved there."""
     import meshcat
 
     vis = meshcat.Visualizer()
+    moved = None
     try:
         viewer = Viewer(robot, viewer=vis)
         viewer.show(q)
@@ -157,10 +152,13 @@ def framed_screenshots(robot, q: np.ndarray, tmp_path: Path) -> tuple[np.ndarray
             vis[viewer.root].set_property("visible", True)
             if changed_fraction(with_robot, without) > 0.005:
                 break
+        if moved_q is not None:
+            viewer.show(moved_q)
+            moved = screenshot(vis.url(), tmp_path / "moved.png", tmp_path, budget_ms=budget_ms)
     finally:
         vis.window.server_proc.kill()
         vis.window.server_proc.wait(timeout=10)
-    return with_robot, without, viewer
+    return Shots(with_robot, without, viewer, moved)
 
 
 #: the framed arm spans this share of the picture's height, and stays this far inside its edges
@@ -176,11 +174,22 @@ def assert_framed(with_robot: np.ndarray, without: np.ndarray) -> None:
 
 
 @pytest.mark.skipif(CHROMIUM is None, reason="chromium not installed (make test installs it via apt)")
-def test_primitive_arm_is_framed_with_its_floor(rx130l, tmp_path):
+def test_primitive_arm_is_drawn_framed_with_its_floor_and_moves(rx130l, tmp_path):
+    """The RX130L in meshcat, seen by headless Chromium: drawn (its yellow links on screen, absent
+    when it is hidden), framed with the floor and the legend, and redrawn when it moves."""
     from pipeline.robot.defaults import ready_pose_rad
 
-    with_robot, without, viewer = framed_screenshots(rx130l, ready_pose_rad(rx130l), tmp_path)
+    with_robot, without, viewer, bent = framed_screenshots(rx130l, ready_pose_rad(rx130l), tmp_path,
+                                                           moved_q=np.deg2rad([90, 60, 30, 0, 0, 0]))
     assert viewer.drawn_as == "meshes"            # the URDF's own primitives (cylinders, boxes)
+    drawn = changed_fraction(without, with_robot)
+    moved = changed_fraction(with_robot, bent)
+    assert drawn > 0.01, f"only {drawn:.4f} of the pixels changed when the robot was shown"
+    assert moved > 0.005, f"only {moved:.4f} of the pixels changed when the robot moved"
+    # the URDF's yellow links are on screen, and not with the robot hidden
+    yellow = (with_robot[..., 0] > 0.7) & (with_robot[..., 1] > 0.4) & (with_robot[..., 2] < 0.3)
+    yellow_hidden = (without[..., 0] > 0.7) & (without[..., 1] > 0.4) & (without[..., 2] < 0.3)
+    assert yellow.sum() > 500 and yellow_hidden.sum() < 50
     assert_framed(with_robot, without)
     assert "floor" in viewer.legend and "collision.floor_z_m" in viewer.legend_text()
     # the legend picture in the top left corner: pale, with dark text

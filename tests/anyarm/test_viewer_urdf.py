@@ -9,9 +9,9 @@ import pytest
 
 from pipeline.robot.defaults import ready_pose_rad
 from pipeline.robot.model import RobotModel
-from pipeline.viewer import Viewer, visual_model
+from pipeline.viewer import visual_model
 from tests.anyarm.test_urdf_only import _erd
-from tests.test_viewer import CHROMIUM, assert_framed, changed_fraction, framed_screenshots, screenshot
+from tests.test_viewer import CHROMIUM, assert_framed, changed_fraction, framed_screenshots
 
 
 def _ur5_without_meshes(tmp_path):
@@ -35,35 +35,12 @@ def test_meshes_resolved_from_package_paths_else_capsules(tmp_path):
 # the mesh scene (several MB of UR5 triangles) does not always reach headless Chromium within its
 # virtual time budget on a loaded machine: that case runs with the slow tests
 @pytest.mark.parametrize("meshes", [pytest.param(True, marks=pytest.mark.slow), False])
-def test_real_urdf_is_drawn(meshes, tmp_path):
-    import meshcat
-
+def test_real_urdf_is_drawn_and_framed(meshes, tmp_path):
+    """The UR5 in meshcat, seen by headless Chromium: drawn (pixels change when it is hidden) as
+    meshes or, without them, as capsules, and framed by the camera."""
     robot = RobotModel.load(_erd("ur_description/urdf/ur5_robot.urdf")) if meshes else _ur5_without_meshes(tmp_path)
-    vis = meshcat.Visualizer()
-    proc = vis.window.server_proc
-    try:
-        empty = screenshot(vis.url(), tmp_path / "empty.png", tmp_path)
-        viewer = Viewer(robot, viewer=vis)
-        viewer.show(ready_pose_rad(robot))
-        assert viewer.drawn_as == ("meshes" if meshes else "capsules")
-        # a heavy mesh scene may not have arrived within headless Chromium's virtual time budget:
-        # look up to three times (a robot that is never drawn fails all three)
-        for attempt in range(3):
-            drawn = screenshot(vis.url(), tmp_path / f"robot{attempt}.png", tmp_path)
-            if changed_fraction(empty, drawn) > 0.01:
-                break
-    finally:
-        proc.kill()
-        proc.wait(timeout=10)
-    assert changed_fraction(empty, drawn) > 0.01
-    assert np.isfinite(drawn).all()
-
-
-@pytest.mark.skipif(CHROMIUM is None, reason="chromium not installed (make test installs it via apt)")
-# the UR5's meshes are several MB (see test_real_urdf_is_drawn): that case runs with the slow tests
-@pytest.mark.parametrize("meshes", [pytest.param(True, marks=pytest.mark.slow), False])
-def test_urdf_arm_is_framed(meshes, tmp_path):
-    robot = RobotModel.load(_erd("ur_description/urdf/ur5_robot.urdf")) if meshes else _ur5_without_meshes(tmp_path)
-    with_robot, without, viewer = framed_screenshots(robot, ready_pose_rad(robot), tmp_path)
+    with_robot, without, viewer, _ = framed_screenshots(robot, ready_pose_rad(robot), tmp_path)
     assert viewer.drawn_as == ("meshes" if meshes else "capsules")
+    assert changed_fraction(without, with_robot) > 0.01
+    assert np.isfinite(with_robot).all()
     assert_framed(with_robot, without)

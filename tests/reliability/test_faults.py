@@ -1,7 +1,9 @@
 """Faults from outside: SIGINT/SIGTERM/kill -9 in a stage, two runs at once, read-only and full
 disks, a damaged compiled-code cache. Each ends as one line with the right exit code, nothing
-half-written, and the next run resumes. Subprocess cases are fast (fake stages); the tmpfs
-disk-full case needs root and ``mount`` (skipped otherwise)."""
+half-written, and the next run resumes. The process that is signalled, killed or runs first is a
+real child (``fake_cli.py``: the command line with fake stages); the run after the fault is the same
+command line in this process (a child's interpreter start imports the whole package, seconds of
+CPU). The tmpfs disk-full case needs root and ``mount`` (skipped otherwise)."""
 
 from __future__ import annotations
 
@@ -17,44 +19,35 @@ from pathlib import Path
 
 import pytest
 
+from pipeline import cli, config
+from tests.reliability import fake_cli
+
 REPO = Path(__file__).resolve().parents[2]
 
-SCRIPT = textwrap.dedent('''
-    import sys, time
-    from dataclasses import dataclass
-    from types import SimpleNamespace
-    import numpy as np
-    from pipeline import cli, config
-    from pipeline.stage_api import StageResult
-
-    @dataclass
-    class Config:
-        sleep_s: float = 0.0
-
-    def make(name, depends):
-        def run(ctx):
-            (ctx.out_dir / "part.txt").write_text("half")
-            if ctx.config.sleep_s:
-                marker = ctx.out_dir.parent / f"{name}.started"
-                marker.write_text("x")
-                deadline = time.monotonic() + ctx.config.sleep_s
-                while time.monotonic() < deadline:      # a Python loop, like a stage's work
-                    time.sleep(0.01)
-            return StageResult(summary={"seed": ctx.run.seed}, arrays={"x": np.arange(3.0)})
-        return SimpleNamespace(NAME=name, DEPENDS=depends, Config=Config, run=run, __file__=None)
-
-    config.STAGES = {"a": make("a", ()), "b": make("b", ("a",)), "c": make("c", ("b",))}
-    config.robot_run_defaults = lambda cfg: None   # the built-in robots' run_defaults name the real sections
-    sys.exit(cli.main(sys.argv[1:]))
-''')
+FAKE_CLI = Path(__file__).with_name("fake_cli.py")
 
 
 def _start(tmp_path: Path, *args: str) -> subprocess.Popen:
-    script = tmp_path / "fake_cli.py"
-    script.write_text(SCRIPT)
+    """``fake_cli.py run --out <tmp>/runs *args`` in a child process."""
     env = {**os.environ, "PYTHONPATH": str(REPO)}
-    return subprocess.Popen([sys.executable, str(script), "run", "--out", str(tmp_path / "runs"), *args],
+    return subprocess.Popen([sys.executable, str(FAKE_CLI), "run", "--out", str(tmp_path / "runs"), *args],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
+
+
+@pytest.fixture
+def resume(monkeypatch, capsys):
+    """``resume(tmp_path, *args) -> (exit code, stderr)``: the same fake command line in this process
+    (:func:`pipeline.cli.main` with :func:`fake_cli.registry`), for the run after the fault: what it
+    reuses and commits is read from the run directory, not from the process that made it."""
+    monkeypatch.setattr(config, "STAGES", fake_cli.registry())
+    monkeypatch.setattr(config, "robot_run_defaults", fake_cli.no_run_defaults)
+
+    def call(tmp_path: Path, *args: str) -> tuple[int, str]:
+        capsys.readouterr()
+        code = cli.main(["run", "--out", str(tmp_path / "runs"), *args])
+        return code, capsys.readouterr().err
+
+    return call
 
 
 def _wait_for(path: Path, proc: subprocess.Popen, timeout_s: float = 60.0) -> None:
@@ -75,7 +68,7 @@ def _leftovers(run_dir: Path) -> list[str]:
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
-def test_signal_in_a_stage_exits_130_and_commits_nothing(tmp_path, sig):
+def test_signal_in_a_stage_exits_130_and_commits_nothing(tmp_path, sig, resume):
     proc = _start(tmp_path, "--set", "name=r", "--set", "b.sleep_s=60")
     run_dir = tmp_path / "runs" / "r"
     _wait_for(run_dir / "b.started", proc)
@@ -87,36 +80,27 @@ def test_signal_in_a_stage_exits_130_and_commits_nothing(tmp_path, sig):
     assert err.strip().splitlines()[-1].startswith("interrupted")
     assert "Traceback" not in err
     assert _committed(run_dir) == {"a"} and not _leftovers(run_dir)
-    resumed = _start(tmp_path, "--set", "name=r")
-    _, err = resumed.communicate(timeout=60)
-    assert resumed.returncode == 0, err
+    code, err = resume(tmp_path, "--set", "name=r")
+    assert code == 0, err
     assert "a: reused" in err and _committed(run_dir) == {"a", "b", "c"}
 
 
-def test_kill_9_in_a_stage_leaves_no_half_stage(tmp_path):
-    proc = _start(tmp_path, "--set", "name=r", "--set", "b.sleep_s=60")
-    run_dir = tmp_path / "runs" / "r"
-    _wait_for(run_dir / "b.started", proc)
-    proc.kill()
-    proc.communicate(timeout=30)
-    assert _committed(run_dir) == {"a"}                     # the staging dir is not a stage
-    resumed = _start(tmp_path, "--set", "name=r")
-    _, err = resumed.communicate(timeout=60)
-    assert resumed.returncode == 0, err
-    assert _committed(run_dir) == {"a", "b", "c"} and not _leftovers(run_dir)
-
-
-def test_concurrent_run_is_refused_naming_the_pid(tmp_path):
+def test_concurrent_run_is_refused_naming_the_pid_and_kill_9_leaves_no_half_stage(tmp_path, resume):
+    """A second run while another process works on the run directory is refused, naming that
+    process; kill -9 of the first then leaves no half stage, and its lock dies with it."""
     first = _start(tmp_path, "--set", "name=r", "--set", "b.sleep_s=60")
     run_dir = tmp_path / "runs" / "r"
     _wait_for(run_dir / "b.started", first)
-    second = _start(tmp_path, "--set", "name=r", "--set", "seed=2")
-    _, err = second.communicate(timeout=60)
-    first.send_signal(signal.SIGTERM)
-    first.communicate(timeout=30)
-    assert second.returncode == 2
+    code, err = resume(tmp_path, "--set", "name=r", "--set", "seed=2")
+    assert code == 2
     assert err.strip().splitlines() == [f"error: {run_dir}: process {first.pid} is running on this run "
                                         "directory; wait for it to finish or choose another name/--out"]
+    first.kill()
+    first.communicate(timeout=30)
+    assert _committed(run_dir) == {"a"}                     # the staging dir is not a stage
+    code, err = resume(tmp_path, "--set", "name=r")
+    assert code == 0, err
+    assert _committed(run_dir) == {"a", "b", "c"} and not _leftovers(run_dir)
 
 
 @pytest.mark.skipif(os.geteuid() == 0, reason="root ignores directory permissions")
@@ -151,16 +135,14 @@ def test_disk_full_is_one_line_and_keeps_older_artefacts(tmp_path):
         pytest.skip("needs root and a working tmpfs mount")
     try:
         out = disk / "runs"
-        script = tmp_path / "fake_cli.py"
-        big_arrays = 'arrays={"x": np.random.default_rng(1).random(ctx.run.seed ** 2 * 20000)}'
-        script.write_text(SCRIPT.replace('arrays={"x": np.arange(3.0)}', big_arrays))
         env = {**os.environ, "PYTHONPATH": str(REPO)}
-        small = subprocess.run([sys.executable, str(script), "run", "--out", str(out), "--set", "name=r",
-                                "--set", "seed=1"], capture_output=True, text=True, env=env, check=False)
+        sizes = [item for stage in "abc" for item in ("--set", f"{stage}.values_per_seed_squared=20000")]
+        small = subprocess.run([sys.executable, str(FAKE_CLI), "run", "--out", str(out), "--set", "name=r",
+                                "--set", "seed=1", *sizes], capture_output=True, text=True, env=env, check=False)
         assert small.returncode == 0, small.stderr
         before = (out / "r" / "a" / "results.npz").read_bytes()
-        big = subprocess.run([sys.executable, str(script), "run", "--out", str(out), "--set", "name=r",
-                              "--set", "seed=3"], capture_output=True, text=True, env=env, check=False)
+        big = subprocess.run([sys.executable, str(FAKE_CLI), "run", "--out", str(out), "--set", "name=r",
+                              "--set", "seed=3", *sizes], capture_output=True, text=True, env=env, check=False)
         assert big.returncode == 2 and "No space left on device" in big.stderr.strip().splitlines()[-1]
         assert "Traceback" not in big.stderr
         assert (out / "r" / "a" / "results.npz").read_bytes() == before
