@@ -18,10 +18,10 @@ from pipeline.sweep_table import flatten_summary, is_timing_column, spread
 QUICK = str(REPO_ROOT / "configs" / "quick.yaml")
 #: a calibration small enough for a few seconds per run
 # small designs on the rigid robot: the sweep machinery is under test here, not the elastostatic model
-TINY = ["calibration.n_random_candidates=300", "calibration.n_configurations=20", "calibration.n_heldout=100",
+TINY = ["calibration.n_random_candidates=100", "calibration.n_configurations=20", "calibration.n_heldout=30",
         "truth.joint_compliance_scale=0", "truth.transmission_error_amplitude_rad=0",
         "calibration.second_pass=never",   # one pass: the sweep machinery is under test, not the second pass
-        "calibration.figures=false"]
+        "calibration.figures=false", "model.views_deg=[[25, -60]]", "model.picture_size_in=2"]
 
 
 def test_parse_seeds_ranges_lists_and_errors() -> None:

@@ -126,6 +126,9 @@ def ptp_move_rad(robot: RobotModel, fractions: tuple[float, ...] = (0.4, 0.3, 0.
 
 
 _CUBES: dict[tuple[object, ...], IsoCube] = {}
+#: searches that found no cube (the problem stated), so that a fallback to another tool orientation or
+#: direction does not search the failing one again on every call
+_NO_CUBES: dict[tuple[object, ...], str] = {}
 
 
 def iso_rotation(robot: RobotModel, plane: str, orientation: str) -> np.ndarray:
@@ -161,7 +164,8 @@ def iso_cube(robot: RobotModel, plane: str = "diagonal_x", orientation: str | No
 
     If no cube is feasible at ``speed_m_s`` (the joint speeds of a small or slow arm), the speed is lowered
     to ``SLOW_SHARE`` of the highest speed a small cube allows, and the largest cube at that speed returned.
-    Results are cached per robot model (same model -> same cube).
+    Results are cached per robot model (same model -> same cube), and so is the finding that a tool
+    orientation and direction have no cube (the fallbacks below do not search it again).
 
     ``direction``: the searched half-plane (:data:`~pipeline.robot.iso_search.SEARCH_DIRECTIONS`);
     ``None``: in front of the base, else (no orientation nor speed has a cube there) beside it, else
@@ -188,6 +192,8 @@ def iso_cube(robot: RobotModel, plane: str = "diagonal_x", orientation: str | No
     key = (*_cache_key(robot, seeds, plane, orientation, speed_m_s, frame), direction)
     if key in _CUBES:
         return copy.deepcopy(_CUBES[key])
+    if key in _NO_CUBES:
+        raise InfeasibleError(None, "control.iso", _NO_CUBES[key])
     rotation = iso_rotation(robot, plane, orientation)
     reach = cast(float, robot.summary()["reach_m"])
     memo: dict[tuple[float, ...], float] = {}
@@ -204,9 +210,9 @@ def iso_cube(robot: RobotModel, plane: str = "diagonal_x", orientation: str | No
     found = None if best is None or speed <= 0 else verified_edge(robot, best[0], best[1], plane, rotation, seeds,
                                                                   frame, speed)
     if found is None or best is None:
-        raise InfeasibleError(None, "control.iso", f"no ISO 9283 cube of edge >= {MIN_EDGE_REACH * reach:.3f} m "
-                              f"is feasible for {robot.name} with the tool {orientation}: set control.iso.centre_m "
-                              "and edge_m")
+        _NO_CUBES[key] = (f"no ISO 9283 cube of edge >= {MIN_EDGE_REACH * reach:.3f} m is feasible for "
+                          f"{robot.name} with the tool {orientation}: set control.iso.centre_m and edge_m")
+        raise InfeasibleError(None, "control.iso", _NO_CUBES[key])
     edge, q_start = found
     centre = best[1]
     cube = IsoCube(centre, edge, plane, speed, f"{how}: edge {edge:.3f} m ({edge / reach:.2f} x reach "

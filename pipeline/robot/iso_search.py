@@ -67,6 +67,8 @@ VERIFY_SAMPLE_TIME_S = 4e-3      # the final check runs the control stage's refe
 SHRINK = 0.9                      # edge factor when the final check fails
 #: horizontal directions of the searched half-planes, in the order tried (module docstring)
 SEARCH_DIRECTIONS = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, -1.0, 0.0), (-1.0, 0.0, 0.0))
+_DAMPING = 1e-6 * np.eye(6)       # of the damped least squares steps
+_NO_TURN = np.zeros(3)            # the path's angular velocity (constant tool orientation)
 
 
 @dataclass
@@ -82,15 +84,16 @@ def _dls(model: pin.Model, data: pin.Data, fid: int, q: np.ndarray, target: pin.
          tolerance: float) -> tuple[np.ndarray, float]:
     """Damped least squares on ``[p_err; log3(R R^T)]`` (as paths.start_configuration), step ≤ 0.3 rad."""
     err = np.inf
+    position, rotation = target.translation, target.rotation
     for _ in range(iterations):
         pin.framesForwardKinematics(model, data, q)
         cur = data.oMf[fid]
-        e = np.concatenate([target.translation - cur.translation, pin.log3(target.rotation @ cur.rotation.T)])
+        e = np.concatenate([position - cur.translation, pin.log3(rotation @ cur.rotation.T)])
         err = float(np.linalg.norm(e))
         if err < tolerance:
             break
         J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
-        dq = J.T @ np.linalg.solve(J @ J.T + 1e-6 * np.eye(6), e)
+        dq = J.T @ np.linalg.solve(J @ J.T + _DAMPING, e)
         q = q + dq * min(1.0, 0.3 / max(float(np.abs(dq).max()), 1e-12))
     return q, err
 
@@ -141,7 +144,7 @@ def _follow(model: pin.Model, data: pin.Data, fid: int, q_start: np.ndarray, pos
         sv = np.linalg.svd(J, compute_uv=False)
         if sv[0] > MAX_CONDITION * sv[-1]:
             return CubeCheck(np.inf, f"near a singularity at sample {k}/{n}", q_start)
-        v = np.linalg.pinv(J) @ np.r_[speed_m_s * tangent, 0.0, 0.0, 0.0]
+        v = np.linalg.pinv(J) @ np.concatenate([speed_m_s * tangent, _NO_TURN])
         worst = max(worst, float(np.max(np.abs(v) / vmax)))
     return CubeCheck(worst, "ok" if worst <= 1.0 else "joint speed", q_start)
 

@@ -84,15 +84,20 @@ def test_cached_cube_is_a_copy():
     assert defaults.iso_cube(robot).centre_m[0] != a.centre_m[0]
 
 
-def test_an_arm_whose_wrist_cannot_point_down_gets_a_cube_with_another_tool_orientation():
+def test_an_arm_whose_wrist_cannot_point_down_gets_a_cube_with_another_tool_orientation(monkeypatch):
     """The Unitree Z1's wrist (±77°, ±87°) cannot hold the tool down anywhere in front of it: the derived
-    cube falls back to another constant orientation, whose whole path the search verified."""
+    cube falls back to another constant orientation, whose whole path the search verified. The failed
+    search is not repeated: a fallback asks for the tool-down cube again on every call."""
     urdf = example_arm_urdf("z1")
     if urdf is None:
         pytest.skip("example-robot-data not installed")
     robot = RobotModel.load(urdf)
     with pytest.raises(InfeasibleError, match="tool down"):
         defaults.iso_cube(robot, orientation="down", direction=SEARCH_DIRECTIONS[0])     # in front
+    with monkeypatch.context() as m:
+        m.setattr(defaults, "search_cube", lambda *a, **k: pytest.fail("the failed search ran again"))
+        with pytest.raises(InfeasibleError, match="tool down"):
+            defaults.iso_cube(robot.copy(), orientation="down", direction=SEARCH_DIRECTIONS[0])
     cube = defaults.iso_cube(robot)
     assert cube.orientation in ("plane", "ready") and cube.edge_m > 0
     assert np.allclose(cube.rotation, defaults.iso_rotation(robot, cube.plane, cube.orientation))
