@@ -37,6 +37,7 @@ numbers.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import cast
@@ -89,7 +90,7 @@ def _dls(model: pin.Model, data: pin.Data, fid: int, q: np.ndarray, target: pin.
         pin.framesForwardKinematics(model, data, q)
         cur = data.oMf[fid]
         e = np.concatenate([position - cur.translation, pin.log3(rotation @ cur.rotation.T)])
-        err = float(np.linalg.norm(e))
+        err = math.sqrt(e.dot(e))            # np.linalg.norm(e), without its dispatch
         if err < tolerance:
             break
         J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
@@ -136,9 +137,9 @@ def _follow(model: pin.Model, data: pin.Data, fid: int, q_start: np.ndarray, pos
         q, err = _dls(model, data, fid, q, T, 60, 1e-9)
         if err > 1e-6:
             return CubeCheck(np.inf, f"IK lost at sample {k}/{n}", q_start)
-        if np.any(q < lo_m) or np.any(q > hi_m):
+        if (q < lo_m).any() or (q > hi_m).any():
             return CubeCheck(np.inf, f"joint limit margin at sample {k}/{n}", q_start)
-        if np.any(np.abs(pin.computeGeneralizedGravity(model, data, q)) > tau_max):
+        if (np.abs(pin.computeGeneralizedGravity(model, data, q)) > tau_max).any():
             return CubeCheck(np.inf, f"gravity torque at sample {k}/{n}", q_start)
         J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
         sv = np.linalg.svd(J, compute_uv=False)
