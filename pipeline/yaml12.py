@@ -12,10 +12,15 @@ and a signed exponent), ``.5`` needs the dot, ``yes``/``no``/``on``/``off`` are 
 
 A mapping that holds the same key twice is an error (:class:`DuplicateKeyError`, naming the key
 and both lines) instead of PyYAML's silent "the last one wins".
+
+Parsing is pure-Python PyYAML (tens of milliseconds for a robot.yaml) and a run reads the same
+files several times (config, robot.yaml for the spec and for the model): :func:`load_yaml` keeps
+the last ``PARSED_TEXTS`` parsed texts and hands out deep copies (the same data, no shared state).
 """
 
 from __future__ import annotations
 
+import copy
 import re
 from pathlib import Path
 from typing import Any
@@ -85,9 +90,20 @@ Yaml12Loader.add_implicit_resolver(_FLOAT_TAG, _FLOAT_12, list("-+0123456789."))
 Yaml12Loader.add_constructor(_INT_TAG, Yaml12Loader.construct_yaml_int)
 
 
+#: how many parsed texts :func:`load_yaml` keeps (the files of a few runs)
+PARSED_TEXTS = 32
+_PARSED: dict[str, Any] = {}
+
+
 def load_yaml(text: str) -> Any:
-    """Parse YAML text with :class:`Yaml12Loader` (raises ``yaml.YAMLError``)."""
-    return yaml.load(text, Loader=Yaml12Loader)  # noqa: S506 - a SafeLoader subclass
+    """Parse YAML text with :class:`Yaml12Loader` (raises ``yaml.YAMLError``); a text parsed before
+    is answered with a deep copy of its earlier result (the loader is a pure function of the text)."""
+    if text not in _PARSED:
+        data = yaml.load(text, Loader=Yaml12Loader)  # noqa: S506 - a SafeLoader subclass
+        if len(_PARSED) >= PARSED_TEXTS:
+            del _PARSED[next(iter(_PARSED))]          # the oldest
+        _PARSED[text] = data
+    return copy.deepcopy(_PARSED[text])
 
 
 def yaml_problem(exc: yaml.YAMLError) -> tuple[str | None, str]:

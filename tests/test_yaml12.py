@@ -77,3 +77,12 @@ def test_robot_yaml_exponent_floats_are_numbers(robot_yaml):
     assert old in text
     robot_yaml.write_text(text.replace(old, "viscous_Nms_rad: [2.0e1, 2e+1, 1E1, 3e0, 30e-1, .15e1]"))
     assert load_robot_spec(robot_yaml).actuation.viscous_Nms_rad.tolist() == [20.0, 20.0, 10.0, 3.0, 3.0, 1.5]
+
+
+def test_a_text_parsed_again_gives_equal_data_that_is_not_shared():
+    text = "base: &b {x: [1, 2]}\nother: *b\nn: 1e-3\n"
+    first = load_yaml(text)
+    first["base"]["x"].append(3)                       # a caller edits what it was given
+    again = load_yaml(text)
+    assert again == {"base": {"x": [1, 2]}, "other": {"x": [1, 2]}, "n": 1e-3}
+    assert again["base"] is again["other"]             # an alias is one object, as when parsed
