@@ -21,12 +21,6 @@ import joblib
 from pipeline.errors import ConfigError
 from pipeline.progress import Progress, current
 
-try:  # optional extra ``cluster``: dask[distributed]
-    from distributed import Client, as_completed
-except ModuleNotFoundError:  # pragma: no cover - depends on the environment
-    Client = None  # type: ignore[assignment,misc]
-    as_completed = None  # type: ignore[assignment]
-
 T = TypeVar("T")
 R = TypeVar("R")
 
@@ -51,9 +45,11 @@ def _run_local(fn: Callable[[T], R], items: Sequence[T], jobs: int, progress: Pr
 
 def _run_dask(fn: Callable[[T], R], items: Sequence[T], scheduler: object, progress: Progress,
               description: str) -> list[R]:
-    if Client is None or as_completed is None:
+    try:  # the optional extra ``cluster``, imported when a cluster is asked for (0.7 s of every start)
+        from distributed import Client, as_completed
+    except ModuleNotFoundError:  # pragma: no cover - depends on the environment
         raise ConfigError("--scheduler", str(scheduler),
-                          "dask distributed is not installed (pip install 'pipeline[cluster]')")
+                          "dask distributed is not installed (pip install 'pipeline[cluster]')") from None
     own = not isinstance(scheduler, Client)
     try:
         client = Client(scheduler) if own else scheduler
