@@ -17,7 +17,7 @@ QUICK = CONFIGS_DIR / "quick.yaml"
 GRADIENT = ["calibration.selection_method=gradient", "calibration.index_name=A"]
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def robot():
     from pipeline.robot.model import RobotModel
 
@@ -124,7 +124,7 @@ def test_too_few_feasible_candidates_speaks_in_the_users_fields(robot):
 
 
 # ------------------------------------------------------------------ measurement CSV: units, lines
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def measured(robot):
     """Simulated readings of the hidden robot (its tracker pose differs from the nominal one)."""
     from pipeline.sim.truth import RealRobot

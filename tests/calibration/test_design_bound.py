@@ -93,7 +93,7 @@ def test_rms_samples_have_the_predicted_mean_square_and_compare_fairly():
     assert p1 ** 10 == pytest.approx(0.5, abs=0.02)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def tx40_pool():
     robot = RobotModel.load("staubli_tx40")
     mm = em.MeasurementModel(robot)

@@ -29,7 +29,7 @@ from pipeline.calibration.error_model import se3_to_vector
 from pipeline.robot.parameters import pinocchio_dynamic_parameters
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def setup(rx130l_generic_stiffness):
     robot = rx130l_generic_stiffness
     cfg = st.Config(candidates="random", n_random_candidates=600, identifiability_samples=80,

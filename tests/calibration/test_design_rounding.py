@@ -117,7 +117,7 @@ def test_design_figures_combine_tcp_and_reflector(tx40_setup):
         Config(design_figure="flange").validate()
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def tx40_setup():
     robot = RobotModel.load("staubli_tx40")
     mm = em.MeasurementModel(robot)

@@ -18,12 +18,12 @@ from pipeline.robot.defaults import iso_cube
 from pipeline.robot.model import RobotModel
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def robot():
     return RobotModel.load("rx130l")
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def setup(robot):
     mm = em.MeasurementModel(robot)
     rng = np.random.default_rng(3)

@@ -18,12 +18,12 @@ from pipeline.sim.truth import RealRobot, TruthConfig
 PRIOR = GravityPrior(0.15, 0.02)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def robot() -> RobotModel:
     return RobotModel.load("rx130l")
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def mm(robot) -> em.MeasurementModel:
     return em.MeasurementModel(robot, compliance=True)
 

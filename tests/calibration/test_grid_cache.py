@@ -15,12 +15,12 @@ PER_AXIS = 4
 MARGINS = cd.FilterMargins(0.01, np.radians(3.0), 0.02)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def chain(rx130l):
     return cd.chain_from_robot(rx130l)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def fresh(chain):
     return cd.filter_grid(chain, PER_AXIS, MARGINS)
 

@@ -64,7 +64,7 @@ def test_auto_is_the_default_and_means_all_without_a_measurement_file():
     assert "tool.rx" in [names[i] for i in subsets.select("joint_offsets", names)]
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def smooth_field():
     """A smooth millimetre-size field over 6 joint angles, read with 30 µm noise."""
     rng = np.random.default_rng(4)

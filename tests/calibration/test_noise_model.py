@@ -77,7 +77,7 @@ def test_gates_judge_heldout_before_cross_validation():
     assert gate_figures(s) == ("cross-validated", 9.0, pytest.approx(0.2))
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def gross_files(tmp_path_factory):
     """A simulated record written to CSV, the same with three gross errors, and a held-out file."""
 
@@ -105,14 +105,19 @@ class _Ctx:
 
 
 def test_three_gross_errors_are_found_and_the_run_passes(gross_files):
+    """The gross file with the defaults (parameters: auto: the model selection leaves gross held-out
+    readings out of every score); the clean file with the parameter subset the gross run chose (the
+    selection on the clean file picks the same one; fixing it compares the two records' fits alone)."""
     robot, clean, gross, val, n = gross_files
     figures = {}
-    for name, path in (("clean", clean), ("gross", gross)):
-        # the defaults (parameters: auto): the model selection leaves gross held-out readings out of every score
-        cfg = st.Config(measurements_csv=str(path), validation_csv=str(val), identifiability_samples=60, figures=False)
+    for name, path in (("gross", gross), ("clean", clean)):
+        parameters = figures["gross"]["parameters"] if figures else "auto"
+        cfg = st.Config(measurements_csv=str(path), validation_csv=str(val), identifiability_samples=60, figures=False,
+                        parameters=parameters)
         res = st.run(_Ctx(cfg, robot))      # raises on a failed quality gate (exit 3)
         figures[name] = res.summary
     g, c = figures["gross"], figures["clean"]
+    assert "model_selection" in g and "model_selection" not in c and c["parameters"] == g["parameters"]
     rejected = {r["pose_index"] for r in g["outliers_rejected"]}
     assert {5, 17, 30} <= rejected
     assert g["heldout_rms_position_error_after_m"] <= 1.1 * c["heldout_rms_position_error_after_m"]
@@ -124,13 +129,15 @@ def test_three_gross_errors_are_found_and_the_run_passes(gross_files):
 
 def test_readings_the_model_cannot_explain_still_fail(gross_files, tmp_path):
     """Readings paired with the wrong poses (a shifted file): the calibration explains little of the
-    nominal error, and the gross-inadequacy gate stops the run (exit 3)."""
+    nominal error, and the gross-inadequacy gate stops the run (exit 3). The geometric subset is the
+    one ``parameters: auto`` chooses on this file; given here, the run skips the model selection
+    (the selection itself runs on the gross file in the test above)."""
 
     robot, clean, _, val, _ = gross_files
     m = ms.read_csv(clean, robot)
     shifted = ms.write_csv(tmp_path / "shifted.csv", ms.Measurements(m.Q, np.roll(m.Y, 1, axis=0), m.sigma_m, "x"))
     cfg = st.Config(measurements_csv=str(shifted), validation_csv=str(val), identifiability_samples=60,
-                    figures=False, max_outlier_fraction=0.0)
+                    figures=False, max_outlier_fraction=0.0, parameters="geometric")
     with pytest.raises(QualityGateError) as info:
         st.run(_Ctx(cfg, robot))
     failed = {c["name"] for c in info.value.result.summary["quality_gates"]["checks"] if not c["passed"]}

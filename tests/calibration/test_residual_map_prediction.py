@@ -27,7 +27,7 @@ def _field_m(Q: np.ndarray) -> np.ndarray:
                                    np.sin(Q[:, 1] + 2 * Q[:, 3])])
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def setting():
     robot = RobotModel.load("rx130l")
     mm = em.MeasurementModel(robot)

@@ -14,7 +14,7 @@ from pipeline.compiled_on_demand import FLAGS
 from pipeline.robot.model import RobotModel
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def robot() -> RobotModel:
     return RobotModel.load("rx130l")
 

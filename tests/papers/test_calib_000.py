@@ -46,7 +46,7 @@ def test_parameter_weights_scale_only_angles() -> None:
     assert np.allclose(scaled[:5] / lit[:5], [1, 4, 4, 1, 4])   # lengths kept, angles x 2^2
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def quick_row() -> dict:
     cfg = p0.Settings(n=60, pool=250, gradient=False)
     return p0.run_arm("kuka_kr15", RobotModel.load("kuka_kr15"), cfg, seed=0)

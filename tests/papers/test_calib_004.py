@@ -13,7 +13,7 @@ from pipeline.robot.model import RobotModel
 MARGINS = OpticalMargins(np.radians(1.0), 0.05, 0.01)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def quick() -> tuple[dict, dict]:
     grid = p4.visible_grid("rx130l", 7, MARGINS)
     row = p4._seed(("rx130l", 1, "ideal", grid, 32, 60, ["O3"], MARGINS, "registered", 1.0, None, 1.0, True))

@@ -13,12 +13,12 @@ from pipeline.robot.model import RobotModel
 from pipeline.sim.truth import RealRobot
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def robot() -> RobotModel:
     return RobotModel.load("rx130l")
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def real(robot) -> RealRobot:
     return RealRobot.create(robot, 8)
 
