@@ -50,6 +50,9 @@ TRACKER_NAMES = [f"tracker.{c}" for c in KINEMATIC_COMPONENTS]
 REFLECTOR_NAMES = ["reflector.dx", "reflector.dy", "reflector.dz"]
 #: suffix of the joint compliance parameters ``j{i}.c`` (rad/(N m))
 COMPLIANCE_SUFFIX = ".c"
+#: configuration sets whose static torques a measurement model remembers (a cross-validation fold's
+#: training and held-out readings, the chunks of a larger record)
+TORQUE_MEMO_SETS = 8
 
 
 def is_compliance(name: str) -> bool:
@@ -123,16 +126,27 @@ class MeasurementModel:
         """Take the gravity torques from ``model``'s inertias (e.g. an identified model)."""
         self._gravity_model = model
         self._payload_model = with_payload(model, self.robot.frame_flange, self.payload)
+        #: torques of the last few configuration sets (an iterative fit evaluates the same readings
+        #: again at every step); emptied with a new gravity model
+        self._torque_memo: dict[tuple[tuple[int, ...], bytes, bytes | None], np.ndarray] = {}
 
     def static_torques(self, Q: np.ndarray, mounted: np.ndarray | None = None) -> np.ndarray:
-        """``(N, nq)`` gravity torques of the current dynamic model, with the payload where ``mounted``."""
+        """``(N, nq)`` gravity torques of the current dynamic model, with the payload where ``mounted``
+        (remembered for the last :data:`TORQUE_MEMO_SETS` sets of up to ``chunk`` configurations)."""
         Q = np.atleast_2d(np.asarray(Q, float))
+        m = None if mounted is None else np.asarray(mounted, bool)
+        key = (Q.shape, Q.tobytes(), None if m is None else m.tobytes()) if len(Q) <= self.chunk else None
+        if key is not None and key in self._torque_memo:
+            return self._torque_memo[key].copy()
         tau = gravity_torques_Nm(self._gravity_model, Q)
-        if mounted is not None and np.any(mounted):
+        if m is not None and np.any(m):
             if self.payload is None:
                 raise ValueError("payload readings but the measurement model has no payload")
-            m = np.asarray(mounted, bool)
             tau[m] = gravity_torques_Nm(self._payload_model, Q[m])
+        if key is not None:
+            if len(self._torque_memo) >= TORQUE_MEMO_SETS:
+                del self._torque_memo[next(iter(self._torque_memo))]
+            self._torque_memo[key] = tau.copy()
         return tau
 
     def _extra(self, Q: np.ndarray, mounted: np.ndarray | None, offsets: np.ndarray | None) -> list[np.ndarray]:
