@@ -217,11 +217,13 @@ def _collision_ok(chain: Chain, seg: np.ndarray, margins: FilterMargins, pairs: 
     for c in floor:
         ok &= seg[:, c, :, 2].min(axis=1) - chain.capsule_r[c] - chain.floor_z >= margins.collision_m
     idx = np.flatnonzero(ok)
+    ends = np.ascontiguousarray(np.moveaxis(seg[idx], 0, 2))   # (nc, 2, rows, 3): one block per capsule end
+    rows = np.arange(len(idx))
     for a, b in pairs:
-        d = segment_distances(seg[idx, a, 0], seg[idx, a, 1], seg[idx, b, 0], seg[idx, b, 1])
-        idx = idx[d - chain.capsule_r[a] - chain.capsule_r[b] >= margins.collision_m]
+        p0, p1, q0, q1 = (ends[c, k].take(rows, axis=0) for c, k in ((a, 0), (a, 1), (b, 0), (b, 1)))
+        rows = rows[segment_distances(p0, p1, q0, q1) - chain.capsule_r[a] - chain.capsule_r[b] >= margins.collision_m]
     ok[:] = False
-    ok[idx] = True
+    ok[idx[rows]] = True
     return ok
 
 
