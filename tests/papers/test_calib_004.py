@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from pipeline.papers import calib_004 as p4
 from pipeline.papers import calib_004_optical as op
@@ -13,25 +12,28 @@ from pipeline.robot.model import RobotModel
 MARGINS = OpticalMargins(np.radians(1.0), 0.05, 0.01)
 
 
-@pytest.fixture(scope="session")
-def quick() -> tuple[dict, dict]:
+def test_quick_seed_row():
+    """One seed of the quick variant and the properties its row must have (the checks below). One
+    test, not one per property: a fixture shared by several tests is built again by every pytest-xdist
+    worker that runs one of them, and this row is the costliest step of the file."""
     grid = p4.visible_grid("rx130l", 7, MARGINS)
     row = p4._seed(("rx130l", 1, "ideal", grid, 32, 60, ["O3"], MARGINS, "registered", 1.0, None, 1.0, True))
-    return grid, row
+    _candidates_are_the_visible_grid(grid, row)
+    _headline_keys_and_the_papers_index(row)
+    _calibration_reduces_the_held_out_errors(row)
+    _whole_grid_has_the_largest_index_but_not_per_pose(row)
 
 
-def test_candidates_are_the_visible_grid(quick):
+def _candidates_are_the_visible_grid(grid: dict, row: dict) -> None:
     """Candidates are visible grid configurations (nominal model, with margins): a subset of the
     configurations the cameras see without margins, never one they cannot see."""
-    grid, row = quick
     robot = RobotModel.load("rx130l")
     assert 32 <= row["n_candidates"] <= grid["n_visible"] < grid["counts"]["total"]
     assert op.visible_mask(robot, grid["Q"]).all()
     assert np.all(np.diff(grid["flat"]) > 0)          # grid order (the grid-order scan relies on it)
 
 
-def test_headline_keys_and_the_papers_index(quick):
-    _, row = quick
+def _headline_keys_and_the_papers_index(row: dict) -> None:
     d = row["designs"]
     for key in ("rr_O3", *p4.BASELINES):
         assert {"B", "O3", "cond", "commanded", "predicted_visible", "lost_on_hidden_robot"} <= d[key].keys()
@@ -45,10 +47,9 @@ def test_headline_keys_and_the_papers_index(quick):
     assert d["rr_O3"]["predicted_visible"] == 32
 
 
-def test_calibration_reduces_the_held_out_errors(quick):
+def _calibration_reduces_the_held_out_errors(row: dict) -> None:
     """On the ideal hidden robot the 6-D calibration from the R&R design reduces the held-out
     position and orientation errors (Table 2 layout keys present)."""
-    _, row = quick
     r = row["designs"]["rr_O3"]
     assert r["calibrated"]
     for ax in ("x", "y", "z", "alpha", "beta", "gamma"):
@@ -57,10 +58,9 @@ def test_calibration_reduces_the_held_out_errors(quick):
     assert r["after"]["orientation"]["rms"] < r["before"]["orientation"]["rms"]
 
 
-def test_whole_grid_has_the_largest_index_but_not_per_pose(quick):
+def _whole_grid_has_the_largest_index_but_not_per_pose(row: dict) -> None:
     """Information adds up: the whole candidate set's Lambda dominates every subset's, so its B =
     lambda_min is at least R&R's; per measured pose the R&R optimum is the better design."""
-    _, row = quick
     d = row["designs"]
     whole = d[p4.WHOLE_GRID]
     assert whole["commanded"] == row["n_candidates"]
