@@ -265,6 +265,8 @@ def test_quick_profile_stage_through_runner(tmp_path):
     assert s["selection_method"] != "user file" and s["validation_source"] == "simulated tracker (held-out)"
     stage_report = (tmp_path / "calq" / "calibration" / "report.md").read_text()
     assert "visible to the tracker" in stage_report and "no held-out validation" not in stage_report
+    # the design table (the other simulated runs of these tests leave it out)
+    assert s["design_table"] and "### Design table" in stage_report
     assert out.arrays["configurations_selected"].shape == (s["n_configurations"], 6)
     stage_dir = tmp_path / "calq" / "calibration"
     assert (stage_dir / "heldout_errors.png").exists() and (stage_dir / "index_history.png").exists()
