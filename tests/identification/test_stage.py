@@ -25,7 +25,7 @@ SUMMARY_KEYS = (
 TX40_KEYS = ("tx40_heldout_rms_Nm_ols", "tx40_heldout_rms_Nm_physical", "tx40_physically_consistent")
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")   # built once per worker, also when pytest-xdist comes back to this file
 def quick_run(tmp_path_factory):
     ctx, real = quick_context(tmp_path_factory.mktemp("id"), truth=NO_LOAD_FRICTION)   # Stribeck, no load term
     return ctx, real, stage.run(ctx)
@@ -213,7 +213,9 @@ def test_stage_runs_on_a_joint_csv_record(tmp_path):
     designed, validation is on the record's held-out tail, the hidden robot is never used."""
     from pipeline.identification import fourier
 
-    ctx, real = quick_context(tmp_path / "run", overrides={"run_tx40": False})
+    # the linear friction model: the record's path is what this test is about (the Stribeck and load-friction
+    # fits on a record's held-out tail: the TIAGo record test, test_tiago_record.py)
+    ctx, real = quick_context(tmp_path / "run", overrides={"run_tx40": False, "friction_model": "viscous_coulomb"})
     robot = ctx.robot
     limits = fourier.ExcitationLimits.from_robot(robot, 0.95, 0.95, 0.95, 0.8, 0.05, 0.02)
     traj = fourier.random_feasible_trajectories(robot, limits, 5, 0.1, 1, np.random.default_rng(7))[0]

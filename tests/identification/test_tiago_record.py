@@ -25,7 +25,7 @@ HELD_OUT_BOUND_NM = np.array([0.50, 1.34, 0.56, 0.70])
 FIGAROH_HELD_OUT_RMS_NM = 2.51
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")   # built once per worker, also when pytest-xdist comes back to this file
 def tiago_result(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("tiago")
     table = np.loadtxt(TIAGO / "tiago_identification.csv", delimiter=",", skiprows=1)

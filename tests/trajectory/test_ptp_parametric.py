@@ -43,7 +43,7 @@ def problem(arm, parametric: bool) -> tuple[PtpProblem, PlanningModel]:
                       parametric=parametric), pm
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")   # built once per worker, also when pytest-xdist comes back to this file
 def problems(rx130l):
     """(parametric, constant) problem pairs of two recalibrated arms."""
     return [(problem(arm, True), problem(arm, False)) for arm in (recalibrated(rx130l, 1), recalibrated(rx130l, 2))]

@@ -19,7 +19,6 @@ from pipeline.trajectory.settling import (
     time_scaled,
 )
 from pipeline.trajectory.solve import plan_ptp
-from pipeline.trajectory.solve import ptp_problem as build_ptp_problem
 from pipeline.trajectory.trajectories import JointTrajectory, check_trajectory
 
 
@@ -63,9 +62,12 @@ def test_smooth_ptp_settles_faster_on_the_elastic_truth(rx130l_generic_stiffness
     # an arm whose first mode rings visibly: the RX130L with the generic (33x softer) joint stiffness
     rx130l = rx130l_generic_stiffness
     cfg = quick_config.trajectory
-    pm = PlanningModel.from_robot(rx130l, cfg.torque_reserve)    # as the stage plans (ptp_problem: warm cache)
+    pm = PlanningModel.from_robot(rx130l, cfg.torque_reserve)    # as the stage plans
     q0, q1 = np.radians(cfg.ptp_start_deg), np.radians(cfg.ptp_goal_deg)
-    plan = plan_ptp(pm, build_ptp_problem(pm, rx130l, cfg), q0, q1, cfg)
+    # the session's compiled problem: the same NLP (its code holds neither the stiffness nor the torque
+    # limits, which plan_ptp passes from ``pm``); no Pareto sweep, the settling study reads the main plan only
+    plan = plan_ptp(pm, ptp_problem, q0, q1, cfg, pareto=False)
+    plans = {"ptp": plan.trajectories["ptp"]}      # and its smooth variant (settle_study adds it)
     # the run's seed with the default truth (elastic joints, Stribeck friction), and a truth without the
     # Stribeck and load-dependent friction: their stick-slip creep of the wrist can set the last 0.1 mrad
     # on other seeds (seed 3: smooth 1.12 s vs 0.63 s; docs/stages/trajectory.md), the gear ringing never
@@ -74,7 +76,7 @@ def test_smooth_ptp_settles_faster_on_the_elastic_truth(rx130l_generic_stiffness
     for seed, truth in truths:
         real = RealRobot.create(rx130l, seed, truth)
         assert real.plant.elastic                                  # the default truth: elastic joints
-        results, s = settle_study(real, rx130l, plan.trajectories, None, np.random.default_rng(3))
+        results, s = settle_study(real, rx130l, plans, None, np.random.default_rng(3))
         opt, sm = results["ptp"], results["ptp_smooth"]
         assert np.isfinite(opt.settling_time_s) and np.isfinite(sm.settling_time_s)
         assert sm.settling_time_s < opt.settling_time_s and s["ptp_smooth_settles_faster"], seed
