@@ -9,6 +9,7 @@ import numpy as np
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 from pipeline.sim.truth import RealRobot, TruthConfig
 from pipeline.trajectory.dynamics import PlanningModel
+from pipeline.trajectory.ptp import energy_weights
 from pipeline.trajectory.settling import (
     add_smooth_ptp,
     lowest_mode_hz,
@@ -18,7 +19,7 @@ from pipeline.trajectory.settling import (
     smooth_trajectory,
     time_scaled,
 )
-from pipeline.trajectory.solve import plan_ptp
+from pipeline.trajectory.solve import FINE_GRID_ROUNDOFF, solve_ptp_verified
 from pipeline.trajectory.trajectories import JointTrajectory, check_trajectory
 
 
@@ -64,10 +65,14 @@ def test_smooth_ptp_settles_faster_on_the_elastic_truth(rx130l_generic_stiffness
     cfg = quick_config.trajectory
     pm = PlanningModel.from_robot(rx130l, cfg.torque_reserve)    # as the stage plans
     q0, q1 = np.radians(cfg.ptp_start_deg), np.radians(cfg.ptp_goal_deg)
-    # the session's compiled problem: the same NLP (its code holds neither the stiffness nor the torque
-    # limits, which plan_ptp passes from ``pm``); no Pareto sweep, the settling study reads the main plan only
-    plan = plan_ptp(pm, ptp_problem, q0, q1, cfg, pareto=False)
-    plans = {"ptp": plan.trajectories["ptp"]}      # and its smooth variant (settle_study adds it)
+    # the time-optimal NLP plan slowed into its fine-grid limits, as the stage's plan_ptp makes it (without the
+    # ruckig baseline, the energy plan and the Pareto sweep, which the settling study does not read), on the
+    # session's compiled problem: the same NLP (its code holds neither the stiffness nor the torque limits,
+    # which solve_ptp_verified passes from ``pm``); settle_study adds the smooth variant
+    weights = energy_weights(pm, cfg.ptp_energy)
+    res = solve_ptp_verified(pm, ptp_problem, q0, q1, cfg, cfg.ptp_k1, cfg.ptp_k2, weights)
+    plans = {"ptp": slowed_into_limits(pm, res.sample(cfg.fine_dt_s, "ptp"), FINE_GRID_ROUNDOFF,
+                                       cfg.acceleration_limits, weights)[0]}
     # the run's seed with the default truth (elastic joints, Stribeck friction), and a truth without the
     # Stribeck and load-dependent friction: their stick-slip creep of the wrist can set the last 0.1 mrad
     # on other seeds (seed 3: smooth 1.12 s vs 0.63 s; docs/stages/trajectory.md), the gear ringing never
