@@ -44,9 +44,14 @@ def test_refined_respects_full_friction_where_toppra_does_not(pm, line_path, qui
     assert plan.activity["grid_min_activity"] >= 0.999
 
 
-def test_smooth_variant_is_continuous_and_slower(pm, line_path):
-    cv = solve_cp_convex(pm, line_path, 120)
-    opt = solve_cp_refined(pm, line_path, cv)
+@pytest.fixture(scope="session")
+def refined_line(pm, line_path):
+    """The friction-refined time-optimal CP of the ISO line on 120 intervals (read, not changed, by its tests)."""
+    return solve_cp_refined(pm, line_path, solve_cp_convex(pm, line_path, 120))
+
+
+def test_smooth_variant_is_continuous_and_slower(pm, line_path, refined_line):
+    opt = refined_line
     sm = solve_cp_smooth(pm, line_path, opt, n_intervals=40, torque_margin=0.004)
     assert sm.duration_s >= opt.duration_s * (1 - 1e-6)
     dt = 2e-4
@@ -59,10 +64,9 @@ def test_smooth_variant_is_continuous_and_slower(pm, line_path):
     assert check_trajectory(pm, tr).violation <= 0.01
 
 
-def test_piecewise_acceleration_profile_jumps(pm, line_path):
+def test_piecewise_acceleration_profile_jumps(line_path, refined_line):
     """The non-smooth optimum has acceleration jumps (that is what the smooth variant removes)."""
-    opt = solve_cp_refined(pm, line_path, solve_cp_convex(pm, line_path, 120))
-    tr = opt.sample(line_path, 2e-4)
+    tr = refined_line.sample(line_path, 2e-4)
     assert np.abs(tr.a[1] - tr.a[0]).max() < np.abs(np.diff(tr.a, axis=0)).max()
 
 
