@@ -95,9 +95,7 @@ def test_failed_gate_raises_unless_accept_poor(tmp_path):
     figure and threshold named; with --accept-poor the result is handed on and says so."""
     ctx, _ = quick_context(tmp_path, overrides={"run_tx40": False, "max_validation_rms_over_noise": 0.2,
                                                 "max_cond_data_over_design": 1e9,
-                                                # the linear friction model: the gate reads the validation
-                                                # residual of whichever model is fitted (no Stribeck and
-                                                # load-friction fits needed to fail it)
+                                                # viscous + Coulomb friction: no Stribeck fits to pay for
                                                 "friction_model": "viscous_coulomb",
                                                 # a small excitation problem: the validation gate fails on any fit
                                                 "excitation": {"n_samples": 30, "n_starts": 1, "n_random": 2,
