@@ -12,12 +12,12 @@ import pytest
 from pipeline.errors import InfeasibleError
 from pipeline.interrupts import INTERRUPT_STATUSES, raise_if_interrupted
 from pipeline.robot.example_robots import example_arm_urdf
-from pipeline.trajectory.baselines import ruckig_torque_feasible, toppra_cp
+from pipeline.trajectory.baselines import toppra_cp
 from pipeline.trajectory.cp import cp_grid_activity, solve_cp_convex, solve_cp_refined
 from pipeline.trajectory.design import JointPath
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.reachability import _argmax_concave, solve_cp_reachability
-from pipeline.trajectory.solve import plan_cp, solve_ptp_verified
+from pipeline.trajectory.solve import plan_cp
 from pipeline.trajectory.trajectories import check_trajectory
 
 N_SMALL = 80
@@ -65,16 +65,17 @@ def test_unholdable_path_raises(pm, line_path):
         solve_cp_reachability(weak, line_path, 40)
 
 
-def test_ptp_and_ruckig_respect_acceleration_limits(pm, ptp_problem, big_move, quick_traj_config):
-    cfg = dataclasses.replace(quick_traj_config, acceleration_limits=True)
-    res = solve_ptp_verified(pm, ptp_problem, *big_move, cfg, 1.0, 0.01, np.ones(pm.nq))
+def test_ptp_and_ruckig_respect_acceleration_limits(pm, big_move_plan, quick_traj_config):
+    """The session's plan of the big move (conftest) is planned with the acceleration limits of the quick
+    profile: its NLP solution and its torque-feasible ruckig baseline keep them."""
+    cfg = quick_traj_config
+    assert cfg.acceleration_limits
+    res = big_move_plan.result                                # the time-optimal NLP solution (k1 = 1, k2 = 0.01)
     assert res.info["solver_status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
     chk = check_trajectory(pm, res.sample(cfg.fine_dt_s))
     assert chk.max_acceleration_ratio <= 1.0 + 1e-6          # linear between nodes: node bounds are exact
     assert chk.violation <= cfg.violation_tolerance
-    rk = ruckig_torque_feasible(pm, *big_move, cfg.ruckig_check_dt_s, (25.0,), joint_rounds=1,
-                                acceleration_limits=True)
-    assert check_trajectory(pm, rk.trajectory).max_acceleration_ratio <= 1.0 + 1e-6
+    assert check_trajectory(pm, big_move_plan.ruckig.trajectory).max_acceleration_ratio <= 1.0 + 1e-6
 
 
 @pytest.mark.parametrize("status", sorted(INTERRUPT_STATUSES))
