@@ -1,12 +1,10 @@
 """Candidate measurement configurations: grid / random generation, batched filtering, Jacobians.
 
-Filtering (DESIGN.md "Sensors"; paper 000 §2.2 and §3; paper 004 §3.4): inside the joint limits,
-no self-collision between capsules of non-adjacent links and no capsule below the floor
-(``RobotModel.self_collision_pairs`` / ``floor_capsules`` with a clearance margin), and a
-*predicted* tracker line of sight with the nominal tracker pose: incidence angle between the
-reflector axis and the beam ``<= max_incidence - margin`` and the beam segment reflector ->
-tracker clear of every link capsule. The sensor decides at measurement time; the margins make the
-prediction conservative against the unknown tracker pose and kinematic errors.
+Filtering (DESIGN.md "Sensors"; paper 000 §2.2, §3; paper 004 §3.4): inside the joint limits, no
+self-collision between capsules of non-adjacent links, no capsule below the floor (with a clearance
+margin), and a *predicted* line of sight from the nominal tracker pose (incidence between reflector
+axis and beam ``<= max_incidence - margin``, the beam clear of every link capsule). The sensor
+decides at measurement time; the margins make the prediction conservative.
 
 The full 13^6 grid (paper 004: 13 values per axis, ~4.8 million) is filtered coarse-first: the
 5-axis prefix grid (13^5) is checked for everything that does not depend on axis 6, then only the
@@ -18,10 +16,9 @@ Python (one ``pin.forwardKinematics`` each): on a slice of the RX130L's grid ~6x
 extrapolated to the full grid; so the vectorised chain stays, as a filter only (decisions that must
 match the sensor are re-checked with Pinocchio, e.g. :mod:`pipeline.calibration.gradient_design`).
 
-The whitened candidate Jacobians use the exact first-order model of
-:mod:`pipeline.calibration.error_model` at ``x = 0`` in closed form (screw theory: a twist
-``(v, w)`` right-multiplied on a frame F moves a point p by ``R_F v + (R_F w) x (p - o_F)``), tested
-against the CasADi Jacobian.
+The whitened candidate Jacobians: the first-order model of :mod:`pipeline.calibration.error_model`
+at ``x = 0`` in closed form (a twist ``(v, w)`` on a frame F moves a point p by
+``R_F v + (R_F w) x (p - o_F)``), tested against the CasADi Jacobian.
 """
 
 from __future__ import annotations
@@ -183,8 +180,7 @@ def _last_joint_expanded(chain: Chain, kin: Kinematics, seg: np.ndarray, q_last:
     prefixes, those on the last link moved); row by row the arithmetic of :func:`kinematics`."""
     rows = np.repeat(np.arange(len(seg)), len(q_last))
     R_last = kin.Rpre[rows, -1] @ _axis_rotation(chain.axis[-1], np.tile(q_last, len(seg)))
-    seg_all = seg[rows]
-    o_last = kin.opre[rows, -1, None]
+    seg_all, o_last = seg[rows], kin.opre[rows, -1, None]
     for c in np.flatnonzero(np.asarray(chain.capsule_joint) == chain.nq):
         seg_all[:, c] = np.einsum("nij,kj->nki", R_last, chain.capsule_p[c]) + o_last
     return rows, R_last, seg_all
@@ -192,9 +188,8 @@ def _last_joint_expanded(chain: Chain, kin: Kinematics, seg: np.ndarray, q_last:
 
 def _with_last_joint(chain: Chain, kin: Kinematics, rows: np.ndarray, R_last: np.ndarray) -> Kinematics:
     """The :class:`Kinematics` of prefix rows ``rows`` with the last joint's world rotation ``R_last``."""
-    Rpost = kin.Rpost[rows]
+    Rpost, o = kin.Rpost[rows], kin.opre[rows, -1]
     Rpost[:, -1] = R_last
-    o = kin.opre[rows, -1]
     return Kinematics(kin.Rpre[rows], kin.opre[rows], Rpost, o + R_last @ chain.reflector_p,
                       R_last @ chain.flange_R, o + R_last @ chain.flange_p, R_last @ chain.reflector_axis_joint)
 
@@ -398,10 +393,6 @@ def random_candidates(chain: Chain, n: int, rng: np.random.Generator, margins: F
     Qf = np.concatenate(out)[:n]
     return Qf, counts
 
-
-# ------------------------------------------------------------------------------------------------
-# Jacobians
-# ------------------------------------------------------------------------------------------------
 
 def _skew_batch(v: np.ndarray) -> np.ndarray:
     z = np.zeros(v.shape[0])
