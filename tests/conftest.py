@@ -203,3 +203,18 @@ def execute_notebook():
     to bottom in ``workdir`` and return the text of all its outputs."""
     return _execute_notebook
 
+
+
+# ---------------------------------------------------------------------------- test order
+#: session fixtures that take seconds and serve several tests. Their tests are collected first, file by
+#: file: pytest-xdist's ``worksteal`` hands the first half of the list to one worker and an idle worker
+#: takes tests from the END of the other's queue, so these stay on one worker and each fixture is built
+#: once per ``make test`` instead of once per worker.
+SHARED_COSTLY_FIXTURES = frozenset({
+    "quick_run", "big_move_plan", "ptp_problem", "problems", "tiago_result", "selection", "gross_files",
+    "elastic_run", "quick_row", "nominal_gravity_run", "refined_line",
+})
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    items.sort(key=lambda item: SHARED_COSTLY_FIXTURES.isdisjoint(getattr(item, "fixturenames", ())))
