@@ -6,7 +6,9 @@ structure and the stage's own settings, never on an upstream result (the traject
 NLP: the arm's parameters are inputs of its code). With an empty cache such a build is the longest
 single step of a run (about a minute of gcc for a 6-axis arm's PtP Hessian), and the stages before
 it mostly keep one core busy: the runner starts the warm-ups of the stages that will run in one
-forked process, so the build takes the idle core. It runs at the run's own priority: at a lower one
+forked process, one gcc at a time, so the build takes the idle core (with two gcc processes the
+calibration's two-core steps were slowed by more than the build saved: a cold default run took 193 s
+instead of 171 s). It runs at the run's own priority: at a lower one
 a busy machine starves it (measured: a PtP build at ``nice`` 10 beside two test workers made no
 progress in minutes), and the stage that waits for its library would wait longer than its own
 build takes.
@@ -42,6 +44,7 @@ def _run_tasks(tasks: Sequence[Task]) -> None:
     """The child: no output, each task in turn; a failing task is left to its stage."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)       # Ctrl-C is the run's; it stops this process
     signal.signal(signal.SIGTERM, _stop_quietly)
+    os.environ["PIPELINE_JOBS"] = "1"   # one gcc at a time: the stages keep the other core
     with open(os.devnull, "w") as sink:
         sys.stdout = sys.stderr = sink
         for _name, task in tasks:
