@@ -23,7 +23,6 @@ Paper ``004_abbe750b8bbcc3aa.txt`` §4.1 (overdetermined system (28), ``tau = W 
 
 from __future__ import annotations
 
-import threading
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -308,48 +307,6 @@ class PhysicalEstimate:
         return float(np.sqrt(np.mean(self.residual_Nm**2)))
 
 
-#: the physically consistent fit's IPOPT solver and parameter map per problem size: the data enter as
-#: NLP parameters, so one construction (the symbolic exact Hessian, most of a fit's set-up time) serves
-#: every fit of that size in the process
-_PHYSICAL_SOLVERS: dict[tuple[int, int, int], tuple[ca.Function, ca.Function]] = {}
-_SOLVER_LOCK = threading.Lock()
-
-
-def _physical_solver(n_links: int, nv: int, max_iter: int) -> tuple[ca.Function, ca.Function]:
-    """``(solver, p_of_x)`` of the module doc's objective, ``f = (||R_p p - r_b||^2 + lambda N ||(p - p_nominal)
-    / p_scale||^2) / N`` with the compressed data ``R_p`` (upper triangular), ``r_b``, ``p_nominal``,
-    ``1 / p_scale``, ``lambda N`` and ``1 / N`` as parameters (``x = [theta; actuator parameters]``)."""
-    key = (n_links, nv, max_iter)
-    with _SOLVER_LOCK:
-        if key in _PHYSICAL_SOLVERS:
-            return _PHYSICAL_SOLVERS[key]
-        n_std = 10 * n_links + 4 * nv
-        theta = ca.SX.sym("theta", 10 * n_links)
-        act = ca.SX.sym("act", 4 * nv)
-        p = ca.vertcat(*[log_cholesky_to_dynamic(theta[10 * i : 10 * i + 10]) for i in range(n_links)], act)
-        upper = ca.Sparsity.upper(n_std)
-        r_nz, r_b = ca.SX.sym("R", upper.nnz()), ca.SX.sym("r", n_std)
-        p_nom, inv_scale, weights = ca.SX.sym("p_nominal", n_std), ca.SX.sym("inv_scale", n_std), ca.SX.sym("w", 2)
-        res = ca.mtimes(ca.SX(upper, r_nz), p) - r_b
-        reg = (p - p_nom) * inv_scale
-        f = (ca.dot(res, res) + weights[0] * ca.dot(reg, reg)) * weights[1]
-        x = ca.vertcat(theta, act)
-        solver = ca.nlpsol(
-            "physical_fit",
-            "ipopt",
-            {"x": x, "f": f, "p": ca.vertcat(r_nz, r_b, p_nom, inv_scale, weights)},
-            {
-                "ipopt.print_level": 0,
-                "print_time": False,
-                "ipopt.max_iter": max_iter,
-                "ipopt.tol": 1e-10,
-                "ipopt.sb": "yes",
-            },
-        )
-        _PHYSICAL_SOLVERS[key] = (solver, ca.Function("p", [x], [p]))
-        return _PHYSICAL_SOLVERS[key]
-
-
 def physical_fit(
     Y: np.ndarray,
     y: np.ndarray,
@@ -391,14 +348,17 @@ def _physical_fit(Y, y, nv, p_nominal, joint_sigma_Nm, regularization, max_iter,
     R_p, r_b = R[:n_std, :n_std], R[:n_std, n_std]
     n_rows = Y.shape[0]
 
+    theta = ca.SX.sym("theta", 10 * n_links)
+    act = ca.SX.sym("act", 4 * nv)
+    p = ca.vertcat(*[log_cholesky_to_dynamic(theta[10 * i : 10 * i + 10]) for i in range(n_links)], act)
     scale = parameter_scale(p_nominal, n_links, nv)
-    solver, p_fun = _physical_solver(n_links, nv, max_iter)
-    # the data of this fit, the NLP's parameters (R_p's upper triangle column by column)
-    params = np.concatenate([R_p.T[np.tril_indices(n_std)], r_b, p_nominal, 1.0 / scale,
-                             [regularization * n_rows, 1.0 / n_rows]])
-    n_x = 10 * n_links + 4 * nv
-    lbx = -np.inf * np.ones(n_x)
-    ubx = np.inf * np.ones(n_x)
+    res = ca.mtimes(ca.DM(R_p), p) - ca.DM(r_b)
+    reg = (p - ca.DM(p_nominal)) / ca.DM(scale)
+    # normalise by the number of rows so that lambda is independent of the data length
+    f = (ca.dot(res, res) + regularization * n_rows * ca.dot(reg, reg)) / n_rows
+    x = ca.vertcat(theta, act)
+    lbx = -np.inf * np.ones(x.shape[0])
+    ubx = np.inf * np.ones(x.shape[0])
     off = 10 * n_links
     lbx[off : off + 3 * nv] = POSITIVE_LOWER_BOUND
     # keep every pseudo-inertia strictly inside the PD cone: mass >= min_mass_kg and each
@@ -416,16 +376,28 @@ def _physical_fit(Y, y, nv, p_nominal, joint_sigma_Nm, regularization, max_iter,
             p_nominal[off + 3 * nv :] if fit_offsets else np.zeros(nv),
         ]
     )
+    solver = ca.nlpsol(
+        "physical_fit",
+        "ipopt",
+        {"x": x, "f": f},
+        {
+            "ipopt.print_level": 0,
+            "print_time": False,
+            "ipopt.max_iter": max_iter,
+            "ipopt.tol": 1e-10,
+            "ipopt.sb": "yes",
+        },
+    )
     x0 = np.clip(x0, lbx + 1e-3, ubx)
-    with _SOLVER_LOCK:
-        sol = solver(x0=x0, lbx=lbx, ubx=ubx, p=params)
-        stats = solver.stats()
+    sol = solver(x0=x0, lbx=lbx, ubx=ubx)
+    stats = solver.stats()
     raise_if_interrupted(stats["return_status"], "physical fit")
     if not stats["success"] and stats["return_status"] not in (
         "Maximum_Iterations_Exceeded",
         "Solved_To_Acceptable_Level",
     ):
         raise SolverError(None, "physical_fit", f"IPOPT: {stats['return_status']}")
+    p_fun = ca.Function("p", [x], [p])
     p_hat = np.asarray(p_fun(sol["x"])).ravel()
     resid = (y - Y @ p_hat).reshape(-1, nr)
     eigs = [
