@@ -16,12 +16,12 @@ import sys
 import time
 from dataclasses import dataclass
 from types import SimpleNamespace
-from typing import Any
 
 import numpy as np
 
 from pipeline import cli, config
-from pipeline.stage_api import StageResult
+from pipeline.config import RunConfig
+from pipeline.stage_api import StageContext, StageResult
 
 
 @dataclass
@@ -31,7 +31,7 @@ class Config:
 
 
 def make(name: str, depends: tuple[str, ...]) -> SimpleNamespace:
-    def run(ctx: Any) -> StageResult:
+    def run(ctx: StageContext) -> StageResult:
         (ctx.out_dir / "part.txt").write_text("half")
         if ctx.config.sleep_s:
             marker = ctx.out_dir.parent / f"{name}.started"
@@ -50,7 +50,7 @@ def registry() -> dict[str, SimpleNamespace]:
     return {"a": make("a", ()), "b": make("b", ("a",)), "c": make("c", ("b",))}
 
 
-def no_run_defaults(cfg: Any) -> None:
+def no_run_defaults(cfg: RunConfig) -> None:
     """The built-in robots' run_defaults name the real stages' sections, which the fakes replace."""
     return None
 
