@@ -21,6 +21,7 @@ the last ``PARSED_TEXTS`` parsed texts and hands out deep copies (the same data,
 from __future__ import annotations
 
 import copy
+import functools
 import re
 from pathlib import Path
 from typing import Any
@@ -92,18 +93,17 @@ Yaml12Loader.add_constructor(_INT_TAG, Yaml12Loader.construct_yaml_int)
 
 #: how many parsed texts :func:`load_yaml` keeps (the files of a few runs)
 PARSED_TEXTS = 32
-_PARSED: dict[str, Any] = {}
+
+
+@functools.lru_cache(maxsize=PARSED_TEXTS)
+def _parsed(text: str) -> Any:   # Any: whatever the YAML holds
+    return yaml.load(text, Loader=Yaml12Loader)  # noqa: S506 - a SafeLoader subclass
 
 
 def load_yaml(text: str) -> Any:
     """Parse YAML text with :class:`Yaml12Loader` (raises ``yaml.YAMLError``); a text parsed before
     is answered with a deep copy of its earlier result (the loader is a pure function of the text)."""
-    if text not in _PARSED:
-        data = yaml.load(text, Loader=Yaml12Loader)  # noqa: S506 - a SafeLoader subclass
-        if len(_PARSED) >= PARSED_TEXTS:
-            del _PARSED[next(iter(_PARSED))]          # the oldest
-        _PARSED[text] = data
-    return copy.deepcopy(_PARSED[text])
+    return copy.deepcopy(_parsed(text))
 
 
 def yaml_problem(exc: yaml.YAMLError) -> tuple[str | None, str]:
