@@ -19,6 +19,10 @@ PYTEST_WORKERS ?= 2
 # one BLAS thread: reproducible numbers (see pipeline/__init__.py)
 export OPENBLAS_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
+# Python's bytecode cache (__pycache__, git-ignored) is written: with PYTHONDONTWRITEBYTECODE set, as in
+# some containers, every test worker and every CLI child compiles the package again and pytest rewrites
+# every test module again (collection 12.7 s -> 5.6 s per worker on the 2-core machine)
+unexport PYTHONDONTWRITEBYTECODE
 
 .PHONY: run test test-slow lint typecheck
 
