@@ -134,13 +134,21 @@ def read_npz(path: str | Path) -> dict[str, np.ndarray]:
         return {k: data[k] for k in data.files}
 
 
-def save_figure(path: str | Path, fig: Figure, dpi: int = 120, close: bool = True) -> Path:
-    """Atomic PNG of a matplotlib figure (closed afterwards unless ``close=False``)."""
+def figure_png(fig: Figure, dpi: int = 120) -> bytes:
+    """The PNG file of a matplotlib figure, as bytes (tight bounding box)."""
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
+    return buf.getvalue()
+
+
+def save_figure(path: str | Path, fig: Figure, dpi: int = 120, close: bool = True,
+                png: bytes | None = None) -> Path:
+    """Atomic PNG of a matplotlib figure (closed afterwards unless ``close=False``); ``png``: the
+    figure already rendered (:func:`figure_png`, e.g. by a worker process)."""
+    data = figure_png(fig, dpi) if png is None else png
     if close:
         plt.close(fig)
-    return write_bytes(path, buf.getvalue())
+    return write_bytes(path, data)
 
 
 # --------------------------------------------------------------------------------------------

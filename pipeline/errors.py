@@ -25,6 +25,10 @@ class PipelineError(Exception):
         parts = [p for p in (self.file, self.field) if p]
         return ": ".join([*parts, self.problem])
 
+    def __reduce__(self) -> tuple[type, tuple[object, ...]]:
+        """Pickled by its fields: an error raised in a worker process reaches its parent as itself."""
+        return type(self), (self.file, self.field, self.problem)
+
 
 class ConfigError(PipelineError):
     """The run configuration is invalid."""
@@ -60,3 +64,6 @@ class QualityGateError(PipelineError):
     def __init__(self, file: str | Path | None, field: str | None, problem: str, result: object = None) -> None:
         super().__init__(file, field, problem)
         self.result = result
+
+    def __reduce__(self) -> tuple[type, tuple[object, ...]]:
+        return type(self), (self.file, self.field, self.problem, self.result)

@@ -43,6 +43,7 @@ from pipeline import artefacts
 from pipeline import config as config_mod
 from pipeline.config import to_plain
 from pipeline.errors import PipelineError
+from pipeline.forks import fork_map
 from pipeline.robot.exact import load_exact_robot, save_exact_robot
 from pipeline.robot.model import RobotModel
 from pipeline.stage_api import PROVENANCE_FILE, Provenance, StageOutput, StageResult
@@ -87,8 +88,10 @@ def _write_payload(stage_dir: Path, result: StageResult) -> list[str]:
     artefacts.write_npz(stage_dir / RESULTS_NPZ, result.arrays)
     artefacts.write_json(stage_dir / RESULTS_JSON, result.data)
     figures = []
-    for key, fig in result.figures.items():
-        artefacts.save_figure(stage_dir / f"{key}.png", fig)
+    # rendering the PNGs is most of a stage's writing time: side by side on forked workers (the same bytes)
+    keys, figs = list(result.figures), list(result.figures.values())
+    for key, fig, png in zip(keys, figs, fork_map(lambda k: artefacts.figure_png(figs[k]), len(figs)), strict=True):
+        artefacts.save_figure(stage_dir / f"{key}.png", fig, png=png)
         figures.append(f"{key}.png")
     if result.report_md:
         artefacts.write_text(stage_dir / REPORT_MD, result.report_md.rstrip() + "\n")

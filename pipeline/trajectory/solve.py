@@ -7,6 +7,7 @@ Public entry points: :func:`cp_joint_path`, :func:`plan_cp`, :func:`plan_ptp`.
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -15,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.errors import InfeasibleError, PipelineError, SolverError
+from pipeline.forks import fork_map
 from pipeline.robot.defaults import iso_cube, ready_pose_rad
 from pipeline.robot.iso9283 import iso9283_path, tool_rotation
 from pipeline.robot.model import RobotModel
@@ -416,29 +418,45 @@ def plan_ptp(pm: PlanningModel, problem: PtpProblem, q0: np.ndarray, q1: np.ndar
     # the baseline verified on the same fine grid as every plan
     rk_fine = ruckig_resampled(pm, q0, q1, rk, cfg.fine_dt_s)
     res, ptp_tr, ptp_chk = best_ptp_candidate(pm, problem, q0, q1, cfg, w, rk_fine)
-    fixed: PtpResult | None = None
     note = ""
-    if rk.duration_s < res.duration_s:
+    energy_at_ruckig = rk.duration_s >= res.duration_s
+    if not energy_at_ruckig:
         # ruckig's jerk-limited profile of a kinematically limited move switches its accelerations
         # between the transcription's nodes: no plan of this transcription exists at its duration
         note = (f"ruckig's plan ({rk.duration_s:.4f} s) is shorter than this transcription's minimum time "
                 f"({res.duration_s:.4f} s, {problem.N} intervals): no energy plan at ruckig's duration")
-    else:
-        fixed = solve_ptp_verified(pm, problem, q0, q1, cfg, 0.0, 1.0, w, duration_s=rk.duration_s,
-                                   coulomb_widths_rad_s=tuple(cfg.ptp_fixed_coulomb_widths_rad_s))
+    # the Pareto sweep: continuation from the main solution outwards (k1 = 1), same verification as
+    # the main one; its two branches and the energy plan at ruckig's duration are independent chains
+    # of solves, run side by side on forked workers (:func:`pipeline.forks.fork_map`, same numbers)
+    ks = sorted(float(k) for k in cfg.ptp_pareto_k2) if pareto else []
+    up = [k for k in ks if k > cfg.ptp_k2 and not np.isclose(k, cfg.ptp_k2)]
+    down = [k for k in reversed(ks) if k < cfg.ptp_k2 and not np.isclose(k, cfg.ptp_k2)]
+    scale0 = np.asarray(res.info["torque_scale"])
+
+    def continuation(branch: list[float]) -> list[PtpResult]:
+        out, prev = [], res
+        for k2 in branch:
+            prev = solve_ptp_verified(pm, problem, q0, q1, cfg, 1.0, k2, w, x0=prev.info["x"], torque_scale=scale0)
+            out.append(prev)
+        return out
+
+    def at_ruckig_duration() -> list[PtpResult]:
+        return [solve_ptp_verified(pm, problem, q0, q1, cfg, 0.0, 1.0, w, duration_s=rk.duration_s,
+                                   coulomb_widths_rad_s=tuple(cfg.ptp_fixed_coulomb_widths_rad_s))]
+
+    tasks: list[tuple[int, bool, Callable[[], list[PtpResult]]]] = [
+        (len(b), False, functools.partial(continuation, b)) for b in (up, down) if b]
+    if energy_at_ruckig:
+        tasks.append((1, True, at_ruckig_duration))
+    tasks.sort(key=lambda t: -t[0])          # the longest chain first: the workers finish together
+    fixed: PtpResult | None = None
     sweep: list[PtpResult] = []
+    for (_, is_fixed, _), out in zip(tasks, fork_map(lambda k: tasks[k][2](), len(tasks)), strict=True):
+        if is_fixed:
+            fixed = out[0]
+        else:
+            sweep += out
     if pareto:
-        # continuation from the main solution outwards (k1 = 1), same verification as the main one
-        ks = sorted(float(k) for k in cfg.ptp_pareto_k2)
-        up = [k for k in ks if k > cfg.ptp_k2 and not np.isclose(k, cfg.ptp_k2)]
-        down = [k for k in reversed(ks) if k < cfg.ptp_k2 and not np.isclose(k, cfg.ptp_k2)]
-        scale0 = np.asarray(res.info["torque_scale"])
-        for branch in (up, down):
-            prev = res
-            for k2 in branch:
-                prev = solve_ptp_verified(pm, problem, q0, q1, cfg, 1.0, k2, w, x0=prev.info["x"],
-                                          torque_scale=scale0)
-                sweep.append(prev)
         if cfg.ptp_k1 == 1.0 and any(np.isclose(k, cfg.ptp_k2) for k in ks):
             sweep.append(res)          # the main solution is a point of the front too
         sweep.sort(key=lambda r: r.k2)

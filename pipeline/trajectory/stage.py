@@ -16,7 +16,8 @@ Paper ``004_abbe750b8bbcc3aa.txt`` §5 and DESIGN.md "Trajectories":
    of the links), the PtP plans also with a hold after the move: settling time of the time-optimal
    plan, of its smooth variant and of ruckig's jerk-limited one (:mod:`pipeline.trajectory.settling`).
 
-The steps of :func:`run`: plan the CP and the PtP motion (:mod:`.solve`), verify the plans in the
+The steps of :func:`run`: plan the CP and the PtP motion (:mod:`.solve`; side by side, the CP plan in a
+forked child, :func:`pipeline.forks.in_background`), verify the plans in the
 servo simulation (:mod:`.measure`), gate them (:mod:`.validate`), report (:mod:`.report`: every
 reported energy is the fine-grid re-check with the weights of ``ptp_energy``).
 """
@@ -28,6 +29,7 @@ import time
 import numpy as np
 
 from pipeline.errors import ConfigError
+from pipeline.forks import in_background
 from pipeline.robot.defaults import ptp_move_rad
 from pipeline.robot.model import RobotModel
 from pipeline.stage_api import StageContext, StageResult
@@ -79,9 +81,12 @@ def warm_up(config: TrajectoryConfig, robot: RobotModel) -> None:
 def run(ctx: StageContext) -> StageResult:
     cfg: TrajectoryConfig = ctx.config
     pm = PlanningModel.from_robot(ctx.robot, cfg.torque_reserve)
-    timings: dict[str, float] = {}
-    cp, path_length_m = plan_cp_step(ctx.robot, pm, cfg, timings)
-    ptp = plan_ptp_step(ctx.robot, pm, cfg, timings)
+    ptp_timings: dict[str, float] = {}
+    # the CP plan in a forked child beside the PtP plans: independent problems, the same numbers
+    with in_background(lambda: plan_cp_step(ctx.robot, pm, cfg)) as cp_result:
+        ptp = plan_ptp_step(ctx.robot, pm, cfg, ptp_timings)
+        cp, path_length_m, cp_s = cp_result()
+    timings = {"cp_s": cp_s, **ptp_timings}
     summary = report.plan_summary(cfg, ctx.robot, pm, cp, ptp, path_length_m,
                                   ctx.upstream.get("identification") is not None)
     servo = ServoVerification()
@@ -101,14 +106,12 @@ def run(ctx: StageContext) -> StageResult:
                                     report_md=report.report_markdown(cfg, summary, servo)))
 
 
-def plan_cp_step(robot: RobotModel, pm: PlanningModel, cfg: TrajectoryConfig,
-                 timings: dict[str, float]) -> tuple[CPPlan, float]:
-    """The CP plan on its piece of the ISO path and the piece's length (m), timed."""
+def plan_cp_step(robot: RobotModel, pm: PlanningModel, cfg: TrajectoryConfig) -> tuple[CPPlan, float, float]:
+    """The CP plan on its piece of the ISO path, the piece's length (m) and the wall time taken (s)."""
     t0 = time.perf_counter()
     path, piece = cp_joint_path(robot, cfg)
     cp = plan_cp(pm, path, cfg)
-    timings["cp_s"] = time.perf_counter() - t0
-    return cp, float(piece.length_m)
+    return cp, float(piece.length_m), time.perf_counter() - t0
 
 
 def plan_ptp_step(robot: RobotModel, pm: PlanningModel, cfg: TrajectoryConfig, timings: dict[str, float]) -> PTPPlan:
