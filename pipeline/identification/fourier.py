@@ -21,6 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import pinocchio as pin
 
 from pipeline.errors import InfeasibleError
 from pipeline.identification.tcp_motion import tcp_speed_acceleration
@@ -195,6 +196,17 @@ class FeasibilityReport:
                    self.tcp_acceleration_max_m_s2 / limits.tcp_acceleration_m_s2)
 
 
+def nominal_torques(robot: RobotModel, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """``robot.inverse_dynamics`` of every row of ``q, v, a`` (N, nq), number for number: ``pin.rnea``
+    row by row, the friction terms (elementwise) on all rows at once."""
+    model, data = robot.model, robot.model.createData()
+    tau = np.array([pin.rnea(model, data, qk, vk, ak) for qk, vk, ak in zip(q, v, a, strict=True)])
+    tau0 = tau.reshape(len(q), robot.nq) + robot.friction_torque(v)
+    if robot.spec.actuation.coulomb_load_coefficient is None:
+        return tau0
+    return tau0 + robot.load_friction_torque(tau0, v)
+
+
 def check_trajectory(
     robot: RobotModel,
     traj: FourierTrajectory,
@@ -211,8 +223,7 @@ def check_trajectory(
     pos = float(np.max(np.abs(q - mid) / half))
     vel = float(np.max(np.abs(v) / limits.velocity_rad_s))
     acc = float(np.max(np.abs(a) / limits.acceleration_rad_s2))
-    tau = np.array([robot.inverse_dynamics(qk, vk, ak) for qk, vk, ak in zip(q, v, a, strict=True)])
-    trq = float(np.max(np.abs(tau) / limits.effort_Nm))
+    trq = float(np.max(np.abs(nominal_torques(robot, q, v, a)) / limits.effort_Nm))
     seg = robot.capsule_segments(q)
     pair, floor = robot.capsule_clearances(seg)
     self_min = float(pair.min()) if pair.size else np.inf
@@ -258,8 +269,7 @@ def random_trajectory(
     bq, bv, ba = fourier_basis(traj_t, base_frequency_hz, L)
     def torque_ratio(coef: np.ndarray) -> float:
         q, v, a = (b @ coef.T for b in (bq, bv, ba))
-        tau = np.array([robot.inverse_dynamics(*s) for s in zip(q, v, a, strict=True)])
-        return float(np.max(np.abs(tau) / limits.effort_Nm))
+        return float(np.max(np.abs(nominal_torques(robot, q, v, a)) / limits.effort_Nm))
 
     for _ in range(CENTRE_DRAWS):
         coef = np.zeros((nq, 2 * L + 1))

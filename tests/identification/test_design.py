@@ -39,6 +39,24 @@ def test_fourier_derivatives_and_rest(rx130l, setup):
     np.testing.assert_allclose(q0[0], q0[1], atol=1e-12)  # periodic
 
 
+@pytest.mark.parametrize("friction", ["nominal", "stribeck_and_load"])
+def test_nominal_torques_are_inverse_dynamics_number_for_number(rx130l, setup, friction):
+    """The feasibility checks' torques of whole trajectories equal ``inverse_dynamics`` sample by sample
+    exactly (the random baseline and the fine-grid check decide on them), also with an identified
+    Stribeck term and load-dependent Coulomb friction."""
+    robot = rx130l.copy()
+    if friction == "stribeck_and_load":
+        act = robot.spec.actuation
+        act.static_friction_excess_Nm = 0.3 * np.asarray(act.coulomb_Nm, float)
+        act.stribeck_velocity_rad_s = np.full(robot.nq, 0.05)
+        act.coulomb_load_coefficient = np.linspace(0.0, 0.02, robot.nq)
+    traj = F.random_trajectory(robot, setup[2], 5, 0.1, np.random.default_rng(3))
+    q, v, a = traj.evaluate(traj.sample_times(200))
+    expected = np.array([robot.inverse_dynamics(*s) for s in zip(q, v, a, strict=True)])
+    assert np.array_equal(F.nominal_torques(robot, q, v, a), expected)
+    assert friction == "nominal" or not np.array_equal(expected, F.nominal_torques(rx130l, q, v, a))
+
+
 @pytest.mark.parametrize("criterion,softness", [("cond", 0.0), ("cond", 0.2), ("logdet", 0.0)])
 def test_criterion_gradient_is_exact(rx130l, setup, criterion, softness):
     reg, base, limits, sym = setup
