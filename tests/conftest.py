@@ -4,9 +4,9 @@
 * ``rx130l``: the built-in robot, loaded once per session (do not mutate it; use ``.copy()``).
 * ``shipped_configs``: (config, robot) pairs every shipped setting must pass.
 * ``fake_stages``: replaces the stage registry with small fake stages (runner tests).
-* ``execute_notebook(name, workdir) -> str``: every code cell of ``notebooks/<name>`` run top to
-  bottom in an IPython shell inside the test process (no kernel start, no second import of the
-  package), returning the text the cells printed.
+* ``execute_notebook(name, workdir, parameters=None) -> str``: every code cell of ``notebooks/<name>``
+  run top to bottom in an IPython shell inside the test process (no kernel start, no second import of
+  the package), returning the text the cells printed; ``parameters`` set its ``# parameter`` lines.
 * ``tests/trajectory/conftest.py``: the RX130L planning model, the quick ISO line, ONE compiled PtP
   problem and ONE quick-profile PtP plan of the big move (``big_move_plan``).
 
@@ -25,6 +25,7 @@ import builtins
 import contextlib
 import io
 import os
+import re
 import shutil
 import sys
 from dataclasses import dataclass
@@ -185,22 +186,33 @@ def _ipython_shell(workdir: Path):
         plt.close("all")
 
 
-def _execute_notebook(name: str, workdir: Path) -> str:
+def _with_parameters(cells: list[str], parameters: dict[str, Any]) -> list[str]:
+    """The cells with each parameter line ``NAME = ...  # parameter: ...`` of ``parameters`` set to its value."""
+    for key, value in parameters.items():
+        line = re.compile(rf"^{key} = .*# parameter.*$", re.MULTILINE)
+        assert sum(len(line.findall(c)) for c in cells) == 1, f"no parameter line {key} = ...  # parameter"
+        cells = [line.sub(lambda _m, k=key, v=value: f"{k} = {v!r}  # parameter (set by the test)", c) for c in cells]
+    return cells
+
+
+def _execute_notebook(name: str, workdir: Path, parameters: dict[str, Any] | None = None) -> str:
     nb = nbformat.read(NOTEBOOKS / name, as_version=4)
+    cells = _with_parameters([c.source for c in nb.cells if c.cell_type == "code"], parameters or {})
     text = io.StringIO()
     with _ipython_shell(workdir) as shell, contextlib.redirect_stdout(text):
-        for i, cell in enumerate(c for c in nb.cells if c.cell_type == "code"):
-            result = shell.run_cell(cell.source, store_history=False)
+        for i, source in enumerate(cells):
+            result = shell.run_cell(source, store_history=False)
             if not result.success:
                 error = result.error_in_exec or result.error_before_exec
-                raise AssertionError(f"{name}: code cell {i + 1} failed: {error!r}\n{cell.source}") from error
+                raise AssertionError(f"{name}: code cell {i + 1} failed: {error!r}\n{source}") from error
     return text.getvalue()
 
 
 @pytest.fixture
 def execute_notebook():
-    """``execute_notebook(name, workdir) -> str``: run every code cell of ``notebooks/<name>`` top
-    to bottom in ``workdir`` and return the text of all its outputs."""
+    """``execute_notebook(name, workdir, parameters=None) -> str``: run every code cell of
+    ``notebooks/<name>`` top to bottom in ``workdir`` and return the text of all its outputs;
+    ``parameters`` ``{NAME: value}`` replace the notebook's ``NAME = ...  # parameter`` lines."""
     return _execute_notebook
 
 

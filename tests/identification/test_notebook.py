@@ -2,7 +2,29 @@
 
 from __future__ import annotations
 
+import pytest
+
+#: a smaller quick setting: a fifth of the samples per period, 4 random trajectories and 30 IPOPT iterations
+#: for the excitation, the first 4 s of the TX40 record (the quick stage itself: tests/identification/test_stage.py;
+#: the whole TX40 record: tests/identification/test_tx40.py)
+SMALL = {"identification.decimation": 20, "identification.excitation.n_random": 4,
+         "identification.excitation.max_iter": 30, "identification.tx40.max_samples": 20000}
+
+
+def _check(text: str) -> None:
+    assert "base parameters" in text and "cond optimised" in text and "tx40_heldout_rms_Nm_physical" in text
+    assert "physically consistent: True" in text and "within 3 sigma (nominal kinematics)" in text
+
 
 def test_identification_notebook_executes(tmp_path, execute_notebook):
-    text = execute_notebook("02_identification.ipynb", tmp_path)
-    assert "base parameters" in text and "cond optimised" in text and "tx40_heldout_rms_Nm_physical" in text
+    """Every cell on a smaller setting (the same code path: Stribeck and load-dependent friction
+    candidates, ISO path validation, the TX40 record); the slow twin runs the notebook as shipped."""
+    text = execute_notebook("02_identification.ipynb", tmp_path, {"SETTINGS": SMALL})
+    _check(text)
+    assert "n_random=4, max_iter=30" in text        # the setting reached the stage
+
+
+@pytest.mark.slow
+def test_identification_notebook_executes_as_shipped(tmp_path, execute_notebook):
+    """The notebook with its own quick setting (what a user runs): the full excitation design."""
+    _check(execute_notebook("02_identification.ipynb", tmp_path))
