@@ -56,7 +56,10 @@ def test_tx40_validates_on_the_iso_path_of_its_run_defaults(tx40):
 def test_rx130l_sized_path_falls_back_on_the_tx40(tx40):
     fallback = val_mod.ValidationTrajectory(np.zeros(2), np.zeros((2, 6)), np.zeros((2, 6)), np.zeros((2, 6)),
                                             "fourier", "a random feasible Fourier trajectory")
-    rx130l_cube = ControlConfig(iso={"centre_m": [1.0, 0.0, 0.6], "edge_m": 0.5})   # out of the TX40's reach
+    # a TX40 run (its robot.yaml IK seeds) given the RX130L's cube, out of the TX40's reach
+    rx130l_cube = load_config(values={"robot": "staubli_tx40", "control.iso.centre_m": [1.0, 0.0, 0.6],
+                                      "control.iso.edge_m": 0.5}).control
+    assert rx130l_cube.ik_seeds_deg
     vt = val_mod.validation_trajectory(tx40, 4e-3, lambda: fallback, control=rx130l_cube)
     assert vt.label == "fourier" and "ISO 9283 path" in vt.note
     md = report.validation_markdown(stage.Config(), vt, rx130l_cube.iso, tx40)
