@@ -247,10 +247,9 @@ def pose_error(robot: RobotModel, model: pin.Model, data: pin.Data, fid: int, fr
                target: pin.SE3) -> tuple[np.ndarray, np.ndarray]:
     """``e = [p* - p, log3(R* R^T)]`` of ``frame`` at ``q`` and its LOCAL_WORLD_ALIGNED Jacobian ``(6, nq)``;
     a tool frame's position and linear rows include the calibration's residual map
-    (:meth:`RobotModel.residual_map_of`)."""
-    pin.framesForwardKinematics(model, data, q)
-    cur = data.oMf[fid]
+    (:meth:`RobotModel.residual_map_of`). One kinematic pass: the Jacobian's, along the frame's support."""
     J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
+    cur = pin.updateFramePlacement(model, data, fid)
     p = cur.translation
     rmap = robot.residual_map_of(frame)
     if rmap is not None:

@@ -137,14 +137,16 @@ def track(robot: RobotModel, rotation: np.ndarray, P: np.ndarray, Pd: np.ndarray
     q = np.array(q_start, float)
     v_prev = np.zeros(nq)
     a_prev = np.zeros(nq)
+    rhs_v, rhs_a = np.zeros(6), np.zeros(6)    # [p_dot; 0] and [p_ddot; 0]
     for k in range(N):
         if k > 0:
             dt = t_s[k] - t_s[k - 1]
             q = q + dt * v_prev + 0.5 * dt * dt * a_prev
         err = np.inf
+        target = pin.SE3(rotation, P[k])
         for _ in range(max_iterations):
-            e, J = pose_error(robot, model, data, fid, frame, q, pin.SE3(rotation, P[k]))
-            err = float(np.linalg.norm(e))
+            e, J = pose_error(robot, model, data, fid, frame, q, target)
+            err = float(np.sqrt(e.dot(e)))
             if err < tolerance_m:
                 break
             q = q + resolved_rate(J, e)
@@ -157,12 +159,13 @@ def track(robot: RobotModel, rotation: np.ndarray, P: np.ndarray, Pd: np.ndarray
                                   f"{limiting_joint(robot, q)})")
         if np.any(q < lo) or np.any(q > hi):
             check_within_limits(robot, q, where())
-        v = resolved_rate(J, np.concatenate([Pd[k], np.zeros(3)]))
+        rhs_v[:3], rhs_a[:3] = Pd[k], Pdd[k]
+        v = resolved_rate(J, rhs_v)
         pin.forwardKinematics(model, data, q, v, zero)
         drift = pin.getFrameClassicalAcceleration(model, data, fid, pin.LOCAL_WORLD_ALIGNED).vector
         if rmap is not None:      # the residual map's share of J_dot v (pipeline.robot.residual_map)
             drift[:3] += rmap.drift(q, v)
-        a = resolved_rate(J, np.concatenate([Pdd[k], np.zeros(3)]) - drift)
+        a = resolved_rate(J, rhs_a - drift)
         over = np.nonzero(np.abs(v) > vlim)[0]
         if len(over):
             j = int(over[0])

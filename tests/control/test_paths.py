@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import numpy as np
+import pinocchio as pin
 import pytest
 
 from pipeline.errors import ConfigError
 from pipeline.robot.iso9283 import iso9283_path
-from pipeline.robot.paths import CirclePath, LinePath, PolylinePath, SplinePath, rectangle
+from pipeline.robot.model import RobotModel
+from pipeline.robot.paths import CirclePath, LinePath, PolylinePath, SplinePath, pose_error, rectangle
 
 
 @pytest.mark.parametrize("path", [
@@ -103,3 +105,23 @@ def test_registered_error_removes_rigid_motion_only():
     bent = moved.copy()
     bent[:, 2] += 1e-3 * P[:, 0] ** 2 / 0.09  # a non-rigid deformation stays visible
     assert registered_error(bent, P).max() > 1e-4
+
+
+@pytest.mark.parametrize("name", ["rx130l", "staubli_tx40", "kuka_kr15"])
+def test_pose_error_kinematics_are_the_full_forward_kinematics(name):
+    """The IK's pose error and Jacobian come from one kinematic pass (the Jacobian's, along the frame's
+    support): number for number what full forward kinematics and the frame Jacobian give."""
+    robot = RobotModel.load(name)
+    model, data, ref = robot.model, robot.model.createData(), robot.model.createData()
+    rng = np.random.default_rng(5)
+    for frame in (robot.frame_tcp, robot.frame_reflector, robot.frame_flange):
+        fid = model.getFrameId(frame)
+        for _ in range(50):
+            q = rng.uniform(robot.limits.lower_rad, robot.limits.upper_rad)
+            target = pin.SE3(pin.exp3(rng.normal(size=3)), rng.normal(size=3))
+            e, J = pose_error(robot, model, data, fid, frame, q, target)
+            pin.framesForwardKinematics(model, ref, q)
+            cur = ref.oMf[fid]
+            assert np.array_equal(e, np.concatenate([target.translation - cur.translation,
+                                                      pin.log3(target.rotation @ cur.rotation.T)]))
+            assert np.array_equal(J, pin.computeFrameJacobian(model, ref, q, fid, pin.LOCAL_WORLD_ALIGNED))
