@@ -144,12 +144,12 @@ def frd_gain_phase_margins(sys: ct.TransferFunction) -> tuple[float, float, floa
     PM = np.remainder(np.angle(response(wc), deg=True), 360.0) - 180.0
     gm, wpc = float("inf"), float("nan")
     if GM.shape[0] and not np.isinf(GM).all():
-        k = np.where(log_gm == np.min(log_gm))
-        gm, wpc = GM[k][0], w_180[k][0]
+        smallest_gm = np.where(log_gm == np.min(log_gm))
+        gm, wpc = GM[smallest_gm][0], w_180[smallest_gm][0]
     pm, wgc = float("inf"), float("nan")
     if PM.shape[0]:
-        k = np.where(np.abs(PM) == np.amin(np.abs(PM)))[0]
-        pm, wgc = PM[k][0], wc[k][0]
+        smallest_pm = np.where(np.abs(PM) == np.amin(np.abs(PM)))[0]
+        pm, wgc = PM[smallest_pm][0], wc[smallest_pm][0]
     return gm, pm, wpc, wgc
 
 
