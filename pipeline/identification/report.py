@@ -1,7 +1,5 @@
 """Summary, arrays, data, figures and report tables of the identification stage (measured vs
-predicted torques, parameter errors, condition-number convergence, the TX40 comparison).
-
-The figures lay themselves out when drawn (``layout="tight"``: when saved or shown), not when built."""
+predicted torques, parameter errors, condition-number convergence, the TX40 comparison)."""
 
 from __future__ import annotations
 
@@ -23,7 +21,7 @@ from pipeline.stage_api import StageResult
 
 def torques_figure(t: np.ndarray, measured: np.ndarray, predicted: np.ndarray, title: str) -> Figure:
     nq = measured.shape[1]
-    fig = Figure(figsize=(10, 1.6 * nq), layout="tight")
+    fig = Figure(figsize=(10, 1.6 * nq))
     axes = fig.subplots(nq, 1, sharex=True)
     for j in range(nq):
         ax = axes[j]
@@ -33,6 +31,7 @@ def torques_figure(t: np.ndarray, measured: np.ndarray, predicted: np.ndarray, t
     axes[0].legend(loc="upper right", fontsize=8)
     axes[0].set_title(title)
     axes[-1].set_xlabel("t [s]")
+    fig.tight_layout()
     return fig
 
 
@@ -40,7 +39,7 @@ def parameters_figure(base: BaseParameters, beta: np.ndarray, sigma: np.ndarray,
                     beta_nom: np.ndarray, z: np.ndarray | None) -> Figure:
     """Base parameters: WLS estimate with 3-sigma error bars, the physically consistent fit and the
     nominal model, each divided by a per-parameter scale; with a truth score, the z-scores too."""
-    fig = Figure(figsize=(12, 7 if z is not None else 4), layout="tight")
+    fig = Figure(figsize=(12, 7 if z is not None else 4))
     axes = fig.subplots(2 if z is not None else 1, 1, squeeze=False)[:, 0]
     k = np.arange(base.n_base)
     scale = np.maximum.reduce([np.abs(beta), np.abs(beta_nom), 3 * sigma, np.full_like(beta, 1e-9)])
@@ -57,11 +56,12 @@ def parameters_figure(base: BaseParameters, beta: np.ndarray, sigma: np.ndarray,
         axes[1].axhline(-3, color="r", lw=0.6)
         axes[1].set_ylabel("(estimate - truth) / sigma")
     axes[-1].set_xlabel("base parameter index (names in results.json)")
+    fig.tight_layout()
     return fig
 
 
 def convergence_figure(res: design_mod.ExcitationResult) -> Figure:
-    fig = Figure(figsize=(7, 4), layout="tight")
+    fig = Figure(figsize=(7, 4))
     ax = fig.subplots()
     for i, h in enumerate(res.cond_history):
         if h:
@@ -73,6 +73,7 @@ def convergence_figure(res: design_mod.ExcitationResult) -> Figure:
     ax.set_ylabel("cond(W_base)")
     ax.set_title("excitation optimisation")
     ax.legend(fontsize=8)
+    fig.tight_layout()
     return fig
 
 
