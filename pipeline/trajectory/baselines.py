@@ -120,13 +120,39 @@ def _ruckig_sample(q0: np.ndarray, q1: np.ndarray, vmax: np.ndarray, amax: np.nd
         return None
     T = traj.duration
     t = np.append(np.arange(0.0, T, dt_s), T)
-    Q = np.empty((t.size, n))
-    V = np.empty_like(Q)
-    A = np.empty_like(Q)
-    for k, tk in enumerate(t):
-        p, v, a = traj.at_time(tk)
-        Q[k], V[k], A[k] = p, v, a
+    Q, V, A = _states_at(traj, t)
     return JointTrajectory("ptp_ruckig", t, Q, V, A)
+
+
+def _integrate(t: np.ndarray, p0: np.ndarray, v0: np.ndarray, a0: np.ndarray,
+               j: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """ruckig's ``integrate``: constant jerk ``j`` for ``t`` from (p0, v0, a0), its order of operations."""
+    return p0 + t * (v0 + t * (a0 / 2 + t * j / 6)), v0 + t * (a0 + t * j / 2), a0 + t * j
+
+
+def _states_at(traj: Trajectory, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``traj.at_time`` at all times ``t`` at once, each ``(len(t), dofs)``: per joint the phase holding
+    each time (``t_sum`` = cumulative phase durations, ``upper_bound``), then ruckig's ``integrate`` from
+    the phase's start state, past the end at constant acceleration from the final state; the same
+    arithmetic as ruckig's ``Trajectory::at_time`` (one section, no brake pre-trajectory), so the same
+    numbers without a Python call per sample. A trajectory with a brake phase or several sections is
+    sampled by ruckig itself."""
+    profiles = traj.profiles
+    if len(profiles) != 1 or any(p.brake.duration > 0 for p in profiles[0]):
+        states = np.array([traj.at_time(tk) for tk in t], float)     # (len(t), 3, dofs)
+        return states[:, 0], states[:, 1], states[:, 2]
+    out = np.empty((3, t.size, len(profiles[0])))
+    past = t >= traj.duration
+    for dof, prof in enumerate(profiles[0]):
+        t_sum = np.cumsum(prof.t)           # ruckig: t_sum[i + 1] = t_sum[i] + t[i + 1]
+        p, v, a, j = (np.asarray(x, float) for x in (prof.p, prof.v, prof.a, [*prof.j, 0.0]))
+        end = past | (t >= t_sum[-1])
+        index = np.where(end, 7, np.searchsorted(t_sum, t, side="right"))
+        start = np.concatenate([[0.0], t_sum])[index]
+        tau = np.where(past, t - (prof.brake.duration + t_sum[-1]), t - start)
+        tau = np.where(end & ~past, t - t_sum[-1], tau)
+        out[:, :, dof] = _integrate(tau, p[index], v[index], a[index], j[index])
+    return out[0], out[1], out[2]
 
 
 #: ruckig moves a search keeps (about 0.3 MB each): the bisections and the simplex come back to a

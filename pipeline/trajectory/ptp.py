@@ -23,12 +23,14 @@ motor resistance R, torque constant k_t and gear ratio G).
 The NLP is built once per robot structure with start, goal, limits, weights, k1, k2, the dynamic
 parameters and the joint placements (:func:`arm_parameters`) as NLP parameters/bounds; with
 ``jit=True`` its C code (all derivative functions, size independent of N thanks to ``map``) is
-compiled once by gcc and cached on disk keyed by the SHA-256 of the generated code, which holds
-no parameter of the arm: every calibration and identification of the arm reuses one library.
+compiled once by gcc and cached on disk keyed by the SHA-256 of what the code is generated from
+(:func:`nlp_library_key`), which holds no parameter of the arm: every calibration and identification
+of the arm reuses one library.
 """
 
 from __future__ import annotations
 
+import hashlib
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -121,15 +123,30 @@ def nlp_functions(solver: ca.Function) -> list[ca.Function]:
     return [solver.oracle(), *(solver.get_function(fn) for fn in solver.get_function())]
 
 
-def _compile_nlp(solver_sx: ca.Function, cache_dir: Path | None, name: str,
+def nlp_library_key(solver: ca.Function, options: dict, flags: tuple[str, ...]) -> str:
+    """What names the compiled library of an NLP: the SHA-256 of everything its C code is generated
+    from, namely the NLP itself (its expression graph, serialised by CasADi), CasADi's own options (not
+    IPOPT's ``ipopt.*``, which the code never sees), the names of the generated functions, the gcc flags
+    and the CasADi version. The derivative functions (gradient, constraint Jacobian, Lagrangian Hessian)
+    are a deterministic function of these, so one key is one code; serialising the NLP takes
+    milliseconds where generating the code to hash it takes a second (the Hessian of a 6-axis arm's
+    RNEA is megabytes of C)."""
+    casadi_options = sorted((k, v) for k, v in options.items() if not k.startswith("ipopt."))
+    text = "\n".join([FORMULATION_VERSION, solver.oracle().serialize(), repr(casadi_options),
+                      " ".join(solver.get_function()), " ".join(flags), ca.__version__])
+    return hashlib.sha256(text.encode()).hexdigest()[:20]
+
+
+def _compile_nlp(solver_sx: ca.Function, key: str, cache_dir: Path | None, name: str,
                  flags: tuple[str, ...] = JIT_FLAGS) -> Path:
     """C code of the NLP's functions (objective, constraints and their derivatives) -> .so.
 
-    Named by the SHA-256 of the code (:func:`pipeline.codegen.build_library`): the arm's parameters
-    are inputs of the code, so one library serves every calibration and identification of an arm
-    (its structure, grid size and velocity/acceleration scales name it), and is never compiled twice."""
-    return codegen.build_library(name, nlp_functions(solver_sx), subdir="trajectory", flags=flags,
-                                 cache_dir=cache_dir)
+    Named by ``key`` (:func:`nlp_library_key`, :func:`pipeline.codegen.build_library`; the code itself is
+    generated only when the library is missing): the arm's parameters are inputs of the code, so one
+    library serves every calibration and identification of an arm (its structure, grid size and
+    velocity/acceleration scales name it), and is never compiled twice."""
+    return codegen.build_library(name, lambda: nlp_functions(solver_sx), subdir="trajectory", flags=flags,
+                                 cache_dir=cache_dir, key=key)
 
 
 def arm_parameters(sym: SymbolicRobot, p_dyn: np.ndarray) -> np.ndarray:
@@ -227,12 +244,13 @@ class PtpProblem:
         name = f"ptp_{pm.model.name or 'robot'}_{N}".replace("-", "_").replace(" ", "_")
         self.jit = bool(jit)
         solver = ca.nlpsol(name, "ipopt", nlp, opts)
+        self.library_key = nlp_library_key(solver, opts, tuple(jit_flags))   # of the compiled code (jit)
         self.build_time_s = time.perf_counter() - t0
         self.compile_time_s = 0.0
         source: dict[str, ca.SX] | str = nlp
         if self.jit:
             t1 = time.perf_counter()
-            lib = _compile_nlp(solver, Path(cache_dir) if cache_dir else None, name,
+            lib = _compile_nlp(solver, self.library_key, Path(cache_dir) if cache_dir else None, name,
                                tuple(jit_flags))
             solver = ca.nlpsol(name, "ipopt", str(lib), opts)
             self.library = lib
