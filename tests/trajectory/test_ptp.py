@@ -6,10 +6,11 @@ import dataclasses
 
 import numpy as np
 import pytest
+from ruckig import Ruckig, Trajectory
 
 from pipeline.errors import InfeasibleError, PipelineError, SolverError
 from pipeline.trajectory import solve as solve_mod
-from pipeline.trajectory.baselines import ruckig_torque_feasible
+from pipeline.trajectory.baselines import _ruckig_input, _states_at, ruckig_torque_feasible
 from pipeline.trajectory.pareto import dominated_flags, settle_pareto
 from pipeline.trajectory.ptp import energy_weights
 from pipeline.trajectory.report import pareto_figure
@@ -221,6 +222,23 @@ def test_ruckig_search_respects_torques(pm, big_move):
     assert np.diff(rk.trajectory.t_s).max() <= 5e-4 + 1e-12
 
 
+def test_ruckig_samples_are_ruckigs_own_bit_for_bit():
+    """The profiles sampled in numpy equal ``Trajectory.at_time`` to the last bit (asymmetric and
+    symmetric acceleration limits, joints at rest, times past the end)."""
+    rng = np.random.default_rng(7)
+    for trial in range(40):
+        n = int(rng.integers(1, 8))
+        q0, q1 = rng.uniform(-3, 3, n), rng.uniform(-3, 3, n)
+        q1[: n // 3] = q0[: n // 3]
+        amax = rng.uniform(0.5, 50, n)
+        amin = amax * rng.uniform(0.3, 2, n) if trial % 2 else None
+        traj = Trajectory(n)
+        Ruckig(n).calculate(_ruckig_input(q0, q1, rng.uniform(0.2, 5, n), amax, amax * rng.uniform(2, 200, n),
+                                          amin), traj)
+        t = np.append(np.arange(0.0, traj.duration, 1e-3), [traj.duration, traj.duration + 0.01])
+        expected = np.array([traj.at_time(tk) for tk in t])
+        sampled = np.stack(_states_at(traj, t), axis=1)
+        assert np.array_equal(sampled.view(np.uint64), expected.view(np.uint64)), trial
 
 
 def test_ruckig_refinement_is_feasible_and_not_slower(pm, big_move):
