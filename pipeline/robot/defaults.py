@@ -22,6 +22,7 @@ kinematics and capsules with a fixed-seed search (same robot -> same defaults).
 from __future__ import annotations
 
 import copy
+import hashlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import cast
@@ -58,8 +59,37 @@ class IsoCube:
     rotation: np.ndarray | None = None          # the constant TCP orientation of the path (base frame)
 
 
+#: rankings of :func:`_ranked_poses` by :func:`_ranking_key` (a pure function of the model: the ISO cube
+#: search, its fallbacks and the stages ask for the same robot's ranking many times)
+_RANKED: dict[tuple[str, str], np.ndarray] = {}
+
+
+def _ranking_key(robot: RobotModel) -> tuple[str, str] | None:
+    """The robot's name and the SHA-256 of everything the ranking reads: the Pinocchio model (kinematics,
+    limits, frames; its full-precision serialisation), the flange frame, the capsules and the checked
+    pairs and floor height; None with a residual map (the flange positions then depend on it)."""
+    if robot.residual_map is not None:
+        return None
+    parts = [robot.model.saveToString().encode(), robot.frame_flange.encode(),
+             repr((robot.self_collision_pairs, robot.floor_capsules)).encode(),
+             np.float64(robot.spec.collision.floor_z_m).tobytes(),
+             *(c.frame.encode() + np.concatenate([c.p0, c.p1, [c.radius_m]]).astype(float).tobytes()
+               for c in robot.capsules)]
+    return robot.name, hashlib.sha256(b"|".join(parts)).hexdigest()
+
+
 def _ranked_poses(robot: RobotModel) -> np.ndarray:
-    """Collision-free configurations (flange above the base) ranked best first (module docstring)."""
+    """Collision-free configurations (flange above the base) ranked best first (module docstring);
+    computed once per model (:data:`_RANKED`)."""
+    key = _ranking_key(robot)
+    if key is None:
+        return _ranking(robot)
+    if key not in _RANKED:
+        _RANKED[key] = _ranking(robot)
+    return _RANKED[key].copy()
+
+
+def _ranking(robot: RobotModel) -> np.ndarray:
     lo, hi = robot.limits.lower_rad, robot.limits.upper_rad
     Q = np.random.default_rng(0).uniform(lo, hi, size=(N_SAMPLES, robot.nq))
     Q = np.vstack([np.clip(0.5 * (lo + hi), lo, hi), np.clip(np.zeros(robot.nq), lo, hi), Q])

@@ -123,3 +123,21 @@ def test_cube_cache_tells_apart_models_whose_gravity_differs():
     key = _cache_key(robot, seeds, "diagonal_x", "down", 1.0, robot.frame_reflector)
     assert key == _cache_key(robot.copy(), seeds, "diagonal_x", "down", 1.0, robot.frame_reflector)
     assert key != _cache_key(heavier, seeds, "diagonal_x", "down", 1.0, robot.frame_reflector)
+
+
+def test_pose_ranking_is_kept_per_model_and_never_served_stale(rx130l):
+    """The ranking behind the ready pose and the IK seeds is computed once per model: asked again it is
+    the same, and a model whose limits, kinematics or capsules differ gets its own."""
+    first = defaults._ranked_poses(rx130l)
+    assert np.array_equal(defaults._ranked_poses(rx130l.copy()), first)
+    narrower = rx130l.copy()
+    narrower.model.upperPositionLimit[0] = 0.5 * narrower.model.upperPositionLimit[0]
+    longer = rx130l.copy()
+    placement = longer.model.jointPlacements[3]
+    longer.model.jointPlacements[3] = pin.SE3(placement.rotation, placement.translation + np.array([0.0, 0.0, 0.05]))
+    thicker = rx130l.copy()
+    thicker.spec.capsules[2].radius_m += 0.05
+    for changed in (narrower, longer, thicker):
+        assert defaults._ranking_key(changed) != defaults._ranking_key(rx130l)
+        assert np.array_equal(defaults._ranked_poses(changed), defaults._ranking(changed))
+    assert not np.array_equal(defaults._ranked_poses(narrower), first)
