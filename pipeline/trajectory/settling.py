@@ -29,6 +29,7 @@ a little motion time for less vibration. Here:
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -142,7 +143,7 @@ def move_and_settle(real, robot: RobotModel, traj: JointTrajectory, control_conf
     ts = settling_time(t, pos, p_rest, duration, rot, R_rest)
     ts_pos = settling_time(t, pos, p_rest, duration)
     e_pos = np.linalg.norm(pos - p_rest, axis=1)
-    e_rot = np.array([np.linalg.norm(pin.log3(R_rest.T @ R)) for R in rot])
+    e_rot = np.array([math.sqrt(w.dot(w)) for w in map(pin.log3, np.matmul(R_rest.T, rot))])  # |log3| (norm)
     moving = t <= duration + 1e-9
     desired = robot.positions(res.q_d, frame=tcp_frame)
     e_path = np.linalg.norm(pos - desired, axis=1)
