@@ -133,7 +133,7 @@ def nlp_library_key(solver: ca.Function, options: dict, flags: tuple[str, ...]) 
     RNEA is megabytes of C)."""
     casadi_options = sorted((k, v) for k, v in options.items() if not k.startswith("ipopt."))
     text = "\n".join([FORMULATION_VERSION, solver.oracle().serialize(), repr(casadi_options),
-                      " ".join(solver.get_function()), " ".join(flags), ca.__version__])
+                      " ".join(solver.get_function()), " ".join(flags), ca.CasadiMeta.version()])
     return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 
