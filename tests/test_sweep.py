@@ -21,7 +21,8 @@ QUICK = str(REPO_ROOT / "configs" / "quick.yaml")
 TINY = ["calibration.n_random_candidates=100", "calibration.n_configurations=20", "calibration.n_heldout=30",
         "truth.joint_compliance_scale=0", "truth.transmission_error_amplitude_rad=0",
         "calibration.second_pass=never",   # one pass: the sweep machinery is under test, not the second pass
-        "calibration.figures=false", "model.views_deg=[[25, -60]]", "model.picture_size_in=2"]
+        "calibration.figures=false", "model.views_deg=[[25, -60]]", "model.picture_size_in=2",
+        "calibration.design_table=false"]  # the stage's design table: tests/calibration/test_calibration.py
 
 
 def test_parse_seeds_ranges_lists_and_errors() -> None:
