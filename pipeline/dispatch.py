@@ -13,7 +13,10 @@ its item (every random number from a generator seeded by the item).
 
 from __future__ import annotations
 
+import importlib.util
+import sys
 from collections.abc import Callable, Sequence
+from types import ModuleType
 from typing import TypeVar
 
 import joblib
@@ -21,11 +24,25 @@ import joblib
 from pipeline.errors import ConfigError
 from pipeline.progress import Progress, current
 
-try:  # optional extra ``cluster``: dask[distributed]
-    from distributed import Client, as_completed
-except ModuleNotFoundError:  # pragma: no cover - depends on the environment
-    Client = None  # type: ignore[assignment,misc]
-    as_completed = None  # type: ignore[assignment]
+
+def _lazy_optional(name: str) -> ModuleType | None:
+    """The installed module ``name``, executed at its first attribute access
+    (:class:`importlib.util.LazyLoader`), or None when it is not installed."""
+    if name in sys.modules:
+        return sys.modules[name]
+    spec = importlib.util.find_spec(name)
+    if spec is None or spec.loader is None:
+        return None
+    spec.loader = importlib.util.LazyLoader(spec.loader)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+#: the optional extra ``cluster`` (dask[distributed]): loaded when a cluster is asked for, not by every
+#: process that imports the package (its import takes about a second)
+distributed = _lazy_optional("distributed")
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -51,18 +68,18 @@ def _run_local(fn: Callable[[T], R], items: Sequence[T], jobs: int, progress: Pr
 
 def _run_dask(fn: Callable[[T], R], items: Sequence[T], scheduler: object, progress: Progress,
               description: str) -> list[R]:
-    if Client is None or as_completed is None:
+    if distributed is None:
         raise ConfigError("--scheduler", str(scheduler),
                           "dask distributed is not installed (pip install 'pipeline[cluster]')")
-    own = not isinstance(scheduler, Client)
+    own = not isinstance(scheduler, distributed.Client)
     try:
-        client = Client(scheduler) if own else scheduler
+        client = distributed.Client(scheduler) if own else scheduler
     except OSError as exc:
         raise ConfigError("--scheduler", str(scheduler), f"cannot connect: {exc}") from None
     try:
         futures = [client.submit(_indexed, fn, i, item, pure=False) for i, item in enumerate(items)]
         results: dict[int, R] = {}
-        for future in progress.track(as_completed(futures), f"{description} (dask)", total=len(futures)):
+        for future in progress.track(distributed.as_completed(futures), f"{description} (dask)", total=len(futures)):
             i, result = future.result()
             results[i] = result
     finally:
