@@ -7,6 +7,11 @@ columns, whatever the function's size. :class:`CompiledOnDemand` counts the colu
 and compiles after :data:`COMPILE_AFTER_COLUMNS` of them (the ski-rental rule: never more than
 about twice the cost of the better choice made in hindsight). A library already in the cache
 (:mod:`pipeline.codegen`, named by the SHA-256 of its code) is loaded at the first call.
+The count is kept per code, not per instance: instances of the same function in one process
+(the measurement models of two parameter subsets) add up, and each loads the library one of
+them built. A caller that knows a lower bound of the columns it is about to evaluate adds it to
+the count ahead (:meth:`CompiledOnDemand.expect`): the rule then decides on the use known so far,
+which a lower bound never overstates.
 
 The compiled code performs the virtual machine's operations in the same order, and is built with
 ``-ffp-contract=off`` (no fused multiply-add), so both evaluate to the same numbers. When gcc is
@@ -33,6 +38,8 @@ COMPILE_AFTER_COLUMNS = 30_000
 #: gcc flags: -O1 builds in a quarter of -O2's time at nearly its speed; no FMA contraction
 FLAGS = ("-O1", "-ffp-contract=off")
 _WARNED: list[str] = []
+#: columns counted towards the build in this process, per library (cache subfolder, name, key of the code)
+_COLUMNS: dict[str, int] = {}
 
 
 class CompiledOnDemand:
@@ -51,10 +58,18 @@ class CompiledOnDemand:
     def mapped(self, n: int) -> BufferedFunction:
         if self.compiled is None:
             self._maybe_compile(n)
+            if self.compiled is None:
+                self.columns_interpreted += n
         if n not in self._maps:
             base = self.compiled if self.compiled is not None else self.function
             self._maps[n] = BufferedFunction(base.map(n))
         return self._maps[n]
+
+    def expect(self, columns: int) -> None:
+        """Count ``columns`` that the caller will evaluate (a lower bound of its coming use) now,
+        so that the build starts as soon as the known use passes the break-even."""
+        if self.compiled is None:
+            self._maybe_compile(columns)
 
     def _maybe_compile(self, n: int) -> None:
         name = self.function.name()
@@ -64,8 +79,9 @@ class CompiledOnDemand:
             if cached is not None:
                 self._load(cached)
                 return
-        self.columns_interpreted += n
-        if self.columns_interpreted >= self.after_columns:
+        code = f"{self.subdir}/{name}_{self._key}"
+        _COLUMNS[code] = _COLUMNS.get(code, 0) + n
+        if _COLUMNS[code] >= self.after_columns:
             library = _build_or_warn(name, [self.function], self.subdir, self._key)
             if library is None:
                 self.after_columns = sys.maxsize

@@ -11,11 +11,11 @@ from pipeline.casadi_buffers import BufferedFunction
 from pipeline.compiled_on_demand import CompiledOnDemand
 
 
-def _function() -> ca.Function:
+def _function(name: str = "toy") -> ca.Function:
     q = ca.SX.sym("q", 3)
     x = ca.SX.sym("x", 2)
     y = ca.vertcat(ca.sin(q[0] * x[0]) * ca.cos(q[1]) + q[2] * x[1], ca.exp(-q[0] ** 2) * x[1] / (1 + q[2] ** 2))
-    return ca.Function("toy", [q, x], [y, ca.jacobian(y, x)])
+    return ca.Function(name, [q, x], [y, ca.jacobian(y, x)])
 
 
 def test_interpreted_until_the_threshold_then_compiled(tmp_path, monkeypatch):
@@ -34,6 +34,30 @@ def test_interpreted_until_the_threshold_then_compiled(tmp_path, monkeypatch):
     g = CompiledOnDemand(_function(), after_columns=10**9)
     g.mapped(4)(Q[:, :4], x)
     assert g.compiled is not None
+
+
+def test_instances_of_one_code_count_together_and_an_announced_use_compiles_at_once(tmp_path, monkeypatch):
+    monkeypatch.setenv("PIPELINE_CACHE_DIR", str(tmp_path))
+    Q, x = np.random.default_rng(2).standard_normal((3, 10)), np.array([-0.7, 0.4])
+    a, b = CompiledOnDemand(_function("toy_pooled"), after_columns=25), CompiledOnDemand(_function("toy_pooled"),
+                                                                                          after_columns=25)
+    first = a.mapped(10)(Q, x)
+    b.mapped(10)(Q, x)
+    assert a.compiled is None and b.compiled is None and b.columns_interpreted == 10
+    a.mapped(10)(Q, x)                 # 30 columns of this code in the process: compiled
+    assert a.compiled is not None and a.columns_interpreted == 10
+    b.mapped(10)(Q, x)                 # the other instance loads the library built for the first
+    assert b.compiled is not None and b.columns_interpreted == 10
+    for u, v in zip(first, b.mapped(10)(Q, x), strict=True):
+        np.testing.assert_array_equal(u, v)
+    # a use announced ahead counts like one evaluated: no column interpreted
+    c = CompiledOnDemand(_function("toy_announced"), after_columns=25)
+    c.expect(20)
+    assert c.compiled is None
+    c.expect(5)
+    assert c.compiled is not None
+    c.mapped(10)(Q, x)
+    assert c.columns_interpreted == 0
 
 
 def test_compiled_measurement_jacobian_equals_the_interpreted_one(rx130l):

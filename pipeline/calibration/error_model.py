@@ -155,11 +155,21 @@ class MeasurementModel:
             out.append(np.zeros((3, len(Q))) if offsets is None else np.asarray(offsets, float).T)
         return out
 
-    def _mapped(self, name: str, n: int) -> BufferedFunction:
+    def _on_demand(self, name: str) -> CompiledOnDemand:
         if name not in self._functions:
             f = {"h": self.h, "hj": self.hj, "pb": self.base_pos, "ht": getattr(self, "ht", None)}[name]
             self._functions[name] = CompiledOnDemand(f, subdir="measurement_model")
-        return self._functions[name].mapped(n)
+        return self._functions[name]
+
+    def _mapped(self, name: str, n: int) -> BufferedFunction:
+        return self._on_demand(name).mapped(n)
+
+    def expect_readings(self, readings: int) -> None:
+        """Announce at least ``readings`` evaluations of both :meth:`predict` and :meth:`jacobian`
+        (readings times evaluations) to come: their compiled code is built as soon as the use known
+        so far pays for it (:meth:`pipeline.compiled_on_demand.CompiledOnDemand.expect`)."""
+        for name in ("h", "hj"):
+            self._on_demand(name).expect(readings)
 
     def predict(self, Q: np.ndarray, x: np.ndarray, T0: pin.SE3, mounted: np.ndarray | None = None,
                 offsets: np.ndarray | None = None) -> np.ndarray:
