@@ -60,15 +60,24 @@ def oc_terms(o1: np.ndarray, o3: np.ndarray, od: np.ndarray, scale: OcScale) -> 
 
 def _spectral(ev: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """O1, O2, O3 from ascending eigenvalues of M (batched)."""
-    ev = np.clip(ev, 1e-300, None)
+    ev = np.maximum(ev, 1e-300)
     s = np.sqrt(ev)
     o1 = np.exp(np.mean(np.log(s), axis=-1)) / math.sqrt(max(m, 1))
     return o1, s[..., 0] / s[..., -1], s[..., 0]
 
 
 def _od_from_means(means: np.ndarray) -> np.ndarray:
-    var = np.var(means, axis=-1)
+    """``1 / var`` over the last axis (inf without spread); the variance by the operations of ``np.var``
+    (sum / n, the squared deviations summed / n) without its wrapper: the search's inner loop."""
+    n = means.shape[-1]
+    dev = means - np.add.reduce(means, axis=-1, keepdims=True) / n
+    var = np.add.reduce(dev * dev, axis=-1) / n
     return np.where(var > 0, 1.0 / np.maximum(var, 1e-300), np.inf)
+
+
+def _oc_value(o1: float, o3: float, od: float, scale: OcScale) -> float:
+    """``oc_terms(o1, o3, od, scale).sum()`` of one selection (the same operations on the same array)."""
+    return float((2.0 / np.pi * np.arctan(np.array([o1 / scale.o1, o3 / scale.o3, od / scale.od]))).sum())
 
 
 class SubsetState:
@@ -104,7 +113,7 @@ class SubsetState:
     # -- bookkeeping ---------------------------------------------------------------------------
     @property
     def n(self) -> int:
-        return int(self.sel.sum())
+        return int(self.selected.size)
 
     @property
     def selected(self) -> np.ndarray:
@@ -128,14 +137,14 @@ class SubsetState:
         if rows.size == 0 or not self.track_knn:
             return
         idx = self.selected
-        d = self.D[rows][:, idx]
+        d = self.D[rows[:, None], idx]
         k1 = self.K + 1
         if d.shape[1] > k1:
             d = np.partition(d, k1 - 1, axis=1)[:, :k1]
         d = np.sort(d, axis=1)
-        out = np.full((rows.size, k1), np.inf)
-        out[:, : d.shape[1]] = d
-        self.near[rows] = out
+        if d.shape[1] < k1:
+            d = np.concatenate([d, np.full((rows.size, k1 - d.shape[1]), np.inf)], axis=1)
+        self.near[rows] = d
 
     def _touch(self) -> None:
         self.updates += 1
@@ -160,28 +169,34 @@ class SubsetState:
 
     def swap(self, s: int, j: int) -> tuple:
         """Remove ``s`` and add ``j``; returns what :meth:`undo` needs to restore the state exactly."""
+        before = self._selected
         self._set(s, False)
         idx = self.selected
-        rows = (idx[(self.D[idx, s] <= self.near[idx, self.K]) | (self.D[idx, j] < self.near[idx, self.K])]
-                if self.track_knn else idx[:0])
-        token = (s, j, self.M, rows, self.near[rows].copy(), self.near[j].copy())
+        if self.track_knn:    # D is symmetric: its rows s and j are read (contiguous)
+            kth = self.near[idx, self.K]
+            rows = idx[(self.D[s, idx] <= kth) | (self.D[j, idx] < kth)]
+        else:
+            rows = idx[:0]
+        token = (s, j, self.M, rows, self.near[rows], self.near[j].copy(), before)
         self._set(j, True)
         self.M = self.M - self.A[s] + self.A[j]
-        self._rows(np.append(rows, j))
+        self._rows(np.concatenate([rows, [j]]))
         self.updates += 1
         return token
 
     def undo(self, token: tuple) -> None:
-        s, j, M, rows, near_rows, near_j = token
+        s, j, M, rows, near_rows, near_j, before = token
         self._set(j, False)
         self._set(s, True)
+        self._selected = before      # the selection of before the swap (None: not listed then)
         self.M = M
         self.near[rows] = near_rows
         self.near[j] = near_j
 
     # -- values --------------------------------------------------------------------------------
     def knn_means(self) -> np.ndarray:
-        return self.near[self.selected, : self.K].mean(axis=1)
+        """Mean of the K nearest selected distances of each selected point (``mean(axis=1)``'s operations)."""
+        return np.add.reduce(self.near[self.selected, : self.K], axis=1) / self.K
 
     def all_values(self) -> dict[str, float]:
         """O1, O2, O3, Od, Oc of the current selection (natural values; Oc with this state's scale)."""
@@ -212,10 +227,12 @@ class SubsetState:
         if self.name in ("O1", "Oc"):
             o1 = self._o1(np.linalg.slogdet(self.M)[1], self.n)
         if self.name in ("O2", "O3", "Oc"):
-            ev = np.sqrt(np.clip(np.linalg.eigvalsh(self.M), 1e-300, None))
+            ev = np.sqrt(np.maximum(np.linalg.eigvalsh(self.M), 1e-300))
             o2, o3 = ev[0] / ev[-1], ev[0]
         if self.name in ("Od", "Oc"):
             od = _od_from_means(self.knn_means())
+        if self.name == "Oc":
+            return _oc_value(o1, o3, od, self.scale)
         return float(self._value_of(o1, o3, od, o2))
 
     def _od_add(self, cand: np.ndarray) -> np.ndarray:
