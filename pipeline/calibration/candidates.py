@@ -374,24 +374,26 @@ def filter_grid(chain: Chain, n_per_axis: int | list[int] = 13, margins: FilterM
 
 
 def random_candidates(chain: Chain, n: int, rng: np.random.Generator, margins: FilterMargins | None = None,
-                      max_draws: int = 50, visibility: bool = True) -> tuple[np.ndarray, dict]:
-    """``n`` feasible uniformly random configurations (drawn in batches until enough)."""
+                      max_draws: int = 50, visibility: bool = True, count_all: bool = False) -> tuple[np.ndarray, dict]:
+    """``n`` feasible uniformly random configurations (batches drawn until enough), rejection counts of the draws
+    filtered: unless ``count_all``, the last batch's up to its n-th feasible draw only (same draws and rows)."""
     out, counts = [], {"total": 0, "limits": 0, "collision": 0, "visibility": 0, "feasible": 0}
-    have = 0
-    rate = 0.01
+    have, rate = 0, 0.01
     for _ in range(max_draws):
         size = int(min(max(1.3 * (n - have) / rate, 2000), 400_000))
         Q = rng.uniform(chain.lower, chain.upper, size=(size, chain.nq))
-        mask, c = filter_configurations(chain, Q, margins, visibility=visibility)
-        for k in counts:
-            counts[k] += c.get(k, 0)
-        out.append(Q[mask])
-        have += int(mask.sum())
+        start, chunk = 0, size if count_all else 2048   # doubling chunks: row by row the same arithmetic
+        while start < size and have < n:
+            mask, c = filter_configurations(chain, Q[start : start + chunk], margins, visibility=visibility)
+            for k in counts:
+                counts[k] += c.get(k, 0)
+            out.append(Q[start : start + chunk][mask])
+            have += int(mask.sum())
+            start, chunk = start + chunk, 2 * chunk
         rate = max(counts["feasible"] / max(counts["total"], 1), 1e-4)
         if have >= n:
             break
-    Qf = np.concatenate(out)[:n]
-    return Qf, counts
+    return np.concatenate(out)[:n], counts
 
 
 def _skew_batch(v: np.ndarray) -> np.ndarray:

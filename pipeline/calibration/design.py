@@ -351,7 +351,7 @@ def build_candidates(robot: RobotModel, cfg: Config, basis: np.ndarray, rng: np.
         with task(f"calibration: filtering the {per_axis}^{robot.nq} grid") as bar:
             Q, grid_index, counts = grid_cache.filter_grid(chain, per_axis, margins, progress=bar)
     else:
-        Q, counts = cd.random_candidates(chain, cfg.n_random_candidates, rng, margins)
+        Q, counts = cd.random_candidates(chain, cfg.n_random_candidates, rng, margins, count_all=True)
     if len(Q) == 0:
         counts_text = ", ".join(f"{k} {v}" for k, v in counts.items() if k != "time_s")
         key = "calibration.grid_per_axis" if cfg.candidates == "grid" else "calibration.candidates"
