@@ -103,12 +103,22 @@ def _blocks(base_var: np.ndarray, factors: np.ndarray | None) -> np.ndarray:
 def reml_objective(residual: np.ndarray, J: np.ndarray, base_var: np.ndarray,
                    factors: np.ndarray | None = None) -> float:
     """``l`` of the module docstring for per-reading variance ``base_var`` (N,) (plus the gravity
-    factors' ``B_k B_k^T``); ``residual`` (N, 3), ``J`` (N, 3, p) block-diagonal readings."""
-    L = np.linalg.cholesky(_blocks(base_var, factors))
+    factors' ``B_k B_k^T``); ``residual`` (N, 3), ``J`` (N, 3, p) block-diagonal readings. Without
+    factors ``Sigma_k = v_k I``: its Cholesky factor ``sqrt(v_k) I`` and inverse ``(1 / sqrt(v_k)) I`` are
+    formed directly (what LAPACK's factorisation and inverse give for a diagonal block, exactly)."""
+    if factors is None or not factors.shape[2]:
+        sd = np.sqrt(np.asarray(base_var, float))
+        L = np.zeros((len(sd), 3, 3))
+        L[:, [0, 1, 2], [0, 1, 2]] = sd[:, None]
+        w = 1.0 / sd
+        wr = (residual * w[:, None]).reshape(-1)
+        wJ = (J * w[:, None, None]).reshape(len(wr), -1)
+    else:
+        L = np.linalg.cholesky(_blocks(base_var, factors))
+        W = np.linalg.inv(L)
+        wr = np.einsum("nij,nj->ni", W, residual).reshape(-1)
+        wJ = np.einsum("nij,njp->nip", W, J).reshape(len(wr), -1)
     logdet_sigma = 2.0 * float(np.sum(np.log(np.diagonal(L, axis1=1, axis2=2))))
-    W = np.linalg.inv(L)
-    wr = np.einsum("nij,nj->ni", W, residual).reshape(-1)
-    wJ = np.einsum("nij,njp->nip", W, J).reshape(len(wr), -1)
     q, r = np.linalg.qr(wJ)
     d = np.abs(np.diagonal(r))
     keep = d > d.max() * 1e-10 if d.size else d.astype(bool)
