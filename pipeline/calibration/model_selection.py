@@ -41,6 +41,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from typing import TypeVar
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -53,7 +54,7 @@ from pipeline.calibration.elastostatic import measurement_model
 from pipeline.calibration.error_model import MeasurementModel
 from pipeline.calibration.estimate import Estimate
 from pipeline.calibration.noise_model import NoiseModel, fit_with_noise_model
-from pipeline.calibration.residual_map import fit_residual_map
+from pipeline.calibration.residual_map import fit_residual_map, restart_seed
 from pipeline.errors import PipelineError
 from pipeline.robot.model import RobotModel
 from pipeline.robot.repeatability import repeatability_sigma_m
@@ -89,6 +90,7 @@ class Candidate:
 
 
 CANDIDATES = tuple(Candidate(p, m) for p in SUBSETS for m in (False, True))
+T = TypeVar("T")
 
 
 @dataclass
@@ -249,12 +251,14 @@ def heldout_errors(mm: MeasurementModel, est: Estimate, meas: ms.Measurements, r
 
 def score_subset(mm: MeasurementModel, basis: np.ndarray, meas: ms.Measurements, orientation_sigma_rad: float,
                  folds: int, max_iterations: int, rng: np.random.Generator, robust: dict | None = None,
-                 noise: NoiseModel | None = None) -> tuple[CandidateScore, CandidateScore]:
+                 noise: NoiseModel | None = None) -> tuple[CandidateScore, Callable[[], CandidateScore]]:
     """Held-out errors of one parameter subset without and with the residual map; each training fold
     is fitted with the noise model ``noise`` (its REML remainder estimated on the training fold,
     :func:`pipeline.calibration.noise_model.fit_with_noise_model`; ``robust``: the robust fit's loss,
     confidence and max_fraction), so gross errors are rejected inside the training folds only and
-    every held-out pose is scored."""
+    every held-out pose is scored. The score with the map is computed when its callable is called
+    (the seeds of its fits are drawn from ``rng`` fold by fold here: an orientation weight that is
+    not chosen skips the maps and leaves every later draw as it was)."""
     robust = ROBUST_DEFAULTS | (robust or {})
     n = len(meas)
     six_d = meas.rotvec is not None and mm.marker_points
@@ -262,8 +266,8 @@ def score_subset(mm: MeasurementModel, basis: np.ndarray, meas: ms.Measurements,
     pose = rec.pose_index if rec.pose_index is not None else np.arange(len(rec))
     fold_of_pose = np.arange(n) % folds
     e_plain = np.full(n, np.nan)
-    e_map = np.full(n, np.nan)
     e_rot = np.full(n, np.nan) if six_d else None
+    maps: list[tuple[Estimate, np.ndarray, int, np.ndarray, np.ndarray]] = []
     for f in range(folds):
         train = (pose % folds) != f
         test = np.flatnonzero(fold_of_pose == f)
@@ -285,12 +289,18 @@ def score_subset(mm: MeasurementModel, basis: np.ndarray, meas: ms.Measurements,
         e_plain[test] = np.linalg.norm(e, axis=1)
         if e_rot is not None and ang is not None:
             e_rot[test] = ang
-        e_train, _, _ = heldout_errors(mm, est, meas, train_poses)
-        gp = fit_residual_map(meas.Q[train_poses], e_train @ R_tb.T, rng)
-        e_map[test] = np.linalg.norm(e - gp.predict(meas.Q[test])[0] @ R_tb, axis=1)
+        maps.append((est, train_poses, restart_seed(rng), test, e))
     p = basis.shape[1]
-    return (CandidateScore(Candidate("", False), p, fold_of_pose, e_plain, e_rot),
-            CandidateScore(Candidate("", True), p, fold_of_pose, e_map, e_rot))
+
+    def mapped() -> CandidateScore:
+        e_map = np.full(n, np.nan)
+        for est, train_poses, seed, test, e in maps:
+            e_train, R_tb, _ = heldout_errors(mm, est, meas, train_poses)
+            gp = fit_residual_map(meas.Q[train_poses], e_train @ R_tb.T, seed)
+            e_map[test] = np.linalg.norm(e - gp.predict(meas.Q[test])[0] @ R_tb, axis=1)
+        return CandidateScore(Candidate("", True), p, fold_of_pose, e_map, e_rot)
+
+    return CandidateScore(Candidate("", False), p, fold_of_pose, e_plain, e_rot), mapped
 
 
 def select_model(meas: ms.Measurements, setup: Callable[[str], tuple[MeasurementModel, np.ndarray]],
@@ -313,20 +323,21 @@ def select_model(meas: ms.Measurements, setup: Callable[[str], tuple[Measurement
         readings = len(ms.expand_orientation(meas, orientation_sigma_rad)) if mm.marker_points else len(meas)
         mm.expect_readings((2 if mm.compliance else 1) * (folds - 1) * readings * EVALUATIONS_PER_READING)
 
-    def scored_with(subset: str, kappa: float) -> tuple[CandidateScore, CandidateScore]:
+    def scored_with(subset: str, kappa: float) -> tuple[CandidateScore, Callable[[], CandidateScore]]:
         mm, basis = models[subset]
         return score_subset(mm, basis, meas, orientation_sigma_rad, folds, max_iterations, rng, robust,
                             replace(noise, orientation_scale=kappa))
 
     kappa = 1.0
     tried: list[tuple[float, float, float]] = []
-    done: dict[float, tuple[CandidateScore, CandidateScore]] = {}
+    done: dict[float, tuple[CandidateScore, Callable[[], CandidateScore]]] = {}
     weight_subset = WEIGHT_SUBSET if WEIGHT_SUBSET in models else next(iter(models), "")
     if meas.rotvec is not None and weight_subset and models[weight_subset][0].marker_points:
         kappa, done = orientation_weight(lambda k: scored_with(weight_subset, k))
         tried = [(k, *rms_errors(pair[0])) for k, pair in sorted(done.items())]
     for subset in models:
-        plain, mapped = done[kappa] if subset == weight_subset and kappa in done else scored_with(subset, kappa)
+        plain, with_map = done[kappa] if subset == weight_subset and kappa in done else scored_with(subset, kappa)
+        mapped = with_map()
         plain.candidate, mapped.candidate = Candidate(subset, False), Candidate(subset, True)
         scores += [plain, mapped]
     gross = gross_heldout_poses(scores, float((robust or {}).get("confidence", 0.999)))
@@ -345,10 +356,11 @@ def rms_errors(score: CandidateScore) -> tuple[float, float]:
     return float(np.sqrt(np.mean(score.position_error_m ** 2))), float(np.sqrt(np.mean(rot ** 2)))
 
 
-def orientation_weight(scored: Callable[[float], tuple[CandidateScore, CandidateScore]]
-                       ) -> tuple[float, dict[float, tuple[CandidateScore, CandidateScore]]]:
+def orientation_weight(scored: Callable[[float], tuple[CandidateScore, T]]
+                       ) -> tuple[float, dict[float, tuple[CandidateScore, T]]]:
     """The factor ``kappa`` on the marker-point rows' 1-sigma (module docstring) and the scores of
-    every factor tried; ``scored(kappa)`` gives the (plain, mapped) scores of the weight subset. From
+    every factor tried; ``scored(kappa)`` gives the plain score of the weight subset (and the mapped
+    one, or what gives it: only the plain one is compared). From
     1 the walk goes down :data:`ORIENTATION_SCALES` (heavier orientation) while the score
     ``MSE_pos / MSE_pos(1) + MSE_rot / MSE_rot(1)`` decreases, else up while it decreases."""
     done = {1.0: scored(1.0)}

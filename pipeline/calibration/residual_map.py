@@ -30,9 +30,15 @@ NOISE_STD_BOUNDS_M = (1e-6, 1e-2)
 RESTARTS = 1
 
 
-def fit_residual_map(Q: np.ndarray, residuals_base_m: np.ndarray, rng: np.random.Generator) -> ResidualMap:
+def restart_seed(rng: np.random.Generator) -> int:
+    """The seed of a fit's restarts: one draw from ``rng``."""
+    return int(rng.integers(2 ** 31 - 1))
+
+
+def fit_residual_map(Q: np.ndarray, residuals_base_m: np.ndarray, rng: np.random.Generator | int) -> ResidualMap:
     """GP posterior of ``residuals_base_m`` (n, 3) over the configurations ``Q`` (n, nq); the
-    restarts' random starts from a seed drawn from ``rng``."""
+    restarts' random starts from the seed ``rng`` or one drawn from it (:func:`restart_seed`)."""
+    seed = rng if isinstance(rng, int) else restart_seed(rng)
     Q = np.asarray(Q, float)
     D = np.asarray(residuals_base_m, float)
     s0 = float(np.clip(np.sqrt(np.mean(D ** 2)), *SIGNAL_STD_BOUNDS_M))
@@ -40,7 +46,7 @@ def fit_residual_map(Q: np.ndarray, residuals_base_m: np.ndarray, rng: np.random
               * RBF(1.0, LENGTH_SCALE_BOUNDS_RAD)
               + WhiteKernel(s0 ** 2, tuple(b ** 2 for b in NOISE_STD_BOUNDS_M)))
     gp = GaussianProcessRegressor(kernel, normalize_y=False, n_restarts_optimizer=RESTARTS,
-                                  random_state=np.random.RandomState(int(rng.integers(2 ** 31 - 1))))
+                                  random_state=np.random.RandomState(seed))
     with warnings.catch_warnings():   # a hyperparameter at its bound is a result, not a fault
         warnings.simplefilter("ignore", ConvergenceWarning)
         gp.fit(Q, D)
