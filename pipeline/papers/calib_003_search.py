@@ -31,6 +31,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -75,7 +76,7 @@ def _od_from_means(means: np.ndarray) -> np.ndarray:
     return np.where(var > 0, 1.0 / np.maximum(var, 1e-300), np.inf)
 
 
-def _oc_value(o1: float, o3: float, od: float, scale: OcScale) -> float:
+def _oc_value(o1: Any, o3: Any, od: Any, scale: OcScale) -> float:
     """``oc_terms(o1, o3, od, scale).sum()`` of one selection (the same operations on the same array)."""
     return float((2.0 / np.pi * np.arctan(np.array([o1 / scale.o1, o3 / scale.o3, od / scale.od]))).sum())
 
