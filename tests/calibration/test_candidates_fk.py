@@ -32,3 +32,22 @@ def test_numpy_chain_matches_pinocchio(name):
     inside = np.all((Q >= ch.lower) & (Q <= ch.upper), axis=1)
     ref = inside & np.all(pair_ref >= 0, axis=1) & np.all(floor_ref >= 0, axis=1)
     assert np.array_equal(mask, ref)
+
+
+@pytest.mark.parametrize("visibility,n", [(False, 60), (True, 200)])
+def test_random_candidates_stop_filtering_at_the_last_one_needed_and_keep_the_draws(rx130l, visibility, n):
+    """The last batch filtered only up to its n-th feasible draw gives the configurations, and leaves
+    the generator where, filtering and counting every draw (the candidate set's report), it would."""
+    chain = cd.chain_from_robot(rx130l)
+    runs = []
+    for count_all in (False, True):
+        rng = np.random.default_rng(11)
+        Q, counts = cd.random_candidates(chain, n, rng, cd.FilterMargins(), visibility=visibility,
+                                         count_all=count_all)
+        runs.append((Q, counts, rng.random()))
+    (Q, counts, after), (Q_all, counts_all, after_all) = runs
+    assert len(Q) == n and np.array_equal(Q, Q_all) and after == after_all
+    assert counts_all["feasible"] >= counts["feasible"] >= n
+    assert counts["total"] < counts_all["total"]      # the rest of the batch was never filtered
+    mask, _ = cd.filter_configurations(chain, Q, cd.FilterMargins(), visibility=visibility)
+    assert mask.all()
