@@ -11,7 +11,7 @@ from pipeline.robot.defaults import ready_pose_rad
 from pipeline.robot.model import RobotModel
 from pipeline.viewer import visual_model
 from tests.anyarm.test_urdf_only import _erd
-from tests.test_viewer import CHROMIUM, assert_framed, changed_fraction, framed_screenshots
+from tests.test_viewer import CHROMIUM, DRAWN_FRACTION, assert_framed, changed_fraction, framed_screenshots
 
 
 def _ur5_without_meshes(tmp_path):
@@ -41,6 +41,6 @@ def test_real_urdf_is_drawn_and_framed(meshes, tmp_path):
     robot = RobotModel.load(_erd("ur_description/urdf/ur5_robot.urdf")) if meshes else _ur5_without_meshes(tmp_path)
     with_robot, without, viewer, _ = framed_screenshots(robot, ready_pose_rad(robot), tmp_path)
     assert viewer.drawn_as == ("meshes" if meshes else "capsules")
-    assert changed_fraction(without, with_robot) > 0.01
+    assert changed_fraction(without, with_robot) > DRAWN_FRACTION
     assert np.isfinite(with_robot).all()
     assert_framed(with_robot, without)
