@@ -36,10 +36,6 @@ from dataclasses import dataclass
 import control as ct
 import numpy as np
 import pinocchio as pin
-from control import freqplot
-from control.margins import _likely_numerical_inaccuracy
-from scipy.interpolate import splev
-from scipy.optimize import brentq
 
 from pipeline.control.config import ControlConfig
 from pipeline.errors import InfeasibleError
@@ -109,60 +105,11 @@ def loop_models(J: float, kp: float, kv: float, ki: float, sample_time_s: float,
     return {"velocity_open": L_v, "velocity_closed": T_vel, "position_open": L_p, "position_closed": T_pos}
 
 
-def frd_gain_phase_margins(sys: ct.TransferFunction) -> tuple[float, float, float, float]:
-    """Gain margin, phase margin (deg), phase and gain crossover (rad/s) of a discrete loop as
-    ``ct.stability_margins`` computes them on its fallback to frequency-response data (python-control
-    0.10, ``method="best"``), number for number: the loop sampled on the default grid below Nyquist and
-    smoothed by a cubic spline of real and imaginary part, -180 deg and unit-gain crossings bracketed on
-    the grid and refined by Brent's method, the crossing with the smallest ``|log GM|`` and ``|PM|``.
-    The spline is evaluated on whole grids at once (python-control: one point at a time) and the
-    stability margin (distance to -1, a minimisation per local minimum) is not computed."""
-    omega = freqplot._default_frequency_range(sys)
-    frd = ct.FRD(sys, omega[omega < np.pi / sys.dt], smooth=True)
-    tck, grid = frd._ifunc[0, 0], frd.omega
-
-    def response(w: np.ndarray | float) -> np.ndarray:
-        if np.ndim(w) and np.size(w) == 0:
-            return np.empty(0, complex)
-        x, y = splev(w, tck)
-        return x + 1.0j * y
-
-    def unit_gain(w: np.ndarray | float) -> np.ndarray:
-        return np.abs(response(w)) - 1
-
-    def phase_from_180(w: np.ndarray | float) -> np.ndarray:
-        return np.angle(-response(w))
-
-    idx = np.where(np.diff(np.sign(phase_from_180(grid))))[0]
-    idx = idx[np.real(response(grid[idx])) <= 0]
-    w_180 = np.array([brentq(phase_from_180, grid[i], grid[i + 1]) for i in idx])
-    idx = np.where(np.diff(np.sign(unit_gain(grid))))[0]
-    wc = np.array([brentq(unit_gain, grid[i], grid[i + 1]) for i in idx])
-    with np.errstate(all="ignore"):
-        GM = 1.0 / np.abs(response(w_180))
-        log_gm = np.abs(np.log(GM))
-    PM = np.remainder(np.angle(response(wc), deg=True), 360.0) - 180.0
-    gm, wpc = float("inf"), float("nan")
-    if GM.shape[0] and not np.isinf(GM).all():
-        smallest_gm = np.where(log_gm == np.min(log_gm))
-        gm, wpc = GM[smallest_gm][0], w_180[smallest_gm][0]
-    pm, wgc = float("inf"), float("nan")
-    if PM.shape[0]:
-        smallest_pm = np.where(np.abs(PM) == np.amin(np.abs(PM)))[0]
-        pm, wgc = PM[smallest_pm][0], wc[smallest_pm][0]
-    return gm, pm, wpc, wgc
-
-
 def margins(sys: ct.TransferFunction) -> dict[str, float]:
-    """Gain margin (dB), phase margin (deg), crossover frequencies (Hz), closed-loop stability: those of
-    ``ct.stability_margins``; near z = 1 python-control falls back to frequency-response data, whose
-    gain and phase margins :func:`frd_gain_phase_margins` computes faster."""
-    if not sys.isctime() and _likely_numerical_inaccuracy(sys):
-        gm, pm, wpc, wgc = frd_gain_phase_margins(sys)
-    else:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)
-            gm, pm, _sm, wpc, wgc, _ws = ct.stability_margins(sys)
+    """Gain margin (dB), phase margin (deg), crossover frequencies (Hz), closed-loop stability."""
+    with warnings.catch_warnings():  # python-control falls back to FRD margins near z = 1: expected
+        warnings.simplefilter("ignore", UserWarning)
+        gm, pm, _sm, wpc, wgc, _ws = ct.stability_margins(sys)
     closed = ct.feedback(sys, 1)
     stable = bool(np.all(np.abs(closed.poles()) < 1.0))
     return {"gain_margin_db": float(20 * np.log10(gm)) if np.isfinite(gm) and gm > 0 else float("inf"),
