@@ -31,7 +31,6 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -74,11 +73,6 @@ def _od_from_means(means: np.ndarray) -> np.ndarray:
     dev = means - np.add.reduce(means, axis=-1, keepdims=True) / n
     var = np.add.reduce(dev * dev, axis=-1) / n
     return np.where(var > 0, 1.0 / np.maximum(var, 1e-300), np.inf)
-
-
-def _oc_value(o1: Any, o3: Any, od: Any, scale: OcScale) -> float:
-    """``oc_terms(o1, o3, od, scale).sum()`` of one selection (the same operations on the same array)."""
-    return float((2.0 / np.pi * np.arctan(np.array([o1 / scale.o1, o3 / scale.o3, od / scale.od]))).sum())
 
 
 class SubsetState:
@@ -232,8 +226,6 @@ class SubsetState:
             o2, o3 = ev[0] / ev[-1], ev[0]
         if self.name in ("Od", "Oc"):
             od = _od_from_means(self.knn_means())
-        if self.name == "Oc":
-            return _oc_value(o1, o3, od, self.scale)
         return float(self._value_of(o1, o3, od, o2))
 
     def _od_add(self, cand: np.ndarray) -> np.ndarray:
