@@ -31,10 +31,16 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.control.config import ControlConfig
+from pipeline.robot.model import RobotModel
+from pipeline.stage_api import RealRobot
+from pipeline.trajectory.config import TrajectoryConfig
 from pipeline.trajectory.cp import CPProfile
+from pipeline.trajectory.design import JointPath
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.reachability import solve_cp_reachability
 from pipeline.trajectory.settling import time_scaled
+from pipeline.trajectory.solve import CPPlan
 from pipeline.trajectory.trajectories import JointTrajectory, TorqueCheck, check_trajectory
 from pipeline.trajectory.validate import simulate_on_real
 
@@ -115,7 +121,7 @@ def to_gate(run: Callable[[float], tuple[JointTrajectory, dict]], first: tuple[J
     return tr, sim, rounds
 
 
-def servo_slowed(real: Any, robot: Any, traj: JointTrajectory, ccfg: Any, seed: int,
+def servo_slowed(real: RealRobot, robot: RobotModel, traj: JointTrajectory, ccfg: ControlConfig, seed: int,
                  gate: float, first_sim: dict | None = None) -> tuple[JointTrajectory, dict, int]:
     """``traj`` slowed in time (``t' = (1 + x) t``) until its 4 ms mean command keeps ``gate``."""
     def run(x: float) -> tuple[JointTrajectory, dict]:
@@ -128,7 +134,8 @@ def servo_slowed(real: Any, robot: Any, traj: JointTrajectory, ccfg: Any, seed: 
     return to_gate(run, first, lambda r: float(np.sqrt(r / gate)) - 1.0, gate)
 
 
-def servo_reserved(real: Any, robot: Any, pm: PlanningModel, path: Any, profile: CPProfile, ccfg: Any,
+def servo_reserved(real: RealRobot, robot: RobotModel, pm: PlanningModel, path: JointPath, profile: CPProfile,
+                   ccfg: ControlConfig,
                    seed: int, gate: float, n_grid: int, fine_dt_s: float,
                    first_sim: dict) -> tuple[JointTrajectory, dict, int]:
     """The time-optimal profile re-solved with the torque limits of the joints over the gate lowered,
@@ -147,7 +154,8 @@ def servo_reserved(real: Any, robot: Any, pm: PlanningModel, path: Any, profile:
     return to_gate(run, (profile.sample(path, fine_dt_s), first_sim), lambda r: 0.5, gate)
 
 
-def executable_cp(real: Any, robot: Any, pm: PlanningModel, cp: Any, ccfg: Any, seed: int, cfg: Any,
+def executable_cp(real: RealRobot, robot: RobotModel, pm: PlanningModel, cp: CPPlan, ccfg: ControlConfig, seed: int,
+                  cfg: TrajectoryConfig,
                   cp_sim: dict) -> ExecutableCP:
     """Measure the remedies (module docstring) and pick the shortest that keeps the servo gate.
 
