@@ -55,17 +55,23 @@ $(PY):
 	  || { echo "error: Python >= 3.11 needed ($(PYTHON) is $$($(PYTHON) --version))"; exit 1; }
 	$(PYTHON) -m venv $(VENV)
 
-# pip compiles the installed modules to bytecode one by one; compileall does it on every core
-# (the install's longest step after the downloads; a failure is left to import time, as pip does)
-PIP_INSTALL := $(PY) -m pip install --quiet --disable-pip-version-check --no-compile
-COMPILE_VENV := $(PY) -m compileall -q -j 0 $(VENV)/lib >/dev/null 2>&1 || true
+# The install: uv (PyPI's `uv`, a resolver and installer written in Rust) installs the same releases
+# as pip, downloads included, in about 8 s instead of pip's 68 s on the 2-core machine; where uv
+# cannot be had, pip installs. Modules are byte-compiled when first imported (__pycache__ is written,
+# see above): about 6 s for what a run imports, where compiling all of the venv's 7,000 modules
+# ahead takes 22 s.
+PIP := $(PY) -m pip --quiet --disable-pip-version-check
+define INSTALL
+echo "installing the package ($(1)) and its dependencies into $(VENV)"; \
+if $(PIP) install --no-compile uv >/dev/null 2>&1; then \
+  $(VENV)/bin/uv pip install --quiet --python $(PY) $(1); \
+else echo "uv not available: installing with pip"; $(PIP) install --no-compile $(1); fi
+endef
 
 $(VENV)/.stamp-run: pyproject.toml | $(PY)
-	$(PIP_INSTALL) -e .
-	@$(COMPILE_VENV)
+	@$(call INSTALL,-e .)
 	@touch $@
 
 $(VENV)/.stamp-dev: pyproject.toml | $(PY)
-	$(PIP_INSTALL) -e '.[dev]'
-	@$(COMPILE_VENV)
+	@$(call INSTALL,-e '.[dev]')
 	@touch $@ $(VENV)/.stamp-run
