@@ -48,6 +48,13 @@ from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.trajectories import JointTrajectory
 
 JIT_FLAGS = ("-O1",)
+#: directional derivatives CasADi propagates per call of a derivative function of the RNEA (its option
+#: ``max_num_dir``, default 64): the constraint Jacobian and the Lagrangian Hessian of the NLP ask for
+#: 25-31 directions (graph colouring), and one function for all of them is most of the generated C.
+#: In batches of 6 the values are the same bit for bit (every direction is its own chain of operations),
+#: gcc -O1 needs about half the CPU (84 -> 45 s for the RX130L, -O0: 23 -> 10 s) and the compiled
+#: Hessian evaluates as fast (``benchmarks/bench_ptp_code.py``)
+DERIVATIVE_DIRECTIONS = 6
 FORMULATION_VERSION = "ptp-v1"
 
 
@@ -186,7 +193,7 @@ class PtpProblem:
     def __init__(self, pm: PlanningModel, sym: SymbolicRobot, n_intervals: int = 50, jit: bool = True,
                  cache_dir: Path | None = None, ipopt_options: dict | None = None,
                  jit_flags: tuple[str, ...] = JIT_FLAGS, p_dyn: np.ndarray | None = None,
-                 parametric: bool = True) -> None:
+                 parametric: bool = True, derivative_directions: int = DERIVATIVE_DIRECTIONS) -> None:
         t0 = time.perf_counter()
         self.pm, self.sym, self.N, self.nq = pm, sym, int(n_intervals), pm.nq
         self.p_dyn_nominal = np.asarray(sym.nominal_dynamic_parameters() if p_dyn is None else p_dyn, float)
@@ -239,7 +246,8 @@ class PtpProblem:
         self._energy_fn = ca.Function("energy", [x, p], [energy, tau])
         nlp = {"x": x, "p": p, "f": k1 * T + k2 * energy, "g": g}
         opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "ipopt.tol": 1e-8,
-                "ipopt.acceptable_tol": 1e-5, "ipopt.max_iter": 1000}
+                "ipopt.acceptable_tol": 1e-5, "ipopt.max_iter": 1000,
+                "oracle_options": {"max_num_dir": int(derivative_directions)}}
         opts.update(ipopt_options or {})
         name = f"ptp_{pm.model.name or 'robot'}_{N}".replace("-", "_").replace(" ", "_")
         self.jit = bool(jit)

@@ -4,6 +4,7 @@ calibration and identification of the arm (interpreted, small grid: no gcc build
 
 from __future__ import annotations
 
+import casadi as ca
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -11,7 +12,13 @@ import pytest
 from pipeline import codegen
 from pipeline.robot.symbolic import SymbolicRobot
 from pipeline.trajectory.dynamics import PlanningModel
-from pipeline.trajectory.ptp import PtpProblem, energy_weights, nlp_functions, nlp_library_key
+from pipeline.trajectory.ptp import (
+    DERIVATIVE_DIRECTIONS,
+    PtpProblem,
+    energy_weights,
+    nlp_functions,
+    nlp_library_key,
+)
 
 N_INTERVALS = 6
 #: tight tolerances: both NLPs converge to the same optimum (their code rounds differently, so a
@@ -81,3 +88,25 @@ def test_one_code_serves_every_arm(problems):
     assert nlp_code_key(constant_1) != nlp_code_key(constant_2)
     # the key follows what the code is generated from: other gcc flags, another library
     assert nlp_library_key(parametric_1.solver, {}, ("-O0",)) != nlp_library_key(parametric_1.solver, {}, ("-O1",))
+
+
+def test_derivative_batches_give_the_same_bits(rx130l):
+    """The NLP's gradient, constraint Jacobian and Lagrangian Hessian are the same to the last bit
+    whether CasADi propagates all their directional derivatives of the RNEA in one call (64 at most) or
+    in batches of ``DERIVATIVE_DIRECTIONS`` (half the generated code); the batches do reach the code."""
+    pm = PlanningModel.from_robot(rx130l)
+    sym = SymbolicRobot(rx130l)
+    one_call, batches = (PtpProblem(pm, sym, N_INTERVALS, jit=False, derivative_directions=n)
+                         for n in (64, DERIVATIVE_DIRECTIONS))
+    names = [set(p.solver.get_function()) for p in (one_call, batches)]
+    assert names[0] == names[1] and one_call.library_key != batches.library_key
+    rng = np.random.default_rng(3)
+    x = rng.standard_normal(one_call.n_x)
+    x[0] = 1.0   # the duration
+    p = np.abs(rng.standard_normal(one_call.n_p))
+    lam_g = rng.standard_normal(one_call.n_g)
+    for name, args in (("nlp_grad", (x, p, 1.0, lam_g)), ("nlp_jac_g", (x, p)), ("nlp_hess_l", (x, p, 1.0, lam_g))):
+        values = [[out.full() for out in s.solver.get_function(name).call([ca.DM(a) for a in args])]
+                  for s in (one_call, batches)]
+        for a, b in zip(*values, strict=True):
+            assert np.array_equal(a, b), name
