@@ -4,7 +4,7 @@ A stage module may expose ``warm_up(config, robot) -> None``: it builds, into th
 :mod:`pipeline.codegen`, compiled code the stage will need that depends only on the robot's
 structure and the stage's own settings, never on an upstream result (the trajectory stage's PtP
 NLP: the arm's parameters are inputs of its code). With an empty cache such a build is the longest
-single step of a run (about a minute of gcc for a 6-axis arm's PtP Hessian), and the stages before
+single step of a run (about 45 s of gcc for a 6-axis arm's PtP Hessian), and the stages before
 it mostly keep one core busy: the runner starts the warm-ups of the stages that will run in one
 forked process, one gcc at a time, so the build takes the idle core (with two gcc processes the
 calibration's two-core steps were slowed by more than the build saved: a cold default run took 193 s
