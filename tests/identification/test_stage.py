@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from pipeline.config import CONFIGS_DIR, load_config, to_plain
-from pipeline.errors import DataFileError, PipelineError
+from pipeline.errors import DataFileError, PipelineError, QualityGateError
 from pipeline.identification import stage
 from pipeline.identification.estimate import is_physically_consistent
 from pipeline.robot.model import RobotModel
@@ -208,14 +208,21 @@ class _NoHiddenRobot:
         raise AssertionError(f"the stage read ctx.real.{name} in user-data mode")
 
 
-def test_stage_runs_on_a_joint_csv_record(tmp_path):
+def test_stage_runs_on_a_joint_csv_record_and_a_failed_gate_raises(tmp_path):
     """A user record (CSV, joint side) instead of the simulated experiment: no excitation is
-    designed, validation is on the record's held-out tail, the hidden robot is never used."""
+    designed, validation is on the record's held-out tail, the hidden robot is never used.
+
+    The same run is held to a validation threshold no model can meet (0.2 x the noise; the gates only
+    read the finished result, so the result is the one an ordinary threshold hands on): the stage
+    fails naming the figure and threshold, writes nothing, and the unaccepted result rides on the
+    error (the record's checks below read it there); --accept-poor: test_gates.py."""
     from pipeline.identification import fourier
 
     # the linear friction model: the record's path is what this test is about (the Stribeck and load-friction
     # fits on a record's held-out tail: the TIAGo record test, test_tiago_record.py)
-    ctx, real = quick_context(tmp_path / "run", overrides={"run_tx40": False, "friction_model": "viscous_coulomb"})
+    ctx, real = quick_context(tmp_path / "run", overrides={"run_tx40": False, "friction_model": "viscous_coulomb",
+                                                           "max_validation_rms_over_noise": 0.2})
+    ctx.run.accept_poor = False
     robot = ctx.robot
     limits = fourier.ExcitationLimits.from_robot(robot, 0.95, 0.95, 0.95, 0.8, 0.05, 0.02)
     traj = fourier.random_feasible_trajectories(robot, limits, 5, 0.1, 1, np.random.default_rng(7))[0]
@@ -225,7 +232,13 @@ def test_stage_runs_on_a_joint_csv_record(tmp_path):
     _write_csv(path, t, meas.q_rad, meas.tau_Nm)
     ctx.config.data_file = str(path)
     ctx.real = _NoHiddenRobot()
-    res = stage.run(ctx)
+    with pytest.raises(QualityGateError) as info:
+        stage.run(ctx)
+    msg = str(info.value)
+    assert "validation_rms_over_noise" in msg and "0.2" in msg and "--accept-poor" in msg
+    assert not any(ctx.out_dir.iterdir())
+    res = info.value.result
+    assert res is not None and res.summary["quality_gates"]["passed"] is False
     s = res.summary
     assert s["data_source"] == str(path)
     assert s["physically_consistent"]
