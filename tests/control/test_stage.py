@@ -52,17 +52,24 @@ def test_stage_without_upstream(quick_config, rx130l, real, tmp_path):
     assert {"lag_errors", "tcp_error", "iso_path", "servo_bode"} <= set(res.figures)
 
 
-def test_stage_with_calibrated_kinematics(quick_config, rx130l, real, tmp_path):
-    # a perfect calibration: the hidden kinematics with the nominal dynamics
+def test_stage_with_calibrated_kinematics_and_a_nominal_comparison(quick_config, rx130l, real, tmp_path):
+    """A perfect calibration (the hidden kinematics with the nominal dynamics) and an identification stage
+    upstream. compare_nominal_feedforward without the full_friction variant: the nominal-model run is an
+    extra comparison, never the reported main variant (the user's last one)."""
     calibrated = with_dynamics_of(real.truth, rx130l)
-    upstream = {"calibration": StageOutput({}, {}, {}, calibrated, tmp_path)}
+    upstream = {"calibration": StageOutput({}, {}, {}, calibrated, tmp_path),
+                "identification": StageOutput({}, {}, {}, calibrated.copy(), tmp_path)}
     cfg = quick_config.control
-    cfg.variants = ["elastic_flat"]  # the elastic truth: rigid feedforward leaves the mm-level joint deflection
+    # the main variant elastic_flat: on the elastic truth rigid feedforward leaves the mm-level joint deflection
+    cfg.variants, cfg.compare_nominal_feedforward = ["none", "elastic_flat"], True
     cfg.benchmark_python_seconds = 0.0
     cfg.iso.segments = ["line"]
     res = stage.run(_ctx(quick_config, calibrated.copy(), real, upstream, tmp_path))
     s = res.summary
-    assert s["kinematics"] == "calibrated"
+    assert s["kinematics"] == "calibrated" and s["feedforward_model"] == "identified"
+    assert set(s["tcp_error_max_m"]) == {"none", "elastic_flat", "full_friction_nominal"}
+    assert s["tcp_error_rms_calibrated_kinematics_m"] == s["tcp_error_rms_m"]["elastic_flat"] \
+        != s["tcp_error_rms_m"]["full_friction_nominal"]
     # nominal kinematics: mm-level absolute error; calibrated: only the tracking error remains
     assert s["tcp_error_rms_nominal_kinematics_m"] > 5 * s["tcp_error_rms_calibrated_kinematics_m"]
     # a calibration without compliances: every joint's stiffness is nominal, and the report says what it is worth
@@ -80,20 +87,3 @@ def test_bad_config_is_a_config_error(kwargs):
 
     with pytest.raises(ConfigError, match="control"):
         ControlConfig(**kwargs)
-
-
-def test_nominal_comparison_without_full_friction_variant(quick_config, rx130l, real, tmp_path):
-    """compare_nominal_feedforward with variants [none]: the nominal-model run is an extra comparison,
-    never the reported main variant."""
-    import copy
-
-    run = copy.deepcopy(quick_config)
-    cfg = run.control
-    cfg.variants, cfg.compare_nominal_feedforward = ["none"], True
-    cfg.benchmark_python_seconds, cfg.iso.segments = 0.05, ["line"]
-    upstream = {"identification": StageOutput({}, {}, {}, rx130l.copy(), tmp_path)}
-    ctx = StageContext(run=run, config=cfg, robot=rx130l.copy(), real=real, upstream=upstream, out_dir=tmp_path,
-                       rng=stage_rng(run.seed, "control"), progress=Progress(enabled=False))
-    s = stage.run(ctx).summary
-    assert set(s["tcp_error_max_m"]) == {"none", "full_friction_nominal"}
-    assert s["feedforward_model"] == "identified"
