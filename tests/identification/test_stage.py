@@ -185,11 +185,12 @@ def test_bad_data_files_raise_and_write_nothing(tmp_path, problem):
 def test_infeasible_excitation_limits_raise(tmp_path):
     # 5 % of the torque limits: no excitation moves the arm enough; the stage stops naming
     # identification.excitation (no feasible centre, or a random start the motion gate refuses)
-    # the quick profile's small excitation problem with only the margin changed (a bare
-    # {"torque_margin": ...} section would fall back to the default-profile excitation sizes)
+    # the quick profile's small excitation problem with the margin changed and fewer random trajectories
+    # and IPOPT iterations (a bare {"torque_margin": ...} section would fall back to the default-profile
+    # excitation sizes): whatever IPOPT does within 5 % of the limits, the arm hardly moves
     quick_excitation = to_plain(load_config(CONFIGS_DIR / "quick.yaml").identification.excitation)
-    ctx, _ = quick_context(tmp_path, overrides={"run_tx40": False,
-                                                "excitation": {**quick_excitation, "torque_margin": 0.05}})
+    ctx, _ = quick_context(tmp_path, overrides={"run_tx40": False, "excitation": {
+        **quick_excitation, "torque_margin": 0.05, "n_random": 2, "max_iter": 5}})
     with pytest.raises(PipelineError, match="identification.excitation"):
         stage.run(ctx)
     assert not any(ctx.out_dir.iterdir())
