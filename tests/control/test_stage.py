@@ -29,6 +29,10 @@ def real(rx130l):
 
 
 def test_stage_without_upstream(quick_config, rx130l, real, tmp_path):
+    """The quick profile on the ISO path's line alone (its large circle: the references of
+    test_reference_simulate.py and test_paths.py; the whole quick path through the stage: the control
+    notebook's slow twin and the whole-pipeline runs of make test-slow)."""
+    quick_config.control.iso.segments = ["line"]
     res = stage.run(_ctx(quick_config, rx130l.copy(), real, {}, tmp_path))
     s = res.summary
     for key in REQUIRED:
