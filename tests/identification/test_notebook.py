@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import pytest
 
-#: a smaller quick setting: a fifth of the samples per period, 4 random trajectories and 30 IPOPT iterations
-#: for the excitation, the linear friction model (no Stribeck fits), the first 4 s of the TX40 record (the quick
-#: stage itself, Stribeck fits included: tests/identification/test_stage.py; the whole TX40 record:
-#: tests/identification/test_tx40.py)
-SMALL = {"identification.decimation": 20, "identification.excitation.n_random": 4,
-         "identification.excitation.max_iter": 30, "identification.tx40.max_samples": 20000,
-         "identification.friction_model": "viscous_coulomb"}
+#: a smaller quick setting: a fifth of the samples per period, 30 samples per period in the excitation NLP,
+#: 4 random trajectories and 30 IPOPT iterations for the excitation, the linear friction model (no Stribeck
+#: fits), the first 4 s of the TX40 record (the quick stage itself, Stribeck fits included:
+#: tests/identification/test_stage.py; the whole TX40 record: tests/identification/test_tx40.py)
+SMALL = {"identification.decimation": 20, "identification.excitation.n_samples": 30,
+         "identification.excitation.n_random": 4, "identification.excitation.max_iter": 30,
+         "identification.tx40.max_samples": 20000, "identification.friction_model": "viscous_coulomb"}
 
 
 def _check(text: str) -> None:
@@ -24,7 +24,7 @@ def test_identification_notebook_executes(tmp_path, execute_notebook):
     Stribeck fits too)."""
     text = execute_notebook("02_identification.ipynb", tmp_path, {"SETTINGS": SMALL})
     _check(text)
-    assert "n_random=4, max_iter=30" in text        # the setting reached the stage
+    assert "n_samples=30, n_starts=1, n_random=4, max_iter=30" in text        # the setting reached the stage
 
 
 @pytest.mark.slow
