@@ -20,8 +20,10 @@ REQUIRED = ("cp_duration_s", "cp_toppra_duration_s", "cp_fine_violation", "cp_to
 
 def test_stage_quick(quick_config, rx130l, ptp_problem, tmp_path):
     # 0.01 = the main solution's k2: reused as the Pareto point (no extra solve); the warm-started sweep
-    # over k2 is plan_ptp's, checked on the big move by test_ptp.py (k2 = 0.01, 0.1, 1.0)
-    cfg = dataclasses.replace(quick_config.trajectory, ptp_pareto_k2=[0.01])
+    # over k2 is plan_ptp's, checked on the big move by test_ptp.py (k2 = 0.01, 0.1, 1.0). Coarser CP grids
+    # (IK samples, path grid, smooth intervals) than the quick profile's, whose CP plans test_cp.py checks
+    cfg = dataclasses.replace(quick_config.trajectory, ptp_pareto_k2=[0.01], cp_ik_points=40, cp_n_grid=60,
+                              cp_smooth_intervals=25)
     real = RealRobot.create(rx130l, quick_config.seed, TruthConfig())
     # planned on the NOMINAL model (no identification upstream), run on the hidden robot: the servo
     # simulation may exceed the limits; accept_poor records the gates instead of stopping
