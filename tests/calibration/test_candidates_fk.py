@@ -51,3 +51,18 @@ def test_random_candidates_stop_filtering_at_the_last_one_needed_and_keep_the_dr
     assert counts["total"] < counts_all["total"]      # the rest of the batch was never filtered
     mask, _ = cd.filter_configurations(chain, Q, cd.FilterMargins(), visibility=visibility)
     assert mask.all()
+
+
+@pytest.mark.parametrize("visibility", [True, False])
+def test_incidence_first_filter_rejects_the_same_rows(rx130l, visibility):
+    """``reasons=False`` (incidence before the capsules, capsules on the rows it passes) keeps exactly the
+    rows of the full check; only the split of the rejections between collision and visibility may move."""
+    chain = cd.chain_from_robot(rx130l)
+    Q = np.random.default_rng(3).uniform(chain.lower - 0.2, chain.upper + 0.2, size=(20000, rx130l.nq))
+    full, counts_full = cd.filter_configurations(chain, Q, visibility=visibility)
+    fast, counts_fast = cd.filter_configurations(chain, Q, visibility=visibility, reasons=False)
+    assert full.any() and not full.all() and np.array_equal(fast, full)
+    for key in ("total", "limits", "feasible"):
+        assert counts_fast[key] == counts_full[key]
+    assert (counts_fast["collision"] + counts_fast["visibility"]
+            == counts_full["collision"] + counts_full["visibility"] > 0)
