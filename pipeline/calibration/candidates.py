@@ -6,20 +6,15 @@ margin), and a *predicted* line of sight from the nominal tracker pose (incidenc
 axis and beam ``<= max_incidence - margin``, the beam clear of every link capsule). The sensor
 decides at measurement time; the margins make the prediction conservative.
 
-The full 13^6 grid (paper 004: 13 values per axis, ~4.8 million) is filtered coarse-first: the
-5-axis prefix grid (13^5) is checked for everything that does not depend on axis 6, then only the
-surviving prefixes are expanded along axis 6 in chunks (the frames of axes 1-5 computed once per
-prefix). All kinematics is batched numpy on the Pinocchio model's joint placements (``Chain``,
-``kinematics``, ``capsule_segments``), tested to 1e-12 against ``RobotModel.positions`` /
-``capsule_segments`` (tests/calibration/test_candidates_fk.py). Pinocchio loops over the rows in
-Python (one ``pin.forwardKinematics`` each): on a slice of the RX130L's grid ~6x slower, ~170 s
-extrapolated to the full grid; so the vectorised chain stays, as a filter only (decisions that must
-match the sensor are re-checked with Pinocchio, e.g. :mod:`pipeline.calibration.gradient_design`).
+The full 13^6 grid (paper 004: 13 values per axis, ~4.8 million) is filtered coarse-first: the 5-axis
+prefix grid is checked for everything that does not depend on axis 6, then only the surviving prefixes are
+expanded along axis 6 in chunks. All kinematics is batched numpy on the Pinocchio model's joint placements
+(``Chain``, ``kinematics``, ``capsule_segments``; one ``pin.forwardKinematics`` per row is ~6x slower), tested
+to 1e-12 against ``RobotModel`` (tests/calibration/test_candidates_fk.py); it is a filter only (decisions
+that must match the sensor are re-checked with Pinocchio, e.g. :mod:`pipeline.calibration.gradient_design`).
 
-The whitened candidate Jacobians: the first-order model of :mod:`pipeline.calibration.error_model`
-at ``x = 0`` in closed form (a twist ``(v, w)`` on a frame F moves a point p by
-``R_F v + (R_F w) x (p - o_F)``), tested against the CasADi Jacobian.
-"""
+The whitened candidate Jacobians: the first-order model of :mod:`pipeline.calibration.error_model` at x = 0 in
+closed form (a twist (v, w) on a frame F moves a point p by ``R_F v + (R_F w) x (p - o_F)``), tested against CasADi."""
 
 from __future__ import annotations
 
@@ -115,11 +110,10 @@ def chain_from_robot(robot: RobotModel, transform_tracker_to_base: pin.SE3 | Non
 
 def _axis_rotation(axis: np.ndarray, q: np.ndarray) -> np.ndarray:
     """Rotation matrices (N,3,3) about a fixed unit axis (Rodrigues ``I + sin q K + (1 - cos q) K^2``, entrywise)."""
-    c, s = np.cos(q), np.sin(q)
     K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    out = np.multiply.outer(K.reshape(9), s)
+    out = np.multiply.outer(K.reshape(9), np.sin(q))
     out += np.eye(3).reshape(9, 1)
-    out += np.multiply.outer((K @ K).reshape(9), 1 - c)
+    out += np.multiply.outer((K @ K).reshape(9), 1 - np.cos(q))
     return np.ascontiguousarray(out.T).reshape(-1, 3, 3)
 
 
@@ -143,13 +137,18 @@ def kinematics(chain: Chain, Q: np.ndarray) -> Kinematics:
     Rpre, opre, Rpost = np.empty((nq, N, 3, 3)), np.empty((nq, N, 3)), np.empty((nq, N, 3, 3))
     R, o = np.broadcast_to(np.eye(3), (N, 3, 3)), np.zeros((N, 3))
     for i in range(nq):
-        np.matmul(R, chain.R_place[i], out=Rpre[i])
-        np.add(o, R @ chain.p_place[i], out=opre[i])
+        np.matmul(R.reshape(-1, 3), chain.R_place[i], out=Rpre[i].reshape(-1, 3))
+        np.add(o, _times(R, chain.p_place[i]), out=opre[i])
         np.matmul(Rpre[i], _axis_rotation(chain.axis[i], Q[:, i]), out=Rpost[i])
         R, o = Rpost[i], opre[i]
     Rpre, opre, Rpost = (np.moveaxis(a, 0, 1) for a in (Rpre, opre, Rpost))     # (N, nq, ...) views
-    return Kinematics(Rpre, opre, Rpost, o + R @ chain.reflector_p, R @ chain.flange_R, o + R @ chain.flange_p,
-                      R @ chain.reflector_axis_joint)
+    return Kinematics(Rpre, opre, Rpost, o + _times(R, chain.reflector_p), _times(R, chain.flange_R),
+                      o + _times(R, chain.flange_p), _times(R, chain.reflector_axis_joint))
+
+
+def _times(R: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """``R @ B`` for a stack ``R`` (N,3,3), one BLAS product of its 3N rows (OpenBLAS: the stacked product's bits)."""
+    return (R.reshape(-1, 3) @ B).reshape(R.shape[:-1] + B.shape[1:])
 
 
 def capsule_segments(chain: Chain, kin: Kinematics) -> np.ndarray:
@@ -181,8 +180,9 @@ def _with_last_joint(chain: Chain, kin: Kinematics, rows: np.ndarray, R_last: np
     """The :class:`Kinematics` of prefix rows ``rows`` with the last joint's world rotation ``R_last``."""
     Rpost, o = kin.Rpost[rows], kin.opre[rows, -1]
     Rpost[:, -1] = R_last
-    return Kinematics(kin.Rpre[rows], kin.opre[rows], Rpost, o + R_last @ chain.reflector_p,
-                      R_last @ chain.flange_R, o + R_last @ chain.flange_p, R_last @ chain.reflector_axis_joint)
+    return Kinematics(kin.Rpre[rows], kin.opre[rows], Rpost, o + _times(R_last, chain.reflector_p),
+                      _times(R_last, chain.flange_R), o + _times(R_last, chain.flange_p),
+                      _times(R_last, chain.reflector_axis_joint))
 
 
 @dataclass
@@ -374,8 +374,7 @@ def filter_grid(chain: Chain, n_per_axis: int | list[int] = 13, margins: FilterM
 def random_candidates(chain: Chain, n: int, rng: np.random.Generator, margins: FilterMargins | None = None,
                       max_draws: int = 50, visibility: bool = True, count_all: bool = False) -> tuple[np.ndarray, dict]:
     """``n`` feasible uniformly random configurations (batches drawn until enough), rejection counts of the draws
-    filtered: unless ``count_all``, the last batch's up to its n-th feasible draw only (same draws and rows),
-    reasons as :func:`filter_configurations` with ``reasons=False`` counts them."""
+    filtered (unless ``count_all``: the last batch's up to its n-th feasible draw, reasons as ``reasons=False``)."""
     out, counts = [], {"total": 0, "limits": 0, "collision": 0, "visibility": 0, "feasible": 0}
     have, rate = 0, 0.01
     for _ in range(max_draws):
