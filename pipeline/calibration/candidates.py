@@ -141,8 +141,8 @@ def kinematics(chain: Chain, Q: np.ndarray) -> Kinematics:
         np.add(o, _times(R, chain.p_place[i]), out=opre[i])
         np.matmul(Rpre[i], _axis_rotation(chain.axis[i], Q[:, i]), out=Rpost[i])
         R, o = Rpost[i], opre[i]
-    Rpre, opre, Rpost = (np.moveaxis(a, 0, 1) for a in (Rpre, opre, Rpost))     # (N, nq, ...) views
-    return Kinematics(Rpre, opre, Rpost, o + _times(R, chain.reflector_p), _times(R, chain.flange_R),
+    by_row = [np.moveaxis(a, 0, 1) for a in (Rpre, opre, Rpost)]     # (N, nq, ...) views
+    return Kinematics(by_row[0], by_row[1], by_row[2], o + _times(R, chain.reflector_p), _times(R, chain.flange_R),
                       o + _times(R, chain.flange_p), _times(R, chain.reflector_axis_joint))
 
 
@@ -210,7 +210,7 @@ def _collision_ok(chain: Chain, seg: np.ndarray, margins: FilterMargins, pairs: 
         return segment_distances(*p) - chain.capsule_r[a] - chain.capsule_r[b] >= margins.collision_m, p
 
     rows = np.arange(len(idx))
-    for a, b in sorted(np.asarray(pairs, int).reshape(-1, 2).tolist(), key=lambda p: clear(*p, rows[:256])[0].sum()):
+    for a, b in sorted(pairs.reshape(-1, 2).tolist(), key=lambda p: clear(p[0], p[1], rows[:256])[0].sum()):
         keep, held = clear(a, b, rows)      # end points held until the next pair's: their pages are reused
         rows = rows[keep]
     ok[:] = False
