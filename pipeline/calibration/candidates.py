@@ -205,14 +205,13 @@ def _collision_ok(chain: Chain, seg: np.ndarray, margins: FilterMargins, pairs: 
     idx = np.flatnonzero(ok)
     ends = np.ascontiguousarray(np.moveaxis(seg[idx], 0, 2))   # (nc, 2, rows, 3): one block per capsule end
 
-    def clear(a: int, b: int, rows: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+    def clear(a: int, b: int, rows: np.ndarray) -> np.ndarray:
         p = [ends[c, k].take(rows, axis=0) for c, k in ((a, 0), (a, 1), (b, 0), (b, 1))]
-        return segment_distances(*p) - chain.capsule_r[a] - chain.capsule_r[b] >= margins.collision_m, p
+        return segment_distances(*p) - chain.capsule_r[a] - chain.capsule_r[b] >= margins.collision_m
 
     rows = np.arange(len(idx))
-    for a, b in sorted(pairs.reshape(-1, 2).tolist(), key=lambda p: clear(p[0], p[1], rows[:256])[0].sum()):
-        keep, held = clear(a, b, rows)      # end points held until the next pair's: their pages are reused
-        rows = rows[keep]
+    for a, b in sorted(pairs.reshape(-1, 2).tolist(), key=lambda p: clear(p[0], p[1], rows[:256]).sum()):
+        rows = rows[clear(a, b, rows)]
     ok[:] = False
     ok[idx[rows]] = True
     return ok
@@ -245,8 +244,9 @@ def beam_blockers(chain: Chain, kin: Kinematics, seg: np.ndarray, margins: Filte
     return out
 
 
-def _visibility_ok(chain: Chain, kin: Kinematics, seg: np.ndarray, margins: FilterMargins) -> np.ndarray:
-    ok = incidence_ok(chain, kin, margins)
+def _visibility_ok(chain: Chain, kin: Kinematics, seg: np.ndarray, margins: FilterMargins,
+                   incidence_checked: bool = False) -> np.ndarray:     # incidence_checked: every row within it
+    ok = np.ones(len(seg), bool) if incidence_checked else incidence_ok(chain, kin, margins)
     idx = np.flatnonzero(ok)
     if idx.size:
         ok[idx[beam_blockers(chain, kin, seg, margins, idx).any(axis=1)]] = False
@@ -277,7 +277,7 @@ def filter_configurations(chain: Chain, Q: np.ndarray, margins: FilterMargins | 
         counts["collision"] += int((ok[rows] & ~col).sum())
         ok[rows] &= col
         if visibility:
-            vis = _visibility_ok(chain, kin, seg, margins)
+            vis = _visibility_ok(chain, kin, seg, margins, incidence_checked=not reasons)
             counts["visibility"] += int((ok[rows] & ~vis).sum())
             ok[rows] &= vis
         mask[s : s + len(Qc)] = ok
