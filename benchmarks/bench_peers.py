@@ -53,7 +53,7 @@ from pipeline.sim.truth import RealRobot
 from pipeline.stage_api import stage_rng
 
 HAVE_FIGAROH = importlib.util.find_spec("figaroh") is not None
-if HAVE_FIGAROH:
+if HAVE_FIGAROH:  # optional peer (the bench extra, not installed by default): imported only when present
     from figaroh.calibration.base_calibration import BaseCalibration
     from figaroh.calibration.calibration_tools import calc_updated_fkm
     from figaroh.identification.parameter import add_standard_additional_parameters, get_standard_parameters

@@ -42,11 +42,13 @@ import nbformat  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from IPython.core.interactiveshell import InteractiveShell  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
 from traitlets.config import Config  # noqa: E402
 
 from pipeline import config as config_module  # noqa: E402
 from pipeline.config import CONFIGS_DIR, load_config  # noqa: E402
 from pipeline.robot.model import RobotModel  # noqa: E402
+from pipeline.stage_api import StageResult  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 os.environ.setdefault("MPLBACKEND", "Agg")
@@ -105,10 +107,6 @@ class FakeStages:
 
     def make(self, name: str, depends: tuple[str, ...] = ()) -> SimpleNamespace:
         def run(ctx: Any) -> Any:
-            from matplotlib.figure import Figure
-
-            from pipeline.stage_api import StageResult
-
             self.calls.append(name)
             self.contexts[name] = ctx
             (ctx.out_dir / "extra.txt").write_text(f"{name} started\n")

@@ -3,15 +3,22 @@
 from __future__ import annotations
 
 import json
+import re
+import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
-from pipeline import artefacts, stage_io
-from pipeline.config import load_config
-from pipeline.runner import run_pipeline
+from pipeline import artefacts, config, runner, stage_io
+from pipeline.config import load_config, resolve_robot_dir
+from pipeline.errors import DataFileError, PipelineError
+from pipeline.progress import Progress, task, track
+from pipeline.runner import run_pipeline, stage_inputs_hashes
 from pipeline.stage_api import stage_rng
 from pipeline.stage_io import load_run
+from pipeline.stage_plan import plan_stages
 
 
 # ------------------------------------------------------------------------------ atomic files
@@ -153,9 +160,6 @@ def test_robot_handed_on_to_later_stages(fake_stages, tmp_path, rx130l):
 
 
 def test_stage_check_hook_runs_before_anything_is_written(fake_stages, tmp_path):
-    from pipeline import config
-    from pipeline.errors import DataFileError
-
     def check(cfg, robot):
         if cfg.label == "bad":
             raise DataFileError("measurements.csv", "q3", "not a number in row 4")
@@ -167,8 +171,6 @@ def test_stage_check_hook_runs_before_anything_is_written(fake_stages, tmp_path)
 
 
 def test_progress_passes_items_through_with_or_without_display():
-    from pipeline.progress import Progress, task, track
-
     for enabled in (False, True):
         with Progress(enabled=enabled) as prog:
             assert list(prog.track(iter(range(4)), "gen")) == [0, 1, 2, 3]      # no len()
@@ -182,10 +184,6 @@ def test_progress_passes_items_through_with_or_without_display():
 # ------------------------------------------------------------------ what the reuse hash covers
 def _package_copy(tmp_path, monkeypatch):
     """A copy of the pipeline package's sources that the runner hashes instead of the real one."""
-    import shutil
-
-    from pipeline import runner
-
     copy = tmp_path / "pkg" / "pipeline"
     shutil.copytree(runner._PACKAGE_ROOT, copy, ignore=shutil.ignore_patterns("__pycache__"))
     monkeypatch.setattr(runner, "_PACKAGE_ROOT", copy)
@@ -205,10 +203,6 @@ def test_code_change_in_any_subpackage_reruns_every_stage(fake_stages, tmp_path,
 
 
 def test_every_real_stage_hash_covers_the_whole_package(tmp_path, monkeypatch):
-    from pipeline.config import resolve_robot_dir
-    from pipeline.runner import stage_inputs_hashes
-    from pipeline.stage_plan import plan_stages
-
     copy = _package_copy(tmp_path, monkeypatch)
     cfg = load_config()
     plans = plan_stages(cfg)
@@ -225,8 +219,6 @@ def test_every_real_stage_hash_covers_the_whole_package(tmp_path, monkeypatch):
 
 
 def test_config_reads_enter_the_inputs_hash(fake_stages, tmp_path):
-    from pipeline import config
-
     config.STAGES["a"].CONFIG_READS = ("c.label",)
     quiet = {"out_root": tmp_path, "log": lambda m: None}
     run_pipeline(load_config(None, ["name=r"]), **quiet)
@@ -239,9 +231,6 @@ def test_config_reads_enter_the_inputs_hash(fake_stages, tmp_path):
 
 
 def test_bad_config_reads_declaration_is_refused_before_writing(fake_stages, tmp_path):
-    from pipeline import config
-    from pipeline.errors import PipelineError
-
     config.STAGES["b"].CONFIG_READS = ("nosuch.field",)
     with pytest.raises(PipelineError, match="CONFIG_READS.*nosuch.field"):
         run_pipeline(load_config(None, ["name=r"]), out_root=tmp_path, log=lambda m: None)
@@ -249,8 +238,6 @@ def test_bad_config_reads_declaration_is_refused_before_writing(fake_stages, tmp
 
 
 def test_config_yaml_lists_the_planned_stages(fake_stages, tmp_path):
-    import yaml
-
     run_pipeline(load_config(None, ["name=r"]), out_root=tmp_path, log=lambda m: None)
     res = run_pipeline(load_config(None, ["name=r"], stages="b"), out_root=tmp_path, log=lambda m: None)
     assert res.reused == ["a", "b"]
@@ -261,9 +248,6 @@ def test_config_yaml_lists_the_planned_stages(fake_stages, tmp_path):
 
 # ------------------------------------------------------------------------------------- docs
 def test_architecture_layout_lists_exactly_the_package_files():
-    import re
-    from pathlib import Path
-
     repo = Path(__file__).resolve().parents[1]
     text = (repo / "docs" / "ARCHITECTURE.md").read_text(encoding="utf-8")
     block = text.split("## Layout\n```", 1)[1].split("```", 1)[0]

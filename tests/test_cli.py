@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -11,7 +12,9 @@ from pathlib import Path
 
 import pytest
 
-from pipeline import cli, studies
+from pipeline import cli, config, studies
+from pipeline.config import load_config
+from pipeline.runner import run_pipeline
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -119,8 +122,6 @@ def test_bad_set_and_stage_in_process(tmp_path, capsys):
 
 
 def test_missing_stage_module_reported(monkeypatch, tmp_path, capsys):
-    from pipeline import config
-
     monkeypatch.setattr(config, "STAGES", {**config.STAGES, "ghost": "pipeline.ghost_not_written.stage"})
     out = tmp_path / "runs"
     assert cli.main(["run", "--stages", "ghost", "--out", str(out)]) == 2
@@ -185,8 +186,6 @@ def test_stage_check_names_the_source(tmp_path, cli_in_process):
 def test_second_robot_runs_every_stage(tmp_path):
     """The TX40 through the whole quick pipeline: its robot.yaml run_defaults put the ISO cube in
     its workspace; feedforward from its identified model beats feedback alone."""
-    import json
-
     out = tmp_path / "runs"
     proc = run_cli("run", "--config", "configs/quick.yaml", "--set", "robot=staubli_tx40", "--set", "name=tx40",
                    "--out", str(out))
@@ -222,9 +221,6 @@ def test_check_error_names_the_layer_of_the_field(tmp_path, capsys):
 
 
 def test_failed_run_report_says_failed_and_marks_stale_stages(fake_stages, tmp_path):
-    from pipeline.config import load_config
-    from pipeline.runner import run_pipeline
-
     quiet = {"out_root": tmp_path, "log": lambda m: None}
     run_pipeline(load_config(None, ["name=r"]), **quiet)
     report = tmp_path / "r" / "report.md"

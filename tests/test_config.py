@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 from dataclasses import dataclass, field
 from types import SimpleNamespace
 
@@ -10,6 +11,7 @@ import pytest
 from pipeline import config
 from pipeline.config import RunConfig, load_config, parse_set
 from pipeline.errors import ConfigError
+from pipeline.robot.iso9283 import IsoPathConfig
 
 
 def write(tmp_path, text: str, name: str = "run.yaml"):
@@ -150,8 +152,6 @@ def test_quick_profile_loads(quick_config):
 
 # ---------------------------------------------------------------- robot run_defaults layer
 def test_robot_run_defaults_sit_between_defaults_and_file(tmp_path):
-    from pipeline.robot.iso9283 import IsoPathConfig
-
     builtin = IsoPathConfig().centre_m
     tx40 = load_config(values={"robot": "staubli_tx40"})
     assert tx40.control.iso.centre_m == [0.35, 0.0, 0.2] != builtin
@@ -170,8 +170,6 @@ def test_robot_run_defaults_sit_between_defaults_and_file(tmp_path):
                                                 ("run_defaults:\n  control: {iso: {edge_m: abc}}\n",
                                                  "control.iso.edge_m")])
 def test_bad_robot_run_defaults_name_robot_yaml(tmp_path, block, field_name):
-    import shutil
-
     robot = tmp_path / "myrobot"
     shutil.copytree(config.REPO_ROOT / "robots" / "staubli_tx40", robot)
     text = (robot / "robot.yaml").read_text()
@@ -190,8 +188,6 @@ def test_bad_robot_run_defaults_name_robot_yaml(tmp_path, block, field_name):
     ],
 )
 def test_bad_run_defaults_blamed_when_a_later_layer_touches_the_section(tmp_path, bad, field_name, problem):
-    import shutil
-
     robot = tmp_path / "myrobot"
     shutil.copytree(config.REPO_ROOT / "robots" / "staubli_tx40", robot)
     text = (robot / "robot.yaml").read_text()

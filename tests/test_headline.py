@@ -8,9 +8,10 @@ from types import SimpleNamespace
 import pytest
 from rich.console import Console
 
-from pipeline import cli
+from pipeline import cli, config
 from pipeline import headline as hl
 from pipeline.report import write_report
+from pipeline.runner import StageResult
 
 GATES_PASS = {"passed": True, "checks": [
     {"name": "validation_rms_over_noise", "passed": True, "value": 1.03, "op": "<=", "threshold": 2.0},
@@ -114,9 +115,6 @@ def test_console_table_shows_every_row_and_the_warnings(tmp_path):
 @pytest.fixture
 def model_like_stage(monkeypatch, fake_stages):
     """The fake registry plus a stage "model" whose summary carries a warning and an assumption."""
-    from pipeline import config
-    from pipeline.runner import StageResult
-
     def run(ctx):
         return StageResult(summary=dict(SUMMARIES["model"]))
 

@@ -7,15 +7,27 @@ import subprocess
 from pathlib import Path
 from typing import NamedTuple
 
+import meshcat
 import numpy as np
 import pytest
+from matplotlib.image import imread
 
 from pipeline import cli
 from pipeline.config import load_config
+from pipeline.robot.defaults import ready_pose_rad
 from pipeline.robot.example_robots import example_arm_urdf
 from pipeline.robot.model import RobotModel
 from pipeline.runner import run_pipeline
-from pipeline.viewer import Viewer, find_saved_motions, view_run
+from pipeline.viewer import (
+    LAYERS,
+    Viewer,
+    camera_view,
+    find_saved_motions,
+    is_run_dir,
+    layer_of,
+    view_run,
+    workspace_box,
+)
 
 CHROMIUM = shutil.which("chromium") or ("/usr/bin/chromium" if Path("/usr/bin/chromium").exists() else None)
 
@@ -23,8 +35,6 @@ CHROMIUM = shutil.which("chromium") or ("/usr/bin/chromium" if Path("/usr/bin/ch
 def screenshot(url: str, out: Path, tmp_path: Path, size: str = "800,600", budget_ms: int = 5000) -> np.ndarray:
     """Load ``url`` in headless Chromium and return the screenshot as an (H, W, C) float array
     (``budget_ms``: the page's virtual time before the shot, for the scene to arrive)."""
-    from matplotlib.image import imread
-
     profile = tmp_path / f"chromium-profile-{out.stem}"
     cmd = [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
            "--disable-background-networking", "--disable-component-update", "--disable-sync",
@@ -46,8 +56,6 @@ def changed_fraction(a: np.ndarray, b: np.ndarray, threshold: float = 0.1) -> fl
 
 
 def test_configurations_and_trajectories_api(rx130l):
-    import meshcat
-
     vis = meshcat.Visualizer()
     try:
         v = Viewer(rx130l, viewer=vis)
@@ -106,8 +114,6 @@ def test_view_command_on_a_run(fake_stages, tmp_path, monkeypatch, capsys):
 
 
 def test_view_refuses_a_folder_that_is_not_a_run(tmp_path, capsys):
-    from pipeline.viewer import is_run_dir
-
     folder = tmp_path / "some_folder"
     (folder / "model").mkdir(parents=True)              # a sub-folder without manifest.json
     assert not is_run_dir(folder)
@@ -143,8 +149,6 @@ def framed_screenshots(robot, q: np.ndarray, tmp_path: Path, moved_q: np.ndarray
     the pixels differ, each waiting three times longer:
     5 s to 135 s of page time, for a loaded machine), then, with ``moved_q``, one with the robot
     moved there."""
-    import meshcat
-
     vis = meshcat.Visualizer()
     moved = None
     try:
@@ -183,8 +187,6 @@ def assert_framed(with_robot: np.ndarray, without: np.ndarray) -> None:
 def test_primitive_arm_is_drawn_framed_with_its_floor_and_moves(rx130l, tmp_path):
     """The RX130L in meshcat, seen by headless Chromium: drawn (its yellow links on screen, absent
     when it is hidden), framed with the floor and the legend, and redrawn when it moves."""
-    from pipeline.robot.defaults import ready_pose_rad
-
     with_robot, without, viewer, bent = framed_screenshots(rx130l, ready_pose_rad(rx130l), tmp_path,
                                                            moved_q=np.deg2rad([90, 60, 30, 0, 0, 0]))
     assert viewer.drawn_as == "meshes"            # the URDF's own primitives (cylinders, boxes)
@@ -205,10 +207,6 @@ def test_primitive_arm_is_drawn_framed_with_its_floor_and_moves(rx130l, tmp_path
 
 
 def test_layers_are_named_and_explained(rx130l):
-    import meshcat
-
-    from pipeline.viewer import LAYERS, layer_of
-
     assert layer_of("calibration/selected", False) == "chosen poses"
     assert layer_of("calibration/heldout", False) == "held-out poses"
     assert layer_of("calibration/candidates", False) == "candidates"
@@ -232,8 +230,6 @@ def test_layers_are_named_and_explained(rx130l):
 
 
 def test_camera_frames_the_reach_of_small_and_large_arms(rx130l):
-    from pipeline.viewer import camera_view, workspace_box
-
     small = RobotModel.load(example_arm_urdf("ur_description/urdf/ur3_robot.urdf") or pytest.skip("no example arms"))
     for robot in (rx130l, small):
         box = workspace_box(robot.model, robot.spec.collision.floor_z_m)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +13,7 @@ from pipeline.robot import defaults
 from pipeline.robot.example_robots import example_arm_urdf
 from pipeline.robot.model import RobotModel
 from pipeline.robot.reference import resolved_rate
+from pipeline.robot.yaml_init import write_robot_yaml
 
 
 def _erd(name: str) -> Path:
@@ -87,10 +89,6 @@ def test_ready_pose_and_move_are_collision_free_and_inside_limits():
 
 
 def test_robot_init_writes_an_editable_yaml_that_loads_back(tmp_path):
-    import shutil
-
-    from pipeline.robot.yaml_init import write_robot_yaml
-
     source = _erd("ur_description/urdf/ur5_robot.urdf")
     urdf = tmp_path / "ur5.urdf"
     shutil.copy(source, urdf)

@@ -11,21 +11,25 @@ import pinocchio as pin
 import pytest
 
 from pipeline.calibration import candidates as cd
+from pipeline.calibration import design as ds
 from pipeline.calibration import error_model as em
+from pipeline.calibration import indices as ix
 from pipeline.calibration import measure as ms
 from pipeline.calibration import stage as st
 from pipeline.calibration import validate as va
 from pipeline.calibration.elastostatic import design_basis, design_blocks, measurement_model
 from pipeline.calibration.estimate import estimate, register_points
-from pipeline.errors import DataFileError, InfeasibleError, PipelineError, SolverError
+from pipeline.config import quick_config
+from pipeline.errors import ConfigError, DataFileError, InfeasibleError, PipelineError, SolverError
 from pipeline.quality import QualityGates
-from pipeline.sim.truth import RealRobot
+from pipeline.robot.instruments import tracker_visibility
+from pipeline.robot.model import RobotModel
+from pipeline.runner import run_pipeline
+from pipeline.sim.truth import RealRobot, TruthConfig
 
 
 @pytest.fixture(scope="session")
 def robot():
-    from pipeline.robot.model import RobotModel
-
     return RobotModel.load("rx130l")
 
 
@@ -77,8 +81,6 @@ def test_numpy_kinematics_and_jacobian_match_pinocchio_and_casadi(robot, mm):
 
 
 def test_filter_is_conservative_against_the_sensor_rule(robot):
-    from pipeline.robot.instruments import tracker_visibility
-
     ch = cd.chain_from_robot(robot)
     Q = em.random_configurations(robot, 60000, np.random.default_rng(4))
     mask, counts = cd.filter_configurations(ch, Q)
@@ -139,9 +141,6 @@ def test_too_few_or_degenerate_configurations_raise(robot, mm):
 
 
 def test_candidate_set_that_cannot_be_regular_raises(robot, mm):
-    from pipeline.calibration import design as ds
-    from pipeline.calibration import indices as ix
-
     rng = np.random.default_rng(7)
     _, basis = st.identify_parameter_set(robot, mm, st.Config(), rng)
     ch = cd.chain_from_robot(robot)
@@ -181,9 +180,6 @@ def test_csv_bad_inputs_name_file_and_problem(robot, tmp_path):
 
 
 def test_bad_csv_through_runner_writes_nothing(tmp_path):
-    from pipeline.config import quick_config
-    from pipeline.runner import run_pipeline
-
     bad = tmp_path / "bad.csv"
     bad.write_text("q1,q2,q3,q4,q5,q6,x,y,z\n" + "0.1,0.2,0.3,0.1,0.2,0.3,1.0,2.0,nan\n" * 30)
     cfg = quick_config(**{"stages": ["model", "calibration"], "name": "badcsv",
@@ -194,8 +190,6 @@ def test_bad_csv_through_runner_writes_nothing(tmp_path):
 
 
 def test_csv_round_trip_gives_the_same_calibration(robot, tmp_path):
-    from pipeline.sim.truth import RealRobot
-
     real = RealRobot.create(robot, 11)
     rng = np.random.default_rng(11)
     mmod = em.MeasurementModel(robot)
@@ -244,11 +238,6 @@ def _truth_gap(robot_a, robot_b, Q, frame="reflector"):
 
 
 def test_quick_profile_stage_through_runner(tmp_path):
-    from pipeline.config import quick_config
-    from pipeline.robot.model import RobotModel
-    from pipeline.runner import run_pipeline
-    from pipeline.sim.truth import RealRobot, TruthConfig
-
     # one pass: the second pass through the runner is covered by test_second_pass_pipeline.py
     cfg = quick_config(**{"stages": ["model", "calibration"], "name": "calq", "calibration.second_pass": "never"})
     cfg.sections["truth"] = TruthConfig.ideal()   # geometric-only truth: the geometric targets hold
@@ -286,9 +275,6 @@ def test_targets_hold_for_other_robots_and_seeds(name, seed):
     """The targets of the quick run on another arm and seed. The RX130L at seed 4 is a slow check:
     the fast suite calibrates the RX130L through the runner (quick profile, seed 1) and the TX40 here;
     the slow twin adds a second seed of the RX130L."""
-    from pipeline.robot.model import RobotModel
-    from pipeline.sim.truth import RealRobot, TruthConfig
-
     robot = RobotModel.load(name)
     real = RealRobot.create(robot, seed, TruthConfig.ideal())
     cfg = _cfg()
@@ -297,10 +283,6 @@ def test_targets_hold_for_other_robots_and_seeds(name, seed):
 
 
 def test_too_small_candidate_set_through_runner_writes_nothing(tmp_path):
-    from pipeline.config import quick_config
-    from pipeline.errors import ConfigError
-    from pipeline.runner import run_pipeline
-
     # fewer random candidates than configurations: caught when the configuration is loaded
     with pytest.raises(ConfigError, match="calibration.n_random_candidates: 5 feasible random candidates"):
         quick_config(**{"stages": ["model", "calibration"], "calibration.n_random_candidates": 5})
@@ -317,9 +299,6 @@ def test_too_small_candidate_set_through_runner_writes_nothing(tmp_path):
                                                ("n_configurations", 0, "n_configurations"),
                                                ("error_model", "dh", "error_model")])
 def test_bad_config_values_name_the_field(key, value, problem):
-    from pipeline.config import quick_config
-    from pipeline.errors import ConfigError
-
     with pytest.raises(ConfigError, match=f"calibration.{problem}"):
         quick_config(**{f"calibration.{key}": value})
 
@@ -347,8 +326,6 @@ class _Ctx:
 @pytest.fixture(scope="session")
 def tracker_files(robot, tmp_path_factory):
     """Calibration and validation CSVs written from simulated measurements of one hidden robot."""
-    from pipeline.sim.truth import RealRobot, TruthConfig
-
     real = RealRobot.create(robot, 21, TruthConfig.ideal())
     rng = np.random.default_rng(21)
     ch = cd.chain_from_robot(robot)
@@ -366,8 +343,6 @@ HELDOUT_KEYS = ("heldout_n_poses", "heldout_rms_position_error_before_m", "heldo
 
 
 def test_measurement_file_without_validation_file_has_no_heldout_validation(robot, tracker_files):
-    from pipeline.calibration import indices as ix
-
     path, _, n_meas, _ = tracker_files
     cfg = _cfg(measurements_csv=str(path), n_heldout=200, identifiability_samples=60, index_name="O3",
                parameters="all")
@@ -424,8 +399,6 @@ def test_measurement_and_validation_files_validate_on_the_validation_file(robot,
 
 
 def test_report_says_how_many_selected_poses_were_not_visible(robot):
-    from types import SimpleNamespace
-
     Q = np.zeros((50, 6))
     meas = ms.Measurements(Q[:48], np.zeros((48, 3)), np.ones(48), "simulated tracker", None, 50, Q[48:])
     out = SimpleNamespace(measurements=meas, selection=object())

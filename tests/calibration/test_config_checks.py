@@ -12,6 +12,8 @@ from pipeline.calibration import stage as st
 from pipeline.cli import main
 from pipeline.config import CONFIGS_DIR, load_config
 from pipeline.errors import ConfigError, DataFileError, InfeasibleError
+from pipeline.robot.model import RobotModel
+from pipeline.sim.truth import RealRobot
 
 QUICK = CONFIGS_DIR / "quick.yaml"
 GRADIENT = ["calibration.selection_method=gradient", "calibration.index_name=A"]
@@ -19,8 +21,6 @@ GRADIENT = ["calibration.selection_method=gradient", "calibration.index_name=A"]
 
 @pytest.fixture(scope="session")
 def robot():
-    from pipeline.robot.model import RobotModel
-
     return RobotModel.load("rx130l")
 
 
@@ -111,8 +111,6 @@ def test_cli_too_few_configurations_is_reported_before_anything_is_written(tmp_p
 
 
 def test_too_few_feasible_candidates_speaks_in_the_users_fields(robot):
-    from pipeline.sim.truth import RealRobot
-
     cfg = _load("calibration.candidates=grid", "calibration.grid_per_axis=3").calibration
     cfg.figures = False
     with pytest.raises(InfeasibleError) as info:
@@ -127,8 +125,6 @@ def test_too_few_feasible_candidates_speaks_in_the_users_fields(robot):
 @pytest.fixture(scope="session")
 def measured(robot):
     """Simulated readings of the hidden robot (its tracker pose differs from the nominal one)."""
-    from pipeline.sim.truth import RealRobot
-
     rng = np.random.default_rng(0)
     Q, _ = cd.random_candidates(cd.chain_from_robot(robot), 40, rng)
     return ms.measure_simulated(RealRobot.create(robot, 3), Q, rng)

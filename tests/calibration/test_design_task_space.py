@@ -10,12 +10,15 @@ from pipeline.calibration import design as ds
 from pipeline.calibration import design_table as dtab
 from pipeline.calibration import error_model as em
 from pipeline.calibration import indices as ix
+from pipeline.calibration import measure as ms
 from pipeline.calibration import stage as st
 from pipeline.calibration import task_space as ts
 from pipeline.calibration.design_state import DesignState
+from pipeline.calibration.estimate import estimate
 from pipeline.errors import ConfigError, DataFileError
 from pipeline.robot.defaults import iso_cube
 from pipeline.robot.model import RobotModel
+from pipeline.sim.truth import RealRobot
 
 
 @pytest.fixture(scope="session")
@@ -87,15 +90,11 @@ def test_selectors_improve_v_over_random(setup, method):
 
 
 def test_design_table_rows_and_user_mode(robot, setup):
-    from pipeline.sim.truth import RealRobot
-
     mm, basis, cs, region, Qw = setup
     spec = ts.task_space_spec(mm, Qw, basis)
     rng = np.random.default_rng(2)
     sel = ds.remove_and_replace(cs.G, spec, 24, rng)
     real = RealRobot.create(robot, 2)
-    from pipeline.calibration import measure as ms
-    from pipeline.calibration.estimate import estimate
 
     meas = ms.measure_simulated(real, cs.Q[sel.selected], rng)
     est = estimate(mm, meas.Q, meas.Y, meas.sigma_m, basis)

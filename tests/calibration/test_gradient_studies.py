@@ -13,6 +13,8 @@ from pipeline.calibration import stage as st
 from pipeline.calibration.gradient_design import GradientDesignConfig, gradient_design
 from pipeline.robot.collision import segment_distances
 from pipeline.robot.collision_sx import segment_distance_sx
+from pipeline.robot.instruments import tracker_visibility
+from pipeline.robot.model import RobotModel
 
 
 def test_squared_casadi_segment_distance_matches_numpy():
@@ -28,9 +30,6 @@ def test_squared_casadi_segment_distance_matches_numpy():
 
 
 def test_gradient_design_improves_and_stays_feasible():
-    from pipeline.robot.instruments import tracker_visibility
-    from pipeline.robot.model import RobotModel
-
     robot = RobotModel.load("rx130l")
     mm = em.MeasurementModel(robot)
     rng = np.random.default_rng(1)

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import nbformat
 
+from pipeline.calibration.notebook import build
+
 
 def test_calibration_notebook_executes(tmp_path, execute_notebook):
     text = execute_notebook("01_calibration.ipynb", tmp_path)
@@ -13,7 +15,5 @@ def test_calibration_notebook_executes(tmp_path, execute_notebook):
 
 
 def test_notebook_file_is_up_to_date():
-    from pipeline.calibration.notebook import build
-
     nb = nbformat.read(Path(__file__).resolve().parents[2] / "notebooks" / "01_calibration.ipynb", as_version=4)
     assert [c.source for c in nb.cells] == [c.source for c in build().cells]

@@ -11,6 +11,7 @@ from pipeline.config import CONFIGS_DIR, load_config
 from pipeline.control import stage
 from pipeline.control.config import ControlConfig
 from pipeline.errors import ConfigError
+from pipeline.robot import iso9283
 from pipeline.robot.iso9283 import ISO_PLANES, ISO_SEGMENTS, IsoPathConfig
 
 BAD = [
@@ -109,9 +110,6 @@ def test_direct_construction_is_checked():
 
 
 def test_allowed_sets_match_the_path_builder():
-    pytest.importorskip("pinocchio")
-    from pipeline.robot import iso9283
-
     assert set(ISO_PLANES) == set(iso9283.PLANES)
     # the builder knows every segment the config allows
     path = iso9283.iso9283_path(None, 0.2, (0.9, 0.0, 0.5), segments=ISO_SEGMENTS)

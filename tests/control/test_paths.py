@@ -6,10 +6,20 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from pipeline.control.validate import registered_error
 from pipeline.errors import ConfigError
 from pipeline.robot.iso9283 import iso9283_path
 from pipeline.robot.model import RobotModel
-from pipeline.robot.paths import CirclePath, LinePath, PolylinePath, SplinePath, pose_error, rectangle
+from pipeline.robot.paths import (
+    CirclePath,
+    LinePath,
+    PolylinePath,
+    SplinePath,
+    joint_path,
+    pose_error,
+    rectangle,
+    start_configuration,
+)
 
 
 @pytest.mark.parametrize("path", [
@@ -80,10 +90,6 @@ def test_iso9283_geometry(plane):
 
 
 def test_joint_path_follows_the_poses(rx130l):
-    import pinocchio as pin
-
-    from pipeline.robot.paths import joint_path, start_configuration
-
     down = pin.utils.rotate("x", np.pi)
     line = LinePath([0.8, -0.2, 0.3], [1.0, 0.2, 0.5], rotation=down)
     q0 = start_configuration(rx130l, line.poses([0.0])[0], np.radians([[0.0, 17.0, 86.0, 0.0, 75.0, 0.0]]))
@@ -93,10 +99,6 @@ def test_joint_path_follows_the_poses(rx130l):
 
 
 def test_registered_error_removes_rigid_motion_only():
-    import pinocchio as pin
-
-    from pipeline.control.validate import registered_error
-
     rng = np.random.default_rng(0)
     P = rng.uniform(-0.3, 0.3, (200, 3))
     T = pin.exp6(np.array([0.01, -0.02, 0.005, 0.01, 0.02, -0.01]))

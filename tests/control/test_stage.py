@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 from pipeline.control import stage
+from pipeline.control.config import ControlConfig
 from pipeline.control.estimate import with_dynamics_of
+from pipeline.errors import ConfigError
 from pipeline.progress import Progress
 from pipeline.sim.truth import RealRobot, TruthConfig
 from pipeline.stage_api import StageContext, StageOutput, stage_rng
@@ -86,8 +88,5 @@ def test_stage_with_calibrated_kinematics_and_a_nominal_comparison(quick_config,
                                     {"setpoint_delay_samples": -1}, {"iso": {"plane": "vertical"}},
                                     {"iso": {"edge_m": 0.0}}])
 def test_bad_config_is_a_config_error(kwargs):
-    from pipeline.control.config import ControlConfig
-    from pipeline.errors import ConfigError
-
     with pytest.raises(ConfigError, match="control"):
         ControlConfig(**kwargs)

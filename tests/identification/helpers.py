@@ -11,12 +11,14 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.config import CONFIGS_DIR, load_config
+from pipeline.config import CONFIGS_DIR, load_config, to_plain
+from pipeline.identification import stage
 from pipeline.progress import Progress
 from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import apply_kinematic_errors
 from pipeline.sim.truth import RealRobot, TruthConfig
 from pipeline.stage_api import StageContext, stage_rng
+from pipeline.typed_config import build_dataclass
 
 
 def calibrated_robot(nominal: RobotModel, real: RealRobot) -> RobotModel:
@@ -36,10 +38,6 @@ def quick_context(tmp_path: Path, seed: int = 1, robot: str = "rx130l", override
                   calibrated: bool = True, truth: TruthConfig | None = None) -> tuple[StageContext, RealRobot]:
     """Quick-profile context of the identification stage (config from configs/quick.yaml); the
     hidden robot of ``truth`` (default: the default TruthConfig)."""
-    from pipeline.config import to_plain
-    from pipeline.identification import stage
-    from pipeline.typed_config import build_dataclass
-
     cfg = load_config(CONFIGS_DIR / "quick.yaml")
     section: dict[str, Any] = {}
     raw = cfg.sections.get("identification")

@@ -5,15 +5,19 @@ from __future__ import annotations
 
 import json
 import warnings
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
+from pipeline import config as config_mod
 from pipeline.config import CONFIGS_DIR, load_config, to_plain
 from pipeline.errors import DataFileError, PipelineError, QualityGateError
-from pipeline.identification import stage
+from pipeline.identification import fourier, stage
 from pipeline.identification.estimate import is_physically_consistent
+from pipeline.identification.measure import load_joint_csv
 from pipeline.robot.model import RobotModel
+from pipeline.runner import run_pipeline
 
 from .helpers import NO_LOAD_FRICTION, quick_context, true_base
 
@@ -217,8 +221,6 @@ def test_stage_runs_on_a_joint_csv_record_and_a_failed_gate_raises(tmp_path):
     read the finished result, so the result is the one an ordinary threshold hands on): the stage
     fails naming the figure and threshold, writes nothing, and the unaccepted result rides on the
     error (the record's checks below read it there); --accept-poor: test_gates.py."""
-    from pipeline.identification import fourier
-
     # the linear friction model: the record's path is what this test is about (the Stribeck and load-friction
     # fits on a record's held-out tail: the TIAGo record test, test_tiago_record.py)
     ctx, real = quick_context(tmp_path / "run", overrides={"run_tx40": False, "friction_model": "viscous_coulomb",
@@ -276,8 +278,6 @@ def test_stage_runs_on_a_joint_csv_record_and_a_failed_gate_raises(tmp_path):
 
 
 def test_motor_side_csv_is_converted_with_the_gear_matrix(tmp_path):
-    from pipeline.identification.measure import load_joint_csv
-
     tx40 = RobotModel.load("staubli_tx40")
     K = tx40.actuation.gear_matrix
     rng = np.random.default_rng(9)
@@ -291,12 +291,6 @@ def test_motor_side_csv_is_converted_with_the_gear_matrix(tmp_path):
 
 def test_runner_leaves_no_stage_directory_on_bad_input(tmp_path, monkeypatch):
     """Through the runner (calibration left out of the dependencies to keep this fast)."""
-    from types import SimpleNamespace
-
-    from pipeline import config as config_mod
-    from pipeline.config import CONFIGS_DIR, load_config
-    from pipeline.runner import run_pipeline
-
     path = tmp_path / "record.csv"
     t = np.arange(400) * 0.01
     q = 0.1 * np.sin(np.outer(t, np.arange(1, 7)))

@@ -17,9 +17,10 @@ import textwrap
 import time
 from pathlib import Path
 
+import casadi as ca
 import pytest
 
-from pipeline import cli, config
+from pipeline import cli, codegen, config
 from tests.reliability import fake_cli
 
 REPO = Path(__file__).resolve().parents[2]
@@ -152,15 +153,11 @@ def test_disk_full_is_one_line_and_keeps_older_artefacts(tmp_path):
 
 # ------------------------------------------------------------------------------ compiled code cache
 def _tiny_function():
-    import casadi as ca
-
     x = ca.SX.sym("x", 2)
     return ca.Function("tiny_fault_test", [x], [ca.sin(x) * 2.0])
 
 
 def test_truncated_library_is_rebuilt(tmp_path):
-    from pipeline import codegen
-
     library = codegen.build_library("tiny", [_tiny_function()], cache_dir=tmp_path)
     data = library.read_bytes()
     library.write_bytes(data[: len(data) // 3])                 # dlopen of this would SIGBUS
@@ -171,8 +168,6 @@ def test_truncated_library_is_rebuilt(tmp_path):
 
 
 def test_cache_honours_xdg_and_falls_back_when_unwritable(tmp_path, monkeypatch, capsys):
-    from pipeline import codegen
-
     monkeypatch.delenv("PIPELINE_CACHE_DIR", raising=False)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
     assert codegen.cache_root() == tmp_path / "xdg" / "pipeline"

@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 
 from pipeline.config import CONFIGS_DIR, load_config, section_names
 from pipeline.errors import ConfigError, PipelineError, RobotFileError
+from pipeline.robot.model import RobotModel
 from pipeline.robot.spec import load_robot_spec
 
 FUZZ = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
@@ -110,8 +111,6 @@ def test_binary_config_file_is_one_line(tmp_path):
 
 @pytest.mark.parametrize("field", ["gear_ratio", "rotor_inertia_kgm2", "viscous_Nms_rad", "coulomb_Nm"])
 def test_per_joint_list_of_wrong_length_is_reported_under_its_own_field(tmp_path, field):
-    from pipeline.robot.model import RobotModel
-
     folder = tmp_path / "robot"
     shutil.copytree(ROBOT_YAML.parent, folder)
     data = yaml.safe_load(ROBOT_YAML.read_text())

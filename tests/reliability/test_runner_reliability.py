@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 from dataclasses import dataclass
@@ -10,15 +11,15 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from pipeline import cli, stage_io
-from pipeline.config import load_config
-from pipeline.errors import PipelineError, QualityGateError
+from pipeline import cli, config, locking, stage_io
+from pipeline.config import CONFIGS_DIR, load_config
+from pipeline.errors import ArtefactWriteError, PipelineError, QualityGateError
 from pipeline.interrupts import INTERRUPT_STATUSES, raise_if_interrupted
 from pipeline.locking import RunLockedError, run_lock
 from pipeline.quality import QualityGates
 from pipeline.runner import run_pipeline
 from pipeline.stage_api import StageResult
-from pipeline.stage_io import load_run
+from pipeline.stage_io import file_sha256, load_run
 
 QUIET = {"log": lambda m: None}
 
@@ -44,8 +45,6 @@ def _gate_stage(name: str, depends: tuple[str, ...], calls: list[str]) -> Simple
 
 @pytest.fixture
 def gate_stages(monkeypatch):
-    from pipeline import config
-
     calls: list[str] = []
     registry = {"a": _gate_stage("a", (), calls), "b": _gate_stage("b", ("a",), calls),
                 "c": _gate_stage("c", ("b",), calls)}
@@ -132,8 +131,6 @@ def test_manifest_lists_every_file_with_its_sha256(gate_stages, tmp_path):
     manifest = json.loads((tmp_path / "r" / "a" / "manifest.json").read_text())
     files = manifest["files_sha256"]
     assert set(files) == {"summary.json", "results.npz", "results.json", "extra.txt"}
-    from pipeline.stage_io import file_sha256
-
     assert all(file_sha256(tmp_path / "r" / "a" / f) == h for f, h in files.items())
 
 
@@ -205,11 +202,6 @@ def test_unwritable_run_dir_is_one_line(gate_stages, tmp_path, monkeypatch):
 
 
 def test_read_only_run_dir_reuses_everything_or_says_why_not(gate_stages, tmp_path, monkeypatch):
-    import errno
-
-    from pipeline import locking
-    from pipeline.errors import ArtefactWriteError
-
     run_pipeline(load_config(None, ["name=r"]), out_root=tmp_path, **QUIET)
     real_open = os.open
 
@@ -227,8 +219,6 @@ def test_read_only_run_dir_reuses_everything_or_says_why_not(gate_stages, tmp_pa
 
 
 def test_check_validates_the_data_files_of_real_stages_and_writes_nothing(tmp_path, capsys):
-    from pipeline.config import CONFIGS_DIR
-
     missing = tmp_path / "missing.csv"
     out = tmp_path / "runs"
     code = cli.main(["check", "--config", str(CONFIGS_DIR / "quick.yaml"), "--set",

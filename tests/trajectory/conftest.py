@@ -8,36 +8,31 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.trajectory.solve import PTPPlan, plan_ptp
+from pipeline.config import CONFIGS_DIR, load_config
+from pipeline.trajectory.dynamics import PlanningModel
+from pipeline.trajectory.solve import PTPPlan, cp_joint_path, plan_ptp
+from pipeline.trajectory.solve import ptp_problem as compile_ptp_problem  # the fixture below takes its name
 
 
 @pytest.fixture(scope="session")
 def quick_traj_config():
-    from pipeline.config import CONFIGS_DIR, load_config
-
     return load_config(CONFIGS_DIR / "quick.yaml").trajectory
 
 
 @pytest.fixture(scope="session")
 def pm(rx130l):
-    from pipeline.trajectory.dynamics import PlanningModel
-
     return PlanningModel.from_robot(rx130l)
 
 
 @pytest.fixture(scope="session")
 def line_path(rx130l, quick_traj_config):
-    from pipeline.trajectory.solve import cp_joint_path
-
     path, _ = cp_joint_path(rx130l, quick_traj_config)
     return path
 
 
 @pytest.fixture(scope="session")
 def ptp_problem(rx130l, pm, quick_traj_config):
-    from pipeline.trajectory.solve import ptp_problem
-
-    return ptp_problem(pm, rx130l, quick_traj_config)
+    return compile_ptp_problem(pm, rx130l, quick_traj_config)
 
 
 @pytest.fixture(scope="session")

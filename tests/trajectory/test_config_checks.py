@@ -6,12 +6,15 @@ from __future__ import annotations
 import dataclasses
 import shutil
 
+import numpy as np
 import pytest
 
 from pipeline.config import CONFIGS_DIR, REPO_ROOT, load_config
 from pipeline.errors import ConfigError
+from pipeline.robot.iso9283 import ISO_SEGMENTS
 from pipeline.trajectory import stage
 from pipeline.trajectory.config import CP_SEGMENTS, PTP_ENERGIES, TrajectoryConfig
+from pipeline.trajectory.ptp import energy_weights
 
 T = "trajectory."
 BAD = [
@@ -125,11 +128,6 @@ def test_bad_robot_run_defaults_names_robot_yaml(tmp_path):
 
 
 def test_allowed_sets_match_the_planner(pm):
-    import numpy as np
-
-    from pipeline.robot.iso9283 import ISO_SEGMENTS
-    from pipeline.trajectory.ptp import energy_weights
-
     assert set(CP_SEGMENTS) - {"spline"} <= set(ISO_SEGMENTS)    # smooth pieces the ISO path builder draws
     motors = {"motor_resistance_ohm": [1.0] * pm.nq, "torque_constant_Nm_A": [0.5] * pm.nq}   # no default
     cfg = TrajectoryConfig(**motors)

@@ -5,9 +5,10 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import pinocchio as pin
 import pytest
 
-from pipeline.errors import InfeasibleError
+from pipeline.errors import ConfigError, InfeasibleError
 from pipeline.trajectory.baselines import toppra_cp
 from pipeline.trajectory.cp import solve_cp_convex, solve_cp_refined, solve_cp_smooth
 from pipeline.trajectory.design import JointPath
@@ -93,8 +94,6 @@ SPLINE_POINTS_M = [[0.9, -0.3, 0.2], [1.0, -0.1, 0.35], [0.95, 0.15, 0.3], [0.85
 
 def test_spline_through_points_is_followed(rx130l, pm, quick_traj_config):
     """cp_segment = spline: the joint path passes the given points (FK) and plans like the ISO pieces."""
-    import pinocchio as pin
-
     cfg = dataclasses.replace(quick_traj_config, cp_segment="spline", cp_points_m=SPLINE_POINTS_M, cp_smooth=False)
     path, piece = cp_joint_path(rx130l, cfg)
     data = rx130l.model.createData()
@@ -115,8 +114,6 @@ def test_spline_through_points_is_followed(rx130l, pm, quick_traj_config):
                                            ([[0.9, 0.0, 0.3], [0.9, 0.0, 0.3], [1.0, 0.1, 0.3]],
                                             r"cp_points_m\[1\]")])
 def test_bad_spline_points_are_named(rx130l, quick_traj_config, points, field):
-    from pipeline.errors import ConfigError
-
     cfg = dataclasses.replace(quick_traj_config, cp_segment="spline", cp_points_m=points)
     with pytest.raises(ConfigError, match=field):
         cp_joint_path(rx130l, cfg)

@@ -12,7 +12,7 @@ from pipeline.errors import InfeasibleError, PipelineError, SolverError
 from pipeline.trajectory import solve as solve_mod
 from pipeline.trajectory.baselines import _ruckig_input, _states_at, ruckig_torque_feasible
 from pipeline.trajectory.pareto import dominated_flags, settle_pareto
-from pipeline.trajectory.ptp import energy_weights
+from pipeline.trajectory.ptp import PtpResult, energy_weights
 from pipeline.trajectory.report import pareto_figure
 from pipeline.trajectory.solve import plan_ptp
 from pipeline.trajectory.trajectories import check_trajectory
@@ -109,8 +109,6 @@ def test_dominated_flags():
 
 
 def _fake(k2, T, E, tag="warm"):
-    from pipeline.trajectory.ptp import PtpResult
-
     z = np.zeros((2, 1))
     return PtpResult(np.array([0.0, T]), z, z, z, T, -1.0, 0.0, 0.0, 0, 1.0, k2, info={"E": E, "tag": tag})
 
@@ -198,10 +196,8 @@ def test_unattainable_duration_raises_before_the_solver_runs(ptp_problem, big_mo
 
 
 def test_compiled_library_is_reused(pm, rx130l, ptp_problem, quick_traj_config):
-    from pipeline.trajectory.solve import ptp_problem as make
-
     mtime = ptp_problem.library.stat().st_mtime_ns
-    again = make(pm, rx130l, quick_traj_config)
+    again = solve_mod.ptp_problem(pm, rx130l, quick_traj_config)
     assert again.library == ptp_problem.library
     assert again.library.stat().st_mtime_ns == mtime          # loaded from the cache, not rebuilt
 

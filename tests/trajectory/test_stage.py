@@ -7,6 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from pipeline.errors import ConfigError
 from pipeline.progress import Progress
 from pipeline.sim.truth import RealRobot, TruthConfig
 from pipeline.stage_api import StageContext, stage_rng
@@ -114,10 +115,6 @@ def test_report_units_and_pareto_table():
 
 
 def test_check_names_bad_fields(quick_config, rx130l):
-    import pytest
-
-    from pipeline.errors import ConfigError
-
     base = quick_config.trajectory
     for field, value, match in (("cp_segment", "rectangle", "cp_segment"), ("ptp_energy", "joules", "ptp_energy"),
                                 ("ptp_goal_deg", [0, 170, 0, 0, 0, 0], "joint 2"),
