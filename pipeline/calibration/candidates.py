@@ -202,18 +202,18 @@ def _collision_ok(chain: Chain, seg: np.ndarray, margins: FilterMargins, pairs: 
     ok = np.ones(seg.shape[0], bool)
     for c in floor:
         ok &= seg[:, c, :, 2].min(axis=1) - chain.capsule_r[c] - chain.floor_z >= margins.collision_m
-    idx = np.flatnonzero(ok)
-    ends = np.ascontiguousarray(np.moveaxis(seg[idx], 0, 2))   # (nc, 2, rows, 3): one block per capsule end
+    used = np.unique(pairs)                     # (n_used, 2, N, 3): the end points of the paired capsules
+    ends, slot = np.ascontiguousarray(seg[:, used].transpose(1, 2, 0, 3)), {c: i for i, c in enumerate(used.tolist())}
 
     def clear(a: int, b: int, rows: np.ndarray) -> np.ndarray:
-        p = [ends[c, k].take(rows, axis=0) for c, k in ((a, 0), (a, 1), (b, 0), (b, 1))]
+        p = [ends[slot[c], k].take(rows, axis=0) for c, k in ((a, 0), (a, 1), (b, 0), (b, 1))]
         return segment_distances(*p) - chain.capsule_r[a] - chain.capsule_r[b] >= margins.collision_m
 
-    rows = np.arange(len(idx))
+    rows = np.flatnonzero(ok)
     for a, b in sorted(pairs.reshape(-1, 2).tolist(), key=lambda p: clear(p[0], p[1], rows[:256]).sum()):
         rows = rows[clear(a, b, rows)]
     ok[:] = False
-    ok[idx[rows]] = True
+    ok[rows] = True
     return ok
 
 
