@@ -22,7 +22,8 @@ from pipeline.sim.truth import RealRobot
 from pipeline.stage_api import stage_rng
 from pipeline.calibration import stage as st, design as ds, indices as ix, validate as va, plots
 
-run = quick_config()
+SETTINGS = {}   # parameter: settings over configs/quick.yaml, e.g. {"calibration.n_heldout": 200}
+run = quick_config(**SETTINGS)
 cfg = run.section("calibration")
 robot = RobotModel.load(run.robot)
 real = RealRobot.create(robot, run.seed)   # the hidden robot: only its tracker is used below
