@@ -1,9 +1,11 @@
 """Faults from outside: SIGINT/SIGTERM/kill -9 in a stage, two runs at once, read-only and full
 disks, a damaged compiled-code cache. Each ends as one line with the right exit code, nothing
 half-written, and the next run resumes. The process that is signalled, killed or runs first is a
-real child (``fake_cli.py``: the command line with fake stages); the run after the fault is the same
-command line in this process (a child's interpreter start imports the whole package, seconds of
-CPU). The tmpfs disk-full case needs root and ``mount`` (skipped otherwise)."""
+real child: the command line with fake stages (``fake_cli.py``), forked from this process with the
+package already imported (a fresh interpreter imports it again, about 1.7 s of CPU per child; the
+disk-full case starts ``fake_cli.py`` itself, the ``python -m pipeline`` start: test_cli.py); the run
+after the fault is the same command line in this process. The tmpfs disk-full case needs root and
+``mount`` (skipped otherwise)."""
 
 from __future__ import annotations
 
@@ -15,6 +17,7 @@ import subprocess
 import sys
 import textwrap
 import time
+import traceback
 from pathlib import Path
 
 import casadi as ca
@@ -28,11 +31,74 @@ REPO = Path(__file__).resolve().parents[2]
 FAKE_CLI = Path(__file__).with_name("fake_cli.py")
 
 
-def _start(tmp_path: Path, *args: str) -> subprocess.Popen:
-    """``fake_cli.py run --out <tmp>/runs *args`` in a child process."""
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
-    return subprocess.Popen([sys.executable, str(FAKE_CLI), "run", "--out", str(tmp_path / "runs"), *args],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
+class ForkedRun:
+    """``fake_cli.py run --out <tmp>/runs *args`` in a child forked from this process: what
+    ``fake_cli.py`` does as a script (:func:`pipeline.cli.main` with the fake stages), with the
+    signal handlers of a fresh interpreter, its stderr in a file, its exit code as the process's.
+    The parts of :class:`subprocess.Popen` the tests use: ``pid``, ``returncode``, ``poll``,
+    ``send_signal``, ``kill`` and ``communicate`` (``(None, stderr text)``)."""
+
+    def __init__(self, tmp_path: Path, *args: str) -> None:
+        argv = ["run", "--out", str(tmp_path / "runs"), *args]
+        self._stderr = tmp_path / f"child-{len(list(tmp_path.glob('child-*.err')))}.err"
+        sys.stdout.flush()
+        sys.stderr.flush()
+        self.pid = os.fork()
+        if self.pid == 0:          # the child: never returns into the test
+            os._exit(self._child(tmp_path, argv))
+        self.returncode: int | None = None
+
+    def _child(self, cwd: Path, argv: list[str]) -> int:
+        code = 1
+        try:
+            err = os.open(self._stderr, os.O_WRONLY | os.O_CREAT | os.O_TRUNC)
+            os.dup2(err, 2)
+            os.dup2(os.open(os.devnull, os.O_WRONLY), 1)
+            sys.stdout, sys.stderr = open(1, "w", closefd=False), open(2, "w", closefd=False)  # noqa: SIM115
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
+            os.chdir(cwd)
+            config.STAGES = fake_cli.registry()
+            config.robot_run_defaults = fake_cli.no_run_defaults
+            code = cli.main(argv)
+        except SystemExit as exc:  # argparse: its message is on stderr already
+            code = exc.code if isinstance(exc.code, int) else 1
+        except BaseException:      # noqa: BLE001 - reported on the child's stderr, as a script would
+            traceback.print_exc()
+        finally:
+            sys.stderr.flush()
+        return code
+
+    def poll(self) -> int | None:
+        if self.returncode is None:
+            pid, status = os.waitpid(self.pid, os.WNOHANG)
+            if pid:
+                self.returncode = os.waitstatus_to_exitcode(status)
+        return self.returncode
+
+    def send_signal(self, sig: int) -> None:
+        os.kill(self.pid, sig)
+
+    def kill(self) -> None:
+        self.send_signal(signal.SIGKILL)
+
+    def wait(self, timeout: float) -> int:
+        deadline = time.monotonic() + timeout
+        while self.poll() is None:
+            if time.monotonic() > deadline:
+                self.kill()
+                raise subprocess.TimeoutExpired(f"fork of {FAKE_CLI.name}", timeout)
+            time.sleep(0.01)
+        return self.returncode
+
+    def communicate(self, timeout: float = 60.0) -> tuple[None, str]:
+        self.wait(timeout)
+        return None, self._stderr.read_text(errors="replace")
+
+
+def _start(tmp_path: Path, *args: str) -> ForkedRun:
+    """``fake_cli.py run --out <tmp>/runs *args`` in a child process (:class:`ForkedRun`)."""
+    return ForkedRun(tmp_path, *args)
 
 
 @pytest.fixture
@@ -51,7 +117,7 @@ def resume(monkeypatch, capsys):
     return call
 
 
-def _wait_for(path: Path, proc: subprocess.Popen, timeout_s: float = 60.0) -> None:
+def _wait_for(path: Path, proc: ForkedRun, timeout_s: float = 60.0) -> None:
     deadline = time.monotonic() + timeout_s
     while not path.exists():
         if proc.poll() is not None or time.monotonic() > deadline:
