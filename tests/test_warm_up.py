@@ -31,8 +31,10 @@ def test_tasks_run_in_turn_in_another_process_and_a_failure_does_not_stop_the_ne
     def fails() -> None:
         raise RuntimeError("a build that fails is the stage's to report")
 
-    def writes() -> None:
-        marker.write_text(str(os.getpid()))
+    def writes() -> None:        # renamed into place: the marker never exists empty
+        partial = marker.with_name("pid.partial")
+        partial.write_text(str(os.getpid()))
+        os.replace(partial, marker)
 
     with warmed_up([("a", fails), ("b", writes)]) as process:
         assert process is not None and _wait_for(marker)
