@@ -7,6 +7,8 @@ from pathlib import Path
 import nbformat
 import pytest
 
+from pipeline.calibration.notebook import build
+
 #: a smaller quick setting: fewer random candidates and held-out poses (the same code path: candidate
 #: filter, selection, measurement, fit, validation, the other selection algorithms); the quick profile's
 #: calibration itself: tests/calibration/test_calibration.py (the stage through the runner)
@@ -15,8 +17,6 @@ SMALL = {"SETTINGS": {"calibration.n_random_candidates": 400, "calibration.n_hel
 
 def _check(text: str) -> None:
     assert "held-out RMS error before" in text and "x noise sigma" in text
-
-from pipeline.calibration.notebook import build
 
 
 def test_calibration_notebook_executes(tmp_path, execute_notebook):
