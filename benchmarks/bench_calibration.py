@@ -28,13 +28,13 @@ import time
 
 import numpy as np
 
-from pipeline.blas import single_thread_blas
 from pipeline.calibration import design as ds
 from pipeline.calibration import indices as ix
 from pipeline.calibration import stage as st
 from pipeline.calibration.design_state import DesignState, is_regular
 from pipeline.calibration.elastostatic import design_basis, design_torques, measurement_model
 from pipeline.calibration.gradient_design import GradientDesignConfig, gradient_design
+from pipeline.core.blas import single_thread_blas
 from pipeline.robot.model import RobotModel
 
 

@@ -29,9 +29,9 @@ from contextlib import contextmanager
 import numpy as np
 import pinocchio as pin
 
-from pipeline.config import load_config
 from pipeline.control.config import ControlConfig
 from pipeline.control.simulate import ClosedLoopResult, simulate_joint_trajectory
+from pipeline.core.config import load_config
 from pipeline.robot.defaults import ik_seeds_or_derived_rad, iso_or_derived
 from pipeline.robot.iso9283 import iso9283_path
 from pipeline.robot.model import RobotModel

@@ -40,7 +40,6 @@ import time
 
 import numpy as np
 
-from pipeline.blas import single_thread_blas
 from pipeline.calibration import design as ds
 from pipeline.calibration import design_bound as db
 from pipeline.calibration import design_rounding as dr
@@ -48,6 +47,7 @@ from pipeline.calibration import indices as ix
 from pipeline.calibration import measure as ms
 from pipeline.calibration import stage as st
 from pipeline.calibration import task_space as ts
+from pipeline.core.blas import single_thread_blas
 from pipeline.papers.calib_design import study_pool
 
 GAIN_FACTOR = 0.85        # the acceptance: >= 15 % lower RMS

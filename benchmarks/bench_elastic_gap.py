@@ -39,11 +39,11 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from pipeline.config import load_config
 from pipeline.control.config import ControlConfig
 from pipeline.control.design import iso_reference
 from pipeline.control.joint_stiffness import StiffnessChoice, feedforward_stiffness
 from pipeline.control.simulate import servo_gains, simulate_joint_trajectory
+from pipeline.core.config import load_config
 from pipeline.robot.model import RobotModel
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 from pipeline.sim.truth import RealRobot, TruthConfig

@@ -18,7 +18,7 @@ import time
 import numpy as np
 import pinocchio as pin
 
-from pipeline.blas import single_thread_blas
+from pipeline.core.blas import single_thread_blas
 from pipeline.identification import design as D
 from pipeline.identification import estimate as E
 from pipeline.identification import fourier

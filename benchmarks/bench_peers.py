@@ -41,10 +41,10 @@ from types import SimpleNamespace
 import numpy as np
 import pinocchio as pin
 
-from pipeline.blas import single_thread_blas
 from pipeline.calibration.error_model import MeasurementModel
 from pipeline.calibration.stage import calibrate, heldout_measurements
-from pipeline.config import REPO_ROOT, load_config
+from pipeline.core.blas import single_thread_blas
+from pipeline.core.config import REPO_ROOT, load_config
 from pipeline.identification.measure import process_record
 from pipeline.identification.regressor import RegressorModel
 from pipeline.identification.tx40 import Tx40Config, load_tx40_record, run_tx40

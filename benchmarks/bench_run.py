@@ -5,7 +5,7 @@ Run: ``.venv/bin/python benchmarks/bench_run.py [--out DIR] [--baseline] [--comp
 [--set key=value ...]`` (default: the default profile, RX130L, seed 0, into a fresh temporary
 folder, with an empty compiled-code cache ``$PIPELINE_CACHE_DIR``, as a fresh clone has).
 
-The run is made in this process (:func:`pipeline.runner.run_pipeline` with ``warm_up=True``, as the
+The run is made in this process (:func:`pipeline.run.runner.run_pipeline` with ``warm_up=True``, as the
 CLI makes it: the background build of the stages' compiled code); the per-stage wall time is
 each stage's ``manifest.json`` ``duration_s`` (first pass under ``first_pass/``, then the run's
 own stages), the total is the wall and CPU time of the call (CPU: user + system of this process).
@@ -33,8 +33,8 @@ from typing import Any
 
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import grid_cache
-from pipeline.config import load_config
-from pipeline.runner import run_pipeline
+from pipeline.core.config import load_config
+from pipeline.run.runner import run_pipeline
 
 TARGET_S = 150.0
 _TIME_WORDS = ("time_s", "runtime_s", "realtime_factor", "speedup", "per_s", "duration_s", "cpu_ratio")

@@ -25,7 +25,6 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from pipeline.blas import single_thread_blas
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import design as ds
 from pipeline.calibration import error_model as em
@@ -34,9 +33,10 @@ from pipeline.calibration.config import Config as CalibrationConfig
 from pipeline.calibration.stage import identify_parameter_set
 from pipeline.control.config import ControlConfig
 from pipeline.control.simulate import simulate_joint_trajectory
+from pipeline.core.blas import single_thread_blas
+from pipeline.core.progress import Progress
 from pipeline.identification import estimate as E
 from pipeline.identification.regressor import RegressorModel, standard_parameters
-from pipeline.progress import Progress
 from pipeline.robot.model import RobotModel
 from pipeline.sim.truth import RealRobot, TruthConfig
 

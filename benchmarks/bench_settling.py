@@ -30,8 +30,8 @@ import time
 import numpy as np
 from bench_elastic_gap import with_stiffness, with_truth_friction
 
-from pipeline.config import load_config
 from pipeline.control.config import ControlConfig
+from pipeline.core.config import load_config
 from pipeline.robot import defaults
 from pipeline.robot.model import RobotModel
 from pipeline.sim.truth import RealRobot, TruthConfig

@@ -21,9 +21,9 @@ from pathlib import Path
 
 import distributed
 
-from pipeline.config import REPO_ROOT
-from pipeline.sweep import SweepSpec, parse_seeds, run_sweep
-from pipeline.sweep_table import is_timing_column, numeric_values, spread
+from pipeline.core.config import REPO_ROOT
+from pipeline.run.sweep import SweepSpec, parse_seeds, run_sweep
+from pipeline.run.sweep_table import is_timing_column, numeric_values, spread
 
 FIGURE = "calibration.heldout_rms_position_error_after_m"
 

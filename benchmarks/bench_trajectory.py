@@ -46,8 +46,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.config import load_config
-from pipeline.errors import PipelineError
+from pipeline.core.config import load_config
+from pipeline.core.errors import PipelineError
 from pipeline.robot.defaults import ptp_move_rad
 from pipeline.robot.example_robots import example_arm_urdf
 from pipeline.robot.model import RobotModel

@@ -2,7 +2,7 @@
 
 * ``run [--config FILE] [--set key=value ...] [--stages a,b] [--out DIR] [--force] [--accept-poor]``
 * ``check`` (same options as ``run``): validate what ``run`` would validate, try a quick sample of
-  each stage's poses (:mod:`pipeline.preflight`), write nothing, and print which stages would run
+  each stage's poses (:mod:`pipeline.run.preflight`), write nothing, and print which stages would run
   or be reused, and the robot's plausibility warnings
 * ``view [RUN_DIR] [--robot NAME] [--configurations NAME] [--trajectory NAME] [--open]``
 * ``study [NAME [ARGS...]]`` (no name: list the registered studies)
@@ -10,10 +10,10 @@
   [--force]``: a commented robot.yaml
 * ``sweep [--seeds 0-19] [--robots A,B] [--config FILE] [--set k=v] [--vary k=[a,b]] [--scheduler ADDR]``
 
-``run`` ends with the headline table (:mod:`pipeline.headline`) and the path of ``report.md``.
+``run`` ends with the headline table (:mod:`pipeline.run.headline`) and the path of ``report.md``.
 A run directory made with another robot is refused (exit 2) unless ``--force``.
 
-Exit codes: 0 done; 2 a :class:`pipeline.errors.PipelineError` (bad input, a fault writing
+Exit codes: 0 done; 2 a :class:`pipeline.core.errors.PipelineError` (bad input, a fault writing
 files, the run directory locked by another run), one line on stderr, no traceback; 3 a stage
 failed its quality gate (one line naming the figure and the threshold; the result is kept in
 ``<run>/<stage>.rejected/``); 130 interrupted (SIGINT or SIGTERM; nothing of the stage committed).
@@ -26,18 +26,19 @@ import sys
 from collections.abc import Sequence
 
 import pipeline
-from pipeline import config as config_mod
-from pipeline import studies, sweep
-from pipeline.config import load_config
-from pipeline.errors import PipelineError, QualityGateError
-from pipeline.headline import print_headline, read_headline
-from pipeline.interrupts import handle_termination
-from pipeline.preflight import preflight
+from pipeline.core import config as config_mod
+from pipeline.core.config import load_config
+from pipeline.core.errors import PipelineError, QualityGateError
+from pipeline.core.interrupts import handle_termination
+from pipeline.papers import registry as studies
 from pipeline.robot.plausibility import robot_warnings
 from pipeline.robot.yaml_init import parse_locks, write_robot_yaml
-from pipeline.run_check import check_run
-from pipeline.runner import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_QUALITY_GATE, run_pipeline
-from pipeline.viewer import view_run
+from pipeline.run import sweep
+from pipeline.run.headline import print_headline, read_headline
+from pipeline.run.preflight import preflight
+from pipeline.run.run_check import check_run
+from pipeline.run.runner import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_QUALITY_GATE, run_pipeline
+from pipeline.view.viewer import view_run
 
 
 def _built_in_robots() -> list[str]:
@@ -160,7 +161,7 @@ def _cmd_view(ns: argparse.Namespace) -> int:
 def _cmd_study(ns: argparse.Namespace) -> int:
     if not ns.name:
         names = studies.list_studies()
-        print("\n".join(names) if names else "no studies registered (see pipeline/studies.py)")
+        print("\n".join(names) if names else "no studies registered (see pipeline/papers/registry.py)")
         return 0
     args, results_dir = list(ns.args), None
     if "--results" in args:

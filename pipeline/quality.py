@@ -3,7 +3,7 @@
 A stage checks the figures that say whether its result can be trusted (solver status,
 condition numbers, validation residual against the noise, chi²/dof, limit violations) against
 thresholds stated in its ``Config``. A failed gate ends the stage with
-:class:`~pipeline.errors.QualityGateError` naming the figure and the threshold, unless the run
+:class:`~pipeline.core.errors.QualityGateError` naming the figure and the threshold, unless the run
 was started with ``--accept-poor`` (``RunConfig.accept_poor``); then the result is handed on and
 its ``summary["quality_gates"]`` and ``summary["accepted_poor"]`` say so (the report shows it).
 
@@ -22,7 +22,7 @@ import operator
 from dataclasses import asdict, dataclass
 from typing import Protocol
 
-from pipeline.errors import QualityGateError
+from pipeline.core.errors import QualityGateError
 
 _COMPARE = {"<=": operator.le, "<": operator.lt, ">=": operator.ge, ">": operator.gt}
 

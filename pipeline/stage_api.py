@@ -1,8 +1,8 @@
 """The stage contract: what a stage's ``run(ctx)`` gets and returns, and what later stages read.
 
 ``StageContext`` (inputs of ``run``), ``StageResult`` (its return value, written to the stage
-directory by :mod:`pipeline.stage_io`) and ``StageOutput`` (a finished stage loaded back).
-Every stage imports them from here, never from :mod:`pipeline.runner` (docs/ARCHITECTURE.md, "Layers").
+directory by :mod:`pipeline.run.stage_io`) and ``StageOutput`` (a finished stage loaded back).
+Every stage imports them from here, never from :mod:`pipeline.run.runner` (docs/ARCHITECTURE.md, "Layers").
 """
 
 from __future__ import annotations
@@ -16,9 +16,9 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from pipeline import config as config_mod
-from pipeline.config import RunConfig
-from pipeline.progress import Progress
+from pipeline.core import config as config_mod
+from pipeline.core.config import RunConfig
+from pipeline.core.progress import Progress
 from pipeline.robot.model import RobotModel
 from pipeline.sim.truth import RealRobot
 
@@ -35,7 +35,7 @@ PROVENANCE_FILE = "provenance.json"
 
 @dataclass(frozen=True)
 class Provenance:
-    """Where a stage's inputs come from (decided by the stage plan, :mod:`pipeline.stage_plan`).
+    """Where a stage's inputs come from (decided by the stage plan, :mod:`pipeline.run.stage_plan`).
 
     ``kind``: ``recorded`` (a file of the stage's ``RECORDED_INPUT`` field), ``simulated`` (what the
     stage's ``SIMULATES`` names, on the hidden robot) or ``robot files`` (no measurement at all).

@@ -15,7 +15,7 @@ fixture here or in the package's conftest; it is built once per pytest-xdist wor
 per ``make test``), see ``big_move_plan``.
 
 Compiled CasADi code is cached on disk by content (``$PIPELINE_CACHE_DIR``, see
-:mod:`pipeline.codegen`), so a compiled function is built once per machine, not per worker.
+:mod:`pipeline.core.codegen`), so a compiled function is built once per machine, not per worker.
 Durations: ``--durations=15`` (pyproject ``addopts``) prints the slowest tests of every run.
 """
 
@@ -45,8 +45,8 @@ from IPython.core.interactiveshell import InteractiveShell  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from traitlets.config import Config  # noqa: E402
 
-from pipeline import config as config_module  # noqa: E402
-from pipeline.config import CONFIGS_DIR, load_config  # noqa: E402
+from pipeline.core import config as config_module  # noqa: E402
+from pipeline.core.config import CONFIGS_DIR, load_config  # noqa: E402
 from pipeline.robot.model import RobotModel  # noqa: E402
 from pipeline.stage_api import StageResult  # noqa: E402
 

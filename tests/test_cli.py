@@ -12,9 +12,11 @@ from pathlib import Path
 
 import pytest
 
-from pipeline import cli, config, studies
-from pipeline.config import load_config
-from pipeline.runner import run_pipeline
+from pipeline import cli
+from pipeline.core import config
+from pipeline.core.config import load_config
+from pipeline.papers import registry as studies
+from pipeline.run.runner import run_pipeline
 
 REPO = Path(__file__).resolve().parents[1]
 

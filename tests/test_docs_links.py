@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.config import stage_names
+from pipeline.core.config import stage_names
 
 REPO = Path(__file__).resolve().parents[1]
 README_MAX_LINES = 250

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import pytest
 
-from pipeline.errors import QualityGateError
+from pipeline.core.errors import QualityGateError
 from pipeline.quality import QualityGates
 
 

@@ -25,8 +25,8 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 import pinocchio as pin
 
-from pipeline.forks import fork_map
-from pipeline.progress import TaskHandle
+from pipeline.core.forks import fork_map
+from pipeline.core.progress import TaskHandle
 from pipeline.robot.collision import segment_distances
 from pipeline.robot.instruments import BEAM_END_CLEARANCE_M
 from pipeline.robot.model import RobotModel
@@ -300,7 +300,7 @@ def filter_grid(chain: Chain, n_per_axis: int | list[int] = 13, margins: FilterM
     grid order, their flat grid indices, and counts. The prefix grid over axes 1..nq-1 (the last axis does not
     move capsules off the last link) is checked for collisions between capsules not on the last joint; survivors
     are expanded along the last axis in chunks and checked for the remaining pairs, floor and visibility.
-    ``progress``: an optional :class:`pipeline.progress.TaskHandle` advanced over the collision-free prefixes.
+    ``progress``: an optional :class:`pipeline.core.progress.TaskHandle` advanced over the collision-free prefixes.
     ``visibility(kinematics, capsule_segments) -> mask``: another sensor's line of sight (e.g. the optical 6-D
     tracker, :mod:`pipeline.sim.optical_tracker`) instead of the laser tracker's."""
     t0 = time.perf_counter()

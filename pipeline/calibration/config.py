@@ -15,7 +15,7 @@ from pipeline.calibration.gravity_uncertainty import GravityPrior
 from pipeline.calibration.robust import LOSSES
 from pipeline.calibration.subsets import check_parameters
 from pipeline.calibration.task_space import check_task_fields
-from pipeline.errors import ConfigError
+from pipeline.core.errors import ConfigError
 from pipeline.robot.iso_search import POSE_AXES
 from pipeline.robot.model import RobotModel
 from pipeline.robot.payload import Payload
@@ -34,7 +34,7 @@ GRADIENT_INDICES = ix.TRACE_INDICES
 #: largest candidate set (random candidates or grid points): beyond it the filtering and the
 #: whitened Jacobians of the feasible candidates take too much time and memory
 MAX_CANDIDATES = 20_000_000
-#: calibration.second_pass values (pipeline.second_pass)
+#: calibration.second_pass values (pipeline.run.second_pass)
 SECOND_PASS_MODES = ("auto", "always", "never")
 
 
@@ -126,7 +126,7 @@ class Config:
     gravity_model_com_sigma_m: float = 0.02
     #: both sigmas are multiplied by this with an identified gravity model (calibration.gravity_model)
     gravity_model_identified_scale: float = 0.1
-    #: second calibration pass by the runner (pipeline.second_pass): a first pass of calibration and
+    #: second calibration pass by the runner (pipeline.run.second_pass): a first pass of calibration and
     #: identification under ``<run>/first_pass/``, then this run with the identified inertias as
     #: gravity_model. auto: when the gravity model's share of the first pass's predicted error is
     #: >= 0.25 (arms with a nominal mass model that gravity twists), always, never; only without a

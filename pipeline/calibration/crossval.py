@@ -34,7 +34,7 @@ from pipeline.calibration.noise_model import reweighted
 from pipeline.calibration.residual_map import fit_residual_map
 from pipeline.calibration.robust import robust_estimate
 from pipeline.calibration.validate import gross_error_rows, predicted_covariance
-from pipeline.errors import PipelineError
+from pipeline.core.errors import PipelineError
 
 
 def _rms(e: np.ndarray) -> float | None:

@@ -26,7 +26,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pipeline.blas import single_thread_blas
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import error_model as em
 from pipeline.calibration import feasibility as fz
@@ -37,8 +36,9 @@ from pipeline.calibration import task_space as ts
 from pipeline.calibration.config import Config
 from pipeline.calibration.design_state import DesignState
 from pipeline.calibration.elastostatic import design_blocks, negligible_compliances
-from pipeline.errors import ConfigError, InfeasibleError
-from pipeline.progress import task
+from pipeline.core.blas import single_thread_blas
+from pipeline.core.errors import ConfigError, InfeasibleError
+from pipeline.core.progress import task
 from pipeline.robot.model import RobotModel
 
 

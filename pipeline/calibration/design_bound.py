@@ -54,8 +54,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
 
-from pipeline.blas import single_thread_blas
 from pipeline.calibration import candidates as cd
+from pipeline.core.blas import single_thread_blas
 from pipeline.robot.model import RobotModel
 
 

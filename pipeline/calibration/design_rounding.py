@@ -39,7 +39,7 @@ from pipeline.calibration import design as ds
 from pipeline.calibration import design_bound as db
 from pipeline.calibration import indices as ix
 from pipeline.calibration.design_state import is_regular
-from pipeline.forks import fork_map
+from pipeline.core.forks import fork_map
 
 #: equivalence-theorem gap at which the approximate design is good enough as a start (the exchanges
 #: do the rest; the bound itself is computed to 1e-4 by the benchmark)
@@ -100,7 +100,7 @@ def approximate_remove_and_replace(G: np.ndarray, spec: ix.IndexSpec, n: int, rn
     The random-start runs and the rounded start's run are independent (only the random starts
     draw from ``rng``): with two cores and at least :data:`SIDE_BY_SIDE_MIN_ENTRIES` Jacobian
     entries they run side by side in forked processes
-    (:func:`pipeline.forks.fork_map`), ``rng`` taking the state the random starts left, so the
+    (:func:`pipeline.core.forks.fork_map`), ``rng`` taking the state the random starts left, so the
     result is the one of running them one after the other."""
     if restarts < 0:
         raise ValueError("restarts must be >= 0")

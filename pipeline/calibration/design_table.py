@@ -31,7 +31,7 @@ from pipeline.calibration import task_space as ts
 from pipeline.calibration import validate as va
 from pipeline.calibration.error_model import MeasurementModel
 from pipeline.calibration.estimate import Estimate, estimate
-from pipeline.errors import PipelineError
+from pipeline.core.errors import PipelineError
 from pipeline.robot.model import RobotModel
 
 

@@ -27,7 +27,7 @@ from pipeline.calibration import measure as ms
 from pipeline.calibration import subsets
 from pipeline.calibration.config import Config
 from pipeline.calibration.estimate import Estimate, estimate, identified_compliance
-from pipeline.errors import ConfigError, PipelineError
+from pipeline.core.errors import ConfigError, PipelineError
 from pipeline.robot.handoff import ElastostaticRecord
 from pipeline.robot.model import RobotModel
 from pipeline.robot.stiffness import DEFLECTION_AT_TORQUE_LIMIT_RAD, nominal_joint_stiffness_Nm_rad

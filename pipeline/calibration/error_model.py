@@ -38,8 +38,8 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
-from pipeline.casadi_buffers import BufferedFunction
-from pipeline.compiled_on_demand import CompiledOnDemand
+from pipeline.core.casadi_buffers import BufferedFunction
+from pipeline.core.compiled_on_demand import CompiledOnDemand
 from pipeline.robot import spatial_sx as sx
 from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import KINEMATIC_COMPONENTS
@@ -70,7 +70,7 @@ class MeasurementModel:
     ``h(q, x, T0) -> y`` and ``hj(q, x, T0) -> (y, dy/dx)``; numeric batched helpers
     :meth:`predict` and :meth:`jacobian` evaluate them on ``(N, nq)`` configurations with
     ``Function.map`` in chunks, compiled by gcc once their use pays for it
-    (:class:`pipeline.compiled_on_demand.CompiledOnDemand`; same numbers).
+    (:class:`pipeline.core.compiled_on_demand.CompiledOnDemand`; same numbers).
     """
 
     def __init__(self, robot: RobotModel, sym: SymbolicRobot | None = None, chunk: int = 4096, compliance: bool = False,
@@ -167,7 +167,7 @@ class MeasurementModel:
     def expect_readings(self, readings: int) -> None:
         """Announce at least ``readings`` evaluations of both :meth:`predict` and :meth:`jacobian`
         (readings times evaluations) to come: their compiled code is built as soon as the use known
-        so far pays for it (:meth:`pipeline.compiled_on_demand.CompiledOnDemand.expect`)."""
+        so far pays for it (:meth:`pipeline.core.compiled_on_demand.CompiledOnDemand.expect`)."""
         for name in ("h", "hj"):
             self._on_demand(name).expect(readings)
 

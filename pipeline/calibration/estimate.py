@@ -26,7 +26,7 @@ from scipy.spatial.transform import Rotation
 
 from pipeline.calibration.error_model import MeasurementModel
 from pipeline.calibration.gravity_uncertainty import Whitener
-from pipeline.errors import SolverError
+from pipeline.core.errors import SolverError
 from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import apply_kinematic_errors
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad

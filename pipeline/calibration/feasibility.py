@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.calibration import candidates as cd
-from pipeline.errors import InfeasibleError
+from pipeline.core.errors import InfeasibleError
 from pipeline.robot.collision import segment_distances
 
 #: configurations per chunk of the probe, and the probe's size: 1 % of the 20 million random draws

@@ -41,7 +41,7 @@ import numpy as np
 
 from pipeline.calibration import indices as ix
 from pipeline.calibration.error_model import MeasurementModel, se3_to_vector
-from pipeline.interrupts import raise_if_interrupted
+from pipeline.core.interrupts import raise_if_interrupted
 from pipeline.robot.collision import segment_distances
 from pipeline.robot.collision_sx import capsule_clearance_function, segment_distance_sx
 from pipeline.robot.instruments import BEAM_END_CLEARANCE_M, tracker_visibility

@@ -3,7 +3,7 @@
 :func:`pipeline.calibration.candidates.filter_grid` depends only on the nominal chain (joint
 placements, capsules, reflector, nominal tracker pose, limits), the grid size and the margins,
 never on the seed, the hidden robot or the gravity model. A run with a second calibration pass
-(:mod:`pipeline.second_pass`) filters the same 13^6 grid twice, and every run of the same robot
+(:mod:`pipeline.run.second_pass`) filters the same 13^6 grid twice, and every run of the same robot
 filters it again: the result is kept under a key that is the SHA-256 of those inputs (every array
 of the :class:`~pipeline.calibration.candidates.Chain` by dtype, shape and bytes, the grid size, the
 margins, the chunk size) and of the source code of the filter (``candidates.py`` and the
@@ -11,7 +11,7 @@ segment-distance code of ``pipeline/robot/collision.py``), so a changed robot, s
 computes anew and no path enters the key.
 
 Two levels: a small in-process table (the second pass in the same process), and ``.npz`` files
-under the compiled-code cache folder (``$PIPELINE_CACHE_DIR``/grids, :func:`pipeline.codegen.cache_root`),
+under the compiled-code cache folder (``$PIPELINE_CACHE_DIR``/grids, :func:`pipeline.core.codegen.cache_root`),
 written atomically (``os.replace``). A file that cannot be read, or a folder that cannot be
 written, only costs the computation. The result is the same arrays bit for bit; only the counts'
 ``time_s`` is the time of this call.
@@ -31,8 +31,8 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.calibration import candidates as cd
-from pipeline.codegen import cache_root
-from pipeline.progress import TaskHandle
+from pipeline.core.codegen import cache_root
+from pipeline.core.progress import TaskHandle
 from pipeline.robot import collision
 
 #: grids kept in this process (a run uses one; tests may use a few robots)

@@ -12,7 +12,7 @@ orientation, at the reflector offset). Such 6-D readings (6-DOF tracker probe, m
 enter the fit (:func:`expand_orientation`) and the validation reports orientation errors. Any problem (missing
 file, wrong column count, non-numeric or NaN/inf value, too few rows, joint angles outside the
 limits, values in the wrong unit: positions in mm, angles in degrees) raises
-:class:`pipeline.errors.DataFileError` naming the file, the file line (1-based, as an editor shows
+:class:`pipeline.core.errors.DataFileError` naming the file, the file line (1-based, as an editor shows
 it) and column and the problem, before anything is written.
 
 Without a file the simulated tracker measures the designed configurations
@@ -32,7 +32,7 @@ from scipy.spatial.transform import Rotation
 from pipeline.calibration import candidates as cd
 from pipeline.calibration.config import Config
 from pipeline.calibration.estimate import Estimate
-from pipeline.errors import DataFileError, InfeasibleError
+from pipeline.core.errors import DataFileError, InfeasibleError
 from pipeline.robot.model import RobotModel
 from pipeline.robot.payload import Payload
 

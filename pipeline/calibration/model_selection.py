@@ -55,7 +55,7 @@ from pipeline.calibration.error_model import MeasurementModel
 from pipeline.calibration.estimate import Estimate
 from pipeline.calibration.noise_model import NoiseModel, fit_with_noise_model
 from pipeline.calibration.residual_map import fit_residual_map, restart_seed
-from pipeline.errors import PipelineError
+from pipeline.core.errors import PipelineError
 from pipeline.robot.model import RobotModel
 from pipeline.robot.repeatability import repeatability_sigma_m
 from pipeline.robot.residual_map import ResidualMap

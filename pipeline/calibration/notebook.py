@@ -16,7 +16,7 @@ and validation on 1000 held-out poses."""),
     ("code", """import numpy as np
 from IPython.display import Markdown, display
 
-from pipeline.config import quick_config
+from pipeline.core.config import quick_config
 from pipeline.robot.model import RobotModel
 from pipeline.sim.truth import RealRobot
 from pipeline.stage_api import stage_rng
@@ -57,7 +57,7 @@ fig2 = plots.index_history(out.selection.history, out.selection.index_name, out.
 Set `SHOW_VIEWER = True` to open a meshcat scene with the chosen configurations, the tracker and the beams."""),
     ("code", """SHOW_VIEWER = False
 if SHOW_VIEWER:
-    from pipeline.calibration.view import show_calibration
+    from pipeline.view.calibration import show_calibration
     viewer = show_calibration(out.robot, out.measurements.Q, out.estimate.transform_tracker_to_base)
     display(viewer.jupyter_cell())"""),
 ]

@@ -46,7 +46,7 @@ from scipy.stats import chi2
 from pipeline.calibration.error_model import MeasurementModel
 from pipeline.calibration.estimate import Estimate, estimate
 from pipeline.calibration.gravity_uncertainty import GravityCovariance, Whitener
-from pipeline.errors import PipelineError
+from pipeline.core.errors import PipelineError
 
 #: scale of the robust loss in whitened units (readings within 2 sigma count quadratically)
 ROBUST_SCALE = 2.0

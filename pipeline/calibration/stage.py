@@ -33,7 +33,6 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.blas import single_thread_blas
 from pipeline.calibration import design as ds
 from pipeline.calibration import design_rounding as dr
 from pipeline.calibration import design_table as dtab
@@ -81,7 +80,8 @@ from pipeline.calibration.report import (  # noqa: F401 - re-exported (tests, no
     visibility_sentence,
 )
 from pipeline.calibration.validate import predicted_on_random_poses
-from pipeline.errors import InfeasibleError, PipelineError
+from pipeline.core.blas import single_thread_blas
+from pipeline.core.errors import InfeasibleError, PipelineError
 from pipeline.quality import QualityGates
 from pipeline.robot.model import RobotModel
 from pipeline.stage_api import StageContext, StageResult
@@ -91,7 +91,7 @@ DEPENDS: tuple[str, ...] = ("model",)
 CONFIG_READS: tuple[str, ...] = ("control.iso",)
 #: fields naming files or folders: the inputs hash covers their content, not their path
 FILE_INPUTS: tuple[str, ...] = ("gravity_model", "measurements_csv", "validation_csv", "working_csv")
-#: provenance (pipeline.stage_plan): the field naming a recorded file, else what is simulated
+#: provenance (pipeline.run.stage_plan): the field naming a recorded file, else what is simulated
 RECORDED_INPUT = "measurements_csv"
 SIMULATES = "tracker readings of the hidden robot"
 #: cross-validation folds for a measurement file without a validation file (calibration.cross_validation_folds 0)

@@ -17,7 +17,7 @@ selected parameters the identifiability analysis keeps the identifiable base set
 from __future__ import annotations
 
 from pipeline.calibration.error_model import is_compliance
-from pipeline.errors import ConfigError
+from pipeline.core.errors import ConfigError
 
 NAMED_SUBSETS = ("auto", "all", "geometric", "joint_offsets", "joint_offsets+compliance")
 

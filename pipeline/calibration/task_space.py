@@ -41,11 +41,11 @@ import yaml
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import indices as ix
 from pipeline.calibration.error_model import MeasurementModel
-from pipeline.errors import ConfigError, DataFileError, InfeasibleError
+from pipeline.core.errors import ConfigError, DataFileError, InfeasibleError
+from pipeline.core.yaml12 import load_yaml
 from pipeline.robot.defaults import iso_or_derived
 from pipeline.robot.iso9283 import IsoPathConfig
 from pipeline.robot.model import RobotModel
-from pipeline.yaml12 import load_yaml
 
 WORKING_REGIONS = ("iso_cube", "box", "csv")
 #: what V weights over the working configurations (``calibration.design_figure``): the TCP (the task),

@@ -1,17 +1,17 @@
 """Configuration of stage 3 (control). Units in the names.
 
 Range and length checks that do not need the robot are in ``validate(source)`` (called by
-:func:`pipeline.config.load_config` with the file or ``--set`` the section came from, and by
+:func:`pipeline.core.config.load_config` with the file or ``--set`` the section came from, and by
 ``__post_init__`` for configs built in Python); the joint-vector lengths (``nq``) are checked by
-``pipeline.control.stage.check``. Field checks: :mod:`pipeline.config_checks`.
+``pipeline.control.stage.check``. Field checks: :mod:`pipeline.core.config_checks`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from pipeline.config_checks import check_choice, check_count, check_number, check_unique, check_vector
-from pipeline.errors import ConfigError, Source
+from pipeline.core.config_checks import check_choice, check_count, check_number, check_unique, check_vector
+from pipeline.core.errors import ConfigError, Source
 from pipeline.robot.iso9283 import IsoPathConfig
 
 FEEDFORWARD_VARIANTS = ("none", "gravity", "full", "full_friction", "elastic_static", "elastic_flat")

@@ -38,7 +38,7 @@ import numpy as np
 import pinocchio as pin
 
 from pipeline.control.config import ControlConfig
-from pipeline.errors import InfeasibleError
+from pipeline.core.errors import InfeasibleError
 from pipeline.robot.defaults import ik_seeds_or_derived_rad, iso_or_derived, iso_rotation
 from pipeline.robot.iso9283 import IsoPath, IsoPathConfig, iso9283_path
 from pipeline.robot.model import RobotModel

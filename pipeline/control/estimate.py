@@ -14,8 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.config import resolve_robot_dir
 from pipeline.control.joint_stiffness import StiffnessChoice, feedforward_stiffness
+from pipeline.core.config import resolve_robot_dir
 from pipeline.robot.handoff import ElastostaticRecord
 from pipeline.robot.model import RobotModel
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad

@@ -19,7 +19,7 @@ from pipeline.control.design import IsoReference, ServoDesign
 from pipeline.control.estimate import ControlModels, with_dynamics_of
 from pipeline.control.simulate import ClosedLoopResult, first_saturation, simulate_joint_trajectory
 from pipeline.control.validate import registered_error, run_metrics
-from pipeline.errors import PipelineError
+from pipeline.core.errors import PipelineError
 from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import start_configuration
 from pipeline.robot.reference import cartesian_reference

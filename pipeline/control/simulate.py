@@ -31,7 +31,7 @@ from scipy.interpolate import CubicHermiteSpline
 from pipeline.control.config import FEEDFORWARD_VARIANTS, ControlConfig
 from pipeline.control.design import ServoGains, design_gains, filter_alpha, reflected_inertia, stick_slip_gains
 from pipeline.control.elastic_feedforward import ELASTIC_VARIANTS, elastic_feedforward
-from pipeline.errors import ConfigError, InfeasibleError
+from pipeline.core.errors import ConfigError, InfeasibleError
 from pipeline.robot.friction import has_stribeck, stribeck_slope_Nms_rad
 
 

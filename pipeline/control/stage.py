@@ -40,14 +40,14 @@ from pipeline.control.estimate import ControlModels, control_models, elastic_sti
 from pipeline.control.joint_stiffness import StiffnessChoice, deflection_budget, stiffness_markdown
 from pipeline.control.measure import ServoRuns, kinematics_comparison, loop_speed, variant_runs
 from pipeline.control.simulate import servo_gains
-from pipeline.errors import ConfigError, PipelineError
+from pipeline.core.errors import ConfigError, PipelineError
 from pipeline.robot.defaults import iso_or_derived
 from pipeline.robot.model import RobotModel
 from pipeline.stage_api import StageContext, StageResult
 
 NAME = "control"
 DEPENDS: tuple[str, ...] = ("model", "calibration", "identification")
-#: provenance (pipeline.stage_plan): what is simulated (this stage reads no recorded file)
+#: provenance (pipeline.run.stage_plan): what is simulated (this stage reads no recorded file)
 SIMULATES = "servo loop on the hidden robot"
 __all__ = ["NAME", "DEPENDS", "SIMULATES", "Config", "check", "run"]
 

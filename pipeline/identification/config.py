@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from pipeline.errors import ConfigError, Source
+from pipeline.core.errors import ConfigError, Source
 from pipeline.identification.base_set import STRUCTURAL_BASE_TOLERANCE
 from pipeline.identification.friction import FRICTION_MODELS
 from pipeline.identification.tx40 import TX40_SAMPLE_TIME_S, Tx40Config
@@ -100,7 +100,7 @@ class Config:
     joints: list[str | int] = field(default_factory=list)
 
     def validate(self, source: Source = None) -> None:
-        """Range checks of values of the right type (called by ``pipeline.config`` at load time
+        """Range checks of values of the right type (called by ``pipeline.core.config`` at load time
         with the file or ``--set`` that set them, and again by :func:`run`); the robot-dependent
         ones are in :func:`check`."""
         ex = self.excitation

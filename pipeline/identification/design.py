@@ -47,9 +47,12 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from pipeline.blas import single_thread_blas
-from pipeline.compiled_on_demand import compiled_with_jacobian
-from pipeline.forks import fork_map
+from pipeline.core.blas import single_thread_blas
+from pipeline.core.compiled_on_demand import compiled_with_jacobian
+from pipeline.core.forks import fork_map
+from pipeline.core.interrupts import raise_if_interrupted
+from pipeline.core.progress import Progress
+from pipeline.core.solver_status import is_success
 from pipeline.identification.excitation_criterion import (
     CriterionCallback,
     ExcitationCriterion,
@@ -69,14 +72,11 @@ from pipeline.identification.fourier import (
 )
 from pipeline.identification.regressor import BaseParameters, RegressorModel
 from pipeline.identification.tcp_motion import tcp_motion_sx
-from pipeline.interrupts import raise_if_interrupted
-from pipeline.progress import Progress
 from pipeline.robot.collision_sx import capsule_clearance_function
 from pipeline.robot.model import RobotModel
 from pipeline.robot.symbolic import SymbolicRobot
-from pipeline.solver_status import is_success
 
-#: cache folder of the compiled per-sample constraints (:mod:`pipeline.codegen`)
+#: cache folder of the compiled per-sample constraints (:mod:`pipeline.core.codegen`)
 CONSTRAINTS_CACHE = "excitation"
 
 
@@ -134,7 +134,7 @@ def _build_nlp(
     equalities, so every nonlinear constraint touches one sample (block-sparse Jacobian) and the
     position/velocity/acceleration limits are simple bounds on ``S``. The per-sample constraints
     and their Jacobian are compiled when the ``n_starts`` solves are expected to pay for the build
-    (:func:`~pipeline.compiled_on_demand.compiled_with_jacobian`: same numbers)."""
+    (:func:`~pipeline.core.compiled_on_demand.compiled_with_jacobian`: same numbers)."""
     nq, n = robot.nq, crit.n
     nc = nq * (2 * harmonics + 1)
     c = ca.MX.sym("c", nc)
@@ -310,7 +310,7 @@ def _optimize_excitation_impl(
     indices = range(len(starts))
     iterable = indices if progress is None else progress.track(indices, "excitation starts")
     n_evals = crit.n_evals
-    # the starts are independent: side by side on the available cores (pipeline.forks)
+    # the starts are independent: side by side on the available cores (pipeline.core.forks)
     for _, out in zip(iterable, fork_map(solve_start, len(starts)), strict=True):
         raise_if_interrupted(out.status, "excitation IPOPT")
         n_evals += out.criterion_evaluations

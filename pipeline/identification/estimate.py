@@ -28,9 +28,9 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from pipeline.blas import single_thread_blas
-from pipeline.errors import DataFileError, SolverError
-from pipeline.interrupts import raise_if_interrupted
+from pipeline.core.blas import single_thread_blas
+from pipeline.core.errors import DataFileError, SolverError
+from pipeline.core.interrupts import raise_if_interrupted
 
 #: lower bound of rotor inertia (kg m^2) and friction (N m s/rad, N m) in the physical fit
 POSITIVE_LOWER_BOUND = 1e-6

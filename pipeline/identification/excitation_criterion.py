@@ -15,7 +15,7 @@ from collections.abc import Mapping, Sequence
 import casadi as ca
 import numpy as np
 
-from pipeline.compiled_on_demand import CompiledOnDemand
+from pipeline.core.compiled_on_demand import CompiledOnDemand
 from pipeline.identification.regressor import BaseParameters, RegressorModel
 from pipeline.robot.symbolic import SymbolicRobot
 

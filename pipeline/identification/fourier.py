@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from pipeline.errors import InfeasibleError
+from pipeline.core.errors import InfeasibleError
 from pipeline.identification.tcp_motion import tcp_speed_acceleration
 from pipeline.robot.model import RobotModel
 

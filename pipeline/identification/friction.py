@@ -59,14 +59,14 @@ from dataclasses import dataclass, replace
 import casadi as ca
 import numpy as np
 
-from pipeline.errors import SolverError
+from pipeline.core.errors import SolverError
+from pipeline.core.interrupts import raise_if_interrupted
+from pipeline.core.solver_status import is_success
 from pipeline.identification import estimate as est_mod
 from pipeline.identification.measure import ProcessedData
 from pipeline.identification.regressor import BaseParameters
 from pipeline.identification.tx40 import heldout_validation
-from pipeline.interrupts import raise_if_interrupted
 from pipeline.robot.friction import stribeck_excess_torque as stribeck_torque
-from pipeline.solver_status import is_success
 
 FRICTION_MODELS = ("viscous_coulomb", "stribeck")
 #: bounds of the Stribeck velocity [rad/s] (joint side)

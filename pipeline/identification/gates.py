@@ -17,10 +17,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.errors import DataFileError, PipelineError
+from pipeline.core.errors import DataFileError, PipelineError
+from pipeline.core.solver_status import is_success
 from pipeline.identification.config import Config
 from pipeline.quality import QualityGates
-from pipeline.solver_status import is_success
 
 
 def check_data_excites(

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.errors import ConfigError
+from pipeline.core.errors import ConfigError
 
 #: a column whose logged values are at least this fraction exact zeros carries no signal
 MOSTLY_ZEROS_FRACTION = 0.5

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.errors import DataFileError
+from pipeline.core.errors import DataFileError
 from pipeline.identification import signals
 from pipeline.identification.fourier import FourierTrajectory
 from pipeline.identification.joints import unmeasured_torque_columns

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.errors import ConfigError, DataFileError
+from pipeline.core.errors import ConfigError, DataFileError
 from pipeline.identification import measure as meas_mod
 from pipeline.identification.config import DATA_BORDER_SAMPLES, MAX_SAMPLE_TIME_S, Config
 from pipeline.robot.model import RobotModel

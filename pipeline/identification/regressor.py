@@ -37,8 +37,8 @@ import numpy as np
 import pinocchio as pin
 import scipy.linalg
 
-from pipeline.blas import single_thread_blas
-from pipeline.errors import DataFileError
+from pipeline.core.blas import single_thread_blas
+from pipeline.core.errors import DataFileError
 
 LINK_PARAMETER_NAMES: tuple[str, ...] = (
     "m",

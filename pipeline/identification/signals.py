@@ -21,7 +21,7 @@ import numpy as np
 import scipy.interpolate
 import scipy.signal
 
-from pipeline.errors import DataFileError
+from pipeline.core.errors import DataFileError
 
 
 @dataclass

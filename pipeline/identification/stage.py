@@ -31,7 +31,7 @@ and the real Stäubli TX40 record (paper ``004_abbe750b8bbcc3aa.txt`` §4).
 7. The TX40 record, only for the TX40 or when asked (:func:`tx40_wanted`): base parameters,
    condition number, held-out RMS (:mod:`.tx40`).
 8. Quality gates (:func:`.gates.add_result_gates`): condition number vs design, validation RMS vs
-   noise, predicted torques vs limits -> :class:`~pipeline.errors.QualityGateError` unless
+   noise, predicted torques vs limits -> :class:`~pipeline.core.errors.QualityGateError` unless
    ``--accept-poor``.
 
 :func:`run` sequences these steps; what they hand each other is in :mod:`.outcome`, the summary,
@@ -45,9 +45,10 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.blas import single_thread_blas
-from pipeline.config import resolve_robot_dir
-from pipeline.errors import ConfigError, InfeasibleError, PipelineError, SolverError
+from pipeline.core.blas import single_thread_blas
+from pipeline.core.config import resolve_robot_dir
+from pipeline.core.errors import ConfigError, InfeasibleError, PipelineError, SolverError
+from pipeline.core.solver_status import is_success
 from pipeline.identification import design as design_mod
 from pipeline.identification import estimate as est_mod
 from pipeline.identification import fourier, report
@@ -87,14 +88,13 @@ from pipeline.robot.assumed_values import predicted_drive_values
 from pipeline.robot.defaults import iso_or_derived
 from pipeline.robot.model import RobotModel
 from pipeline.robot.symbolic import SymbolicRobot
-from pipeline.solver_status import is_success
 from pipeline.stage_api import StageContext, StageResult
 
 NAME = "identification"
 DEPENDS: tuple[str, ...] = ("model", "calibration")
 #: fields naming files: the inputs hash covers their content, not their path
 FILE_INPUTS: tuple[str, ...] = ("data_file",)
-#: provenance (pipeline.stage_plan): the field naming a recorded file, else what is simulated
+#: provenance (pipeline.run.stage_plan): the field naming a recorded file, else what is simulated
 RECORDED_INPUT = "data_file"
 SIMULATES = "joint torques of the hidden robot"
 #: settings of other sections this stage reads (the runner adds them to its inputs hash): the

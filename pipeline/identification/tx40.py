@@ -24,9 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.blas import single_thread_blas
-from pipeline.config import REPO_ROOT
-from pipeline.errors import ConfigError, DataFileError
+from pipeline.core.blas import single_thread_blas
+from pipeline.core.config import REPO_ROOT
+from pipeline.core.errors import ConfigError, DataFileError
 from pipeline.identification import estimate as est_mod
 from pipeline.identification.measure import JointRecord, ProcessedData, motor_to_joint, process_record
 from pipeline.identification.regressor import (

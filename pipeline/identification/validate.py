@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.control.config import ControlConfig
-from pipeline.errors import PipelineError
+from pipeline.core.errors import PipelineError
 from pipeline.identification import fourier
 from pipeline.identification.config import ExcitationConfig
 from pipeline.identification.regressor import BaseParameters

@@ -12,11 +12,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.errors import ConfigError
-from pipeline.plotting import robot_figure
+from pipeline.core.errors import ConfigError
 from pipeline.robot.defaults import ready_pose_rad
 from pipeline.robot.model import RobotModel
 from pipeline.robot.plausibility import robot_warnings
+from pipeline.robot.plotting import robot_figure
 from pipeline.stage_api import StageContext, StageResult
 
 NAME = "model"

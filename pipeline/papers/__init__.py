@@ -1,5 +1,5 @@
 """Paper reproductions and studies (``python -m pipeline study <name>``, registry
-:mod:`pipeline.studies`); no stage imports them.
+:mod:`pipeline.papers.registry`); no stage imports them.
 
 Calibration studies (the calibration stage on simulated arms, scored on held-out poses):
 

@@ -44,7 +44,7 @@ Experiments beside the defaults (docs/papers/paper_000.md): ``--parameters joint
 comma-separated list of DH/Hayati names) identifies fewer arm parameters, ``--tag`` names the
 output folder ``data/studies/calib-000-TAG/``.
 
-The arms are independent tasks of :func:`pipeline.dispatch.map_tasks` (one dispatch, the named
+The arms are independent tasks of :func:`pipeline.core.dispatch.map_tasks` (one dispatch, the named
 arms first): ``--jobs N`` local processes or ``--scheduler ADDRESS`` a Dask cluster, as
 ``python -m pipeline sweep``; the rows do not depend on it (each arm's generator is seeded by the
 seed and the arm's name).
@@ -67,18 +67,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.blas import single_thread_blas
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import design as ds
 from pipeline.calibration import error_model as em
 from pipeline.calibration import indices as ix
 from pipeline.calibration import stage as st
 from pipeline.calibration.gradient_design import GradientDesignConfig, feasible_configurations, gradient_design
-from pipeline.dispatch import map_tasks
+from pipeline.core.blas import single_thread_blas
+from pipeline.core.dispatch import map_tasks
+from pipeline.core.progress import Progress
 from pipeline.papers import calib_000_elastic as el
 from pipeline.papers import calib_000_report as rp
 from pipeline.papers import calib_000_scene as sc
-from pipeline.progress import Progress
 from pipeline.robot.model import RobotModel
 
 KUKA_ARMS = ("kuka_kr15", "kuka_kr300", "kuka_kr500")
@@ -258,7 +258,7 @@ def run_arm(name: str, robot: RobotModel, cfg: Settings, seed: int) -> dict:
 
 @dataclass(frozen=True)
 class ArmTask:
-    """One arm of the study (a task of :func:`pipeline.dispatch.map_tasks`): a robot folder, or a
+    """One arm of the study (a task of :func:`pipeline.core.dispatch.map_tasks`): a robot folder, or a
     notional arm (segment lengths ``lambda_m``, ``mu_m`` on the ``robot`` folder's kinematics)."""
 
     name: str

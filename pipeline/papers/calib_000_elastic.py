@@ -43,7 +43,7 @@ from pipeline.calibration import stage as st
 from pipeline.calibration.estimate import Estimate, calibrated_robot
 from pipeline.calibration.gravity_uncertainty import GravityCovariance
 from pipeline.calibration.robust import robust_estimate
-from pipeline.errors import SolverError
+from pipeline.core.errors import SolverError
 from pipeline.robot.model import RobotModel
 from pipeline.sim.truth import RealRobot, TruthConfig
 

@@ -20,7 +20,7 @@ from collections.abc import Callable
 import numpy as np
 
 from pipeline.papers import calib_000_elastic as el
-from pipeline.studies import save_result
+from pipeline.papers.registry import save_result
 
 PAPER_KUKA = {"kuka_kr15": (0.44, 0.17), "kuka_kr300": (0.40, 0.10), "kuka_kr500": (0.43, 0.12)}
 PAPER_NOTIONAL = {"both_vs_heuristic_min": 0.36, "tcp_vs_heuristic": 0.43, "tcp_vs_parameter": 0.19,

@@ -45,7 +45,7 @@ import pinocchio as pin
 
 from pipeline.calibration import candidates as cd
 from pipeline.calibration.gradient_design import feasible_configurations
-from pipeline.errors import InfeasibleError
+from pipeline.core.errors import InfeasibleError
 from pipeline.robot.collision import segment_distances
 from pipeline.robot.mdh import MDHRow
 from pipeline.robot.model import RobotModel

@@ -35,7 +35,7 @@ import casadi as ca
 import numpy as np
 
 from pipeline.calibration import error_model as em
-from pipeline.studies import save_result
+from pipeline.papers.registry import save_result
 
 _DEG = math.pi / 180.0
 #: (theta offset rad, d m, a m, alpha rad) per joint: MPE 2018 / 1760190 Table 2, rounded (docstring)

@@ -43,17 +43,17 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from pipeline.blas import single_thread_blas
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import error_model as em
 from pipeline.calibration import stage as st
 from pipeline.calibration.estimate import estimate, register_points
-from pipeline.errors import DataFileError, SolverError
+from pipeline.core.blas import single_thread_blas
+from pipeline.core.errors import DataFileError, SolverError
 from pipeline.papers import calib_003_search as ps
+from pipeline.papers.registry import save_result
 from pipeline.robot.model import RobotModel
 from pipeline.robot.spec import TrackerSpec
 from pipeline.sim.truth import RealRobot, TruthConfig
-from pipeline.studies import save_result
 
 #: paper 003 Table 2 (simulation): mean, RMSE, max positioning error [mm]
 PAPER_003 = {"none": (0.485, 0.558, 1.078), "detmax_O1": (0.4131, 0.4807, 1.0966), "detmax_O2": (0.430, 0.491, 1.015),

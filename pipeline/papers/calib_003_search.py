@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.blas import single_thread_blas
+from pipeline.core.blas import single_thread_blas
 
 INDICES = ("O1", "O2", "O3", "Od", "Oc")
 

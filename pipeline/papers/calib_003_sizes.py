@@ -27,13 +27,13 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from pipeline.blas import single_thread_blas
 from pipeline.calibration.estimate import estimate, register_points
-from pipeline.errors import SolverError
+from pipeline.core.blas import single_thread_blas
+from pipeline.core.errors import SolverError
 from pipeline.papers import calib_003 as p3
 from pipeline.papers import calib_003_search as ps
+from pipeline.papers.registry import save_result
 from pipeline.sim.truth import RealRobot, TruthConfig
-from pipeline.studies import save_result
 
 #: searches of the experiment: (algorithm, index)
 SEARCHES = (("detmax", "O1"), ("detmax", "O3"), ("detmax", "Oc"), ("bsaa", "Oc"))

@@ -51,12 +51,12 @@ import time
 import numpy as np
 import pinocchio as pin
 
-from pipeline.blas import single_thread_blas
 from pipeline.calibration import design as ds
 from pipeline.calibration import error_model as em
 from pipeline.calibration import indices as ix
 from pipeline.calibration import stage as st
-from pipeline.errors import SolverError
+from pipeline.core.blas import single_thread_blas
+from pipeline.core.errors import SolverError
 from pipeline.papers import calib_004_laser as lz
 from pipeline.papers import calib_004_optical as op
 from pipeline.papers import calib_004_scans as sd

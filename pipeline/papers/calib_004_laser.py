@@ -23,7 +23,6 @@ import math
 
 import numpy as np
 
-from pipeline.blas import single_thread_blas
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import design as ds
 from pipeline.calibration import error_model as em
@@ -32,6 +31,7 @@ from pipeline.calibration import measure as ms
 from pipeline.calibration import stage as st
 from pipeline.calibration import validate as va
 from pipeline.calibration.estimate import estimate
+from pipeline.core.blas import single_thread_blas
 from pipeline.robot.model import RobotModel
 from pipeline.sim.truth import RealRobot, TruthConfig
 

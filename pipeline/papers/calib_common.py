@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from joblib import Parallel, delayed
 
-from pipeline import studies
+from pipeline.papers import registry as studies
 
 
 def run_parallel(fn, items, jobs: int):
@@ -18,6 +18,6 @@ def run_parallel(fn, items, jobs: int):
 
 
 def save_result(name: str, result: dict) -> None:
-    """Write ``result`` to ``data/studies/<name>/result.json`` (:func:`pipeline.studies.study_dir`)."""
+    """Write ``result`` to ``data/studies/<name>/result.json`` (:func:`pipeline.papers.registry.study_dir`)."""
     print()
     studies.save_result(name, result)

@@ -37,7 +37,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.blas import single_thread_blas
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import design as ds
 from pipeline.calibration import design_bound as db
@@ -48,6 +47,7 @@ from pipeline.calibration import measure as ms
 from pipeline.calibration import stage as st
 from pipeline.calibration import task_space as ts
 from pipeline.calibration.estimate import calibrated_robot, estimate, register_points
+from pipeline.core.blas import single_thread_blas
 from pipeline.papers.calib_common import run_parallel, save_result
 from pipeline.robot.model import RobotModel
 from pipeline.sim.truth import RealRobot, TruthConfig

@@ -8,7 +8,7 @@ on the ISO path (§4.3, Fig. 5); time-optimal CP with a torque or speed limit ac
 instant (§5.3, Fig. 8); PtP minimising k1 T + k2 E under joint position, speed and torque
 limits (§5.4, eq. 40). The settings are :data:`PAPER_SETTINGS` (also ``configs/paper004.yaml``).
 
-Runs (``pipeline.runner.run_pipeline``; each its own run directory under ``--out``):
+Runs (``pipeline.run.runner.run_pipeline``; each its own run directory under ``--out``):
 - ``main``: the chain on the default hidden robot (elastic joints, Stribeck friction), per seed;
 - ``rigid`` (experiment): the same on the rigid hidden robot ``TruthConfig.ideal()``, stages up to
   control, to show what the elastic joints do to Fig. 2(b);
@@ -44,15 +44,15 @@ from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
-from pipeline.config import CONFIGS_DIR, RunConfig, load_config
-from pipeline.errors import PipelineError
+from pipeline.core.config import CONFIGS_DIR, RunConfig, load_config
+from pipeline.core.errors import PipelineError
+from pipeline.core.progress import Progress
 from pipeline.papers import chain_004_stiffness as stiff
 from pipeline.papers.chain_004_rows import Row, Run, all_rows, markdown
-from pipeline.progress import Progress
-from pipeline.runner import run_pipeline
+from pipeline.papers.registry import save_result, study_dir
+from pipeline.run.runner import run_pipeline
+from pipeline.run.stage_io import load_run
 from pipeline.sim.truth import TruthConfig
-from pipeline.stage_io import load_run
-from pipeline.studies import save_result, study_dir
 
 NAME = "paper-004"
 FULL_CONFIG = CONFIGS_DIR / "paper004.yaml"

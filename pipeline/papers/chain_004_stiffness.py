@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.config import RunConfig, load_config
+from pipeline.core.config import RunConfig, load_config
 from pipeline.papers.chain_004_rows import CLEAR_REDUCTION, Run
 
 #: stages up to the one that reads Fig. 2(b)

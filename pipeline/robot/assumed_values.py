@@ -23,8 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.errors import RobotFileError
-from pipeline.typed_config import dotted_get
+from pipeline.core.errors import RobotFileError
+from pipeline.core.typed_config import dotted_get
 
 _MISSING = object()
 

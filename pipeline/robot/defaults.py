@@ -29,7 +29,7 @@ from typing import cast
 
 import numpy as np
 
-from pipeline.errors import InfeasibleError
+from pipeline.core.errors import InfeasibleError
 from pipeline.robot.iso9283 import TOOL_ORIENTATIONS, IsoPathConfig, tool_rotation
 from pipeline.robot.iso_search import (
     MIN_EDGE_REACH,

@@ -21,8 +21,8 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from pipeline.artefacts import read_npz, write_bytes, write_npz
-from pipeline.errors import RobotFileError
+from pipeline.core.artefacts import read_npz, write_bytes, write_npz
+from pipeline.core.errors import RobotFileError
 from pipeline.robot.model import RobotModel
 from pipeline.robot.residual_map import ResidualMap
 

@@ -20,8 +20,8 @@ import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
 
-from pipeline.config_checks import check_choice, check_number, check_unique, check_vector
-from pipeline.errors import ConfigError, Source
+from pipeline.core.config_checks import check_choice, check_number, check_unique, check_vector
+from pipeline.core.errors import ConfigError, Source
 from pipeline.robot.paths import CartesianPath, CirclePath, LinePath, rectangle
 
 PLANES = {

@@ -45,7 +45,7 @@ from typing import cast
 import numpy as np
 import pinocchio as pin
 
-from pipeline.errors import InfeasibleError
+from pipeline.core.errors import InfeasibleError
 from pipeline.robot.iso9283 import PLANES, iso9283_path
 from pipeline.robot.model import RobotModel
 from pipeline.robot.reference import cartesian_reference

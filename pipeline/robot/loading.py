@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from pipeline.errors import RobotFileError
+from pipeline.core.errors import RobotFileError
 from pipeline.robot.spec import RobotSpec, load_robot_spec
 from pipeline.robot.urdf_import import arm_chain, assumed_spec, build_arm_model, reach_m
 from pipeline.robot.vendor_urdf import placeholder_inertias, placeholder_limits, repair_inertias

@@ -18,8 +18,8 @@ import pinocchio as pin
 import yaml
 from scipy.optimize import minimize
 
-from pipeline.artefacts import write_text
-from pipeline.errors import RobotFileError
+from pipeline.core.artefacts import write_text
+from pipeline.core.errors import RobotFileError
 from pipeline.robot.assumed_values import assumed_sentences
 from pipeline.robot.collision import CapsuleDistances, segment_distances
 from pipeline.robot.friction import joint_friction_torque, load_free_from_applied, load_friction_torque

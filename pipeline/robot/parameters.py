@@ -39,7 +39,7 @@ import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
 
-from pipeline.errors import PipelineError, RobotFileError
+from pipeline.core.errors import PipelineError, RobotFileError
 from pipeline.robot import spatial_sx as sx
 
 KINEMATIC_COMPONENTS = ("dx", "dy", "dz", "rx", "ry", "rz")

@@ -20,7 +20,7 @@ import numpy.typing as npt
 import pinocchio as pin
 from scipy.interpolate import CubicSpline
 
-from pipeline.errors import ConfigError, InfeasibleError
+from pipeline.core.errors import ConfigError, InfeasibleError
 from pipeline.robot.model import RobotModel
 
 

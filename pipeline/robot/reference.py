@@ -26,7 +26,7 @@ import numpy as np
 import pinocchio as pin
 from ruckig import InputParameter, Result, Ruckig, Trajectory
 
-from pipeline.errors import InfeasibleError, SolverError
+from pipeline.core.errors import InfeasibleError, SolverError
 from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import CartesianPath, check_within_limits, limiting_joint, pose_error
 

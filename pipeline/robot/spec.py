@@ -1,6 +1,6 @@
 """``robot.yaml``: the robot facts a URDF does not carry, parsed strictly.
 
-Every problem raises :class:`~pipeline.errors.RobotFileError` naming the file and the field
+Every problem raises :class:`~pipeline.core.errors.RobotFileError` naming the file and the field
 (``robot.yaml: actuation.viscous_Nms_rad: expected 6 numbers, got 5``). Unknown keys are
 errors, so a typo never silently falls back to a default.
 """
@@ -17,10 +17,10 @@ import numpy.typing as npt
 import pinocchio as pin
 import yaml
 
-from pipeline.errors import RobotFileError
+from pipeline.core.errors import RobotFileError
+from pipeline.core.typed_config import unknown_key
+from pipeline.core.yaml12 import DuplicateKeyError, load_yaml, yaml_problem
 from pipeline.robot.assumed_values import TORQUE_SIDES, assumed_in_force, locked_joints
-from pipeline.typed_config import unknown_key
-from pipeline.yaml12 import DuplicateKeyError, load_yaml, yaml_problem
 
 
 @dataclass
@@ -148,7 +148,7 @@ _TOP_KEYS = {
     "collision", "capsules", "assumptions", "optical_tracker", "base_link", "locked_joints", "assumed",
     "repeatability_m",
     # robot-specific defaults of the run configuration (test path placement, moves); read and
-    # checked by pipeline.config.load_config, which layers them under the config file
+    # checked by pipeline.core.config.load_config, which layers them under the config file
     "run_defaults",
 }
 _REQUIRED_TOP = {"urdf", "flange_frame", "tool", "actuation", "limits"}

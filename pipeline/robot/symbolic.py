@@ -26,8 +26,8 @@ import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
 
-from pipeline import codegen
-from pipeline.errors import PipelineError, RobotFileError
+from pipeline.core import codegen
+from pipeline.core.errors import PipelineError, RobotFileError
 from pipeline.robot import spatial_sx as sx
 from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import (
@@ -55,7 +55,7 @@ JIT_FLAGS = ("-O2",)
 
 
 def compile_function(function: ca.Function, cache_dir: Path | None = None) -> ca.Function:
-    """``function`` compiled with gcc and cached (:func:`pipeline.codegen.compile_function`)."""
+    """``function`` compiled with gcc and cached (:func:`pipeline.core.codegen.compile_function`)."""
     return codegen.compile_function(function, subdir="casadi", flags=JIT_FLAGS, cache_dir=cache_dir)
 
 

@@ -11,7 +11,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pinocchio as pin
 
-from pipeline.errors import RobotFileError
+from pipeline.core.errors import RobotFileError
 
 
 def _fmt(values: np.ndarray) -> str:

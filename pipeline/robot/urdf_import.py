@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from pipeline.errors import RobotFileError
+from pipeline.core.errors import RobotFileError
 from pipeline.robot.reflector_check import capsules_holding
 from pipeline.robot.repeatability import assumed_repeatability_m, repeatability_rule
 from pipeline.robot.spec import ActuationSpec, Capsule, CollisionSpec, RobotSpec, ToolSpec, TrackerSpec

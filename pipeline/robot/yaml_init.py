@@ -28,8 +28,8 @@ from pathlib import Path
 
 import yaml
 
-from pipeline.artefacts import write_text
-from pipeline.errors import RobotFileError
+from pipeline.core.artefacts import write_text
+from pipeline.core.errors import RobotFileError
 from pipeline.robot.assumed_values import assumed_entry
 from pipeline.robot.model import RobotModel
 from pipeline.robot.repeatability import repeatability_rule

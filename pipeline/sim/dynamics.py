@@ -22,7 +22,7 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
-from pipeline.errors import RobotFileError
+from pipeline.core.errors import RobotFileError
 from pipeline.robot.model import RobotModel
 
 PARAMS_PER_JOINT = 12 + 10 + 4  # placement (R row-major, p), inertia (10), armature, viscous, coulomb, effort

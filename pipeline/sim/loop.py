@@ -20,7 +20,7 @@ The step is rolled out with ``mapaccum`` over a chunk of samples, C code is gene
 compiled with gcc once per structure; the ``.so`` is cached under ``~/.cache/pipeline/control``
 keyed by a hash of the structure, the loop settings, CasADi's version and this source.
 :func:`rollout` runs it chunk after chunk through CasADi's buffer interface
-(:class:`~pipeline.casadi_buffers.BufferedFunction`): inputs and outputs are numpy arrays, no ``DM``
+(:class:`~pipeline.core.casadi_buffers.BufferedFunction`): inputs and outputs are numpy arrays, no ``DM``
 in between (the ``DM`` round trip cost about 3x the evaluation itself on the elastic RX130L).
 """
 
@@ -37,8 +37,8 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
-from pipeline import codegen
-from pipeline.casadi_buffers import BufferedFunction
+from pipeline.core import codegen
+from pipeline.core.casadi_buffers import BufferedFunction
 from pipeline.sim import dynamics, elastic_dynamics
 from pipeline.sim.dynamics import ChainStructure
 from pipeline.sim.elastic_dynamics import TRANSMISSION_PARAMS_PER_JOINT

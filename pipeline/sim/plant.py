@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
-from pipeline.errors import ConfigError
+from pipeline.core.errors import ConfigError
 from pipeline.sim import dynamics, loop
 from pipeline.sim.transmission import Transmission, link_inertia_kgm2
 

@@ -42,7 +42,7 @@ import numpy as np
 import pinocchio as pin
 from scipy.linalg import expm
 
-from pipeline.errors import ConfigError
+from pipeline.core.errors import ConfigError
 from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import (
     KinematicLayout,

@@ -24,7 +24,7 @@ import toppra.constraint as constraint
 from ruckig import InputParameter, Result, Ruckig, Trajectory
 from scipy.optimize import minimize
 
-from pipeline.errors import InfeasibleError, SolverError
+from pipeline.core.errors import InfeasibleError, SolverError
 from pipeline.trajectory.cp import CPProfile
 from pipeline.trajectory.design import JointPath
 from pipeline.trajectory.dynamics import PlanningModel

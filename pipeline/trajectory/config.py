@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from pipeline.config_checks import check_choice, check_count, check_number, check_vector
-from pipeline.errors import ConfigError, Source
+from pipeline.core.config_checks import check_choice, check_count, check_number, check_vector
+from pipeline.core.errors import ConfigError, Source
 from pipeline.robot.iso9283 import ISO_PLANES
 
 CP_SEGMENTS = ("line", "circle_large", "circle_small", "spline")   # smooth pieces of the ISO path, or a spline

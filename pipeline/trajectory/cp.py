@@ -32,8 +32,8 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from pipeline.errors import InfeasibleError, SolverError
-from pipeline.interrupts import raise_if_interrupted
+from pipeline.core.errors import InfeasibleError, SolverError
+from pipeline.core.interrupts import raise_if_interrupted
 from pipeline.trajectory.design import JointPath
 from pipeline.trajectory.dynamics import PlanningModel, path_coefficients
 from pipeline.trajectory.trajectories import JointTrajectory

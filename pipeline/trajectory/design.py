@@ -16,7 +16,7 @@ import numpy as np
 import pinocchio as pin
 from scipy.interpolate import make_interp_spline
 
-from pipeline.errors import InfeasibleError
+from pipeline.core.errors import InfeasibleError
 from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import ik_track, start_configuration
 

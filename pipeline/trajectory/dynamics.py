@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
-from pipeline.errors import ConfigError
+from pipeline.core.errors import ConfigError
 from pipeline.robot.model import RobotModel
 
 #: joint path derivatives smaller than this are treated as "joint does not move" (Coulomb sign).

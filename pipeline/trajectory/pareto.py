@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from pipeline.errors import InfeasibleError, SolverError
+from pipeline.core.errors import InfeasibleError, SolverError
 from pipeline.trajectory.ptp import PtpResult
 
 

@@ -40,9 +40,9 @@ import casadi as ca
 import numpy as np
 import numpy.typing as npt
 
-from pipeline import codegen
-from pipeline.errors import InfeasibleError, PipelineError, SolverError
-from pipeline.interrupts import raise_if_interrupted
+from pipeline.core import codegen
+from pipeline.core.errors import InfeasibleError, PipelineError, SolverError
+from pipeline.core.interrupts import raise_if_interrupted
 from pipeline.robot.symbolic import SymbolicRobot
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.trajectories import JointTrajectory
@@ -148,7 +148,7 @@ def _compile_nlp(solver_sx: ca.Function, key: str, cache_dir: Path | None, name:
                  flags: tuple[str, ...] = JIT_FLAGS) -> Path:
     """C code of the NLP's functions (objective, constraints and their derivatives) -> .so.
 
-    Named by ``key`` (:func:`nlp_library_key`, :func:`pipeline.codegen.build_library`; the code itself is
+    Named by ``key`` (:func:`nlp_library_key`, :func:`pipeline.core.codegen.build_library`; the code itself is
     generated only when the library is missing): the arm's parameters are inputs of the code, so one
     library serves every calibration and identification of an arm (its structure, grid size and
     velocity/acceleration scales name it), and is never compiled twice."""

@@ -49,7 +49,7 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from pipeline.errors import InfeasibleError, SolverError
+from pipeline.core.errors import InfeasibleError, SolverError
 from pipeline.trajectory.cp import CPProfile
 from pipeline.trajectory.design import JointPath
 from pipeline.trajectory.dynamics import PlanningModel, path_coefficients

@@ -15,8 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.errors import InfeasibleError, PipelineError, SolverError
-from pipeline.forks import fork_map
+from pipeline.core.errors import InfeasibleError, PipelineError, SolverError
+from pipeline.core.forks import fork_map
 from pipeline.robot.defaults import iso_cube, ready_pose_rad
 from pipeline.robot.iso9283 import iso9283_path, tool_rotation
 from pipeline.robot.model import RobotModel
@@ -427,7 +427,7 @@ def plan_ptp(pm: PlanningModel, problem: PtpProblem, q0: np.ndarray, q1: np.ndar
                 f"({res.duration_s:.4f} s, {problem.N} intervals): no energy plan at ruckig's duration")
     # the Pareto sweep: continuation from the main solution outwards (k1 = 1), same verification as
     # the main one; its two branches and the energy plan at ruckig's duration are independent chains
-    # of solves, run side by side on forked workers (:func:`pipeline.forks.fork_map`, same numbers)
+    # of solves, run side by side on forked workers (:func:`pipeline.core.forks.fork_map`, same numbers)
     ks = sorted(float(k) for k in cfg.ptp_pareto_k2) if pareto else []
     up = [k for k in ks if k > cfg.ptp_k2 and not np.isclose(k, cfg.ptp_k2)]
     down = [k for k in reversed(ks) if k < cfg.ptp_k2 and not np.isclose(k, cfg.ptp_k2)]

@@ -17,7 +17,7 @@ Paper ``004_abbe750b8bbcc3aa.txt`` §5 and DESIGN.md "Trajectories":
    plan, of its smooth variant and of ruckig's jerk-limited one (:mod:`pipeline.trajectory.settling`).
 
 The steps of :func:`run`: plan the CP and the PtP motion (:mod:`.solve`; side by side, the CP plan in a
-forked child, :func:`pipeline.forks.in_background`), verify the plans in the
+forked child, :func:`pipeline.core.forks.in_background`), verify the plans in the
 servo simulation (:mod:`.measure`), gate them (:mod:`.validate`), report (:mod:`.report`: every
 reported energy is the fine-grid re-check with the weights of ``ptp_energy``).
 """
@@ -28,8 +28,8 @@ import time
 
 import numpy as np
 
-from pipeline.errors import ConfigError
-from pipeline.forks import in_background
+from pipeline.core.errors import ConfigError
+from pipeline.core.forks import in_background
 from pipeline.robot.defaults import ptp_move_rad
 from pipeline.robot.model import RobotModel
 from pipeline.stage_api import StageContext, StageResult
@@ -43,7 +43,7 @@ from pipeline.trajectory.validate import quality_gates
 
 NAME = "trajectory"
 DEPENDS: tuple[str, ...] = ("model", "identification", "control")  # plans are run in the servo simulation
-#: provenance (pipeline.stage_plan): what is simulated (this stage reads no recorded file)
+#: provenance (pipeline.run.stage_plan): what is simulated (this stage reads no recorded file)
 SIMULATES = "servo loop on the hidden robot"
 __all__ = ["NAME", "DEPENDS", "SIMULATES", "Config", "check", "warm_up", "run"]
 
@@ -71,7 +71,7 @@ def check(config: TrajectoryConfig, robot: RobotModel) -> None:
 
 
 def warm_up(config: TrajectoryConfig, robot: RobotModel) -> None:
-    """Compile the PtP NLP while the upstream stages run (:mod:`pipeline.warm_up`): its code depends on
+    """Compile the PtP NLP while the upstream stages run (:mod:`pipeline.run.warm_up`): its code depends on
     the arm's structure and this section only (the identified and calibrated parameters are inputs),
     so the nominal robot's build is the library :func:`plan_ptp_step` loads."""
     if config.ptp_jit:

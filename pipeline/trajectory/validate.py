@@ -10,9 +10,9 @@ import numpy as np
 
 from pipeline.control.config import ControlConfig
 from pipeline.control.simulate import simulate_joint_trajectory
+from pipeline.core.solver_status import SUCCESS_STATUSES
 from pipeline.quality import QualityGates
 from pipeline.robot.model import RobotModel
-from pipeline.solver_status import SUCCESS_STATUSES
 from pipeline.trajectory.config import TrajectoryConfig
 from pipeline.trajectory.solve import CPPlan, PTPPlan
 from pipeline.trajectory.trajectories import JointTrajectory

@@ -9,7 +9,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from pipeline.errors import InfeasibleError
+from pipeline.core.errors import InfeasibleError
 from pipeline.robot import defaults
 from pipeline.robot.defaults import _cache_key, ik_seeds_rad
 from pipeline.robot.example_robots import EXAMPLE_ARMS, example_arm_urdf

@@ -19,7 +19,7 @@ from pipeline.calibration import candidates as cd
 from pipeline.calibration import feasibility as fz
 from pipeline.calibration.config import Config
 from pipeline.calibration.stage import build_candidates
-from pipeline.errors import InfeasibleError
+from pipeline.core.errors import InfeasibleError
 from pipeline.robot import model as model_mod
 from pipeline.robot.model import RobotModel
 from tests.anyarm.test_urdf_only import _erd

@@ -8,12 +8,12 @@ import pytest
 import yaml
 
 from pipeline.cli import main
-from pipeline.config import CONFIGS_DIR, load_config
-from pipeline.errors import ConfigError
+from pipeline.core.config import CONFIGS_DIR, load_config
+from pipeline.core.errors import ConfigError
 from pipeline.robot.example_robots import example_arm_urdf
 from pipeline.robot.model import RobotModel
-from pipeline.runner import prepare_run
-from pipeline.stage_plan import plan_stages, unavailable_stages
+from pipeline.run.runner import prepare_run
+from pipeline.run.stage_plan import plan_stages, unavailable_stages
 
 
 def _ur5() -> Path:

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline.errors import RobotFileError
+from pipeline.core.errors import RobotFileError
 from pipeline.robot import defaults
 from pipeline.robot.example_robots import example_arm_urdf
 from pipeline.robot.model import RobotModel

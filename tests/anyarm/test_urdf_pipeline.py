@@ -15,9 +15,9 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.config import CONFIGS_DIR, load_config
+from pipeline.core.config import CONFIGS_DIR, load_config
 from pipeline.robot.example_robots import EXAMPLE_ARMS, example_arm_urdf
-from pipeline.runner import run_pipeline
+from pipeline.run.runner import run_pipeline
 
 #: limit ratios above 1 by less than this are round-off of the fine-grid check
 LIMIT_TOLERANCE = 1e-3

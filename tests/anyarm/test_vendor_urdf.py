@@ -14,7 +14,7 @@ import pytest
 import yaml
 
 from pipeline.cli import main
-from pipeline.errors import RobotFileError
+from pipeline.core.errors import RobotFileError
 from pipeline.robot.assumed_values import value_digest
 from pipeline.robot.example_robots import example_arm_urdf
 from pipeline.robot.model import RobotModel

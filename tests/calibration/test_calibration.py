@@ -19,12 +19,12 @@ from pipeline.calibration import stage as st
 from pipeline.calibration import validate as va
 from pipeline.calibration.elastostatic import design_basis, design_blocks, measurement_model
 from pipeline.calibration.estimate import estimate, register_points
-from pipeline.config import quick_config
-from pipeline.errors import ConfigError, DataFileError, InfeasibleError, PipelineError, SolverError
+from pipeline.core.config import quick_config
+from pipeline.core.errors import ConfigError, DataFileError, InfeasibleError, PipelineError, SolverError
 from pipeline.quality import QualityGates
 from pipeline.robot.instruments import tracker_visibility
 from pipeline.robot.model import RobotModel
-from pipeline.runner import run_pipeline
+from pipeline.run.runner import run_pipeline
 from pipeline.sim.truth import RealRobot, TruthConfig
 
 

@@ -10,8 +10,8 @@ from pipeline.calibration import candidates as cd
 from pipeline.calibration import measure as ms
 from pipeline.calibration import stage as st
 from pipeline.cli import main
-from pipeline.config import CONFIGS_DIR, load_config
-from pipeline.errors import ConfigError, DataFileError, InfeasibleError
+from pipeline.core.config import CONFIGS_DIR, load_config
+from pipeline.core.errors import ConfigError, DataFileError, InfeasibleError
 from pipeline.robot.model import RobotModel
 from pipeline.sim.truth import RealRobot
 

@@ -8,7 +8,7 @@ import pytest
 from pipeline.calibration import design as ds
 from pipeline.calibration import indices as ix
 from pipeline.calibration.design_state import DesignState, above
-from pipeline.errors import InfeasibleError
+from pipeline.core.errors import InfeasibleError
 
 
 def _cands(N=300, m=3, p=12, seed=0):

@@ -13,7 +13,7 @@ from pipeline.calibration import indices as ix
 from pipeline.calibration import stage as st
 from pipeline.calibration import task_space as ts
 from pipeline.calibration.config import Config
-from pipeline.errors import ConfigError, InfeasibleError
+from pipeline.core.errors import ConfigError, InfeasibleError
 from pipeline.robot.model import RobotModel
 
 

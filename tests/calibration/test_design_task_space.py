@@ -15,7 +15,7 @@ from pipeline.calibration import stage as st
 from pipeline.calibration import task_space as ts
 from pipeline.calibration.design_state import DesignState
 from pipeline.calibration.estimate import estimate
-from pipeline.errors import ConfigError, DataFileError
+from pipeline.core.errors import ConfigError, DataFileError
 from pipeline.robot.defaults import iso_cube
 from pipeline.robot.model import RobotModel
 from pipeline.sim.truth import RealRobot

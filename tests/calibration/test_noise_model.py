@@ -16,7 +16,7 @@ from pipeline.calibration import report
 from pipeline.calibration import stage as st
 from pipeline.calibration.robust import robust_estimate
 from pipeline.calibration.validate import gate_figures
-from pipeline.errors import QualityGateError
+from pipeline.core.errors import QualityGateError
 from pipeline.robot import repeatability as rp
 from pipeline.robot.model import RobotModel
 from pipeline.sim.truth import RealRobot, TruthConfig

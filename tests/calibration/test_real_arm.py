@@ -14,7 +14,7 @@ from pipeline.calibration import stage as st
 from pipeline.calibration import validate as va
 from pipeline.calibration.estimate import estimate, register_points
 from pipeline.calibration.robust import robust_estimate
-from pipeline.errors import ConfigError, DataFileError
+from pipeline.core.errors import ConfigError, DataFileError
 from pipeline.papers.calib_six_d import simulate_six_d_record
 from pipeline.robot.model import RobotModel
 from pipeline.sim.truth import RealRobot, TruthConfig

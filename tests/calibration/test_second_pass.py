@@ -7,10 +7,10 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from pipeline import codegen
 from pipeline.calibration import error_model as em
 from pipeline.calibration.elastostatic import gravity_model_of, negligible_compliances
-from pipeline.compiled_on_demand import FLAGS
+from pipeline.core import codegen
+from pipeline.core.compiled_on_demand import FLAGS
 from pipeline.robot.model import RobotModel
 
 

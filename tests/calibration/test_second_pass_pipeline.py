@@ -13,11 +13,11 @@ import shutil
 import numpy as np
 import pytest
 
-from pipeline.config import CONFIGS_DIR, load_config
+from pipeline.core.config import CONFIGS_DIR, load_config
 from pipeline.robot.model import RobotModel
-from pipeline.run_check import check_run
-from pipeline.runner import run_pipeline
-from pipeline.second_pass import GRAVITY_SHARE_FOR_SECOND_PASS
+from pipeline.run.run_check import check_run
+from pipeline.run.runner import run_pipeline
+from pipeline.run.second_pass import GRAVITY_SHARE_FOR_SECOND_PASS
 from pipeline.sim.truth import RealRobot, TruthConfig
 
 #: 3 sigma of the tracker plus the unmodelled remainder (3 µrad cyclic gear error at ~1.5 m: < 0.5 sigma)

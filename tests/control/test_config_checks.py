@@ -7,10 +7,10 @@ import dataclasses
 
 import pytest
 
-from pipeline.config import CONFIGS_DIR, load_config
 from pipeline.control import stage
 from pipeline.control.config import ControlConfig
-from pipeline.errors import ConfigError
+from pipeline.core.config import CONFIGS_DIR, load_config
+from pipeline.core.errors import ConfigError
 from pipeline.robot import iso9283
 from pipeline.robot.iso9283 import ISO_PLANES, ISO_SEGMENTS, IsoPathConfig
 

@@ -8,11 +8,11 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from pipeline.config import load_config
 from pipeline.control.config import ControlConfig
 from pipeline.control.elastic_feedforward import elastic_feedforward, link_torque
 from pipeline.control.simulate import feedforward_torque, simulate_joint_trajectory
 from pipeline.control.validate import settling_time
+from pipeline.core.config import load_config
 from pipeline.robot.defaults import ik_seeds_or_derived_rad, iso_or_derived
 from pipeline.robot.iso9283 import iso9283_path
 from pipeline.robot.paths import start_configuration

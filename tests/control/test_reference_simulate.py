@@ -8,7 +8,7 @@ import pytest
 
 from pipeline.control.config import ControlConfig
 from pipeline.control.simulate import simulate_joint_trajectory
-from pipeline.errors import InfeasibleError
+from pipeline.core.errors import InfeasibleError
 from pipeline.robot.iso9283 import iso9283_path
 from pipeline.robot.paths import CirclePath, LinePath, start_configuration
 from pipeline.robot.reference import cartesian_reference

@@ -10,8 +10,8 @@ import pytest
 from pipeline.control import stage
 from pipeline.control.config import ControlConfig
 from pipeline.control.estimate import with_dynamics_of
-from pipeline.errors import ConfigError
-from pipeline.progress import Progress
+from pipeline.core.errors import ConfigError
+from pipeline.core.progress import Progress
 from pipeline.sim.truth import RealRobot, TruthConfig
 from pipeline.stage_api import StageContext, StageOutput, stage_rng
 

@@ -8,7 +8,7 @@ import pytest
 from pipeline.control.config import ControlConfig
 from pipeline.control.design import design_gains, reflected_inertia, stick_slip_gains
 from pipeline.control.simulate import servo_gains, simulate_joint_trajectory
-from pipeline.errors import ConfigError
+from pipeline.core.errors import ConfigError
 from pipeline.robot.friction import stribeck_excess_torque, stribeck_slope_Nms_rad
 from pipeline.sim.truth import RealRobot, TruthConfig
 

@@ -8,9 +8,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from pipeline.config import load_config
-from pipeline.progress import Progress
-from pipeline.runner import run_pipeline
+from pipeline.core.config import load_config
+from pipeline.core.progress import Progress
+from pipeline.run.runner import run_pipeline
 from pipeline.sim.truth import TruthConfig
 
 RIGID = {"truth.joint_compliance_scale": 0.0, "truth.stribeck_excess_relative": 0.0,

@@ -11,14 +11,14 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.config import CONFIGS_DIR, load_config, to_plain
+from pipeline.core.config import CONFIGS_DIR, load_config, to_plain
+from pipeline.core.progress import Progress
+from pipeline.core.typed_config import build_dataclass
 from pipeline.identification import stage
-from pipeline.progress import Progress
 from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import apply_kinematic_errors
 from pipeline.sim.truth import RealRobot, TruthConfig
 from pipeline.stage_api import StageContext, stage_rng
-from pipeline.typed_config import build_dataclass
 
 
 def calibrated_robot(nominal: RobotModel, real: RealRobot) -> RobotModel:

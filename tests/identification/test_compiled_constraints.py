@@ -8,8 +8,8 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from pipeline import codegen
-from pipeline import compiled_on_demand as cod
+from pipeline.core import codegen
+from pipeline.core import compiled_on_demand as cod
 from pipeline.identification import design as D
 from pipeline.identification import fourier as F
 from pipeline.robot.symbolic import SymbolicRobot

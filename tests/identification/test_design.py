@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from pipeline.core.solver_status import SUCCESS_STATUSES
 from pipeline.identification import design as D
 from pipeline.identification import fourier as F
 from pipeline.identification.regressor import RegressorModel, base_parameters
 from pipeline.robot.symbolic import SymbolicRobot
-from pipeline.solver_status import SUCCESS_STATUSES
 
 
 @pytest.fixture(scope="module")

@@ -9,11 +9,11 @@ import pytest
 import yaml
 
 from pipeline.cli import main
-from pipeline.config import CONFIGS_DIR, load_config
-from pipeline.errors import ConfigError, DataFileError
+from pipeline.core.config import CONFIGS_DIR, load_config
+from pipeline.core.errors import ConfigError, DataFileError
 from pipeline.identification import stage
 from pipeline.robot.model import RobotModel
-from pipeline.runner import run_pipeline
+from pipeline.run.runner import run_pipeline
 
 from .test_stage import _bad_record, _write_csv
 

@@ -10,13 +10,13 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from pipeline.errors import DataFileError
+from pipeline.core.errors import DataFileError
+from pipeline.core.interrupts import raise_if_interrupted
 from pipeline.identification import design as D
 from pipeline.identification import fourier as F
 from pipeline.identification import stage
 from pipeline.identification.gates import add_result_gates, check_data_excites
 from pipeline.identification.regressor import RegressorModel, base_parameters
-from pipeline.interrupts import raise_if_interrupted
 from pipeline.quality import QualityGates
 from pipeline.robot.model import RobotModel
 from pipeline.robot.symbolic import SymbolicRobot

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from pipeline.cli import main
-from pipeline.config import CONFIGS_DIR, load_config
-from pipeline.errors import ConfigError, DataFileError
+from pipeline.core.config import CONFIGS_DIR, load_config
+from pipeline.core.errors import ConfigError, DataFileError
 from pipeline.identification import stage
 from pipeline.identification.tx40 import TX40_DATA_DIR, Tx40Config, check_tx40_config
 from pipeline.robot.model import RobotModel

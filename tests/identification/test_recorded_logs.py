@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import scipy.signal
 
-from pipeline.errors import ConfigError, DataFileError
+from pipeline.core.errors import ConfigError, DataFileError
 from pipeline.identification import estimate as est_mod
 from pipeline.identification.config import Config
 from pipeline.identification.friction import fit_stribeck, stribeck_chi2_gain, stribeck_torque

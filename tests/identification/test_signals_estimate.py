@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.errors import DataFileError
+from pipeline.core.errors import DataFileError
 from pipeline.identification import estimate as E
 from pipeline.identification import signals
 from pipeline.identification.measure import JointRecord, process_periodic

@@ -10,14 +10,14 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from pipeline import config as config_mod
-from pipeline.config import CONFIGS_DIR, load_config, to_plain
-from pipeline.errors import DataFileError, PipelineError, QualityGateError
+from pipeline.core import config as config_mod
+from pipeline.core.config import CONFIGS_DIR, load_config, to_plain
+from pipeline.core.errors import DataFileError, PipelineError, QualityGateError
 from pipeline.identification import fourier, stage
 from pipeline.identification.estimate import is_physically_consistent
 from pipeline.identification.measure import load_joint_csv
 from pipeline.robot.model import RobotModel
-from pipeline.runner import run_pipeline
+from pipeline.run.runner import run_pipeline
 
 from .helpers import NO_LOAD_FRICTION, quick_context, true_base
 

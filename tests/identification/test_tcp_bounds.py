@@ -6,8 +6,8 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from pipeline.config import CONFIGS_DIR, load_config
-from pipeline.errors import ConfigError
+from pipeline.core.config import CONFIGS_DIR, load_config
+from pipeline.core.errors import ConfigError
 from pipeline.identification import design as D
 from pipeline.identification import fourier as F
 from pipeline.identification.tcp_motion import tcp_speed_acceleration

@@ -11,10 +11,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.config import CONFIGS_DIR, REPO_ROOT, load_config
+from pipeline.core.config import CONFIGS_DIR, REPO_ROOT, load_config
+from pipeline.core.progress import Progress
 from pipeline.identification import stage
 from pipeline.identification.friction import MAX_EXCESS_OVER_LIMIT, MAX_LOAD_COEFFICIENT
-from pipeline.progress import Progress
 from pipeline.robot.model import RobotModel
 from pipeline.stage_api import StageContext, stage_rng
 

@@ -6,13 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.config import RunConfig, load_config, resolve_robot_dir
 from pipeline.control.config import ControlConfig
+from pipeline.core.config import RunConfig, load_config, resolve_robot_dir
 from pipeline.identification import report, stage
 from pipeline.identification import validate as val_mod
 from pipeline.robot.model import RobotModel
-from pipeline.runner import stage_inputs_hashes
-from pipeline.stage_plan import plan_stages
+from pipeline.run.runner import stage_inputs_hashes
+from pipeline.run.stage_plan import plan_stages
 
 
 def _identification_hash(values: dict | None = None) -> str:

@@ -6,8 +6,8 @@ import json
 
 import numpy as np
 
-from pipeline import studies
 from pipeline.papers import calib_002 as p2
+from pipeline.papers import registry as studies
 
 
 def test_paper_table_has_rank_23_with_two_couplings_in_the_last_joint():

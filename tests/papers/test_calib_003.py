@@ -8,11 +8,11 @@ import json
 import numpy as np
 import pytest
 
-from pipeline import studies
 from pipeline.calibration import indices as ix
 from pipeline.papers import calib_003 as p3
 from pipeline.papers import calib_003_search as ps
 from pipeline.papers import calib_003_sizes as p3s
+from pipeline.papers import registry as studies
 
 #: BSAA's cooling factor in the quick study test (the paper's: 0.98, the default of ps.bsaa)
 FAST_COOLING = 0.9

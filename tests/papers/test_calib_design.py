@@ -7,8 +7,8 @@ import math
 
 import pytest
 
-from pipeline import studies
 from pipeline.papers import calib_design
+from pipeline.papers import registry as studies
 
 
 @pytest.mark.slow

@@ -12,12 +12,12 @@ import math
 
 import pytest
 
-from pipeline.config import load_config
+from pipeline.core.config import load_config
 from pipeline.papers import chain_004 as study
 from pipeline.papers import chain_004_rows as rows_mod
 from pipeline.papers import chain_004_stiffness as stiff
+from pipeline.papers.registry import resolve
 from pipeline.sim.truth import TruthConfig
-from pipeline.studies import resolve
 
 HEADLINES = {"iso_settings", "excitation_tcp", "fig2a_lag", "fig2b_tcp", "fig5_torques", "fig8_cp_active",
              "ptp_tradeoff", "executed"}

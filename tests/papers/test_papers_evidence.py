@@ -22,7 +22,8 @@ from pathlib import Path
 
 import pytest
 
-from pipeline import cli, studies
+from pipeline import cli
+from pipeline.papers import registry as studies
 
 ROOT = Path(__file__).resolve().parents[2]
 PAPERS = ROOT / "docs" / "PAPERS.md"

@@ -19,8 +19,9 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from pipeline import cli, config
-from pipeline.config import RunConfig
+from pipeline import cli
+from pipeline.core import config
+from pipeline.core.config import RunConfig
 from pipeline.stage_api import StageContext, StageResult
 
 

@@ -10,10 +10,10 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from pipeline.config import CONFIGS_DIR, load_config
+from pipeline.core.config import CONFIGS_DIR, load_config
 from pipeline.robot.exact import load_exact_robot, robots_equal, save_exact_robot
 from pipeline.robot.model import RobotModel
-from pipeline.runner import run_pipeline
+from pipeline.run.runner import run_pipeline
 
 
 def _perturbed(name: str, seed: int) -> RobotModel:

@@ -23,7 +23,8 @@ from pathlib import Path
 import casadi as ca
 import pytest
 
-from pipeline import cli, codegen, config
+from pipeline import cli
+from pipeline.core import codegen, config
 from tests.reliability import fake_cli
 
 REPO = Path(__file__).resolve().parents[2]
@@ -248,7 +249,7 @@ def test_cache_honours_xdg_and_falls_back_when_unwritable(tmp_path, monkeypatch,
 IPOPT_SCRIPT = textwrap.dedent('''
     import sys
     import casadi as ca
-    from pipeline.interrupts import handle_termination, raise_if_interrupted
+    from pipeline.core.interrupts import handle_termination, raise_if_interrupted
     n = 2000
     x = ca.MX.sym("x", n)
     f = ca.sum1(100 * (x[1:] - x[:-1] ** 2) ** 2 + (1 - x[:-1]) ** 2) + ca.sum1(ca.sin(x) ** 4)

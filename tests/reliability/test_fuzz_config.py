@@ -12,8 +12,8 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from pipeline.config import CONFIGS_DIR, load_config, section_names
-from pipeline.errors import ConfigError, PipelineError, RobotFileError
+from pipeline.core.config import CONFIGS_DIR, load_config, section_names
+from pipeline.core.errors import ConfigError, PipelineError, RobotFileError
 from pipeline.robot.model import RobotModel
 from pipeline.robot.spec import load_robot_spec
 

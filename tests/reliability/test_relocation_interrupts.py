@@ -9,11 +9,13 @@ import signal
 
 import pytest
 
-from pipeline import cli, config, interrupts, second_pass
-from pipeline.config import CONFIGS_DIR, load_config
-from pipeline.locking import run_lock
-from pipeline.run_check import check_run
-from pipeline.runner import run_pipeline
+from pipeline import cli
+from pipeline.core import config, interrupts
+from pipeline.core.config import CONFIGS_DIR, load_config
+from pipeline.run import second_pass
+from pipeline.run.locking import run_lock
+from pipeline.run.run_check import check_run
+from pipeline.run.runner import run_pipeline
 
 QUIET = {"log": lambda m: None}
 

@@ -11,15 +11,17 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from pipeline import cli, config, locking, stage_io
-from pipeline.config import CONFIGS_DIR, load_config
-from pipeline.errors import ArtefactWriteError, PipelineError, QualityGateError
-from pipeline.interrupts import INTERRUPT_STATUSES, raise_if_interrupted
-from pipeline.locking import RunLockedError, run_lock
+from pipeline import cli
+from pipeline.core import config
+from pipeline.core.config import CONFIGS_DIR, load_config
+from pipeline.core.errors import ArtefactWriteError, PipelineError, QualityGateError
+from pipeline.core.interrupts import INTERRUPT_STATUSES, raise_if_interrupted
 from pipeline.quality import QualityGates
-from pipeline.runner import run_pipeline
+from pipeline.run import locking, stage_io
+from pipeline.run.locking import RunLockedError, run_lock
+from pipeline.run.runner import run_pipeline
+from pipeline.run.stage_io import file_sha256, load_run
 from pipeline.stage_api import StageResult
-from pipeline.stage_io import file_sha256, load_run
 
 QUIET = {"log": lambda m: None}
 

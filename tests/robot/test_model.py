@@ -10,7 +10,7 @@ import pinocchio as pin
 import pytest
 import yaml
 
-from pipeline.errors import RobotFileError
+from pipeline.core.errors import RobotFileError
 from pipeline.robot.collision import coal_capsule_distance, segment_distances
 from pipeline.robot.model import ROBOTS_DIR, RobotModel
 

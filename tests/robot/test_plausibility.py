@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from pipeline import cli
-from pipeline.config import REPO_ROOT
+from pipeline.core.config import REPO_ROOT
 from pipeline.robot import plausibility as pl
 from pipeline.robot.example_robots import EXAMPLE_ARMS, example_arm_urdf
 from pipeline.robot.mdh import JointSpec, LinkSpec, MDHRobotSpec, MDHRow, cylinder_inertia, urdf_from_mdh

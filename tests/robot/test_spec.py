@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from pipeline.errors import RobotFileError
+from pipeline.core.errors import RobotFileError
 from pipeline.robot.model import ROBOTS_DIR, RobotModel
 
 

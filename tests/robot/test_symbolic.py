@@ -10,7 +10,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from pipeline.errors import PipelineError, RobotFileError
+from pipeline.core.errors import PipelineError, RobotFileError
 from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import (
     apply_kinematic_errors,

@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from pipeline.calibration import candidates as cd
-from pipeline.errors import RobotFileError
+from pipeline.core.errors import RobotFileError
 from pipeline.papers import calib_004_optical as op
 from pipeline.robot import instruments
 from pipeline.robot.model import RobotModel

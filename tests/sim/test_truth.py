@@ -6,7 +6,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from pipeline.errors import ConfigError
+from pipeline.core.errors import ConfigError
 from pipeline.robot.instruments import tracker_visibility
 from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import KinematicLayout, dynamic_parameter_problems

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.config import CONFIGS_DIR, load_config
+from pipeline.core.config import CONFIGS_DIR, load_config
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.solve import PTPPlan, cp_joint_path, plan_ptp
 from pipeline.trajectory.solve import ptp_problem as compile_ptp_problem  # the fixture below takes its name

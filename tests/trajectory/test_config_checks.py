@@ -9,8 +9,8 @@ import shutil
 import numpy as np
 import pytest
 
-from pipeline.config import CONFIGS_DIR, REPO_ROOT, load_config
-from pipeline.errors import ConfigError
+from pipeline.core.config import CONFIGS_DIR, REPO_ROOT, load_config
+from pipeline.core.errors import ConfigError
 from pipeline.robot.iso9283 import ISO_SEGMENTS
 from pipeline.trajectory import stage
 from pipeline.trajectory.config import CP_SEGMENTS, PTP_ENERGIES, TrajectoryConfig

@@ -8,7 +8,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from pipeline.errors import ConfigError, InfeasibleError
+from pipeline.core.errors import ConfigError, InfeasibleError
 from pipeline.trajectory.baselines import toppra_cp
 from pipeline.trajectory.cp import solve_cp_convex, solve_cp_refined, solve_cp_smooth
 from pipeline.trajectory.design import JointPath

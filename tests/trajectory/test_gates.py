@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from pipeline.errors import QualityGateError
+from pipeline.core.errors import QualityGateError
 from pipeline.stage_api import StageResult
 from pipeline.trajectory.config import TrajectoryConfig
 from pipeline.trajectory.trajectories import TorqueCheck

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from ruckig import Ruckig, Trajectory
 
-from pipeline.errors import InfeasibleError, PipelineError, SolverError
+from pipeline.core.errors import InfeasibleError, PipelineError, SolverError
 from pipeline.trajectory import solve as solve_mod
 from pipeline.trajectory.baselines import _ruckig_input, _states_at, ruckig_torque_feasible
 from pipeline.trajectory.pareto import dominated_flags, settle_pareto

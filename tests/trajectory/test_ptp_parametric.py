@@ -9,7 +9,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from pipeline import codegen
+from pipeline.core import codegen
 from pipeline.robot.symbolic import SymbolicRobot
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.ptp import (

@@ -9,8 +9,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from pipeline.errors import InfeasibleError
-from pipeline.interrupts import INTERRUPT_STATUSES, raise_if_interrupted
+from pipeline.core.errors import InfeasibleError
+from pipeline.core.interrupts import INTERRUPT_STATUSES, raise_if_interrupted
 from pipeline.robot.example_robots import example_arm_urdf
 from pipeline.trajectory.baselines import toppra_cp
 from pipeline.trajectory.cp import cp_grid_activity, solve_cp_convex, solve_cp_refined

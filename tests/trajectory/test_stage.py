@@ -7,8 +7,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from pipeline.errors import ConfigError
-from pipeline.progress import Progress
+from pipeline.core.errors import ConfigError
+from pipeline.core.progress import Progress
 from pipeline.sim.truth import RealRobot, TruthConfig
 from pipeline.stage_api import StageContext, stage_rng
 from pipeline.trajectory import report, stage

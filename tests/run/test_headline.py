@@ -1,0 +1,157 @@
+"""The headline: every stage's key figure against its gate or anchor, on the console and atop report.md."""
+
+from __future__ import annotations
+
+import json
+from types import SimpleNamespace
+
+import pytest
+from rich.console import Console
+
+from pipeline import cli
+from pipeline.core import config
+from pipeline.run import headline as hl
+from pipeline.run.report import write_report
+from pipeline.run.runner import StageResult
+
+GATES_PASS = {"passed": True, "checks": [
+    {"name": "validation_rms_over_noise", "passed": True, "value": 1.03, "op": "<=", "threshold": 2.0},
+    {"name": "cond_data_over_design", "passed": True, "value": 1.0, "op": "<=", "threshold": 2.0}]}
+SUMMARIES = {
+    "model": {"name": "arm", "dof": 6, "reach_m": 1.6, "moving_mass_kg": 12.0, "payload_kg": 16.0,
+              "assumptions": ["payload 0 kg assumed"], "plausibility_warnings": ["moving mass 12 kg is light"]},
+    "calibration": {"heldout_rms_position_error_after_m": 26e-6, "heldout_rms_position_error_before_m": 2e-3,
+                    "tracker_noise_sigma_m": 13e-6, "predicted_rms_position_error_m": 52e-6,
+                    "validation_source": "simulated tracker (held-out)",
+                    "quality_gates": {"passed": True, "checks": [{"name": "chi2_per_dof", "passed": True}]}},
+    "identification": {"validation_rms_over_noise": [1.0, 3.5, 1.2], "data_source": "/data/my_arm_record.csv",
+                       "quality_gates": {"passed": False, "checks": [
+                           {"name": "validation_rms_over_noise", "passed": False, "value": 3.5, "op": "<=",
+                            "threshold": 2.0}]}, "accepted_poor": True},
+    "control": {"tcp_error_max_m": {"none": 2.4e-3, "full_friction": 2.3e-3, "elastic_flat": 75e-6,
+                                    "full_friction_nominal": 1e-9}},
+    "trajectory": {"cp_duration_s": 0.54, "cp_toppra_duration_s": 0.50, "cp_segment": "line",
+                   "ptp_duration_s": 0.8, "ptp_ruckig_duration_s": 1.0, "ptp_energy_at_ruckig_duration": 0.6,
+                   "ptp_ruckig_energy": 0.9, "ptp_energy_measure": "normalised",
+                   "ptp_move_and_settle_s": 1.3, "ptp_smooth_move_and_settle_s": 1.1,
+                   "ptp_ruckig_move_and_settle_s": 1.5, "quality_gates": GATES_PASS},
+}
+
+
+def _write_run(tmp_path, summaries=SUMMARIES):
+    run = tmp_path / "arm-quick"
+    for stage, summary in summaries.items():
+        (run / stage).mkdir(parents=True)
+        (run / stage / "summary.json").write_text(json.dumps(summary))
+        (run / stage / "inputs.sha256").write_text("0" * 64)
+    return run
+
+
+def _rows(headline, stage, figure_start):
+    return [r for r in headline.rows if r.stage == stage and r.figure.startswith(figure_start)]
+
+
+def test_each_stage_figure_stands_against_its_anchor_with_a_verdict(tmp_path):
+    run = _write_run(tmp_path)
+    headline = hl.read_headline(run, list(SUMMARIES))
+    (noise,) = _rows(headline, "calibration", "held-out TCP error RMS / noise")
+    assert noise.verdict == hl.ratio(26e-6 / 13e-6) and noise.source == "simulated"
+    (predicted,) = _rows(headline, "calibration", "held-out TCP error RMS, actual / predicted")
+    assert predicted.verdict == hl.ratio(0.5) and "52.0 µm" in predicted.against
+    (ident,) = _rows(headline, "identification", "validation torque RMS")
+    assert ident.verdict == "FAIL" and "joint 2" in ident.value and "≤ 2" in ident.against
+    assert ident.source == "recorded (my_arm_record.csv)"
+    (gates,) = _rows(headline, "identification", "quality gates")
+    assert gates.verdict.startswith("FAIL: validation_rms_over_noise") and "--accept-poor" in gates.verdict
+    (ff,) = _rows(headline, "control", "feedforward gain")
+    # the best variant the stage ran (the nominal-model comparison is no variant of the run)
+    assert "elastic_flat" in ff.value and ff.verdict == hl.ratio(2.4e-3 / 75e-6)
+    # simulated on a model identified from the user's record: the row says so
+    assert "recorded (my_arm_record.csv)" in ff.source
+    verdicts = {r.figure.split(" (")[0]: r.verdict for r in headline.rows if r.stage == "trajectory"}
+    assert verdicts["CP duration"] == hl.ratio(0.54 / 0.50)
+    assert verdicts["PtP duration"] == hl.ratio(0.8)
+    assert verdicts["PtP energy at ruckig's duration"] == hl.ratio(0.6 / 0.9)
+    assert verdicts["PtP move + settle"] == hl.ratio(1.1 / 1.5)     # the better of the two plans
+    assert verdicts["quality gates"] == "pass"
+    assert headline.assumptions == ["payload 0 kg assumed"] and headline.warnings == ["moving mass 12 kg is light"]
+    assert headline.failed
+    (model,) = _rows(headline, "model", "robot")
+    assert model.verdict.startswith("WARN")
+
+
+def test_missing_stages_and_figures_leave_rows_out(tmp_path):
+    run = _write_run(tmp_path, {"model": {"name": "x"}, "control": {"tcp_error_max_m": {"none": 1e-3}}})
+    headline = hl.read_headline(run, ["model", "calibration", "control"])
+    assert headline.rows == [] and not headline.failed
+    assert "_no finished stage yet_" in hl.headline_markdown(headline)
+
+
+def test_stale_stages_are_marked(tmp_path):
+    run = _write_run(tmp_path)
+    rows = hl.read_headline(run, list(SUMMARIES), stale=["control"]).rows
+    assert all(("stale" in r.source) == (r.stage == "control") for r in rows)
+
+
+def test_report_opens_with_the_headline_then_assumptions_and_warnings(tmp_path):
+    run = _write_run(tmp_path)
+    text = write_report(run).read_text()
+    first_stage = text.index("\n## model")
+    head = text[:first_stage]
+    assert text.startswith("# Run `arm-quick`") and "## Headline" in head
+    assert head.index("## Headline") < head.index("**Assumptions still in force**") < head.index("**Warnings**")
+    assert "* payload 0 kg assumed" in head and "* moving mass 12 kg is light" in head
+    assert "| calibration | held-out TCP error RMS / noise |" in head
+
+
+def test_console_table_shows_every_row_and_the_warnings(tmp_path):
+    headline = hl.read_headline(_write_run(tmp_path), list(SUMMARIES))
+    console = Console(record=True, width=400, color_system=None)
+    hl.print_headline(headline, console)
+    text = console.export_text()
+    assert all(r.figure in text and r.verdict in text for r in headline.rows)
+    assert "warning: moving mass 12 kg is light" in text and "payload 0 kg assumed" in text
+
+
+@pytest.fixture
+def model_like_stage(monkeypatch, fake_stages):
+    """The fake registry plus a stage "model" whose summary carries a warning and an assumption."""
+    def run(ctx):
+        return StageResult(summary=dict(SUMMARIES["model"]))
+
+    stage = SimpleNamespace(NAME="model", DEPENDS=(), Config=type(fake_stages.make("x").Config()), run=run,
+                            __file__=None)
+    monkeypatch.setattr(config, "STAGES", {"model": stage, **config.STAGES})
+    return stage
+
+
+def test_run_prints_the_headline_before_the_report_path(model_like_stage, tmp_path, capsys):
+    assert cli.main(["run", "--out", str(tmp_path), "--set", "name=r"]) == 0
+    out = capsys.readouterr().out
+    report = tmp_path / "r" / "report.md"
+    assert out.rstrip().splitlines()[-1] == str(report)
+    assert "Run r: headline" in out and "robot arm" in out and "warning: moving mass 12 kg is light" in out
+    assert "## Headline" in report.read_text().split("\n## model")[0]
+
+
+def test_recorded_calibration_stands_on_its_cross_validation(tmp_path):
+    summary = {"cross_validation": {"folds": 5, "rms_position_error_m": 40e-6}, "tracker_noise_sigma_m": 20e-6,
+               "measurement_source": "/data/tracker_readings.csv", "heldout_rms_position_error_after_m": None}
+    (row,) = hl.stage_rows("calibration", summary)
+    assert row.figure.startswith("5-fold cross-validated") and row.verdict == hl.ratio(2.0)
+    assert row.source == "recorded (tracker_readings.csv)"
+
+
+def test_calibration_row_judges_against_the_total_noise_not_the_sensor_alone():
+    summary = {"heldout_rms_position_error_after_m": 60e-6, "tracker_noise_sigma_m": 10e-6,
+               "noise_total_sigma_m": 30e-6, "validation_source": "simulated tracker (held-out)"}
+    (row, *_) = hl.stage_rows("calibration", summary)
+    assert row.verdict == hl.ratio(2.0)
+
+
+def test_cross_validated_error_is_compared_with_the_cross_validated_prediction():
+    summary = {"cross_validation": {"folds": 5, "rms_position_error_m": 3e-3, "predicted_rms_position_error_m": 3e-3},
+               "predicted_rms_position_error_m": 40e-3, "measurement_source": "/data/mocap.csv",
+               "heldout_rms_position_error_after_m": None}
+    (row,) = [r for r in hl.stage_rows("calibration", summary) if "actual / predicted" in r.figure]
+    assert row.verdict == hl.ratio(1.0)
