@@ -31,12 +31,12 @@ import pinocchio as pin
 
 from pipeline.control.config import ControlConfig
 from pipeline.control.simulate import ClosedLoopResult, simulate_joint_trajectory
-from pipeline.core.config import load_config
 from pipeline.robot.defaults import ik_seeds_or_derived_rad, iso_or_derived
 from pipeline.robot.iso9283 import iso9283_path
 from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import start_configuration
 from pipeline.robot.reference import cartesian_reference
+from pipeline.run.stages import load_config
 from pipeline.sim import dynamics, loop
 from pipeline.sim.truth import RealRobot, TruthConfig
 

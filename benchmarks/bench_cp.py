@@ -33,11 +33,11 @@ import time
 
 import numpy as np
 
-from pipeline.core.config import load_config
 from pipeline.core.errors import PipelineError
 from pipeline.robot.defaults import iso_cube
 from pipeline.robot.example_robots import EXAMPLE_ARMS, example_arm_urdf
 from pipeline.robot.model import RobotModel
+from pipeline.run.stages import load_config
 from pipeline.trajectory.baselines import toppra_cp
 from pipeline.trajectory.cp import solve_cp_convex, solve_cp_refined
 from pipeline.trajectory.design import JointPath

@@ -37,15 +37,15 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from pipeline.control.config import ControlConfig
 from pipeline.control.design import iso_reference
 from pipeline.control.joint_stiffness import StiffnessChoice, feedforward_stiffness
 from pipeline.control.simulate import servo_gains, simulate_joint_trajectory
-from pipeline.core.config import load_config
+from pipeline.core.yaml12 import load_yaml
 from pipeline.robot.model import RobotModel
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
+from pipeline.run.stages import load_config
 from pipeline.sim.truth import RealRobot, TruthConfig
 from pipeline.stage_api import stage_rng
 
@@ -146,7 +146,7 @@ class RunModels:
 def load_run_models(run_dir: str | Path) -> RunModels:
     """The run's robot, seed and truth read from ``run_dir`` and its models built as the stage does."""
     run = Path(run_dir)
-    raw = yaml.safe_load((run / "config.yaml").read_text())
+    raw = load_yaml((run / "config.yaml").read_text())
     seed, robot_name = int(raw.get("seed", 0)), str(raw.get("robot", "rx130l"))
     truth_cfg = TruthConfig(**raw.get("truth", {}))
     cfg = load_config(values={"robot": robot_name, "seed": seed, "control.on_saturation": "clip"}).control

@@ -44,11 +44,12 @@ import pinocchio as pin
 from pipeline.calibration.error_model import MeasurementModel
 from pipeline.calibration.stage import calibrate, heldout_measurements
 from pipeline.core.blas import single_thread_blas
-from pipeline.core.config import REPO_ROOT, load_config
+from pipeline.core.config import REPO_ROOT
 from pipeline.identification.measure import process_record
 from pipeline.identification.regressor import RegressorModel
 from pipeline.identification.tx40 import Tx40Config, load_tx40_record, run_tx40
 from pipeline.robot.model import RobotModel
+from pipeline.run.stages import load_config
 from pipeline.sim.truth import RealRobot
 from pipeline.stage_api import stage_rng
 

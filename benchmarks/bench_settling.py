@@ -31,9 +31,9 @@ import numpy as np
 from bench_elastic_gap import with_stiffness, with_truth_friction
 
 from pipeline.control.config import ControlConfig
-from pipeline.core.config import load_config
 from pipeline.robot import defaults
 from pipeline.robot.model import RobotModel
+from pipeline.run.stages import load_config
 from pipeline.sim.truth import RealRobot, TruthConfig
 from pipeline.trajectory import settling
 from pipeline.trajectory.dynamics import PlanningModel

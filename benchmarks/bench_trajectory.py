@@ -46,11 +46,11 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.core.config import load_config
 from pipeline.core.errors import PipelineError
 from pipeline.robot.defaults import ptp_move_rad
 from pipeline.robot.example_robots import example_arm_urdf
 from pipeline.robot.model import RobotModel
+from pipeline.run.stages import load_config
 from pipeline.trajectory.baselines import ruckig_resampled, ruckig_torque_feasible
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.ptp import energy_weights

@@ -8,6 +8,8 @@
 * ``study [NAME [ARGS...]]`` (no name: list the registered studies)
 * ``robot init ARM.urdf [--base LINK] [--tip LINK] [--lock JOINT=VALUE] [--torque-side link|motor] [--out FILE]
   [--force]``: a commented robot.yaml
+* ``export RUN_DIR [--to DIR] [--rate-hz R] [--start q1,...] [--bag-format sqlite3|mcap]``: the run's
+  designed poses, excitation and plans as files for an arm (:mod:`pipeline.run.export`)
 * ``sweep [--seeds 0-19] [--robots A,B] [--config FILE] [--set k=v] [--vary k=[a,b]] [--scheduler ADDR]``
 
 ``run`` ends with the headline table (:mod:`pipeline.run.headline`) and the path of ``report.md``.
@@ -31,14 +33,18 @@ from pipeline.core.config import load_config
 from pipeline.core.errors import PipelineError, QualityGateError
 from pipeline.core.interrupts import handle_termination
 from pipeline.papers import registry as studies
-from pipeline.robot.plausibility import robot_warnings
+from pipeline.robot.model import RobotModel
+from pipeline.robot.plausibility import placeholder_warnings, robot_warnings
 from pipeline.robot.yaml_init import parse_locks, write_robot_yaml
 from pipeline.run import sweep
+from pipeline.run.export import export_run
 from pipeline.run.headline import print_headline, read_headline
 from pipeline.run.preflight import preflight
 from pipeline.run.run_check import check_run
 from pipeline.run.runner import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_QUALITY_GATE, run_pipeline
-from pipeline.view.viewer import view_run
+from pipeline.run.stage_plan import stages_line
+from pipeline.sim.player import play_file
+from pipeline.view.run_view import view_run
 
 
 def _built_in_robots() -> list[str]:
@@ -100,7 +106,8 @@ def _parser() -> argparse.ArgumentParser:
                          description="Write robot.yaml beside ARM.urdf (or --out) with the values the URDF "
                                      "lacks (gear ratios, rotor inertia, friction, tool, tracker, capsules) "
                                      "assumed by stated rules, each commented, for you to edit.")
-    ri.add_argument("urdf", metavar="ARM.urdf")
+    ri.add_argument("urdf", metavar="ARM.urdf",
+                    help="the arm's URDF, or an MJCF model (model.xml: converted to model.urdf beside robot.yaml)")
     ri.add_argument("--base", metavar="LINK", help="first link of the arm chain (default: the URDF's root)")
     ri.add_argument("--tip", metavar="LINK", help="last link of the arm chain (default: found from the joints)")
     ri.add_argument("--out", metavar="FILE", help="where to write (default: robot.yaml beside the URDF)")
@@ -111,7 +118,61 @@ def _parser() -> argparse.ArgumentParser:
                     help="where your torque log is measured: link (joint torque sensors, e.g. Franka, iiwa) or "
                          "motor (motor currents); default: detected from the URDF, else motor")
     ri.add_argument("--force", action="store_true", help="replace an existing robot.yaml")
+    _add_arm_parser(sub)
+    _add_export_parser(sub)
     return p
+
+
+def _add_export_parser(sub: argparse._SubParsersAction) -> None:
+    """``export RUN_DIR [--to DIR] [--rate-hz R] [--start q1,...] [--bag-format sqlite3|mcap]``."""
+    e = sub.add_parser("export", help="write a run's designed poses, excitation and plans as files for an arm",
+                       description="Write, for each stage the run holds, the files a controller needs "
+                                   "(docs/exchange.md): calibration poses, template and tour, the excitation, "
+                                   "the planned trajectories (CSV and ROS 2 bag, q, velocity, acceleration, "
+                                   "feedforward torque), servo gains, the URDF and joint_limits.yaml.")
+    e.add_argument("run_dir", metavar="RUN_DIR")
+    e.add_argument("--to", metavar="DIR", help="folder to write (default RUN_DIR/export; replaced as a whole)")
+    e.add_argument("--rate-hz", type=float, default=1000.0, help="sample rate of every motion (default 1000)")
+    e.add_argument("--start", metavar="Q1,...", help="start configuration, rad (default: the robot's ready pose)")
+    e.add_argument("--bag-format", choices=("sqlite3", "mcap"), default="sqlite3", help="rosbag2 storage")
+
+
+def _cmd_export(ns: argparse.Namespace) -> int:
+    start = None
+    if ns.start:
+        try:
+            start = [float(x) for x in ns.start.split(",")]
+        except ValueError:
+            raise PipelineError(None, "--start", f"{ns.start!r} is not comma-separated numbers (rad)") from None
+    folder, written, notes = export_run(ns.run_dir, ns.to, ns.rate_hz, start, ns.bag_format)
+    print(f"wrote {folder}: {', '.join(written)}")
+    for note in notes:
+        print(f"note: {note}")
+    return 0
+
+
+def _add_arm_parser(sub: argparse._SubParsersAction) -> None:
+    """``arm play MOTION --engine mujoco|pipeline --out RECORD``: the stand-in arm behind files."""
+    arm = sub.add_parser("arm", help="the stand-in arm behind files: `arm play MOTION --out RECORD`")
+    asub = arm.add_subparsers(dest="arm_command", required=True, metavar="{play}")
+    ap = asub.add_parser("play", help="play an exported motion on the stand-in arm and record its logging",
+                         description="Play a JointTrajectory bag or motion CSV on the hidden robot under its drives "
+                                     "(400 µs cascade) and write what the arm logs: JointState at the logging rate "
+                                     "(a bag, or CSV when RECORD ends in .csv) and, at the motion's dwells, tracker "
+                                     "readings (RECORD_tracker bag).")
+    ap.add_argument("motion", metavar="MOTION_BAG_OR_CSV")
+    ap.add_argument("--engine", choices=("mujoco", "pipeline"), default="mujoco")
+    ap.add_argument("--out", required=True, metavar="RECORD")
+    ap.add_argument("--robot", default="rx130l", help="built-in robot, folder, URDF or example arm (panda)")
+    ap.add_argument("--seed", type=int, default=1, help="seed of the hidden robot (the run's seed)")
+    ap.add_argument("--log-rate-hz", type=float, default=None, help="logging rate (default: every 400 µs sample)")
+
+
+def _cmd_arm(ns: argparse.Namespace) -> int:
+    record = play_file(ns.motion, ns.out, robot=ns.robot, engine=ns.engine, seed=ns.seed, log_rate_hz=ns.log_rate_hz)
+    print(f"wrote {', '.join(str(p) for p in record.paths)} ({record.states.n_samples} joint states, "
+          f"{record.tracker.n_samples} tracker readings, engine {record.engine})")
+    return 0
 
 
 def _cmd_run(ns: argparse.Namespace) -> int:
@@ -142,6 +203,8 @@ def _cmd_check(ns: argparse.Namespace) -> int:
         print(f"  {prep.second_pass}")
     for warning in robot_warnings(prep.nominal):      # placeholder data: warnings, not errors
         print(f"warning: robot {prep.nominal.name}: {warning}")
+    for warning in placeholder_warnings(prep.nominal, [p.name for p in prep.plans]):
+        print(f"warning: robot {prep.nominal.name}: {warning}")
     return 0
 
 
@@ -149,6 +212,9 @@ def _cmd_robot(ns: argparse.Namespace) -> int:
     written = write_robot_yaml(ns.urdf, ns.out, base=ns.base, tip=ns.tip, lock=parse_locks(ns.lock), force=ns.force,
                                torque_side=ns.torque_side)
     print(f"wrote {written}: edit the values marked as assumed, then run with --set robot={written.parent}")
+    line = stages_line(RobotModel.load(written.parent, yaml_path=written))
+    if line:
+        print(line)
     return 0
 
 
@@ -176,7 +242,8 @@ def _cmd_study(ns: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     ns = _parser().parse_args(argv)
     commands = {"run": _cmd_run, "check": _cmd_check, "view": _cmd_view, "study": _cmd_study,
-                "sweep": sweep.main, "robot": _cmd_robot}
+                "sweep": sweep.main, "robot": _cmd_robot, "arm": _cmd_arm,
+                "export": _cmd_export}
     try:
         with handle_termination():
             return commands[ns.command](ns)

@@ -1,29 +1,33 @@
-"""The stage contract: what a stage's ``run(ctx)`` gets and returns, and what later stages read.
+"""The stage contract: what a stage module declares, what its ``run(ctx)`` gets and returns, and
+what later stages read.
 
-``StageContext`` (inputs of ``run``), ``StageResult`` (its return value, written to the stage
-directory by :mod:`pipeline.run.stage_io`) and ``StageOutput`` (a finished stage loaded back).
+``StageModule`` (the names a stage module defines, checked by mypy where the run layer lists the
+stages, :mod:`pipeline.run.stages`), ``StageContext`` (inputs of ``run``, generic in the stage's
+``Config``), ``StageResult`` (its return value, written to the stage directory by
+:mod:`pipeline.run.stage_io`) and ``StageOutput`` (a finished stage loaded back).
 Every stage imports them from here, never from :mod:`pipeline.run.runner` (docs/ARCHITECTURE.md, "Layers").
 """
 
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import ModuleType
-from typing import Any
+from typing import Any, Generic, Protocol, TypeVar
 
 import numpy as np
 from matplotlib.figure import Figure
 
-from pipeline.core import config as config_mod
 from pipeline.core.config import RunConfig
 from pipeline.core.progress import Progress
 from pipeline.robot.model import RobotModel
 from pipeline.sim.truth import RealRobot
 
-__all__ = ["StageContext", "StageResult", "StageOutput", "stage_rng", "stable_stage_hash", "Provenance",
-           "RECORDED", "SIMULATED", "ROBOT_FILES", "stage_config", "own_provenance", "stage_provenance"]
+__all__ = ["StageModule", "StageContext", "StageResult", "StageOutput", "stage_rng", "stable_stage_hash",
+           "Provenance", "RECORDED", "SIMULATED", "ROBOT_FILES", "own_provenance", "declared"]
+
+ConfigT = TypeVar("ConfigT")
 
 #: provenance kinds: a file the user measured, the simulated world (:mod:`pipeline.sim`), the robot files only
 RECORDED, SIMULATED, ROBOT_FILES = "recorded", "simulated", "robot files"
@@ -89,9 +93,11 @@ class Provenance:
 
 
 @dataclass
-class StageContext:
+class StageContext(Generic[ConfigT]):
+    """What ``run(ctx)`` of a stage gets: ``ctx.config`` is its own section (``StageContext[Config]``)."""
+
     run: RunConfig                        # name, seed, robot, profile (+ all sections)
-    config: Any                           # Any: this stage's own Config dataclass (one type per stage)
+    config: ConfigT                       # this stage's own Config dataclass
     robot: RobotModel                     # best model so far (a private copy)
     real: RealRobot | None                # sensors of the hidden robot (None if unavailable)
     upstream: dict[str, StageOutput]      # loaded results of the earlier stages it depends on
@@ -132,27 +138,58 @@ def stage_rng(seed: int, stage: str) -> np.random.Generator:
     return np.random.default_rng([seed, stable_stage_hash(stage)])
 
 
-def stage_config(cfg: RunConfig, name: str, module: ModuleType) -> Any:  # Any: the stage's own Config
-    """The stage's section as its ``Config`` dataclass (built from a plain mapping and stored back)."""
-    section = cfg.sections.get(name)
-    if section is None or isinstance(section, dict):
-        section = config_mod.build_dataclass(module.Config, section or {}, name, cfg.source)
-        cfg.sections[name] = section
-    return section
+class StageModule(Protocol):
+    """The names a stage module defines (docs/writing-a-stage.md).
+
+    ``NAME``: the stage's name (its section of the run configuration); ``DEPENDS``: the upstream
+    stages whose results it reads; ``Config``: the dataclass of its section, whose file inputs are
+    ``Annotated[str | None, FileInput]`` fields (:class:`pipeline.core.typed_config.FileInput`: the
+    inputs hash covers their content); ``CONFIG_READS``: settings of other sections ``run`` reads
+    (dotted, e.g. ``"control.iso"``: in its inputs hash); ``RECORDED_INPUT``: the ``Config`` field
+    naming a recorded measurement file ("" for none) and ``SIMULATES``: what it simulates without
+    one ("" for nothing: the stage reads the robot files only), see :class:`Provenance`;
+    ``check(config, robot)``: raise a PipelineError before anything runs (a bad data file ...);
+    ``warm_up(config, robot)`` or None: compiled code built in the background
+    (:mod:`pipeline.run.warm_up`); ``run(ctx)``: the stage.
+    """
+
+    @property
+    def NAME(self) -> str: ...
+    @property
+    def DEPENDS(self) -> tuple[str, ...]: ...
+    @property
+    def Config(self) -> type[Any]: ...                 # Any: one dataclass per stage
+    @property
+    def CONFIG_READS(self) -> tuple[str, ...]: ...
+    @property
+    def RECORDED_INPUT(self) -> str: ...
+    @property
+    def SIMULATES(self) -> str: ...
+    @property
+    def check(self) -> Callable[[Any, RobotModel], None]: ...
+    @property
+    def warm_up(self) -> Callable[[Any, RobotModel], None] | None: ...
+    @property
+    def run(self) -> Callable[[StageContext[Any]], StageResult]: ...
 
 
-def own_provenance(module: ModuleType, config: object) -> Provenance:
+#: the optional names of a stage module and their meaning when left out (a stage written for tests
+#: or outside the package may define only NAME, DEPENDS, Config and run)
+OPTIONAL_NAMES: dict[str, object] = {"CONFIG_READS": (), "RECORDED_INPUT": "", "SIMULATES": "",
+                                     "check": None, "warm_up": None}
+
+
+def declared(module: object, name: str) -> Any:  # Any: the declared value (its type: StageModule)
+    """``module.<name>``, or its meaning when left out (:data:`OPTIONAL_NAMES`)."""
+    return getattr(module, name, OPTIONAL_NAMES.get(name))
+
+
+def own_provenance(module: object, config: object) -> Provenance:
     """Recorded when the stage's ``RECORDED_INPUT`` field names a file, simulated when it declares
     ``SIMULATES``, else robot files (upstream stages not yet filled in)."""
-    field_name = str(getattr(module, "RECORDED_INPUT", "") or "")
+    field_name = str(declared(module, "RECORDED_INPUT") or "")
     record = getattr(config, field_name, None) if field_name else None
     if record:
         return Provenance(RECORDED, str(record))
-    simulates = str(getattr(module, "SIMULATES", "") or "")
+    simulates = str(declared(module, "SIMULATES") or "")
     return Provenance(SIMULATED, simulates) if simulates else Provenance(ROBOT_FILES, "")
-
-
-def stage_provenance(cfg: RunConfig, name: str) -> Provenance:
-    """The stage's own provenance from the run configuration (planned or not)."""
-    module = config_mod.load_stage_module(name)
-    return own_provenance(module, stage_config(cfg, name, module))

@@ -4,9 +4,12 @@
 * ``rx130l``: the built-in robot, loaded once per session (do not mutate it; use ``.copy()``).
 * ``shipped_configs``: (config, robot) pairs every shipped setting must pass.
 * ``fake_stages``: replaces the stage registry with small fake stages (runner tests).
-* ``execute_notebook(name, workdir, parameters=None) -> str``: every code cell of ``notebooks/<name>``
-  run top to bottom in an IPython shell inside the test process (no kernel start, no second import of
-  the package), returning the text the cells printed; ``parameters`` set its ``# parameter`` lines.
+* ``fuzz_inputs``: ``fuzz_inputs[reader] += 1`` per generated input of a property test; the counts per
+  reader are printed after the run (tests/reliability/test_fuzz_*.py).
+* ``execute_notebook(name, workdir, parameters=None) -> ExecutedNotebook``: every code cell of
+  ``notebooks/<name>`` run top to bottom in an IPython shell inside the test process (no kernel start, no
+  second import of the package), returning the text the cells printed and the objects they showed
+  (``.images``: the figures shown inline); ``parameters`` set its ``# parameter`` lines.
 * ``tests/trajectory/conftest.py``: the RX130L planning model, the quick ISO line, ONE compiled PtP
   problem and ONE quick-profile PtP plan of the big move (``big_move_plan``).
 
@@ -22,6 +25,7 @@ Durations: ``--durations=15`` (pyproject ``addopts``) prints the slowest tests o
 from __future__ import annotations
 
 import builtins
+import collections
 import contextlib
 import io
 import os
@@ -41,13 +45,15 @@ import matplotlib.pyplot as plt  # noqa: E402
 import nbformat  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
-from IPython.core.interactiveshell import InteractiveShell  # noqa: E402
+from IPython.core.interactiveshell import InteractiveShell
+from IPython.core.pylabtools import select_figure_formats  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from traitlets.config import Config  # noqa: E402
 
 from pipeline.core import config as config_module  # noqa: E402
 from pipeline.core.config import CONFIGS_DIR, load_config  # noqa: E402
 from pipeline.robot.model import RobotModel  # noqa: E402
+from pipeline.run import stages as stage_registry  # noqa: E402
 from pipeline.stage_api import StageResult  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
@@ -145,7 +151,7 @@ def shipped_configs(rx130l):
 def fake_stages(monkeypatch):
     fakes = FakeStages()
     registry = {"a": fakes.make("a"), "b": fakes.make("b", ("a",)), "c": fakes.make("c", ("b",))}
-    monkeypatch.setattr(config_module, "STAGES", registry)
+    monkeypatch.setattr(stage_registry, "STAGES", registry)
     # the built-in robots' run_defaults name the real stages' sections, which the fakes replace
     monkeypatch.setattr(config_module, "robot_run_defaults", lambda cfg: None)
     return fakes
@@ -159,7 +165,8 @@ NOTEBOOKS = REPO / "notebooks"
 def _ipython_shell(workdir: Path):
     """A fresh IPython shell working in ``workdir``; afterwards the process is as before: the shell
     instance cleared, ``__main__``, the builtins it adds (``__IPYTHON__``, ``display``), the sys hooks,
-    the working directory and the open figures restored."""
+    the working directory, the open figures and the pyplot backend and rcParams (a notebook's
+    ``%matplotlib inline`` switches them) restored."""
     saved_main, saved_cwd = sys.modules.get("__main__"), Path.cwd()
     saved_hooks = (sys.excepthook, sys.displayhook)
     saved_builtins = {k: builtins.__dict__[k] for k in ("__IPYTHON__", "display", "get_ipython")
@@ -168,10 +175,17 @@ def _ipython_shell(workdir: Path):
     settings.HistoryManager.enabled = False        # no history database shared by the workers
     InteractiveShell.clear_instance()
     shell = InteractiveShell.instance(config=settings)
+    shell.enable_gui = lambda gui=None: None       # as a kernel's shell: no event loop (%matplotlib inline)
+    # figures shown as PNG, as in a fresh kernel after %matplotlib inline: matplotlib-inline configures only
+    # the first shell of a process, and a test worker runs several notebooks
+    select_figure_formats(shell, {"png"})
+    saved_backend = matplotlib.get_backend()
     try:
-        os.chdir(workdir)
-        yield shell
+        with matplotlib.rc_context():              # %matplotlib inline sets rcParams of its own
+            os.chdir(workdir)
+            yield shell
     finally:
+        plt.switch_backend(saved_backend)          # %matplotlib inline switched pyplot to its backend
         os.chdir(saved_cwd)
         shell.reset(new_session=False)
         InteractiveShell.clear_instance()
@@ -193,38 +207,96 @@ def _with_parameters(cells: list[str], parameters: dict[str, Any]) -> list[str]:
     return cells
 
 
-def _execute_notebook(name: str, workdir: Path, parameters: dict[str, Any] | None = None) -> str:
+@dataclass
+class ExecutedNotebook:
+    """What the code cells of a notebook showed: the text they printed (displayed objects and cell
+    results as their plain text), and every displayed object and cell result as its MIME bundle
+    (``{"text/plain": ..., "image/png": ...}``), as a notebook front end receives them."""
+
+    text: str
+    outputs: list[dict[str, Any]]
+
+    @property
+    def images(self) -> list[dict[str, Any]]:
+        """The outputs holding a PNG image (a figure shown inline)."""
+        return [o for o in self.outputs if "image/png" in o]
+
+
+def _execute_notebook(name: str, workdir: Path, parameters: dict[str, Any] | None = None) -> ExecutedNotebook:
     nb = nbformat.read(NOTEBOOKS / name, as_version=4)
     cells = _with_parameters([c.source for c in nb.cells if c.cell_type == "code"], parameters or {})
-    text = io.StringIO()
+    text, outputs = io.StringIO(), []
     with _ipython_shell(workdir) as shell, contextlib.redirect_stdout(text):
+        printed = shell.display_pub.publish
+
+        def publish(data: dict[str, Any], *args: Any, **kwargs: Any) -> None:
+            outputs.append(dict(data))                 # display(...) and the figures shown inline
+            printed(data, *args, **kwargs)
+
+        shell.display_pub.publish = publish
         for i, source in enumerate(cells):
             result = shell.run_cell(source, store_history=False)
             if not result.success:
                 error = result.error_in_exec or result.error_before_exec
                 raise AssertionError(f"{name}: code cell {i + 1} failed: {error!r}\n{source}") from error
-    return text.getvalue()
+            if result.result is not None:              # the cell's value, shown as its result
+                outputs.append(shell.display_formatter.format(result.result)[0])
+    return ExecutedNotebook(text.getvalue(), outputs)
 
 
 @pytest.fixture
 def execute_notebook():
-    """``execute_notebook(name, workdir, parameters=None) -> str``: run every code cell of
-    ``notebooks/<name>`` top to bottom in ``workdir`` and return the text of all its outputs;
-    ``parameters`` ``{NAME: value}`` replace the notebook's ``NAME = ...  # parameter`` lines."""
+    """``execute_notebook(name, workdir, parameters=None) -> ExecutedNotebook``: run every code cell of
+    ``notebooks/<name>`` top to bottom in ``workdir``; the text of all its outputs and their MIME bundles
+    (figures shown inline: ``.images``). ``parameters`` ``{NAME: value}`` replace the notebook's
+    ``NAME = ...  # parameter`` lines."""
     return _execute_notebook
 
 
 
 # ---------------------------------------------------------------------------- test order
-#: session fixtures that take seconds and serve several tests. Their tests are collected first, file by
-#: file: pytest-xdist's ``worksteal`` hands the first half of the list to one worker and an idle worker
-#: takes tests from the END of the other's queue, so these stay on one worker and each fixture is built
-#: once per ``make test`` instead of once per worker.
-SHARED_COSTLY_FIXTURES = frozenset({
-    "quick_run", "big_move_plan", "ptp_problem", "problems", "tiago_result", "selection", "gross_files",
-    "elastic_run", "quick_row", "nominal_gravity_run", "refined_line",
-})
+def _uses_shared_costly_fixture(item: pytest.Item) -> bool:
+    """The test uses a fixture that the module defining it (a test file or a folder's conftest.py)
+    lists in its ``SHARED_COSTLY_FIXTURES``: a session fixture that takes seconds and serves several tests."""
+    info = getattr(item, "_fixtureinfo", None)
+    for name, definitions in (info.name2fixturedefs.items() if info is not None else ()):
+        module = sys.modules.get(getattr(definitions[-1].func, "__module__", ""))
+        if name in getattr(module, "SHARED_COSTLY_FIXTURES", ()):
+            return True
+    return False
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    items.sort(key=lambda item: SHARED_COSTLY_FIXTURES.isdisjoint(getattr(item, "fixturenames", ())))
+    """The tests of the shared costly fixtures first, file by file: pytest-xdist's ``worksteal`` hands the
+    first half of the list to one worker and an idle worker takes tests from the END of the other's queue,
+    so these stay on one worker and each fixture is built once per ``make test`` instead of once per worker."""
+    items.sort(key=lambda item: not _uses_shared_costly_fixture(item))
+
+
+# ---------------------------------------------------------------------------- property tests
+#: generated inputs per reader of the property tests in this process (tests/reliability/test_fuzz_*.py)
+FUZZ_INPUTS: collections.Counter[str] = collections.Counter()
+
+
+@pytest.fixture(scope="session")
+def fuzz_inputs() -> collections.Counter[str]:
+    """``fuzz_inputs[reader] += 1`` per generated input of a property test; printed after the run."""
+    return FUZZ_INPUTS
+
+
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    if FUZZ_INPUTS and hasattr(session.config, "workeroutput"):     # a pytest-xdist worker: to the controller
+        session.config.workeroutput["fuzz_inputs"] = dict(FUZZ_INPUTS)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_testnodedown(node: Any, error: object) -> None:
+    """The controller of pytest-xdist adds up the counts of its workers."""
+    FUZZ_INPUTS.update(getattr(node, "workeroutput", {}).get("fuzz_inputs") or {})
+
+
+def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: pytest.Config) -> None:
+    if FUZZ_INPUTS:
+        terminalreporter.write_sep("-", "property-test inputs per reader")
+        for reader, count in sorted(FUZZ_INPUTS.items()):
+            terminalreporter.write_line(f"{reader}: {count}")

@@ -13,9 +13,9 @@ from pathlib import Path
 import pytest
 
 from pipeline import cli
-from pipeline.core import config
 from pipeline.core.config import load_config
 from pipeline.papers import registry as studies
+from pipeline.run import stages as stage_registry
 from pipeline.run.runner import run_pipeline
 
 REPO = Path(__file__).resolve().parents[1]
@@ -124,7 +124,8 @@ def test_bad_set_and_stage_in_process(tmp_path, capsys):
 
 
 def test_missing_stage_module_reported(monkeypatch, tmp_path, capsys):
-    monkeypatch.setattr(config, "STAGES", {**config.STAGES, "ghost": "pipeline.ghost_not_written.stage"})
+    monkeypatch.setattr(stage_registry, "STAGES",
+                        {**stage_registry.STAGES, "ghost": "pipeline.ghost_not_written.stage"})
     out = tmp_path / "runs"
     assert cli.main(["run", "--stages", "ghost", "--out", str(out)]) == 2
     err = capsys.readouterr().err

@@ -5,10 +5,14 @@ stage.py only sequences named steps: short functions, no long run function. Read
 from __future__ import annotations
 
 import ast
+import dataclasses
 import importlib
 from pathlib import Path
 
 import pytest
+
+from pipeline.run.stage_plan import check_stage_module
+from pipeline.stage_api import StageModule
 
 PACKAGE = Path(__file__).resolve().parents[1] / "pipeline"
 STAGES = ("calibration", "identification", "control", "trajectory")
@@ -35,10 +39,26 @@ def test_stage_package_has_the_skeleton_modules(stage):
 
 @pytest.mark.parametrize("stage", STAGES)
 def test_stage_module_names_its_config_class_config(stage):
+    """``Config`` of the stage module (StageModule) is the one dataclass of its config.py, which
+    holds it under one name only."""
     module = importlib.import_module(f"pipeline.{stage}.stage")
     config = importlib.import_module(f"pipeline.{stage}.config")
-    assert isinstance(config.Config, type) and module.Config is config.Config
+    assert dataclasses.is_dataclass(module.Config) and module.Config.__module__ == config.__name__
+    names = [name for name, value in vars(config).items() if value is module.Config]
+    assert len(names) == 1, f"pipeline/{stage}/config.py names its section's dataclass {names}"
     assert callable(module.run) and module.NAME == stage
+
+
+@pytest.mark.parametrize("stage", ("model", *STAGES))
+def test_stage_module_defines_every_name_of_the_contract(stage):
+    """Every name of :class:`pipeline.stage_api.StageModule` is defined by each stage module, with its type."""
+    module = importlib.import_module(f"pipeline.{stage}.stage")
+    contract = [name for name in vars(StageModule) if not name.startswith("_")]
+    assert {"NAME", "DEPENDS", "Config", "run", "check", "warm_up", "CONFIG_READS", "RECORDED_INPUT",
+            "SIMULATES"} <= set(contract)
+    missing = [name for name in contract if not hasattr(module, name)]
+    assert not missing, f"pipeline/{stage}/stage.py does not define {missing}"
+    check_stage_module(stage, module)
 
 
 @pytest.mark.parametrize("stage", STAGES)

@@ -10,7 +10,7 @@ Public entry points:
 - :mod:`~pipeline.calibration.error_model`: ``MeasurementModel`` (exact CasADi tracker model and
   Jacobian), ``identifiability`` (SVD + ordered QR + correlations), ``mdh_basis``.
 - :mod:`~pipeline.calibration.candidates`: grid / random candidates, batched filtering,
-  ``nominal_jacobian``.
+  ``nominal_jacobian``; their batched forward kinematics: :mod:`~pipeline.calibration.batch_kinematics`.
 - :mod:`~pipeline.calibration.indices`: O1..O5, Od, Oc, D/A/E, TCP-covariance A-criterion.
 - :mod:`~pipeline.calibration.design`: ``remove_and_replace``, ``detmax``, ``bsaa``, ``random_design``.
 - :mod:`~pipeline.calibration.gradient_design`: CasADi/IPOPT design of n configurations.

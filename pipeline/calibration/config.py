@@ -8,14 +8,16 @@ robot (the number of identifiable parameters, the tracker's incidence limit) in
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Annotated, Literal, get_args
 
 from pipeline.calibration import indices as ix
 from pipeline.calibration.gravity_uncertainty import GravityPrior
-from pipeline.calibration.robust import LOSSES
+from pipeline.calibration.robust import Loss
 from pipeline.calibration.subsets import check_parameters
 from pipeline.calibration.task_space import check_task_fields
 from pipeline.core.errors import ConfigError
+from pipeline.core.typed_config import FileInput, check_choices
 from pipeline.robot.iso_search import POSE_AXES
 from pipeline.robot.model import RobotModel
 from pipeline.robot.payload import Payload
@@ -23,19 +25,24 @@ from pipeline.robot.payload import Payload
 #: values per axis of the paper's 6-axis grid (paper 004 §3: 13⁶ configurations)
 GRID_VALUES_PAPER = 13
 
-SELECTION_METHODS = ("remove_and_replace", "detmax", "bsaa", "random", "gradient")
+SelectionMethod = Literal["remove_and_replace", "detmax", "bsaa", "random", "gradient"]
+SELECTION_METHODS: tuple[SelectionMethod, ...] = get_args(SelectionMethod)
 #: start of remove-and-replace: the rounded optimal approximate design (pipeline.calibration.design_rounding)
 #: or paper 004's random regular subset
-DESIGN_STARTS = ("approximate", "random")
-CANDIDATE_KINDS = ("grid", "random")
-ERROR_MODELS = ("se3", "mdh_hayati")
+DesignStart = Literal["approximate", "random"]
+CandidateKind = Literal["grid", "random"]
+ErrorModel = Literal["se3", "mdh_hayati"]
+DESIGN_STARTS: tuple[DesignStart, ...] = get_args(DesignStart)
+CANDIDATE_KINDS: tuple[CandidateKind, ...] = get_args(CandidateKind)
+ERROR_MODELS: tuple[ErrorModel, ...] = get_args(ErrorModel)
 #: indices the gradient design (IPOPT) can optimise
 GRADIENT_INDICES = ix.TRACE_INDICES
 #: largest candidate set (random candidates or grid points): beyond it the filtering and the
 #: whitened Jacobians of the feasible candidates take too much time and memory
 MAX_CANDIDATES = 20_000_000
 #: calibration.second_pass values (pipeline.run.second_pass)
-SECOND_PASS_MODES = ("auto", "always", "never")
+SecondPassMode = Literal["auto", "always", "never"]
+SECOND_PASS_MODES: tuple[SecondPassMode, ...] = get_args(SecondPassMode)
 
 
 @dataclass
@@ -43,12 +50,12 @@ class Config:
     """Settings of the calibration stage (defaults = the full profile)."""
 
     #: "grid" (``grid_per_axis`` values per axis, paper 004: 13) or "random"
-    candidates: str = "grid"
+    candidates: CandidateKind = "grid"
     #: None: derived from the number of axes (:meth:`grid_points_per_axis`)
     grid_per_axis: int | None = None
     n_random_candidates: int = 20000
     #: remove_and_replace | detmax | bsaa | random | gradient (remove-and-replace + IPOPT refinement)
-    selection_method: str = "remove_and_replace"
+    selection_method: SelectionMethod = "remove_and_replace"
     #: O1..O5, D, A, E, Od, Oc, tcp_A, tcp_A_mixed, V (see pipeline.calibration.indices); V: the
     #: predicted TCP variance over the working region (pipeline.calibration.task_space)
     index_name: str = "V"
@@ -58,13 +65,13 @@ class Config:
     #: remove-and-replace (and the gradient design's start) on a trace index (V, A, tcp_A): "approximate"
     #: also polishes the efficient rounding of the optimal approximate design and keeps the better
     #: design (pipeline.calibration.design_rounding); "random": paper 004's random start only
-    design_start: str = "approximate"
+    design_start: DesignStart = "approximate"
     #: remove-and-replace runs from random starts next to the rounded start (design_start approximate)
     design_restarts: int = 1
     #: working configurations for the TCP-covariance criterion (random feasible poses)
     n_working_configurations: int = 5
     #: "se3": 6 errors per joint placement + zero offsets; "mdh_hayati": modified DH + Hayati beta
-    error_model: str = "se3"
+    error_model: ErrorModel = "se3"
     identifiability_samples: int = 200
     identifiability_rel_tol: float = 1e-7
     n_heldout: int = 1000
@@ -77,15 +84,27 @@ class Config:
     #: (visibility constraints need it); they count towards n_configurations and are used in the fit
     n_pilot: int = 8
     #: user data instead of the simulated tracker (format: pipeline.calibration.measure)
-    measurements_csv: str | None = None
-    validation_csv: str | None = None
+    measurements_csv: Annotated[str | None, FileInput] = None
+    #: the same as a CSV or a ROS 2 bag (folder, .db3, .mcap) of JointState + a tracker topic
+    #: (PointStamped / PoseStamped / TransformStamped); a bag is read in its stationary windows
+    #: (pipeline.exchange.stationary); taken as measurements_csv
+    measurements_file: str | None = None
+    #: a bag's stationary windows: every joint slower than this, for at least stationary_min_s,
+    #: the first stationary_settle_s skipped, at least stationary_min_readings tracker readings
+    stationary_speed_rad_s: float = 2e-3
+    stationary_min_s: float = 0.5
+    stationary_settle_s: float = 0.1
+    stationary_min_readings: int = 1
+    #: a bag's joints renamed to the model's: {name in the recording: name in the model}
+    joint_names: dict[str, str] = field(default_factory=dict)
+    validation_csv: Annotated[str | None, FileInput] = None
     figures: bool = True
     #: auto | all | geometric | joint_offsets | joint_offsets+compliance | [names]
     #: (pipeline.calibration.subsets); auto: chosen by cross-validation for a measurement file
     #: (pipeline.calibration.model_selection), all in simulation
     parameters: str | list[str] = "auto"
     #: robust loss before the outlier test: huber | cauchy | linear (pipeline.calibration.robust)
-    robust_loss: str = "huber"
+    robust_loss: Loss = "huber"
     #: per-reading confidence of the chi-square outlier test on whitened residuals
     outlier_confidence: float = 0.999
     #: at most this fraction of the readings is rejected (more failing the test: model inadequate)
@@ -117,7 +136,7 @@ class Config:
     #: robot folder whose inertias give the gravity torques of the elastostatic model (second pass
     #: after identification: ``<runs>/<name>/identification/robot`` of a previous run); None: this
     #: run's model (nominal)
-    gravity_model: str | None = None
+    gravity_model: Annotated[str | None, FileInput] = None
     #: prior uncertainty of the gravity model's inertial parameters in the elastostatic measurement
     #: covariance (pipeline.calibration.gravity_uncertainty): relative 1-sigma of each link mass and
     #: 1-sigma of each centre of mass (m); typical data-sheet/CAD values ("inertial parameters
@@ -131,13 +150,13 @@ class Config:
     #: gravity_model. auto: when the gravity model's share of the first pass's predicted error is
     #: >= 0.25 (arms with a nominal mass model that gravity twists), always, never; only without a
     #: gravity_model
-    second_pass: str = "auto"
+    second_pass: SecondPassMode = "auto"
 
     # -- task-space criterion and design table (pipeline.calibration.task_space, design_table) --
     #: iso_cube (control.iso) | box (working_box_m) | csv (working_csv: columns q1..qn, rad)
     working_region: str = "iso_cube"
     working_box_m: list[list[float]] | None = None
-    working_csv: str | None = None
+    working_csv: Annotated[str | None, FileInput] = None
     #: working configurations sampled in the region (W of the V criterion)
     n_region_configurations: int = 300
     #: what V weights at the working configurations: tcp+reflector (the TCP, the task's point, and the
@@ -168,24 +187,33 @@ class Config:
             return int(self.grid_per_axis)
         return max(2, math.floor(GRID_VALUES_PAPER ** (6 / nq) + 1e-9))
 
+    def __post_init__(self) -> None:
+        # measurements_file is measurements_csv under its general name (a CSV or a bag)
+        if self.measurements_file and not self.measurements_csv:
+            self.measurements_csv = self.measurements_file
+
     def validate(self, source: str = "config") -> None:
         """Robot-independent checks of every field (robot-dependent ones: :func:`check`)."""
         def bad(key: str, problem: str) -> ConfigError:
             return ConfigError(source, f"calibration.{key}", problem)
 
-        if self.candidates not in CANDIDATE_KINDS:
-            raise bad("candidates", f"must be one of {CANDIDATE_KINDS}, got {self.candidates!r}")
-        if self.selection_method not in SELECTION_METHODS:
-            raise bad("selection_method", f"must be one of {SELECTION_METHODS}, got {self.selection_method!r}")
+        self.__post_init__()
+        if self.measurements_file and self.measurements_csv != self.measurements_file:
+            raise bad("measurements_file", f"{self.measurements_file!r} and measurements_csv "
+                      f"{self.measurements_csv!r} name two files; give one of them")
+        for key in ("stationary_speed_rad_s", "stationary_min_s"):
+            if not (math.isfinite(getattr(self, key)) and getattr(self, key) > 0):
+                raise bad(key, f"must be > 0, got {getattr(self, key)!r}")
+        if not (math.isfinite(self.stationary_settle_s) and self.stationary_settle_s >= 0):
+            raise bad("stationary_settle_s", f"must be >= 0, got {self.stationary_settle_s!r}")
+        if self.stationary_min_readings < 1:
+            raise bad("stationary_min_readings", f"must be >= 1, got {self.stationary_min_readings!r}")
+        check_choices(self, "calibration", source)
         if self.index_name not in ix.INDEX_NAMES:
             raise bad("index_name", f"must be one of {ix.INDEX_NAMES}, got {self.index_name!r}")
-        if self.design_start not in DESIGN_STARTS:
-            raise bad("design_start", f"must be one of {DESIGN_STARTS}, got {self.design_start!r}")
         if isinstance(self.design_restarts, bool) or not isinstance(self.design_restarts, int) \
                 or not 0 <= self.design_restarts <= 100:
             raise bad("design_restarts", f"must be an integer in [0, 100], got {self.design_restarts!r}")
-        if self.error_model not in ERROR_MODELS:
-            raise bad("error_model", f"must be one of {ERROR_MODELS}, got {self.error_model!r}")
         for key in ("n_random_candidates", "n_configurations", "n_heldout",
                     "identifiability_samples", "max_lm_iterations", "n_working_configurations",
                     "gradient_max_iterations"):
@@ -217,8 +245,6 @@ class Config:
                 raise bad("n_pilot", f"the pilot measurements count towards n_configurations = "
                           f"{self.n_configurations}: must be smaller, got {self.n_pilot}")
         check_parameters(self.parameters, source)
-        if self.robust_loss not in LOSSES:
-            raise bad("robust_loss", f"must be one of {LOSSES}, got {self.robust_loss!r}")
         if not (math.isfinite(self.outlier_confidence) and 0.5 < self.outlier_confidence < 1):
             raise bad("outlier_confidence", f"must be in (0.5, 1), got {self.outlier_confidence}")
         if not (math.isfinite(self.max_outlier_fraction) and 0 <= self.max_outlier_fraction < 0.5):
@@ -235,8 +261,6 @@ class Config:
             v = getattr(self, key)
             if isinstance(v, bool) or not isinstance(v, int | float) or not (math.isfinite(v) and 0 <= v <= hi):
                 raise bad(key, f"must be in [0, {hi}], got {v!r}")
-        if self.second_pass not in SECOND_PASS_MODES:
-            raise bad("second_pass", f"must be one of {SECOND_PASS_MODES}, got {self.second_pass!r}")
         if self.cross_validation_folds != 0 and not 2 <= self.cross_validation_folds <= 50:
             raise bad("cross_validation_folds", f"must be 0 (none) or in [2, 50], got {self.cross_validation_folds}")
         if self.position_sigma_m is not None and not (math.isfinite(self.position_sigma_m)

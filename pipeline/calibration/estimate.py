@@ -31,6 +31,11 @@ from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import apply_kinematic_errors
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 
+#: the estimate's regularity test: smallest / largest eigenvalue of the column-normalised
+#: information matrix (exact dependencies give ~1e-16; the design's identifiable set is cut at
+#: :data:`pipeline.calibration.design_identifiable.POOL_REL_TOL` on singular values, 1e-10 here)
+REGULAR_EIGENVALUE_RATIO = 1e-12
+
 
 def register_points(tracker_points: np.ndarray, base_points: np.ndarray) -> pin.SE3:
     """Closed-form ``T`` with ``base ≈ R tracker + t`` (Kabsch / Umeyama, no scale)."""
@@ -70,19 +75,25 @@ class Estimate:
 def levenberg_marquardt(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarray,
                         basis: np.ndarray, T0: pin.SE3, max_iterations: int = 50,
                         tol: float = 1e-10, mounted: np.ndarray | None = None,
-                        offsets: np.ndarray | None = None, whitener: Whitener | None = None
+                        offsets: np.ndarray | None = None, whitener: Whitener | None = None,
+                        theta0: np.ndarray | None = None, first: tuple[np.ndarray, np.ndarray] | None = None
                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, bool, list[float]]:
     """Minimise ``|L^-1 (Y - h(Q, basis @ theta, T0))|^2`` over ``theta`` (``whitener``; None:
-    ``sum |(Y - h) / sigma|^2``)."""
+    ``sum |(Y - h) / sigma|^2``) from ``theta0`` (None: 0; a warm start, e.g. the fit of a
+    neighbouring fold or of the previous noise-model round); ``first``: the predictions and
+    Jacobian blocks already evaluated at the start."""
     P = np.asarray(basis, float)
-    theta = np.zeros(P.shape[1])
+    theta = np.zeros(P.shape[1]) if theta0 is None else np.asarray(theta0, float).copy()
     wh = whitener if whitener is not None else Whitener(sigma)
 
     def resid_jac(th: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         pred, J = mm.jacobian(Q, P @ th, T0, P, mounted, offsets)
         return wh.vector(Y - pred), wh.matrix(J)
 
-    r, J = resid_jac(theta)
+    if first is not None:
+        r, J = wh.vector(Y - first[0]), wh.matrix(first[1])
+    else:
+        r, J = resid_jac(theta)
     cost = float(r @ r)
     hist = [cost]
     lam = 1e-3
@@ -121,10 +132,13 @@ def levenberg_marquardt(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigm
 
 def estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarray, basis: np.ndarray,
              source: str = "measurements", max_iterations: int = 50, mounted: np.ndarray | None = None,
-             offsets: np.ndarray | None = None, factors: np.ndarray | None = None) -> Estimate:
+             offsets: np.ndarray | None = None, factors: np.ndarray | None = None,
+             theta0: np.ndarray | None = None) -> Estimate:
     """Registration + LM + covariance (see module docstring); ``mounted``: rows read with the payload;
     ``factors`` (N, 3, r): gravity-model covariance factors ``B_k`` of the readings
-    (:class:`pipeline.calibration.gravity_uncertainty.GravityCovariance`; None: ``sigma_k^2 I``)."""
+    (:class:`pipeline.calibration.gravity_uncertainty.GravityCovariance`; None: ``sigma_k^2 I``);
+    ``theta0``: LM's start (None: the nominal model, whose Jacobian the regularity check evaluates
+    once for both)."""
     Q = np.asarray(Q, float)
     Y = np.asarray(Y, float)
     P = np.asarray(basis, float)
@@ -135,16 +149,22 @@ def estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarr
     P_nom, _ = mm.base_positions(Q, np.zeros(mm.n), mounted, offsets)
     T_reg = register_points(Y, P_nom)
     # regularity of the information matrix before iterating
-    _, J0 = mm.jacobian(Q, np.zeros(mm.n), T_reg, P, mounted, offsets)
+    pred0, J0_raw = mm.jacobian(Q, np.zeros(mm.n), T_reg, P, mounted, offsets)
     wh = Whitener(np.asarray(sigma, float), factors)
-    J0 = wh.matrix(J0)
-    ev = np.linalg.eigvalsh(J0.T @ J0)
-    if not ev[0] > 1e-12 * ev[-1]:
+    J0 = wh.matrix(J0_raw)
+    # column-normalised: the test does not depend on the parameters' units (a compliance in
+    # rad/(N m) has columns 10^2-10^3 times a length's, which alone made a regular set "singular")
+    norms = np.linalg.norm(J0, axis=0)
+    Jn = J0 / np.where(norms > 0, norms, 1.0)
+    ev = np.linalg.eigvalsh(Jn.T @ Jn)
+    if not (ev[0] > REGULAR_EIGENVALUE_RATIO * ev[-1] and np.all(norms > 0)):
         raise SolverError(source, "information matrix",
-                          f"singular (smallest/largest eigenvalue {max(ev[0], 0.0) / ev[-1]:.3g}): "
-                          f"the configurations do not excite all {p} identifiable parameters")
+                          f"singular (smallest/largest eigenvalue {max(ev[0], 0.0) / ev[-1]:.3g} of the "
+                          f"column-normalised matrix): the configurations do not excite all {p} identifiable "
+                          "parameters")
+    start = None if theta0 is not None and np.any(theta0) else (pred0, J0_raw)
     theta, x, J, it, conv, hist = levenberg_marquardt(mm, Q, Y, sigma, P, T_reg, max_iterations, mounted=mounted,
-                                                      offsets=offsets, whitener=wh)
+                                                      offsets=offsets, whitener=wh, theta0=theta0, first=start)
     A = J.T @ J
     C = np.linalg.inv(A)
     C = 0.5 * (C + C.T)

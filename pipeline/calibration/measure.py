@@ -1,4 +1,4 @@
-"""Measurements: the simulated laser tracker on the hidden robot, or a CSV file.
+"""Measurements: the simulated laser tracker on the hidden robot, a CSV file or a ROS 2 bag (:func:`read_bag`).
 
 CSV format (one row per configuration, comma separated, header recommended)::
 
@@ -33,6 +33,9 @@ from pipeline.calibration import candidates as cd
 from pipeline.calibration.config import Config
 from pipeline.calibration.estimate import Estimate
 from pipeline.core.errors import DataFileError, InfeasibleError
+from pipeline.exchange import ros2_bag
+from pipeline.exchange.ros2_bag import is_bag
+from pipeline.exchange.stationary import stationary_windows
 from pipeline.robot.model import RobotModel
 from pipeline.robot.payload import Payload
 
@@ -56,6 +59,9 @@ class Measurements:
     offset_m: np.ndarray | None = None
     #: (N,) row of the original record each row comes from (6-D readings), None: the identity
     pose_index: np.ndarray | None = None
+    #: a bag: stationary windows found (each row is one used window), and each row's scatter (m)
+    windows_found: int | None = None
+    scatter_m: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.Q)
@@ -150,6 +156,34 @@ def reflector_reach_m(robot: RobotModel) -> float:
     reach = sum(float(np.linalg.norm(model.jointPlacements[j].translation)) for j in range(1, model.njoints))
     frame = model.frames[model.getFrameId(robot.frame_reflector)]
     return reach + float(np.linalg.norm(frame.placement.translation))
+
+
+def read_measurements(path: str | Path, robot: RobotModel, cfg: Config, min_rows: int = 1) -> Measurements:
+    """A measurement CSV (:func:`read_csv`) or a ROS 2 bag (:func:`read_bag`)."""
+    return read_bag(path, robot, cfg, min_rows) if is_bag(path) else read_csv(path, robot, min_rows=min_rows)
+
+
+def read_bag(path: str | Path, robot: RobotModel, cfg: Config, min_rows: int = 1) -> Measurements:
+    """A ROS 2 bag of ``sensor_msgs/JointState`` and a tracker topic (``PointStamped``, ``PoseStamped``
+    or ``TransformStamped``, positions in m in the tracker frame): one row per stationary window
+    (:func:`pipeline.exchange.stationary.stationary_windows`, the ``calibration.stationary_*`` settings),
+    the joint positions and the readings averaged over the window, their scatter kept."""
+    names = [str(n) for n in robot.model.names[1:]]
+    t0 = ros2_bag.first_stamp_s(path)
+    states = ros2_bag.read_joint_states(path, names, cfg.joint_names or None, field="calibration.joint_names",
+                                        t0_s=t0)
+    points = ros2_bag.read_points(path, t0_s=t0)
+    windows = stationary_windows(states, points, cfg.stationary_speed_rad_s, cfg.stationary_min_s,
+                                 cfg.stationary_settle_s, cfg.stationary_min_readings, str(path))
+    if windows.n_used < min_rows:
+        raise DataFileError(path, "stationary windows", f"{windows.n_used} used ({windows.n_found} found), "
+                            f"need at least {min_rows}")
+    Q, Y = windows.q_rad, windows.xyz_m
+    lines = np.arange(1, windows.n_used + 1)
+    _check_joint_angles(Path(path), Q, robot, lines)
+    _check_tracker_positions(Path(path), Y, robot, lines, True)
+    return Measurements(Q, Y, noise_model_sigma(robot, Y), str(path), None, len(Q), np.zeros((0, robot.nq)),
+                        None, lines, windows_found=windows.n_found, scatter_m=windows.scatter_m)
 
 
 def read_csv(path: str | Path, robot: RobotModel, min_rows: int = 1, min_rows_field: str | None = None) -> Measurements:

@@ -56,7 +56,12 @@ from pipeline.calibration.estimate import Estimate
 from pipeline.calibration.gravity_uncertainty import GravityCovariance
 from pipeline.calibration.measure import Measurements
 from pipeline.calibration.robust import Rejection, robust_estimate
-from pipeline.robot.repeatability import repeatability_sigma_m  # noqa: F401 - re-exported
+from pipeline.robot.model import RobotModel
+from pipeline.robot.repeatability import (  # noqa: F401 - repeatability_sigma_m re-exported
+    REPEATABILITY_KEY,
+    repeatability_for_calibration,
+    repeatability_sigma_m,
+)
 
 
 @dataclass
@@ -69,6 +74,14 @@ class NoiseModel:
     #: factor on the 1-sigma of the marker-point rows in the fit (the orientation weight, chosen by
     #: cross-validation, :func:`pipeline.calibration.model_selection.orientation_weight`)
     orientation_scale: float = 1.0
+    #: where the repeatability comes from (:func:`pipeline.robot.repeatability.repeatability_for_calibration`)
+    repeatability_source: str = "stated"
+    #: robot.yaml's RP (m) when it was not used ("data": the reach class's assumption), else None
+    repeatability_not_used_m: float | None = None
+
+    def known(self) -> NoiseModel:
+        """The parts known before the fit: no remainder."""
+        return replace(self, remainder_sigma_m=(0.0, 0.0))
 
     def total(self, sensor_sigma_m: np.ndarray, groups: np.ndarray | None = None) -> np.ndarray:
         """``(N,)`` 1-sigma per axis of each reading: sensor, repeatability and remainder combined
@@ -79,11 +92,23 @@ class NoiseModel:
         scale = np.where(g == 1, self.orientation_scale, 1.0)
         return scale * np.sqrt(s ** 2 + self.repeatability_sigma_m ** 2 + tau ** 2)
 
-    def as_dict(self) -> dict[str, float]:
+    def as_dict(self) -> dict[str, float | str | None]:
         return {"repeatability_sigma_m": float(self.repeatability_sigma_m),
+                "repeatability_source": self.repeatability_source,
+                "repeatability_not_used_m": self.repeatability_not_used_m,
                 "remainder_sigma_m": float(self.remainder_sigma_m[0]),
                 "remainder_orientation_points_sigma_m": float(self.remainder_sigma_m[1]),
                 "orientation_weight_scale": float(self.orientation_scale)}
+
+
+def noise_of_robot(robot: RobotModel, recorded: bool, orientation_scale: float = 1.0) -> NoiseModel:
+    """The known noise parts of a calibration of ``robot`` (``recorded``: readings from a file): the
+    repeatability by :func:`pipeline.robot.repeatability.repeatability_for_calibration`."""
+    rp = robot.spec.repeatability_m
+    assumed = REPEATABILITY_KEY in robot.spec.assumed
+    sigma, source = repeatability_for_calibration(rp, assumed, recorded)
+    return NoiseModel(sigma, orientation_scale=orientation_scale, repeatability_source=source,
+                      repeatability_not_used_m=float(rp) if source == "data" and rp is not None else None)
 
 
 def row_groups(offset_m: np.ndarray | None, n: int) -> np.ndarray:
@@ -196,23 +221,25 @@ def reweighted(mm: MeasurementModel, est: Estimate, Q: np.ndarray, Y: np.ndarray
 
 def fit_with_noise_model(mm: MeasurementModel, rec: Measurements, basis: np.ndarray, noise: NoiseModel,
                          gravity: GravityCovariance | None, *, max_iterations: int, loss: str, confidence: float,
-                         max_fraction: float, rounds: int = 3, tolerance: float = 0.05
-                         ) -> tuple[Estimate, Rejection, NoiseModel]:
+                         max_fraction: float, rounds: int = 3, tolerance: float = 0.05,
+                         theta0: np.ndarray | None = None) -> tuple[Estimate, Rejection, NoiseModel]:
     """Robust fit (:func:`pipeline.calibration.robust.robust_estimate`) with the readings' noise
     ``sensor + repeatability + remainder``; the remainder by REML on the kept readings of that fit,
     then the fit again with it, until the readings' total variance changes by less than
-    ``tolerance`` (relative, mean over the readings) or after ``rounds`` fits."""
+    ``tolerance`` (relative, mean over the readings) or after ``rounds`` fits. The first fit starts
+    from ``theta0`` (a warm start: a neighbouring fold's fit), each later one from the fit before."""
     groups = row_groups(rec.offset_m, len(rec))
-    known = NoiseModel(noise.repeatability_sigma_m).total(rec.sigma_m, groups)
+    known = replace(noise.known(), orientation_scale=1.0).total(rec.sigma_m, groups)
     current = noise
     for _ in range(rounds):
         sigma = current.total(rec.sigma_m, groups)
         est, rejection = robust_estimate(mm, rec.Q, rec.Y, sigma, basis, rec.source, max_iterations,
-                                         rec.payload_mounted, loss, confidence, max_fraction, rec.offset_m, gravity)
+                                         rec.payload_mounted, loss, confidence, max_fraction, rec.offset_m, gravity,
+                                         theta0)
+        theta0 = est.theta
         kept = np.ones(len(rec), bool)
         kept[rejection.rejected] = False
-        new = NoiseModel(noise.repeatability_sigma_m, _remainder_at(mm, est, rec, known, groups, kept, gravity),
-                         noise.orientation_scale)
+        new = replace(noise, remainder_sigma_m=_remainder_at(mm, est, rec, known, groups, kept, gravity))
         change = float(np.mean(np.abs(new.total(rec.sigma_m, groups) ** 2 - sigma ** 2)) / np.mean(sigma ** 2))
         current = new
         if change < tolerance:

@@ -13,10 +13,11 @@ parameter set of the tracker measurement model (SVD + ordered QR, paper 002/003)
 (limits, capsule collisions, floor, tracker visibility), selection by remove-and-replace on the minimum
 singular value (paper 004), measurement with the simulated laser tracker, registration + Levenberg-Marquardt,
 and validation on 1000 held-out poses."""),
-    ("code", """import numpy as np
+    ("code", """%matplotlib inline
+import numpy as np
 from IPython.display import Markdown, display
 
-from pipeline.core.config import quick_config
+from pipeline.run.stages import quick_config
 from pipeline.robot.model import RobotModel
 from pipeline.sim.truth import RealRobot
 from pipeline.stage_api import stage_rng
@@ -51,7 +52,8 @@ for method in ("remove_and_replace", "detmax", "bsaa", "random"):
 display(Markdown("\\n".join(rows)))"""),
     ("code", """fig1 = plots.error_histograms(out.validation["errors_before_m"], out.validation["errors_after_m"],
                               out.validation["noise_total_sigma_m"], out.validation["predicted_rms_m"])
-fig2 = plots.index_history(out.selection.history, out.selection.index_name, out.selection.method)"""),
+fig2 = plots.index_history(out.selection.history, out.selection.index_name, out.selection.method)
+display(fig1, fig2)"""),
     ("markdown", """## 3-D view (meshcat)
 
 Set `SHOW_VIEWER = True` to open a meshcat scene with the chosen configurations, the tracker and the beams."""),
@@ -68,8 +70,10 @@ def build():
 
     nb = nbformat.v4.new_notebook()
     nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
-    for kind, src in CELLS:
-        nb.cells.append(nbformat.v4.new_markdown_cell(src) if kind == "markdown" else nbformat.v4.new_code_cell(src))
+    for k, (kind, src) in enumerate(CELLS):
+        cell = nbformat.v4.new_markdown_cell(src) if kind == "markdown" else nbformat.v4.new_code_cell(src)
+        cell.id = f"cell-{k + 1:02d}"    # fixed ids: writing the notebook again changes nothing else
+        nb.cells.append(cell)
     return nb
 
 

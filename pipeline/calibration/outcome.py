@@ -4,6 +4,7 @@ what its steps hand each other (:mod:`pipeline.calibration.stage`)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -18,7 +19,41 @@ from pipeline.calibration.estimate import Estimate
 from pipeline.calibration.gradient_design import GradientDesignResult
 from pipeline.calibration.gravity_uncertainty import GravityCovariance
 from pipeline.calibration.robust import Rejection
+from pipeline.calibration.selection_scores import ModelSelection
+from pipeline.robot.handoff import ElastostaticRecord
 from pipeline.robot.model import RobotModel
+from pipeline.robot.residual_map import ResidualMap
+
+
+@dataclass
+class CalibrationNotes:
+    """What the stage's steps record beside the fit for the report, the summary and the arrays
+    (:mod:`pipeline.calibration.stage` fills it step by step; None: the step did not run or found nothing)."""
+
+    #: ``R_m``, the marker's rotation on the flange (3, 3) of 6-D readings
+    #: (:func:`pipeline.calibration.marker_frame.align_records`)
+    marker_rotation_on_flange: np.ndarray | None = None
+    #: the parameter subset chosen on a measurement file
+    #: (:func:`pipeline.calibration.model_selection.choose_parameters`)
+    model_selection: ModelSelection | None = None
+    #: parameters the feasible configurations cannot identify, dropped before the design (``ModelSetUp.dropped``:
+    #: :class:`pipeline.calibration.design_identifiable.DroppedParameter`, which imports this module)
+    design_dropped: list = field(default_factory=list)
+    #: the fitted rows of 6-D readings (three per pose; None: the measurements themselves)
+    fit_record: ms.Measurements | None = None
+    noise_model: nm.NoiseModel | None = None
+    #: the Gaussian-process map of the fit residuals handed on to later stages
+    residual_map: ResidualMap | None = None
+    #: the map's noise floor from the readings' known noise (measurement file only)
+    residual_map_floor_m: float | None = None
+    #: k-fold cross-validation figures of a measurement file (pipeline.calibration.crossval)
+    cross_validation: dict[str, Any] | None = None
+    #: second pass with the upstream gravity model (:func:`pipeline.calibration.elastostatic.gravity_pass`)
+    gravity_pass: dict[str, Any] | None = None
+    #: static torques for later gravity models (elastostatic model only)
+    static_torques: ElastostaticRecord | None = None
+    #: the held-out configurations (n, nq), drawn by the viewer
+    heldout_configurations: np.ndarray | None = None
 
 
 @dataclass
@@ -44,8 +79,8 @@ class CalibrationOutcome:
     prediction: dict | None = None
     #: readings rejected by the outlier test (pipeline.calibration.robust)
     rejection: Rejection | None = None
-    #: extra report sections (e.g. the comparison with the geometric-only fit)
-    notes: dict = field(default_factory=dict)
+    #: what the steps recorded beside the fit (model selection, residual map, cross-validation, ...)
+    notes: CalibrationNotes = field(default_factory=CalibrationNotes)
     #: the chosen design against baselines of the same size (pipeline.calibration.design_table)
     design_table: dict | None = None
 
@@ -73,6 +108,9 @@ class ModelSetUp:
     design_basis: np.ndarray
     #: the robot of calibration.gravity_model (None: none given)
     upstream_gravity: RobotModel | None
+    #: parameters the feasible configurations cannot identify, dropped before the design
+    #: (:class:`pipeline.calibration.design_identifiable.DroppedParameter`)
+    dropped: list = field(default_factory=list)
 
 
 @dataclass

@@ -1,18 +1,20 @@
-"""Figures of the calibration stage: held-out error histograms, fit residuals, index against iterations."""
+"""Figures of the calibration stage: held-out error histograms, fit residuals, index against iterations.
+
+Each is a :class:`matplotlib.figure.Figure` of its own (no pyplot state, no backend chosen here): the
+run writes it to a file, a notebook shows it inline.
+"""
 
 from __future__ import annotations
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import numpy as np
+from matplotlib.figure import Figure
 
 
 def error_histograms(errors_before_m: np.ndarray, errors_after_m: np.ndarray, sigma_m: float,
-                     predicted_rms_m: float | None = None):
+                     predicted_rms_m: float | None = None) -> Figure:
     """Histograms of the held-out position errors before and after calibration (mm / µm)."""
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
+    fig = Figure(figsize=(10, 3.8))
+    axes = fig.subplots(1, 2)
     axes[0].hist(1e3 * errors_before_m, bins=40, color="tab:red", alpha=0.8)
     axes[0].set_xlabel("|e| before calibration [mm]")
     axes[0].set_ylabel("poses")
@@ -28,10 +30,11 @@ def error_histograms(errors_before_m: np.ndarray, errors_after_m: np.ndarray, si
     return fig
 
 
-def index_history(history: list[tuple[int, float]], index_name: str, method: str):
+def index_history(history: list[tuple[int, float]], index_name: str, method: str) -> Figure:
     """Observability index against the iterations of the selection algorithm."""
     h = np.asarray(history, float).reshape(-1, 2)
-    fig, ax = plt.subplots(figsize=(6, 3.6))
+    fig = Figure(figsize=(6, 3.6))
+    ax = fig.subplots()
     ax.plot(h[:, 0], h[:, 1], marker=".", lw=1)
     ax.set_xlabel("iteration (accepted exchange / addition)")
     ax.set_ylabel(index_name)
@@ -41,9 +44,10 @@ def index_history(history: list[tuple[int, float]], index_name: str, method: str
     return fig
 
 
-def fit_residual_histogram(residuals_m: np.ndarray, sigma_m: float | None = None):
+def fit_residual_histogram(residuals_m: np.ndarray, sigma_m: float | None = None) -> Figure:
     """Histogram of the in-sample fit residuals |y - h| of the calibration measurements (µm)."""
-    fig, ax = plt.subplots(figsize=(6, 3.6))
+    fig = Figure(figsize=(6, 3.6))
+    ax = fig.subplots()
     ax.hist(1e6 * residuals_m, bins=min(40, max(5, len(residuals_m) // 2)), color="tab:gray", alpha=0.8)
     if sigma_m is not None:
         ax.axvline(3e6 * sigma_m, color="k", ls="--", label="3 σ tracker")

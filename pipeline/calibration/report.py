@@ -35,7 +35,7 @@ def summary_of(out: CalibrationOutcome, cfg: Config) -> dict:
     predicted = pred["predicted_rms_m"] if pred is not None else None
     sigma = pred["noise_total_sigma_m"] if pred is not None else None
     fit = out.fit or {}
-    return noise_components(out.notes.get("noise_model"), sigma) | {
+    return noise_components(out.notes.noise_model, sigma) | {
         "n_configurations": int(len(out.measurements)),
         "n_configurations_commanded": None if user else int(out.measurements.n_requested),
         "n_configurations_not_visible": n_not_visible(out),
@@ -73,12 +73,13 @@ def summary_of(out: CalibrationOutcome, cfg: Config) -> dict:
         "outliers_rejected": rejected_readings(out),
         "n_payload_readings": (int(np.sum(out.measurements.payload_mounted))
                                if out.measurements.payload_mounted is not None else 0),
-        "gravity_pass": out.notes.get("gravity_pass"),
-        "cross_validation": out.notes.get("cross_validation"),
-        "noise_model": out.notes["noise_model"].as_dict() if "noise_model" in out.notes else None,
+        "gravity_pass": out.notes.gravity_pass,
+        "cross_validation": out.notes.cross_validation,
+        "noise_model": out.notes.noise_model.as_dict() if out.notes.noise_model is not None else None,
         "n_outliers_expected_clean": expected_rejections(out.rejection) if out.rejection is not None else None,
         "joint_stiffness_Nm_rad": (None if out.robot.spec.actuation.joint_stiffness_Nm_rad is None
                                    else [float(v) for v in out.robot.spec.actuation.joint_stiffness_Nm_rad]),
+        "design_dropped_parameters": [d.name for d in out.notes.design_dropped],
         "lm_iterations": out.estimate.iterations,
         "timings_s": {k: round(t, 3) for k, t in out.timings_s.items()},
     }
@@ -135,7 +136,7 @@ def rejected_readings(out: CalibrationOutcome) -> list[dict]:
     rej = out.rejection
     if rej is None:
         return []
-    rec = out.notes.get("fit_record", out.measurements)   # 6-D: three fitted rows per pose
+    rec = out.notes.fit_record if out.notes.fit_record is not None else out.measurements   # 6-D: 3 rows a pose
     lines = rec.lines
     pose = rec.pose_index if rec.pose_index is not None else np.arange(len(rec))
     return [{"pose_index": int(pose[i]), "csv_line": None if lines is None else int(lines[i]),
@@ -170,13 +171,13 @@ def expected_rejections(rej) -> float:
 
 def noise_markdown(out: CalibrationOutcome) -> list[str]:
     """The readings' noise model: sensor, arm repeatability, REML remainder (report.md)."""
-    noise = out.notes.get("noise_model")
+    noise = out.notes.noise_model
     if noise is None:
         return []
     s = np.asarray(out.measurements.sigma_m, float)
     line = (f"Noise model of a reading (1σ per axis, pipeline.calibration.noise_model): sensor "
             f"{1e3 * float(np.sqrt(np.mean(s ** 2))):.4f} mm (RMS over the readings), arm repeatability "
-            f"{1e3 * noise.repeatability_sigma_m:.4f} mm (robot.yaml repeatability_m / 3.616), unmodelled "
+            f"{1e3 * noise.repeatability_sigma_m:.4f} mm ({repeatability_source_text(noise)}), unmodelled "
             f"remainder {1e3 * noise.remainder_sigma_m[0]:.4f} mm (REML on the fit residuals)")
     if noise.remainder_sigma_m[1]:
         line += f", remainder of the marker-point rows {1e3 * noise.remainder_sigma_m[1]:.4f} mm"
@@ -186,9 +187,27 @@ def noise_markdown(out: CalibrationOutcome) -> list[str]:
     return [line + ".", ""]
 
 
+def repeatability_source_text(noise) -> str:
+    """Which repeatability the noise model used (:func:`pipeline.robot.repeatability.repeatability_for_calibration`)."""
+    source = getattr(noise, "repeatability_source", "stated")
+    if source == "data":
+        rp = noise.repeatability_not_used_m
+        return ("from the data: robot.yaml's " + (f"±{1e3 * rp:g} mm " if rp is not None else "")
+                + "is robot init's reach-class assumption, not used; the remainder estimated from the record "
+                "takes up the arm's scatter")
+    if source == "assumed":
+        return "robot init's reach-class assumption / 3.616 (simulated readings scatter by it)"
+    if source == "none":
+        return "not stated in robot.yaml: the remainder takes it up"
+    return "robot.yaml repeatability_m / 3.616, as stated"
+
+
 def visibility_sentence(out: CalibrationOutcome, robot: RobotModel) -> str:
     """How many commanded poses the tracker could not see (report.md)."""
     m = out.measurements
+    if from_file(out) and m.windows_found is not None:
+        return (f"Calibration measurements: {len(m)} configurations from the bag `{m.source}`: "
+                f"{m.windows_found} stationary windows found, {len(m)} used (the readings of each averaged).")
     if from_file(out):
         return (f"Calibration measurements: {len(m)} configurations from the user file `{m.source}` "
                 "(poses the tracker could not see are not in the file).")
@@ -201,15 +220,19 @@ def visibility_sentence(out: CalibrationOutcome, robot: RobotModel) -> str:
 
 
 def report_markdown(out: CalibrationOutcome, cfg: Config, robot: RobotModel) -> str:
-    md = ["### Identifiability", "", out.report.markdown(), "", "### Measurements", "",
-          visibility_sentence(out, robot), ""]
+    md = ["### Identifiability", "", out.report.markdown(), ""]
+    dropped = out.notes.design_dropped
+    if dropped:
+        md += [f"Dropped before the design ({len(dropped)}; held at their nominal values, the design optimises "
+               "the rest):", "", *(f"- {d.name}: {d.why}" for d in dropped), ""]
+    md += ["### Measurements", "", visibility_sentence(out, robot), ""]
     d = out.measured_design
     if d is not None and from_file(out):
         md += [f"Configurations chosen by the user (no selection was run): {d['index_name']} = "
                f"{d['index_value']:.6g} for the {d['n_configurations']} measured configurations.", ""]
     md += ["### Fit", "", va.fit_markdown(out.fit, out.prediction), "", *noise_markdown(out), outlier_markdown(out),
            ""]
-    cv = out.notes.get("cross_validation")
+    cv = out.notes.cross_validation
     if cv is not None and cv["rms_position_error_m"] is not None:
         md += [f"{cv['folds']}-fold cross-validation on the measurement file: RMS position error of the left-out "
                f"poses {1e3 * cv['rms_position_error_m']:.4f} mm over {cv['n_poses']} poses "
@@ -218,7 +241,7 @@ def report_markdown(out: CalibrationOutcome, cfg: Config, robot: RobotModel) -> 
                + (f"; predicted RMS {1e3 * cv['predicted_rms_position_error_m']:.4f} mm, actual/predicted "
                   f"{cv['actual_over_predicted']:.3f}" if cv.get("actual_over_predicted") is not None else "")
                + ".", ""]
-    g = out.notes.get("gravity_pass")
+    g = out.notes.gravity_pass
     if g is not None:
         md += [f"Second calibration pass: gravity torques of the elastostatic model from `{g['gravity_model']}` "
                f"(identified inertias) instead of this run's model; chi²/dof {g['chi2_per_dof_nominal_gravity']:.3f} "
@@ -271,10 +294,10 @@ def stage_arrays(out: CalibrationOutcome) -> dict[str, np.ndarray]:
         arrays["heldout_errors_before_m"] = out.validation["errors_before_m"]
         arrays["heldout_errors_after_m"] = out.validation["errors_after_m"]
         arrays["heldout_predicted_std_m"] = out.validation["predicted_std_m"]
-    if "static_torques" in out.notes:                     # elastostatic model: for later gravity models
-        arrays.update(out.notes["static_torques"].to_arrays())
-    if out.notes.get("heldout_configurations") is not None:   # for the viewer's layers
-        arrays["configurations_heldout"] = out.notes["heldout_configurations"]
+    if out.notes.static_torques is not None:              # elastostatic model: for later gravity models
+        arrays.update(out.notes.static_torques.to_arrays())
+    if out.notes.heldout_configurations is not None:      # for the viewer's layers
+        arrays["configurations_heldout"] = out.notes.heldout_configurations
     if out.candidates is not None and len(out.candidates):
         arrays["configurations_candidates"] = out.candidates.Q[:: max(1, len(out.candidates) // VIEWER_CANDIDATES)]
     if out.selection is not None:

@@ -38,6 +38,7 @@ at the stated confidence: with the default 0.999 a good reading is rejected with
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal, get_args
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -51,7 +52,8 @@ from pipeline.core.errors import PipelineError
 #: scale of the robust loss in whitened units (readings within 2 sigma count quadratically)
 ROBUST_SCALE = 2.0
 MAX_ROUNDS = 5
-LOSSES = ("linear", "huber", "cauchy")
+Loss = Literal["linear", "huber", "cauchy"]
+LOSSES: tuple[Loss, ...] = get_args(Loss)
 
 
 @dataclass
@@ -124,10 +126,11 @@ def geometric_screen(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: 
 def robust_estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarray, basis: np.ndarray,
                     source: str = "measurements", max_iterations: int = 50, mounted: np.ndarray | None = None,
                     loss: str = "huber", confidence: float = 0.999, max_fraction: float = 0.1,
-                    offsets: np.ndarray | None = None, gravity: GravityCovariance | None = None
-                    ) -> tuple[Estimate, Rejection]:
+                    offsets: np.ndarray | None = None, gravity: GravityCovariance | None = None,
+                    theta0: np.ndarray | None = None) -> tuple[Estimate, Rejection]:
     """Steps 1-4 of the module docstring. ``loss`` "linear": no robust refit (outlier test only);
-    ``gravity``: the gravity-model covariance of the readings (None or inactive: ``sigma_k`` only)."""
+    ``gravity``: the gravity-model covariance of the readings (None or inactive: ``sigma_k`` only);
+    ``theta0``: the first fit's start (a warm start; each later fit starts from the one before)."""
     Q, Y, sigma = np.asarray(Q, float), np.asarray(Y, float), np.asarray(sigma, float)
     n = len(Q)
     base_threshold = float(np.sqrt(chi2.ppf(confidence, 3)))
@@ -139,7 +142,8 @@ def robust_estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: n
     def rows(a: np.ndarray | None) -> np.ndarray | None:
         return None if a is None else a[kept]
 
-    est = estimate(mm, Q[kept], Y[kept], sigma[kept], basis, source, max_iterations, rows(mounted), rows(offsets))
+    est = estimate(mm, Q[kept], Y[kept], sigma[kept], basis, source, max_iterations, rows(mounted), rows(offsets),
+                   theta0=theta0)
     use_gravity = gravity is not None and gravity.active
 
     def gravity_factors(e: Estimate) -> np.ndarray | None:
@@ -148,7 +152,7 @@ def robust_estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: n
     fac = gravity_factors(est)
     if fac is not None:
         est = estimate(mm, Q[kept], Y[kept], sigma[kept], basis, source, max_iterations, rows(mounted), rows(offsets),
-                       fac[kept])
+                       fac[kept], theta0=est.theta)
     probe = est if loss == "linear" else _robust_refit(mm, est, Q, Y, sigma, mounted, loss, max_iterations, offsets,
                                                        fac)
     capped = False
@@ -166,12 +170,13 @@ def robust_estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: n
         m = None if mounted is None else mounted[kept]
         o = None if offsets is None else offsets[kept]
         est = estimate(mm, Q[kept], Y[kept], sigma[kept], basis, source, max_iterations, m, o,
-                       None if fac is None else fac[kept])
+                       None if fac is None else fac[kept], theta0=est.theta)
         probe = est
     if fac is not None:   # fixed-point step: the covariance at the final compliances
         fac = gravity_factors(est)
         m = None if mounted is None else mounted[kept]
         o = None if offsets is None else offsets[kept]
-        est = estimate(mm, Q[kept], Y[kept], sigma[kept], basis, source, max_iterations, m, o, fac[kept])
+        est = estimate(mm, Q[kept], Y[kept], sigma[kept], basis, source, max_iterations, m, o, fac[kept],
+                       theta0=est.theta)
     norm = _whitened_norm(mm, est, Q, Y, sigma, mounted, offsets, fac)
     return est, Rejection(np.flatnonzero(~kept), norm, threshold, confidence, loss, capped)

@@ -54,6 +54,7 @@ from pipeline.calibration.design import (  # noqa: F401 - build_candidates etc. 
     too_few_candidates,
     working_jacobian,
 )
+from pipeline.calibration.design_identifiable import restrict_to_pool
 from pipeline.calibration.elastostatic import (
     design_basis,
     design_torques,
@@ -68,7 +69,7 @@ from pipeline.calibration.estimate import calibrated_robot, register_points
 from pipeline.calibration.gradient_design import GradientDesignConfig, GradientDesignResult, gradient_design
 from pipeline.calibration.gravity_uncertainty import GravityCovariance
 from pipeline.calibration.measure import heldout_measurements
-from pipeline.calibration.outcome import CalibrationOutcome, Design, Fit, ModelSetUp, UserRecords
+from pipeline.calibration.outcome import CalibrationNotes, CalibrationOutcome, Design, Fit, ModelSetUp, UserRecords
 from pipeline.calibration.report import (  # noqa: F401 - re-exported (tests, notebook)
     VIEWER_CANDIDATES,
     from_file,
@@ -89,11 +90,10 @@ from pipeline.stage_api import StageContext, StageResult
 NAME = "calibration"
 DEPENDS: tuple[str, ...] = ("model",)
 CONFIG_READS: tuple[str, ...] = ("control.iso",)
-#: fields naming files or folders: the inputs hash covers their content, not their path
-FILE_INPUTS: tuple[str, ...] = ("gravity_model", "measurements_csv", "validation_csv", "working_csv")
 #: provenance (pipeline.run.stage_plan): the field naming a recorded file, else what is simulated
 RECORDED_INPUT = "measurements_csv"
 SIMULATES = "tracker readings of the hidden robot"
+warm_up = None                       # its compiled code is built where it is used
 #: cross-validation folds for a measurement file without a validation file (calibration.cross_validation_folds 0)
 DEFAULT_FOLDS = 5
 
@@ -101,7 +101,7 @@ DEFAULT_FOLDS = 5
 def check(config: Config, robot: RobotModel) -> None:
     """Robot-dependent checks and the user files, before the runner creates any directory."""
     cfg = config
-    user = ms.read_csv(cfg.measurements_csv, robot, min_rows=1) if cfg.measurements_csv else None
+    user = ms.read_measurements(cfg.measurements_csv, robot, cfg) if cfg.measurements_csv else None
     mm = measurement_model(robot, cfg, marker_points=user is not None and user.rotvec is not None
                            and cfg.use_orientation)
     load_gravity_model(cfg, robot)
@@ -115,13 +115,13 @@ def check(config: Config, robot: RobotModel) -> None:
         ms.read_csv(cfg.validation_csv, robot, min_rows=1)
 
 
-def run(ctx: StageContext) -> StageResult:
+def run(ctx: StageContext[Config]) -> StageResult:
     cfg: Config = ctx.config
     t0 = time.perf_counter()
-    # real tracker data: the simulated hidden robot must not be touched (not even ctx.real)
-    real = None if cfg.measurements_csv else ctx.real
+    # recorded or simulated is the plan's decision (pipeline.run.stage_plan, ctx.provenance): a recorded
+    # stage gets no hidden robot (ctx.real None), and with a measurement file calibrate never uses one
     region = ts.region_of_run(getattr(ctx, "run", None), cfg, ctx.robot)
-    out = calibrate(ctx.robot, real, cfg, ctx.rng, getattr(ctx, "progress", None), region)
+    out = calibrate(ctx.robot, ctx.real, cfg, ctx.rng, getattr(ctx, "progress", None), region)
     result = outputs(out, cfg, ctx.robot, t0)
     gates = QualityGates(NAME, accept_poor=ctx.run.accept_poor)
     va.check_gates(gates, result.summary, cfg)
@@ -167,6 +167,7 @@ def _calibrate(robot: RobotModel, real, cfg: Config, rng: np.random.Generator, p
     design: Design | None = None
     if records.measurements is None:
         design = design_configurations(robot, real, model, rng, region, timings)
+        notes.design_dropped = list(model.dropped)
         meas = measure_design(real, model, design, rng, timings)
     else:   # the user's configurations: no candidates, no selection, no simulated robot
         ms.check_rows(model.cfg.use_orientation, records.measurements, model.basis.shape[1], robot)
@@ -180,28 +181,28 @@ def _calibrate(robot: RobotModel, real, cfg: Config, rng: np.random.Generator, p
     return outcome(robot, real, model, records, design, meas, fit, validation, rng, region, timings, notes)
 
 
-def read_records(robot: RobotModel, cfg: Config) -> tuple[UserRecords, dict]:
+def read_records(robot: RobotModel, cfg: Config) -> tuple[UserRecords, CalibrationNotes]:
     """The user's measurement and validation files (``position_sigma_m`` overriding their sigma);
     for 6-D readings the marker's rotation on the flange in closed form first
     (:func:`pipeline.calibration.marker_frame.align_records`), kept in the returned notes."""
-    user = ms.read_csv(cfg.measurements_csv, robot, min_rows=1) if cfg.measurements_csv else None
+    user = ms.read_measurements(cfg.measurements_csv, robot, cfg) if cfg.measurements_csv else None
     val_user = ms.read_csv(cfg.validation_csv, robot, min_rows=1) if cfg.validation_csv else None
     if cfg.position_sigma_m is not None:
         for m in (user, val_user):
             if m is not None:
                 m.sigma_m = np.full(len(m), float(cfg.position_sigma_m))
     six_d = user is not None and user.rotvec is not None and cfg.use_orientation
-    notes: dict = {}
+    notes = CalibrationNotes()
     if six_d and user is not None:   # a marker turned on the flange: its rotation in closed form first
-        notes["marker_rotation_on_flange"], user, val_user = mf.align_records(robot, user, val_user)
+        notes.marker_rotation_on_flange, user, val_user = mf.align_records(robot, user, val_user)
     return UserRecords(user, val_user, six_d), notes
 
 
 def set_up_model(robot: RobotModel, cfg: Config, records: UserRecords, rng: np.random.Generator,
-                 notes: dict) -> ModelSetUp:
-    """The parameter subset (model selection on a measurement file, ``notes["model_selection"]``),
+                 notes: CalibrationNotes) -> ModelSetUp:
+    """The parameter subset (model selection on a measurement file, ``notes.model_selection``),
     the measurement model with the upstream gravity model, the identifiable parameter set."""
-    cfg, notes["model_selection"] = msel.choose_parameters(robot, cfg, records.measurements, records.six_d, rng,
+    cfg, notes.model_selection = msel.choose_parameters(robot, cfg, records.measurements, records.six_d, rng,
                                                            identify_parameter_set)
     mm = measurement_model(robot, cfg, marker_points=records.six_d)
     upstream_gravity = load_gravity_model(cfg, robot)
@@ -220,6 +221,7 @@ def design_configurations(robot: RobotModel, real, model: ModelSetUp, rng: np.ra
     cfg = model.cfg
     t = time.perf_counter()
     cs = build_candidates(robot, cfg, model.design_basis, rng, design_torques(model.mm))
+    cs, model.dropped = restrict_to_pool(model, cs)       # what the feasible configurations can identify
     timings["candidates_s"] = time.perf_counter() - t
     if len(cs) < cfg.n_configurations:
         raise InfeasibleError(None, "calibration.grid_per_axis" if cfg.candidates == "grid"
@@ -290,28 +292,30 @@ def _robust_settings(cfg: Config) -> dict[str, Any]:
 
 
 def fit_model(robot: RobotModel, model: ModelSetUp, records: UserRecords, meas: ms.Measurements,
-              rng: np.random.Generator, notes: dict) -> Fit:
+              rng: np.random.Generator, notes: CalibrationNotes) -> Fit:
     """Robust fit with the noise model (:func:`pipeline.calibration.noise_model.fit_with_noise_model`),
     the residual map, the cross-validation, the gravity pass and the static torques (in ``notes``)."""
     cfg, mm, basis = model.cfg, model.mm, model.basis
     rec = ms.expand_orientation(meas, cfg.orientation_sigma_rad) if records.six_d else meas   # the fitted rows
     gravity = GravityCovariance(mm, cfg.gravity_prior())
-    sel = notes["model_selection"]
+    sel = notes.model_selection
     kappa = sel.orientation_scale if sel is not None else 1.0
-    est, rejection, noise = nm.fit_with_noise_model(mm, rec, basis, nm.NoiseModel(nm.repeatability_sigma_m(
-        robot.spec.repeatability_m or 0.0), orientation_scale=kappa), gravity, max_iterations=cfg.max_lm_iterations,
-        **_robust_settings(cfg))
-    notes |= {"fit_record": rec} if records.six_d else {}
-    notes["noise_model"] = noise
-    notes["residual_map"] = msel.final_residual_map(sel, mm, est, records.measurements, rec, rejection.rejected, rng)
+    known = nm.noise_of_robot(robot, records.measurements is not None, kappa)
+    est, rejection, noise = nm.fit_with_noise_model(mm, rec, basis, known, gravity,
+                                                    max_iterations=cfg.max_lm_iterations, **_robust_settings(cfg))
+    notes.fit_record = rec if records.six_d else None
+    notes.noise_model = noise
+    notes.residual_map = msel.final_residual_map(sel, mm, est, records.measurements, rec, rejection.rejected, rng,
+                                                 noise)
+    if records.measurements is not None:
+        notes.residual_map_floor_m = msel.map_noise_floor_m(noise, records.measurements.sigma_m)
     fit = Fit(rec, gravity, est, rejection, noise)
-    cv = cross_validation(model, records, fit, sel, rng if notes["residual_map"] is not None else None)
-    if cv is not None:
-        notes["cross_validation"] = cv
+    cv = cross_validation(model, records, fit, sel, rng if notes.residual_map is not None else None)
+    notes.cross_validation = cv
     if model.upstream_gravity is not None:
-        notes["gravity_pass"] = gravity_pass(mm, rec, basis, est, rejection.rejected, cfg, str(cfg.gravity_model))
+        notes.gravity_pass = gravity_pass(mm, rec, basis, est, rejection.rejected, cfg, str(cfg.gravity_model))
     if mm.compliance:
-        notes["static_torques"] = static_torque_record(mm, meas, est, basis, model.report.identifiable_names)
+        notes.static_torques = static_torque_record(mm, meas, est, basis, model.report.identifiable_names)
     return fit
 
 
@@ -320,22 +324,23 @@ def cross_validation(model: ModelSetUp, records: UserRecords, fit: Fit, sel: mse
     """K-fold cross-validation of a measurement file (``calibration.cross_validation_folds``, else
     :data:`DEFAULT_FOLDS` without a validation file, else the model selection's folds; None: none)."""
     cfg, user = model.cfg, records.measurements
+    if user is not None and sel is not None:
+        # the model selection's held-out figures of the chosen model (every fold's own noise model): one
+        # computation, so every ratio is of the figures beside it
+        return sel.cross_validation()
     folds = cfg.cross_validation_folds or (DEFAULT_FOLDS if user is not None and records.validation is None else 0)
-    if user is None or not (folds or sel is not None):
+    if user is None or not folds:
         return None
     rec, noise = fit.record, fit.noise
     groups = nm.row_groups(rec.offset_m, len(rec))
-    n_folds = folds or (sel.folds if sel is not None else 0)   # folds 0: a model selection
-    cv = cross_validate(model.mm, rec, model.basis, noise.total(rec.sigma_m, groups), n_folds,
-                        cfg.max_lm_iterations, gravity=fit.gravity, map_rng=map_rng,
-                        noise_sigma_m=replace(noise, orientation_scale=1.0).total(rec.sigma_m, groups),
-                        **_robust_settings(cfg))
-    # the model selection's figures of the chosen model; the gates' actual/predicted from this fit's noise model
-    return cv | sel.cross_validation() if sel is not None else cv
+    return cross_validate(model.mm, rec, model.basis, noise.total(rec.sigma_m, groups), folds,
+                          cfg.max_lm_iterations, gravity=fit.gravity, map_rng=map_rng,
+                          noise_sigma_m=replace(noise, orientation_scale=1.0).total(rec.sigma_m, groups),
+                          map_noise_floor_m=msel.map_noise_floor_m(noise, user.sigma_m), **_robust_settings(cfg))
 
 
 def validate_heldout(robot: RobotModel, real, model: ModelSetUp, records: UserRecords, fit: Fit,
-                     rng: np.random.Generator, notes: dict) -> dict | None:
+                     rng: np.random.Generator, notes: CalibrationNotes) -> dict | None:
     """Held-out validation (:func:`pipeline.calibration.validate.validate`) on the validation file,
     or on simulated held-out poses without a measurement file; None with real data and no
     validation file (a simulated held-out set would be fiction)."""
@@ -350,14 +355,14 @@ def validate_heldout(robot: RobotModel, real, model: ModelSetUp, records: UserRe
         held = heldout_measurements(robot, real, fit.estimate, cfg, rng)
     held.sigma_m = fit.noise.total(held.sigma_m)
     validation = va.validate(model.mm, fit.estimate, held, cfg.outlier_confidence, fit.gravity,
-                             cfg.orientation_sigma_rad, notes["residual_map"])
-    notes["heldout_configurations"] = held.Q      # drawn by the viewer
+                             cfg.orientation_sigma_rad, notes.residual_map)
+    notes.heldout_configurations = held.Q      # drawn by the viewer
     return validation
 
 
 def outcome(robot: RobotModel, real, model: ModelSetUp, records: UserRecords, design: Design | None,
             meas: ms.Measurements, fit: Fit, validation: dict | None, rng: np.random.Generator,
-            region: ts.WorkingRegion, timings: dict[str, float], notes: dict) -> CalibrationOutcome:
+            region: ts.WorkingRegion, timings: dict[str, float], notes: CalibrationNotes) -> CalibrationOutcome:
     """The measured design's index, the fit residuals, the covariance prediction (without a
     held-out set), the calibrated robot (with the residual map) and the design table."""
     cfg, mm, est = model.cfg, model.mm, fit.estimate
@@ -369,10 +374,10 @@ def outcome(robot: RobotModel, real, model: ModelSetUp, records: UserRecords, de
     measured = measured_design(robot, mm, model.design_basis, meas.Q, spec, est.transform_tracker_to_base,
                                "user file" if user is not None else "measured subset", meas.payload_mounted)
     residuals = va.fit_residuals(mm, est, fit.record, fit.rejection.rejected)
-    prediction = (predicted_on_random_poses(robot, mm, est, cfg, rng, fit.gravity, fit.noise, notes["residual_map"])
+    prediction = (predicted_on_random_poses(robot, mm, est, cfg, rng, fit.gravity, fit.noise, notes.residual_map)
                   if validation is None else None)
     new_robot = calibrated_robot(robot, mm, est.x, model.basis, est.covariance)
-    new_robot.residual_map = notes["residual_map"]   # later stages' forward kinematics (pipeline.robot)
+    new_robot.residual_map = notes.residual_map   # later stages' forward kinematics (pipeline.robot)
     cs = design.candidates if design is not None else None
     table = dtab.for_run(cfg, robot, real if user is None else None, mm, model.basis, spec, meas.Q, est, cs, region,
                          rng, model.design_basis)

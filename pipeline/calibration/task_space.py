@@ -36,13 +36,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import indices as ix
 from pipeline.calibration.error_model import MeasurementModel
 from pipeline.core.errors import ConfigError, DataFileError, InfeasibleError
-from pipeline.core.yaml12 import load_yaml
+from pipeline.core.yaml12 import YAMLError, load_yaml
 from pipeline.robot.defaults import iso_or_derived
 from pipeline.robot.iso9283 import IsoPathConfig
 from pipeline.robot.model import RobotModel
@@ -267,7 +266,7 @@ def default_region(robot: RobotModel) -> WorkingRegion:
         data = load_yaml(Path(robot.spec.path).read_text(encoding="utf-8")) or {}
         section = ((data.get("run_defaults") or {}).get("control") or {}).get("iso") or {}
         centre, edge = section.get("centre_m", centre), section.get("edge_m", edge)
-    except (OSError, AttributeError, yaml.YAMLError):
+    except (OSError, AttributeError, YAMLError):
         pass
     if centre is None or edge is None:
         iso = iso_or_derived(robot, IsoPathConfig(centre_m=centre, edge_m=edge))

@@ -9,15 +9,21 @@ Range and length checks that do not need the robot are in ``validate(source)`` (
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Literal, get_args
 
-from pipeline.core.config_checks import check_choice, check_count, check_number, check_unique, check_vector
+from pipeline.core.config_checks import check_count, check_number, check_unique, check_vector
 from pipeline.core.errors import ConfigError, Source
+from pipeline.core.typed_config import check_choices
 from pipeline.robot.iso9283 import IsoPathConfig
 
-FEEDFORWARD_VARIANTS = ("none", "gravity", "full", "full_friction", "elastic_static", "elastic_flat")
-ENGINES = ("compiled", "python")
-PATH_FRAMES = ("reflector", "tcp")
-ON_SATURATION = ("error", "clip")
+FeedforwardVariant = Literal["none", "gravity", "full", "full_friction", "elastic_static", "elastic_flat"]
+Engine = Literal["compiled", "python"]
+PathFrame = Literal["reflector", "tcp"]
+OnSaturation = Literal["error", "clip"]
+FEEDFORWARD_VARIANTS: tuple[FeedforwardVariant, ...] = get_args(FeedforwardVariant)
+ENGINES: tuple[Engine, ...] = get_args(Engine)
+PATH_FRAMES: tuple[PathFrame, ...] = get_args(PathFrame)
+ON_SATURATION: tuple[OnSaturation, ...] = get_args(OnSaturation)
 
 
 @dataclass
@@ -38,11 +44,11 @@ class ControlConfig:
     velocity_filter_hz: float = 150.0
     compensate_velocity_estimate_delay: bool = True   # delay v_ff like the velocity estimate
     settle_time_s: float = 0.3                  # hold the start pose before the path (integrators settle)
-    engine: str = "compiled"                    # compiled | python
+    engine: Engine = "compiled"
     chunk_samples: int = 250
-    on_saturation: str = "error"                # error | clip
+    on_saturation: OnSaturation = "error"
     saturation_ratio: float = 1.0               # |tau_cmd| / tau_max above this is saturation
-    variants: list[str] = field(default_factory=lambda: list(FEEDFORWARD_VARIANTS))
+    variants: list[FeedforwardVariant] = field(default_factory=lambda: list(FEEDFORWARD_VARIANTS))
     compare_nominal_feedforward: bool = True    # also run full_friction from the nominal model
     ik_tolerance_m: float = 1e-9
     #: cold-start seeds (deg) for the IK of the first path point, tried in order; None = derived from
@@ -52,7 +58,7 @@ class ControlConfig:
     #: as paper 004 measures the path with the tracker ("reflector"), or the tool centre point ("tcp";
     #: its offset from the reflector is not observable by the calibration, so its absolute error
     #: keeps the tool's unidentified part)
-    path_frame: str = "reflector"
+    path_frame: PathFrame = "reflector"
     iso: IsoPathConfig = field(default_factory=IsoPathConfig)
     benchmark_python_seconds: float = 0.5       # >0: time the plain-Python loop for this simulated time
 
@@ -82,16 +88,13 @@ class ControlConfig:
         check_number(s, "control.stick_slip_margin", self.stick_slip_margin, ge=0,
                      why=" (Kv >= margin x the identified Stribeck slope; 0 turns the floor off)")
         check_number(s, "control.settle_time_s", self.settle_time_s, ge=0, unit="s")
-        check_choice(s, "control.engine", self.engine, ENGINES)
+        check_choices(self, "control", s)
         check_count(s, "control.chunk_samples", self.chunk_samples, 1)
-        check_choice(s, "control.on_saturation", self.on_saturation, ON_SATURATION)
         check_number(s, "control.saturation_ratio", self.saturation_ratio, gt=0,
                      why=" (|tau_cmd| / tau_max above this counts as saturation)")
         if not isinstance(self.variants, (list, tuple)) or not self.variants:
             raise ConfigError(s, "control.variants", f"expected a non-empty list of feedforward variants "
                               f"({', '.join(FEEDFORWARD_VARIANTS)}), got {self.variants!r}")
-        for i, v in enumerate(self.variants):
-            check_choice(s, f"control.variants[{i}]", v, FEEDFORWARD_VARIANTS)
         check_unique(s, "control.variants", self.variants)
         check_number(s, "control.ik_tolerance_m", self.ik_tolerance_m, gt=0, le=1e-4, unit="m",
                      why=" (the IK error of the reference must stay far below the sub-mm errors being measured)")
@@ -102,7 +105,6 @@ class ControlConfig:
                               f"expected a non-empty list of joint vectors (deg), got {self.ik_seeds_deg!r}")
         for i, seed in enumerate(self.ik_seeds_deg or []):
             check_vector(s, f"control.ik_seeds_deg[{i}]", seed, unit="deg", nonempty=True)
-        check_choice(s, "control.path_frame", self.path_frame, PATH_FRAMES)
         if isinstance(self.iso, IsoPathConfig):
             self.iso.validate(s)
         else:
@@ -110,6 +112,3 @@ class ControlConfig:
         check_number(s, "control.benchmark_python_seconds", self.benchmark_python_seconds, ge=0, unit="s",
                      why=" (0 skips the plain-Python benchmark)")
 
-
-#: the name every stage package gives its section dataclass (docs/ARCHITECTURE.md "Stage skeleton")
-Config = ControlConfig

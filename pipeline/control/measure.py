@@ -63,7 +63,7 @@ def variant_runs(ctx: StageContext, models: ControlModels, iso: IsoReference, se
     tcp_at_ref = ctx.real.plant.measure_tcp(ref.q_d, iso.frame)
     noise_seed = int(ctx.rng.integers(2**32))  # common random numbers across the variants
     runs, metrics = {}, {}
-    jobs = [(v, robot) for v in cfg.variants]
+    jobs: list[tuple[str, RobotModel]] = [(v, robot) for v in cfg.variants]
     if cfg.compare_nominal_feedforward and models.identified:
         jobs.append(("full_friction_nominal", with_dynamics_of(robot, models.nominal)))
     for name, model in ctx.progress.track(jobs, "closed loop on the ISO path"):

@@ -30,6 +30,7 @@ from pipeline.control.config import ControlConfig
 from pipeline.control.design import IsoReference, ServoDesign
 from pipeline.control.joint_stiffness import StiffnessChoice
 from pipeline.control.measure import ServoRuns, measured_tcp
+from pipeline.robot.plotting import LINE_STYLES, distinct_colors
 from pipeline.robot.reference import Reference
 
 
@@ -92,9 +93,9 @@ def summary(cfg: ControlConfig, ref: Reference, metrics: dict[str, dict], main: 
 
 def figures(iso: IsoReference, measured: ServoRuns, servo: ServoDesign, cfg: ControlConfig, nq: int
             ) -> dict[str, Figure]:
-    """The stage's figures: lag errors, TCP error, the ISO path, Bode plots of axes 1-3."""
+    """The stage's figures: lag errors, TCP error, the ISO path, Bode plots of every axis."""
     ref, runs, path, tcp_at_ref = iso.ref, measured.runs, iso.path, measured.tcp_at_ref
-    servo_models = servo.loop_models(min(3, nq), cfg.sample_time_s, cfg.measurement_delay_samples)
+    servo_models = servo.loop_models(nq, cfg.sample_time_s, cfg.measurement_delay_samples)
     show: list[str] = [k for k in ("none", "full_friction", "elastic_flat") if k in runs] or list(runs)
     lag = {k: runs[k].lag_error_rad for k in runs}
     tcp = {k: np.linalg.norm(runs[k].tcp_position_m - tcp_at_ref, axis=1) for k in runs}
@@ -243,18 +244,31 @@ def path_figure(desired_m: np.ndarray, actual: dict[str, np.ndarray], points: di
     return fig
 
 
-def bode_figure(models: list[dict], joints: tuple[int, ...] = (0, 1, 2)) -> Figure:
-    """Bode magnitude/phase of the velocity and position open loops (python-control frequency response)."""
+def bode_figure(models: list[dict], joints: tuple[int, ...] | None = None) -> Figure:
+    """Bode magnitude/phase of the velocity and position open loops of the axes ``joints`` (None: every
+    axis of ``models``; python-control frequency response). Each axis has its own colour and dash
+    pattern, the later ones drawn thinner over the earlier: axes whose loops coincide (gains designed
+    from the reflected inertia give the same loop shape) stay visible and say so in the legend
+    (``axis 4 (= axis 1)``), and an axis designed differently (e.g. a raised stick-slip ``Kv``) stands out."""
+    joints = tuple(range(len(models))) if joints is None else joints
+    colors = distinct_colors(len(joints))
+    widths = np.linspace(2.4, 0.9, len(joints)) if len(joints) > 1 else np.array([1.2])
     fig = Figure(figsize=(9, 5.5), constrained_layout=True)
     axs = fig.subplots(2, 2, sharex="col")
     for col, key in enumerate(("velocity_open", "position_open")):
-        for j in joints:
+        drawn: list[tuple[int, np.ndarray]] = []
+        for n, j in enumerate(joints):
             sys = models[j][key]
             w = np.logspace(0, np.log10(np.pi / sys.dt) - 0.01, 600)
-            resp = ct.frequency_response(sys, w)
-            mag, phase = np.abs(resp.complex).ravel(), np.unwrap(np.angle(resp.complex).ravel())
-            axs[0, col].semilogx(w / 2 / np.pi, 20 * np.log10(mag), label=f"axis {j + 1}")
-            axs[1, col].semilogx(w / 2 / np.pi, np.degrees(phase))
+            resp = np.asarray(ct.frequency_response(sys, w).complex).ravel()
+            mag, phase = np.abs(resp), np.unwrap(np.angle(resp))
+            same = next((i for i, r in drawn if r.shape == resp.shape and np.allclose(r, resp, rtol=1e-6)), None)
+            drawn.append((j, resp))
+            label = f"axis {j + 1}" + ("" if same is None else f" (= axis {same + 1})")
+            style = {"color": colors[n], "ls": LINE_STYLES[n % len(LINE_STYLES)], "lw": widths[n]}
+            axs[0, col].semilogx(w / 2 / np.pi, 20 * np.log10(mag), label=label, **style)
+            axs[1, col].semilogx(w / 2 / np.pi, np.degrees(phase), **style)
+        axs[0, col].legend(fontsize=7, ncol=2)
         axs[0, col].axhline(0, color="k", lw=0.5)
         axs[1, col].axhline(-180, color="k", lw=0.5)
         axs[0, col].set_title(key.replace("_", " ") + " loop")
@@ -263,5 +277,4 @@ def bode_figure(models: list[dict], joints: tuple[int, ...] = (0, 1, 2)) -> Figu
             axs[r, col].grid(alpha=0.3, which="both")
     axs[0, 0].set_ylabel("magnitude [dB]")
     axs[1, 0].set_ylabel("phase [deg]")
-    axs[0, 0].legend(fontsize=7)
     return fig

@@ -27,7 +27,7 @@ import time
 import numpy as np
 
 from pipeline.control import report
-from pipeline.control.config import Config, ControlConfig
+from pipeline.control.config import ControlConfig
 from pipeline.control.design import (
     IsoReference,
     ServoDesign,
@@ -47,9 +47,14 @@ from pipeline.stage_api import StageContext, StageResult
 
 NAME = "control"
 DEPENDS: tuple[str, ...] = ("model", "calibration", "identification")
+#: the stage's section (pipeline.stage_api.StageModule)
+Config = ControlConfig
+CONFIG_READS: tuple[str, ...] = ()
+RECORDED_INPUT = ""
 #: provenance (pipeline.run.stage_plan): what is simulated (this stage reads no recorded file)
 SIMULATES = "servo loop on the hidden robot"
-__all__ = ["NAME", "DEPENDS", "SIMULATES", "Config", "check", "run"]
+warm_up = None                       # its compiled code is built where it is used
+__all__ = ["NAME", "DEPENDS", "CONFIG_READS", "RECORDED_INPUT", "SIMULATES", "Config", "check", "warm_up", "run"]
 
 
 def check(config: ControlConfig, robot: RobotModel) -> None:
@@ -62,7 +67,7 @@ def check(config: ControlConfig, robot: RobotModel) -> None:
                               f"{robot.name}, got {len(seed)}: {list(seed)!r}")
 
 
-def run(ctx: StageContext) -> StageResult:
+def run(ctx: StageContext[ControlConfig]) -> StageResult:
     cfg: ControlConfig = ctx.config
     if ctx.real is None:
         raise PipelineError(None, "control", "the hidden robot (pipeline.sim.truth) is not available")

@@ -8,7 +8,8 @@ any change of the model or expression compiles anew and nothing is compiled twic
 whose code generation is itself costly pass their own ``key`` and a lazy ``functions``
 callable: the code is then generated only when the library is missing. A library is built under
 an exclusive file lock beside it: a second process asking for it meanwhile waits and loads it
-(the file itself is written atomically, ``os.replace``).
+(the file itself is written atomically, ``os.replace``). While a library is compiled, or waited for,
+the active progress display (:mod:`pipeline.core.progress`) shows a line ``compiling <name> ...``.
 
 Faults: a cache folder that cannot be written falls back to a private temporary cache (with a
 warning on stderr); every library has its SHA-256 in ``<library>.sha256`` beside it and is
@@ -32,6 +33,7 @@ from pathlib import Path
 
 import casadi as ca
 
+from pipeline.core import progress
 from pipeline.core.errors import SolverError
 
 DEFAULT_FLAGS = ("-O2",)
@@ -188,28 +190,34 @@ def build_library(name: str, functions: Sequence[ca.Function] | Callable[[], Seq
     library, sources = _library_path(name, functions, subdir, flags, key, cache_dir)
     if _intact(library):
         return library
-    with _build_lock(library):      # another process building it: wait for its library
+    with _build_lock(library, name):      # another process building it: wait for its library
         if _intact(library):
             return library
-        if sources is None:
-            sources = _sources(functions() if callable(functions) else functions, name)
-        _build(sources, name, flags, library)
+        with progress.task(f"compiling {name} (C code, gcc)"):
+            if sources is None:
+                sources = _sources(functions() if callable(functions) else functions, name)
+            _build(sources, name, flags, library)
     return library
 
 
 @contextlib.contextmanager
-def _build_lock(library: Path) -> Iterator[None]:
+def _build_lock(library: Path, name: str | None = None) -> Iterator[None]:
     """An exclusive ``flock`` on ``.<library>.lock`` beside the library while it is built, so that two
     processes (a run's background warm-up, :mod:`pipeline.run.warm_up`, and its stage) never compile the
-    same library side by side: the second waits and finds it built. No lock (a folder that refuses
-    the file) only costs a possible second build."""
+    same library side by side: the second waits (a progress line says for what) and finds it built.
+    No lock (a folder that refuses the file) only costs a possible second build."""
     try:
         handle = open(library.with_name(f".{library.name}.lock"), "a")  # noqa: SIM115 (held across the yield)
     except OSError:
         yield
         return
     with handle:
-        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:     # another process compiles it (e.g. the run's background warm-up)
+            what = library.name if name is None else name
+            with progress.task(f"compiling {what} (C code, gcc; in another process, waiting for it)"):
+                fcntl.flock(handle, fcntl.LOCK_EX)
         yield
 
 

@@ -4,9 +4,12 @@ A run configuration has a few top-level keys (``name``, ``seed``, ``robot``, ``p
 ``stages``) and one section per stage (plus ``truth`` for the hidden robot). Each section is
 validated against a dataclass:
 
-* stage ``<stage>``: ``Config`` in the stage module (``STAGES[stage]``, e.g.
-  ``pipeline.calibration.stage.Config``), imported lazily;
+* stage ``<stage>``: the ``Config`` dataclass of the stage module (e.g.
+  ``pipeline.calibration.stage.Config``);
 * ``truth``: ``pipeline.sim.truth.TruthConfig``.
+
+Which sections there are is not known here: the run layer, which owns the stages, registers them
+(:func:`register_sections`, :mod:`pipeline.run.stages`); this module only layers and checks them.
 
 Merging order (later wins): dataclass defaults < the robot's ``run_defaults`` (a section of its
 ``robot.yaml``: where the test path sits and which moves fit that arm) < YAML file < ``--set``
@@ -17,15 +20,11 @@ dotted field, e.g. ``configs/my.yaml: calibration.n_configurations: expected int
 
 from __future__ import annotations
 
-import dataclasses
-import importlib
 import inspect
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
-
-import yaml
+from typing import Any, TypeVar, overload
 
 import pipeline
 from pipeline.core.config_layers import (
@@ -40,26 +39,13 @@ from pipeline.core.config_layers import (
 )
 from pipeline.core.errors import ConfigError, PipelineError
 from pipeline.core.run_names import default_run_name
-from pipeline.core.typed_config import build_dataclass, describe, unknown_key, with_source
-from pipeline.core.yaml12 import load_yaml
+from pipeline.core.typed_config import DataclassInstance, build_dataclass, describe, unknown_key, with_source
+from pipeline.core.yaml12 import YAMLError, dump_yaml, load_yaml
 
-#: Stage registry, in run order: stage name -> module path (or a module-like object exposing
-#: ``NAME``, ``DEPENDS``, ``Config`` and ``run``; tests put fake stages here).
-STAGES: dict[str, Any] = {
-    "model": "pipeline.model.stage",
-    "calibration": "pipeline.calibration.stage",
-    "identification": "pipeline.identification.stage",
-    "control": "pipeline.control.stage",
-    "trajectory": "pipeline.trajectory.stage",
-}
-
-#: Sections that are not stages: section name -> "module:ClassName" of their dataclass.
-EXTRA_SECTIONS: dict[str, str] = {
-    "truth": "pipeline.sim.truth:TruthConfig",
-}
+SectionT = TypeVar("SectionT")
 
 TOP_LEVEL_KEYS = ("name", "seed", "robot", "profile", "stages")
-PROFILES = ("full", "quick")
+PROFILES = ("full", "quick", "corpus")
 
 #: the folder that holds the ``pipeline`` package (the repository in a source checkout)
 REPO_ROOT = Path(pipeline.__file__).resolve().parent.parent
@@ -78,67 +64,48 @@ class StageUnavailableError(PipelineError):
 
 
 # --------------------------------------------------------------------------------------------
-# Stage modules
+# Sections: which there are is registered from above (the run layer owns the stages)
 # --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class SectionRegistry:
+    """The sections a run configuration holds: the stages in run order, then the sections that are
+    not stages (the hidden robot's ``truth``); ``config_class(name)`` is a section's dataclass
+    (None: its module does not exist yet, then ``missing(name)`` names that module)."""
+
+    stages: tuple[str, ...]
+    others: tuple[str, ...]
+    config_class: Callable[[str], type | None]
+    missing: Callable[[str], str]
+
+
+_registry: Callable[[], SectionRegistry] | None = None
+
+
+def register_sections(provider: Callable[[], SectionRegistry]) -> None:
+    """Install the function that returns the run's sections (:mod:`pipeline.run.stages` does at
+    import; it is called at every use, so a test may swap the stages it returns)."""
+    global _registry
+    _registry = provider
+
+
+def sections_registry() -> SectionRegistry:
+    """The registered sections (:func:`register_sections`)."""
+    if _registry is None:
+        raise StageUnavailableError(None, "stages", "no stage is registered: the run layer registers the "
+                                    "stages (import pipeline.run, or load the configuration with "
+                                    "pipeline.run.stages.load_config)")
+    return _registry()
+
+
 def stage_names() -> list[str]:
     """Registered stage names in run order."""
-    return list(STAGES)
-
-
-def load_stage_module(name: str) -> Any:
-    """Import the module of stage ``name`` (see :data:`STAGES`).
-
-    Raises :class:`StageUnavailableError` when the module does not exist (not written yet) and
-    :class:`ConfigError` for an unknown stage name. Other import errors propagate (they are bugs).
-    """
-    if name not in STAGES:
-        raise ConfigError(None, "stages", f"unknown stage {name!r} (known: {', '.join(STAGES)})")
-    target = STAGES[name]
-    if not isinstance(target, str):
-        return target
-    try:
-        return importlib.import_module(target)
-    except ModuleNotFoundError as exc:
-        missing = exc.name or ""
-        if missing and (target == missing or target.startswith(missing + ".")):
-            raise StageUnavailableError(
-                target.replace(".", "/") + ".py", name,
-                f"stage {name!r} is not available: module {target} does not exist (not written yet?)",
-            ) from None
-        raise
-
-
-def _section_class(section: str) -> type | None:
-    """The dataclass of a section, or None when its module does not exist yet."""
-    if section in STAGES:
-        try:
-            module = load_stage_module(section)
-        except StageUnavailableError:
-            return None
-        cls = getattr(module, "Config", None)
-        if cls is None or not dataclasses.is_dataclass(cls):
-            raise StageUnavailableError(
-                str(getattr(module, "__file__", section)), "Config",
-                f"stage {section!r} has no Config dataclass",
-            )
-        return cls
-    spec = EXTRA_SECTIONS[section]
-    module_name, _, cls_name = spec.partition(":")
-    try:
-        module = importlib.import_module(module_name)
-    except ModuleNotFoundError as exc:
-        if exc.name and (module_name == exc.name or module_name.startswith(exc.name + ".")):
-            return None
-        raise
-    cls = getattr(module, cls_name, None)
-    if cls is None:
-        return None
-    return cls
+    return list(sections_registry().stages)
 
 
 def section_names() -> list[str]:
-    """All section names: the extra sections (``truth``) then the stages."""
-    return [*EXTRA_SECTIONS, *STAGES]
+    """All section names: the other sections (``truth``) then the stages."""
+    registry = sections_registry()
+    return [*registry.others, *registry.stages]
 
 
 # --------------------------------------------------------------------------------------------
@@ -149,9 +116,9 @@ class RunConfig:
     """A validated run configuration.
 
     ``sections`` maps each section name (``truth``, ``model``, ``calibration``, ...) to its
-    validated dataclass instance, or to a plain dict when the section's module does not exist
-    yet (then the dict is empty: a non-empty section for a missing module is an error).
-    Sections are also reachable as attributes: ``cfg.calibration.n_configurations``.
+    validated dataclass instance (a section whose module does not exist yet is left out: settings
+    for it are an error). Typed access: ``cfg.section("calibration", CalibrationConfig)``; sections
+    are also reachable as attributes: ``cfg.calibration.n_configurations``.
     """
 
     name: str = "rx130l"                # without a name: default_run_name(robot, profile)
@@ -159,7 +126,7 @@ class RunConfig:
     robot: str = "rx130l"
     profile: str = "full"
     stages: list[str] = field(default_factory=stage_names)
-    sections: dict[str, Any] = field(default_factory=dict)
+    sections: dict[str, DataclassInstance] = field(default_factory=dict)
     source: str = "<defaults>"          # where it came from, for messages
     base_dir: Path = field(default_factory=Path.cwd)   # relative robot paths resolve here first
     origins: dict[str, str] = field(default_factory=dict)  # top-level key or section -> file or "--set" (last)
@@ -188,11 +155,20 @@ class RunConfig:
         head = field_path(dotted)[0] if dotted else ""
         return self.origins.get(head, self.source)
 
-    def section(self, name: str) -> Any:
-        """The config of section ``name`` (dataclass instance)."""
+    @overload
+    def section(self, name: str) -> DataclassInstance: ...
+
+    @overload
+    def section(self, name: str, kind: type[SectionT]) -> SectionT: ...
+
+    def section(self, name: str, kind: type[SectionT] | None = None) -> DataclassInstance | SectionT:
+        """The config of section ``name`` (dataclass instance); with ``kind``, checked to be one."""
         if name not in self.sections:
             raise ConfigError(self.source, name, "no such section")
-        return self.sections[name]
+        value = self.sections[name]
+        if kind is not None and not isinstance(value, kind):
+            raise ConfigError(self.source, name, f"expected a {kind.__name__}, got {type(value).__name__}")
+        return value
 
     def to_dict(self) -> dict[str, Any]:
         """Plain (YAML/JSON-able) dict that :func:`load_config` reads back to an equal config."""
@@ -208,7 +184,7 @@ class RunConfig:
         return out
 
     def to_yaml(self) -> str:
-        return yaml.safe_dump(self.to_dict(), sort_keys=False)
+        return dump_yaml(self.to_dict())
 
 
 # --------------------------------------------------------------------------------------------
@@ -221,13 +197,14 @@ def _parse_stages(value: object, source: str) -> list[str]:
         items = list(value)
     else:
         raise ConfigError(source, "stages", f"expected a list of stage names, got {describe(value)}")
+    known = stage_names()
     for s in items:
-        if s not in STAGES:
-            raise ConfigError(source, "stages", f"unknown stage {s!r} (known: {', '.join(STAGES)})")
+        if s not in known:
+            raise ConfigError(source, "stages", f"unknown stage {s!r} (known: {', '.join(known)})")
     if not items:
         raise ConfigError(source, "stages", "no stage selected")
     # keep registry order, drop duplicates
-    return [s for s in STAGES if s in items]
+    return [s for s in known if s in items]
 
 
 def load_config(
@@ -323,17 +300,16 @@ def load_config(
                 raise ConfigError(src, f"run_defaults.{key}", f"expected a mapping of settings, got {describe(value)}")
             raw_sections[key].insert(0, (src, value))
 
+    registry = sections_registry()
     for section, items in raw_sections.items():
-        cls = _section_class(section)
+        cls = registry.config_class(section)
         if cls is None:
             for src, value in items:
                 if value:
-                    module = STAGES.get(section) or EXTRA_SECTIONS[section].partition(":")[0]
                     raise ConfigError(
                         src, section,
-                        f"cannot check these settings: {module} does not exist yet",
+                        f"cannot check these settings: {registry.missing(section)} does not exist yet",
                     )
-            cfg.sections[section] = {}
             continue
         # validate the merged section after each layer; a problem of the final section is blamed
         # on the layer that introduced it (a bad value in a file that a later --set repairs is
@@ -345,7 +321,7 @@ def load_config(
                 cfg.field_origins[key] = src
         merged: dict[str, Any] = {}
         errors: list[ConfigError | None] = []
-        instance: object = None
+        instance: DataclassInstance | None = None
         for src, value in items:
             merged = merge_layers(merged, value)
             try:
@@ -362,6 +338,7 @@ def load_config(
             _semantic_check(instance, source)
         if errors and errors[-1] is not None:
             raise _blame(errors, items, section)
+        assert instance is not None       # every layer's error is raised above
         cfg.sections[section] = instance
     return cfg
 
@@ -394,7 +371,7 @@ def robot_run_defaults(cfg: RunConfig) -> tuple[str, Mapping[str, Any]] | None:
         return None
     try:
         data = load_yaml(robot_yaml.read_text(encoding="utf-8"))
-    except (OSError, yaml.YAMLError):
+    except (OSError, YAMLError):
         return None                      # the robot loader reports a broken robot.yaml
     if not isinstance(data, dict) or data.get("run_defaults") is None:
         return None

@@ -1,6 +1,7 @@
 """Field checks of run-configuration sections: each raises :class:`ConfigError` naming the
 source (file or ``--set``) and the dotted field, saying what was expected and what was given.
-Used by the sections' ``validate(source)`` methods (``pipeline.core.config`` calls them at load time).
+Used by the sections' ``validate(source)`` methods (``pipeline.core.config`` calls them at load time);
+a choice is a ``Literal`` field instead (:func:`pipeline.core.typed_config.check_choices`).
 """
 
 from __future__ import annotations
@@ -40,11 +41,6 @@ def check_count(source: Source, name: str, value: object, minimum: int, why: str
     """ConfigError unless ``value`` is an int >= ``minimum``."""
     if not isinstance(value, int) or isinstance(value, bool) or value < minimum:
         raise ConfigError(source, name, f"expected an integer >= {minimum}, got {value!r}{why}")
-
-
-def check_choice(source: Source, name: str, value: object, allowed: tuple[str, ...]) -> None:
-    if value not in allowed:
-        raise ConfigError(source, name, f"expected one of {', '.join(allowed)}, got {value!r}")
 
 
 def check_vector(source: Source, name: str, values: object, n: int | None = None, unit: str = "", *,

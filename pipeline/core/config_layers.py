@@ -11,11 +11,9 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from pipeline.core.errors import ConfigError
 from pipeline.core.typed_config import one_line
-from pipeline.core.yaml12 import load_yaml, yaml_problem
+from pipeline.core.yaml12 import YAMLError, load_yaml, yaml_problem
 
 
 def field_path(dotted: str) -> tuple[str, ...]:
@@ -84,7 +82,7 @@ def parse_set(item: str) -> tuple[list[str], Any]:
         raise ConfigError("--set", item, "empty key")
     try:
         value = load_yaml(text) if text.strip() else ""
-    except yaml.YAMLError as exc:
+    except YAMLError as exc:
         raise ConfigError("--set", key, f"cannot parse value {text!r}: {one_line(exc)}") from None
     return key.split("."), value
 
@@ -113,7 +111,7 @@ def read_yaml(path: Path) -> dict[str, Any]:
         raise ConfigError(path, None, "contains NUL bytes (a binary file?); expected a YAML run configuration")
     try:
         data = load_yaml(text)
-    except yaml.YAMLError as exc:
+    except YAMLError as exc:
         raise ConfigError(path, *yaml_problem(exc)) from None
     if data is None:
         raise ConfigError(path, None, "the config file is empty; leave out --config to run the "

@@ -12,6 +12,10 @@ from pathlib import Path
 Source = str | Path | None
 
 
+#: the characters ``str.splitlines`` breaks at, as escapes (so a message stays one line)
+_LINE_BREAK_ESCAPES = {ord(c): repr(c)[1:-1] for c in "\n\r\x0b\x0c\x1c\x1d\x1e\x85\u2028\u2029"}
+
+
 class PipelineError(Exception):
     """A user-facing error: ``<file>: <field>: <problem>``."""
 
@@ -22,8 +26,10 @@ class PipelineError(Exception):
         super().__init__(self.one_line())
 
     def one_line(self) -> str:
+        """``file: field: problem``, line breaks inside a part (a key or value quoted from the input)
+        written as escapes: one line whatever the input held."""
         parts = [p for p in (self.file, self.field) if p]
-        return ": ".join([*parts, self.problem])
+        return ": ".join([*parts, self.problem]).translate(_LINE_BREAK_ESCAPES)
 
     def __reduce__(self) -> tuple[type, tuple[object, ...]]:
         """Pickled by its fields: an error raised in a worker process reaches its parent as itself."""

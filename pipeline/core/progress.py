@@ -10,12 +10,14 @@ Usage in stage code::
 
 Outside the runner, the module-level :func:`track` / :func:`task` use the active
 :class:`Progress` if there is one, else a temporary one. When stderr is not a terminal
-(tests, CI, pipes) nothing is drawn; the iterables pass through unchanged.
+(tests, CI, pipes) nothing is drawn; the iterables pass through unchanged. Compiled code
+being built shows as a task ``compiling <name> ...`` (:mod:`pipeline.core.codegen`).
 """
 
 from __future__ import annotations
 
 import contextlib
+import os
 import sys
 from collections.abc import Iterable, Iterator
 from typing import TYPE_CHECKING, Any, TypeVar
@@ -71,6 +73,7 @@ class Progress:
         self._transient = transient
         self._depth = 0
         self._previous: Progress | None = None
+        self._pid = os.getpid()     # a forked child does not draw on its parent's display
 
     # context management ------------------------------------------------------------------
     def __enter__(self) -> Progress:
@@ -138,8 +141,13 @@ class Progress:
 
 
 def current() -> Progress:
-    """The active progress display, or a new quiet-unless-terminal one."""
-    return _ACTIVE if _ACTIVE is not None else Progress()
+    """The active progress display, or a new quiet-unless-terminal one; in a forked child of the
+    process that owns the active display (a run's background warm-up, a worker of
+    :mod:`pipeline.core.forks`), a quiet one: the terminal's display is the parent's, and its copy
+    in the child holds the parent's locks as they were at the fork."""
+    if _ACTIVE is None:
+        return Progress()
+    return _ACTIVE if _ACTIVE._pid == os.getpid() else Progress(enabled=False)
 
 
 def track(iterable: Iterable[T], description: str, total: float | None = None) -> Iterator[T]:

@@ -12,10 +12,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import yaml
-
 from pipeline.core.errors import ConfigError
-from pipeline.core.yaml12 import load_yaml
+from pipeline.core.yaml12 import YAMLError, load_yaml
 
 #: the profile whose runs carry the bare robot name
 DEFAULT_PROFILE = "full"
@@ -44,7 +42,7 @@ def run_dir_robot(run_dir: Path) -> str | None:
     path = Path(run_dir) / RUN_CONFIG_FILE
     try:
         data = load_yaml(path.read_text(encoding="utf-8"))
-    except (OSError, yaml.YAMLError):
+    except (OSError, YAMLError):
         return None
     robot = data.get("robot") if isinstance(data, dict) else None
     return str(robot) if robot not in (None, "") else None

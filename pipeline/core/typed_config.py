@@ -4,7 +4,12 @@
 mapping; every value is checked and converted by :func:`coerce` (bool, int, float, str, Path,
 optional and union types, Literal, list/tuple/dict of those, nested dataclasses, numpy arrays),
 and a problem raises :class:`pipeline.core.errors.ConfigError` naming ``source`` (the file or
-``--set``) and the dotted field ``where``.
+``--set``) and the dotted field ``where``. A choice is a ``Literal`` (``engine: Literal["pipeline",
+"mujoco"]``): a value outside it is refused with one line naming the field and the choices.
+
+A field naming a file or folder whose content is an input of the stage is declared
+``Annotated[str | None, FileInput]`` (:func:`file_input_fields`): the stage's inputs hash covers
+that content, never the path.
 """
 
 from __future__ import annotations
@@ -15,11 +20,68 @@ import types
 import typing
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
-from pipeline.core.errors import ConfigError, PipelineError
+from pipeline.core.errors import ConfigError, PipelineError, Source
+
+
+class DataclassInstance(Protocol):
+    """Any dataclass instance (a validated section of a run configuration)."""
+
+    __dataclass_fields__: ClassVar[dict[str, dataclasses.Field[Any]]]
+
+
+class FileInput:
+    """Marker of a configuration field that names a file or folder read by the stage:
+    ``measurements_csv: Annotated[str | None, FileInput] = None``. The inputs hash of the stage
+    covers the file's content (:func:`file_input_fields`), so a renamed field stays covered."""
+
+
+def file_input_fields(cls: type) -> tuple[str, ...]:
+    """The fields of dataclass ``cls`` annotated with :class:`FileInput`, in declaration order."""
+    hints = typing.get_type_hints(cls, include_extras=True)
+    out = []
+    for f in dataclasses.fields(cls):
+        tp = hints.get(f.name)
+        if typing.get_origin(tp) is typing.Annotated and any(
+                m is FileInput or isinstance(m, FileInput) for m in getattr(tp, "__metadata__", ())):
+            out.append(f.name)
+    return tuple(out)
+
+
+def choices(tp: object) -> tuple[object, ...]:
+    """The values of a ``Literal`` annotation (``()`` for any other annotation)."""
+    return typing.get_args(tp) if typing.get_origin(tp) is typing.Literal else ()
+
+
+def _choice_text(values: Sequence[object]) -> str:
+    return ", ".join(str(v) if isinstance(v, str) else repr(v) for v in values)
+
+
+def _check_literal(value: object, tp: object, where: str, source: Source) -> None:
+    """ConfigError unless ``value`` holds one of the choices wherever annotation ``tp`` has a Literal
+    (``Literal[...]``, ``Literal[...] | None``, ``list[Literal[...]]``, ``tuple[Literal[...], ...]``)."""
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin is typing.Literal:
+        if not any(value == a and type(value) is type(a) for a in args):
+            raise ConfigError(source, where, f"expected one of {_choice_text(args)}, got {value!r}")
+    elif origin is typing.Union or origin is types.UnionType:
+        arms = [a for a in args if a is not type(None)]
+        if value is not None and len(arms) == 1:
+            _check_literal(value, arms[0], where, source)
+    elif origin in (list, tuple, Sequence) and args and isinstance(value, (list, tuple)):
+        for i, item in enumerate(value):
+            _check_literal(item, args[0], f"{where}[{i}]", source)
+
+
+def check_choices(instance: object, where: str, source: Source = None) -> None:
+    """Every ``Literal`` field of dataclass ``instance`` holds one of its choices (a config built in
+    Python, which :func:`build_dataclass` did not check): ConfigError naming ``<where>.<field>``."""
+    hints = _hints(type(instance))
+    for f in dataclasses.fields(instance):  # type: ignore[arg-type]  # a dataclass instance
+        _check_literal(getattr(instance, f.name), hints.get(f.name, Any), f"{where}.{f.name}", source)
 
 
 def one_line(exc: BaseException) -> str:
@@ -71,11 +133,14 @@ def coerce(value: Any, tp: Any, where: str, source: str) -> Any:  # Any: a YAML 
                 return coerce(value, arg, where, source)
             except ConfigError as exc:
                 errors.append(exc)
+        arms = [a for a in args if a is not type(None)]
+        if len(arms) == 1 and choices(arms[0]):       # Literal[...] | None: name the choices
+            raise errors[0]
         raise fail(_type_name(tp))
     if origin is typing.Literal:
-        if value in args:
+        if any(value == a and type(value) is type(a) for a in args):
             return value
-        raise fail("one of " + ", ".join(repr(a) for a in args))
+        raise ConfigError(source, where, f"expected one of {_choice_text(args)}, got {value!r}")
     if tp is type(None) or tp is None:
         if value is None:
             return None

@@ -18,8 +18,13 @@ Public entry points:
   (joint or motor side), ``process_periodic`` / ``process_record``.
 - :mod:`~pipeline.identification.estimate`: ``ols``, ``wls`` (Gautier), ``physical_fit``
   (log-Cholesky, IPOPT), ``is_physically_consistent``.
-- :mod:`~pipeline.identification.validate`: ISO 9283 validation trajectory, torque RMS, z-scores.
-- :mod:`~pipeline.identification.tx40`: ``run_tx40`` on the real Stäubli TX40 record.
+- :mod:`~pipeline.identification.experiment`: the stage's regressors and base set, and its data (the
+  user's record, or the optimal excitation run on the hidden robot).
+- :mod:`~pipeline.identification.fit`: the stage's fits on all samples (Stribeck and load-dependent
+  friction candidates), the HAC covariance, the handed-on robot.
+- :mod:`~pipeline.identification.validate`: ISO 9283 validation trajectory, torque RMS, z-scores; the
+  stage's validation step and the choice of the handed-on friction model.
+- :mod:`~pipeline.identification.tx40`: ``run_tx40`` on the real Stäubli TX40 record (``tx40_wanted``).
 - :mod:`~pipeline.identification.outcome`: what the stage's steps hand each other and
   ``identified_robot(robot, p)`` (a ``RobotModel`` with identified inertias, rotor inertia, friction).
 - :mod:`~pipeline.identification.report`: summary, arrays, figures and report text.

@@ -8,18 +8,40 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Annotated, Literal, get_args
 
 from pipeline.core.errors import ConfigError, Source
+from pipeline.core.typed_config import FileInput, check_choices
 from pipeline.identification.base_set import STRUCTURAL_BASE_TOLERANCE
-from pipeline.identification.friction import FRICTION_MODELS
-from pipeline.identification.tx40 import TX40_SAMPLE_TIME_S, Tx40Config
 
 #: processed samples dropped at each end of a data_file record (filter transients)
 DATA_BORDER_SAMPLES = 20
 #: longest plausible sample interval of a torque/encoder record (20 Hz); a longer one in a data
 #: file means its t column is not in seconds
 MAX_SAMPLE_TIME_S = 0.05
+#: friction models of the fit (``friction_model``, :mod:`.friction`)
+FrictionModel = Literal["viscous_coulomb", "stribeck"]
+FRICTION_MODELS: tuple[FrictionModel, ...] = get_args(FrictionModel)
+#: sample time of the Stäubli TX40 record (5 kHz, :mod:`.tx40`)
+TX40_SAMPLE_TIME_S = 2e-4
 TX40_NYQUIST_HZ = 0.5 / TX40_SAMPLE_TIME_S
+
+
+@dataclass
+class Tx40Config:
+    """Fit of the Stäubli TX40 record (:mod:`.tx40`)."""
+
+    data_dir: str = ""  # empty: data/staubli_tx40 of the repository
+    cutoff_hz: float = 100.0
+    decimation: int = 10
+    border_samples: int = 5
+    train_fraction: float = 0.7
+    regularization: float = 1e-3
+    max_iter: int = 1500
+    max_samples: int = 0  # >0: use only the first max_samples raw samples (quick profile)
+    # seed of the random states that select the structural base parameters (pivoted QR): fixed
+    # here, so the real-data result does not change with the simulation's seed
+    base_seed: int = 0
 
 
 @dataclass
@@ -32,7 +54,7 @@ class ExcitationConfig:
     n_starts: int = 3  # IPOPT runs from the best random feasible trajectories
     n_random: int = 20  # random feasible trajectories for the baseline median
     max_iter: int = 150  # IPOPT stops earlier when the objective stalls (objective_change_tol)
-    criterion: str = "cond"  # cond | logdet
+    criterion: Literal["cond", "logdet"] = "cond"
     # >0: IPOPT minimises a smooth surrogate of log cond, soft max - soft min of log(eigenvalues)
     # of W^T W (log-sum-exp with this width); the reported condition number is the exact one
     cond_softness: float = 0.2
@@ -69,18 +91,23 @@ class Config:
     # stribeck: viscous + Coulomb + a Stribeck term per joint (IPOPT), handed on in the identified
     # model, with the viscous_coulomb fit's validation errors reported beside it (friction.py);
     # viscous_coulomb: the linear friction model only
-    friction_model: str = "stribeck"
-    validation: str = "iso9283"  # iso9283 | fourier
+    friction_model: FrictionModel = "stribeck"
+    validation: Literal["iso9283", "fourier"] = "iso9283"
     validation_sample_time_s: float = 4e-3
-    data_file: str = ""  # CSV record instead of the simulated experiment
-    data_side: str = "joint"  # joint | motor (columns of data_file)
-    data_cutoff_hz: float = 20.0  # position low-pass for a (non-periodic) data_file
-    data_decimation: int = 10
+    #: CSV record or ROS 2 bag (folder, .db3, .mcap) instead of the simulated experiment
+    data_file: Annotated[str, FileInput] = ""
+    data_side: Literal["joint", "motor"] = "joint"  # columns of data_file
+    # position low-pass and decimation of a (non-periodic) data_file; null: from its sample rate,
+    # min(20 Hz, rate / 4) and rate / (5 x cut-off) (signals.record_filter_settings)
+    data_cutoff_hz: float | None = None
+    data_decimation: int | None = None
+    # a data_file's joints renamed to the model's: {name in the record: name in the model} (bags)
+    joint_names: dict[str, str] = field(default_factory=dict)
     # actuator columns: "gear" = motor-side rotor/friction through the gear matrix (coupled axes,
     # e.g. TX40 5/6), "none" = diagonal joint-side (RobotModel, SymbolicRobot and the hidden robot),
     # "auto" = gear for a data_file (a real drive train; none with robot.yaml actuation.torque_side: link),
     # none for the simulated hidden robot
-    actuator_coupling: str = "auto"
+    actuator_coupling: Literal["auto", "gear", "none"] = "auto"
     # quality gates (pipeline.quality): data must excite the model (hard error) ...
     min_joint_motion_rad: float = 0.05  # peak to peak, every joint
     max_cond_base_regressor_data: float = 1e6
@@ -106,6 +133,8 @@ class Config:
         ex = self.excitation
         tx = self.tx40
         p = "identification."
+        check_choices(self, "identification", source)
+        check_choices(ex, "identification.excitation", source)
 
         def fin(x: float) -> bool:
             return math.isfinite(x)
@@ -120,7 +149,6 @@ class Config:
             ("excitation.n_random", ex.n_random >= 1, "must be >= 1"),
             ("excitation.max_iter", ex.max_iter >= 0, "must be >= 0"),
             ("excitation.n_check", ex.n_check >= 2, "must be >= 2"),
-            ("excitation.criterion", ex.criterion in ("cond", "logdet"), "must be cond or logdet"),
             ("excitation.objective_change_tol", fin(ex.objective_change_tol) and ex.objective_change_tol > 0,
              "must be > 0"),
             ("min_joint_motion_rad", fin(self.min_joint_motion_rad) and self.min_joint_motion_rad >= 0, "must be >= 0"),
@@ -142,14 +170,12 @@ class Config:
             ("base_samples", self.base_samples >= 1, "must be >= 1"),
             ("regularization", fin(self.regularization) and self.regularization >= 0, "must be >= 0"),
             ("physical_max_iter", self.physical_max_iter >= 1, "must be >= 1"),
-            ("friction_model", self.friction_model in FRICTION_MODELS, f"must be one of {', '.join(FRICTION_MODELS)}"),
-            ("validation", self.validation in ("iso9283", "fourier"), "must be iso9283 or fourier"),
             ("validation_sample_time_s", fin(self.validation_sample_time_s)
              and 0 < self.validation_sample_time_s <= MAX_SAMPLE_TIME_S, f"must be in (0, {MAX_SAMPLE_TIME_S}] s"),
-            ("data_side", self.data_side in ("joint", "motor"), "must be joint or motor"),
-            ("data_cutoff_hz", fin(self.data_cutoff_hz) and self.data_cutoff_hz > 0, "must be > 0"),
-            ("data_decimation", self.data_decimation >= 1, "must be >= 1"),
-            ("actuator_coupling", self.actuator_coupling in ("auto", "gear", "none"), "must be auto, gear or none"),
+            ("data_cutoff_hz", self.data_cutoff_hz is None or (fin(self.data_cutoff_hz) and self.data_cutoff_hz > 0),
+             "must be > 0 or null (from the record's rate)"),
+            ("data_decimation", self.data_decimation is None or self.data_decimation >= 1,
+             "must be >= 1 or null (from the record's rate)"),
             ("replay_rate_hz", fin(self.replay_rate_hz) and self.replay_rate_hz > 0, "must be > 0"),
             ("data_train_fraction", 0 < self.data_train_fraction < 1, "must be in (0, 1)"),
             ("tx40.train_fraction", 0 < tx.train_fraction < 1, "must be in (0, 1)"),

@@ -23,7 +23,8 @@ from pipeline.robot.symbolic import SymbolicRobot
 def regressor_casadi(sym: SymbolicRobot, reg: RegressorModel, base: BaseParameters) -> ca.Function:
     """``Y_b(q, v, a)`` as a CasADi function: inertial columns from ``sym.regressor`` (the
     symbolic bridge), actuator columns from the gear matrix (same formulas as
-    :meth:`RegressorModel.actuator_columns`), then the base columns."""
+    :meth:`RegressorModel.actuator_columns`), then the base columns; only the torque rows of the
+    joints the fit uses (``reg.rows``), so the design scores the regressor the fit solves."""
     nq = reg.nv
     q, v, a = ca.SX.sym("q", nq), ca.SX.sym("v", nq), ca.SX.sym("a", nq)
     y_sym = sym.regressor(q, v, a)
@@ -50,7 +51,8 @@ def regressor_casadi(sym: SymbolicRobot, reg: RegressorModel, base: BaseParamete
                 e[j] = 1.0
                 cols.append(ca.DM(e))
     y = ca.horzcat(y_links, *cols)
-    yb = y[:, [int(i) for i in base.independent]]
+    rows = list(range(nq)) if reg.rows is None else [int(j) for j in reg.rows]
+    yb = y[rows, [int(i) for i in base.independent]]
     return ca.Function("regressor_base", [q, v, a], [yb], ["q", "v", "a"], ["Yb"])
 
 
@@ -76,8 +78,9 @@ class ExcitationCriterion:
         self.n = self.bq.shape[0]
         self.nq = nq
         self.nb = y_base.size2_out(0)
+        self.n_rows = y_base.size1_out(0)  # torque rows per sample: the joints the fit uses
         q, v, a = (ca.SX.sym(s, nq) for s in "qva")
-        gbar = ca.SX.sym("gbar", nq, self.nb)
+        gbar = ca.SX.sym("gbar", self.n_rows, self.nb)
         yb = y_base(q, v, a)
         inner = ca.sum1(ca.sum2(yb * gbar))
         state = ca.vertcat(q, v, a)
@@ -93,8 +96,8 @@ class ExcitationCriterion:
         return np.vstack([c @ self.bq.T, c @ self.bv.T, c @ self.ba.T])
 
     def matrix_states(self, S: np.ndarray) -> np.ndarray:
-        yb = self._y.mapped(self.n)(S)[0]  # (nq, N*nb), blocks per sample
-        return yb.reshape(self.nq, self.n, self.nb).transpose(1, 0, 2).reshape(-1, self.nb)
+        yb = self._y.mapped(self.n)(S)[0]  # (n_rows, N*nb), blocks per sample
+        return yb.reshape(self.n_rows, self.n, self.nb).transpose(1, 0, 2).reshape(-1, self.nb)
 
     def matrix(self, x: np.ndarray) -> np.ndarray:
         return self.matrix_states(self.states(x))
@@ -125,8 +128,8 @@ class ExcitationCriterion:
             dG = -(U / lam) @ U.T / self.nb
         if not gradient:
             return f, None
-        dW = 2.0 * W @ dG  # df/dW, (N*nq, nb)
-        gbar = dW.reshape(self.n, self.nq, self.nb).transpose(1, 0, 2).reshape(self.nq, -1)
+        dW = 2.0 * W @ dG  # df/dW, (N*n_rows, nb)
+        gbar = dW.reshape(self.n, self.n_rows, self.nb).transpose(1, 0, 2).reshape(self.n_rows, -1)
         return f, self._vjp.mapped(self.n)(S, gbar)[0]  # (3 nq, N)
 
     def value_and_gradient(self, x: np.ndarray, gradient: bool = True) -> tuple[float, np.ndarray | None]:

@@ -68,7 +68,6 @@ from pipeline.identification.regressor import BaseParameters
 from pipeline.identification.tx40 import heldout_validation
 from pipeline.robot.friction import stribeck_excess_torque as stribeck_torque
 
-FRICTION_MODELS = ("viscous_coulomb", "stribeck")
 #: bounds of the Stribeck velocity [rad/s] (joint side)
 VS_MIN_RAD_S = 1e-3
 VS_MAX_RAD_S = 5.0
@@ -438,7 +437,7 @@ def friction_summary(rms_Nm: dict[str, np.ndarray], sigma_Nm: np.ndarray | None,
     })
 
 
-__all__ = ["FRICTION_MODELS", "LOAD_REFITS", "MAX_EXCESS_OVER_LIMIT", "MAX_LOAD_COEFFICIENT", "LoadFit",
+__all__ = ["LOAD_REFITS", "MAX_EXCESS_OVER_LIMIT", "MAX_LOAD_COEFFICIENT", "LoadFit",
            "LoadFriction", "StribeckFit", "best_friction_model", "expand_to_joints", "fit_load_friction",
            "fit_stribeck", "friction_summary", "load_columns", "load_free_torque", "load_heldout", "load_summary",
            "stribeck_heldout", "stribeck_torque"]

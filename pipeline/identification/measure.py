@@ -1,11 +1,12 @@
-"""Identification data: the hidden robot following a trajectory, or a CSV file.
+"""Identification data: the hidden robot following a trajectory, a CSV file or a ROS 2 bag.
 
 Paper ``004_abbe750b8bbcc3aa.txt`` §4.3: the excitation is run for several periods and joint
 positions and motor torques are recorded. Two sources:
 
 * **simulation**: ``real.execute_joint_trajectory`` (ideal tracking of the commanded Fourier
   trajectory; encoder and motor-torque noise added by the hidden robot's sensors);
-* **files**: CSV with a header; columns ``t`` (s, optional if ``sample_time_s`` is given), joint
+* **files**: a ROS 2 bag of ``sensor_msgs/JointState`` (:func:`load_joint_bag`) or CSV with a
+  header; columns ``t`` (s, optional if ``sample_time_s`` is given), joint
   positions ``q1..qn`` and torques ``tau1..taun``. Motor-side columns (``side="motor"``) are
   converted with the gear matrix ``K`` of ``robot.yaml``: ``q = K^-1 q_motor``,
   ``tau = K^T tau_motor``.
@@ -23,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.core.errors import DataFileError
+from pipeline.exchange.ros2_bag import read_joint_states
 from pipeline.identification import signals
 from pipeline.identification.fourier import FourierTrajectory
 from pipeline.identification.joints import unmeasured_torque_columns
@@ -201,17 +203,53 @@ def load_joint_csv(
         q, tau = motor_to_joint(q, tau, robot.actuation.gear_matrix)
     if q_offset_rad is not None:
         q = q + np.asarray(q_offset_rad, float)
+    return _uniform_record(t, q, tau, str(path), line_numbers, nq, min_samples)
+
+
+def _uniform_record(t: np.ndarray, q: np.ndarray, tau: np.ndarray, source: str, line_numbers: np.ndarray | None,
+                    nq: int, min_samples: int) -> JointRecord:
+    """A :class:`JointRecord` on uniform time stamps: non-uniform ones resampled
+    (:func:`~pipeline.identification.signals.resample_uniform`), the largest gap and where it ends kept."""
     unmeasured = unmeasured_torque_columns(tau)
     max_gap_s, gap_where, how = None, "", ""
     dt = np.diff(t)
     if len(t) > 2 and np.max(np.abs(dt - np.median(dt))) > 1e-3 * np.median(dt) + 1e-9:
+        logged_t = t
         res = signals.resample_uniform(t, q, tau)
         t, q, tau, max_gap_s, how = res.t_s, res.q, res.tau, res.max_gap_s, res.method
-        gap_where = f"line {line_numbers[res.max_gap_index]}"
-        line_numbers = line_numbers[np.searchsorted(data[:, col["t"]], t, side="right") - 1]
-    rec = JointRecord(t, q, tau, str(path), line_numbers, max_gap_s, gap_where, how, unmeasured)
+        if line_numbers is not None:
+            gap_where = f"line {line_numbers[res.max_gap_index]}"
+            line_numbers = line_numbers[np.searchsorted(logged_t, t, side="right") - 1]
+        else:
+            gap_where = f"message {int(res.max_gap_index) + 1}"
+    rec = JointRecord(t, q, tau, source, line_numbers, max_gap_s, gap_where, how, unmeasured)
     rec.validate(nq, min_samples)
     return rec
+
+
+def load_joint_bag(
+    path: str | Path,
+    robot: RobotModel,
+    side: str = "joint",
+    name_map: dict[str, str] | None = None,
+    min_samples: int = 10,
+) -> JointRecord:
+    """A ROS 2 bag's ``sensor_msgs/JointState`` (``/joint_states`` or the one topic of that type) as a
+    record: positions and efforts of the model's joints, matched by name in any order
+    (:func:`pipeline.exchange.joint_names.match_joint_names`; ``name_map`` = {recorded: model},
+    ``identification.joint_names``); other joints ignored. ``side="motor"`` converts through the gear matrix."""
+    names = [str(n) for n in robot.model.names[1:]]
+    states = read_joint_states(path, names, name_map, field="identification.joint_names")
+    for label, x in (("position", states.q_rad), ("effort", states.effort_Nm)):
+        if not np.all(np.isfinite(x)):
+            k, j = (int(i) for i in np.argwhere(~np.isfinite(x))[0])
+            raise DataFileError(path, label, f"joint {names[j]}: empty or NaN in message {k + 1}")
+    if states.n_samples < min_samples:
+        raise DataFileError(path, "samples", f"{states.n_samples} JointState messages, need at least {min_samples}")
+    q, tau = states.q_rad, states.effort_Nm
+    if side == "motor":
+        q, tau = motor_to_joint(q, tau, robot.actuation.gear_matrix)
+    return _uniform_record(states.t_s, q, tau, str(path), None, robot.nq, min_samples)
 
 
 def motor_to_joint(
@@ -319,17 +357,19 @@ def process_periodic(
 def process_record(
     rec: JointRecord,
     reg: RegressorModel,
-    state_cutoff_hz: float,
-    decimation: int,
+    state_cutoff_hz: float | None,
+    decimation: int | None,
     border_samples: int = 20,
 ) -> ProcessedData:
     """Non-periodic record (e.g. the TX40 file): filter positions, differentiate, decimate
     states and torques in parallel (zero-phase low-pass then every ``decimation``-th sample),
-    and drop ``border_samples`` decimated samples at both ends (filter transients)."""
+    and drop ``border_samples`` decimated samples at both ends (filter transients). A cut-off or
+    decimation of None follows from the record's rate (:func:`signals.record_filter_settings`)."""
     nq = reg.nv
     rec.validate(nq)
     dt = rec.sample_time_s
     fs = 1.0 / dt
+    state_cutoff_hz, decimation = signals.record_filter_settings(fs, state_cutoff_hz, decimation)
     st = signals.states_from_positions(rec.q_rad, dt, state_cutoff_hz)
     q = signals.decimate(st.q, decimation, fs)
     v = signals.decimate(st.v, decimation, fs)

@@ -22,8 +22,8 @@ from pipeline.identification.joints import JointSelection
 from pipeline.identification.measure import JointRecord, ProcessedData
 from pipeline.identification.regressor import BaseParameters, RegressorModel
 from pipeline.identification.tx40 import HeldOutValidation, Tx40Result
-from pipeline.identification.validate import ValidationTrajectory
 from pipeline.robot.handoff import JointFriction
+from pipeline.robot.iso9283 import IsoPathConfig
 from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import DynamicLayout, set_dynamic_parameters
 
@@ -101,9 +101,23 @@ class Fits:
 
 
 @dataclass
+class ValidationTrajectory:
+    """Joint states (N, nq) sampled at ``t_s`` that validate the fits, what they are (``label``:
+    ``iso9283``, ``fourier`` or a record's held-out tail) and why (``note``)."""
+
+    t_s: np.ndarray
+    q: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    label: str
+    note: str = ""
+
+
+@dataclass
 class Validation:
     """Measured and predicted torques on the validation trajectory and their RMS per joint, the
-    torque noise sigma and where it comes from, the report's paragraph on the trajectory."""
+    torque noise sigma and where it comes from, the ISO 9283 path settings the validation used or
+    fell back from (None: a record's held-out tail)."""
 
     trajectory: ValidationTrajectory
     tau_Nm: np.ndarray
@@ -116,7 +130,7 @@ class Validation:
     rel_wls: np.ndarray
     noise_sigma: np.ndarray | None
     noise_source: str
-    markdown: str = ""
+    iso: IsoPathConfig | None = None
     heldout: HeldOutValidation | None = None    # a record's held-out tail
     #: predictions of the load-dependent candidate (physical, WLS), None when it was not fitted
     pred_load: np.ndarray | None = None

@@ -10,24 +10,29 @@ from matplotlib.figure import Figure
 
 from pipeline.identification import design as design_mod
 from pipeline.identification.config import Config
-from pipeline.identification.outcome import Outcome
+from pipeline.identification.friction_terms import report_lines
+from pipeline.identification.outcome import Outcome, ValidationTrajectory
 from pipeline.identification.regressor import BaseParameters
 from pipeline.identification.tx40 import Tx40Result
-from pipeline.identification.validate import ValidationTrajectory
 from pipeline.robot.iso9283 import IsoPathConfig
 from pipeline.robot.model import RobotModel
+from pipeline.robot.plotting import distinct_colors
 from pipeline.stage_api import StageResult
 
 
-def torques_figure(t: np.ndarray, measured: np.ndarray, predicted: np.ndarray, title: str) -> Figure:
+def torques_figure(t: np.ndarray, measured: np.ndarray, predicted: np.ndarray, title: str,
+                   joint_numbers: np.ndarray | None = None) -> Figure:
+    """Measured and predicted torque per column, one panel each (one column: one panel);
+    ``joint_numbers`` (1-based) labels the columns (default 1..n)."""
     nq = measured.shape[1]
-    fig = Figure(figsize=(10, 1.6 * nq))
-    axes = fig.subplots(nq, 1, sharex=True)
+    numbers = np.arange(1, nq + 1) if joint_numbers is None or len(joint_numbers) != nq else joint_numbers
+    fig = Figure(figsize=(10, 1.6 * max(nq, 2)))
+    axes = fig.subplots(nq, 1, sharex=True, squeeze=False)[:, 0]
     for j in range(nq):
         ax = axes[j]
         ax.plot(t, measured[:, j], lw=0.6, color="0.6", label="measured")
         ax.plot(t, predicted[:, j], lw=1.0, color="C0", label="predicted")
-        ax.set_ylabel(f"tau{j + 1} [N m]")
+        ax.set_ylabel(f"tau{int(numbers[j])} [N m]")
     axes[0].legend(loc="upper right", fontsize=8)
     axes[0].set_title(title)
     axes[-1].set_xlabel("t [s]")
@@ -38,24 +43,28 @@ def torques_figure(t: np.ndarray, measured: np.ndarray, predicted: np.ndarray, t
 def parameters_figure(base: BaseParameters, beta: np.ndarray, sigma: np.ndarray, beta_phys: np.ndarray,
                     beta_nom: np.ndarray, z: np.ndarray | None) -> Figure:
     """Base parameters: WLS estimate with 3-sigma error bars, the physically consistent fit and the
-    nominal model, each divided by a per-parameter scale; with a truth score, the z-scores too."""
-    fig = Figure(figsize=(12, 7 if z is not None else 4))
-    axes = fig.subplots(2 if z is not None else 1, 1, squeeze=False)[:, 0]
+    nominal model, each divided by a per-parameter scale; with a truth score, the z-scores too. Each
+    base parameter is named on the axis by its independent standard parameter (``base.set_names``;
+    the combination it stands for: ``base.names``, in results.json)."""
+    fig = Figure(figsize=(max(12.0, 0.16 * base.n_base), 8 if z is not None else 5))
+    axes = fig.subplots(2 if z is not None else 1, 1, squeeze=False, sharex=True)[:, 0]
     k = np.arange(base.n_base)
     scale = np.maximum.reduce([np.abs(beta), np.abs(beta_nom), 3 * sigma, np.full_like(beta, 1e-9)])
     ax = axes[0]
-    ax.errorbar(k, beta / scale, yerr=3 * sigma / scale, fmt="o", ms=3, lw=0.8, label="WLS +- 3 sigma")
-    ax.plot(k, beta_phys / scale, "x", ms=4, label="physically consistent fit")
+    ax.errorbar(k, beta / scale, yerr=3 * sigma / scale, fmt="o", ms=3, lw=0.8, color="tab:blue",
+                label="WLS +- 3 sigma")
+    ax.plot(k, beta_phys / scale, "x", ms=4, color="tab:orange", label="physically consistent fit")
     ax.plot(k, beta_nom / scale, "_", ms=8, color="k", label="nominal model")
     ax.set_ylabel("value / scale")
     ax.set_title("base parameters (scale per parameter: max of |estimate|, |nominal|, 3 sigma)")
     ax.legend(fontsize=8, ncol=3)
     if z is not None:
-        axes[1].errorbar(k, z, yerr=np.ones_like(z), fmt="o", ms=3, lw=0.8)
-        axes[1].axhline(3, color="r", lw=0.6)
-        axes[1].axhline(-3, color="r", lw=0.6)
+        axes[1].errorbar(k, z, yerr=np.ones_like(z), fmt="o", ms=3, lw=0.8, color="tab:blue")
+        axes[1].axhline(3, color="tab:red", lw=0.6)
+        axes[1].axhline(-3, color="tab:red", lw=0.6)
         axes[1].set_ylabel("(estimate - truth) / sigma")
-    axes[-1].set_xlabel("base parameter index (names in results.json)")
+    axes[-1].set_xticks(k, base.set_names, rotation=90, fontsize=6)
+    axes[-1].set_xlabel("base parameter (its independent standard parameter; the combinations: results.json)")
     fig.tight_layout()
     return fig
 
@@ -63,11 +72,13 @@ def parameters_figure(base: BaseParameters, beta: np.ndarray, sigma: np.ndarray,
 def convergence_figure(res: design_mod.ExcitationResult) -> Figure:
     fig = Figure(figsize=(7, 4))
     ax = fig.subplots()
+    colors = distinct_colors(len(res.cond_history))
     for i, h in enumerate(res.cond_history):
         if h:
-            ax.semilogy(np.arange(len(h)), h, label=f"start {i + 1}")
+            ax.semilogy(np.arange(len(h)), h, color=colors[i], label=f"start {i + 1}")
+    # the starts take the tab10 colours; the two reference lines black, told apart by their dashes
     ax.axhline(res.cond_random_median, color="k", ls="--", lw=0.8, label="median of random feasible")
-    ax.axhline(res.cond_optimized, color="g", ls=":", lw=0.8,
+    ax.axhline(res.cond_optimized, color="k", ls=":", lw=1.4,
                label="optimised (fine-grid feasible)" if res.source == "optimised" else "best random (fallback)")
     ax.set_xlabel("IPOPT iteration")
     ax.set_ylabel("cond(W_base)")
@@ -136,6 +147,7 @@ def report_markdown(summary: dict, tx: Tx40Result | None) -> str:
         lines += [f"| {j + 1} | " + " | ".join("unmeasured" if by_model[k][j] is None else f"{by_model[k][j]:.2f}"
                                               for k in by_model) + " |"
                   for j in range(len(next(iter(by_model.values()))))]
+    lines += report_lines(summary)   # a record's friction/actuation terms and the model-class check
     if tx is not None:
         lines += [
             "",
@@ -313,7 +325,8 @@ def figures(o: Outcome) -> dict[str, Figure]:
     figures["parameters"] = parameters_figure(base, wls.beta, wls.sigma, base.from_standard(o.fits.phys.p),
                                             base.from_standard(o.fits.p_nom), None if truth is None else truth["z"])
     figures["validation_torques"] = torques_figure(vt.t_s, o.val.tau_Nm, o.val.pred_phys,
-                                                 f"validation on {vt.label}: measured vs identified model")
+                                                 f"validation on {vt.label}: measured vs identified model",
+                                                 np.asarray(o.regs.used) + 1)
     if tx is not None:
         figures["tx40_heldout"] = torques_figure(
             tx.heldout_t_s, tx.heldout_tau_Nm, tx.heldout_pred_Nm["physical"],
@@ -327,8 +340,9 @@ def stage_result(cfg: Config, o: Outcome, robot: RobotModel) -> StageResult:
     s = summary(cfg, o)
     fallback_md = "" if exc is None or not exc.fallback_reason else (
         f"**Excitation: the best random feasible trajectory is used** ({exc.fallback_reason}).\n\n")
+    validation_md = "" if o.val.iso is None else validation_markdown(cfg, o.val.trajectory, o.val.iso, robot)
     return StageResult(summary=s, arrays=arrays(cfg, o), data=data(cfg, o), figures=figures(o), robot=robot,
-                       report_md=fallback_md + o.val.markdown + report_markdown(s, o.tx))
+                       report_md=fallback_md + validation_md + report_markdown(s, o.tx))
 
 
 def validation_markdown(cfg: Config, vt: ValidationTrajectory, iso: IsoPathConfig, robot: RobotModel) -> str:

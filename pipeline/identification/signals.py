@@ -94,6 +94,29 @@ def states_from_positions(
     return FilteredStates(q, v, a)
 
 
+#: a recorded log's position low-pass by default: this cut-off, at most RECORD_CUTOFF_OVER_RATE x the rate
+RECORD_CUTOFF_HZ = 20.0
+RECORD_CUTOFF_OVER_RATE = 0.25
+#: a recorded log is decimated by default to about this multiple of its position cut-off
+RECORD_DECIMATED_RATE_OVER_CUTOFF = 5.0
+
+
+def record_filter_settings(sample_rate_hz: float, cutoff_hz: float | None = None,
+                           decimation: int | None = None) -> tuple[float, int]:
+    """(position cut-off Hz, decimation) for a recorded log at ``sample_rate_hz``; given values are kept.
+
+    Defaults follow from the rate: the cut-off ``min(20 Hz, rate / 4)`` (half the Nyquist
+    frequency for slow logs: the 30 Hz ``joint_states`` of many ROS drivers get 7.5 Hz), and the
+    decimation ``max(1, round(rate / (5 x cut-off)))`` (a 1 kHz log: 10, decimated to 100 Hz;
+    25-80 Hz logs are not decimated): the decimated rate keeps five samples per cut-off period.
+    """
+    fs = float(sample_rate_hz)
+    cutoff = float(cutoff_hz) if cutoff_hz is not None else min(RECORD_CUTOFF_HZ, RECORD_CUTOFF_OVER_RATE * fs)
+    if decimation is None:
+        decimation = max(1, int(round(fs / (RECORD_DECIMATED_RATE_OVER_CUTOFF * cutoff))))
+    return cutoff, int(decimation)
+
+
 def decimate(x: np.ndarray, factor: int, sample_rate_hz: float, order: int = 4) -> np.ndarray:
     """Zero-phase low-pass at 0.8 x the new Nyquist frequency, then keep every ``factor``-th row."""
     if factor <= 1:

@@ -19,6 +19,7 @@ Steps (paper ``004_abbe750b8bbcc3aa.txt`` §4.1 on a real robot):
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -28,6 +29,7 @@ from pipeline.core.blas import single_thread_blas
 from pipeline.core.config import REPO_ROOT
 from pipeline.core.errors import ConfigError, DataFileError
 from pipeline.identification import estimate as est_mod
+from pipeline.identification.config import TX40_SAMPLE_TIME_S, Config, Tx40Config
 from pipeline.identification.measure import JointRecord, ProcessedData, motor_to_joint, process_record
 from pipeline.identification.regressor import (
     BaseParameters,
@@ -38,26 +40,12 @@ from pipeline.identification.regressor import (
 from pipeline.robot.model import RobotModel
 
 TX40_DATA_DIR = REPO_ROOT / "data" / "staubli_tx40"
-TX40_SAMPLE_TIME_S = 2e-4
+#: the built-in robot of the record (robots/staubli_tx40)
+TX40_ROBOT_NAME = "staubli_tx40"
 #: joint offsets after the motor -> joint conversion (README of the record)
 TX40_JOINT_OFFSETS_RAD = np.array([0.0, -np.pi / 2, np.pi / 2, 0.0, 0.0, 0.0])
 #: reference result of the README (OLS, fitted and scored on the same samples)
 TX40_REFERENCE = {"n_base_parameters": 58, "condition_number": 970.0, "rms_Nm": 3.35}
-
-
-@dataclass
-class Tx40Config:
-    data_dir: str = ""  # empty: data/staubli_tx40 of the repository
-    cutoff_hz: float = 100.0
-    decimation: int = 10
-    border_samples: int = 5
-    train_fraction: float = 0.7
-    regularization: float = 1e-3
-    max_iter: int = 1500
-    max_samples: int = 0  # >0: use only the first max_samples raw samples (quick profile)
-    # seed of the random states that select the structural base parameters (pivoted QR): fixed
-    # here, so the real-data result does not change with the simulation's seed
-    base_seed: int = 0
 
 
 @dataclass
@@ -279,3 +267,22 @@ def _run_tx40_impl(robot: RobotModel, config: Tx40Config | None = None,
             "ols_ia6_base_value": float(ols_all.beta[ia6[0]]) if ia6 else None,
         },
     )
+
+
+def tx40_wanted(cfg: Config, robot: RobotModel) -> bool:
+    """Fit the Stäubli TX40 record? ``run_tx40`` when set, else only when the robot is the TX40
+    or ``tx40.data_dir`` points to a record."""
+    if cfg.run_tx40 is not None:
+        return bool(cfg.run_tx40)
+    return getattr(robot, "name", "") == TX40_ROBOT_NAME or bool(cfg.tx40.data_dir)
+
+
+def tx40_record(robot: RobotModel, cfg: Config, timings: dict[str, float]) -> Tx40Result | None:
+    """The stage's step: the Stäubli TX40 record's fit, when wanted (:func:`tx40_wanted`), timed
+    (``timings["tx40_s"]``)."""
+    if not tx40_wanted(cfg, robot):
+        return None
+    t1 = time.perf_counter()
+    tx = run_tx40(RobotModel.load(TX40_ROBOT_NAME), cfg.tx40)   # its own fixed seed (tx40.base_seed)
+    timings["tx40_s"] = time.perf_counter() - t1
+    return tx

@@ -9,36 +9,45 @@
 * In simulation, each base parameter's error against the truth in units of its estimated
   standard deviation, ``z_k = (beta_hat_k - beta_true_k) / sigma_k`` (tests only, or
   :func:`truth_scores` when the stage is explicitly allowed to score against the truth).
+
+The stage's step 6 (:mod:`pipeline.identification.stage`): :func:`validate_on_path` (the hidden
+robot on the run's ISO path) or :func:`validate_on_record` (the held-out tail of the user's record,
+fitted on its first part), and :func:`choose_friction_model`: the friction model whose physically
+consistent fit predicts the validation torques best is handed on.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from pipeline.control.config import ControlConfig
-from pipeline.core.errors import PipelineError
+from pipeline.core.errors import InfeasibleError, PipelineError, SolverError
+from pipeline.core.solver_status import is_success
+from pipeline.identification import estimate as est_mod
 from pipeline.identification import fourier
-from pipeline.identification.config import ExcitationConfig
+from pipeline.identification.config import Config, ExcitationConfig
+from pipeline.identification.fit import offset_mask
+from pipeline.identification.friction import (
+    best_friction_model,
+    friction_summary,
+    load_free_torque,
+    load_heldout,
+    load_summary,
+    stribeck_heldout,
+)
+from pipeline.identification.friction_terms import FrictionTerms, record_scores
+from pipeline.identification.outcome import Fits, LoadCandidate, Measured, Regressors, Validation, ValidationTrajectory
 from pipeline.identification.regressor import BaseParameters
+from pipeline.identification.tx40 import heldout_validation
 from pipeline.robot.defaults import ik_seeds_or_derived_rad, iso_or_derived, iso_rotation
 from pipeline.robot.iso9283 import IsoPathConfig, iso9283_path
 from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import start_configuration
 from pipeline.robot.reference import cartesian_reference
-
-
-@dataclass
-class ValidationTrajectory:
-    t_s: np.ndarray
-    q: np.ndarray
-    v: np.ndarray
-    a: np.ndarray
-    label: str
-    note: str = ""
+from pipeline.stage_api import StageContext
 
 
 def run_control_config(run: object) -> ControlConfig:
@@ -154,3 +163,149 @@ def truth_scores(real: Any,  # Any: the simulated hidden robot (its true paramet
         "fraction_within_3sigma": fraction_within(z, 3.0),
         "max_abs_z": float(np.max(np.abs(z))),
     }
+
+
+# ------------------------------------------------------------ the stage's steps (6, and the choice of model)
+def validate_on_record(robot: RobotModel, cfg: Config, regs: Regressors, measured: Measured, fits: Fits) -> Validation:
+    """The held-out tail of the user's record: a separate fit on the first part (tx40 route); the
+    noise sigma from the residuals of the WLS fit on all samples."""
+    data, nq, nm = measured.data, robot.nq, regs.n_used
+    ho = heldout_validation(data, regs.base, fits.p_nom, nq, cfg.data_train_fraction, cfg.regularization,
+                            cfg.physical_max_iter, "identification.data_train_fraction", n_rows=nm)
+    pct = round(100 * (1 - cfg.data_train_fraction))
+    vt = ValidationTrajectory(
+        ho.t_s, ho.q, np.empty((0, nq)), np.empty((0, nq)), f"held-out last {pct} % of the user's record",
+        f"fit on the first {ho.n_train} of {ho.n_samples} processed samples, scored on the rest")
+    tau_v, pred_phys, pred_wls, pred_vc = ho.tau_Nm, ho.pred["physical"], ho.pred["wls"], ho.pred["physical"]
+    if fits.stribeck is not None:   # the Stribeck model: its own fit on the first part, scored on the rest
+        pred_s = stribeck_heldout(data, regs.base, fits.p_nom, nq, cfg.data_train_fraction, cfg.regularization,
+                                  cfg.physical_max_iter, regs.reg.coulomb_width_rad_s,
+                                  "identification.data_train_fraction", fits.max_excess_Nm)
+        pred_phys, pred_wls = pred_s["physical"], pred_s["wls"]
+    pred_l = None
+    if fits.load_candidate is not None:
+        try:
+            pred_l = load_heldout(data, regs.base, fits.p_nom, nq, cfg.data_train_fraction, cfg.regularization,
+                                  cfg.physical_max_iter, regs.reg.coulomb_width_rad_s, offset_mask(regs, nq),
+                                  fits.stribeck is not None, "identification.data_train_fraction", fits.max_excess_Nm)
+        except SolverError as exc:   # not scored: not handed on
+            fits.load_note = f"not scored on the held-out tail: {exc}"
+    rms_phys, rel_phys = torque_rms(tau_v, pred_phys)
+    rms_wls, rel_wls = torque_rms(tau_v, pred_wls)
+    # residual sigma per joint of the WLS fit on all samples (processed torques, like the RMS)
+    return Validation(vt, tau_v, pred_phys, pred_wls, pred_vc, rms_phys, rel_phys, rms_wls, rel_wls,
+                      np.asarray(fits.wls.joint_sigma_Nm, float), "residuals of the WLS fit (processed torques)",
+                      heldout=ho, pred_load=None if pred_l is None else pred_l["physical"],
+                      pred_load_wls=None if pred_l is None else pred_l["wls"])
+
+
+def validate_on_path(ctx: StageContext, cfg: Config, regs: Regressors, measured: Measured, fits: Fits) -> Validation:
+    """The run's ISO 9283 path (or a random Fourier trajectory, the report says why) on the hidden
+    robot: measured torques against the fits' predictions; noise sigma from the excitation periods."""
+    robot, real, limits, ex, nm = ctx.robot, ctx.real, measured.limits, cfg.excitation, regs.n_used
+    assert limits is not None and real is not None     # a simulated experiment: its excitation, the hidden robot
+    control = run_control_config(ctx.run)
+    try:
+        iso = iso_or_derived(robot, control.iso)     # the cube of the report (configured or derived)
+    except InfeasibleError:
+        iso = control.iso                            # no cube found: the fallback's note says why
+    vt = validation_trajectory(
+        robot, cfg.validation_sample_time_s,
+        lambda: fourier_validation(robot, limits, ex, cfg.validation_sample_time_s, ctx.rng),
+        use_iso=cfg.validation == "iso9283", control=control)
+    noise_sigma, noise_source = measured.data.noise_sigma_Nm, "spread between excitation periods"
+    meas_v = real.execute_joint_trajectory(vt.t_s, vt.q, vt.v, vt.a, ctx.rng)
+    tau_v = meas_v.tau_Nm[:, regs.used]
+    Yv = regs.reg.stacked(vt.q, vt.v, vt.a)
+    st_v = 0.0 if fits.stribeck is None else fits.stribeck.stribeck_torque(vt.v[:, regs.used])
+    pred_phys = (Yv @ fits.phys.p).reshape(-1, nm) + st_v
+    pred_wls = (regs.base.base_regressor(Yv) @ fits.wls.beta).reshape(-1, nm) + st_v
+    pred_vc = (Yv @ fits.phys_vc.p).reshape(-1, nm)
+    pred_l, pred_l_wls = (None, None) if fits.load_candidate is None else load_candidate_predictions(
+        regs, fits.load_candidate, Yv, vt.v[:, regs.used], robot.nq)
+    rms_phys, rel_phys = torque_rms(tau_v, pred_phys)
+    rms_wls, rel_wls = torque_rms(tau_v, pred_wls)
+    if noise_sigma is None or not np.all(np.isfinite(noise_sigma)):
+        noise_sigma = np.asarray(meas_v.tau_sigma_Nm, float)[regs.used]
+        noise_source = "torque sensor of the simulation"
+    return Validation(vt, tau_v, pred_phys, pred_wls, pred_vc, rms_phys, rel_phys, rms_wls, rel_wls,
+                      noise_sigma, noise_source, iso, pred_load=pred_l, pred_load_wls=pred_l_wls)
+
+
+def load_candidate_predictions(regs: Regressors, c: LoadCandidate, Y: np.ndarray, v: np.ndarray,
+                               nq: int) -> tuple[np.ndarray, np.ndarray]:
+    """Torques (N, n_used) the load-dependent candidate's physically consistent and WLS fits predict at
+    the standard regressor ``Y`` and the measured joints' velocities ``v``; the load torque of each is
+    its own torque without the load term and the offsets (:mod:`.friction`)."""
+    nm = regs.n_used
+    st = 0.0 if c.fit.stribeck is None else c.fit.stribeck.stribeck_torque(v)
+    p_free = c.phys.p.copy()
+    p_free[len(p_free) - nq:] = 0.0
+    pred = (Y @ c.phys.p).reshape(-1, nm) + st + c.fit.load.torque((Y @ p_free).reshape(-1, nm) + st, v)
+    W = regs.base.base_regressor(Y)
+    load = load_free_torque(W, c.wls.beta, offset_mask(regs, nq), nm, c.fit.stribeck, v)
+    return pred, (W @ c.wls.beta).reshape(-1, nm) + st + c.fit.load.torque(load, v)
+
+
+def choose_friction_model(robot: RobotModel, regs: Regressors, fits: Fits, val: Validation) -> dict[str, Any]:
+    """The friction models' physically consistent fits (viscous + Coulomb, Stribeck, the configured one
+    with load-dependent Coulomb friction) scored on the same held-out torques; the best one is handed on
+    (``fits`` and ``val`` switched to it). Returns the summary's friction part."""
+    friction: dict[str, Any] = {}
+    configured = "viscous_coulomb" if fits.stribeck is None else "stribeck"
+    scored: dict[str, np.ndarray] = {configured: val.rms_phys}
+    if fits.stribeck is not None:
+        vc_status = fits.phys_vc.status if val.heldout is None else val.heldout.phys.status   # a record's tail
+        scored = ({"viscous_coulomb": torque_rms(val.tau_Nm, val.pred_vc)[0]} if is_success(vc_status)
+                  else {}) | scored
+        friction["friction_viscous_coulomb_status"] = vc_status   # not scored unless IPOPT succeeded
+    c, with_load = fits.load_candidate, f"{configured}_load"
+    if fits.load_note:
+        friction["load_friction_status"] = fits.load_note
+    elif c is not None and val.pred_load is not None:
+        friction |= load_summary(c.fit.load, c.phys.status, regs.selection.per_joint)
+        if is_success(c.phys.status):   # not scored unless IPOPT succeeded
+            scored[with_load] = torque_rms(val.tau_Nm, val.pred_load)[0]
+    best = best_friction_model(scored, val.noise_sigma)     # the held-out data select the handed-on model
+    reported = fits.stribeck
+    if best == "viscous_coulomb" and fits.stribeck is not None:
+        fits.stribeck, fits.phys, val.pred_phys = None, fits.phys_vc, val.pred_vc
+        val.rms_phys, val.rel_phys = torque_rms(val.tau_Nm, val.pred_phys)
+    elif best == with_load and c is not None:
+        hand_on_load_candidate(regs, fits, val, c)
+        reported = fits.stribeck
+    friction = friction_summary(scored, val.noise_sigma, reported, regs.selection.per_joint,
+                                robot.limits.effort_Nm[regs.used]) | friction
+    friction["friction_model_handed_on"] = ("viscous_coulomb" if fits.stribeck is None else "stribeck") + (
+        "" if fits.load is None else "_load")
+    if fits.stribeck is None and fits.load is None and fits.wls is not fits.wls_vc:   # the handed-on base estimate
+        fits.wls, fits.y_fit, fits.ols = fits.wls_vc, fits.y, est_mod.ols(fits.Wb, fits.y, regs.n_used)
+    return friction
+
+
+def hand_on_load_candidate(regs: Regressors, fits: Fits, val: Validation, c: LoadCandidate) -> None:
+    """Switch ``fits`` and ``val`` to the load-dependent candidate (its Stribeck term, if any, refitted with it)."""
+    fits.stribeck, fits.load, fits.phys, fits.wls, fits.y_fit = c.fit.stribeck, c.fit, c.phys, c.wls, c.y_fit
+    fits.ols = est_mod.ols(fits.Wb, fits.y_fit, regs.n_used)
+    if val.pred_load is not None and val.pred_load_wls is not None:
+        val.pred_phys, val.pred_wls = val.pred_load, val.pred_load_wls
+        val.rms_phys, val.rel_phys = torque_rms(val.tau_Nm, val.pred_phys)
+        val.rms_wls, val.rel_wls = torque_rms(val.tau_Nm, val.pred_wls)
+
+
+def scored_against_truth(ctx: StageContext, cfg: Config, regs: Regressors, fits: Fits) -> dict[str, Any] | None:
+    """The final base estimate scored against the hidden robot (:func:`truth_scores`): only for a
+    simulated experiment with ``score_against_truth``, else None."""
+    if not cfg.score_against_truth or regs.record is not None or ctx.real is None:
+        return None
+    return truth_scores(ctx.real, regs.base, fits.wls.beta, fits.wls.sigma)
+
+
+def record_term_scores(cfg: Config, regs: Regressors, measured: Measured, fits: Fits, val: Validation,
+                       terms: FrictionTerms | None) -> dict[str, Any]:
+    """A user's record: the summary entries of its terms taken off before the fits and the model-class
+    check on the handed-on fit's residual (:func:`.friction_terms.record_scores`); {} without terms."""
+    if terms is None or regs.record is None:
+        return {}
+    return record_scores(terms, val, fits.wls.residual_Nm, regs.record.sample_time_s, cfg.data_cutoff_hz,
+                         cfg.data_decimation, measured.data, regs.selection.per_joint, regs.used + 1)

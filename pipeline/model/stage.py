@@ -21,6 +21,11 @@ from pipeline.stage_api import StageContext, StageResult
 
 NAME = "model"
 DEPENDS: tuple[str, ...] = ()
+CONFIG_READS: tuple[str, ...] = ()
+#: provenance (pipeline.run.stage_plan): no measurement, the robot files only
+RECORDED_INPUT = ""
+SIMULATES = ""
+warm_up = None                       # nothing compiled
 
 
 #: bounds of ``model.picture_size_in`` (inches per view) and of the number of views
@@ -104,7 +109,7 @@ def _pose(ctx: StageContext) -> np.ndarray:
     return np.clip(q, lim.lower_rad, lim.upper_rad)        # within the tolerance: onto the limit
 
 
-def run(ctx: StageContext) -> StageResult:
+def run(ctx: StageContext[Config]) -> StageResult:
     robot = ctx.robot
     q = _pose(ctx)
     summary = robot.summary()

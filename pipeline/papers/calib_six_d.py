@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -69,7 +70,7 @@ class SixDTrial:
 
 def six_d_trial(robot: RobotModel, real, n_poses: int, rng: np.random.Generator, folder: str | Path,
                 position_sigma_m: float = 1e-4, orientation_sigma_rad: float = 1e-3, n_validation: int = 200,
-                **config: object) -> SixDTrial:
+                **config: Any) -> SixDTrial:  # Any: settings of the calibration section, checked by Config
     """Calibrate ``all`` parameters from ``n_poses`` random 6-D readings of ``real``
     (:func:`simulate_six_d_record`, written to ``folder/fit.csv`` and read back as a user file) and
     validate on ``n_validation`` exact poses (``folder/validation.csv``: the nominal orientation

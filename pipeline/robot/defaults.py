@@ -30,7 +30,7 @@ from typing import cast
 import numpy as np
 
 from pipeline.core.errors import InfeasibleError
-from pipeline.robot.iso9283 import TOOL_ORIENTATIONS, IsoPathConfig, tool_rotation
+from pipeline.robot.iso9283 import TOOL_ORIENTATIONS, IsoPathConfig, ToolOrientation, tool_rotation
 from pipeline.robot.iso_search import (
     MIN_EDGE_REACH,
     SEARCH_DIRECTIONS,
@@ -278,7 +278,7 @@ def iso_or_derived(robot: RobotModel, iso: IsoPathConfig) -> IsoPathConfig:
         return out
     out = copy.copy(iso)
     cube = iso_cube(robot, iso.plane, iso.tool_orientation, 1.0 if iso.speed_m_s is None else iso.speed_m_s)
-    out.tool_orientation = cube.orientation
+    out.tool_orientation = cast(ToolOrientation, cube.orientation)     # one of TOOL_ORIENTATIONS
     if iso.centre_m is None or iso.edge_m is None:
         out.centre_m, out.edge_m = [float(v) for v in cube.centre_m], float(cube.edge_m)
     if iso.speed_m_s is None or ((iso.centre_m is None or iso.edge_m is None) and cube.speed_m_s < iso.speed_m_s):

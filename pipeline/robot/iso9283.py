@@ -15,13 +15,15 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Literal, get_args
 
 import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
 
-from pipeline.core.config_checks import check_choice, check_number, check_unique, check_vector
+from pipeline.core.config_checks import check_number, check_unique, check_vector
 from pipeline.core.errors import ConfigError, Source
+from pipeline.core.typed_config import check_choices
 from pipeline.robot.paths import CartesianPath, CirclePath, LinePath, rectangle
 
 PLANES = {
@@ -74,9 +76,12 @@ class IsoPath(CartesianPath):
 
 #: constant tool orientations of the path (pipeline.robot.defaults.iso_rotation), in the order a derived
 #: cube tries them
-TOOL_ORIENTATIONS = ("down", "plane", "ready")
-ISO_PLANES = ("diagonal_x", "diagonal_y", "horizontal")        # keys of PLANES
-ISO_SEGMENTS = ("line", "rectangle", "circle_large", "circle_small")
+ToolOrientation = Literal["down", "plane", "ready"]
+IsoPlane = Literal["diagonal_x", "diagonal_y", "horizontal"]        # keys of PLANES
+IsoSegment = Literal["line", "rectangle", "circle_large", "circle_small"]
+TOOL_ORIENTATIONS: tuple[ToolOrientation, ...] = get_args(ToolOrientation)
+ISO_PLANES: tuple[IsoPlane, ...] = get_args(IsoPlane)
+ISO_SEGMENTS: tuple[IsoSegment, ...] = get_args(IsoSegment)
 
 
 @dataclass
@@ -86,17 +91,17 @@ class IsoPathConfig:
     #: None = derived from the robot: the largest feasible cube (pipeline.robot.defaults.iso_cube)
     edge_m: float | None = None
     centre_m: list[float] | None = None
-    plane: str = "diagonal_x"          # diagonal_x | diagonal_y | horizontal
+    plane: IsoPlane = "diagonal_x"
     #: constant TCP orientation: down | plane (normal to the plane, away from the base) | ready (as at the
     #: robot's ready pose); None = derived: down, else plane, else ready, the first with a feasible cube
-    tool_orientation: str | None = None
+    tool_orientation: ToolOrientation | None = None
     speed_m_s: float = 1.0
     acceleration_m_s2: float = 5.0
     jerk_m_s3: float = 50.0
     corner_fraction: float = 0.1       # P2..P5 at this fraction of the diagonal from the corners
     large_circle_fraction: float = 0.8  # circle diameters as fractions of the edge (ISO: 80 % and 10 %)
     small_circle_fraction: float = 0.1
-    segments: list[str] = field(default_factory=lambda: list(ISO_SEGMENTS))
+    segments: list[IsoSegment] = field(default_factory=lambda: list(ISO_SEGMENTS))
 
     def __post_init__(self) -> None:
         self.validate(None)
@@ -107,9 +112,7 @@ class IsoPathConfig:
             check_number(source, f"{where}.edge_m", self.edge_m, gt=0, unit="m")
         if self.centre_m is not None:
             check_vector(source, f"{where}.centre_m", self.centre_m, 3, "m")
-        check_choice(source, f"{where}.plane", self.plane, ISO_PLANES)
-        if self.tool_orientation is not None:
-            check_choice(source, f"{where}.tool_orientation", self.tool_orientation, TOOL_ORIENTATIONS)
+        check_choices(self, where, source)
         check_number(source, f"{where}.speed_m_s", self.speed_m_s, gt=0, unit="m/s")
         check_number(source, f"{where}.acceleration_m_s2", self.acceleration_m_s2, gt=0, unit="m/s^2")
         check_number(source, f"{where}.jerk_m_s3", self.jerk_m_s3, gt=0, unit="m/s^3")
@@ -122,8 +125,6 @@ class IsoPathConfig:
         if not isinstance(self.segments, (list, tuple)) or not self.segments:
             raise ConfigError(source, f"{where}.segments",
                               f"expected a non-empty list of {', '.join(ISO_SEGMENTS)}, got {self.segments!r}")
-        for i, s in enumerate(self.segments):
-            check_choice(source, f"{where}.segments[{i}]", s, ISO_SEGMENTS)
         check_unique(source, f"{where}.segments", self.segments)
 
 

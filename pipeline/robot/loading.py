@@ -16,8 +16,11 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from pipeline.core.codegen import cache_root
 from pipeline.core.errors import RobotFileError
+from pipeline.robot.mjcf_import import cached_urdf_of_mjcf, is_mjcf
 from pipeline.robot.spec import RobotSpec, load_robot_spec
+from pipeline.robot.urdf_checks import check_urdf_values
 from pipeline.robot.urdf_import import arm_chain, assumed_spec, build_arm_model, reach_m
 from pipeline.robot.vendor_urdf import placeholder_inertias, placeholder_limits, repair_inertias
 
@@ -75,6 +78,7 @@ def check_urdf_xml(urdf: Path) -> ET.Element:
         if kind not in _JOINT_TYPES:
             raise RobotFileError(urdf, f"joint {name}: type", f"{kind!r} is not a URDF joint type "
                                  f"({', '.join(sorted(_JOINT_TYPES))})")
+    check_urdf_values(urdf, root)
     return root
 
 
@@ -194,7 +198,8 @@ def _raise_limit_order(spec: RobotSpec, urdf: Path, overrides: dict, joint: str,
 def load_robot_files(robot: str | Path, yaml_path: str | Path | None = None, *, base: str | None = None,
                      tip: str | None = None, lock: dict[str, float] | None = None,
                      urdf_alone: bool = False) -> tuple[RobotSpec, pin.Model, str, list[str]]:
-    """(spec, reduced Pinocchio model, URDF text, assumptions) of a robot folder, URDF + yaml or URDF alone.
+    """(spec, reduced Pinocchio model, URDF text, assumptions) of a robot folder, URDF + yaml, URDF alone
+    or MJCF model alone (converted to a URDF once, :mod:`pipeline.robot.mjcf_import`).
 
     With a ``robot.yaml`` the arm chain ends at its ``flange_frame`` (its link) and starts at its
     ``base_link``, its ``locked_joints`` held; without one (or with ``urdf_alone``, which ignores a
@@ -203,6 +208,9 @@ def load_robot_files(robot: str | Path, yaml_path: str | Path | None = None, *, 
     position, rad or m) and every other joint off the chain are locked. What a vendor URDF leaves
     empty (inertials, effort and velocity limits) gets placeholders (:mod:`pipeline.robot.vendor_urdf`).
     """
+    if is_mjcf(robot):       # an MJCF model alone: read through its URDF (mjcf_import), written once
+        robot = cached_urdf_of_mjcf(robot, cache_root() / "mjcf")
+        urdf_alone = True
     yaml_file, _ = resolve_robot_files(robot, yaml_path)
     if urdf_alone and str(robot).endswith(".urdf"):
         yaml_file = None
@@ -224,7 +232,8 @@ def load_robot_files(robot: str | Path, yaml_path: str | Path | None = None, *, 
     keep = {k for k in ("velocity", "effort") if spec is not None
             and f"{k}_{'rad_s' if k == 'velocity' else 'Nm'}" in spec.limit_overrides}
     assumptions: list[str] = [
-        *placeholder_inertias(model, root, model.frames[model.getFrameId(tip_link)].placement.translation, reach),
+        *placeholder_inertias(model, root, model.frames[model.getFrameId(tip_link)].placement.translation, reach,
+                              urdf),
         *repair_inertias(model, root), *placeholder_limits(model, root, reach, keep)]
     validate_inertials(urdf, model)
     if turned:

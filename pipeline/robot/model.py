@@ -15,13 +15,14 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
-import yaml
 from scipy.optimize import minimize
 
 from pipeline.core.artefacts import write_text
 from pipeline.core.errors import RobotFileError
+from pipeline.core.yaml12 import dump_yaml
 from pipeline.robot.assumed_values import assumed_sentences
-from pipeline.robot.collision import CapsuleDistances, segment_distances
+from pipeline.robot.capsule_check import always_colliding_pairs, capsule_clearances, capsule_segments, checked_pairs
+from pipeline.robot.collision import CapsuleDistances
 from pipeline.robot.friction import joint_friction_torque, load_free_from_applied, load_friction_torque
 from pipeline.robot.ik import IKResult, solve_ik
 from pipeline.robot.loading import ROBOTS_DIR, JointLimits, load_robot_files, resolve_robot_files, validate_joint_limits
@@ -33,15 +34,6 @@ from pipeline.robot.urdf_export import export_urdf
 from pipeline.robot.urdf_import import absolute_mesh_paths
 
 WORLD = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-#: a capsule pair closer than :data:`PAIR_MARGIN_M` in at least this share of random configurations
-#: always collides
-ALWAYS_COLLIDING_SHARE = 0.95
-#: the self-collision clearance the stages keep (``calibration.margin_collision_m``'s default, the ranked
-#: default poses): a pair always closer than this rejects every configuration as surely as an overlap
-PAIR_MARGIN_M = 0.01
-#: assumed (fitted) capsules: pairs overlapping in this share of random configurations are neighbours in
-#: all but name (a UR base and shoulder) and are left out of the self-collision check
-ASSUMED_COLLIDING_SHARE = 0.3
 __all__ = ["ROBOTS_DIR", "JointLimits", "RobotModel", "resolve_robot_files"]
 
 
@@ -64,12 +56,7 @@ class RobotModel:
         self._check_frames()
         capsule_joints = [self.model.frames[self.frame_id(c.frame)].parentJoint for c in spec.capsules]
         self._capsule_joint = np.array(capsule_joints, dtype=int)
-        names = [c.name for c in spec.capsules]
-        ignored = {frozenset(pair) for pair in spec.collision.ignore_pairs}
-        self._self_pairs = [(i, k) for i in range(len(spec.capsules)) for k in range(i + 1, len(spec.capsules))
-                            if abs(capsule_joints[i] - capsule_joints[k]) > 1
-                            and frozenset((names[i], names[k])) not in ignored]
-        self._floor_capsules = [i for i, j in enumerate(capsule_joints) if j >= spec.collision.floor_check_from_joint]
+        self._self_pairs, self._floor_capsules = checked_pairs(spec, capsule_joints)
         #: the calibration's non-geometric residual map (None: not chosen), added to the tool frames
         self.residual_map: ResidualMap | None = None
 
@@ -134,29 +121,15 @@ class RobotModel:
         Such a pair makes every candidate configuration "in collision". With assumed capsules (a URDF
         alone, or robot.yaml's capsules still as ``robot init`` fitted them) the pair is left out of the
         self-collision check (an assumption); with capsules the user gave it is an error naming the
-        pair and the fix.
+        pair and the fix (:func:`pipeline.robot.capsule_check.always_colliding_pairs`).
         """
         if not self._self_pairs:
             return
         rng = np.random.default_rng(0)
         Q = rng.uniform(self.model.lowerPositionLimit, self.model.upperPositionLimit, size=(samples, self.nq))
         pair, _ = self.capsule_clearances(self.capsule_segments(Q))
-        share = (pair < PAIR_MARGIN_M).mean(axis=0)
-        bad = [self._self_pairs[i] for i in np.flatnonzero(share >= (ASSUMED_COLLIDING_SHARE if fix
-                                                                      else ALWAYS_COLLIDING_SHARE))]
-        if not bad:
-            return
-        names = [(self.capsules[i].name, self.capsules[k].name) for i, k in bad]
-        if not fix:
-            i, k = bad[0]
-            raise RobotFileError(self.spec.path, "capsules", f"capsules '{names[0][0]}' and '{names[0][1]}' overlap in "
-                                 f"{share[self._self_pairs.index((i, k))]:.0%} of random configurations (closer than "
-                                 f"{PAIR_MARGIN_M * 1e3:.0f} mm): shrink "
-                                 "them (radius_m, p0, p1) or list the pair under collision.ignore_pairs")
-        self.spec.collision.ignore_pairs = list(self.spec.collision.ignore_pairs) + names
+        bad = always_colliding_pairs(self.spec, self._self_pairs, pair, fix)
         self._self_pairs = [p for p in self._self_pairs if p not in bad]
-        self.spec.assumptions.append("capsule pairs overlapping in almost every configuration left out of the "
-                                f"self-collision check: {', '.join(f'{a}-{b}' for a, b in names)}")
 
     def _check_frames(self) -> None:
         for k, capsule in enumerate(self.spec.capsules):
@@ -358,31 +331,12 @@ class RobotModel:
     # ---------------------------------------------------------------- collision
     def capsule_segments(self, Q: np.ndarray) -> np.ndarray:
         """World end points of every capsule, shape ``(N, n_capsules, 2, 3)``."""
-        Q = np.atleast_2d(np.asarray(Q, float))
         caps = self.spec.capsules
-        local = np.stack([np.stack([c.p0, c.p1]) for c in caps]) if caps else np.zeros((0, 2, 3))
-        fids = [self.frame_id(c.frame) for c in caps]
-        out = np.empty((len(Q), len(caps), 2, 3))
-        for k, q in enumerate(Q):
-            pin.forwardKinematics(self.model, self._data, q)
-            for i, fid in enumerate(fids):
-                placement = pin.updateFramePlacement(self.model, self._data, fid)
-                out[k, i] = local[i] @ placement.rotation.T + placement.translation
-        return out
+        return capsule_segments(self.model, self._data, caps, [self.frame_id(c.frame) for c in caps], Q)
 
     def capsule_clearances(self, segments: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Self-pair and floor clearances ``(N, n_pairs)``, ``(N, n_floor)`` from capsule segments."""
-        caps = self.spec.capsules
-        radii = np.array([c.radius_m for c in caps])
-        if self._self_pairs:
-            i, k = np.array(self._self_pairs).T
-            pair = segment_distances(segments[:, i, 0], segments[:, i, 1], segments[:, k, 0], segments[:, k, 1])
-            pair = pair - radii[i] - radii[k]
-        else:
-            pair = np.zeros((len(segments), 0))
-        floor_idx = np.array(self._floor_capsules, dtype=int)
-        floor = segments[:, floor_idx][..., 2].min(axis=-1) - radii[floor_idx] - self.spec.collision.floor_z_m
-        return pair, floor
+        return capsule_clearances(self.spec, self._self_pairs, self._floor_capsules, segments)
 
     def capsule_distances(self, q: np.ndarray) -> CapsuleDistances:
         """Signed clearances between non-adjacent link capsules and of link capsules to the floor."""
@@ -482,5 +436,5 @@ class RobotModel:
         if self.urdf_path is not None and Path(self.urdf_path).is_file():
             urdf_text = absolute_mesh_paths(urdf_text, Path(self.urdf_path))   # meshes still found from folder
         write_text(folder / urdf_name, urdf_text)
-        write_text(folder / "robot.yaml", yaml.safe_dump(robot_spec_to_yaml(spec, urdf_name), sort_keys=False))
+        write_text(folder / "robot.yaml", dump_yaml(robot_spec_to_yaml(spec, urdf_name)))
         return folder

@@ -236,3 +236,42 @@ def robot_warnings(robot: RobotModel, summary: Mapping[str, object] | None = Non
     """:func:`plausibility_warnings` of a :class:`~pipeline.robot.model.RobotModel`, and
     :func:`marker_warnings`."""
     return [*plausibility_warnings(ArmFigures.of(robot, summary)), *marker_warnings(robot)]
+
+
+#: which stages' results rest on each kind of placeholder (:mod:`pipeline.robot.vendor_urdf`): the
+#: inertials give calibration its gravity deflection, identification its nominal model and torque
+#: limits check, control its nominal feedforward, trajectory its dynamics; the limits bound the
+#: excitation, the servo loop's saturation and every plan
+PLACEHOLDER_STAGES = {
+    "inertials": ("calibration", "identification", "control", "trajectory"),
+    "effort limits": ("identification", "control", "trajectory"),
+    "velocity limits": ("identification", "control", "trajectory"),
+}
+
+
+#: a robot.yaml value robot init wrote as a placeholder (still unedited): its assumption line's start
+_YAML_PLACEHOLDERS = {"limits.effort_Nm: PLACEHOLDER": "effort limits",
+                      "limits.velocity_rad_s: PLACEHOLDER": "velocity limits"}
+
+
+def placeholder_kind(line: str) -> str | None:
+    """What an assumption line says is a placeholder (``inertials``, ``effort limits`` ...): a
+    ``PLACEHOLDER <kind> (...)`` line of :mod:`pipeline.robot.vendor_urdf`, or a robot.yaml limit
+    robot init wrote as one and no one edited since; None for any other line."""
+    if line.startswith("PLACEHOLDER "):
+        return line[len("PLACEHOLDER "):].split(" (")[0].split(":")[0].strip() or None
+    return next((kind for start, kind in _YAML_PLACEHOLDERS.items() if line.startswith(start)), None)
+
+
+def placeholder_warnings(robot: RobotModel, stages: list[str]) -> list[str]:
+    """One line per placeholder of ``robot`` that a result of ``stages`` depends on."""
+    out = []
+    for line in robot.assumptions:
+        kind = placeholder_kind(line)
+        if kind is None:
+            continue
+        using = [s for s in PLACEHOLDER_STAGES.get(kind, ("identification", "control", "trajectory")) if s in stages]
+        if using:
+            out.append(f"placeholder {kind} ({line.split(': ', 1)[-1][:160]}): the results of "
+                       f"{', '.join(using)} depend on them; give the real values in the URDF or robot.yaml")
+    return out

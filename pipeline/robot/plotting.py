@@ -16,6 +16,7 @@ from collections.abc import Sequence
 
 import numpy as np
 import pinocchio as pin
+from matplotlib import colormaps
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 from mpl_toolkits.mplot3d.axes3d import Axes3D
@@ -23,6 +24,16 @@ from mpl_toolkits.mplot3d.axes3d import Axes3D
 from pipeline.robot.model import RobotModel
 
 DEFAULT_VIEWS: tuple[tuple[float, float], ...] = ((25.0, -60.0), (0.0, -90.0))
+#: dash patterns cycled with :func:`distinct_colors`: curves that coincide stay visible one over the other
+LINE_STYLES: tuple[str, ...] = ("-", "--", "-.", ":")
+
+
+def distinct_colors(n: int) -> list[tuple[float, float, float, float]]:
+    """``n`` colours that differ pairwise (RGBA): the ten of matplotlib's ``tab10``, and for more than
+    ten curves ``n`` evenly spaced ones of the ``turbo`` colour map (a figure never repeats a colour)."""
+    if n <= 10:
+        return [colormaps["tab10"](k) for k in range(n)]
+    return [colormaps["turbo"](k / (n - 1)) for k in range(n)]
 
 
 def chain_points(robot: RobotModel, q: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:

@@ -4,6 +4,13 @@ ISO 9283 pose repeatability is ``RP = l_bar + 3 S_l``, ``l`` the distance of an 
 from the barycentre of the attained positions. For an isotropic Gaussian scatter of ``sigma`` per
 axis ``l`` is Maxwell distributed (mean ``2 sqrt(2/pi) sigma``, standard deviation
 ``sqrt(3 - 8/pi) sigma``), so ``RP = 3.616 sigma``: ``sigma = RP / 3.616``.
+
+Which repeatability a calibration takes as known (:func:`repeatability_for_calibration`): the
+robot.yaml value when the user stated it; the reach class's value that ``robot init`` assumed only
+for simulated readings (the simulated arm scatters by it). With a recorded file and the value still
+as ``robot init`` assumed it, the data decide: none is taken as known, and the remainder that the
+calibration estimates from the record's residuals (REML, :mod:`pipeline.calibration.noise_model`)
+takes up the arm's scatter. A data sheet's ±2 mm then is not read as the class's ±0.05 mm.
 """
 
 from __future__ import annotations
@@ -23,6 +30,22 @@ REPEATABILITY_BY_REACH_M: tuple[tuple[float, float], ...] = ((1.5, 0.05e-3), (2.
 def repeatability_sigma_m(rp_m: float) -> float:
     """1-sigma per axis of the arm's position scatter from ISO 9283 pose repeatability ``RP`` (m)."""
     return float(rp_m) / RP_OVER_SIGMA
+
+
+#: the robot.yaml key of the repeatability (``assumed`` entries name it so)
+REPEATABILITY_KEY = "repeatability_m"
+
+
+def repeatability_for_calibration(rp_m: float | None, assumed: bool, recorded: bool) -> tuple[float, str]:
+    """1-sigma per axis (m) of the arm's scatter a calibration takes as known, and where it comes from:
+    ``"stated"`` (robot.yaml), ``"assumed"`` (``robot init``'s reach class, simulated readings),
+    ``"data"`` (a recorded file with the value still assumed: the remainder estimated from the record
+    takes it, module docstring) or ``"none"`` (not stated)."""
+    if rp_m is None:
+        return 0.0, "none"
+    if assumed:
+        return (0.0, "data") if recorded else (repeatability_sigma_m(rp_m), "assumed")
+    return repeatability_sigma_m(rp_m), "stated"
 
 
 def assumed_repeatability_m(reach_m: float) -> float:

@@ -15,11 +15,10 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
-import yaml
 
 from pipeline.core.errors import RobotFileError
 from pipeline.core.typed_config import unknown_key
-from pipeline.core.yaml12 import DuplicateKeyError, load_yaml, yaml_problem
+from pipeline.core.yaml12 import YAMLError, load_yaml, yaml_problem
 from pipeline.robot.assumed_values import TORQUE_SIDES, assumed_in_force, locked_joints
 
 
@@ -266,10 +265,8 @@ def load_robot_spec(path: Path, nq: int | None = None) -> RobotSpec:
         raise RobotFileError(path, "robot.yaml", "file not found")
     try:
         data = load_yaml(path.read_text(encoding="utf-8"))
-    except DuplicateKeyError as exc:
+    except YAMLError as exc:
         raise RobotFileError(path, *yaml_problem(exc)) from None
-    except yaml.YAMLError as exc:
-        raise RobotFileError(path, "yaml", f"not valid YAML ({exc})".replace("\n", " ")) from None
     if not isinstance(data, dict):
         raise RobotFileError(path, "top level", "expected a mapping")
     top = _Reader(path, data)

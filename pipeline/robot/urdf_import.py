@@ -36,6 +36,7 @@ import numpy as np
 import pinocchio as pin
 
 from pipeline.core.errors import RobotFileError
+from pipeline.robot.grippers import gripper_joints, is_arm_joint
 from pipeline.robot.reflector_check import capsules_holding
 from pipeline.robot.repeatability import assumed_repeatability_m, repeatability_rule
 from pipeline.robot.spec import ActuationSpec, Capsule, CollisionSpec, RobotSpec, ToolSpec, TrackerSpec
@@ -45,7 +46,6 @@ ROTOR_INERTIA_PER_EFFORT_S2 = 5e-3
 VISCOUS_FRACTION, COULOMB_FRACTION = 0.1, 0.04
 ACCELERATION_PER_VELOCITY_1_S = 5.0
 REFLECTOR_OFFSET_M = 0.03
-GRIPPER_WORDS = ("finger", "gripper", "hand")
 #: a link fixed to the last arm link that is the tool flange (ROS-Industrial REP 199 names it tool0)
 FLANGE_LINKS = ("tool0", "flange")
 TRACKER_DISTANCE_REACHES, TRACKER_HEIGHT_REACHES = 1.5, 0.2
@@ -96,12 +96,6 @@ def _name(element: ET.Element) -> str:
     return element.get("name", "")
 
 
-def _is_arm_joint(joint: ET.Element) -> bool:
-    """A revolute joint not named as a gripper or finger joint (the default tip's rule)."""
-    name = (joint.get("name") or "").lower()
-    return joint.get("type") in ("revolute", "continuous") and not any(w in name for w in GRIPPER_WORDS)
-
-
 def flange_link(root: ET.Element, link: str) -> str:
     """``link``, or the first of :data:`FLANGE_LINKS` fixed to it (through fixed joints only): the
     ROS-Industrial tool flange (REP 199), which a vendor's last link frame need not be (a KUKA's
@@ -125,8 +119,8 @@ def arm_chain(urdf: Path, root: ET.Element, *, base: str | None = None, tip: str
               tip_is_frame: bool = False, lock: dict[str, float] | None = None) -> tuple[list[str], str, str]:
     """(movable joint names base->tip, base link, tip link).
 
-    Default tip: the child link of the deepest revolute joint not named as a gripper/finger/hand joint
-    (the most such joints between it and the root), or a ``tool0``/``flange`` link fixed to it
+    Default tip: the child link of the deepest revolute joint not part of a gripper or end effector
+    (:func:`gripper_joints`; the most such joints between it and the root), or a ``tool0``/``flange`` link fixed to it
     (:func:`flange_link`); an ambiguous choice (several such chains) asks for ``--tip``. Joints in
     ``lock`` and prismatic/planar/floating joints below the first revolute one (a linear track under
     the arm) are not part of the chain (they are locked, :func:`build_arm_model`).
@@ -148,10 +142,11 @@ def arm_chain(urdf: Path, root: ET.Element, *, base: str | None = None, tip: str
             raise RobotFileError(urdf, "tip", f"no link '{tip}' (links: {', '.join(links)})")
         tip = None          # a yaml flange frame that is not a link: default chain
     if tip is None:
-        depth = {link: sum(_is_arm_joint(j) for j in path_to_root(link)) for link in links}
+        gripper = gripper_joints(root)
+        depth = {link: sum(is_arm_joint(j, gripper) for j in path_to_root(link)) for link in links}
         deepest = max(depth.values(), default=0)
         ends = {link for link in links if depth[link] == deepest and link in parent_joint
-                and _is_arm_joint(parent_joint[link])}
+                and is_arm_joint(parent_joint[link], gripper)}
         if deepest == 0 or not ends:
             raise RobotFileError(urdf, "joints", "no movable joint (expected a chain of revolute joints)")
         if len(ends) > 1:

@@ -5,6 +5,9 @@ kinematics and the meshes but leave the dynamics empty: links without ``<inertia
 and joints with ``effort="0"`` / ``velocity="0"``. Such a file is loaded with placeholders sized
 like a catalogue arm of the same reach, and every placeholder is listed as an assumption:
 
+* each placeholder link's mass from its meshes' volume (:mod:`pipeline.robot.mesh_volume`: convex
+  hulls at a density measured on arms that state their masses) when every such link has meshes
+  that are found; else (and stated beside it, for comparison) the reach-class rule:
 * total arm mass ``m = MASS_COEFF_KG * reach**MASS_EXPONENT``, a power law fitted in log-log to
   manufacturers' data sheets (ABB IRB 120: 0.58 m / 25 kg; KUKA KR 6 R900 sixx: 0.90 m / 52 kg;
   ABB IRB 140: 0.81 m / 98 kg; KUKA KR 16-2: 1.61 m / 235 kg; ABB IRB 2400-16: 1.55 m / 380 kg;
@@ -32,10 +35,12 @@ from __future__ import annotations
 
 import warnings
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 
+from pipeline.robot.mesh_volume import LINK_DENSITY_KG_M3, link_volume_m3
 from pipeline.robot.urdf_import import ACCELERATION_PER_VELOCITY_1_S
 
 MASS_COEFF_KG, MASS_EXPONENT = 100.0, 2.4
@@ -43,6 +48,8 @@ BASE_MASS_SHARE = 0.2
 ARM_SPEED_RAD_S = 2.72
 EFFORT_GRAVITY_FACTOR, EFFORT_INERTIA_FACTOR, MIN_EFFORT_SHARE = 3.0, 2.0, 0.03
 MOMENT_FLOOR_KGM2 = 1e-6
+#: a mesh-estimated placeholder link weighs at least this share of the reach-class rule's mass for it
+MIN_MESH_MASS_SHARE = 0.05
 #: a repair below this share of the largest principal moment is the rounding of a URDF's numbers
 #: (e.g. an identified inertia on its triangle boundary written with six digits): no warning
 ROUNDING_SHARE = 0.01
@@ -77,8 +84,12 @@ def child_links(root: ET.Element) -> dict[str, str]:
 
 
 def placeholder_inertias(model: pin.Model, root: ET.Element, flange_local: np.ndarray,
-                         reach_m: float) -> list[str]:
-    """Give every moving body of mass <= 0 a placeholder inertia (in place); the sentences stating it."""
+                         reach_m: float, urdf: Path | None = None) -> list[str]:
+    """Give every moving body of mass <= 0 a placeholder inertia (in place); the sentences stating it.
+
+    With meshes for every such link (``urdf`` given to find them), each mass is the link's mesh
+    volume at :data:`pipeline.robot.mesh_volume.LINK_DENSITY_KG_M3`; else the reach-class rule
+    (module docstring) shares the catalogue mass. The sentence states which, with the other's total."""
     links = child_links(root)
     bad = [j for j in range(1, model.njoints) if abs(model.inertias[j].mass) < 1e-12]   # negative: an error
     if not bad:
@@ -86,15 +97,30 @@ def placeholder_inertias(model: pin.Model, root: ET.Element, flange_local: np.nd
     segments = _segments(model, flange_local)
     weights = np.array([np.linalg.norm(s) + 0.1 * reach_m for s in segments])
     moving_kg = (1 - BASE_MASS_SHARE) * datasheet_mass_kg(reach_m)
+    rule_kg = {j: float(moving_kg * weights[j - 1] / weights.sum()) for j in bad}
+    volumes = {j: (link_volume_m3(root, urdf, links.get(str(model.names[j]), "")) if urdf is not None else None)
+               for j in bad}
+    from_meshes = all(v is not None and v > 0 for v in volumes.values())
     for j in bad:
-        mass = float(moving_kg * weights[j - 1] / weights.sum())
+        # a flange or a cover with a small mesh: not lighter than a share of the rule's link mass
+        mass = (max(LINK_DENSITY_KG_M3 * float(volumes[j] or 0.0), MIN_MESH_MASS_SHARE * rule_kg[j])
+                if from_meshes else rule_kg[j])
         model.inertias[j] = _cylinder_inertia(mass, segments[j - 1], reach_m)
     listed = ", ".join(f"{links.get(str(model.names[j]), model.names[j])} {model.inertias[j].mass:.1f} kg"
                        for j in bad)
-    return [f"PLACEHOLDER inertials (no <inertial> or mass 0 in the URDF): {listed}; sized like a catalogue "
-            f"arm of {reach_m:.2f} m reach ({datasheet_mass_kg(reach_m):.0f} kg in all, "
-            f"{MASS_COEFF_KG:g} kg x reach^{MASS_EXPONENT:g}), each link a solid cylinder from its joint to the "
-            "next: replace them by the real inertials (URDF) or identify them"]
+    rule = (f"a catalogue arm of {reach_m:.2f} m reach ({datasheet_mass_kg(reach_m):.0f} kg in all, "
+            f"{MASS_COEFF_KG:g} kg x reach^{MASS_EXPONENT:g})")
+    if from_meshes:
+        total = sum(model.inertias[j].mass for j in bad)
+        litres = 1e3 * sum(float(v or 0.0) for v in volumes.values())
+        how = (f"estimated from the links' mesh volumes ({litres:.3g} L of convex hulls) at "
+               f"{LINK_DENSITY_KG_M3:g} kg/m³, {total:.0f} kg in all against {sum(rule_kg.values()):.0f} kg by the "
+               f"reach-class rule ({rule})")
+    else:
+        why = "no meshes found for every such link" if urdf is not None else "no meshes looked up"
+        how = f"sized like {rule} ({why})"
+    return [f"PLACEHOLDER inertials (no <inertial> or mass 0 in the URDF): {listed}; {how}, each link a solid "
+            "cylinder from its joint to the next: replace them by the real inertials (URDF) or identify them"]
 
 
 def repair_inertias(model: pin.Model, root: ET.Element) -> list[str]:

@@ -26,11 +26,11 @@ import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-import yaml
-
 from pipeline.core.artefacts import write_text
 from pipeline.core.errors import RobotFileError
+from pipeline.core.yaml12 import dump_yaml
 from pipeline.robot.assumed_values import assumed_entry
+from pipeline.robot.mjcf_import import is_mjcf, write_urdf_of_mjcf
 from pipeline.robot.model import RobotModel
 from pipeline.robot.repeatability import repeatability_rule
 from pipeline.robot.spec_yaml import robot_spec_to_yaml
@@ -119,8 +119,8 @@ def _rules(robot: RobotModel, *, tip_given: bool, lock: dict[str, float], placeh
 
 def _commented(key: str, value: object, rules: dict[str, str]) -> str:
     """A top-level section as YAML, each assumed line ending in ``# ASSUMED: rule``."""
-    lines = yaml.safe_dump({key: value}, sort_keys=False, allow_unicode=True, width=100000,
-                           default_flow_style=None if isinstance(value, dict | list) else False).rstrip().split("\n")
+    flow = None if isinstance(value, dict | list) else False
+    lines = dump_yaml({key: value}, width=100000, flow=flow).rstrip().split("\n")
     for n, line in enumerate(lines):
         indent = len(line) - len(line.lstrip())
         name = line.strip().split(":", 1)[0]
@@ -145,13 +145,17 @@ def parse_locks(items: list[str]) -> dict[str, float]:
 def write_robot_yaml(urdf: str | Path, out: str | Path | None = None, *, base: str | None = None,
                      tip: str | None = None, lock: dict[str, float] | None = None, force: bool = False,
                      torque_side: str | None = None) -> Path:
-    """Write the commented robot.yaml of ``urdf`` (beside it unless ``out``) and return its path.
+    """Write the commented robot.yaml of ``urdf`` (beside it unless ``out``) and return its path. An
+    MJCF model (``model.xml``) is converted first: ``model.urdf`` beside the robot.yaml
+    (:mod:`pipeline.robot.mjcf_import`).
     ``torque_side``: link | motor (None: :func:`detect_torque_side`, marked ASSUMED)."""
     urdf = Path(urdf)
     target = Path(out) if out is not None else urdf.parent / "robot.yaml"
     if target.exists() and not force:
         raise RobotFileError(target, "robot.yaml", "already exists; remove it, write elsewhere (--out) or "
                              "replace it (--force)")
+    if is_mjcf(urdf):        # an MJCF model: its URDF written beside robot.yaml, which names it
+        urdf = write_urdf_of_mjcf(urdf, target.parent / f"{urdf.stem}.urdf")
     robot = RobotModel.load(urdf, base=base, tip=tip, lock=lock, urdf_alone=True)
     spec = robot.spec
     placeholders = {kind for kind in ("velocity", "effort")
@@ -177,6 +181,6 @@ def write_robot_yaml(urdf: str | Path, out: str | Path | None = None, *, base: s
         if key == "assumed":
             lines.append("# values above still as robot init assumed them: rule and digest (do not edit)")
         lines.append(_commented(key, value, rules) if key != "assumed" else
-                     yaml.safe_dump({key: value}, sort_keys=False, allow_unicode=True, width=110).rstrip())
+                     dump_yaml({key: value}, width=110).rstrip())
     write_text(target, "\n".join(lines) + "\n")
     return target

@@ -13,9 +13,14 @@ Read from the stages' ``summary.json`` (nothing is recomputed), one row per figu
   move-and-settle time (rigid and elastic-joint feedforward) against ruckig's;
 * every stage with quality gates: how many pass.
 
-Each row states its verdict (pass/FAIL of a gate, or the ratio to its anchor) and the provenance
+Each row states the ratio of its figure to its anchor (its own column), its verdict and the provenance
 of its input (simulated, or the recorded file: the stage's typed record, ``summary.json``
-``provenance``); the run's ``provenance.json`` adds whether the second calibration pass ran and why.
+``provenance``). The verdict is ``pass``/``FAIL`` of the figure's quality gate where it has one, else
+``pass`` when the ratio is on the good side of its anchor (a feedforward gain above 1, a plan no
+slower than its baseline) and ``warn`` when not; a row without an anchor to judge by (the held-out
+error over the noise) leaves it empty. The run's ``provenance.json`` adds whether the second
+calibration pass ran and why, and whether two different arms are combined (a recorded measurement
+with a simulated one: a warning).
 :func:`headline_markdown` opens ``report.md``
 followed by the assumptions still in force and the warnings; :func:`print_headline` prints the
 same table on the console.
@@ -24,8 +29,8 @@ same table on the console.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -34,9 +39,20 @@ from rich.markup import escape
 from rich.table import Table
 
 from pipeline.core import artefacts
-from pipeline.core.typed_config import dotted_get
+from pipeline.quality import GateCheck
+from pipeline.robot.plausibility import placeholder_kind
 from pipeline.run import stage_io
 from pipeline.stage_api import PROVENANCE_FILE, Provenance
+from pipeline.summaries import (
+    CalibrationSummary,
+    ControlSummary,
+    CrossValidationSummary,
+    IdentificationSummary,
+    ModelSummary,
+    RecordT,
+    StageSummary,
+    TrajectorySummary,
+)
 
 SIMULATED = "simulated"
 #: where the figures of the control and trajectory stages come from: the servo loop simulated on
@@ -44,9 +60,13 @@ SIMULATED = "simulated"
 SERVO_SIMULATION = "simulated"
 
 
+PASS, WARN, FAIL = "pass", "warn", "FAIL"
+
+
 @dataclass(frozen=True)
 class Row:
-    """One headline figure: ``value`` against ``against``, ``verdict`` (pass/FAIL or a ratio)."""
+    """One headline figure: ``value`` against ``against``, their ``ratio`` (``×1.23``, or empty) and the
+    ``verdict`` (:data:`PASS`, :data:`WARN`, :data:`FAIL`, or empty: nothing to judge by)."""
 
     stage: str
     figure: str
@@ -54,6 +74,7 @@ class Row:
     against: str
     verdict: str
     source: str
+    ratio: str = ""
 
 
 @dataclass
@@ -68,20 +89,10 @@ class Headline:
 
     @property
     def failed(self) -> bool:
-        return any(r.verdict.startswith("FAIL") for r in self.rows)
+        return any(r.verdict == FAIL for r in self.rows)
 
 
 # ------------------------------------------------------------------------------ formatting
-def _finite(value: object) -> float | None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        return None
-    return float(value) if math.isfinite(value) else None
-
-
-def _get(summary: dict, dotted: str) -> Any:  # Any: a summary.json value
-    return dotted_get(summary, dotted)
-
-
 def length(m: float) -> str:
     """A length in µm below 1 mm, else in mm."""
     return f"{m * 1e6:.1f} µm" if abs(m) < 1e-3 else f"{m * 1e3:.2f} mm"
@@ -110,161 +121,188 @@ def typed_label(record: Provenance) -> str:
     return label
 
 
-def _gate(summary: dict, name: str) -> dict | None:
-    checks = _get(summary, "quality_gates.checks") or []
-    return next((c for c in checks if isinstance(c, dict) and c.get("name") == name), None)
-
-
-def _gate_verdict(check: dict | None) -> str:
+def _gate_verdict(check: GateCheck | None) -> str:
     if check is None:
         return ""
-    return "pass" if check.get("passed") else "FAIL"
+    return PASS if check.passed else FAIL
+
+
+def _anchor_verdict(x: float, at_most_one: bool) -> str:
+    """``pass`` when ratio ``x`` is on the good side of 1 (at most 1, or at least 1), else ``warn``."""
+    return PASS if (x <= 1.0 if at_most_one else x >= 1.0) else WARN
 
 
 # ------------------------------------------------------------------------------ rows per stage
-def _model_rows(s: dict) -> list[Row]:
-    reach, mass = _finite(s.get("reach_m")), _finite(s.get("moving_mass_kg"))
-    if reach is None or mass is None:
+def _model_rows(s: ModelSummary, gates: StageSummary) -> list[Row]:
+    if s.reach_m is None or s.moving_mass_kg is None:
         return []
-    warnings = s.get("plausibility_warnings") or []
-    assumed = "robot files" + (", with assumed facts" if s.get("assumptions") else "")
-    return [Row("model", f"robot {s.get('name', '')}".strip(),
-                f"{s.get('dof', '?')} DOF, reach {reach:.2f} m, moving mass {mass:.3g} kg, payload "
-                f"{_finite(s.get('payload_kg')) or 0:g} kg", "data-sheet scaling of serial arms",
-                f"WARN: {len(warnings)} warning(s)" if warnings else "plausible", assumed)]
+    warnings = s.plausibility_warnings
+    assumed = "robot files" + (", with assumed facts" if s.assumptions else "")
+    placeholders = placeholder_kinds(s.assumptions)
+    # a placeholder is sized by the scaling rule it would be judged by: never called plausible
+    notes = ([f"{len(warnings)} warning(s)"] if warnings else []) + (
+        [f"placeholder: {', '.join(placeholders)}"] if placeholders else [])
+    against = "data-sheet scaling of serial arms" + (f" ({'; '.join(notes)})" if notes else "")
+    return [Row("model", f"robot {s.name or ''}".strip(),
+                f"{s.dof if s.dof is not None else '?'} DOF, reach {s.reach_m:.2f} m, moving mass "
+                f"{s.moving_mass_kg:.3g} kg, payload {s.payload_kg or 0:g} kg", against, WARN if notes else PASS,
+                assumed)]
 
 
-def _calibration_rows(s: dict) -> list[Row]:
+def placeholder_kinds(assumptions: Iterable[str]) -> list[str]:
+    """What the robot's placeholders stand for (``inertials``, ``effort limits`` ...), from its
+    assumptions (:func:`pipeline.robot.plausibility.placeholder_kind`)."""
+    return list(dict.fromkeys(k for k in map(placeholder_kind, map(str, assumptions)) if k))
+
+
+def _calibration_rows(s: CalibrationSummary, gates: StageSummary) -> list[Row]:
     """Held-out error (simulated validation poses), else the k-fold cross-validated error of a
     recorded file, against the tracker noise and the predicted error."""
-    after, label = _finite(s.get("heldout_rms_position_error_after_m")), "held-out TCP error RMS"
-    predicted = _finite(s.get("predicted_rms_position_error_m"))
+    after, label = s.heldout_rms_position_error_after_m, "held-out TCP error RMS"
+    predicted = s.predicted_rms_position_error_m
+    over = s.actual_over_predicted
+    every = ""
+    cv = s.cross_validation or CrossValidationSummary()
     if after is None:
-        after = _finite(_get(s, "cross_validation.rms_position_error_m"))
-        label = f"{_get(s, 'cross_validation.folds')}-fold cross-validated TCP error RMS"
+        after = cv.rms_position_error_m
+        label = f"{cv.folds}-fold cross-validated TCP error RMS"
         # the same held-out poses' prediction (the summary's is over random poses of the whole workspace)
-        predicted = _finite(_get(s, "cross_validation.predicted_rms_position_error_m")) or predicted
+        predicted = cv.predicted_rms_position_error_m or predicted
+        over = cv.actual_over_predicted
+        # the figure over every pose beside the screened one (gross errors left out)
+        if cv.rms_position_error_all_poses_m is not None and cv.n_rejected:
+            every = f"; all {cv.n_poses_all} poses {length(cv.rms_position_error_all_poses_m)}"
     if after is None:
         return []
-    before = _finite(s.get("heldout_rms_position_error_before_m"))
-    value = length(after) + (f" (before {length(before)})" if before is not None else "")
-    source = provenance(s.get("validation_source") or s.get("measurement_source"))
+    before = s.heldout_rms_position_error_before_m
+    value = length(after) + every + (f" (before {length(before)})" if before is not None else "")
+    source = provenance(s.validation_source or s.measurement_source)
     rows = []
     # the readings' total noise (sensor + repeatability + remainder); runs saved before it had its own
     # key held the total as tracker_noise_sigma_m
-    sigma = _finite(s.get("noise_total_sigma_m", s.get("tracker_noise_sigma_m")))
+    sigma = s.noise_total_sigma_m if s.noise_total_sigma_m is not None else s.tracker_noise_sigma_m
     if sigma:
-        rows.append(Row("calibration", f"{label} / noise", value, f"noise σ {length(sigma)}",
-                        ratio(after / sigma), source))
+        rows.append(Row("calibration", f"{label} / noise", value, f"noise σ {length(sigma)}", "", source,
+                        ratio(after / sigma)))
     if predicted:
-        rows.append(Row("calibration", f"{label}, actual / predicted", length(after),
-                        f"predicted {length(predicted)}", ratio(after / predicted), source))
+        actual_over = over if over is not None else after / predicted
+        check = gates.gate("actual_over_predicted")
+        verdict = _gate_verdict(check)
+        threshold = check.threshold if check is not None else None
+        if verdict == PASS and threshold and actual_over < 1.0 / threshold:
+            verdict = WARN                 # a pessimistic prediction: its gate passes, the stage warns
+        rows.append(Row("calibration", f"{label}, actual / predicted", length(after) + every,
+                        f"predicted {length(predicted)}", verdict, source, ratio(actual_over)))
     return rows
 
 
-def _identification_rows(s: dict) -> list[Row]:
-    ratios = s.get("validation_rms_over_noise")
-    values = [_finite(r) for r in ratios] if isinstance(ratios, list) else []
-    measured = [j for j, r in enumerate(ratios or []) if r is not None]   # unmeasured joints: null
-    if not measured or any(values[j] is None for j in measured):
+def _identification_rows(s: IdentificationSummary, gates: StageSummary) -> list[Row]:
+    values = list(s.validation_rms_over_noise)
+    measured = [j for j, r in enumerate(values) if r is not None]   # unmeasured joints: null
+    if not measured:
         return []
     worst = max(measured, key=lambda j: values[j] or 0.0)
-    check = _gate(s, "validation_rms_over_noise")
-    against = (f"gate ≤ {check['threshold']:g}" if check and check.get("threshold") is not None
+    check = gates.gate("validation_rms_over_noise")
+    against = (f"gate ≤ {check.threshold:g}" if check is not None and check.threshold is not None
                else "torque noise σ")
-    path = s.get("validation_trajectory")
+    path = s.validation_trajectory
     figure = "validation torque RMS / σ, worst joint" + (f" ({path} path)" if path else "")
     return [Row("identification", figure, f"{values[worst]:.3g} (joint {worst + 1})", against,
-                _gate_verdict(check) or ratio(values[worst] or 0.0), provenance(s.get("data_source")))]
+                _gate_verdict(check), provenance(s.data_source), ratio(values[worst] or 0.0))]
 
 
-def _control_rows(s: dict) -> list[Row]:
-    errors = s.get("tcp_error_max_m")
-    if not isinstance(errors, dict) or _finite(errors.get("none")) is None:
+def _control_rows(s: ControlSummary, gates: StageSummary) -> list[Row]:
+    errors = s.tcp_error_max_m
+    without = errors.get("none")
+    if without is None:
         return []
-    without = float(errors["none"])
-    variants = {k: float(v) for k, v in errors.items()
-                if k != "none" and not k.endswith("_nominal") and _finite(v) is not None}
+    variants = {k: v for k, v in errors.items() if k != "none" and not k.endswith("_nominal") and v is not None}
     if not variants:
         return []
     best = min(variants, key=lambda k: variants[k])
     gain = without / variants[best] if variants[best] > 0 else math.inf
     return [Row("control", "feedforward gain (ISO path max TCP error)",
                 f"{length(variants[best])} with {best}", f"{length(without)} without",
-                ratio(gain), SERVO_SIMULATION)]
+                _anchor_verdict(gain, at_most_one=False), SERVO_SIMULATION, ratio(gain))]
 
 
-def _duration_row(s: dict, figure: str, ours: str, theirs: str, name: str, note: str = "") -> Row | None:
-    a, b = _finite(s.get(ours)), _finite(s.get(theirs))
+def _duration_row(figure: str, a: float | None, b: float | None, name: str) -> Row | None:
     if a is None or b is None or b <= 0:
         return None
-    return Row("trajectory", figure, f"{a:.3f} s", f"{name} {b:.3f} s{note}", ratio(a / b), SERVO_SIMULATION)
+    return Row("trajectory", figure, f"{a:.3f} s", f"{name} {b:.3f} s", _anchor_verdict(a / b, True),
+               SERVO_SIMULATION, ratio(a / b))
 
 
-def _settle_row(s: dict, infix: str, label: str) -> Row | None:
-    opt = _finite(s.get(f"ptp{infix}_move_and_settle_s"))
-    smooth = _finite(s.get(f"ptp_smooth{infix}_move_and_settle_s"))
-    ruckig = _finite(s.get(f"ptp_ruckig{infix}_move_and_settle_s"))
+def _settle_row(s: TrajectorySummary, elastic_feedforward: bool, label: str) -> Row | None:
+    opt = s.move_and_settle_s("ptp", elastic_feedforward)
+    smooth = s.move_and_settle_s("ptp_smooth", elastic_feedforward)
+    ruckig = s.move_and_settle_s("ptp_ruckig", elastic_feedforward)
     if opt is None or ruckig is None or ruckig <= 0:
         return None
     best = opt if smooth is None else min(opt, smooth)
     value = f"time-optimal {opt:.3f} s" + (f", smooth {smooth:.3f} s" if smooth is not None else "")
     return Row("trajectory", f"PtP move + settle ({label})", value, f"ruckig {ruckig:.3f} s",
-               ratio(best / ruckig), SERVO_SIMULATION)
+               _anchor_verdict(best / ruckig, True), SERVO_SIMULATION, ratio(best / ruckig))
 
 
-def _trajectory_rows(s: dict) -> list[Row]:
+def _trajectory_rows(s: TrajectorySummary, gates: StageSummary) -> list[Row]:
     rows: list[Row | None] = [
-        _duration_row(s, f"CP duration ({s.get('cp_segment', 'ISO')} path)", "cp_duration_s", "cp_toppra_duration_s",
+        _duration_row(f"CP duration ({s.cp_segment or 'ISO'} path)", s.cp_duration_s, s.cp_toppra_duration_s,
                       "toppra"),
-        _duration_row(s, "PtP duration", "ptp_duration_s", "ptp_ruckig_duration_s", "ruckig"),
+        _duration_row("PtP duration", s.ptp_duration_s, s.ptp_ruckig_duration_s, "ruckig"),
     ]
-    energy, ruckig_energy = _finite(s.get("ptp_energy_at_ruckig_duration")), _finite(s.get("ptp_ruckig_energy"))
+    energy, ruckig_energy = s.ptp_energy_at_ruckig_duration, s.ptp_ruckig_energy
     if energy is not None and ruckig_energy:
-        rows.append(Row("trajectory", f"PtP energy at ruckig's duration ({s.get('ptp_energy_measure', '')})",
-                        f"{energy:.4g}", f"ruckig {ruckig_energy:.4g}", ratio(energy / ruckig_energy),
-                        SERVO_SIMULATION))
-    rows.append(_settle_row(s, "", "rigid feedforward"))
-    if s.get("ptp_settle_elastic_feedforward"):
-        rows.append(_settle_row(s, "_elastic_ff", f"{s['ptp_settle_elastic_feedforward']} feedforward"))
+        rows.append(Row("trajectory", f"PtP energy at ruckig's duration ({s.ptp_energy_measure or ''})",
+                        f"{energy:.4g}", f"ruckig {ruckig_energy:.4g}", _anchor_verdict(energy / ruckig_energy, True),
+                        SERVO_SIMULATION, ratio(energy / ruckig_energy)))
+    rows.append(_settle_row(s, False, "rigid feedforward"))
+    if s.ptp_settle_elastic_feedforward:
+        rows.append(_settle_row(s, True, f"{s.ptp_settle_elastic_feedforward} feedforward"))
     return [r for r in rows if r is not None]
 
 
-#: stage -> its headline rows from its summary
-STAGE_ROWS: dict[str, Callable[[dict], list[Row]]] = {
-    "model": _model_rows,
-    "calibration": _calibration_rows,
-    "identification": _identification_rows,
-    "control": _control_rows,
-    "trajectory": _trajectory_rows,
+def _rows_of(record: type[RecordT], rows: Callable[[RecordT, StageSummary], list[Row]]
+             ) -> Callable[[Mapping[str, Any], StageSummary], list[Row]]:
+    return lambda summary, gates: rows(record.read(summary), gates)
+
+
+#: stage -> its headline rows from its summary (read through the stage's record, :mod:`pipeline.summaries`)
+STAGE_ROWS: dict[str, Callable[[Mapping[str, Any], StageSummary], list[Row]]] = {
+    "model": _rows_of(ModelSummary, _model_rows),
+    "calibration": _rows_of(CalibrationSummary, _calibration_rows),
+    "identification": _rows_of(IdentificationSummary, _identification_rows),
+    "control": _rows_of(ControlSummary, _control_rows),
+    "trajectory": _rows_of(TrajectorySummary, _trajectory_rows),
 }
 
 
-def gate_row(stage: str, s: dict) -> Row | None:
+def gate_row(stage: str, s: StageSummary) -> Row | None:
     """How many of the stage's quality gates pass (``--accept-poor`` results count as FAIL)."""
-    checks = [c for c in _get(s, "quality_gates.checks") or [] if isinstance(c, dict)]
+    checks = s.gate_checks()
     if not checks:
         return None
-    failed = [str(c.get("name")) for c in checks if not c.get("passed")]
-    verdict = "pass" if not failed else "FAIL: " + ", ".join(failed)
-    if failed and s.get("accepted_poor"):
-        verdict += " (accepted with --accept-poor)"
-    return Row(stage, "quality gates", f"{len(checks) - len(failed)} of {len(checks)} pass", "the stage's gates",
-               verdict, "")
+    failed = [str(c.name) for c in checks if not c.passed]
+    value = f"{len(checks) - len(failed)} of {len(checks)} pass"
+    if failed:
+        value += "; failed: " + ", ".join(failed)
+        if s.accepted_poor:
+            value += " (accepted with --accept-poor)"
+    return Row(stage, "quality gates", value, "the stage's gates", FAIL if failed else PASS, "")
 
 
-def stage_rows(stage: str, summary: dict, stale: bool = False) -> list[Row]:
+def stage_rows(stage: str, summary: Mapping[str, Any], stale: bool = False) -> list[Row]:
     """The headline rows of one stage (a stale stage's rows say so in their source)."""
-    rows = list(STAGE_ROWS.get(stage, lambda s: [])(summary))
-    record = Provenance.from_dict(summary.get("provenance"))
+    common = StageSummary.read(summary)
+    rows = list(STAGE_ROWS.get(stage, lambda s, g: [])(summary, common))
+    record = Provenance.from_dict(common.provenance)
     if record is not None:
-        rows = [Row(r.stage, r.figure, r.value, r.against, r.verdict, typed_label(record)) for r in rows]
-    gates = gate_row(stage, summary)
+        rows = [replace(r, source=typed_label(record)) for r in rows]
+    gates = gate_row(stage, common)
     if gates is not None:
         rows.append(gates)
     if stale:
-        rows = [Row(r.stage, r.figure, r.value, r.against, r.verdict, f"{r.source} (stale: earlier run)".strip())
-                for r in rows]
+        rows = [replace(r, source=f"{r.source} (stale: earlier run)".strip()) for r in rows]
     return rows
 
 
@@ -280,6 +318,15 @@ def _read_summary(stage_dir: Path) -> dict:
     return data if isinstance(data, dict) else {}
 
 
+def _arms_combined(run_dir: Path) -> str:
+    """The run's sentence on two different arms combined (``provenance.json``), or ""."""
+    try:
+        record = artefacts.read_json(run_dir / PROVENANCE_FILE)
+    except (OSError, ValueError):
+        return ""
+    return str(record.get("arms_combined") or "") if isinstance(record, dict) else ""
+
+
 def _second_pass_row(run_dir: Path, stages: Sequence[str]) -> Row | None:
     """Whether the second calibration pass ran, and why (``provenance.json`` of the run)."""
     try:
@@ -290,8 +337,7 @@ def _second_pass_row(run_dir: Path, stages: Sequence[str]) -> Row | None:
     if not note or "calibration" not in stages:
         return None
     ran = not str(note).startswith("no ")
-    return Row("calibration", "second calibration pass", str(note), "identified inertias of the arm calibrated",
-               "ran" if ran else "not run", "")
+    return Row("calibration", "second calibration pass", "ran" if ran else "not run", str(note), "", "")
 
 
 def read_headline(run_dir: Path, stages: Sequence[str], stale: Iterable[str] = ()) -> Headline:
@@ -306,13 +352,14 @@ def read_headline(run_dir: Path, stages: Sequence[str], stale: Iterable[str] = (
         if not summary:
             continue
         rows = stage_rows(stage, summary, stage in stale)
-        record = Provenance.from_dict(summary.get("provenance"))
+        common = StageSummary.read(summary)
+        record = Provenance.from_dict(common.provenance)
         if stage == "identification":
-            model_data = (provenance(summary.get("data_source")) if record is None
+            model_data = (provenance(IdentificationSummary.read(summary).data_source) if record is None
                           else typed_label(record) if record.recorded else SIMULATED)
         elif stage in SIMULATED_ON_THE_MODEL and model_data != SIMULATED:
-            rows = [Row(r.stage, r.figure, r.value, r.against, r.verdict,
-                        f"{r.source}, model from {model_data}" if r.source else r.source) for r in rows]
+            rows = [replace(r, source=f"{r.source}, model from {model_data}" if r.source else r.source)
+                    for r in rows]
         headline.rows += rows
         if record is not None:
             headline.inputs.append(f"{stage}: {record.sentence()}")
@@ -320,14 +367,18 @@ def read_headline(run_dir: Path, stages: Sequence[str], stale: Iterable[str] = (
             second = _second_pass_row(run_dir, stages)
             headline.rows += [] if second is None else [second]
         if stage == "model":
-            headline.assumptions = [str(a) for a in summary.get("assumptions") or []]
-            headline.warnings += [str(w) for w in summary.get("plausibility_warnings") or []]
-        headline.warnings += [f"{stage}: {w}" for w in summary.get("warnings") or [] if isinstance(w, str)]
+            model = ModelSummary.read(summary)
+            headline.assumptions = [a for a in model.assumptions if isinstance(a, str)]
+            headline.warnings += [w for w in model.plausibility_warnings if isinstance(w, str)]
+        headline.warnings += [f"{stage}: {w}" for w in common.warnings if isinstance(w, str)]
+    arms = _arms_combined(run_dir)
+    if arms:
+        headline.warnings.insert(0, arms)
     return headline
 
 
 # ------------------------------------------------------------------------------ output
-COLUMNS = ("stage", "figure", "value", "against", "verdict", "input")
+COLUMNS = ("stage", "figure", "value", "against", "ratio", "verdict", "input")
 
 
 def _cell(text: str) -> str:
@@ -339,8 +390,8 @@ def headline_markdown(headline: Headline) -> str:
     lines = ["## Headline", ""]
     if headline.rows:
         lines += ["| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
-        lines += ["| " + " | ".join(_cell(x) for x in (r.stage, r.figure, r.value, r.against, r.verdict, r.source))
-                  + " |" for r in headline.rows]
+        lines += ["| " + " | ".join(_cell(x) for x in (r.stage, r.figure, r.value, r.against, r.ratio, r.verdict,
+                                                        r.source)) + " |" for r in headline.rows]
     else:
         lines.append("_no finished stage yet_")
     if headline.inputs:
@@ -353,7 +404,7 @@ def headline_markdown(headline: Headline) -> str:
     return "\n".join(lines).rstrip() + "\n"
 
 
-_VERDICT_STYLE = (("FAIL", "bold red"), ("WARN", "yellow"), ("pass", "green"), ("plausible", "green"))
+_VERDICT_STYLE = {FAIL: "bold red", WARN: "yellow", PASS: "green"}
 
 
 def headline_table(headline: Headline) -> Table:
@@ -362,9 +413,9 @@ def headline_table(headline: Headline) -> Table:
     for name in COLUMNS:
         table.add_column(name, overflow="fold")
     for r in headline.rows:
-        style = next((s for prefix, s in _VERDICT_STYLE if r.verdict.startswith(prefix)), "")
+        style = _VERDICT_STYLE.get(r.verdict, "")
         verdict = escape(r.verdict)
-        table.add_row(*(escape(x) for x in (r.stage, r.figure, r.value, r.against)),
+        table.add_row(*(escape(x) for x in (r.stage, r.figure, r.value, r.against, r.ratio)),
                       f"[{style}]{verdict}[/]" if style else verdict, escape(r.source))
     return table
 

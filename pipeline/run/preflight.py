@@ -11,7 +11,8 @@ functions, so a robot that cannot run a stage is named before minutes of search:
 * control: the IK seeds inside the limits and collision-free, the ISO 9283 cube (configured or
   derived) and its joint reference (:func:`pipeline.control.design.iso_reference`);
 * trajectory: the PtP start and goal collision-free, the CP path's joint path
-  (:func:`pipeline.trajectory.solve.cp_joint_path`).
+  (:func:`pipeline.trajectory.solve.cp_joint_path`), and the PtP NLP built as the stage builds it
+  (names derived from the URDF, symbolic dynamics; few intervals, not compiled).
 
 Each problem is one :class:`~pipeline.core.errors.PipelineError` naming the setting to change.
 """
@@ -34,14 +35,19 @@ from pipeline.identification import fourier
 from pipeline.identification.config import Config as IdentificationConfig
 from pipeline.robot.defaults import ik_seeds_or_derived_rad, ptp_move_rad
 from pipeline.robot.model import RobotModel
+from pipeline.robot.symbolic import SymbolicRobot
 from pipeline.run.runner import Prepared
 from pipeline.trajectory.config import TrajectoryConfig
+from pipeline.trajectory.dynamics import PlanningModel
+from pipeline.trajectory.ptp import PtpProblem
 from pipeline.trajectory.solve import cp_joint_path
 
 #: random configurations of the calibration probe (a chunk of the stage's own first 1 %)
 CHECK_SAMPLES = 40_000
 #: random excitations tried before the identification check gives up
 EXCITATION_TRIES = 50
+#: intervals of the PtP NLP built by the trajectory check (the run's are ``trajectory.ptp_n_intervals``)
+CHECK_PTP_INTERVALS = 4
 
 
 def _calibration(robot: RobotModel, cfg: CalibrationConfig) -> None:
@@ -95,6 +101,19 @@ def _trajectory(robot: RobotModel, cfg: TrajectoryConfig) -> None:
     if cfg.cp_ik_seed_deg is not None:
         _collision_free(robot, np.radians(cfg.cp_ik_seed_deg), "trajectory.cp_ik_seed_deg")
     cp_joint_path(robot, cfg)
+    _build_ptp_nlp(robot, cfg)
+
+
+def _build_ptp_nlp(robot: RobotModel, cfg: TrajectoryConfig) -> None:
+    """The PtP NLP as the stage builds it (its names from the URDF, its symbolic dynamics), on
+    :data:`CHECK_PTP_INTERVALS` intervals and not compiled: what would fail building it fails here."""
+    pm = PlanningModel.from_robot(robot, cfg.torque_reserve)
+    try:
+        PtpProblem(pm, SymbolicRobot(robot), CHECK_PTP_INTERVALS, jit=False)
+    except RuntimeError as exc:       # CasADi reports an NLP it cannot build as a RuntimeError
+        message = " ".join(str(exc).split())
+        raise InfeasibleError(None, "trajectory.ptp", f"the point-to-point NLP of {robot.name} cannot be built "
+                              f"({message[-200:]})") from None
 
 
 CHECKS: dict[str, Callable[[Any, Any], None]] = {

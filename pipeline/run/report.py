@@ -20,6 +20,7 @@ from pipeline.core.config import RunConfig
 from pipeline.core.errors import PipelineError
 from pipeline.run import stage_io
 from pipeline.run.headline import headline_markdown, read_headline
+from pipeline.summaries import StageSummary
 
 
 def _fmt(value: object) -> str:
@@ -66,11 +67,9 @@ def _summary(stage_dir: Path) -> dict:
     return data if isinstance(data, dict) else {}
 
 
-def _failed_gates(summary: dict) -> str:
+def _failed_gates(summary: StageSummary) -> str:
     """The messages of the failed gates recorded by :class:`pipeline.quality.QualityGates`."""
-    gates = summary.get("quality_gates")
-    checks = gates.get("checks", []) if isinstance(gates, dict) else []
-    failed = [str(c.get("message", c.get("name"))) for c in checks if isinstance(c, dict) and not c.get("passed")]
+    failed = [str(c.message or c.name) for c in summary.gate_checks() if not c.passed]
     return "; ".join(failed) or "see summary.json"
 
 
@@ -123,7 +122,7 @@ def write_report(run_dir: Path, cfg: RunConfig | None = None, current: Sequence[
         lines += [f"robot `{cfg.robot}` · seed {cfg.seed} · profile `{cfg.profile}` · "
                   f"pipeline {pipeline.__version__} · config in `config.yaml`", ""]
     names = [s for s in config_mod.stage_names() if (run_dir / s / stage_io.INPUTS_HASH).exists()]
-    poor = [s for s in names if _summary(run_dir / s).get("accepted_poor")]
+    poor = [s for s in names if StageSummary.read(_summary(run_dir / s)).accepted_poor]
     if poor:
         lines += [f"**Results accepted with `--accept-poor`** (failed quality gates, handed on knowingly): "
                   f"{', '.join(f'`{s}`' for s in poor)}", ""]
@@ -141,8 +140,9 @@ def write_report(run_dir: Path, cfg: RunConfig | None = None, current: Sequence[
         if manifest.get("finished_utc"):
             lines += [f"finished {manifest['finished_utc']} in {manifest.get('duration_s', 0):.1f} s", ""]
         summary = artefacts.read_json(d / stage_io.SUMMARY) if (d / stage_io.SUMMARY).exists() else {}
-        if isinstance(summary, dict) and summary.get("accepted_poor"):
-            lines += [f"**ACCEPTED POOR (`--accept-poor`)**: failed quality gate(s): {_failed_gates(summary)}; "
+        record = StageSummary.read(summary if isinstance(summary, dict) else {})
+        if record.accepted_poor:
+            lines += [f"**ACCEPTED POOR (`--accept-poor`)**: failed quality gate(s): {_failed_gates(record)}; "
                       "handed on knowingly", ""]
         report_md = d / stage_io.REPORT_MD
         stage_md = report_md.read_text(encoding="utf-8").rstrip() if report_md.exists() else ""

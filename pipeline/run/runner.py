@@ -1,69 +1,44 @@
 """The stage runner: run stages in order, reuse finished ones, write ``report.md``
 (:mod:`pipeline.run.report`).
 
-Each stage is a module (registry :data:`pipeline.core.config.STAGES`) exposing::
-
-    NAME = "calibration"
-    DEPENDS = ("model",)           # upstream stages whose results it reads
-    Config = CalibrationConfig     # dataclass with defaults
-    def run(ctx: StageContext) -> StageResult
-    def check(config, robot) -> None   # optional: raise PipelineError early (bad data file...)
-    def warm_up(config, robot) -> None # optional: compiled code built in the background (pipeline.run.warm_up)
-    CONFIG_READS = ("control.iso",)    # optional: settings of other sections run() reads
+The stages are the modules of :mod:`pipeline.run.stages`, each defining the names of
+:class:`pipeline.stage_api.StageModule` (``NAME``, ``DEPENDS``, ``Config``, ``run``, ``check``,
+``warm_up``, ``CONFIG_READS``, ``RECORDED_INPUT``, ``SIMULATES``).
 
 :func:`run_pipeline` validates everything (stage modules, dependencies, the robot files, the
 hidden robot) *before* creating any directory, then for every needed stage either reuses
-``<run>/<stage>/`` (stored ``inputs.sha256`` equal to the new hash) or calls ``run(ctx)`` with
-a staging directory that is renamed to ``<stage>/`` only when complete.
-
-A stage's inputs hash covers its own section, the seed, the robot name and the ``truth``
-section, every file of the robot folder, the values of its ``CONFIG_READS``, the hashes of its
-upstream stages, the package version and the source code: every ``.py`` file of the whole
-``pipeline`` package (any code change re-runs every stage: stages import each other's helpers,
-correctness beats reuse) plus the stage module's own folder when it lives outside the package.
+``<run>/<stage>/`` (stored ``inputs.sha256`` equal to the new hash, :mod:`pipeline.run.inputs`) or
+runs it (:mod:`pipeline.run.stage_run`) with a staging directory that is renamed to ``<stage>/``
+only when complete.
 """
 
 from __future__ import annotations
 
-import errno
 import functools
-import hashlib
-import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from types import ModuleType
-from typing import Any
 
-import yaml
-
-import pipeline
 from pipeline.core import artefacts
-from pipeline.core import config as config_mod
 from pipeline.core.config import RunConfig, default_runs_dir, resolve_robot_dir
-from pipeline.core.errors import ArtefactWriteError, ConfigError, QualityGateError
-from pipeline.core.interrupts import caused_by_interrupt, handle_termination, interrupted
+from pipeline.core.errors import ArtefactWriteError, ConfigError
+from pipeline.core.interrupts import handle_termination
 from pipeline.core.progress import Progress
 from pipeline.core.run_names import check_run_robot
+from pipeline.core.yaml12 import dump_yaml
 from pipeline.robot.model import RobotModel
 from pipeline.run import report as report_mod
 from pipeline.run import second_pass, stage_io
+from pipeline.run.inputs import config_reads, package_code_hash, run_key, stage_inputs_hashes, why_not_reuse
 from pipeline.run.locking import RunLockedError, run_lock
-from pipeline.run.stage_io import (
-    REJECTED_SUFFIX,
-    changed_inputs,
-    load_stage_output,
-    read_manifest,
-    run_key_sha256,
-    stage_problem,
-    write_rejected,
-    write_stage_result,
-)
+from pipeline.run.stage_io import load_stage_output
 from pipeline.run.stage_plan import Plan as _Plan
 from pipeline.run.stage_plan import plan_stages, unavailable_stages
+from pipeline.run.stage_run import make_real, run_one, write_error
+from pipeline.run.stages import stage_names
 from pipeline.run.warm_up import warmed_up
-from pipeline.sim.truth import RealRobot, TruthConfig
-from pipeline.stage_api import StageContext, StageOutput, StageResult, stage_rng
+from pipeline.sim.truth import RealRobot
+from pipeline.stage_api import StageOutput, declared
 
 __all__ = [
     "RunResult", "run_pipeline", "prepare_run", "stage_inputs_hashes", "package_code_hash", "config_reads",
@@ -85,148 +60,10 @@ class RunResult:
     reused: list[str]                     # stages loaded from disk
 
 
-def _make_real(nominal: RobotModel, cfg: RunConfig) -> RealRobot:
-    truth_cfg = cfg.sections.get("truth")
-    if not isinstance(truth_cfg, TruthConfig):
-        truth_cfg = TruthConfig()
-    return RealRobot.create(nominal, cfg.seed, truth_cfg)
-
-
-def run_key(cfg: RunConfig) -> str:
-    """Hash of the run-level settings shared by every stage (:func:`pipeline.run.stage_io.run_key_sha256`)."""
-    return run_key_sha256(cfg.seed, Path(cfg.robot).name or cfg.robot, cfg.sections.get("truth", {}))
-
-
-#: root of the source code every stage's inputs hash covers (tests point it at a copy)
-_PACKAGE_ROOT = Path(pipeline.__file__).resolve().parent
-
-
-def package_code_hash() -> str:
-    """sha256 of every ``.py`` file of the ``pipeline`` package (``pipeline/robot`` included)."""
-    return artefacts.hash_tree(_PACKAGE_ROOT, suffixes=(".py",))
-
-
-def _code_hash(module: ModuleType, package_sha256: str | None = None) -> str:
-    """Hash of the source code a stage stands on: every .py file of the ``pipeline`` package
-    (``package_sha256``, computed when None; a stage imports other subpackages' helpers, e.g.
-    identification validates on the control stage's ISO path) plus the .py files of the stage
-    module's own folder when that lies outside the package (a stage registered from elsewhere)."""
-    code = package_code_hash() if package_sha256 is None else package_sha256
-    path = getattr(module, "__file__", None)
-    if path:
-        folder = Path(path).resolve().parent
-        if not folder.is_relative_to(_PACKAGE_ROOT.resolve()):
-            code += artefacts.hash_tree(folder, suffixes=(".py",))
-    return code
-
-
-def config_reads(cfg: RunConfig, module: ModuleType) -> dict[str, Any]:
-    """Plain values of the settings of other sections a stage declares it reads
-    (``CONFIG_READS = ("control.iso", ...)``): dotted path -> value (None when the section is not
-    validated (a plain dict) or has no such field: the stage then uses built-in defaults, which
-    the code hash covers)."""
-    out: dict[str, Any] = {}
-    for dotted in tuple(getattr(module, "CONFIG_READS", ()) or ()):
-        head, *rest = str(dotted).split(".")
-        value: object = cfg.sections.get(head)
-        for part in rest:
-            if isinstance(value, Mapping):
-                value = value.get(part)
-            else:
-                value = getattr(value, part, None)
-        out[str(dotted)] = config_mod.to_plain(value)
-    return out
-
-
-def content_keyed(plain: dict[str, Any], module: ModuleType) -> dict[str, Any]:
-    """The stage's plain config with each file or folder its ``FILE_INPUTS`` fields name replaced by
-    the sha256 of its content: the inputs hash never holds a path (a moved or copied run is reused)."""
-    out = dict(plain)
-    for name in tuple(getattr(module, "FILE_INPUTS", ()) or ()):
-        value = out.get(name)
-        if isinstance(value, str) and value:
-            path = Path(value)
-            if path.is_dir():
-                out[name] = "sha256:" + artefacts.hash_tree(path)
-            elif path.is_file():
-                out[name] = "sha256:" + hashlib.sha256(path.read_bytes()).hexdigest()
-    return out
-
-
-def stage_inputs_hashes(cfg: RunConfig, plans: Sequence[_Plan], robot_dir: Path) -> dict[str, str]:
-    """Inputs hash of every planned stage (also stored in ``plan.inputs_sha256``)."""
-    robot_sha = artefacts.hash_tree(robot_dir)
-    code_sha = package_code_hash()
-    run_key = {
-        "seed": cfg.seed,
-        "robot": robot_dir.name,
-        "truth": config_mod.to_plain(cfg.sections.get("truth", {})),
-    }
-    by_name: dict[str, _Plan] = {}
-    for plan in plans:
-        reads = config_reads(cfg, plan.module)
-        key = {**run_key, "config_reads": reads} if reads else run_key
-        config = content_keyed(config_mod.to_plain(plan.config), plan.module)
-        upstream = {d: by_name[d].inputs_sha256 for d in plan.closure}
-        code = _code_hash(plan.module, code_sha)
-        plan.inputs_sha256 = stage_io.inputs_hash(plan.name, config, key, robot_sha, upstream,
-                                                   pipeline.__version__, code)
-        plan.inputs = {"config": config, "run": key, "robot_files": robot_sha, "upstream": upstream,
-                       "version": pipeline.__version__, "code": code}
-        by_name[plan.name] = plan
-    return {name: plan.inputs_sha256 for name, plan in by_name.items()}
-
-
-def _copy_robot(robot: RobotModel) -> RobotModel:
-    copy = getattr(robot, "copy", None)
-    return copy() if callable(copy) else robot
-
-
-def _check_result(name: str, result: object) -> StageResult:
-    where = f"stage {name}"
-    if not isinstance(result, StageResult):
-        raise TypeError(f"{where}: run() returned {type(result).__name__}, expected StageResult")
-    if not isinstance(result.summary, dict):
-        raise TypeError(f"{where}: StageResult.summary must be a dict")
-    for key in result.figures:
-        if not str(key).replace("_", "").replace("-", "").isalnum():
-            raise ValueError(f"{where}: figure name {key!r} must be a plain file stem")
-    return result
-
-
-# --------------------------------------------------------------------------------------------
-# Running
-# --------------------------------------------------------------------------------------------
-def _why_not_reuse(plan: _Plan, stage_dir: Path, forced: set[str], cfg: RunConfig, verify: bool) -> str | None:
-    """Why stage ``plan`` must run (a short reason), or None when ``stage_dir`` can be reused."""
-    if plan.name in forced:
-        return "--force"
-    stored = stage_io.read_inputs_hash(stage_dir)
-    if stored is None:
-        return "not run yet"
-    if stored != plan.inputs_sha256:
-        return "inputs changed" + changed_inputs(read_manifest(stage_dir).get("inputs"), plan.inputs, plan.name)
-    if not verify:
-        return None
-    problem = stage_problem(stage_dir)
-    if problem is not None:
-        return f"its files are damaged: {problem}"
-    if not cfg.accept_poor and _accepted_poor(stage_dir):
-        return "it was accepted with --accept-poor and this run requires its quality gates"
-    return None
-
-
-def _accepted_poor(stage_dir: Path) -> bool:
-    try:
-        return bool(artefacts.read_json(stage_dir / stage_io.SUMMARY).get("accepted_poor"))
-    except (OSError, ValueError, AttributeError):
-        return False
-
-
 def _run_checks(plans: Sequence[_Plan], cfg: RunConfig, nominal: RobotModel) -> None:
     """The stages' optional ``check(config, robot)`` (bad data files ...), before any write."""
     for plan in plans:
-        check = getattr(plan.module, "check", None)
+        check = declared(plan.module, "check")
         if not callable(check):
             continue
         try:
@@ -260,19 +97,14 @@ def prepare_run(cfg: RunConfig, out_root: str | Path | None = None,
     robot_dir = resolve_robot_dir(cfg)         # user input first: the robot, then the stage modules
     nominal = RobotModel.load(robot_dir)
     plans = plan_stages(cfg, unavailable_stages(nominal))
-    real = _make_real(nominal, cfg) if any(p.provenance.simulated for p in plans) else None
+    real = make_real(nominal, cfg) if any(p.provenance.simulated for p in plans) else None
     hashes = stage_inputs_hashes(cfg, plans, robot_dir)
     forced = set(hashes) if force is True else set(force or ())
     run_dir = (Path(out_root) if out_root is not None else default_runs_dir()) / cfg.name
     check_run_robot(run_dir, cfg.robot, force=force is True)     # never replace another robot's run
-    reasons = {p.name: _why_not_reuse(p, run_dir / p.name, forced, cfg, verify=True) for p in plans}
+    reasons = {p.name: why_not_reuse(p, run_dir / p.name, forced, cfg, verify=True) for p in plans}
     _run_checks([p for p in plans if reasons[p.name] is not None], cfg, nominal)
     return Prepared(cfg, plans, nominal, real, run_dir, forced, reasons)
-
-
-def _write_error(exc: OSError, path: Path | str) -> ArtefactWriteError:
-    return ArtefactWriteError(getattr(exc, "filename", None) or path, None,
-                              f"cannot write ({exc.strerror or exc}); earlier results are intact")
 
 
 def run_pipeline(
@@ -298,7 +130,7 @@ def run_pipeline(
     with handle_termination():
         prep = prepare_run(cfg, out_root, force)
         tasks = [(p.name, functools.partial(fn, p.config, prep.nominal)) for p in prep.plans
-                 if prep.reasons[p.name] is not None and callable(fn := getattr(p.module, "warm_up", None))]
+                 if prep.reasons[p.name] is not None and callable(fn := declared(p.module, "warm_up"))]
         with warmed_up(tasks if warm_up else []):
             return _run_passes(prep, cfg, out_root, force, prog, say)
 
@@ -306,8 +138,11 @@ def run_pipeline(
 def _run_passes(prep: Prepared, cfg: RunConfig, out_root: str | Path | None, force: bool | Sequence[str],
                 prog: Progress, say: Callable[[str], None]) -> RunResult:
     """The first calibration pass when the run needs one (:mod:`pipeline.run.second_pass`), then the run."""
-    available = [n for n in config_mod.stage_names() if n not in unavailable_stages(prep.nominal)]
+    available = [n for n in stage_names() if n not in unavailable_stages(prep.nominal)]
     copied: list[str] = []
+    arms = stage_io.combined_arms({p.name: p.provenance for p in prep.plans})
+    if arms:
+        say(f"warning: {arms}")
     first, why_not = second_pass.decision(cfg, [p.name for p in prep.plans], available)
     if first:
         prep, copied = _after_first_pass(prep, force, prog, say)
@@ -385,20 +220,20 @@ def _run_locked(prep: Prepared, prog: Progress, say: Callable[[str], None]) -> R
     cfg, run_dir = prep.cfg, prep.run_dir
     stage_io.clean_leftovers(run_dir)
     # decide again under the lock (another run may have finished a stage meanwhile)
-    reasons = {p.name: _why_not_reuse(p, run_dir / p.name, prep.forced, cfg, verify=True) for p in prep.plans}
+    reasons = {p.name: why_not_reuse(p, run_dir / p.name, prep.forced, cfg, verify=True) for p in prep.plans}
     _run_checks([p for p in prep.plans if reasons[p.name] is not None and prep.reasons[p.name] is None],
                 cfg, prep.nominal)
     # the stages this run consists of: the selected ones and the upstream ones they need (run
     # or reused), so that the config.yaml reproduces the run
     written = cfg.to_dict()
     written["stages"] = [p.name for p in prep.plans]
-    text = yaml.safe_dump(written, sort_keys=False)
+    text = dump_yaml(written)
     config_path = run_dir / "config.yaml"
     try:
         if not config_path.is_file() or config_path.read_text(encoding="utf-8") != text:
             artefacts.write_text(config_path, text)
     except OSError as exc:
-        raise _write_error(exc, config_path) from None
+        raise write_error(exc, config_path) from None
     outputs: dict[str, StageOutput] = {}
     ran: list[str] = []
     reused: list[str] = []
@@ -419,7 +254,8 @@ def _run_locked(prep: Prepared, prog: Progress, say: Callable[[str], None]) -> R
                 else:
                     if reason != "not run yet":
                         say(f"{plan.name}: re-running because {reason}")
-                    outputs[plan.name] = _run_one(plan, prep, outputs, handed_robot, key, prog, say)
+                    outputs[plan.name] = run_one(plan, cfg, run_dir, prep.nominal, outputs, handed_robot, key,
+                                                 prog, say)
                     ran.append(plan.name)
                 robot = outputs[plan.name].robot
                 if robot is not None:
@@ -436,65 +272,7 @@ def _run_locked(prep: Prepared, prog: Progress, say: Callable[[str], None]) -> R
                                              failure=failure)
         except OSError as exc:
             if failure is None:
-                raise _write_error(exc, run_dir / "report.md") from None
+                raise write_error(exc, run_dir / "report.md") from None
             report = run_dir / "report.md"     # keep the stage's own error, not this one
     say(f"report: {report}")
     return RunResult(run_dir, report, outputs, ran, reused)
-
-
-def _run_one(plan: _Plan, prep: Prepared, outputs: dict[str, StageOutput], handed_robot: dict[str, RobotModel],
-             key: str, prog: Progress, say: Callable[[str], None]) -> StageOutput:
-    cfg, run_dir = prep.cfg, prep.run_dir
-    robot = prep.nominal
-    for up in plan.closure:                   # latest robot handed on upstream
-        if up in handed_robot:
-            robot = handed_robot[up]
-    try:
-        staging = stage_io.new_stage_dir(run_dir, plan.name)
-    except OSError as exc:
-        raise _write_error(exc, run_dir) from None
-    # a fresh hidden robot per stage: its sensors draw noise from generators seeded by the run, so a
-    # stage measures the same whether the earlier stages ran in this process or were reused
-    # a recorded stage gets no hidden robot: it simulates nothing
-    real = None if plan.provenance.recorded else _make_real(prep.nominal, cfg)
-    ctx = StageContext(run=cfg, config=plan.config, robot=_copy_robot(robot), real=real,
-                       upstream={u: outputs[u] for u in plan.closure}, out_dir=staging,
-                       rng=stage_rng(cfg.seed, plan.name), progress=prog, provenance=plan.provenance)
-    say(f"{plan.name}: running ({plan.provenance.sentence()})")
-    t0 = time.perf_counter()
-    rejected = run_dir / f"{plan.name}{REJECTED_SUFFIX}"
-    try:
-        result = _check_result(plan.name, plan.module.run(ctx))
-        result.summary["provenance"] = plan.provenance.to_dict()
-        if interrupted():             # the stage swallowed the signal: never commit its result
-            raise KeyboardInterrupt(f"stage {plan.name} interrupted")
-        duration = time.perf_counter() - t0
-        write_stage_result(staging, plan.name, result, plan.inputs_sha256, duration, key, plan.inputs)
-        final = stage_io.commit_stage_dir(staging, run_dir / plan.name)
-    except QualityGateError as exc:
-        if isinstance(exc.result, StageResult):
-            exc.result.summary["provenance"] = plan.provenance.to_dict()
-            try:
-                write_rejected(staging, rejected, plan.name, exc.result, exc.one_line())
-                say(f"{plan.name}: quality gate failed; its result is kept for inspection in {rejected} "
-                    "(not handed on)")
-            except OSError:
-                stage_io.discard_stage_dir(staging)
-        else:
-            stage_io.discard_stage_dir(staging)
-        raise
-    except OSError as exc:
-        stage_io.discard_stage_dir(staging)
-        if exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.EFBIG):
-            raise _write_error(exc, staging) from None
-        raise
-    except BaseException as exc:
-        stage_io.discard_stage_dir(staging)
-        if not isinstance(exc, KeyboardInterrupt) and caused_by_interrupt(exc):
-            raise KeyboardInterrupt(f"stage {plan.name} interrupted") from exc
-        raise
-    stage_io.discard_stage_dir(rejected)       # an older rejected result is out of date now
-    say(f"{plan.name}: done in {duration:.1f} s")
-    # hand on what is on disk (the robot read back exactly): later stages then see the same
-    # inputs whether this stage ran in this process or is reused in another one
-    return load_stage_output(final, verify=False)

@@ -40,7 +40,9 @@ from pipeline.calibration.config import Config as CalibrationConfig
 from pipeline.core import artefacts
 from pipeline.core.config import RunConfig
 from pipeline.run import stage_io
-from pipeline.stage_api import StageOutput, stage_provenance
+from pipeline.run.stages import stage_provenance
+from pipeline.stage_api import StageOutput
+from pipeline.summaries import CalibrationSummary
 
 #: ``auto`` runs the second pass when the gravity model makes up at least this share of the first
 #: pass's predicted held-out error (variance share, calibration summary ``gravity_model_share``):
@@ -87,8 +89,7 @@ def first_pass_root(run_dir: Path) -> Path:
 
 def gravity_share(outputs: dict[str, StageOutput]) -> float | None:
     """The first pass's gravity-model share of the predicted error (None: not predicted)."""
-    value = outputs["calibration"].summary.get("gravity_model_share")
-    return None if value is None else float(value)
+    return CalibrationSummary.read(outputs["calibration"].summary).gravity_model_share
 
 
 def second_pass_config(cfg: RunConfig, outputs: dict[str, StageOutput], run_dir: Path,
@@ -97,7 +98,7 @@ def second_pass_config(cfg: RunConfig, outputs: dict[str, StageOutput], run_dir:
     when ``auto`` finds the gravity model's share below :data:`GRAVITY_SHARE_FOR_SECOND_PASS`.
     ``write=False`` (``check``) names the first pass's robot folder itself: the same content,
     hence the same inputs hash (the runner hashes the gravity model's files, not its path)."""
-    cal = cfg.sections["calibration"]
+    cal = cfg.section("calibration", CalibrationConfig)
     share = gravity_share(outputs)
     if cal.second_pass == "auto" and (share is None or share < GRAVITY_SHARE_FOR_SECOND_PASS):
         return None

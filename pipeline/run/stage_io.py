@@ -36,18 +36,16 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 import pipeline
 from pipeline.core import artefacts
 from pipeline.core import config as config_mod
 from pipeline.core.config import to_plain
 from pipeline.core.errors import PipelineError
 from pipeline.core.forks import fork_map
-from pipeline.core.yaml12 import load_yaml
+from pipeline.core.yaml12 import YAMLError, load_yaml
 from pipeline.robot.exact import load_exact_robot, save_exact_robot
 from pipeline.robot.model import RobotModel
-from pipeline.stage_api import PROVENANCE_FILE, Provenance, StageOutput, StageResult
+from pipeline.stage_api import PROVENANCE_FILE, RECORDED, SIMULATED, Provenance, StageOutput, StageResult
 
 SUMMARY = "summary.json"
 RESULTS_NPZ = "results.npz"
@@ -227,7 +225,7 @@ def _config_run_key(path: Path) -> str | None:
         return None
     try:
         data = load_yaml(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+    except (OSError, UnicodeDecodeError, YAMLError) as exc:
         raise PipelineError(path, None, f"cannot read ({' '.join(str(exc).split())})") from None
     if not isinstance(data, Mapping):
         raise PipelineError(path, None, "not a run configuration")
@@ -314,10 +312,38 @@ def inputs_hash(
     return hashlib.sha256(artefacts.stable_json(payload).encode()).hexdigest()
 
 
+#: the stages that measure the arm (tracker readings, joint torques): recorded from one arm or
+#: simulated on the hidden robot
+MEASURING_STAGES = ("calibration", "identification")
+
+
+def combined_arms(stages: Mapping[str, Provenance]) -> str:
+    """One sentence when a planned stage combines a recorded measurement of the arm with a simulated
+    one of the hidden robot (two different arms: e.g. a simulated identification starting from a
+    recorded calibration's kinematics, or a control stage using a simulated calibration and a
+    recorded identification), else "". A stage's own measurement and those of its upstream
+    :data:`MEASURING_STAGES` are compared."""
+    combining = []
+    for name, record in stages.items():
+        measured = {n: stages[n] for n in (*record.upstream, name) if n in MEASURING_STAGES and n in stages
+                    and (stages[n].recorded or stages[n].simulated)}
+        if {p.kind for p in measured.values()} >= {RECORDED, SIMULATED}:
+            combining.append((name, measured))
+    if not combining:
+        return ""
+    _, measured = combining[0]
+    what = ", ".join(f"{n} is {p.label()}" for n, p in measured.items())
+    return (f"two different arms combined: {what}; {', '.join(n for n, _ in combining)} "
+            f"{'uses' if len(combining) == 1 else 'use'} both, so its figures mix the arm measured with the "
+            "simulated robot (record both stages from the same arm, or simulate both)")
+
+
 def write_provenance(run_dir: Path, stages: Mapping[str, Provenance], second_pass: str) -> Path:
-    """``<run>/provenance.json``: each planned stage's provenance and whether the second calibration
-    pass ran, and why (rewritten only when it changes)."""
-    record = {"stages": {name: p.to_dict() for name, p in stages.items()}, "second_pass": second_pass}
+    """``<run>/provenance.json``: each planned stage's provenance, whether two different arms are
+    combined (:func:`combined_arms`) and whether the second calibration pass ran, and why (rewritten
+    only when it changes)."""
+    record = {"stages": {name: p.to_dict() for name, p in stages.items()}, "arms_combined": combined_arms(stages),
+              "second_pass": second_pass}
     path = Path(run_dir) / PROVENANCE_FILE
     try:
         if artefacts.read_json(path) == record:

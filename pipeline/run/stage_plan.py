@@ -1,8 +1,8 @@
 """The stage plan of a run: the selected stages and their upstream stages, in registry order.
 
-A stage module exposes ``NAME``, ``DEPENDS``, ``Config``, ``run`` and optionally ``check`` and
-``CONFIG_READS`` (:mod:`pipeline.run.runner`). A stage the robot cannot run (e.g. calibration
-without a tracker) is left out with its reason (:func:`unavailable_stages`).
+A stage module defines the names of :class:`pipeline.stage_api.StageModule` (the stages:
+:mod:`pipeline.run.stages`); :func:`check_stage_module` checks them at run time. A stage the robot
+cannot run (e.g. calibration without a tracker) is left out with its reason (:func:`unavailable_stages`).
 
 Provenance (:class:`~pipeline.stage_api.Provenance`): a stage whose ``RECORDED_INPUT`` field names
 a file is *recorded*, one that declares ``SIMULATES`` is *simulated* otherwise, the others read the
@@ -16,21 +16,25 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from types import ModuleType
 from typing import Any
 
 from pipeline.core import config as config_mod
 from pipeline.core.config import RunConfig
 from pipeline.core.errors import ConfigError, PipelineError
+from pipeline.core.typed_config import file_input_fields
 from pipeline.robot.iso_search import POSE_AXES
 from pipeline.robot.model import RobotModel
-from pipeline.stage_api import ROBOT_FILES, Provenance, own_provenance, stage_config
+from pipeline.run.stages import load_stage_module, stage_config, stage_names
+from pipeline.stage_api import ROBOT_FILES, Provenance, StageModule, declared, own_provenance
+
+#: most axes the control and trajectory stages plan for (6 for a pose, one redundant axis)
+MAX_PLANNED_AXES = 7
 
 
 @dataclass
 class Plan:
     name: str
-    module: ModuleType
+    module: StageModule
     config: Any                   # Any: the stage's own Config dataclass instance (one type per stage)
     depends: tuple[str, ...]
     closure: list[str]            # all upstream stages (transitive), in run order
@@ -39,24 +43,36 @@ class Plan:
     provenance: Provenance = field(default_factory=lambda: Provenance(ROBOT_FILES, ""))
 
 
-def _check_stage_module(name: str, module: ModuleType) -> None:
+def check_stage_module(name: str, module: StageModule) -> None:
+    """The names of :class:`~pipeline.stage_api.StageModule` as a stage module defines them: the
+    required ones there, the optional ones of the right type, ``RECORDED_INPUT`` a ``FileInput``
+    field of its ``Config`` (a renamed field is an error, not a silently simulated stage)."""
     where = str(getattr(module, "__file__", None) or f"stage {name}")
     for attr in ("NAME", "DEPENDS", "Config", "run"):
         if not hasattr(module, attr):
             raise PipelineError(where, attr, f"stage {name!r} does not define {attr}")
     if module.NAME != name:
         raise PipelineError(where, "NAME", f"is {module.NAME!r}, registered as {name!r}")
-    reads = getattr(module, "CONFIG_READS", ())
+    reads = declared(module, "CONFIG_READS")
     if not isinstance(reads, (tuple, list)) or not all(isinstance(r, str) and r for r in reads):
         raise PipelineError(where, "CONFIG_READS", f"expected a tuple of dotted setting names, got {reads!r}")
     for attr in ("RECORDED_INPUT", "SIMULATES"):
-        value = getattr(module, attr, "")
+        value = declared(module, attr)
         if not isinstance(value, str):
             raise PipelineError(where, attr, f"expected a string, got {value!r}")
+    recorded = declared(module, "RECORDED_INPUT")
+    if recorded and recorded not in file_input_fields(module.Config):
+        raise PipelineError(where, "RECORDED_INPUT", f"{recorded!r} is not a field of {module.Config.__name__} "
+                            "annotated Annotated[..., FileInput]")
+    for attr in ("check", "warm_up"):
+        value = declared(module, attr)
+        if value is not None and not callable(value):
+            raise PipelineError(where, attr, f"expected a function or None, got {value!r}")
+    sections = config_mod.section_names()
     for dotted in reads:
-        if dotted.split(".")[0] not in config_mod.section_names():
+        if dotted.split(".")[0] not in sections:
             raise PipelineError(where, "CONFIG_READS", f"{dotted!r} is not in a section of the run "
-                                f"configuration (sections: {', '.join(config_mod.section_names())})")
+                                f"configuration (sections: {', '.join(sections)})")
 
 
 def unavailable_stages(robot: RobotModel) -> dict[str, str]:
@@ -72,7 +88,24 @@ def unavailable_stages(robot: RobotModel) -> dict[str, str]:
         for stage, path in (("control", "the ISO 9283 path"), ("trajectory", "the CP path")):
             out[stage] = (f"robot {robot.name!r} has {robot.nq} axes: {path} holds a 6-D tool pose, which needs "
                           f"at least {POSE_AXES}; run the stages model, calibration, identification")
+    elif robot.nq > MAX_PLANNED_AXES:
+        for stage, what in (("control", "the ISO 9283 path's joint reference"), ("trajectory", "the CP path and "
+                                                                                  "the point-to-point move")):
+            out[stage] = (f"robot {robot.name!r} has {robot.nq} axes: {what} is solved for at most "
+                          f"{MAX_PLANNED_AXES} (one redundant axis, resolved by the IK seeds); run the stages "
+                          "model, calibration, identification")
     return out
+
+
+def stages_line(robot: RobotModel) -> str:
+    """One line naming the stages ``robot`` can run and those it cannot (why), or "" when all can."""
+    unavailable = unavailable_stages(robot)
+    if not unavailable:
+        return ""
+    can = [n for n in stage_names() if n not in unavailable]
+    reasons = "; ".join(dict.fromkeys(r.split(": ", 1)[-1].split("; run the stages")[0] for r in unavailable.values()))
+    return (f"{robot.name}: {robot.nq} axes: stages {', '.join(can)} run; {', '.join(unavailable)} do not "
+            f"({reasons})")
 
 
 def _left_out_note(name: str, left_out: Sequence[str], depends: Sequence[str]) -> str:
@@ -93,13 +126,13 @@ def plan_stages(cfg: RunConfig, unavailable: Mapping[str, str] | None = None) ->
         for name in cfg.stages:
             if name in unavailable:
                 raise ConfigError(cfg.origins["stages"], "stages", f"{name}: {unavailable[name]}")
-    order = config_mod.stage_names()
-    modules: dict[str, ModuleType] = {}
+    order = stage_names()
+    modules: dict[str, StageModule] = {}
 
-    def module_of(name: str) -> ModuleType:
+    def module_of(name: str) -> StageModule:
         if name not in modules:
-            modules[name] = config_mod.load_stage_module(name)
-            _check_stage_module(name, modules[name])
+            modules[name] = load_stage_module(name)
+            check_stage_module(name, modules[name])
         return modules[name]
 
     own: dict[str, Provenance] = {}

@@ -16,6 +16,11 @@ output directory on a shared file system. A run is a pure function of its config
 random number comes from a generator seeded by it, :func:`pipeline.stage_api.stage_rng`), so the
 table does not depend on where the runs went, apart from wall-clock timings.
 
+A sweep runs the stages asked for (``stages``) and their upstream stages only: when these hold
+calibration but not identification, its points set ``calibration.second_pass: never`` (unless the
+sweep sets it), since the second pass's first pass runs identification, whose gates would then fail
+a calibration row (the setting is in each run's ``config.yaml``).
+
 Every configuration is loaded (and so validated) before the first run starts: bad input is one
 :class:`~pipeline.core.errors.PipelineError` and nothing is written. A run that fails with a
 ``PipelineError`` (e.g. a quality gate) becomes a row with that one-line error as its ``status``.
@@ -30,13 +35,13 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import yaml
-
-from pipeline.core.config import REPO_ROOT, load_config, parse_set
+from pipeline.core.config import REPO_ROOT, RunConfig, load_config, parse_set
 from pipeline.core.dispatch import map_tasks
 from pipeline.core.errors import ConfigError, PipelineError
 from pipeline.core.progress import Progress
+from pipeline.core.yaml12 import dump_yaml
 from pipeline.run.runner import run_pipeline
+from pipeline.run.stage_plan import plan_stages
 from pipeline.run.sweep_table import Cell, Row, flatten_summary, write_outputs
 
 __all__ = ["SweepPoint", "SweepSpec", "parse_seeds", "parse_vary", "grid", "run_point", "run_sweep",
@@ -95,7 +100,7 @@ def parse_vary(items: Sequence[str]) -> dict[str, list[Cell]]:
 
 
 def _yaml_value(value: Cell) -> str:
-    return yaml.safe_dump(value, default_flow_style=True).strip().removesuffix("...").strip()
+    return dump_yaml(value, flow=True).strip()
 
 
 def _point_name(robot: str, seed: int, k: int | None) -> str:
@@ -116,6 +121,9 @@ def grid(spec: SweepSpec) -> list[SweepPoint]:
                 base = [*spec.overrides, f"seed={seed}"] + ([f"robot={robot}"] if robot else [])
                 base += [f"{key}={_yaml_value(v)}" for key, v in varied]
                 cfg = load_config(config_path, base, spec.stages)      # validates (PipelineError)
+                if spec.stages and _first_pass_not_asked_for(cfg):
+                    base.append(f"{SECOND_PASS_KEY}=never")
+                    cfg = load_config(config_path, base, spec.stages)
                 robot_name = Path(str(cfg.robot)).name
                 name = _point_name(robot_name, seed, k if spec.vary else None)
                 points.append(SweepPoint(name=name, robot=robot_name, seed=seed, varied=varied,
@@ -125,6 +133,17 @@ def grid(spec: SweepSpec) -> list[SweepPoint]:
     if len(set(names)) != len(names):
         raise ConfigError("--robots", ",".join(str(r) for r in spec.robots), "the same robot twice in the grid")
     return points
+
+
+#: the setting of the second calibration pass, whose first pass runs identification (pipeline.run.second_pass)
+SECOND_PASS_KEY = "calibration.second_pass"
+
+
+def _first_pass_not_asked_for(cfg: RunConfig) -> bool:
+    """Whether the planned stages hold calibration but not identification, and the second pass is
+    not set: the runner's first pass would run identification too, and its gates could fail the row."""
+    planned = {p.name for p in plan_stages(cfg)}
+    return "calibration" in planned and "identification" not in planned and SECOND_PASS_KEY not in cfg.field_origins
 
 
 def run_point(point: SweepPoint) -> Row:

@@ -42,6 +42,7 @@ from pipeline.core.casadi_buffers import BufferedFunction
 from pipeline.sim import dynamics, elastic_dynamics
 from pipeline.sim.dynamics import ChainStructure
 from pipeline.sim.elastic_dynamics import TRANSMISSION_PARAMS_PER_JOINT
+from pipeline.sim.servo_law import CascadeState, ServoLaw
 
 
 @dataclass(frozen=True)
@@ -243,7 +244,8 @@ def rollout(ls: LoopStructure, x0: np.ndarray, U: np.ndarray, P: np.ndarray) -> 
 
 def python_rollout(ls: LoopStructure, model: pin.Model, p_dyn: np.ndarray, x0: np.ndarray, U: np.ndarray,
                    P: np.ndarray, friction) -> tuple[np.ndarray, np.ndarray]:
-    """The same loop as a plain Python loop with ``pin.aba`` (baseline for the speed-up and tests).
+    """The same loop as a plain Python loop with ``pin.aba`` and :class:`~pipeline.sim.servo_law.ServoLaw`
+    (baseline for the speed-up and tests).
 
     ``friction(v, load)`` is the plant's friction torque; ``U`` is (samples x n_input). For an elastic
     loop ``model`` is the link chain without rotor inertia and ``P`` ends with the transmission numbers.
@@ -258,30 +260,24 @@ def python_rollout(ls: LoopStructure, model: pin.Model, p_dyn: np.ndarray, x0: n
     h = Tv / ns
     data = model.createData()
     x = np.array(x0, float)
-    q, v, integ, q_prev, v_hat = (x[i * n:(i + 1) * n].copy() for i in range(5))
-    buf = [x[(5 + i) * n:(6 + i) * n].copy() for i in range(dm)]
+    q, v = x[:n].copy(), x[n:2 * n].copy()
+    state = CascadeState(x[2 * n:3 * n].copy(), x[3 * n:4 * n].copy(), x[4 * n:5 * n].copy(),
+                         [x[(5 + i) * n:(6 + i) * n].copy() for i in range(dm)])
+    law = ServoLaw(kp, kv, ki, alpha, res, Tv, effort)
     th, w = (x[(5 + dm + i) * n:(6 + dm + i) * n].copy() for i in range(2)) if ls.elastic else (q, v)
     tr = P[npd + 3 * n + 3:].reshape(n, TRANSMISSION_PARAMS_PER_JOINT) if ls.transmission else None
     Y = np.empty((len(U), ls.n_output))
     for k, u in enumerate(U):
         q_start, th_start = q.copy(), th.copy()
         noise = [u[(1 + 2 * nv_ + j) * n:(2 + 2 * nv_ + j) * n] for j in range(nv_)]
-        q_enc0 = np.floor(((th if ls.elastic else q) + noise[0]) / res + 0.5) * res
-        q_fb = buf[0] if dm > 0 else q_enc0
-        e_p = kp * (u[:n] - q_fb)
+        q_enc0 = law.encoder(th if ls.elastic else q, noise[0])
+        e_p = law.position_error(state, u[:n], q_enc0)
         tau_sum = np.zeros(n)
         ratio = np.zeros(n)
         for j in range(nv_):
-            q_enc = q_enc0 if j == 0 else np.floor(((th if ls.elastic else q) + noise[j]) / res + 0.5) * res
-            v_hat = v_hat + alpha * ((q_enc - q_prev) / Tv - v_hat)
-            q_prev = q_enc
-            e_v = u[(1 + j) * n:(2 + j) * n] + e_p - v_hat
-            tau_ff_j = u[(1 + nv_ + j) * n:(2 + nv_ + j) * n]
-            integ_new = np.clip(integ + ki * Tv * e_v, -effort, effort)
-            tau_new = tau_ff_j + kv * e_v + integ_new
-            hold = (np.abs(tau_new) > effort) & (e_v * tau_new > 0)
-            integ = np.where(hold, integ, integ_new)
-            tau_cmd = tau_ff_j + kv * e_v + integ
+            q_enc = q_enc0 if j == 0 else law.encoder(th if ls.elastic else q, noise[j])
+            v_ff_j, tau_ff_j = u[(1 + j) * n:(2 + j) * n], u[(1 + nv_ + j) * n:(2 + nv_ + j) * n]
+            tau_cmd = law.velocity_step(state, q_enc, v_ff_j, tau_ff_j, e_p)
             tau_sum += tau_cmd
             ratio = np.maximum(ratio, np.abs(tau_cmd) / effort)
             tau_sat = np.clip(tau_cmd, -effort, effort)
@@ -297,7 +293,7 @@ def python_rollout(ls: LoopStructure, model: pin.Model, p_dyn: np.ndarray, x0: n
                     a = pin.aba(model, data, q, v, tau_sat - friction(v, tau_sat))
                     v = v + h * a
                     q = q + h * v
-        if dm > 0:
-            buf = [*buf[1:], q_enc0]
-        Y[k] = np.concatenate([q_enc0, v_hat, tau_sum / nv_, ratio, q_start, *([th_start] if ls.elastic else [])])
-    return np.concatenate([q, v, integ, q_prev, v_hat, *buf, *([th, w] if ls.elastic else [])]), Y
+        law.end_sample(state, q_enc0)
+        Y[k] = np.concatenate([q_enc0, state.v_hat, tau_sum / nv_, ratio, q_start, *([th_start] if ls.elastic else [])])
+    return np.concatenate([q, v, state.integral_Nm, state.q_enc_prev, state.v_hat, *state.buffer,
+                           *([th, w] if ls.elastic else [])]), Y

@@ -94,8 +94,11 @@ class LaserTracker(LinkSideSensor):
 
     def __init__(self, robot: RobotModel, transform_tracker_to_base: pin.SE3,
                  link_angles: Callable[[np.ndarray, Payload | None], np.ndarray] | None = None,
-                 gross: GrossErrors | None = None) -> None:
+                 gross: GrossErrors | None = None,
+                 reflector_positions: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
         self._robot = robot
+        #: where the reflector is at link angles Q (N, 3), base frame; default the robot model's kinematics
+        self._reflector_positions = reflector_positions
         self._transform_tracker_to_base = transform_tracker_to_base
         self._link_angles = link_angles
         self._gross = gross if gross is not None else GrossErrors()
@@ -119,7 +122,8 @@ class LaserTracker(LinkSideSensor):
         """
         Q = self._link(Q, payload)
         vis = tracker_visibility(self._robot, self._transform_tracker_to_base, Q)
-        positions_base = self._robot.positions(Q, self._robot.frame_reflector)
+        positions_base = (self._robot.positions(Q, self._robot.frame_reflector) if self._reflector_positions is None
+                          else self._reflector_positions(Q))
         base_to_tracker = self._transform_tracker_to_base.inverse()
         positions = positions_base @ base_to_tracker.rotation.T + base_to_tracker.translation
         sigma = self.noise_const_m + self.noise_per_m * vis.range_m

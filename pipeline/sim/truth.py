@@ -36,7 +36,7 @@ Stage code may use only :attr:`RealRobot.tracker`, :attr:`RealRobot.encoders`,
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pinocchio as pin
@@ -59,6 +59,8 @@ from pipeline.sim.transmission import Transmission, create_transmission
 
 #: fixed salt so the truth stream is independent of every stage's stream
 _TRUTH_SALT = 0x74727574
+#: engines of the hidden arm (TruthConfig.engine)
+ENGINES = ("pipeline", "mujoco")
 #: fixed-point iterations of the load-dependent friction in the measured torque (error ~ (mu F_c/tau_max)^k)
 _LOAD_ITERATIONS = 5
 
@@ -100,6 +102,9 @@ class TruthConfig:
     stribeck_velocity_rad_s: float = 0.05   # joint side (a few rad/s on the motor through a gear of 50-100)
     coulomb_load_coefficient: float = 0.1   # Coulomb grows by this fraction at rated load (Bittencourt 2012)
     joint_damping_ratio: float = 0.05       # of the motor-link resonance (structural damping of gears: a few %)
+    #: the engine of the hidden arm: "pipeline" (this module's own plant) or "mujoco" (the same deviations
+    #: in a MuJoCo model, :mod:`pipeline.sim.mujoco_robot`; no elasticity, Stribeck or transmission error)
+    engine: str = "pipeline"
 
     @classmethod
     def ideal(cls, **overrides: float) -> TruthConfig:
@@ -108,10 +113,14 @@ class TruthConfig:
         fields = dict(joint_compliance_scale=0.0, transmission_error_amplitude_rad=0.0,
                       tracker_outlier_rate=0.0, tracker_stale_rate=0.0,
                       stribeck_excess_relative=0.0, coulomb_load_coefficient=0.0)
-        return cls(**(fields | overrides))
+        return replace(cls(), **(fields | overrides))
 
     def validate(self, source: str = "truth") -> None:
+        if self.engine not in ENGINES:
+            raise ConfigError(source, "truth.engine", f"one of {', '.join(ENGINES)}, got {self.engine!r}")
         for name, value in vars(self).items():
+            if name == "engine":
+                continue
             if not isinstance(value, int | float) or not np.isfinite(value) or value < 0:
                 raise ConfigError(source, f"truth.{name}", f"must be a non-negative number, got {value!r}")
         for name in ("tracker_outlier_rate", "tracker_stale_rate"):
@@ -191,7 +200,7 @@ class RealRobot:
                                 if transform_camera_to_base is not None else None)
         self.encoders = Encoders(config.encoder_noise_rad)
         self.torque_sensor = TorqueSensor(config.torque_noise_fraction_of_limit * truth.limits.effort_Nm)
-        self._plant = None
+        self._plant: Plant | None = None
         self._transmission: Transmission | None = None
 
     @classmethod

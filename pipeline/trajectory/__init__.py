@@ -5,7 +5,7 @@ Public API (paper 004 section 5, DESIGN.md "Trajectories"):
 * :class:`~pipeline.trajectory.dynamics.PlanningModel` ``.from_robot(robot, torque_reserve)``
 * CP: :func:`~pipeline.trajectory.design.joint_path_from_cartesian`,
   :func:`~pipeline.trajectory.cp.solve_cp_convex`, :func:`~pipeline.trajectory.cp.solve_cp_refined`,
-  :func:`~pipeline.trajectory.cp.solve_cp_smooth`, :func:`~pipeline.trajectory.solve.plan_cp`
+  :func:`~pipeline.trajectory.cp_smooth.solve_cp_smooth`, :func:`~pipeline.trajectory.solve.plan_cp`
 * PtP: :class:`~pipeline.trajectory.ptp.PtpProblem` (compiled once, disk cache),
   :func:`~pipeline.trajectory.solve.plan_ptp`, :func:`~pipeline.trajectory.solve.solve_ptp_verified`
 * baselines: :func:`~pipeline.trajectory.baselines.toppra_cp`,

@@ -3,14 +3,19 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Literal, get_args
 
-from pipeline.core.config_checks import check_choice, check_count, check_number, check_vector
+from pipeline.core.config_checks import check_count, check_number, check_vector
 from pipeline.core.errors import ConfigError, Source
-from pipeline.robot.iso9283 import ISO_PLANES
+from pipeline.core.typed_config import check_choices
+from pipeline.robot.iso9283 import IsoPlane
 
-CP_SEGMENTS = ("line", "circle_large", "circle_small", "spline")   # smooth pieces of the ISO path, or a spline
-PTP_ENERGIES = ("torque", "normalised", "electrical")
-CP_METHODS = ("reachability", "nlp")
+CpSegment = Literal["line", "circle_large", "circle_small", "spline"]   # smooth pieces of the ISO path, or a spline
+PtpEnergy = Literal["torque", "normalised", "electrical"]
+CpMethod = Literal["reachability", "nlp"]
+CP_SEGMENTS: tuple[CpSegment, ...] = get_args(CpSegment)
+PTP_ENERGIES: tuple[PtpEnergy, ...] = get_args(PtpEnergy)
+CP_METHODS: tuple[CpMethod, ...] = get_args(CpMethod)
 MIN_GRID = 6                                                        # smallest grid / interval count
 MAX_CHECK_DT_S = 5e-4                                               # torques are checked at least this often
 
@@ -24,21 +29,21 @@ class TrajectoryConfig:
     # false: torque and speed limits only (the time-optimal studies of paper 004 section 5)
     acceleration_limits: bool = True
     # --- continuous path (CP): one smooth piece of the EN ISO 9283 path (DESIGN.md) ---------
-    cp_segment: str = "circle_large"          # line | circle_large | circle_small | spline
+    cp_segment: CpSegment = "circle_large"
     # spline: a cubic spline through these TCP points (base frame, metres; >= 3), the tool
     # orientation as on the ISO path (z axis down); the ISO fields below are then unused
     cp_points_m: list[list[float]] = field(default_factory=list)
     # ISO cube edge L and centre; None = derived from the robot (pipeline.robot.defaults.iso_cube)
     cp_edge_m: float | None = None
     cp_centre_m: list[float] | None = None
-    cp_plane: str = "diagonal_x"
+    cp_plane: IsoPlane = "diagonal_x"
     cp_ik_points: int = 200                   # IK samples of the Cartesian path
     cp_ik_seed_deg: list[float] | None = None  # None = the robot's ready pose (pipeline.robot.defaults)
     cp_max_ik_step_deg: float = 15.0          # larger jumps between IK samples = branch change
     cp_n_grid: int = 400                      # path grid (toppra uses the same grid)
     # reachability: TOPP-RA with the full friction model (pipeline/trajectory/reachability.py, fast);
     # nlp: the convex problem + IPOPT refinement (pipeline/trajectory/cp.py, the reference)
-    cp_method: str = "reachability"
+    cp_method: CpMethod = "reachability"
     cp_torque_margin: float = 0.0             # relative tightening of torque limits in the refinement
     cp_smooth: bool = True
     cp_smooth_intervals: int = 120
@@ -51,7 +56,7 @@ class TrajectoryConfig:
     ptp_n_intervals: int = 50
     ptp_k1: float = 1.0
     ptp_k2: float = 0.01
-    ptp_energy: str = "normalised"            # torque | normalised | electrical
+    ptp_energy: PtpEnergy = "normalised"
     ptp_pareto_k2: list[float] = field(default_factory=lambda: [0.003, 0.01, 0.03, 0.1, 0.3, 1.0, 3.0])
     ptp_jit: bool = True
     ptp_jit_flags: list[str] = field(default_factory=lambda: ["-O1"])   # gcc optimisation of the NLP code
@@ -94,7 +99,7 @@ class TrajectoryConfig:
         check_number(s, name("torque_reserve"), self.torque_reserve, ge=0, lt=1,
                      why=" (share of each torque limit kept for the feedback controller)")
         # --- CP
-        check_choice(s, name("cp_segment"), self.cp_segment, CP_SEGMENTS)
+        check_choices(self, "trajectory", s)
         if not isinstance(self.cp_points_m, (list, tuple)):
             raise ConfigError(s, name("cp_points_m"),
                               f"expected a list of [x, y, z] points (m), got {self.cp_points_m!r}")
@@ -112,13 +117,11 @@ class TrajectoryConfig:
             check_number(s, name("cp_edge_m"), self.cp_edge_m, gt=0, unit="m")
         if self.cp_centre_m is not None:
             check_vector(s, name("cp_centre_m"), self.cp_centre_m, 3, "m")
-        check_choice(s, name("cp_plane"), self.cp_plane, ISO_PLANES)
         check_count(s, name("cp_ik_points"), self.cp_ik_points, MIN_GRID)
         if self.cp_ik_seed_deg is not None:
             check_vector(s, name("cp_ik_seed_deg"), self.cp_ik_seed_deg, unit="deg", nonempty=True)
         check_number(s, name("cp_max_ik_step_deg"), self.cp_max_ik_step_deg, gt=0, unit="deg")
         check_count(s, name("cp_n_grid"), self.cp_n_grid, MIN_GRID)
-        check_choice(s, name("cp_method"), self.cp_method, CP_METHODS)
         check_number(s, name("cp_torque_margin"), self.cp_torque_margin, ge=0, lt=1,
                      why=" (relative tightening of the torque limits)")
         check_count(s, name("cp_smooth_intervals"), self.cp_smooth_intervals, MIN_GRID)
@@ -140,7 +143,6 @@ class TrajectoryConfig:
         check_count(s, name("ptp_n_intervals"), self.ptp_n_intervals, MIN_GRID)
         check_number(s, name("ptp_k1"), self.ptp_k1, ge=0, why=" (weight of the duration)")
         check_number(s, name("ptp_k2"), self.ptp_k2, gt=0, why=" (weight of the energy)")
-        check_choice(s, name("ptp_energy"), self.ptp_energy, PTP_ENERGIES)
         check_vector(s, name("ptp_pareto_k2"), self.ptp_pareto_k2, gt=0)    # empty: no Pareto sweep
         if not isinstance(self.ptp_jit_flags, (list, tuple)):
             raise ConfigError(s, name("ptp_jit_flags"),
@@ -176,6 +178,3 @@ class TrajectoryConfig:
             raise ConfigError(s, name("acceleration_limits"),
                               f"expected true or false, got {self.acceleration_limits!r}")
 
-
-#: the name every stage package gives its section dataclass (docs/ARCHITECTURE.md "Stage skeleton")
-Config = TrajectoryConfig

@@ -42,7 +42,7 @@ from pipeline.trajectory.reachability import solve_cp_reachability
 from pipeline.trajectory.settling import time_scaled
 from pipeline.trajectory.solve import CPPlan
 from pipeline.trajectory.trajectories import JointTrajectory, TorqueCheck, check_trajectory
-from pipeline.trajectory.validate import simulate_on_real
+from pipeline.trajectory.validate import ServoRun, simulate_on_real
 
 #: servo runs per remedy (slowing or re-solving) before it is given up
 SERVO_ROUNDS = 6
@@ -56,7 +56,7 @@ class ExecutableCP:
 
     name: str
     trajectory: JointTrajectory
-    sim: dict
+    sim: ServoRun
     candidates: dict[str, dict] = field(default_factory=dict)
 
     def summary(self, optimal_duration_s: float) -> dict:
@@ -82,28 +82,29 @@ class ExecutableCP:
         return "\n".join(lines)
 
 
-def averaged_ratio_per_joint(sim: dict) -> np.ndarray:
+def averaged_ratio_per_joint(sim: ServoRun) -> np.ndarray:
     """Per joint: the 4 ms mean command over the full limit (``simulate_on_real``)."""
-    return np.asarray(sim["max_averaged_torque_ratio_per_joint"], float)
+    return np.asarray(sim.max_averaged_torque_ratio_per_joint, float)
 
 
-def to_gate(run: Callable[[float], tuple[JointTrajectory, dict]], first: tuple[JointTrajectory, dict],
-            step: Callable[[float], float], gate: float) -> tuple[JointTrajectory, dict, int]:
+def to_gate(run: Callable[[float], tuple[JointTrajectory, ServoRun]], first: tuple[JointTrajectory, ServoRun],
+            step: Callable[[float], float], gate: float) -> tuple[JointTrajectory, ServoRun, int]:
     """Smallest remedy strength ``x`` (``x = 0``: ``first``) whose servo run keeps ``gate``, by regula
     falsi on the 4 ms mean ratio: ``step(ratio)`` proposes the first strength from the measured
     excess, later rounds interpolate between the strongest failing and the weakest passing run,
     aiming ``GATE_AIM`` below the gate. Returns the shortest passing run (else the last) and the
     number of servo runs."""
-    fail_x, fail_r = 0.0, first[1]["max_averaged_torque_ratio"]
+    fail_x, fail_r = 0.0, first[1].max_averaged_torque_ratio
     if fail_r <= gate:
         return first[0], first[1], 0
     best, rounds = None, 0
     x, last = step(fail_r), first
-    pass_x = pass_r = None
+    pass_x: float | None = None
+    pass_r = 0.0                              # the last passing run's ratio, read once pass_x is set
     while rounds < SERVO_ROUNDS:
         last = run(x)
         rounds += 1
-        r = last[1]["max_averaged_torque_ratio"]
+        r = last[1].max_averaged_torque_ratio
         if r <= gate:
             if best is None or last[0].duration_s < best[0].duration_s:
                 best = last
@@ -122,9 +123,9 @@ def to_gate(run: Callable[[float], tuple[JointTrajectory, dict]], first: tuple[J
 
 
 def servo_slowed(real: RealRobot, robot: RobotModel, traj: JointTrajectory, ccfg: ControlConfig, seed: int,
-                 gate: float, first_sim: dict | None = None) -> tuple[JointTrajectory, dict, int]:
+                 gate: float, first_sim: ServoRun | None = None) -> tuple[JointTrajectory, ServoRun, int]:
     """``traj`` slowed in time (``t' = (1 + x) t``) until its 4 ms mean command keeps ``gate``."""
-    def run(x: float) -> tuple[JointTrajectory, dict]:
+    def run(x: float) -> tuple[JointTrajectory, ServoRun]:
         tr = time_scaled(traj, 1.0 + x, traj.name)
         tr.info["servo_time_scale"] = 1.0 + x
         return tr, simulate_on_real(real, robot, tr, ccfg, np.random.default_rng(seed))
@@ -137,13 +138,13 @@ def servo_slowed(real: RealRobot, robot: RobotModel, traj: JointTrajectory, ccfg
 def servo_reserved(real: RealRobot, robot: RobotModel, pm: PlanningModel, path: JointPath, profile: CPProfile,
                    ccfg: ControlConfig,
                    seed: int, gate: float, n_grid: int, fine_dt_s: float,
-                   first_sim: dict) -> tuple[JointTrajectory, dict, int]:
+                   first_sim: ServoRun) -> tuple[JointTrajectory, ServoRun, int]:
     """The time-optimal profile re-solved with the torque limits of the joints over the gate lowered,
     ``scale_j = 1 / (1 + x (r_j - 1))`` with ``r_j`` their 4 ms mean ratio on the time-optimal plan
     (``x = 1``: each by its whole excess), ``x`` by :func:`to_gate`."""
     r0 = np.maximum(averaged_ratio_per_joint(first_sim) / gate, 1.0)
 
-    def run(x: float) -> tuple[JointTrajectory, dict]:
+    def run(x: float) -> tuple[JointTrajectory, ServoRun]:
         scale = 1.0 / (1.0 + x * (r0 - 1.0))
         prof = solve_cp_reachability(pm, path, n_grid, name="cp_reserve", torque_scale=scale,
                                      acceleration_limits=False)
@@ -156,7 +157,7 @@ def servo_reserved(real: RealRobot, robot: RobotModel, pm: PlanningModel, path: 
 
 def executable_cp(real: RealRobot, robot: RobotModel, pm: PlanningModel, cp: CPPlan, ccfg: ControlConfig, seed: int,
                   cfg: TrajectoryConfig,
-                  cp_sim: dict) -> ExecutableCP:
+                  cp_sim: ServoRun) -> ExecutableCP:
     """Measure the remedies (module docstring) and pick the shortest that keeps the servo gate.
 
     ``cp`` is the stage's :class:`~pipeline.trajectory.solve.CPPlan`, ``cp_sim`` the servo simulation
@@ -164,9 +165,9 @@ def executable_cp(real: RealRobot, robot: RobotModel, pm: PlanningModel, cp: CPP
     not chosen; when none keeps it, the one with the lowest ratio is executed (and the stage's gate
     reports it)."""
     gate = cfg.max_sim_averaged_torque_ratio
-    cands: dict[str, tuple[JointTrajectory, dict, int, str]] = {
+    cands: dict[str, tuple[JointTrajectory, ServoRun, int, str]] = {
         "time_optimal": (cp.trajectories["cp"], cp_sim, 0, "as planned")}
-    over = cp_sim["max_averaged_torque_ratio"] > gate
+    over = cp_sim.max_averaged_torque_ratio > gate
     if over:
         tr, sim, rounds = servo_reserved(real, robot, pm, cp.path, cp.optimal, ccfg, seed, gate,
                                          cfg.cp_n_grid, cfg.fine_dt_s, cp_sim)
@@ -178,7 +179,7 @@ def executable_cp(real: RealRobot, robot: RobotModel, pm: PlanningModel, cp: CPP
     if over:
         tr, sim, rounds = servo_slowed(real, robot, cp.trajectories["cp"], ccfg, seed, gate, cp_sim)
         cands["slowed"] = (tr, sim, rounds, f"time-optimal slowed x {tr.info.get('servo_time_scale', 1.0):.3f}")
-    table = {name: {"duration_s": c[0].duration_s, "max_averaged_torque_ratio": c[1]["max_averaged_torque_ratio"],
+    table = {name: {"duration_s": c[0].duration_s, "max_averaged_torque_ratio": c[1].max_averaged_torque_ratio,
                     "rounds": c[2], "what": c[3]} for name, c in cands.items()}
     best = choose(table, gate)
     tr, sim = cands[best][0], cands[best][1]

@@ -24,7 +24,7 @@ from pipeline.trajectory.executable import executable_cp, executed_check
 from pipeline.trajectory.settling import SettleResult, settle_study, time_scaled
 from pipeline.trajectory.solve import CPPlan, PTPPlan
 from pipeline.trajectory.trajectories import JointTrajectory, check_trajectory
-from pipeline.trajectory.validate import simulate_on_real
+from pipeline.trajectory.validate import ServoRun, simulate_on_real
 
 #: rounds of slowing the smooth PtP until the servo simulation keeps the torque limits
 SERVO_SCALING_ROUNDS = 4
@@ -32,10 +32,10 @@ SERVO_SCALING_ROUNDS = 4
 
 @dataclass
 class ServoVerification:
-    """The plans' servo runs by name (:func:`simulate_on_real`'s dicts), the settling runs, the
+    """The plans' servo runs by name (:func:`simulate_on_real`'s records), the settling runs, the
     summary entries they give (in the order the summary lists them) and the executed CP's table."""
 
-    sims: dict[str, dict] = field(default_factory=dict)
+    sims: dict[str, ServoRun] = field(default_factory=dict)
     settle: dict[str, SettleResult] = field(default_factory=dict)
     summary: dict[str, Any] = field(default_factory=dict)
     cp_table: str = ""
@@ -54,7 +54,7 @@ def elastic_of(ctx: StageContext) -> bool:
 
 
 def executable_smooth_ptp(ctx: StageContext, pm: PlanningModel, ptp: PTPPlan, ccfg: ControlConfig, seed: int,
-                          cfg: TrajectoryConfig) -> tuple[JointTrajectory, dict]:
+                          cfg: TrajectoryConfig) -> tuple[JointTrajectory, ServoRun]:
     """The smooth PtP verified in the servo simulation on the real (elastic) arm: while its 4 ms mean
     command exceeds ``max_sim_averaged_torque_ratio`` (the servo's feedback on the ringing joints comes
     on top of the planned torques), slow it down by ``sqrt(excess)`` (inertial torques scale with the
@@ -63,7 +63,7 @@ def executable_smooth_ptp(ctx: StageContext, pm: PlanningModel, ptp: PTPPlan, cc
     base, factor = smooth, 1.0
     sim = simulate_on_real(ctx.real, ctx.robot, smooth, ccfg, np.random.default_rng(seed))
     for _ in range(SERVO_SCALING_ROUNDS):
-        ratio = sim["max_averaged_torque_ratio"] / cfg.max_sim_averaged_torque_ratio
+        ratio = sim.max_averaged_torque_ratio / cfg.max_sim_averaged_torque_ratio
         if ratio <= 1.0:
             break
         factor *= max(1.01, float(np.sqrt(ratio)) * 1.01)
@@ -76,15 +76,15 @@ def executable_smooth_ptp(ctx: StageContext, pm: PlanningModel, ptp: PTPPlan, cc
     return smooth, sim
 
 
-def sim_summary(name: str, sim: dict) -> dict[str, Any]:
+def sim_summary(name: str, sim: ServoRun) -> dict[str, Any]:
     """The summary entries of one plan's servo run."""
-    return {f"{name}_sim_max_torque_ratio": sim["max_torque_ratio"],
-            f"{name}_sim_tcp_error_max_m": sim.get("tcp_error_max_m"),
-            f"{name}_sim_tcp_tracking_error_max_m": sim.get("tcp_tracking_error_max_m"),
-            f"{name}_sim_duration_s": sim["duration_s"],
-            f"{name}_sim_max_feedforward_ratio": sim["max_feedforward_ratio"],
-            f"{name}_sim_max_averaged_torque_ratio": sim["max_averaged_torque_ratio"],
-            f"{name}_sim_feedback_std_ratio": float(max(sim["feedback_std_ratio_per_joint"]))}
+    return {f"{name}_sim_max_torque_ratio": sim.max_torque_ratio,
+            f"{name}_sim_tcp_error_max_m": sim.tcp_error_max_m,
+            f"{name}_sim_tcp_tracking_error_max_m": sim.tcp_tracking_error_max_m,
+            f"{name}_sim_duration_s": sim.duration_s,
+            f"{name}_sim_max_feedforward_ratio": sim.max_feedforward_ratio,
+            f"{name}_sim_max_averaged_torque_ratio": sim.max_averaged_torque_ratio,
+            f"{name}_sim_feedback_std_ratio": float(np.max(sim.feedback_std_ratio_per_joint))}
 
 
 def verify_in_servo(ctx: StageContext, pm: PlanningModel, cp: CPPlan, ptp: PTPPlan) -> ServoVerification:
@@ -117,9 +117,9 @@ def verify_in_servo(ctx: StageContext, pm: PlanningModel, cp: CPPlan, ptp: PTPPl
         out.sims["cp_executed"] = ex.sim
         cp.checks["cp_executed"] = executed_check(pm, ex)
         out.summary.update(ex.summary(cp.optimal.duration_s))
-        out.summary["cp_executed_sim_max_averaged_torque_ratio"] = ex.sim["max_averaged_torque_ratio"]
-        out.summary["cp_executed_sim_max_torque_ratio"] = ex.sim["max_torque_ratio"]
-        out.summary["cp_executed_sim_tcp_error_max_m"] = ex.sim.get("tcp_error_max_m")
+        out.summary["cp_executed_sim_max_averaged_torque_ratio"] = ex.sim.max_averaged_torque_ratio
+        out.summary["cp_executed_sim_max_torque_ratio"] = ex.sim.max_torque_ratio
+        out.summary["cp_executed_sim_tcp_error_max_m"] = ex.sim.tcp_error_max_m
         out.summary["cp_executed_fine_violation"] = cp.checks["cp_executed"].violation
         out.cp_table = ex.table(cp.optimal.duration_s, cfg.max_sim_averaged_torque_ratio)
     return out

@@ -42,6 +42,7 @@ import numpy.typing as npt
 
 from pipeline.core import codegen
 from pipeline.core.errors import InfeasibleError, PipelineError, SolverError
+from pipeline.core.identifiers import casadi_identifier
 from pipeline.core.interrupts import raise_if_interrupted
 from pipeline.robot.symbolic import SymbolicRobot
 from pipeline.trajectory.dynamics import PlanningModel
@@ -249,7 +250,7 @@ class PtpProblem:
                 "ipopt.acceptable_tol": 1e-5, "ipopt.max_iter": 1000,
                 "oracle_options": {"max_num_dir": int(derivative_directions)}}
         opts.update(ipopt_options or {})
-        name = f"ptp_{pm.model.name or 'robot'}_{N}".replace("-", "_").replace(" ", "_")
+        name = casadi_identifier("ptp", pm.model.name or "robot", N)
         self.jit = bool(jit)
         solver = ca.nlpsol(name, "ipopt", nlp, opts)
         self.library_key = nlp_library_key(solver, opts, tuple(jit_flags))   # of the compiled code (jit)

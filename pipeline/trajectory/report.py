@@ -15,6 +15,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from pipeline.robot.model import RobotModel
+from pipeline.robot.plotting import distinct_colors
 from pipeline.trajectory.config import TrajectoryConfig
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.measure import ServoVerification
@@ -119,7 +120,8 @@ def figures(pm: PlanningModel, cfg: TrajectoryConfig, cp: CPPlan, ptp: PTPPlan, 
 def data(cp: CPPlan, ptp: PTPPlan, servo: ServoVerification) -> dict[str, Any]:
     """data.json: the servo runs, settling runs, ruckig's details, solver statuses, the CP solvers' info."""
     sims, settle = servo.sims, servo.settle
-    return {"simulation": sims, "settling": {k: r.summary() for k, r in settle.items()},
+    return {"simulation": {name: s.to_summary() for name, s in sims.items()},
+            "settling": {k: r.summary() for k, r in settle.items()},
             "ruckig": {"jerk_ratio_1_s": ptp.ruckig.jerk_ratio_1_s, **ptp.ruckig.info,
                                            "evaluations": ptp.ruckig.evaluations},
             "solver_status": {"cp": cp.optimal.info.get("solver_status", "reachability (no IPOPT)"),
@@ -168,11 +170,11 @@ def report_markdown(cfg: TrajectoryConfig, summary: dict[str, Any], servo: Servo
                      "torque limits in the servo (4 ms mean); not vouched for, the smooth plan is",
                      summary["ptp_sim_max_averaged_torque_ratio"]))
     for name, s in sims.items():
-        rows.append((f"{name}: simulated max torque ratio (raw / {1e3 * s['average_window_s']:.0f} ms mean / "
+        rows.append((f"{name}: simulated max torque ratio (raw / {1e3 * s.average_window_s:.0f} ms mean / "
                      "feedforward; feedback std), TCP error max [mm]",
-                     f"{s['max_torque_ratio']:.4f} / {s['max_averaged_torque_ratio']:.4f} / "
-                     f"{s['max_feedforward_ratio']:.4f}; {max(s['feedback_std_ratio_per_joint']):.4f}, "
-                     f"{1e3 * s.get('tcp_error_max_m', float('nan')):.3f}"))
+                     f"{s.max_torque_ratio:.4f} / {s.max_averaged_torque_ratio:.4f} / "
+                     f"{s.max_feedforward_ratio:.4f}; {float(np.max(s.feedback_std_ratio_per_joint)):.4f}, "
+                     f"{1e3 * (s.tcp_error_max_m if s.tcp_error_max_m is not None else float('nan')):.3f}"))
     limits = ", ".join(f"{x:.0f}" for x in summary["planning_torque_limits_Nm"])
     report = (f"Dynamics: {summary['dynamics_source']} model; every planner and baseline (CP, toppra, PtP, "
               f"ruckig) plans with the same limits, (1 - torque_reserve) = {1 - cfg.torque_reserve:g} x the "
@@ -186,12 +188,12 @@ def report_markdown(cfg: TrajectoryConfig, summary: dict[str, Any], servo: Servo
         report += "\n\n" + settling_table(list(settle.values())) + "\n\n" + settling_verdict(summary)
     if summary["ptp_pareto"]:
         report += "\n\n" + pareto_table(summary["ptp_pareto"], label)
-    over = {name: s for name, s in sims.items() if s["max_torque_ratio"] > 1.0}
+    over = {name: s for name, s in sims.items() if s.max_torque_ratio > 1.0}
     if over:
         listed = ", ".join(
-            f"{name} {s['max_torque_ratio']:.3f} (feedforward {s['max_feedforward_ratio']:.3f}, "
-            f"{1e3 * s['average_window_s']:.0f} ms mean {s['max_averaged_torque_ratio']:.3f}, feedback std "
-            f"{max(s['feedback_std_ratio_per_joint']):.3f})" for name, s in over.items())
+            f"{name} {s.max_torque_ratio:.3f} (feedforward {s.max_feedforward_ratio:.3f}, "
+            f"{1e3 * s.average_window_s:.0f} ms mean {s.max_averaged_torque_ratio:.3f}, feedback std "
+            f"{float(np.max(s.feedback_std_ratio_per_joint)):.3f})" for name, s in over.items())
         report += (f"\n\n**Warning: not executable within the torque limits.** In the closed-loop simulation of the "
                    f"real robot the drives ask for more than the torque limit ({listed} x the limit). "
                    "The excess over the feedforward (the plan's torques on the model) is feedback torque: where "
@@ -207,9 +209,9 @@ def activity_figure(pm: PlanningModel, traj: JointTrajectory, check: TorqueCheck
     on a time-optimal trajectory at least one of them is at 1 at every instant."""
     fig = Figure(figsize=(8, 5), constrained_layout=True)
     ax1, ax2 = fig.subplots(2, 1, sharex=True)
-    for j in range(pm.nq):
-        ax1.plot(check.t_s, check.tau_Nm[:, j] / pm.effort_Nm[j], lw=0.9, label=f"axis {j + 1}")
-        ax2.plot(traj.t_s, traj.v[:, j] / pm.velocity_rad_s[j], lw=0.9)
+    for j, color in enumerate(distinct_colors(pm.nq)):     # one colour per joint, the same in both panels
+        ax1.plot(check.t_s, check.tau_Nm[:, j] / pm.effort_Nm[j], lw=0.9, color=color, label=f"axis {j + 1}")
+        ax2.plot(traj.t_s, traj.v[:, j] / pm.velocity_rad_s[j], lw=0.9, color=color)
     env = np.maximum(check.torque_ratio.max(axis=1), check.velocity_ratio.max(axis=1))
     ax2.plot(check.t_s, env, "k--", lw=1.0, label="max over torque and speed ratios")
     for ax, lab in ((ax1, "tau / tau_max"), (ax2, "qdot / qdot_max")):
@@ -256,8 +258,8 @@ def comparison_figure(pm: PlanningModel, items: list[tuple[str, JointTrajectory,
     """Max torque ratio over joints against time for several trajectories."""
     fig = Figure(figsize=(8, 3), constrained_layout=True)
     ax = fig.subplots()
-    for name, _, chk in items:
-        ax.plot(chk.t_s, chk.torque_ratio.max(axis=1), lw=0.9, label=f"{name} ({chk.t_s[-1]:.3f} s)")
+    for (name, _, chk), color in zip(items, distinct_colors(len(items)), strict=True):
+        ax.plot(chk.t_s, chk.torque_ratio.max(axis=1), lw=0.9, color=color, label=f"{name} ({chk.t_s[-1]:.3f} s)")
     ax.axhline(1.0, color="grey", lw=0.6)
     ax.set_xlabel("t [s]")
     ax.set_ylabel("max_i |tau_i| / tau_max,i")

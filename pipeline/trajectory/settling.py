@@ -45,6 +45,7 @@ from pipeline.control.validate import (
     settling_time,
 )
 from pipeline.robot.model import RobotModel
+from pipeline.robot.plotting import distinct_colors
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.solve import PTPPlan
@@ -172,8 +173,7 @@ def settling_figure(results: list[SettleResult]) -> Figure:
     the trade-off to choose from."""
     fig = Figure(figsize=(8, 8), constrained_layout=True)
     ax1, ax3, ax2 = fig.subplots(3, 1, gridspec_kw={"height_ratios": [3, 2, 2]})
-    colors = ("tab:red", "tab:blue", "tab:green", "tab:purple", "tab:orange")
-    for r, c in zip(results, colors * 3, strict=False):
+    for r, c in zip(results, distinct_colors(len(results)), strict=True):   # one colour per plan
         ax1.semilogy(r.t_s, np.maximum(r.position_error_m, 1e-7) * 1e6, color=c, lw=0.8,
                      label=f"{r.name}: {r.duration_s:.3f} s + settle {r.settling_time_s:.3f} s")
         ax3.semilogy(r.t_s, np.maximum(r.rotation_error_rad, 1e-7) * 1e3, color=c, lw=0.8, label=r.name)

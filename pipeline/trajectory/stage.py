@@ -34,18 +34,26 @@ from pipeline.robot.defaults import ptp_move_rad
 from pipeline.robot.model import RobotModel
 from pipeline.stage_api import StageContext, StageResult
 from pipeline.trajectory import report
-from pipeline.trajectory.config import Config, TrajectoryConfig
+from pipeline.trajectory.config import TrajectoryConfig
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.measure import ServoVerification, verify_in_servo
+from pipeline.trajectory.ptp_verified import FINE_GRID_ROUNDOFF
 from pipeline.trajectory.settling import add_smooth_ptp, slowed_into_limits
-from pipeline.trajectory.solve import FINE_GRID_ROUNDOFF, CPPlan, PTPPlan, cp_joint_path, plan_cp, plan_ptp, ptp_problem
+from pipeline.trajectory.solve import CPPlan, PTPPlan, cp_joint_path, plan_cp, plan_ptp, ptp_problem
 from pipeline.trajectory.validate import quality_gates
 
 NAME = "trajectory"
-DEPENDS: tuple[str, ...] = ("model", "identification", "control")  # plans are run in the servo simulation
+#: the stage's section (pipeline.stage_api.StageModule)
+Config = TrajectoryConfig
+#: the identified dynamics (and the calibrated kinematics before it); the control stage's results are not read
+DEPENDS: tuple[str, ...] = ("model", "identification")
+#: the plans run in the servo simulation designed from the run's ``control`` section (gains, delays,
+#: rates: :func:`pipeline.trajectory.measure.control_config`), never from the control stage's results
+CONFIG_READS: tuple[str, ...] = ("control",)
 #: provenance (pipeline.run.stage_plan): what is simulated (this stage reads no recorded file)
+RECORDED_INPUT = ""
 SIMULATES = "servo loop on the hidden robot"
-__all__ = ["NAME", "DEPENDS", "SIMULATES", "Config", "check", "warm_up", "run"]
+__all__ = ["NAME", "DEPENDS", "CONFIG_READS", "RECORDED_INPUT", "SIMULATES", "Config", "check", "warm_up", "run"]
 
 
 def check(config: TrajectoryConfig, robot: RobotModel) -> None:
@@ -78,7 +86,7 @@ def warm_up(config: TrajectoryConfig, robot: RobotModel) -> None:
         ptp_problem(PlanningModel.from_robot(robot, config.torque_reserve), robot, config)
 
 
-def run(ctx: StageContext) -> StageResult:
+def run(ctx: StageContext[TrajectoryConfig]) -> StageResult:
     cfg: TrajectoryConfig = ctx.config
     pm = PlanningModel.from_robot(ctx.robot, cfg.torque_reserve)
     ptp_timings: dict[str, float] = {}

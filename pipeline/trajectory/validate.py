@@ -4,6 +4,7 @@ grid and in the servo simulation, IPOPT statuses). Figures: :mod:`pipeline.traje
 
 from __future__ import annotations
 
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -18,9 +19,44 @@ from pipeline.trajectory.solve import CPPlan, PTPPlan
 from pipeline.trajectory.trajectories import JointTrajectory
 
 
+@dataclass(frozen=True)
+class ServoRun:
+    """One plan's run in the servo simulation of the real robot (:func:`simulate_on_real`).
+
+    Torque ratios are ``|tau| / tau_max`` with the full limits (no reserve); the ``*_per_joint``
+    arrays have one entry per joint. The TCP errors are ``None`` when the simulation has no TCP
+    (``tcp_tracking_*`` also when the plant has no tracker)."""
+
+    duration_s: float
+    max_torque_ratio: float
+    max_torque_ratio_per_joint: np.ndarray
+    max_feedforward_ratio: float
+    max_averaged_torque_ratio: float
+    max_averaged_torque_ratio_per_joint: np.ndarray
+    average_window_s: float
+    feedback_std_ratio_per_joint: np.ndarray
+    feedback_max_ratio_per_joint: np.ndarray
+    lag_error_max_rad: float
+    realtime_factor: float
+    tcp_error_max_m: float | None = None
+    tcp_error_rms_m: float | None = None
+    tcp_tracking_error_max_m: float | None = None
+    tcp_tracking_error_rms_m: float | None = None
+
+    def to_summary(self) -> dict[str, Any]:
+        """The run as a summary entry: arrays as lists, TCP errors only when measured."""
+        out: dict[str, Any] = {}
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if value is None:
+                continue
+            out[f.name] = value.tolist() if isinstance(value, np.ndarray) else value
+        return out
+
+
 def simulate_on_real(real: Any, robot: RobotModel, traj: JointTrajectory,  # Any: the simulated hidden robot
                      control_config: ControlConfig | None = None,
-                     rng: np.random.Generator | None = None, average_window_s: float = 4e-3) -> dict:
+                     rng: np.random.Generator | None = None, average_window_s: float = 4e-3) -> ServoRun:
     """Run ``traj`` through ``pipeline.control.simulate.simulate_joint_trajectory`` (cascade with
     full-friction feedforward from ``robot``) and report duration, max torque ratio and the TCP
     error of the (ideal-tracker) measured TCP against the planned TCP ``fk(q_d)``.
@@ -46,32 +82,32 @@ def simulate_on_real(real: Any, robot: RobotModel, traj: JointTrajectory,  # Any
     kernel = np.ones(width) / width
     averaged = np.stack([np.convolve(np.asarray(res.tau_cmd)[:, j], kernel, mode="valid")
                          for j in range(limit.size)], axis=1) / limit
-    out = {"duration_s": float(res.t_s[-1] - res.t_s[0]),
-           "max_torque_ratio": float(np.max(res.max_torque_ratio)),
-           "max_torque_ratio_per_joint": np.asarray(res.max_torque_ratio, float).tolist(),
-           "max_feedforward_ratio": float(np.max(np.abs(res.tau_ff) / limit)),
-           "max_averaged_torque_ratio": float(np.max(np.abs(averaged))),
-           "max_averaged_torque_ratio_per_joint": np.abs(averaged).max(axis=0).tolist(),
-           "average_window_s": width * dt,
-           "feedback_std_ratio_per_joint": feedback.std(axis=0).tolist(),
-           "feedback_max_ratio_per_joint": np.abs(feedback).max(axis=0).tolist(),
-           "lag_error_max_rad": float(np.max(np.abs(res.lag_error_rad))),
-           "realtime_factor": float(res.realtime_factor)}
+    tcp: dict[str, float] = {}
     if res.tcp_position_m is not None:
         # against the planned TCP of the model (includes the residual kinematic error) ...
         desired = robot.positions(res.q_d, robot.frame_tcp)
         e = np.linalg.norm(res.tcp_position_m - desired, axis=1)
-        out["tcp_error_max_m"] = float(e.max())
-        out["tcp_error_rms_m"] = float(np.sqrt(np.mean(e**2)))
+        tcp["tcp_error_max_m"] = float(e.max())
+        tcp["tcp_error_rms_m"] = float(np.sqrt(np.mean(e**2)))
         # ... and against the tracker reading of the robot standing at q_d (dynamic tracking error)
         if hasattr(real.plant, "measure_tcp"):
             e = np.linalg.norm(res.tcp_position_m - real.plant.measure_tcp(res.q_d), axis=1)
-            out["tcp_tracking_error_max_m"] = float(e.max())
-            out["tcp_tracking_error_rms_m"] = float(np.sqrt(np.mean(e**2)))
-    return out
+            tcp["tcp_tracking_error_max_m"] = float(e.max())
+            tcp["tcp_tracking_error_rms_m"] = float(np.sqrt(np.mean(e**2)))
+    return ServoRun(duration_s=float(res.t_s[-1] - res.t_s[0]),
+                    max_torque_ratio=float(np.max(res.max_torque_ratio)),
+                    max_torque_ratio_per_joint=np.asarray(res.max_torque_ratio, float),
+                    max_feedforward_ratio=float(np.max(np.abs(res.tau_ff) / limit)),
+                    max_averaged_torque_ratio=float(np.max(np.abs(averaged))),
+                    max_averaged_torque_ratio_per_joint=np.abs(averaged).max(axis=0),
+                    average_window_s=width * dt,
+                    feedback_std_ratio_per_joint=feedback.std(axis=0),
+                    feedback_max_ratio_per_joint=np.abs(feedback).max(axis=0),
+                    lag_error_max_rad=float(np.max(np.abs(res.lag_error_rad))),
+                    realtime_factor=float(res.realtime_factor), **tcp)
 
 
-def quality_gates(cfg: TrajectoryConfig, cp: CPPlan, ptp: PTPPlan, sims: dict[str, dict],
+def quality_gates(cfg: TrajectoryConfig, cp: CPPlan, ptp: PTPPlan, sims: dict[str, ServoRun],
                   accept_poor: bool = False, elastic_plant: bool = False) -> QualityGates:
     """The stage's gates: every plan within its limits on the fine grid (torque excess, speed and,
     with ``acceleration_limits``, acceleration ratios <= 1 + ``violation_tolerance``), every IPOPT
@@ -112,6 +148,6 @@ def quality_gates(cfg: TrajectoryConfig, cp: CPPlan, ptp: PTPPlan, sims: dict[st
             continue                 # reported (summary cp_sim_*); the executed CP is the one vouched for
         if elastic_plant and name == "ptp" and "ptp_smooth" in sims:
             continue                 # reported (summary ptp_sim_*); the smooth plan is the executable one
-        gates.check(f"{name}_sim_max_averaged_torque_ratio", s["max_averaged_torque_ratio"], "<=",
+        gates.check(f"{name}_sim_max_averaged_torque_ratio", s.max_averaged_torque_ratio, "<=",
                     cfg.max_sim_averaged_torque_ratio, "servo simulation, 4 ms mean over the full limits")
     return gates

@@ -11,7 +11,7 @@ from pipeline.robot.defaults import ready_pose_rad
 from pipeline.robot.model import RobotModel
 from pipeline.view.viewer import visual_model
 from tests.anyarm.test_urdf_only import _erd
-from tests.test_viewer import CHROMIUM, DRAWN_FRACTION, assert_framed, changed_fraction, framed_screenshots
+from tests.view.test_viewer import CHROMIUM, DRAWN_FRACTION, assert_framed, changed_fraction, framed_screenshots
 
 
 def _ur5_without_meshes(tmp_path):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from pipeline.calibration import batch_kinematics as bk
 from pipeline.calibration import candidates as cd
 from pipeline.robot.model import RobotModel
 
@@ -12,12 +13,12 @@ from pipeline.robot.model import RobotModel
 @pytest.mark.parametrize("name", ["rx130l", "staubli_tx40"])
 def test_numpy_chain_matches_pinocchio(name):
     robot = RobotModel.load(name)
-    ch = cd.chain_from_robot(robot)
+    ch = bk.chain_from_robot(robot)
     rng = np.random.default_rng(7)
     # random configurations, also outside the joint limits (the kinematics must not care)
     Q = rng.uniform(ch.lower - 0.5, ch.upper + 0.5, size=(200, robot.nq))
-    kin = cd.kinematics(ch, Q)
-    seg = cd.capsule_segments(ch, kin)
+    kin = bk.kinematics(ch, Q)
+    seg = bk.capsule_segments(ch, kin)
     assert np.allclose(kin.p_reflector, robot.positions(Q, robot.frame_reflector), atol=1e-12, rtol=0)
     assert np.allclose(kin.o_flange, robot.positions(Q, robot.frame_flange), atol=1e-12, rtol=0)
     _, R_refl = robot.poses(Q, robot.frame_reflector)
@@ -38,7 +39,7 @@ def test_numpy_chain_matches_pinocchio(name):
 def test_random_candidates_stop_filtering_at_the_last_one_needed_and_keep_the_draws(rx130l, visibility, n):
     """The last batch filtered only up to its n-th feasible draw gives the configurations, and leaves
     the generator where, filtering and counting every draw (the candidate set's report), it would."""
-    chain = cd.chain_from_robot(rx130l)
+    chain = bk.chain_from_robot(rx130l)
     runs = []
     for count_all in (False, True):
         rng = np.random.default_rng(11)
@@ -57,7 +58,7 @@ def test_random_candidates_stop_filtering_at_the_last_one_needed_and_keep_the_dr
 def test_incidence_first_filter_rejects_the_same_rows(rx130l, visibility):
     """``reasons=False`` (incidence before the capsules, capsules on the rows it passes) keeps exactly the
     rows of the full check; only the split of the rejections between collision and visibility may move."""
-    chain = cd.chain_from_robot(rx130l)
+    chain = bk.chain_from_robot(rx130l)
     Q = np.random.default_rng(3).uniform(chain.lower - 0.2, chain.upper + 0.2, size=(20000, rx130l.nq))
     full, counts_full = cd.filter_configurations(chain, Q, visibility=visibility)
     fast, counts_fast = cd.filter_configurations(chain, Q, visibility=visibility, reasons=False)

@@ -77,6 +77,11 @@ def test_gates_judge_heldout_before_cross_validation():
     assert gate_figures(s) == ("cross-validated", 9.0, pytest.approx(0.2))
 
 
+#: session fixtures that take seconds and serve several tests: their tests run on one pytest-xdist
+#: worker, so each is built once per ``make test`` (tests/conftest.py, pytest_collection_modifyitems)
+SHARED_COSTLY_FIXTURES = frozenset({"gross_files"})
+
+
 @pytest.fixture(scope="session")
 def gross_files(tmp_path_factory):
     """A simulated record written to CSV, the same with three gross errors, and a held-out file."""

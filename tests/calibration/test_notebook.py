@@ -15,7 +15,10 @@ from pipeline.calibration.notebook import build
 SMALL = {"SETTINGS": {"calibration.n_random_candidates": 400, "calibration.n_heldout": 200}}
 
 
-def _check(text: str) -> None:
+def _check(run) -> None:   # run: ExecutedNotebook (tests/conftest.py)
+    """The notebook printed its figures' numbers and showed its figures inline."""
+    text = run.text
+    assert run.images, "no figure shown inline (no image/png output)"
     assert "held-out RMS error before" in text and "x noise sigma" in text
 
 

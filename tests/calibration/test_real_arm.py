@@ -57,6 +57,11 @@ def test_geometric_only_calibration_of_an_elastic_arm_reports_its_remainder_hone
     assert "unmodelled remainder" in res.report_md
 
 
+#: session fixtures that take seconds and serve several tests: their tests run on one pytest-xdist
+#: worker, so each is built once per ``make test`` (tests/conftest.py, pytest_collection_modifyitems)
+SHARED_COSTLY_FIXTURES = frozenset({"elastic_run"})
+
+
 @pytest.fixture(scope="session")
 def elastic_run(robot, tmp_path_factory):
     """Default truth, all parameters, gravity torques from an identified model (here: the truth's

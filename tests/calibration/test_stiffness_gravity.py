@@ -11,6 +11,10 @@ from pipeline.robot.handoff import ElastostaticRecord
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 from pipeline.sim.truth import RealRobot
 
+#: session fixtures that take seconds and serve several tests: their tests run on one pytest-xdist
+#: worker, so each is built once per ``make test`` (tests/conftest.py, pytest_collection_modifyitems)
+SHARED_COSTLY_FIXTURES = frozenset({"nominal_gravity_run"})
+
 
 @pytest.fixture(scope="session")
 def nominal_gravity_run(rx130l_generic_stiffness):
@@ -26,7 +30,7 @@ def nominal_gravity_run(rx130l_generic_stiffness):
 
 def test_static_torque_record_matches_the_calibrated_stiffness(nominal_gravity_run):
     robot, _, out = nominal_gravity_run
-    rec = out.notes["static_torques"]
+    rec = out.notes.static_torques
     Q, torques = rec.configurations_rad, rec.torques_Nm
     assert Q is not None and torques is not None
     assert Q.shape == out.measurements.Q.shape and torques.shape == Q.shape
@@ -46,7 +50,7 @@ def test_identified_gravity_moves_the_stiffness_to_the_truth(nominal_gravity_run
     """The nominal inertias bias the stiffness of the loaded axes 2 and 3; re-expressed for the truth's
     inertias (a perfect identification) they land within a few per cent of the hidden stiffness."""
     _, real, out = nominal_gravity_run
-    record = ElastostaticRecord.from_arrays(out.notes["static_torques"].to_arrays(), 6)  # as saved and loaded
+    record = ElastostaticRecord.from_arrays(out.notes.static_torques.to_arrays(), 6)  # as saved and loaded
     identified = out.robot.copy()
     for j in range(1, identified.model.njoints):
         identified.model.inertias[j] = real.truth.model.inertias[j].copy()

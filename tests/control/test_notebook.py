@@ -9,7 +9,10 @@ import pytest
 SMALL = {"SETTINGS": {"control.iso.segments": ["line"]}}
 
 
-def _check(text: str) -> None:
+def _check(run) -> None:   # run: ExecutedNotebook (tests/conftest.py)
+    """The notebook printed its figures' numbers and showed its figures inline."""
+    text = run.text
+    assert run.images, "no figure shown inline (no image/png output)"
     assert "velocity loop PM" in text and "real-time factor" in text
     assert "elastic_flat" in text and "settling time after the path" in text
 
@@ -17,8 +20,9 @@ def _check(text: str) -> None:
 def test_control_notebook_executes(tmp_path, execute_notebook):
     """Every cell on a shorter path (the same code path: servo design and Bode plot, the feedforward
     variants on the hidden robot, settling); the slow twin runs the notebook as shipped."""
-    text = execute_notebook("03_control.ipynb", tmp_path, SMALL)
-    _check(text)
+    run = execute_notebook("03_control.ipynb", tmp_path, SMALL)
+    _check(run)
+    text = run.text
     assert "segments: ['line P2-P4']" in text        # the setting reached the notebook
 
 

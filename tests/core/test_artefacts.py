@@ -11,11 +11,12 @@ import numpy as np
 import pytest
 import yaml
 
-from pipeline.core import artefacts, config
+from pipeline.core import artefacts
 from pipeline.core.config import load_config, resolve_robot_dir
 from pipeline.core.errors import DataFileError, PipelineError
 from pipeline.core.progress import Progress, task, track
-from pipeline.run import runner, stage_io
+from pipeline.run import inputs, stage_io
+from pipeline.run import stages as stage_registry
 from pipeline.run.runner import run_pipeline, stage_inputs_hashes
 from pipeline.run.stage_io import load_run
 from pipeline.run.stage_plan import plan_stages
@@ -165,7 +166,7 @@ def test_stage_check_hook_runs_before_anything_is_written(fake_stages, tmp_path)
         if cfg.label == "bad":
             raise DataFileError("measurements.csv", "q3", "not a number in row 4")
 
-    config.STAGES["b"].check = check
+    stage_registry.STAGES["b"].check = check
     with pytest.raises(DataFileError, match="measurements.csv: q3"):
         run_pipeline(load_config(None, ["name=r", "b.label=bad"]), out_root=tmp_path, log=lambda m: None)
     assert not any(tmp_path.iterdir()) and fake_stages.calls == []
@@ -186,8 +187,8 @@ def test_progress_passes_items_through_with_or_without_display():
 def _package_copy(tmp_path, monkeypatch):
     """A copy of the pipeline package's sources that the runner hashes instead of the real one."""
     copy = tmp_path / "pkg" / "pipeline"
-    shutil.copytree(runner._PACKAGE_ROOT, copy, ignore=shutil.ignore_patterns("__pycache__"))
-    monkeypatch.setattr(runner, "_PACKAGE_ROOT", copy)
+    shutil.copytree(inputs.PACKAGE_ROOT, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    monkeypatch.setattr(inputs, "PACKAGE_ROOT", copy)
     return copy
 
 
@@ -211,7 +212,7 @@ def test_every_real_stage_hash_covers_the_whole_package(tmp_path, monkeypatch):
     before = stage_inputs_hashes(cfg, plans, robot_dir)
     assert before == stage_inputs_hashes(cfg, plans, robot_dir)
     for edited in (copy / "robot" / "iso9283.py", copy / "sim" / "plant.py", copy / "trajectory" / "ptp.py",
-                   copy / "plotting.py"):
+                   copy / "cli.py"):
         edited.write_text(edited.read_text() + "\n# edited\n")
         after = stage_inputs_hashes(cfg, plans, robot_dir)
         assert set(after) == {"model", "calibration", "identification", "control", "trajectory"}
@@ -220,7 +221,7 @@ def test_every_real_stage_hash_covers_the_whole_package(tmp_path, monkeypatch):
 
 
 def test_config_reads_enter_the_inputs_hash(fake_stages, tmp_path):
-    config.STAGES["a"].CONFIG_READS = ("c.label",)
+    stage_registry.STAGES["a"].CONFIG_READS = ("c.label",)
     quiet = {"out_root": tmp_path, "log": lambda m: None}
     run_pipeline(load_config(None, ["name=r"]), **quiet)
     fake_stages.calls.clear()
@@ -232,7 +233,7 @@ def test_config_reads_enter_the_inputs_hash(fake_stages, tmp_path):
 
 
 def test_bad_config_reads_declaration_is_refused_before_writing(fake_stages, tmp_path):
-    config.STAGES["b"].CONFIG_READS = ("nosuch.field",)
+    stage_registry.STAGES["b"].CONFIG_READS = ("nosuch.field",)
     with pytest.raises(PipelineError, match="CONFIG_READS.*nosuch.field"):
         run_pipeline(load_config(None, ["name=r"]), out_root=tmp_path, log=lambda m: None)
     assert not any(tmp_path.iterdir())

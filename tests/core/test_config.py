@@ -5,13 +5,16 @@ from __future__ import annotations
 import shutil
 from dataclasses import dataclass, field
 from types import SimpleNamespace
+from typing import Literal
 
 import pytest
 
 from pipeline.core import config
 from pipeline.core.config import RunConfig, load_config, parse_set
 from pipeline.core.errors import ConfigError
+from pipeline.core.typed_config import check_choices
 from pipeline.robot.iso9283 import IsoPathConfig
+from pipeline.run import stages as stage_registry
 
 
 def write(tmp_path, text: str, name: str = "run.yaml"):
@@ -114,7 +117,7 @@ class Rich:
 
 def test_nested_dataclasses_and_containers(monkeypatch):
     stage = SimpleNamespace(NAME="r", DEPENDS=(), Config=Rich, run=None)
-    monkeypatch.setattr(config, "STAGES", {"r": stage})
+    monkeypatch.setattr(stage_registry, "STAGES", {"r": stage})
     monkeypatch.setattr(config, "robot_run_defaults", lambda cfg: None)   # rx130l's name the real sections
     cfg = load_config(None, ["r.inner.width_m=2", "r.pair=[3, 4]", "r.maybe=5", "r.weights={a: 1}"])
     assert cfg.r.inner == Inner(width_m=2.0, names=("x",))
@@ -135,19 +138,19 @@ def test_round_trip_through_yaml(fake_stages, tmp_path):
 
 
 def test_missing_stage_module_is_reported(monkeypatch, tmp_path):
-    monkeypatch.setattr(config, "STAGES", {"ghost": "pipeline.ghost_stage_that_does_not_exist.stage"})
+    monkeypatch.setattr(stage_registry, "STAGES", {"ghost": "pipeline.ghost_stage_that_does_not_exist.stage"})
     monkeypatch.setattr(config, "robot_run_defaults", lambda cfg: None)   # rx130l's name the real sections
     load_config()                              # empty section: fine, nothing to check
     with pytest.raises(ConfigError, match=r"ghost: cannot check these settings: .*does not exist"):
         load_config(write(tmp_path, "ghost: {n: 1}\n"))
     with pytest.raises(config.StageUnavailableError, match="stage 'ghost' is not available"):
-        config.load_stage_module("ghost")
+        stage_registry.load_stage_module("ghost")
 
 
 def test_quick_profile_loads(quick_config):
     assert quick_config.profile == "quick"
-    assert quick_config.stages == [s for s in config.STAGES if s in quick_config.stages]
-    assert set(quick_config.sections) >= {"truth", *config.STAGES}
+    assert quick_config.stages == [s for s in stage_registry.STAGES if s in quick_config.stages]
+    assert set(quick_config.sections) >= {"truth", *stage_registry.STAGES}
 
 
 # ---------------------------------------------------------------- robot run_defaults layer
@@ -225,3 +228,30 @@ def test_field_origins_record_the_layer_of_each_field(tmp_path):
     assert cfg.source_of("model.views_deg") == "--set"              # not set: the section's last layer
     assert cfg.source_of("calibration.n_configurations") == str(p)  # untouched section: the file
     assert "field_origins" not in cfg.to_dict() and "field_origins" not in cfg.to_yaml()
+
+
+@pytest.mark.parametrize(("setting", "field"), [
+    ("control.engine=fast", "control.engine"),
+    ("control.variants=[none, bogus]", r"control.variants\[1\]"),
+    ("control.iso.tool_orientation=up", "control.iso.tool_orientation"),
+    ("calibration.second_pass=sometimes", "calibration.second_pass"),
+    ("identification.excitation.criterion=x", "identification.excitation.criterion"),
+    ("trajectory.ptp_energy=joules", "trajectory.ptp_energy"),
+])
+def test_a_choice_outside_its_literal_is_one_line_naming_the_field(setting, field):
+    with pytest.raises(ConfigError, match=rf"^--set: {field}: expected one of [a-z_, ]+, got '\w+'$"):
+        load_config(None, [setting])
+
+
+def test_choices_of_a_config_built_in_python_are_checked_too():
+    @dataclass
+    class Section:
+        mode: Literal["a", "b"] = "a"
+        modes: list[Literal["a", "b"]] = field(default_factory=list)
+        maybe: Literal["a"] | None = None
+
+    check_choices(Section("b", ["a", "b"], None), "s")
+    for bad, where in ((Section("c"), r"s\.mode"), (Section(modes=["a", "c"]), r"s\.modes\[1\]"),
+                       (Section(maybe="b"), r"s\.maybe")):
+        with pytest.raises(ConfigError, match=rf"{where}: expected one of"):
+            check_choices(bad, "s")

@@ -1,16 +1,22 @@
-"""The package's YAML loader: YAML 1.2 numbers in config files, --set and robot.yaml, duplicate keys
-refused naming the file, the key and both lines, unknown keys answered with the closest known key."""
+"""The package's YAML reader and writer: YAML 1.2 numbers in config files, --set and robot.yaml,
+duplicate keys refused naming the file, the key and both lines, unknown keys answered with the
+closest known key; what is written reads back exactly (digests that look like numbers quoted, old
+unquoted digests read as text); nesting and alias expansion bounded."""
 
 from __future__ import annotations
 
+import math
 import shutil
+import time
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from pipeline import cli
 from pipeline.core.config import REPO_ROOT, load_config
 from pipeline.core.errors import ConfigError, RobotFileError
-from pipeline.core.yaml12 import DuplicateKeyError, load_yaml
+from pipeline.core.yaml12 import MAX_DEPTH, MAX_NODES, DuplicateKeyError, YAMLError, dump_yaml, load_yaml, yaml_problem
 from pipeline.robot.spec import load_robot_spec
 
 
@@ -86,3 +92,95 @@ def test_a_text_parsed_again_gives_equal_data_that_is_not_shared():
     again = load_yaml(text)
     assert again == {"base": {"x": [1, 2]}, "other": {"x": [1, 2]}, "n": 1e-3}
     assert again["base"] is again["other"]             # an alias is one object, as when parsed
+
+
+# ------------------------------------------------------------------ written as it is read
+#: strings a YAML 1.2 reader resolves to another type unless quoted: digests that look like numbers,
+#: booleans, null, special floats, octal and hex ints
+LOOK_ALIKES = ["30425e4453996520", "3042544539965201", "0123456789012345", "1e5", "1E-5", ".5", "+1", "-0",
+               "0o17", "0x1F", "true", "False", "null", "~", "", ".inf", "-.Inf", ".nan", "1_000", "yes", "0.",
+               " lead", "trail ", "a: b", "- x", "#c", "'q'", '"d"', "{x}", "[1]", "&a", "*a", "!t", "%p", "@x",
+               "\ufeffbom", "tab\there", "line\nbreak", "é ü 中", "\x85", "\u2028"]
+
+digests = st.text("0123456789abcdef", min_size=16, max_size=16)
+scalars = st.one_of(st.none(), st.booleans(), st.integers(), st.floats(allow_nan=False), digests, st.text(),
+                    st.sampled_from(LOOK_ALIKES))
+documents = st.recursive(scalars, lambda inner: st.one_of(st.lists(inner, max_size=4),
+                                                          st.dictionaries(st.text(max_size=6) | digests, inner,
+                                                                          max_size=4)),
+                         max_leaves=16)
+
+
+@settings(max_examples=60, deadline=None)
+@given(value=documents)
+def test_what_is_written_reads_back_exactly(value):
+    for flow in (False, None):
+        again = load_yaml(dump_yaml(value, flow=flow))
+        assert again == value and _types(again) == _types(value)
+
+
+def _types(value):
+    if isinstance(value, dict):
+        return {k: _types(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_types(v) for v in value]
+    return type(value).__name__
+
+
+@pytest.mark.parametrize("text", LOOK_ALIKES)
+def test_a_string_that_looks_like_another_type_is_quoted(text):
+    assert load_yaml(dump_yaml({"v": text})) == {"v": text}
+    assert load_yaml(dump_yaml([text], flow=True)) == [text]
+
+
+def test_nan_and_infinities_read_back():
+    again = load_yaml(dump_yaml({"a": float("nan"), "b": float("inf"), "c": -float("inf")}))
+    assert math.isnan(again["a"]) and again["b"] == float("inf") and again["c"] == -float("inf")
+
+
+@pytest.mark.parametrize("digest", ["30425e4453996520", "3042544539965201", "0123456789012345", "1e10", "null"])
+def test_an_unquoted_digest_written_by_earlier_versions_is_text(digest):
+    data = load_yaml(f"assumed:\n  tracker: {{rule: r, sha256: {digest}}}\n  other:\n    sha256: {digest}\n")
+    assert data["assumed"]["tracker"]["sha256"] == digest and data["assumed"]["other"]["sha256"] == digest
+    assert load_yaml("sha256: '12'\nn: 12\nsha256s: 12\n") == {"sha256": "12", "n": 12, "sha256s": 12}
+
+
+# ------------------------------------------------------------------ hostile texts refused fast
+def _alias_bomb(levels: int = 10, width: int = 9) -> str:
+    lines = [f"a0: &a0 [{', '.join(['lol'] * width)}]"]
+    lines += [f"a{k}: &a{k} [{', '.join([f'*a{k - 1}'] * width)}]" for k in range(1, levels)]
+    return "\n".join(lines) + "\n"
+
+
+@pytest.mark.parametrize(("text", "problem"), [
+    (_alias_bomb(), f"aliases expand to more than {MAX_NODES} values"),
+    ("[" * 20_000 + "]" * 20_000, f"nested deeper than {MAX_DEPTH} levels"),
+    ("{a: " * 20_000 + "1" + "}" * 20_000, f"nested deeper than {MAX_DEPTH} levels"),
+    ("- " * 20_000 + "x\n", f"nested deeper than {MAX_DEPTH} levels"),
+    ("".join(f"{' ' * k}k:\n" for k in range(200)) + " " * 200 + "v\n", f"nested deeper than {MAX_DEPTH} levels"),
+    ("a: &a [*a]\n", "refers to the node that holds it"),
+])
+def test_hostile_texts_are_refused_in_one_line_within_a_second(text, problem):
+    start = time.perf_counter()
+    with pytest.raises(YAMLError) as info:
+        load_yaml(text)
+    assert time.perf_counter() - start < 1.0
+    where, message = yaml_problem(info.value)
+    assert problem in message and "\n" not in message and where is not None and where.startswith("line ")
+
+
+def test_a_deep_but_allowed_nesting_and_many_aliases_still_load():
+    assert load_yaml("[" * MAX_DEPTH + "]" * MAX_DEPTH) is not None
+    assert len(load_yaml(_alias_bomb(levels=4, width=9))["a3"]) == 9
+
+
+@pytest.mark.parametrize("text", [_alias_bomb(), "[" * 20_000 + "]" * 20_000])
+def test_a_hostile_config_file_is_one_line_exit_2_and_nothing_written(tmp_path, capsys, text):
+    path = tmp_path / "hostile.yaml"
+    path.write_text(text)
+    start = time.perf_counter()
+    assert cli.main(["check", "--config", str(path), "--out", str(tmp_path / "runs")]) == 2
+    assert time.perf_counter() - start < 1.0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"error: {path}: line ") and "refused" in err[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["hostile.yaml"]

@@ -81,6 +81,33 @@ def test_criterion_gradient_is_exact(rx130l, setup, criterion, softness):
         assert (fp - fm) / 2 == pytest.approx(g @ d, rel=1e-4, abs=1e-12)
 
 
+@pytest.mark.parametrize("rows", [[0], [1, 4]])
+def test_criterion_scores_only_the_joints_the_fit_uses(rx130l, setup, rows):
+    """With a subset of joints identified, the design's matrix is the fit's base regressor: the
+    torque rows of those joints only (same rows, same columns, same condition number)."""
+    _, _, limits, sym = setup
+    act = rx130l.actuation
+    reg = RegressorModel(rx130l.model, act.gear_matrix, act.coulomb_smoothing_rad_s, np.asarray(rows))
+    base = base_parameters(reg, np.random.default_rng(0), lower=rx130l.limits.lower_rad,
+                           upper=rx130l.limits.upper_rad)
+    traj = F.random_trajectory(rx130l, limits, 5, 0.1, np.random.default_rng(2))
+    t = np.arange(80) / 8.0  # one period, more rows than base parameters for a single joint
+    crit = D.ExcitationCriterion(D.regressor_casadi(sym, reg, base), basis=F.fourier_basis(t, 0.1, 5),
+                                 nq=rx130l.nq)
+    x = traj.coefficients.ravel()
+    W_fit = base.base_regressor(reg.stacked(*traj.evaluate(t)))
+    W = crit.matrix(x)
+    assert W.shape == W_fit.shape == (len(rows) * len(t), base.n_base)
+    np.testing.assert_allclose(W, W_fit, atol=1e-9)
+    f, g = crit.value_and_gradient(x)
+    assert np.exp(0.5 * f) == pytest.approx(D.condition_number(W_fit), rel=1e-8)
+    d = np.random.default_rng(3).normal(size=x.size) * 1e-5
+    fp, _ = crit.value_and_gradient(x + d, gradient=False)
+    fm, _ = crit.value_and_gradient(x - d, gradient=False)
+    # G = W^T W squares one joint's cond (~1e4): the difference quotient carries ~1e-4 round-off
+    assert (fp - fm) / 2 == pytest.approx(g @ d, rel=2e-3)
+
+
 def test_optimised_excitation_is_feasible_and_better_than_random(rx130l, setup):
     reg, base, limits, sym = setup
     res = D.optimize_excitation(rx130l, sym, reg, base, limits, np.random.default_rng(5), n_samples=50,

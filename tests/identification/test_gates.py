@@ -42,7 +42,7 @@ def test_a_record_where_the_robot_never_moves_fails_with_a_message(tmp_path):
     with pytest.raises(DataFileError) as info:
         stage.run(ctx)
     msg = str(info.value)
-    assert "still.csv" in msg and "does not move" in msg and "min_joint_motion_rad" in msg
+    assert "still.csv" in msg and "never move" in msg and "min_joint_motion_rad" in msg
     assert not any(ctx.out_dir.iterdir())
 
 

@@ -13,7 +13,10 @@ SMALL = {"identification.decimation": 20, "identification.excitation.n_samples":
          "identification.tx40.max_samples": 20000, "identification.friction_model": "viscous_coulomb"}
 
 
-def _check(text: str) -> None:
+def _check(run) -> None:   # run: ExecutedNotebook (tests/conftest.py)
+    """The notebook printed its figures' numbers and showed its figures inline."""
+    text = run.text
+    assert run.images, "no figure shown inline (no image/png output)"
     assert "base parameters" in text and "cond optimised" in text and "tx40_heldout_rms_Nm_physical" in text
     assert "physically consistent: True" in text and "within 3 sigma (nominal kinematics)" in text
 
@@ -22,8 +25,9 @@ def test_identification_notebook_executes(tmp_path, execute_notebook):
     """Every cell on a smaller setting (the same code path: excitation design, the load-dependent friction
     candidate, ISO path validation, the TX40 record); the slow twin runs the notebook as shipped (its
     Stribeck fits too)."""
-    text = execute_notebook("02_identification.ipynb", tmp_path, {"SETTINGS": SMALL})
-    _check(text)
+    run = execute_notebook("02_identification.ipynb", tmp_path, {"SETTINGS": SMALL})
+    _check(run)
+    text = run.text
     assert "n_samples=30, n_starts=1, n_random=4, max_iter=30" in text        # the setting reached the stage
 
 

@@ -13,7 +13,8 @@ from pipeline.cli import main
 from pipeline.core.config import CONFIGS_DIR, load_config
 from pipeline.core.errors import ConfigError, DataFileError
 from pipeline.identification import stage
-from pipeline.identification.tx40 import TX40_DATA_DIR, Tx40Config, check_tx40_config
+from pipeline.identification.config import Tx40Config
+from pipeline.identification.tx40 import TX40_DATA_DIR, check_tx40_config
 from pipeline.robot.model import RobotModel
 
 from .test_stage import _write_csv
@@ -119,9 +120,9 @@ def test_time_in_milliseconds_blames_column_t(robot, tmp_path):
 
 
 def test_slow_sampling_below_the_cutoff_mentions_column_t(robot, tmp_path):
-    path = _record(tmp_path, 0.04)   # 25 Hz: Nyquist 12.5 Hz < the 20 Hz cut-off
+    path = _record(tmp_path, 0.04)   # 25 Hz: Nyquist 12.5 Hz < a 20 Hz cut-off set by hand
     with pytest.raises(ConfigError) as info:
-        stage.check(stage.Config(data_file=str(path), run_tx40=False), robot)
+        stage.check(stage.Config(data_file=str(path), run_tx40=False, data_cutoff_hz=20.0), robot)
     assert info.value.field == "identification.data_cutoff_hz"
     assert "25 Hz sample rate" in info.value.problem and "t must be in seconds" in info.value.problem
 

@@ -10,13 +10,13 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from pipeline.core import config as config_mod
 from pipeline.core.config import CONFIGS_DIR, load_config, to_plain
 from pipeline.core.errors import DataFileError, PipelineError, QualityGateError
 from pipeline.identification import fourier, stage
 from pipeline.identification.estimate import is_physically_consistent
 from pipeline.identification.measure import load_joint_csv
 from pipeline.robot.model import RobotModel
+from pipeline.run import stages as stage_registry
 from pipeline.run.runner import run_pipeline
 
 from .helpers import NO_LOAD_FRICTION, quick_context, true_base
@@ -27,6 +27,11 @@ SUMMARY_KEYS = (
     "quality_gates",
 )
 TX40_KEYS = ("tx40_heldout_rms_Nm_ols", "tx40_heldout_rms_Nm_physical", "tx40_physically_consistent")
+
+
+#: session fixtures that take seconds and serve several tests: their tests run on one pytest-xdist
+#: worker, so each is built once per ``make test`` (tests/conftest.py, pytest_collection_modifyitems)
+SHARED_COSTLY_FIXTURES = frozenset({"quick_run"})
 
 
 @pytest.fixture(scope="session")   # built once per worker, also when pytest-xdist comes back to this file
@@ -300,8 +305,8 @@ def test_runner_leaves_no_stage_directory_on_bad_input(tmp_path, monkeypatch):
                               __file__=stage.__file__)
     cfg = load_config(CONFIGS_DIR / "quick.yaml", stages=["identification"],
                       values={"identification.data_file": str(path), "identification.run_tx40": False})
-    registry = {"model": config_mod.STAGES["model"], "identification": wrapper}
-    monkeypatch.setattr(config_mod, "STAGES", registry)
+    registry = {"model": stage_registry.STAGES["model"], "identification": wrapper}
+    monkeypatch.setattr(stage_registry, "STAGES", registry)
     with pytest.raises(DataFileError, match="record.csv"):
         run_pipeline(cfg, out_root=tmp_path / "runs")
     run_dir = tmp_path / "runs" / cfg.name

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from pipeline.core.errors import DataFileError
+from pipeline.identification.config import Tx40Config
 from pipeline.identification.estimate import is_physically_consistent
-from pipeline.identification.tx40 import TX40_DATA_DIR, Tx40Config, load_tx40_record, run_tx40
+from pipeline.identification.tx40 import TX40_DATA_DIR, load_tx40_record, run_tx40
 from pipeline.robot.model import RobotModel
 
 

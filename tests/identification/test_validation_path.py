@@ -10,6 +10,7 @@ from pipeline.control.config import ControlConfig
 from pipeline.core.config import RunConfig, load_config, resolve_robot_dir
 from pipeline.identification import report, stage
 from pipeline.identification import validate as val_mod
+from pipeline.identification.outcome import ValidationTrajectory
 from pipeline.robot.model import RobotModel
 from pipeline.run.runner import stage_inputs_hashes
 from pipeline.run.stage_plan import plan_stages
@@ -54,7 +55,7 @@ def test_tx40_validates_on_the_iso_path_of_its_run_defaults(tx40):
 
 
 def test_rx130l_sized_path_falls_back_on_the_tx40(tx40):
-    fallback = val_mod.ValidationTrajectory(np.zeros(2), np.zeros((2, 6)), np.zeros((2, 6)), np.zeros((2, 6)),
+    fallback = ValidationTrajectory(np.zeros(2), np.zeros((2, 6)), np.zeros((2, 6)), np.zeros((2, 6)),
                                             "fourier", "a random feasible Fourier trajectory")
     # a TX40 run (its robot.yaml IK seeds) given the RX130L's cube, out of the TX40's reach
     rx130l_cube = load_config(values={"robot": "staubli_tx40", "control.iso.centre_m": [1.0, 0.0, 0.6],
@@ -100,7 +101,7 @@ def test_ik_seeds_come_from_the_run(tx40, monkeypatch):
 
 
 def test_wrong_seed_length_is_the_stated_reason(tx40):
-    fallback = val_mod.ValidationTrajectory(np.zeros(2), np.zeros((2, 6)), np.zeros((2, 6)), np.zeros((2, 6)),
+    fallback = ValidationTrajectory(np.zeros(2), np.zeros((2, 6)), np.zeros((2, 6)), np.zeros((2, 6)),
                                             "fourier", "a random feasible Fourier trajectory")
     control = load_config(values={"robot": "staubli_tx40", "control.ik_seeds_deg": [[0.0] * 7]}).control
     vt = val_mod.validation_trajectory(tx40, 4e-3, lambda: fallback, control=control)

@@ -46,6 +46,11 @@ def test_parameter_weights_scale_only_angles() -> None:
     assert np.allclose(scaled[:5] / lit[:5], [1, 4, 4, 1, 4])   # lengths kept, angles x 2^2
 
 
+#: session fixtures that take seconds and serve several tests: their tests run on one pytest-xdist
+#: worker, so each is built once per ``make test`` (tests/conftest.py, pytest_collection_modifyitems)
+SHARED_COSTLY_FIXTURES = frozenset({"quick_row"})
+
+
 @pytest.fixture(scope="session")
 def quick_row() -> dict:
     cfg = p0.Settings(n=60, pool=250, gradient=False)

@@ -37,7 +37,6 @@ def _headline_keys_and_the_papers_index(row: dict) -> None:
     d = row["designs"]
     for key in ("rr_O3", *p4.BASELINES):
         assert {"B", "O3", "cond", "commanded", "predicted_visible", "lost_on_hidden_robot"} <= d[key].keys()
-        assert np.isclose(d[key]["B"], d[key]["O3"] ** 2)      # B = sigma_min(Theta^T Theta) = O3^2
         assert d[key]["predicted_visible"] <= d[key]["commanded"]
         assert 0 <= d[key]["lost_on_hidden_robot"] <= d[key]["predicted_visible"]
     # remove-and-replace on O3 is at least as good as any scan of the same visible candidates
@@ -59,14 +58,28 @@ def _calibration_reduces_the_held_out_errors(row: dict) -> None:
 
 
 def _whole_grid_has_the_largest_index_but_not_per_pose(row: dict) -> None:
-    """Information adds up: the whole candidate set's Lambda dominates every subset's, so its B =
-    lambda_min is at least R&R's; per measured pose the R&R optimum is the better design."""
+    """The whole candidate set is measured (every candidate commanded); per measured pose the R&R
+    optimum is the better design. (That the whole set's B is at least any subset's holds for any
+    Lambda that adds up over poses: not checked here, see test_index_figures_of_a_known_jacobian.)"""
     d = row["designs"]
     whole = d[p4.WHOLE_GRID]
     assert whole["commanded"] == row["n_candidates"]
-    for key in ("rr_O3", *p4.BASELINES):
-        assert whole["B"] >= d[key]["B"] * (1 - 1e-9)
     assert d["rr_O3"]["B_per_pose"] > whole["B_per_pose"]
+
+
+def test_index_figures_of_a_known_jacobian():
+    """The code path of the paper's index: ``information`` sums G^T G over poses, ``index_figures``
+    returns B = the smallest singular value of the stacked Jacobian squared (compared with an SVD of
+    the stacked rows, not with the function's own O3), the rank and cond; a rank-deficient Jacobian
+    gets B = 0."""
+    rng = np.random.default_rng(4)
+    G = rng.normal(size=(12, 6, 5)) * np.array([1.0, 3.0, 0.5, 2.0, 0.1])
+    fig = p4.index_figures(p4.information(G))
+    s = np.linalg.svd(G.reshape(-1, 5), compute_uv=False)
+    assert np.isclose(fig["B"], s[-1] ** 2) and fig["rank"] == 5 and np.isclose(fig["cond"], (s[0] / s[-1]) ** 2)
+    G[:, :, 4] = G[:, :, 3]                          # two parameters the poses cannot tell apart
+    low = p4.index_figures(p4.information(G))
+    assert low["B"] == 0.0 and low["rank"] == 4
 
 
 def test_larger_probe_halves_the_orientation_noise_only():

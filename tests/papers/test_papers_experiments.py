@@ -1,6 +1,7 @@
 """The experiments behind the causes docs/PAPERS.md gives, read from their committed outputs in
-docs/papers/results/ (fast: JSON only). Each test asserts the property a verdict rests on, so a
-rerun that no longer shows it fails here; the printed numbers are checked by
+docs/papers/results/ (fast: JSON only), and rerun on a quick variant where the cause is a property
+of the code rather than of one committed run (slow). Each test asserts the property a verdict rests
+on, so a rerun that no longer shows it fails here; the printed numbers are checked by
 test_papers_evidence.py.
 """
 
@@ -11,8 +12,11 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pytest
 
+from pipeline.papers import calib_004 as p4
 from pipeline.papers.chain_004_rows import CLEAR_REDUCTION
+from pipeline.robot.instruments import OpticalMargins
 
 RESULTS = Path(__file__).resolve().parents[2] / "docs" / "papers" / "results"
 
@@ -24,7 +28,7 @@ def result(folder: str) -> dict:
 def test_stiffer_joints_let_the_rigid_feedforward_cut_the_tcp_error():
     """Fig. 2(b): the rigid-body feedforward's cut of the max TCP error grows as the hidden
     RX130L's joints get stiffer; it is not "drastic" with the generic stiffness (S = 33) and is with
-    the stiffness the RX130L's robot.yaml states (S = 1) and the stiffest run."""
+    the stiffness fitted into the RX130L's robot.yaml (S = 1) and the stiffest run."""
     points = sorted(result("paper-004-stiffness")["points"], key=lambda p: -p["compliance_scale"])
     cut = [p["tcp_reduction"] for p in points]
     assert points[0]["compliance_scale"] == 33.0 and cut[0] < CLEAR_REDUCTION <= cut[-1]
@@ -59,25 +63,34 @@ def cardan_after_deg(folder: str) -> np.ndarray:
     return np.degrees([after[ax]["max_abs"] for ax in ("alpha", "beta", "gamma")])
 
 
-def test_halving_the_orientation_noise_halves_the_cardan_errors_after_calibration():
-    """On the rigid hidden robot the Cardan errors after calibration are the readings' noise: a probe
-    twice as large halves the stated orientation noise and brings the maxima to the paper's level
-    (0.128 / 0.191 / 0.131 deg, within 40 %)."""
+def cardan_before_deg(folder: str) -> np.ndarray:
+    before = result(folder)["rows"][0]["designs"]["rr_O3"]["before"]
+    return np.degrees([before[ax]["max_abs"] for ax in ("alpha", "beta", "gamma")])
+
+
+def test_the_cardan_errors_are_the_readings_noise_before_and_after_calibration():
+    """On the rigid hidden robot the held-out Cardan errors are the orientation readings' noise: with
+    the default probe calibration leaves them where they were (after within 10 % of before, on
+    average), and a probe twice as large (stated orientation noise halved) lowers both and lets
+    calibration cut the maxima on every axis; position is cut far more in both."""
     base, probe = result("calib-004-grid7-ideal"), result("calib-004-probe-2")
     assert math.isclose(probe["rows"][0]["sigma_rad"] / base["rows"][0]["sigma_rad"], 0.5, rel_tol=0.05)
-    ratio = cardan_after_deg("calib-004-probe-2").mean() / cardan_after_deg("calib-004-grid7-ideal").mean()
-    assert 0.3 < ratio < 0.7
-    paper = np.array([0.128, 0.191, 0.131])
-    assert np.all(np.abs(cardan_after_deg("calib-004-probe-2") / paper - 1) < 0.4)
+    default_gain = cardan_before_deg("calib-004-grid7-ideal") / cardan_after_deg("calib-004-grid7-ideal")
+    probe_gain = cardan_before_deg("calib-004-probe-2") / cardan_after_deg("calib-004-probe-2")
+    assert abs(default_gain.mean() - 1) < 0.1
+    assert np.all(probe_gain > 1) and probe_gain.mean() > default_gain.mean()
+    assert cardan_after_deg("calib-004-probe-2").mean() < 0.7 * cardan_after_deg("calib-004-grid7-ideal").mean()
+    assert np.all(table2_after_mm("calib-004-grid7-ideal") < 0.2 * np.array(
+        [1e3 * result("calib-004-grid7-ideal")["rows"][0]["designs"]["rr_O3"]["before"][ax]["max_abs"]
+         for ax in ("x", "y", "z")]))
 
 
 def test_the_whole_visible_grid_is_no_reading_of_the_factor_18_5():
-    """The whole visible 13^6 grid measured: its B exceeds R&R's (information adds up), and per
-    measured pose R&R is within a factor 2 of it; neither is near the paper's 18.5."""
+    """The whole visible 13^6 grid measured: per measured pose R&R is within a factor 2 of it, far from
+    the paper's 18.5. (Its B exceeding R&R's holds for any information that adds up: not a finding.)"""
     res = result("calib-004-whole-grid")
     d = res["rows"][0]["designs"]
     assert res["grid"]["n_visible"] > 3000 and d["whole_grid"]["commanded"] > 2000
-    assert res["factors_B"]["whole_grid"][0] < 1.0
     assert 0.5 < res["factors_B_per_pose"]["whole_grid"][0] < 2.0
 
 
@@ -130,3 +143,27 @@ def test_tcp_criterion_beats_random_and_parameter_designs_on_every_arm():
             assert cs < arm[p]["tcp_var"], (arm["arm"], p)
     gain = res["headline"]["notional.tcp_vs_heuristic"]["ours_ca_vs_random_var"]
     assert gain["n"] == 90 and gain["mean"] > 5 * gain["sem"] > 0
+
+
+def _cardan_gain(probe_scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """calib-004 rerun on a quick variant (the 7^6 grid, rigid hidden robot, seed 1, O3, 60 held-out
+    poses) with the probe scaled: the Cardan and position maxima's cut by calibration (before / after)."""
+    margins = OpticalMargins(np.radians(1.0), 0.05, 0.01)
+    grid = p4.visible_grid("rx130l", 7, margins, probe_scale)
+    row = p4._seed(("rx130l", 1, "ideal", grid, 32, 60, ["O3"], margins, "registered", 1.0, None, probe_scale,
+                    False))
+    d = row["designs"]["rr_O3"]
+    cut = [d["before"][ax]["max_abs"] / d["after"][ax]["max_abs"] for ax in ("alpha", "beta", "gamma", "x", "y", "z")]
+    return np.array(cut[:3]), np.array(cut[3:])
+
+
+@pytest.mark.slow
+def test_rerun_calibration_leaves_the_cardan_errors_at_the_reading_noise():
+    """The physics of the Table 2 gain row, rerun: calibration cuts the position maxima severalfold
+    with either probe, and leaves the Cardan maxima within 15 % of where they were before, with the
+    default probe and with one twice as large (orientation noise halved): the orientation errors the
+    geometric model removes are below even the halved reading noise."""
+    for scale in (1.0, 2.0):
+        cardan, position = _cardan_gain(scale)
+        assert np.all(position > 3), scale
+        assert np.all(np.abs(cardan - 1) < 0.15), (scale, cardan)

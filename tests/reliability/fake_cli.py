@@ -22,6 +22,7 @@ import numpy as np
 from pipeline import cli
 from pipeline.core import config
 from pipeline.core.config import RunConfig
+from pipeline.run import stages as stage_registry
 from pipeline.stage_api import StageContext, StageResult
 
 
@@ -57,6 +58,6 @@ def no_run_defaults(cfg: RunConfig) -> None:
 
 
 if __name__ == "__main__":
-    config.STAGES = registry()
+    stage_registry.STAGES = registry()
     config.robot_run_defaults = no_run_defaults
     sys.exit(cli.main(sys.argv[1:]))

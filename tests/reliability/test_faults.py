@@ -25,6 +25,7 @@ import pytest
 
 from pipeline import cli
 from pipeline.core import codegen, config
+from pipeline.run import stages as stage_registry
 from tests.reliability import fake_cli
 
 REPO = Path(__file__).resolve().parents[2]
@@ -59,7 +60,7 @@ class ForkedRun:
             signal.signal(signal.SIGINT, signal.default_int_handler)
             signal.signal(signal.SIGTERM, signal.SIG_DFL)
             os.chdir(cwd)
-            config.STAGES = fake_cli.registry()
+            stage_registry.STAGES = fake_cli.registry()
             config.robot_run_defaults = fake_cli.no_run_defaults
             code = cli.main(argv)
         except SystemExit as exc:  # argparse: its message is on stderr already
@@ -107,7 +108,7 @@ def resume(monkeypatch, capsys):
     """``resume(tmp_path, *args) -> (exit code, stderr)``: the same fake command line in this process
     (:func:`pipeline.cli.main` with :func:`fake_cli.registry`), for the run after the fault: what it
     reuses and commits is read from the run directory, not from the process that made it."""
-    monkeypatch.setattr(config, "STAGES", fake_cli.registry())
+    monkeypatch.setattr(stage_registry, "STAGES", fake_cli.registry())
     monkeypatch.setattr(config, "robot_run_defaults", fake_cli.no_run_defaults)
 
     def call(tmp_path: Path, *args: str) -> tuple[int, str]:

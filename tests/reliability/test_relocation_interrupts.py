@@ -6,13 +6,17 @@ from __future__ import annotations
 import json
 import shutil
 import signal
+from dataclasses import dataclass
+from typing import Annotated
 
 import pytest
 
 from pipeline import cli
-from pipeline.core import config, interrupts
+from pipeline.core import interrupts
 from pipeline.core.config import CONFIGS_DIR, load_config
+from pipeline.core.typed_config import FileInput
 from pipeline.run import second_pass
+from pipeline.run import stages as stage_registry
 from pipeline.run.locking import run_lock
 from pipeline.run.run_check import check_run
 from pipeline.run.runner import run_pipeline
@@ -34,7 +38,13 @@ def test_copied_run_reuses_every_stage_with_identical_artefacts(fake_stages, tmp
 
 
 def test_file_inputs_enter_the_hash_by_content_not_path(fake_stages, tmp_path, monkeypatch):
-    monkeypatch.setattr(config.STAGES["a"], "FILE_INPUTS", ("label",), raising=False)
+    fake = stage_registry.STAGES["a"]
+
+    @dataclass
+    class FileConfig(fake.Config):
+        label: Annotated[str, FileInput] = "x"
+
+    monkeypatch.setattr(fake, "Config", FileConfig)
     for folder in ("x", "y"):
         (tmp_path / folder).mkdir()
         (tmp_path / folder / "data.csv").write_text("q1\n0.1\n")
@@ -63,7 +73,7 @@ def test_check_reports_the_plan_run_follows(fake_stages, tmp_path):
 def _interrupting_stage(fake_stages, monkeypatch, swallow: bool):
     """Stage b's run sends SIGINT to the process from inside its loop; the handler's KeyboardInterrupt
     then surfaces as CasADi's SWIG wrappers report it (a SystemError), or is swallowed."""
-    inner = config.STAGES["b"].run
+    inner = stage_registry.STAGES["b"].run
 
     def run(ctx):
         for i in range(10):
@@ -75,7 +85,7 @@ def _interrupting_stage(fake_stages, monkeypatch, swallow: bool):
                         raise SystemError("<function DM.__array__> returned a result with an exception set") from exc
         return inner(ctx)
 
-    monkeypatch.setattr(config.STAGES["b"], "run", run)
+    monkeypatch.setattr(stage_registry.STAGES["b"], "run", run)
 
 
 @pytest.mark.parametrize("swallow", [False, True])

@@ -18,6 +18,7 @@ from pipeline.core.errors import ArtefactWriteError, PipelineError, QualityGateE
 from pipeline.core.interrupts import INTERRUPT_STATUSES, raise_if_interrupted
 from pipeline.quality import QualityGates
 from pipeline.run import locking, stage_io
+from pipeline.run import stages as stage_registry
 from pipeline.run.locking import RunLockedError, run_lock
 from pipeline.run.runner import run_pipeline
 from pipeline.run.stage_io import file_sha256, load_run
@@ -50,7 +51,7 @@ def gate_stages(monkeypatch):
     calls: list[str] = []
     registry = {"a": _gate_stage("a", (), calls), "b": _gate_stage("b", ("a",), calls),
                 "c": _gate_stage("c", ("b",), calls)}
-    monkeypatch.setattr(config, "STAGES", registry)
+    monkeypatch.setattr(stage_registry, "STAGES", registry)
     # the built-in robots' run_defaults name the real stages' sections, which the fakes replace
     monkeypatch.setattr(config, "robot_run_defaults", lambda cfg: None)
     return calls

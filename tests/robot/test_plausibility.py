@@ -119,4 +119,4 @@ def test_placeholder_warnings_reach_check_the_console_and_the_headline(tmp_path,
     head = (out / "placeholder" / "report.md").read_text().split("\n## model")[0]
     for text in (printed, head):
         assert "moving mass 12 kg is implausibly light" in text and "same torque limit 300 N·m" in text
-    assert "WARN: 3 warning(s)" in printed and "**Assumptions still in force**:" in head
+    assert "3 warning(s)" in printed and "**Assumptions still in force**:" in head

@@ -9,10 +9,10 @@ import pytest
 from rich.console import Console
 
 from pipeline import cli
-from pipeline.core import config
 from pipeline.run import headline as hl
+from pipeline.run import stages as stage_registry
 from pipeline.run.report import write_report
-from pipeline.run.runner import StageResult
+from pipeline.stage_api import StageResult
 
 GATES_PASS = {"passed": True, "checks": [
     {"name": "validation_rms_over_noise", "passed": True, "value": 1.03, "op": "<=", "threshold": 2.0},
@@ -55,29 +55,34 @@ def test_each_stage_figure_stands_against_its_anchor_with_a_verdict(tmp_path):
     run = _write_run(tmp_path)
     headline = hl.read_headline(run, list(SUMMARIES))
     (noise,) = _rows(headline, "calibration", "held-out TCP error RMS / noise")
-    assert noise.verdict == hl.ratio(26e-6 / 13e-6) and noise.source == "simulated"
+    # no anchor to judge the noise ratio by: the ratio alone, no verdict
+    assert noise.ratio == hl.ratio(26e-6 / 13e-6) and noise.verdict == "" and noise.source == "simulated"
     (predicted,) = _rows(headline, "calibration", "held-out TCP error RMS, actual / predicted")
-    assert predicted.verdict == hl.ratio(0.5) and "52.0 µm" in predicted.against
+    assert predicted.ratio == hl.ratio(0.5) and predicted.verdict == "" and "52.0 µm" in predicted.against
     (ident,) = _rows(headline, "identification", "validation torque RMS")
-    assert ident.verdict == "FAIL" and "joint 2" in ident.value and "≤ 2" in ident.against
+    assert ident.verdict == hl.FAIL and "joint 2" in ident.value and "≤ 2" in ident.against
+    assert ident.ratio == hl.ratio(3.5)
     assert ident.source == "recorded (my_arm_record.csv)"
     (gates,) = _rows(headline, "identification", "quality gates")
-    assert gates.verdict.startswith("FAIL: validation_rms_over_noise") and "--accept-poor" in gates.verdict
+    assert gates.verdict == hl.FAIL and "failed: validation_rms_over_noise" in gates.value
+    assert "--accept-poor" in gates.value
     (ff,) = _rows(headline, "control", "feedforward gain")
     # the best variant the stage ran (the nominal-model comparison is no variant of the run)
-    assert "elastic_flat" in ff.value and ff.verdict == hl.ratio(2.4e-3 / 75e-6)
+    assert "elastic_flat" in ff.value and ff.ratio == hl.ratio(2.4e-3 / 75e-6) and ff.verdict == hl.PASS
     # simulated on a model identified from the user's record: the row says so
     assert "recorded (my_arm_record.csv)" in ff.source
+    ratios = {r.figure.split(" (")[0]: r.ratio for r in headline.rows if r.stage == "trajectory"}
     verdicts = {r.figure.split(" (")[0]: r.verdict for r in headline.rows if r.stage == "trajectory"}
-    assert verdicts["CP duration"] == hl.ratio(0.54 / 0.50)
-    assert verdicts["PtP duration"] == hl.ratio(0.8)
-    assert verdicts["PtP energy at ruckig's duration"] == hl.ratio(0.6 / 0.9)
-    assert verdicts["PtP move + settle"] == hl.ratio(1.1 / 1.5)     # the better of the two plans
-    assert verdicts["quality gates"] == "pass"
+    assert ratios["CP duration"] == hl.ratio(0.54 / 0.50) and verdicts["CP duration"] == hl.WARN   # slower
+    assert ratios["PtP duration"] == hl.ratio(0.8) and verdicts["PtP duration"] == hl.PASS
+    assert ratios["PtP energy at ruckig's duration"] == hl.ratio(0.6 / 0.9)
+    assert ratios["PtP move + settle"] == hl.ratio(1.1 / 1.5)     # the better of the two plans
+    assert verdicts["quality gates"] == hl.PASS
+    assert {r.verdict for r in headline.rows} <= {hl.PASS, hl.WARN, hl.FAIL, ""}
     assert headline.assumptions == ["payload 0 kg assumed"] and headline.warnings == ["moving mass 12 kg is light"]
     assert headline.failed
     (model,) = _rows(headline, "model", "robot")
-    assert model.verdict.startswith("WARN")
+    assert model.verdict == hl.WARN and "1 warning(s)" in model.against
 
 
 def test_missing_stages_and_figures_leave_rows_out(tmp_path):
@@ -121,7 +126,7 @@ def model_like_stage(monkeypatch, fake_stages):
 
     stage = SimpleNamespace(NAME="model", DEPENDS=(), Config=type(fake_stages.make("x").Config()), run=run,
                             __file__=None)
-    monkeypatch.setattr(config, "STAGES", {"model": stage, **config.STAGES})
+    monkeypatch.setattr(stage_registry, "STAGES", {"model": stage, **stage_registry.STAGES})
     return stage
 
 
@@ -138,7 +143,7 @@ def test_recorded_calibration_stands_on_its_cross_validation(tmp_path):
     summary = {"cross_validation": {"folds": 5, "rms_position_error_m": 40e-6}, "tracker_noise_sigma_m": 20e-6,
                "measurement_source": "/data/tracker_readings.csv", "heldout_rms_position_error_after_m": None}
     (row,) = hl.stage_rows("calibration", summary)
-    assert row.figure.startswith("5-fold cross-validated") and row.verdict == hl.ratio(2.0)
+    assert row.figure.startswith("5-fold cross-validated") and row.ratio == hl.ratio(2.0)
     assert row.source == "recorded (tracker_readings.csv)"
 
 
@@ -146,7 +151,7 @@ def test_calibration_row_judges_against_the_total_noise_not_the_sensor_alone():
     summary = {"heldout_rms_position_error_after_m": 60e-6, "tracker_noise_sigma_m": 10e-6,
                "noise_total_sigma_m": 30e-6, "validation_source": "simulated tracker (held-out)"}
     (row, *_) = hl.stage_rows("calibration", summary)
-    assert row.verdict == hl.ratio(2.0)
+    assert row.ratio == hl.ratio(2.0)
 
 
 def test_cross_validated_error_is_compared_with_the_cross_validated_prediction():
@@ -154,4 +159,16 @@ def test_cross_validated_error_is_compared_with_the_cross_validated_prediction()
                "predicted_rms_position_error_m": 40e-3, "measurement_source": "/data/mocap.csv",
                "heldout_rms_position_error_after_m": None}
     (row,) = [r for r in hl.stage_rows("calibration", summary) if "actual / predicted" in r.figure]
-    assert row.verdict == hl.ratio(1.0)
+    assert row.ratio == hl.ratio(1.0)
+
+
+def test_actual_over_predicted_takes_its_gate_and_warns_when_pessimistic():
+    def row(ratio_: float):
+        check = {"name": "actual_over_predicted", "passed": ratio_ <= 2.0, "value": ratio_, "op": "<=",
+                 "threshold": 2.0}
+        summary = {"heldout_rms_position_error_after_m": ratio_ * 10e-6, "predicted_rms_position_error_m": 10e-6,
+                   "quality_gates": {"passed": check["passed"], "checks": [check]}}
+        (out,) = [r for r in hl.stage_rows("calibration", summary) if "actual / predicted" in r.figure]
+        return out.verdict
+
+    assert (row(1.2), row(0.3), row(2.5)) == (hl.PASS, hl.WARN, hl.FAIL)

@@ -17,6 +17,7 @@ from pipeline.core.config import CONFIGS_DIR, load_config
 from pipeline.identification import stage as ident_stage
 from pipeline.robot.model import RobotModel
 from pipeline.run import second_pass
+from pipeline.run import stages as stage_registry
 from pipeline.run.headline import read_headline
 from pipeline.run.runner import run_pipeline
 from pipeline.run.stage_plan import plan_stages, unavailable_stages
@@ -36,11 +37,11 @@ def _stand_in(real_module, calls: list, summary: dict):
 @pytest.fixture
 def stand_ins(monkeypatch):
     calls = {"calibration": [], "identification": []}
-    registry = {"model": config_mod.STAGES["model"],
+    registry = {"model": stage_registry.STAGES["model"],
                 "calibration": _stand_in(cal_stage, calls["calibration"], {"gravity_model_share": 0.9}),
                 "identification": _stand_in(ident_stage, calls["identification"], {"validation_rms_over_noise": [1.0]}),
-                "control": config_mod.STAGES["control"], "trajectory": config_mod.STAGES["trajectory"]}
-    monkeypatch.setattr(config_mod, "STAGES", registry)
+                "control": stage_registry.STAGES["control"], "trajectory": stage_registry.STAGES["trajectory"]}
+    monkeypatch.setattr(stage_registry, "STAGES", registry)
     return calls
 
 
@@ -87,7 +88,7 @@ def test_no_second_pass_with_a_recorded_calibration_and_a_simulated_identificati
     assert note.startswith("no second calibration pass") and "simulated" in note
     (row,) = [r for r in read_headline(result.run_dir, list(result.outputs)).rows
               if r.figure == "second calibration pass"]
-    assert row.verdict == "not run" and row.value == note
+    assert row.value == "not run" and row.against == note
     assert note in (result.run_dir / "report.md").read_text()
     # the simulated identification uses the recorded calibration's robot, and has its hidden robot
     (ident,) = stand_ins["identification"]

@@ -1,17 +1,27 @@
-"""The runner's second calibration pass (pipeline.run.second_pass): when it runs, what it hands on."""
+"""The runner's second calibration pass (pipeline.run.second_pass): when it runs, what it hands on,
+and (slow) one command running both passes, and a copied run with its second pass reused elsewhere.
+The calibration with a given gravity model: tests/calibration/test_second_pass.py."""
 
 from __future__ import annotations
 
+import json
+import shutil
 from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
 from pipeline.calibration.config import Config as CalibrationConfig
-from pipeline.core.config import RunConfig
+from pipeline.core.config import CONFIGS_DIR, RunConfig, load_config
 from pipeline.core.errors import ConfigError
 from pipeline.run import second_pass, stage_io
+from pipeline.run.run_check import check_run
+from pipeline.run.runner import run_pipeline
+from pipeline.run.second_pass import GRAVITY_SHARE_FOR_SECOND_PASS
 from pipeline.stage_api import StageOutput
+
+#: 3 sigma of the tracker plus the unmodelled remainder (tests/calibration/test_second_pass.py)
+HELDOUT_OVER_SIGMA_MAX = 3.5
 
 
 def _output(path: Path, summary: dict, inputs_hash: str = "abc") -> StageOutput:
@@ -73,3 +83,37 @@ def test_reuse_copies_the_first_pass_and_replaces_only_other_inputs(tmp_path):
 def test_bad_mode_names_the_field():
     with pytest.raises(ConfigError, match="second_pass"):
         replace(CalibrationConfig(), second_pass="twice").validate()
+
+
+@pytest.mark.slow
+def test_the_runner_runs_the_second_pass_when_the_gravity_model_dominates(tmp_path, rx130l_generic_stiffness_dir):
+    """One command (quick profile, the RX130L with the generic joint stiffness, whose own weight
+    dominates the first pass's predicted error): the first pass under ``first_pass/``, this run
+    calibrated with its identified robot, and a repeated command reuses every stage of both."""
+    logs: list[str] = []
+    cfg = load_config(CONFIGS_DIR / "quick.yaml", ["name=one", f"robot={rx130l_generic_stiffness_dir}"])
+    run_pipeline(cfg, out_root=tmp_path, log=logs.append)
+    first = json.loads((tmp_path / "one" / "first_pass" / "one" / "calibration" / "summary.json").read_text())
+    second = json.loads((tmp_path / "one" / "calibration" / "summary.json").read_text())
+    assert first["gravity_model_share"] >= GRAVITY_SHARE_FOR_SECOND_PASS > second["gravity_model_share"]
+    assert second["rms_after_over_sigma"] <= HELDOUT_OVER_SIGMA_MAX < first["rms_after_over_sigma"]
+    assert f"{tmp_path}/.gravity_models/" in second["gravity_pass"]["gravity_model"]
+    again = run_pipeline(cfg, out_root=tmp_path, log=lambda m: None)
+    assert again.ran == [] and set(again.reused) == set(again.outputs)
+
+
+@pytest.mark.slow
+def test_a_copied_run_with_its_second_pass_is_reused_elsewhere(tmp_path):
+    """The second pass's gravity model enters calibration's inputs by content: a run copied to
+    another runs folder is reused there, stage by stage, and ``check`` says so beforehand."""
+    small = ["name=q", "calibration.n_random_candidates=400", "calibration.n_configurations=24",
+             "calibration.n_heldout=100", "calibration.second_pass=always"]
+    cfg = load_config(CONFIGS_DIR / "quick.yaml", small, "calibration")
+    run_pipeline(cfg, out_root=tmp_path / "a", log=lambda m: None)
+    shutil.copytree(tmp_path / "a" / "q", tmp_path / "b" / "q")
+    manifests = {p.relative_to(tmp_path / "b"): p.read_bytes() for p in (tmp_path / "b").rglob("manifest.json")}
+    cfg = load_config(CONFIGS_DIR / "quick.yaml", small, "calibration")
+    assert set(check_run(cfg, out_root=tmp_path / "b").reasons.values()) == {None}
+    again = run_pipeline(cfg, out_root=tmp_path / "b", log=lambda m: None)
+    assert again.ran == [] and set(again.reused) == {"model", "calibration"}
+    assert {p.relative_to(tmp_path / "b"): p.read_bytes() for p in (tmp_path / "b").rglob("manifest.json")} == manifests

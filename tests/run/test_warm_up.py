@@ -11,9 +11,9 @@ from pathlib import Path
 import casadi as ca
 
 from pipeline.core import codegen
-from pipeline.core import config as config_module
 from pipeline.core.config import load_config
 from pipeline.run import runner as runner_module
+from pipeline.run import stages as stage_registry
 from pipeline.run.runner import run_pipeline
 from pipeline.run.warm_up import warmed_up
 
@@ -81,7 +81,7 @@ def test_runner_warms_up_only_the_stages_that_will_run(fake_stages, tmp_path, mo
 
     monkeypatch.setattr(runner_module, "warmed_up", recording)
     for name in ("b", "c"):         # stage a has no warm-up
-        monkeypatch.setattr(config_module.STAGES[name], "warm_up", lambda config, robot: None, raising=False)
+        monkeypatch.setattr(stage_registry.STAGES[name], "warm_up", lambda config, robot: None, raising=False)
     quiet = {"out_root": tmp_path, "log": lambda m: None, "warm_up": True}
     run_pipeline(load_config(None, ["name=r"]), **quiet)
     run_pipeline(load_config(None, ["name=r", "c.n=4"]), **quiet)

@@ -30,6 +30,11 @@ def line_path(rx130l, quick_traj_config):
     return path
 
 
+#: session fixtures that take seconds and serve several tests: their tests run on one pytest-xdist
+#: worker, so each is built once per ``make test`` (tests/conftest.py, pytest_collection_modifyitems)
+SHARED_COSTLY_FIXTURES = frozenset({"ptp_problem", "big_move_plan"})
+
+
 @pytest.fixture(scope="session")
 def ptp_problem(rx130l, pm, quick_traj_config):
     return compile_ptp_problem(pm, rx130l, quick_traj_config)

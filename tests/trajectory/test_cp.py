@@ -10,7 +10,8 @@ import pytest
 
 from pipeline.core.errors import ConfigError, InfeasibleError
 from pipeline.trajectory.baselines import toppra_cp
-from pipeline.trajectory.cp import solve_cp_convex, solve_cp_refined, solve_cp_smooth
+from pipeline.trajectory.cp import solve_cp_convex, solve_cp_refined
+from pipeline.trajectory.cp_smooth import solve_cp_smooth
 from pipeline.trajectory.design import JointPath
 from pipeline.trajectory.solve import cp_joint_path, plan_cp
 from pipeline.trajectory.trajectories import check_trajectory
@@ -43,6 +44,11 @@ def test_refined_respects_full_friction_where_toppra_does_not(pm, line_path, qui
     # every grid point a constraint of an adjacent interval is active (necessary condition)
     assert plan.activity["active_fraction"] > 0.5
     assert plan.activity["grid_min_activity"] >= 0.999
+
+
+#: session fixtures that take seconds and serve several tests: their tests run on one pytest-xdist
+#: worker, so each is built once per ``make test`` (tests/conftest.py, pytest_collection_modifyitems)
+SHARED_COSTLY_FIXTURES = frozenset({"refined_line"})
 
 
 @pytest.fixture(scope="session")

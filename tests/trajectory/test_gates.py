@@ -11,12 +11,22 @@ from pipeline.core.errors import QualityGateError
 from pipeline.stage_api import StageResult
 from pipeline.trajectory.config import TrajectoryConfig
 from pipeline.trajectory.trajectories import TorqueCheck
-from pipeline.trajectory.validate import quality_gates
+from pipeline.trajectory.validate import ServoRun, quality_gates
 
 
 def _check(violation: float = 0.0, v: float = 0.9, a: float = 0.9) -> TorqueCheck:
     z = np.zeros((2, 6))
     return TorqueCheck(np.zeros(2), z, z, z, 1.0 + violation, violation, v, 0.0, a)
+
+
+def _run(averaged_ratio: float) -> ServoRun:
+    """A servo run whose 4 ms mean command is ``averaged_ratio`` x the torque limits."""
+    per_joint = np.full(6, averaged_ratio)
+    return ServoRun(duration_s=1.0, max_torque_ratio=averaged_ratio, max_torque_ratio_per_joint=per_joint,
+                    max_feedforward_ratio=averaged_ratio, max_averaged_torque_ratio=averaged_ratio,
+                    max_averaged_torque_ratio_per_joint=per_joint, average_window_s=4e-3,
+                    feedback_std_ratio_per_joint=np.zeros(6), feedback_max_ratio_per_joint=np.zeros(6),
+                    lag_error_max_rad=0.0, realtime_factor=1.0)
 
 
 def _plans(cp_check: TorqueCheck | None = None, ptp_status: str = "Solve_Succeeded"):
@@ -36,7 +46,7 @@ def _finish(gates):
 
 def test_good_plans_pass():
     cp, ptp = _plans()
-    res = _finish(quality_gates(TrajectoryConfig(), cp, ptp, {"cp": {"max_averaged_torque_ratio": 0.95}}))
+    res = _finish(quality_gates(TrajectoryConfig(), cp, ptp, {"cp": _run(0.95)}))
     assert res.summary["quality_gates"]["passed"]
 
 
@@ -57,7 +67,7 @@ def test_a_violated_limit_or_failed_solve_fails_the_stage(case, figure):
 
 def test_simulation_over_the_limit_fails():
     cp, ptp = _plans()
-    sims = {"cp": {"max_averaged_torque_ratio": 1.2}, "ptp_ruckig": {"max_averaged_torque_ratio": 5.0}}
+    sims = {"cp": _run(1.2), "ptp_ruckig": _run(5.0)}
     with pytest.raises(QualityGateError, match="cp_sim_max_averaged_torque_ratio") as err:
         _finish(quality_gates(TrajectoryConfig(), cp, ptp, sims))
     assert "ptp_ruckig" not in str(err.value)          # the baseline is not gated
@@ -71,12 +81,12 @@ def test_acceleration_gate_follows_the_switch():
 
 def test_on_an_elastic_plant_the_smooth_ptp_is_gated_not_the_time_optimal_one():
     cp, ptp = _plans()
-    sims = {"ptp": {"max_averaged_torque_ratio": 17.0}, "ptp_smooth": {"max_averaged_torque_ratio": 0.9}}
+    sims = {"ptp": _run(17.0), "ptp_smooth": _run(0.9)}
     with pytest.raises(QualityGateError, match="ptp_sim_max_averaged_torque_ratio"):
         _finish(quality_gates(TrajectoryConfig(), cp, ptp, sims))          # rigid plant: the plan must run
     assert _finish(quality_gates(TrajectoryConfig(), cp, ptp, sims, elastic_plant=True)).summary[
         "quality_gates"]["passed"]
-    sims["ptp_smooth"]["max_averaged_torque_ratio"] = 1.2
+    sims["ptp_smooth"] = _run(1.2)
     with pytest.raises(QualityGateError, match="ptp_smooth_sim_max_averaged_torque_ratio"):
         _finish(quality_gates(TrajectoryConfig(), cp, ptp, sims, elastic_plant=True))
 
@@ -84,17 +94,17 @@ def test_on_an_elastic_plant_the_smooth_ptp_is_gated_not_the_time_optimal_one():
 def test_torque_limited_cp_on_an_elastic_plant_gates_the_executed_cp():
     cp, ptp = _plans()
     cp.checks["cp_executed"] = _check()
-    sims = {"cp": {"max_averaged_torque_ratio": 2.1}, "cp_smooth": {"max_averaged_torque_ratio": 1.3},
-            "cp_executed": {"max_averaged_torque_ratio": 0.99}}
+    sims = {"cp": _run(2.1), "cp_smooth": _run(1.3),
+            "cp_executed": _run(0.99)}
     torque_limited = TrajectoryConfig(acceleration_limits=False)
     with pytest.raises(QualityGateError, match="cp_sim_max_averaged_torque_ratio"):
         _finish(quality_gates(TrajectoryConfig(), cp, ptp, sims, elastic_plant=True))   # default: cp gated
     assert _finish(quality_gates(torque_limited, cp, ptp, sims, elastic_plant=True)).summary[
         "quality_gates"]["passed"]
-    sims["cp_executed"]["max_averaged_torque_ratio"] = 1.05
+    sims["cp_executed"] = _run(1.05)
     with pytest.raises(QualityGateError, match="cp_executed_sim_max_averaged_torque_ratio"):
         _finish(quality_gates(torque_limited, cp, ptp, sims, elastic_plant=True))
-    sims["cp_executed"]["max_averaged_torque_ratio"] = 0.99
+    sims["cp_executed"] = _run(0.99)
     cp.checks["cp_executed"] = _check(violation=0.02)
     with pytest.raises(QualityGateError, match="cp_executed_fine_violation"):
         _finish(quality_gates(torque_limited, cp, ptp, sims, elastic_plant=True))

@@ -13,7 +13,10 @@ SMALL = {"SETTINGS": {"trajectory.cp_ik_points": 40, "trajectory.cp_n_grid": 60,
          "PARETO_K2": []}
 
 
-def _check(text: str) -> None:
+def _check(run) -> None:   # run: ExecutedNotebook (tests/conftest.py)
+    """The notebook printed its figures' numbers and showed its figures inline."""
+    text = run.text
+    assert run.images, "no figure shown inline (no image/png output)"
     assert "ours with toppra's constraints" in text and "vs ruckig" in text and "simulated max torque ratio" in text
     assert "move + settle [s]" in text and "TCP path error max (links)" in text
 
@@ -21,8 +24,9 @@ def _check(text: str) -> None:
 def test_trajectory_notebook_executes(tmp_path, execute_notebook, ptp_problem):  # ptp_problem: warm PtP cache
     """Every cell on a smaller setting (the same code path: CP plans, PtP plan, simulation on the hidden
     robot, settling study); the slow twin runs the notebook as shipped (the PtP front's k2 = 1 point)."""
-    text = execute_notebook("04_trajectories.ipynb", tmp_path, SMALL)
-    _check(text)
+    run = execute_notebook("04_trajectories.ipynb", tmp_path, SMALL)
+    _check(run)
+    text = run.text
     assert "path line: " in text and "ptp_energy_at_ruckig_duration: " in text
 
 

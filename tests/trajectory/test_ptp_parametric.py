@@ -50,6 +50,11 @@ def problem(arm, parametric: bool) -> tuple[PtpProblem, PlanningModel]:
                       parametric=parametric), pm
 
 
+#: session fixtures that take seconds and serve several tests: their tests run on one pytest-xdist
+#: worker, so each is built once per ``make test`` (tests/conftest.py, pytest_collection_modifyitems)
+SHARED_COSTLY_FIXTURES = frozenset({"problems"})
+
+
 @pytest.fixture(scope="session")   # built once per worker, also when pytest-xdist comes back to this file
 def problems(rx130l):
     """(parametric, constant) problem pairs of two recalibrated arms."""

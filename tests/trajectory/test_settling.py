@@ -10,6 +10,7 @@ from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 from pipeline.sim.truth import RealRobot, TruthConfig
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.ptp import energy_weights
+from pipeline.trajectory.ptp_verified import FINE_GRID_ROUNDOFF, solve_ptp_verified
 from pipeline.trajectory.settling import (
     add_smooth_ptp,
     lowest_mode_hz,
@@ -19,7 +20,6 @@ from pipeline.trajectory.settling import (
     smooth_trajectory,
     time_scaled,
 )
-from pipeline.trajectory.solve import FINE_GRID_ROUNDOFF, solve_ptp_verified
 from pipeline.trajectory.trajectories import JointTrajectory, check_trajectory
 
 

@@ -18,16 +18,9 @@ from pipeline.robot.defaults import ready_pose_rad
 from pipeline.robot.example_robots import example_arm_urdf
 from pipeline.robot.model import RobotModel
 from pipeline.run.runner import run_pipeline
-from pipeline.view.viewer import (
-    LAYERS,
-    Viewer,
-    camera_view,
-    find_saved_motions,
-    is_run_dir,
-    layer_of,
-    view_run,
-    workspace_box,
-)
+from pipeline.view.run_view import find_saved_motions, is_run_dir, view_run
+from pipeline.view.scene import LAYERS, camera_view, layer_of, workspace_box
+from pipeline.view.viewer import Viewer
 
 CHROMIUM = shutil.which("chromium") or ("/usr/bin/chromium" if Path("/usr/bin/chromium").exists() else None)
 

@@ -1,0 +1,145 @@
+"""MoveIt-style ``joint_limits.yaml`` and the URDF handed on with the joint types of its source.
+
+``joint_limits.yaml`` (the layout of MoveIt's setup assistant, ``joint_limits`` per joint)::
+
+    joint_limits:
+      <joint>:
+        has_position_limits: true
+        min_position: <rad>
+        max_position: <rad>
+        has_velocity_limits: true
+        max_velocity: <rad/s>
+        has_acceleration_limits: true
+        max_acceleration: <rad/s²>
+        has_effort_limits: true
+        max_effort: <N·m>
+
+The values are the limits the plans were verified against (for a continuous joint: the one-turn
+position limits the stages used, the URDF keeps it continuous). The URDF: the model's placements,
+inertials and limits written into its source URDF (:func:`pipeline.robot.urdf_export.export_urdf`),
+with every joint that the source URDF declares ``continuous`` continuous again (no position limits).
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.core.artefacts import write_text
+from pipeline.core.errors import DataFileError
+from pipeline.core.yaml12 import read_yaml_file
+from pipeline.robot.model import RobotModel
+from pipeline.robot.urdf_export import export_urdf
+from pipeline.robot.urdf_import import absolute_mesh_paths
+
+
+@dataclass(frozen=True)
+class JointLimitTable:
+    """Per-joint limits in the order of ``joint_names``: rad, rad/s, rad/s², N·m."""
+
+    joint_names: tuple[str, ...]
+    lower_rad: np.ndarray
+    upper_rad: np.ndarray
+    velocity_rad_s: np.ndarray
+    acceleration_rad_s2: np.ndarray
+    effort_Nm: np.ndarray
+
+    @classmethod
+    def of_model(cls, robot: RobotModel) -> JointLimitTable:
+        """The limits a model's stages verify plans against."""
+        lim = robot.limits
+        return cls(tuple(robot.model.names[1:]), lim.lower_rad, lim.upper_rad, lim.velocity_rad_s,
+                   lim.acceleration_rad_s2, lim.effort_Nm)
+
+
+def joint_limits_yaml(table: JointLimitTable, note: str = "") -> str:
+    """The text of a MoveIt ``joint_limits.yaml`` for ``table`` (17 significant digits)."""
+    lines = ["# joint limits (rad, rad/s, rad/s^2, N m) the exported motions were verified against"]
+    if note:
+        lines += [f"# {line}" for line in note.splitlines()]
+    lines += ["default_velocity_scaling_factor: 1.0", "default_acceleration_scaling_factor: 1.0", "joint_limits:"]
+    for k, name in enumerate(table.joint_names):
+        lines += [f"  {name}:",
+                  "    has_position_limits: true",
+                  f"    min_position: {float(table.lower_rad[k]):.17g}",
+                  f"    max_position: {float(table.upper_rad[k]):.17g}",
+                  "    has_velocity_limits: true",
+                  f"    max_velocity: {float(table.velocity_rad_s[k]):.17g}",
+                  "    has_acceleration_limits: true",
+                  f"    max_acceleration: {float(table.acceleration_rad_s2[k]):.17g}",
+                  "    has_effort_limits: true",
+                  f"    max_effort: {float(table.effort_Nm[k]):.17g}"]
+    return "\n".join(lines) + "\n"
+
+
+def write_joint_limits_yaml(path: str | Path, table: JointLimitTable, note: str = "") -> Path:
+    """``joint_limits.yaml`` at ``path`` (atomic)."""
+    return write_text(path, joint_limits_yaml(table, note))
+
+
+def read_joint_limits_yaml(path: str | Path, joint_names: Sequence[str] | None = None) -> JointLimitTable:
+    """A MoveIt ``joint_limits.yaml``; a limit flagged absent (``has_*: false``) reads as ±inf.
+
+    ``joint_names`` picks and orders the joints (default: the file's order).
+    """
+    data = read_yaml_file(path, DataFileError)
+    if not isinstance(data, dict) or not isinstance(data.get("joint_limits"), dict):
+        raise DataFileError(path, "joint_limits", "missing or not a mapping of joints")
+    entries = data["joint_limits"]
+    names = list(entries) if joint_names is None else list(joint_names)
+
+    def value(name: str, flag: str, key: str, default: float) -> float:
+        entry = entries.get(name)
+        if not isinstance(entry, dict):
+            raise DataFileError(path, f"joint_limits.{name}", "missing or not a mapping")
+        if not entry.get(flag, key in entry):
+            return default
+        number = entry.get(key)
+        if not isinstance(number, int | float) or isinstance(number, bool):
+            raise DataFileError(path, f"joint_limits.{name}.{key}", f"{number!r} is not a number")
+        return float(number)
+
+    def column(flag: str, key: str, default: float) -> np.ndarray:
+        return np.array([value(name, flag, key, default) for name in names])
+
+    return JointLimitTable(tuple(names), column("has_position_limits", "min_position", -np.inf),
+                           column("has_position_limits", "max_position", np.inf),
+                           column("has_velocity_limits", "max_velocity", np.inf),
+                           column("has_acceleration_limits", "max_acceleration", np.inf),
+                           column("has_effort_limits", "max_effort", np.inf))
+
+
+def source_joint_types(urdf_file: str | Path) -> dict[str, str]:
+    """``{joint: type}`` of a URDF file as written (before loading turned continuous joints revolute)."""
+    try:
+        root = ET.parse(urdf_file).getroot()
+    except (OSError, ET.ParseError) as exc:
+        raise DataFileError(urdf_file, None, f"cannot read the source URDF: {exc}") from exc
+    return {str(j.get("name")): str(j.get("type")) for j in root.findall("joint")}
+
+
+def restore_joint_types(urdf_text: str, types: dict[str, str]) -> str:
+    """``urdf_text`` with every joint that ``types`` calls ``continuous`` continuous (position limits dropped)."""
+    root = ET.fromstring(urdf_text)
+    for joint in root.findall("joint"):
+        if types.get(str(joint.get("name"))) == "continuous" and joint.get("type") != "continuous":
+            joint.set("type", "continuous")
+            limit = joint.find("limit")
+            if limit is not None:
+                limit.attrib.pop("lower", None)
+                limit.attrib.pop("upper", None)
+    return ET.tostring(root, encoding="unicode")
+
+
+def handed_on_urdf(robot: RobotModel, source_urdf: str | Path | None = None) -> str:
+    """The model as URDF text with the joint types of its source URDF (``robot.urdf_path`` by default)."""
+    text = export_urdf(robot.model, robot.urdf_text)
+    source = Path(source_urdf) if source_urdf is not None else robot.urdf_path
+    if source is not None and Path(source).is_file():
+        text = restore_joint_types(text, source_joint_types(source))
+        text = absolute_mesh_paths(text, Path(source))     # meshes still found from the export folder
+    return text

@@ -1,0 +1,163 @@
+"""The fits on all samples, step 5 of :mod:`pipeline.identification.stage` (paper
+``004_abbe750b8bbcc3aa.txt`` §4.2), and the model they hand on.
+
+* :func:`fit_models`: OLS, Gautier's WLS ``beta = (W^T S^-1 W)^-1 W^T S^-1 y`` (``S``: per-joint
+  residual variances) and the physically consistent fit (log-Cholesky, IPOPT; :mod:`.estimate`);
+  with ``friction_model: stribeck`` the Stribeck term first (:func:`.friction.fit_stribeck`, nested
+  in the viscous + Coulomb fit) and taken off the torques, the viscous + Coulomb fits kept beside
+  it; the candidate with load-dependent Coulomb friction (:func:`fit_load_candidate`). The
+  validation torques choose among them (:func:`pipeline.identification.validate.choose_friction_model`).
+* :func:`base_covariance`: the HAC sandwich of the handed-on fit (:func:`.estimate.hac_covariance`).
+* :func:`handed_on_robot`: the robot with the handed-on standard parameters and friction terms.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from pipeline.core.errors import SolverError
+from pipeline.identification import estimate as est_mod
+from pipeline.identification import measure as meas_mod
+from pipeline.identification.config import Config
+from pipeline.identification.friction import (
+    MAX_EXCESS_OVER_LIMIT,
+    LoadFriction,
+    expand_to_joints,
+    fit_load_friction,
+    fit_stribeck,
+)
+from pipeline.identification.gates import check_data_excites
+from pipeline.identification.joints import JointSelection
+from pipeline.identification.outcome import Fits, LoadCandidate, Measured, Regressors, identified_robot
+from pipeline.identification.regressor import standard_parameters
+from pipeline.robot.assumed_values import predicted_drive_values
+from pipeline.robot.model import RobotModel
+
+
+def fit_models(robot: RobotModel, cfg: Config, regs: Regressors, measured: Measured, timings: dict[str, float]) -> Fits:
+    """OLS, Gautier's WLS and the physically consistent fit on all samples; with ``friction_model:
+    stribeck`` the Stribeck term first (nested in the viscous + Coulomb fit), taken off the torques,
+    and the viscous + Coulomb fits beside it (the validation torques choose,
+    :func:`pipeline.identification.validate.choose_friction_model`). The data must excite the model
+    (:func:`.gates.check_data_excites`)."""
+    t1 = time.perf_counter()
+    data, base, nm = measured.data, regs.base, regs.n_used
+    Wb, y = base.base_regressor(data.Y), data.y
+    cond_data = check_data_excites(data.q[:, regs.used], Wb, [f"q{j + 1}" for j in regs.used],
+                                   cfg.min_joint_motion_rad, cfg.max_cond_base_regressor_data,
+                                   str(cfg.data_file) if cfg.data_file else None)
+    cond_data_structural = float(np.linalg.cond(regs.base_design.base_regressor(data.Y)))  # design criterion's set
+    wls_vc = est_mod.wls(Wb, y, nm)
+    max_excess = MAX_EXCESS_OVER_LIMIT * robot.limits.effort_Nm[regs.used]
+    fit = (fit_stribeck(Wb, y, data.v_blocks, wls_vc.beta, wls_vc.joint_sigma_Nm, regs.reg.coulomb_width_rad_s,
+                        max_excess_Nm=max_excess) if cfg.friction_model == "stribeck" else None)
+    timings["stribeck_fit_s"] = time.perf_counter() - t1
+    y_fit = y if fit is None else y - fit.stribeck_torque(data.v_blocks).ravel()
+    ols = est_mod.ols(Wb, y_fit, nm)
+    wls = wls_vc if fit is None else est_mod.wls(Wb, y_fit, nm)
+    drive = predicted_drive_values(robot.actuation, robot.spec.assumed)   # assumed or link-side drive values: 0
+    p_nom = standard_parameters(robot.model, drive["rotor_inertia_kgm2"], drive["viscous_Nms_rad"],
+                                drive["coulomb_Nm"])
+    nq = robot.nq
+    phys = est_mod.physical_fit(data.Y, y_fit, nq, p_nom, wls.joint_sigma_Nm, cfg.regularization,
+                                cfg.physical_max_iter, n_rows=nm)
+    phys_vc = phys if fit is None else est_mod.physical_fit(data.Y, y, nq, p_nom, wls_vc.joint_sigma_Nm,
+                                                            cfg.regularization, cfg.physical_max_iter, n_rows=nm)
+    timings["estimation_s"] = time.perf_counter() - t1
+    fits = Fits(Wb, y, cond_data, cond_data_structural, wls_vc, max_excess, fit, y_fit, ols, wls, p_nom, phys,
+                phys_vc)
+    fit_load_candidate(cfg, regs, data, fits, nq, timings)
+    return fits
+
+
+def fit_load_candidate(cfg: Config, regs: Regressors, data: meas_mod.ProcessedData, fits: Fits, nq: int,
+                       timings: dict[str, float]) -> None:
+    """The candidate with load-dependent Coulomb friction (:func:`.friction.fit_load_friction`), nested in
+    the configured model's fit, and its WLS and physically consistent fits (``fits.load_candidate``);
+    on joint-side (diagonal) actuator columns only, else ``fits.load_note`` says why not."""
+    K = regs.reg.gear_matrix
+    if not np.allclose(K, np.diag(np.diag(K))):
+        fits.load_note = "not fitted: coupled axes (a motor's load is not one joint's torque)"
+        return
+    t1 = time.perf_counter()
+    Wb, y, fit, nm = fits.Wb, fits.y, fits.stribeck, regs.n_used
+    try:
+        lf = fit_load_friction(Wb, y, data.v_blocks, fits.wls_vc.beta if fit is None else fit.beta, fit,
+                               fits.wls_vc.joint_sigma_Nm, regs.reg.coulomb_width_rad_s, offset_mask(regs, nq),
+                               fits.max_excess_Nm)
+        y_l = y - lf.torque(Wb, data.v_blocks).ravel()
+        wls_l = est_mod.wls(Wb, y_l, nm)
+        phys_l = est_mod.physical_fit(data.Y, y_l, nq, fits.p_nom, wls_l.joint_sigma_Nm, cfg.regularization,
+                                      cfg.physical_max_iter, n_rows=nm)
+        fits.load_candidate = LoadCandidate(lf, y_l, wls_l, phys_l)
+    except SolverError as exc:   # a candidate only: the others stand
+        fits.load_note = f"not fitted: {exc}"
+    timings["load_friction_fit_s"] = time.perf_counter() - t1
+
+
+def offset_mask(regs: Regressors, nq: int) -> np.ndarray:
+    """Base parameters that are torque offsets (the last ``nq`` standard parameters): left out of the load."""
+    return regs.base.independent >= len(regs.base.standard_names) - nq
+
+
+def load_to_joints(load: LoadFriction, used: np.ndarray, nq: int) -> LoadFriction:
+    """The term of the measured joints ``used`` on all ``nq`` joints (0 on the others)."""
+    coef = np.zeros(nq)
+    coef[used] = load.coefficient
+    return LoadFriction(coef, load.coulomb_width_rad_s)
+
+
+def base_covariance(regs: Regressors, measured: Measured, fits: Fits) -> tuple[est_mod.HacCovariance, np.ndarray]:
+    """Correlated residuals: the covariance reported and scored is the HAC sandwich, for a handed-on
+    Stribeck term the joint one of the nested fit (base parameters with fs, log vs, and fl of a handed-on
+    load-dependent term; its column's load torque taken as given), marginal in beta;
+    set on ``fits.wls``. Returns it and the white-residual WLS sigmas it replaced."""
+    wls = fits.wls
+    white_sigma = wls.sigma
+    vb = measured.data.v_blocks
+    J = np.hstack([fits.Wb, *([] if fits.stribeck is None else [fits.stribeck.jacobian(vb)]),
+                   *([] if fits.load is None else [fits.load.load.jacobian(fits.load.load_Nm, vb)])])
+    hac = est_mod.hac_covariance(J, fits.y_fit - fits.Wb @ wls.beta, wls.joint_sigma_Nm, wls.covariance)
+    wls.covariance = hac.covariance[: regs.base.n_base, : regs.base.n_base]
+    return hac, white_sigma
+
+
+def handed_on_robot(robot: RobotModel, regs: Regressors, fits: Fits) -> RobotModel:
+    """``robot`` with the handed-on fit's standard parameters and friction terms (Stribeck,
+    load-dependent Coulomb) on all joints (:func:`.outcome.identified_robot`); the joints left out
+    keep ``robot``'s values (:func:`with_unmeasured_joints_kept`)."""
+    nq = robot.nq
+    return identified_robot(robot, with_unmeasured_joints_kept(robot, regs.selection, fits.phys.p),
+                            None if fits.stribeck is None else expand_to_joints(fits.stribeck, regs.used, nq),
+                            None if fits.load is None else load_to_joints(fits.load.load, regs.used, nq))
+
+
+def with_unmeasured_joints_kept(robot: RobotModel, selection: JointSelection, p: np.ndarray) -> np.ndarray:
+    """Standard parameters ``p`` with, for every joint left out of the fit, ``robot``'s values of its
+    link's inertial parameters and of its drive train (rotor inertia, viscous and Coulomb friction).
+
+    The fit sees those parameters only through the torques of the joints before them in the chain,
+    in combinations (a one-joint fit puts a link mass 40 % off and a wrist inertia on its bound):
+    handed on, they would give a later stage the wrong dynamics on the joints no torque validated."""
+    if selection.all_used:
+        return p
+    nq, n_links = robot.nq, robot.model.njoints - 1
+    act = robot.actuation
+    kept = standard_parameters(robot.model, act.rotor_inertia_kgm2, act.viscous_Nms_rad, act.coulomb_Nm)
+    out = np.array(p, float)
+    for j in selection.left_out:
+        for idx in ([*range(10 * j, 10 * j + 10)] if j < n_links else []) + [10 * n_links + g * nq + j
+                                                                               for g in range(3)]:
+            out[idx] = kept[idx]
+    return out
+
+
+def unmeasured_joints_note(sel: JointSelection) -> str:
+    """One line for the summary's warnings: which joints the handed-on model keeps nominal ("" when none)."""
+    if sel.all_used:
+        return ""
+    left = ", ".join(sel.names[j] for j in sorted(sel.left_out))
+    return (f"identified joint(s) {', '.join(sel.names[j] for j in sel.used)} only: the handed-on model keeps "
+            f"the previous (nominal or calibrated) link inertias and drive values of {left}")

@@ -1,0 +1,76 @@
+"""Values of a URDF that urdfdom would take without a word, or only with lines of C++ errors on stderr.
+
+urdfdom parses ``izz="nan"`` as NaN and ``mass="inf"`` as infinity; it drops an inertial element it
+cannot parse (``izz="abc"``) with an ``Error:`` on stderr, after which the link has no inertia and a
+placeholder follows. A joint whose lower limit is above its upper reaches numpy as
+``ValueError: high - low < 0`` the first time a configuration is drawn. :func:`check_urdf_values`
+refuses all three in one line naming the element, the attribute and the value, before Pinocchio
+reads the file.
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+from pipeline.core.errors import RobotFileError
+
+#: the numeric attributes of the URDF elements (ROS URDF XML specification), with how many numbers each holds
+NUMERIC_ATTRIBUTES: dict[str, dict[str, int]] = {
+    "origin": {"xyz": 3, "rpy": 3},
+    "mass": {"value": 1},
+    "inertia": {name: 1 for name in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")},
+    "axis": {"xyz": 3},
+    "limit": {"lower": 1, "upper": 1, "effort": 1, "velocity": 1},
+    "dynamics": {"damping": 1, "friction": 1},
+    "safety_controller": {"soft_lower_limit": 1, "soft_upper_limit": 1, "k_position": 1, "k_velocity": 1},
+    "calibration": {"rising": 1, "falling": 1, "reference_position": 1},
+    "mimic": {"multiplier": 1, "offset": 1},
+    "box": {"size": 3},
+    "cylinder": {"radius": 1, "length": 1},
+    "capsule": {"radius": 1, "length": 1},
+    "sphere": {"radius": 1},
+    "mesh": {"scale": 3},
+    "color": {"rgba": 4},
+}
+
+
+def _owner(element: ET.Element, kind: str) -> str:
+    return f"{kind} {element.get('name', '?')}"
+
+
+def _numbers(text: str) -> list[float] | None:
+    try:
+        return [float(token) for token in text.split()]
+    except ValueError:
+        return None
+
+
+def check_urdf_values(urdf: Path, root: ET.Element) -> None:
+    """Every number of every link, joint and material of ``root`` is finite and of the right count,
+    and no joint's ``<limit lower>`` is above its ``upper``; else :class:`RobotFileError`
+    (``<urdf>: link l1: <inertia izz>: not a finite number: 'nan'``). Extension elements
+    (``<gazebo>``, ``<transmission>``) are not URDF geometry and are not read."""
+    for kind in ("link", "joint", "material"):
+        for owner in root.findall(kind):
+            for element in owner.iter():
+                for attribute, count in NUMERIC_ATTRIBUTES.get(element.tag, {}).items():
+                    text = element.get(attribute)
+                    if text is None:
+                        continue
+                    numbers = _numbers(text)
+                    where = f"{_owner(owner, kind)}: <{element.tag} {attribute}>"
+                    if numbers is None or len(numbers) != count:
+                        expected = "a number" if count == 1 else f"{count} numbers"
+                        raise RobotFileError(urdf, where, f"expected {expected}, got {text!r}")
+                    if not all(math.isfinite(x) for x in numbers):
+                        raise RobotFileError(urdf, where, f"not a finite number: {text!r}")
+    for joint in root.findall("joint"):
+        limit = joint.find("limit")
+        if limit is None or limit.get("lower") is None or limit.get("upper") is None:
+            continue
+        lower, upper = float(limit.get("lower", "0")), float(limit.get("upper", "0"))
+        if lower > upper:
+            raise RobotFileError(urdf, f"{_owner(joint, 'joint')}: limit", f"lower {lower} is above upper {upper}; "
+                                 "the lower limit must be below the upper")

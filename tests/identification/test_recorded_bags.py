@@ -1,0 +1,74 @@
+"""A ROS 2 bag as identification.data_file, and the filter settings that follow from any log rate."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.core.errors import DataFileError
+from pipeline.exchange.motion import JointStates
+from pipeline.exchange.ros2_bag import write_joint_states
+from pipeline.identification.config import Config
+from pipeline.identification.record import load_user_record
+from pipeline.identification.signals import record_filter_settings
+from pipeline.robot.model import RobotModel
+
+
+def _states(robot: RobotModel, rate_hz: float, duration_s: float, names: list[str]) -> JointStates:
+    t = np.arange(int(duration_s * rate_hz)) / rate_hz
+    q = 0.3 * np.sin(np.outer(t, 0.5 + 0.1 * np.arange(len(names))))
+    return JointStates(tuple(names), t, q, np.full_like(q, np.nan), np.cos(q))
+
+
+@pytest.mark.parametrize("rate_hz", [25.0, 30.0, 125.0, 1000.0, 4000.0])
+def test_every_rate_from_25_hz_to_4_khz_passes_the_checks_with_the_defaults(tmp_path, rx130l, rate_hz):
+    cutoff_hz, decimation = record_filter_settings(rate_hz)
+    assert cutoff_hz < 0.5 * rate_hz and decimation >= 1
+    assert rate_hz / decimation > 2 * cutoff_hz            # the decimated rate still carries the kept band
+    names = [str(n) for n in rx130l.model.names[1:]]
+    # enough samples for the fit at this rate's decimation (the check states the count)
+    duration_s = 60.0 if rate_hz < 100 else 12.0
+    bag = write_joint_states(tmp_path / "log", _states(rx130l, rate_hz, duration_s, names))
+    rec = load_user_record(Config(data_file=str(bag)), rx130l)
+    assert rec.q_rad.shape[1] == rx130l.nq
+    assert rec.sample_time_s == pytest.approx(1.0 / rate_hz)
+
+
+def test_joints_by_name_in_any_order_extra_joints_ignored_bare_db3(tmp_path, rx130l):
+    model = [str(n) for n in rx130l.model.names[1:]]
+    recorded = ["gripper_finger", *reversed(model)]
+    states = _states(rx130l, 100.0, 30.0, recorded)
+    bag = write_joint_states(tmp_path / "log", states)
+    bare = tmp_path / "log.db3"
+    shutil.copy(next(bag.glob("*.db3")), bare)
+    rec = load_user_record(Config(data_file=str(bare)), rx130l)
+    order = [recorded.index(name) for name in model]
+    np.testing.assert_array_equal(rec.q_rad, states.q_rad[:, order])
+    np.testing.assert_array_equal(rec.tau_Nm, states.effort_Nm[:, order])
+
+
+def test_renamed_joints_need_the_stated_mapping(tmp_path, rx130l):
+    model = [str(n) for n in rx130l.model.names[1:]]
+    renamed = [f"axis_{chr(ord('a') + k)}" for k in range(len(model))]
+    bag = write_joint_states(tmp_path / "log", _states(rx130l, 100.0, 30.0, renamed))
+    with pytest.raises(DataFileError, match="identification.joint_names"):
+        load_user_record(Config(data_file=str(bag)), rx130l)
+    rec = load_user_record(Config(data_file=str(bag), joint_names=dict(zip(renamed, model, strict=True))), rx130l)
+    assert rec.q_rad.shape == (3000, rx130l.nq)
+
+
+def test_a_short_log_names_the_decimation_that_would_fix_it(tmp_path, rx130l):
+    names = [str(n) for n in rx130l.model.names[1:]]
+    bag = write_joint_states(tmp_path / "log", _states(rx130l, 1000.0, 1.0, names))
+    with pytest.raises(DataFileError, match="identification.data_decimation"):
+        load_user_record(Config(data_file=str(bag)), rx130l)
+
+
+def test_a_file_that_is_no_bag_is_named(tmp_path: Path, rx130l):
+    junk = tmp_path / "log.db3"
+    junk.write_bytes(b"\xde" * 100)
+    with pytest.raises(DataFileError, match="log.db3"):
+        load_user_record(Config(data_file=str(junk)), rx130l)
