@@ -87,7 +87,7 @@ def test_run_once_through_equals_stage_by_stage_with_reuse(tmp_path, robot):
              "calibration.n_heldout=100"]
     stages = ("model", "calibration", "identification", "control", "trajectory")
     quiet = {"out_root": tmp_path, "log": lambda m: None}
-    run_pipeline(load_config(CONFIGS_DIR / "quick.yaml", [*small, "name=once"], stages[-1]), **quiet)
+    run_pipeline(load_config(CONFIGS_DIR / "quick.yaml", [*small, "name=once"], stages), **quiet)   # every stage
     for stage in stages:
         result = run_pipeline(load_config(CONFIGS_DIR / "quick.yaml", [*small, "name=steps"], stage), **quiet)
         assert result.ran == [stage]
