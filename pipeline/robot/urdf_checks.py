@@ -36,6 +36,10 @@ NUMERIC_ATTRIBUTES: dict[str, dict[str, int]] = {
 }
 
 
+#: elements whose every attribute above urdfdom requires (an inertia without ``iyz`` is not parsed)
+REQUIRED_ATTRIBUTE_TAGS = frozenset({"inertia"})
+
+
 def _owner(element: ET.Element, kind: str) -> str:
     return f"{kind} {element.get('name', '?')}"
 
@@ -58,6 +62,9 @@ def check_urdf_values(urdf: Path, root: ET.Element) -> None:
                 for attribute, count in NUMERIC_ATTRIBUTES.get(element.tag, {}).items():
                     text = element.get(attribute)
                     if text is None:
+                        if element.tag in REQUIRED_ATTRIBUTE_TAGS:     # urdfdom drops the element with an Error
+                            raise RobotFileError(urdf, f"{_owner(owner, kind)}: <{element.tag}>",
+                                                 f"the {attribute} attribute is missing")
                         continue
                     numbers = _numbers(text)
                     where = f"{_owner(owner, kind)}: <{element.tag} {attribute}>"
