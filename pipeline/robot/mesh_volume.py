@@ -19,6 +19,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial import ConvexHull
 
 from pipeline.robot.urdf_import import resolve_mesh
 
@@ -29,7 +30,6 @@ LINK_DENSITY_KG_M3 = 900.0
 def _hull_volume_m3(path: Path, scale: np.ndarray) -> float | None:
     try:
         import coal
-        from scipy.spatial import ConvexHull
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             vertices = np.asarray(coal.MeshLoader().load(str(path), scale).vertices(), float)
