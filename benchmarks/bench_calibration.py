@@ -35,6 +35,7 @@ for section 5 alone (default 1000 poses).
 from __future__ import annotations
 
 import contextlib
+import importlib.util
 import io
 import os
 import subprocess
@@ -46,6 +47,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pinocchio as pin
+from figaroh_config import figaroh_calibration_yaml
 
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import design as ds
@@ -270,8 +272,6 @@ def timed_run(csv: Path, robot: str, cache: Path) -> tuple[float, float, str]:
 
 def ur10_robot(folder: Path) -> tuple[RobotModel, Path]:
     """The UR10 record's robot (URDF as shipped, robot.yaml from robot init) and its CSV in our layout."""
-    import importlib.util
-
     (folder / "robot.urdf").write_bytes((UR10 / "robot.urdf").read_bytes())
     write_robot_yaml(folder / "robot.urdf")
     spec = importlib.util.spec_from_file_location("mocap_rpy_csv", REPO_ROOT / "tools" / "mocap_rpy_csv.py")
@@ -282,33 +282,6 @@ def ur10_robot(folder: Path) -> tuple[RobotModel, Path]:
 
 #: FIGAROH 1.0.2 unified configuration of the UR10 record: full geometric parameters, unknown base
 #: frame (the camera's) and marker frame on wrist_3_link, 6-D marker (figaroh-examples ur10 layout)
-FIGAROH_UR10_YAML = """\
-robot:
-  name: ur10
-  properties:
-    joints:
-      active_joints: [{joints}]
-tasks:
-  calibration:
-    enabled: true
-    parameters:
-      calibration_level: full_params
-      include_non_geometric: false
-      outlier_threshold: 1.0
-    kinematics:
-      base_frame: universe
-      tool_frame: wrist_3_link
-    measurements:
-      markers:
-        - name: marker
-          reference_joint: wrist_3_joint
-          measurable_dof: [true, true, true, true, true, true]
-    data:
-      source_file: {data_file}
-      number_of_samples: 23
-"""
-
-
 def figaroh_ur10_s(folder: Path) -> float:
     """Seconds of FIGAROH's 6-D calibration of the UR10 record (initialise + LM solve)."""
     from figaroh.calibration.base_calibration import BaseCalibration
@@ -316,7 +289,9 @@ def figaroh_ur10_s(folder: Path) -> float:
     model = pin.buildModelFromUrdf(str(UR10 / "robot.urdf"))
     robot = SimpleNamespace(model=model, data=model.createData(), q0=pin.neutral(model))
     config = folder / "figaroh_ur10.yaml"
-    config.write_text(FIGAROH_UR10_YAML.format(joints=", ".join(UR10_JOINTS), data_file=UR10 / "calibration.csv"))
+    config.write_text(figaroh_calibration_yaml("ur10", list(UR10_JOINTS), UR10 / "calibration.csv", 23,
+                                               tool_frame="wrist_3_link", marker="marker",
+                                               reference_joint="wrist_3_joint", measured_dof=6))
     t0 = time.perf_counter()
     calib = BaseCalibration(robot, str(config))
     calib.calib_config["known_baseframe"] = False

@@ -40,6 +40,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pinocchio as pin
+from figaroh_config import figaroh_calibration_yaml
 
 from pipeline.calibration.error_model import MeasurementModel
 from pipeline.calibration.stage import calibrate, heldout_measurements
@@ -157,38 +158,6 @@ def identification_side_by_side() -> dict:
     return {"ours": ours, "figaroh": fig}
 
 
-#: FIGAROH unified configuration: full geometric parameters, unknown measurement frame (base pose)
-#: and marker position on the flange, position-only marker (figaroh-examples staubli_tx40 layout)
-FIGAROH_CALIBRATION_YAML = """\
-robot:
-  name: {robot}
-  properties:
-    joints:
-      active_joints: {joints}
-tasks:
-  calibration:
-    enabled: true
-    parameters:
-      calibration_level: full_params
-      include_non_geometric: false
-      outlier_threshold: 1.0
-      estimation:
-        method: {method}
-    kinematics:
-      base_frame: universe
-      tool_frame: flange
-    measurements:
-      markers:
-        - name: reflector
-          reference_joint: {last_joint}
-          measurable_dof: [true, true, true, false, false, false]
-          sensor_type: laser_tracker
-    data:
-      source_file: {data_file}
-      number_of_samples: {n}
-"""
-
-
 #: FIGAROH's parameter selection / estimation methods compared (``figaroh.calibration.estimation``:
 #: ``structural`` is its default, ``excitation`` drops poorly excited parameters, ``map`` keeps all
 #: with Gaussian priors)
@@ -207,9 +176,9 @@ def figaroh_calibration(robot: RobotModel, Q: np.ndarray, Y: np.ndarray, Q_test:
         for y, q in zip(Y, Q, strict=True):
             fh.write(",".join(repr(float(v)) for v in (*y, *q)) + "\n")
     config_file = folder / "figaroh_calibration.yaml"
-    config_file.write_text(FIGAROH_CALIBRATION_YAML.format(
-        robot=robot.name, joints="[" + ", ".join(joints) + "]", last_joint=joints[-1], data_file=data_file,
-        n=len(Q), method=method))
+    config_file.write_text(figaroh_calibration_yaml(
+        robot.name, joints, data_file, len(Q), tool_frame="flange", marker="reflector", reference_joint=joints[-1],
+        measured_dof=3, method=method, sensor_type="laser_tracker"))
     model = robot.model.copy()
     fig_robot = SimpleNamespace(model=model, data=model.createData(), q0=pin.neutral(model))
     t0 = time.perf_counter()

@@ -2,8 +2,8 @@
 corpus test writes (``tests/anyarm/test_corpus.py``, one JSON file per arm under ``data/corpus/`` or
 ``$PIPELINE_CORPUS_DIR``), between the markers ``<!-- corpus table -->`` and ``<!-- /corpus table -->``.
 
-    .venv/bin/python -m pytest -m slow tests/anyarm/test_corpus.py   # writes data/corpus/*.json
-    .venv/bin/python tools/corpus_table.py                            # rewrites the table in docs/robots.md
+    .venv/bin/python -m pytest -m "slow or study" tests/anyarm/test_corpus.py   # writes data/corpus/*.json
+    .venv/bin/python tools/corpus_table.py   # rewrites the table in docs/robots.md
 """
 
 from __future__ import annotations

@@ -226,8 +226,9 @@ def fit_with_noise_model(mm: MeasurementModel, rec: Measurements, basis: np.ndar
     """Robust fit (:func:`pipeline.calibration.robust.robust_estimate`) with the readings' noise
     ``sensor + repeatability + remainder``; the remainder by REML on the kept readings of that fit,
     then the fit again with it, until the readings' total variance changes by less than
-    ``tolerance`` (relative, mean over the readings) or after ``rounds`` fits. The first fit starts
-    from ``theta0`` (a warm start: a neighbouring fold's fit), each later one from the fit before."""
+    ``tolerance`` (relative, mean over the readings) or after ``rounds`` fits. ``theta0``: a warm
+    start (a neighbouring fold's fit): the first fit starts from it, each later one from the fit
+    before; None: every fit starts from the nominal model."""
     groups = row_groups(rec.offset_m, len(rec))
     known = replace(noise.known(), orientation_scale=1.0).total(rec.sigma_m, groups)
     current = noise
@@ -236,7 +237,7 @@ def fit_with_noise_model(mm: MeasurementModel, rec: Measurements, basis: np.ndar
         est, rejection = robust_estimate(mm, rec.Q, rec.Y, sigma, basis, rec.source, max_iterations,
                                          rec.payload_mounted, loss, confidence, max_fraction, rec.offset_m, gravity,
                                          theta0)
-        theta0 = est.theta
+        theta0 = None if theta0 is None else est.theta
         kept = np.ones(len(rec), bool)
         kept[rejection.rejected] = False
         new = replace(noise, remainder_sigma_m=_remainder_at(mm, est, rec, known, groups, kept, gravity))

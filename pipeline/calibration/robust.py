@@ -130,7 +130,8 @@ def robust_estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: n
                     theta0: np.ndarray | None = None) -> tuple[Estimate, Rejection]:
     """Steps 1-4 of the module docstring. ``loss`` "linear": no robust refit (outlier test only);
     ``gravity``: the gravity-model covariance of the readings (None or inactive: ``sigma_k`` only);
-    ``theta0``: the first fit's start (a warm start; each later fit starts from the one before)."""
+    ``theta0``: a warm start (e.g. a neighbouring fold's fit): the first fit starts from it and each
+    later one from the fit before; None: every fit starts from the nominal model."""
     Q, Y, sigma = np.asarray(Q, float), np.asarray(Y, float), np.asarray(sigma, float)
     n = len(Q)
     base_threshold = float(np.sqrt(chi2.ppf(confidence, 3)))
@@ -144,6 +145,10 @@ def robust_estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: n
 
     est = estimate(mm, Q[kept], Y[kept], sigma[kept], basis, source, max_iterations, rows(mounted), rows(offsets),
                    theta0=theta0)
+
+    def start(e: Estimate) -> np.ndarray | None:
+        return None if theta0 is None else e.theta
+
     use_gravity = gravity is not None and gravity.active
 
     def gravity_factors(e: Estimate) -> np.ndarray | None:
@@ -152,7 +157,7 @@ def robust_estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: n
     fac = gravity_factors(est)
     if fac is not None:
         est = estimate(mm, Q[kept], Y[kept], sigma[kept], basis, source, max_iterations, rows(mounted), rows(offsets),
-                       fac[kept], theta0=est.theta)
+                       fac[kept], theta0=start(est))
     probe = est if loss == "linear" else _robust_refit(mm, est, Q, Y, sigma, mounted, loss, max_iterations, offsets,
                                                        fac)
     capped = False
@@ -170,13 +175,13 @@ def robust_estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: n
         m = None if mounted is None else mounted[kept]
         o = None if offsets is None else offsets[kept]
         est = estimate(mm, Q[kept], Y[kept], sigma[kept], basis, source, max_iterations, m, o,
-                       None if fac is None else fac[kept], theta0=est.theta)
+                       None if fac is None else fac[kept], theta0=start(est))
         probe = est
     if fac is not None:   # fixed-point step: the covariance at the final compliances
         fac = gravity_factors(est)
         m = None if mounted is None else mounted[kept]
         o = None if offsets is None else offsets[kept]
         est = estimate(mm, Q[kept], Y[kept], sigma[kept], basis, source, max_iterations, m, o, fac[kept],
-                       theta0=est.theta)
+                       theta0=start(est))
     norm = _whitened_norm(mm, est, Q, Y, sigma, mounted, offsets, fac)
     return est, Rejection(np.flatnonzero(~kept), norm, threshold, confidence, loss, capped)

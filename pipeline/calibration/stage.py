@@ -354,10 +354,31 @@ def validate_heldout(robot: RobotModel, real, model: ModelSetUp, records: UserRe
             raise PipelineError(None, "calibration.validation_csv", "no validation file and no simulated robot")
         held = heldout_measurements(robot, real, fit.estimate, cfg, rng)
     held.sigma_m = fit.noise.total(held.sigma_m)
+    gross = None
+    if records.validation is not None and records.measurements is not None:
+        allowed = heldout_outlier_allowance(fit, len(records.measurements) + len(held), cfg.max_outlier_fraction)
+        rec = fit.record      # the fit's residual scale of positions (marker origins), as the screen judges
+        origin = nm.row_groups(rec.offset_m, len(rec)) == 0
+        gross = va.recorded_gross_rows(model.mm, fit.estimate, held, cfg.outlier_confidence,
+                                       fit.rejection.whitened_norm[origin], allowed, fit.gravity)
     validation = va.validate(model.mm, fit.estimate, held, cfg.outlier_confidence, fit.gravity,
-                             cfg.orientation_sigma_rad, notes.residual_map)
+                             cfg.orientation_sigma_rad, notes.residual_map, gross)
     notes.heldout_configurations = held.Q      # drawn by the viewer
     return validation
+
+
+def heldout_outlier_allowance(fit: Fit, n_poses: int, max_fraction: float) -> int:
+    """Held-out poses of a recorded validation file the gross-error screen may leave out:
+    ``max_outlier_fraction`` of the whole record (calibration and validation poses) less the
+    calibration positions the fit already rejected (marker-origin rows; a 6-D pose's virtual
+    marker-point rows carry its orientation, which this screen does not judge). A held-out file of
+    four poses cannot state a fraction of its own; the record's readings share one tracker and one
+    share of gross errors. ``n_poses``: the calibration and validation poses together."""
+    rec = fit.record
+    rows = np.asarray(fit.rejection.rejected, int)
+    if rec.offset_m is not None:
+        rows = rows[nm.row_groups(rec.offset_m, len(rec))[rows] == 0]
+    return int(np.floor(max_fraction * n_poses)) - len(rows)
 
 
 def outcome(robot: RobotModel, real, model: ModelSetUp, records: UserRecords, design: Design | None,

@@ -238,9 +238,28 @@ def gross_error_rows(mm: MeasurementModel, est: Estimate, meas: Measurements, co
     return np.flatnonzero(w > np.sqrt(chi2.ppf(confidence, 3)) * scale)
 
 
+def recorded_gross_rows(mm: MeasurementModel, est: Estimate, meas: Measurements, confidence: float,
+                        fit_norm: np.ndarray, max_rows: int, gravity: GravityCovariance | None = None) -> np.ndarray:
+    """Readings of a recorded held-out file that fail the calibration's outlier test at the
+    calibration's own residual scale: each reading whitened by its predicted error covariance
+    (:func:`predicted_covariance`), ``w_k > u sqrt(chi2_3(confidence))`` with
+    ``u = max(1, sqrt(median(s_j) / chi2_3.median))`` over the fit's whitened training residuals
+    ``s_j = fit_norm_j^2`` (:class:`pipeline.calibration.robust.Rejection`), not over the held-out
+    file: a median over a few held-out readings breaks down when half of them are gross (two of
+    four) and hides them. At most ``max_rows`` (the caller's share of ``max_outlier_fraction`` of
+    the whole record): if more fail, none is left out (the model, not the readings, is off)."""
+    cov, _ = predicted_covariance(mm, est, meas.Q, meas.sigma_m, gravity)
+    e = meas.Y - mm.predict(meas.Q, est.x, est.registration)
+    w = np.sqrt(np.einsum("ni,nij,nj->n", e, np.linalg.inv(cov), e))
+    s = np.asarray(fit_norm, float) ** 2
+    scale = max(1.0, float(np.sqrt(np.median(s) / chi2.ppf(0.5, 3)))) if s.size else 1.0
+    bad = np.flatnonzero(w > np.sqrt(chi2.ppf(confidence, 3)) * scale)
+    return bad if len(bad) <= max(int(max_rows), 0) else np.zeros(0, int)
+
+
 def validate(mm: MeasurementModel, est: Estimate, meas: Measurements, outlier_confidence: float | None = None,
              gravity: GravityCovariance | None = None, orientation_sigma_rad: float = 0.0,
-             residual_map: ResidualMap | None = None) -> dict:
+             residual_map: ResidualMap | None = None, gross_rows: np.ndarray | None = None) -> dict:
     """Held-out statistics before/after calibration and the covariance prediction (with the
     gravity-model term when ``gravity`` is given); with ``outlier_confidence`` the held-out readings
     failing the outlier test are left out and counted (``n_rejected``, ``rejected_rows``). 6-D
@@ -248,16 +267,21 @@ def validate(mm: MeasurementModel, est: Estimate, meas: Measurements, outlier_co
     their prediction, ``after.orientation_rad.predicted_rms`` (``orientation_sigma_rad`` the 1-sigma
     per axis of a held-out reading) and ``predicted_model_rms`` (the model part alone). With the
     calibration's ``residual_map`` the "after" errors are those of the model plus the map, and the
-    prediction includes the map's posterior variance (:func:`predicted_error`)."""
+    prediction includes the map's posterior variance (:func:`predicted_error`). ``gross_rows``: the
+    readings left out, decided by the caller (:func:`recorded_gross_rows`), instead of the test
+    above; the errors over every reading stand beside (``after_all_poses``)."""
     rejected = np.zeros(0, int)
     n_measured = len(meas)
-    if outlier_confidence is not None:
+    every = meas
+    if gross_rows is not None:
+        rejected = np.asarray(gross_rows, int)
+    elif outlier_confidence is not None:
         rejected = gross_error_rows(mm, est, meas, outlier_confidence, gravity)
-        if len(rejected):
-            keep = np.ones(len(meas), bool)
-            keep[rejected] = False
-            meas = Measurements(meas.Q[keep], meas.Y[keep], meas.sigma_m[keep], meas.source,
-                                None if meas.rotvec is None else meas.rotvec[keep], meas.n_requested)
+    if len(rejected):
+        keep = np.ones(len(meas), bool)
+        keep[rejected] = False
+        meas = Measurements(meas.Q[keep], meas.Y[keep], meas.sigma_m[keep], meas.source,
+                            None if meas.rotvec is None else meas.rotvec[keep], meas.n_requested)
     Q, Y = meas.Q, meas.Y
     x0 = np.zeros(mm.n)
     R_before = est.registration.rotation
@@ -283,6 +307,11 @@ def validate(mm: MeasurementModel, est: Estimate, meas: Measurements, outlier_co
         "n_rejected": int(len(rejected)),
         "rejected_rows": [int(i) for i in rejected],
     }
+    if gross_rows is not None:      # every held-out reading counted, beside the screened figures
+        e_all = (every.Y - mm.predict(every.Q, est.x, est.registration)) @ R_after.T
+        if residual_map is not None:
+            e_all = e_all - residual_map.predict(every.Q)[0]
+        out["after_all_poses"] = _stats(e_all)
     if meas.rotvec is not None:
         _, R_refl = mm.base_positions(Q, est.x)
         _, R_refl0 = mm.base_positions(Q, x0)
@@ -317,6 +346,9 @@ def table_markdown(v: dict) -> str:
     if v.get("n_rejected"):
         lines.append(f"\n{v['n_rejected']} held-out reading(s) failed the outlier test (gross tracker errors) and are "
                      "left out of these statistics.")
+        if "after_all_poses" in v:
+            lines.append(f"Over every held-out reading: RMS {1e3 * v['after_all_poses']['rms']:.4f} mm, max "
+                         f"{1e3 * v['after_all_poses']['max']:.4f} mm after calibration.")
     if "orientation_rad" in a:
         lines += ["", "| orientation error | mean [deg] | RMS [deg] | max [deg] |", "|---|---|---|---|"]
         for key, s in (("before", b), ("after", a)):

@@ -18,6 +18,7 @@ from __future__ import annotations
 import os
 import re
 import shutil
+import struct
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Literal
@@ -89,17 +90,23 @@ def _write_bag(path: str | Path, topic: str, msgtype: str, messages: Sequence[tu
 
 def _write_topics(path: str | Path, topics: Sequence[tuple[str, str, Sequence[tuple[float, Any]]]],
                   bag_format: BagFormat) -> Path:
-    """``(topic, type, messages)`` into a new bag folder at ``path``, messages in time order (renamed into place)."""
+    """``(topic, type, messages)`` into a new bag folder at ``path``, messages in time order.
+
+    The bag is written as ``<name>/`` inside a staging folder beside ``path`` and renamed into place, so
+    its storage file is ``<name>.db3`` / ``<name>.mcap`` (as ``ros2 bag record`` names it) in
+    metadata.yaml and in the metadata the storage file carries itself (read when metadata.yaml is absent).
+    """
     target = Path(path)
     if bag_format not in _STORAGE:
         raise DataFileError(target, "bag_format", f"{bag_format!r} is not one of {sorted(_STORAGE)}")
     if target.exists():
         raise DataFileError(target, None, "exists already; a bag is written only to a new path")
-    staging = target.with_name(f".{target.name}.partial-{os.getpid()}")
-    if staging.exists():
-        shutil.rmtree(staging)
+    staging_root = target.with_name(f".{target.name}.partial-{os.getpid()}")
+    if staging_root.exists():
+        shutil.rmtree(staging_root)
+    staging_root.mkdir(parents=True)
     try:
-        with Writer(staging, version=8, storage_plugin=_STORAGE[bag_format]) as writer:
+        with Writer(staging_root / target.name, version=8, storage_plugin=_STORAGE[bag_format]) as writer:
             queue = []
             for topic, msgtype, messages in topics:
                 connection = writer.add_connection(topic, msgtype, typestore=TYPESTORE,
@@ -108,24 +115,10 @@ def _write_topics(path: str | Path, topics: Sequence[tuple[str, str, Sequence[tu
                           for k, (t_s, m) in enumerate(messages)]
             for stamp_ns, _k, connection, msgtype, message in sorted(queue, key=lambda item: item[:2]):
                 writer.write(connection, stamp_ns, TYPESTORE.serialize_cdr(message, msgtype))
-        _rename_storage_files(staging, target.name)
-        staging.rename(target)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
+        (staging_root / target.name).rename(target)
+    finally:
+        shutil.rmtree(staging_root, ignore_errors=True)
     return target
-
-
-def _rename_storage_files(staging: Path, name: str) -> None:
-    """The storage file named after the bag folder (``<name>.db3`` / ``<name>.mcap``), as ``ros2 bag record`` does."""
-    meta = staging / "metadata.yaml"
-    text = meta.read_text()
-    for storage in sorted(staging.glob(f"{staging.name}.*")):
-        if storage.suffix in (".db3", ".mcap"):
-            new_name = f"{name}{storage.suffix}"
-            storage.rename(staging / new_name)
-            text = text.replace(storage.name, new_name)
-    meta.write_text(text)
 
 
 def write_joint_trajectory(path: str | Path, motion: SampledMotion, topic: str,
@@ -220,9 +213,9 @@ def _reader_path(path: Path) -> Path:
     return path
 
 
-def _messages(path: str | Path, msgtypes: Sequence[str], topic: str | None,
-              preferred_topic: str | None = None) -> tuple[str, list[tuple[int, Any]]]:
-    """The chosen topic and its ``(log time ns, message)`` in log order.
+def _raw_messages(path: str | Path, msgtypes: Sequence[str], topic: str | None,
+                  preferred_topic: str | None = None) -> tuple[str, list[tuple[int, str, bytes]]]:
+    """The chosen topic and its ``(log time ns, message type, CDR bytes)`` in log order.
 
     The topic is ``topic`` when given, else ``preferred_topic`` when it holds one of ``msgtypes``, else
     the one topic of those types.
@@ -246,8 +239,7 @@ def _messages(path: str | Path, msgtypes: Sequence[str], topic: str | None,
                 raise DataFileError(source, "topic", f"{len(typed)} topics hold {' / '.join(msgtypes)} "
                                                      f"({sorted(typed)}); name one")
             connections = [c for c in reader.connections if c.topic == chosen]
-            out = [(int(t), TYPESTORE.deserialize_cdr(data, c.msgtype))
-                   for c, t, data in reader.messages(connections=connections)]
+            out = [(int(t), c.msgtype, bytes(data)) for c, t, data in reader.messages(connections=connections)]
     except DataFileError:
         raise
     except Exception as exc:   # rosbags / sqlite3 / mcap errors: one message naming the file
@@ -256,15 +248,38 @@ def _messages(path: str | Path, msgtypes: Sequence[str], topic: str | None,
     return chosen, out
 
 
+def _messages(path: str | Path, msgtypes: Sequence[str], topic: str | None,
+              preferred_topic: str | None = None) -> tuple[str, list[tuple[int, Any]]]:
+    """The chosen topic (:func:`_raw_messages`) and its ``(log time ns, message)`` in log order."""
+    chosen, raw = _raw_messages(path, msgtypes, topic, preferred_topic)
+    try:
+        return chosen, [(t, TYPESTORE.deserialize_cdr(data, msgtype)) for t, msgtype, data in raw]
+    except Exception as exc:
+        raise DataFileError(Path(path), None, f"cannot read as a ROS 2 bag: {exc}") from exc
+
+
+#: message types whose CDR starts with a ``std_msgs/Header``: after the 4-byte encapsulation, ``stamp.sec``
+#: (int32) and ``stamp.nanosec`` (uint32), little-endian for encapsulation 0x0001 (CDR_LE), else big-endian
+_HEADER_FIRST = frozenset((JOINT_STATE, *TRACKER_TYPES))
+
+
+def _header_stamp_s(data: bytes) -> float:
+    sec, nanosec = struct.unpack_from("<iI" if data[1] == 1 else ">iI", data, 4)
+    return float(sec) + 1e-9 * float(nanosec)
+
+
 def _stamp_s(stamp: Any) -> float:
     return float(stamp.sec) + 1e-9 * float(stamp.nanosec)
 
 
 def _times(log_ns: Sequence[int], messages: Sequence[Any]) -> np.ndarray:
     """Header stamps when they are set and increase, else log times: seconds, absolute."""
-    stamps = np.array([_stamp_s(m.header.stamp) for m in messages])
-    if stamps.size > 1 and np.all(np.diff(stamps) > 0.0):
-        return stamps
+    return _stamps_or_log_times(log_ns, np.array([_stamp_s(m.header.stamp) for m in messages]))
+
+
+def _stamps_or_log_times(log_ns: Sequence[int], stamps_s: np.ndarray) -> np.ndarray:
+    if stamps_s.size > 1 and np.all(np.diff(stamps_s) > 0.0):
+        return stamps_s
     return np.asarray(log_ns, dtype=float) * 1e-9
 
 
@@ -366,11 +381,16 @@ def read_points(path: str | Path, topic: str | None = None, t0_s: float | None =
 
 def first_stamp_s(path: str | Path, msgtypes: Sequence[str] = (JOINT_STATE,), topic: str | None = None,
                   preferred_topic: str | None = "/joint_states") -> float:
-    """The absolute time (s) of the first message of the chosen topic, as :func:`read_joint_states` counts it."""
-    _chosen, messages = _messages(path, msgtypes, topic, preferred_topic)
-    if not messages:
+    """The absolute time (s) of the first message of the chosen topic, as :func:`read_joint_states` counts it
+    (the header stamps read from the CDR bytes, without deserialising the messages)."""
+    _chosen, raw = _raw_messages(path, msgtypes, topic, preferred_topic)
+    if not raw:
         raise DataFileError(path, "topic", "holds no message of " + " / ".join(msgtypes))
-    return float(_times([t for t, _ in messages], [m for _, m in messages])[0])
+    if all(msgtype in _HEADER_FIRST and len(data) >= 12 for _, msgtype, data in raw):
+        stamps = np.array([_header_stamp_s(data) for _, _, data in raw])
+        return float(_stamps_or_log_times([t for t, _, _ in raw], stamps)[0])
+    messages = [TYPESTORE.deserialize_cdr(data, msgtype) for _, msgtype, data in raw]
+    return float(_times([t for t, _, _ in raw], messages)[0])
 
 
 def topics(path: str | Path) -> Iterator[tuple[str, str, int]]:

@@ -1,9 +1,10 @@
 """Stationary windows of a recording: where the joints stood still, the tracker's readings averaged.
 
-A sample is stationary when every joint's speed is at most ``speed_rad_s``: the logged velocities
-(or central differences of the positions when the log has none) averaged over ``SPEED_WINDOW_S``
-about the sample (a drive's velocity estimate is noisy at rest; its mean over the window is the
-displacement over the window). A window is a run of stationary
+A sample is stationary when every joint's speed is at most ``speed_rad_s``: the displacement of the
+logged position over ``SPEED_WINDOW_S`` centred on the sample, divided by its duration,
+``|q(t + w/2) - q(t - w/2)| / w`` (the mean velocity over the window, whatever the log rate: a drive's
+velocity estimate is noisy at rest, and a few logged samples of it average to far more than the
+encoder's noise over the window, ``sqrt(2) sigma_enc / w``). A window is a run of stationary
 samples lasting at least ``min_duration_s``; its first ``settle_s`` are skipped (the arm settling),
 and the tracker readings inside the rest are averaged, their scatter (RMS distance from the mean)
 kept (NaN for a single reading). Readings up to half a joint-state interval plus half the speed
@@ -16,7 +17,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.ndimage import uniform_filter1d
 
 from pipeline.core.errors import DataFileError
 from pipeline.exchange.motion import JointStates, TrackerPoints
@@ -44,16 +44,16 @@ SPEED_WINDOW_S = 0.1
 
 
 def joint_speeds(states: JointStates, window_s: float = SPEED_WINDOW_S) -> np.ndarray:
-    """(N, n) joint speeds: the logged velocities, or differences of the positions where they are NaN,
-    averaged over ``window_s`` (centred moving mean), absolute."""
-    velocity = np.asarray(states.qd_rad_s, float)
-    if states.n_samples > 1 and not np.all(np.isfinite(velocity)):
-        numeric = np.gradient(states.q_rad, states.t_s, axis=0)
-        velocity = np.where(np.isfinite(velocity), velocity, numeric)
-    if states.n_samples > 2:
-        width = max(int(round(window_s * states.sample_rate_hz)), 1)
-        velocity = uniform_filter1d(velocity, width, axis=0, mode="nearest")
-    return np.abs(velocity)
+    """(N, n) joint speeds: ``|q[k + h] - q[k - h]| / (t[k + h] - t[k - h])`` with ``h`` half the window in
+    samples (at least 1; indices clipped to the record), the mean speed over ``window_s`` about each sample."""
+    q, t = np.asarray(states.q_rad, float), np.asarray(states.t_s, float)
+    n = len(t)
+    if n < 2:
+        return np.zeros_like(q)
+    half = max(int(round(0.5 * window_s * states.sample_rate_hz)), 1)
+    k = np.arange(n)
+    hi, lo = np.minimum(k + half, n - 1), np.maximum(k - half, 0)
+    return np.abs(q[hi] - q[lo]) / (t[hi] - t[lo])[:, None]
 
 
 def stationary_windows(states: JointStates, points: TrackerPoints, speed_rad_s: float = 2e-3,
@@ -67,7 +67,7 @@ def stationary_windows(states: JointStates, points: TrackerPoints, speed_rad_s: 
             if states.t_s[b] - states.t_s[a] >= min_duration_s]
     rows: list[tuple[np.ndarray, np.ndarray, float, int, float, float]] = []
     half_interval = 0.5 * float(np.median(np.diff(states.t_s))) if states.n_samples > 1 else 0.0
-    # the moving mean of the speeds ends a window up to half its width before the arm moves again
+    # the speed over the window ends a window up to half its width before the arm moves again
     late = half_interval + 0.5 * SPEED_WINDOW_S
     for a, b in runs:
         t0, t1 = states.t_s[a] + settle_s, states.t_s[b] + late

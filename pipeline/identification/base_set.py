@@ -88,3 +88,60 @@ def base_with_set(Y: np.ndarray, structure: BaseParameters) -> BaseParameters:
         tolerance=structure.tolerance,
         rank_gap=structure.rank_gap,
     )
+
+
+#: the excitation's base set is shrunk until its condition number is this factor below
+#: ``identification.max_cond_base_regressor_data``: the measured data (noise, filtering, decimation)
+#: are checked against the bound itself and must still clear it
+DESIGN_COND_MARGIN = 10.0
+
+
+def columns_over_condition(Wb: np.ndarray, max_cond: float) -> np.ndarray:
+    """Positions (into the base set) of the columns of the base regressor ``Wb`` to leave out so that
+    the rest has ``cond <= max_cond``: a column-pivoted QR of ``Wb`` (in its own units, as the design
+    criterion and the data gate measure it) orders the columns by what each adds beyond the ones
+    before it; the longest leading run of that order with ``cond(Wb[:, run]) <= max_cond`` is kept
+    (the condition number of a leading run grows with its length, singular-value interlacing), the
+    rest is returned (sorted; empty when ``cond(Wb) <= max_cond``)."""
+    _, _, piv = scipy.linalg.qr(np.asarray(Wb, float), mode="economic", pivoting=True)
+
+    def cond(k: int) -> float:
+        s = np.linalg.svd(Wb[:, piv[:k]], compute_uv=False)
+        return float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
+
+    lo, hi = 1, Wb.shape[1]          # cond(first column) = 1
+    if cond(hi) <= max_cond:
+        return np.zeros(0, int)
+    while hi - lo > 1:               # largest k with cond(k) <= max_cond lies in [lo, hi)
+        mid = (lo + hi) // 2
+        lo, hi = (mid, hi) if cond(mid) <= max_cond else (lo, mid)
+    return np.sort(piv[lo:])
+
+
+def without_columns(base: BaseParameters, drop: np.ndarray, Y: np.ndarray) -> BaseParameters:
+    """``base`` with its independent columns at positions ``drop`` moved to the dependent set.
+
+    Each left-out column of the base regressor ``W_D`` is replaced by its least-squares combination
+    of the kept ones on the standard regressor ``Y`` (normalised columns), ``W_D ~= W_K C``; then
+    ``W beta ~= W_K (beta_K + C beta_D)``, so the new base parameters are ``beta_K + C beta_D``: the
+    kept standard columns ``p_K`` with combination ``M_K + C M_D`` of the old dependents ``p_old`` and
+    ``C`` of the left-out columns ``p_D`` (``M``: ``base.combination``)."""
+    drop = np.asarray(drop, int)
+    keep = np.setdiff1d(np.arange(base.n_base), drop)
+    if not len(drop):
+        return base
+    W = base.base_regressor(np.asarray(Y, float))
+    norms = np.linalg.norm(W, axis=0)
+    scale = np.where(norms > 0, norms, 1.0)
+    C_s = scipy.linalg.lstsq(W[:, keep] / scale[keep], W[:, drop] / scale[drop])[0]
+    C = C_s * scale[drop][None, :] / scale[keep][:, None]
+    M = base.combination
+    comb_old = M[keep] + C @ M[drop] if M.shape[1] else np.zeros((len(keep), 0))
+    dependent = np.concatenate([base.dependent, base.independent[drop]])
+    combination = np.hstack([comb_old, C])
+    order = np.argsort(dependent)
+    combination = combination[:, order]
+    combination[np.abs(combination) < 1e-10] = 0.0
+    return BaseParameters(independent=base.independent[keep].copy(), dependent=dependent[order],
+                          combination=combination, standard_names=list(base.standard_names),
+                          tolerance=base.tolerance, rank_gap=base.rank_gap)

@@ -284,7 +284,9 @@ def parameter_scale(p_nominal: np.ndarray, n_links: int, nv: int) -> np.ndarray:
         s[10 * i + 1 : 10 * i + 4] = m * 0.1
         s[10 * i + 4 : 10 * i + 10] = max(m * 0.01, np.abs(blk[4:]).max(), 1e-3)
     ia = p_nominal[10 * n_links : 10 * n_links + nv]
-    s[10 * n_links : 10 * n_links + nv] = np.maximum(np.abs(ia), 1e-2)
+    # a rotor inertia the nominal model leaves at 0 (not given: assumed by robot init, or torques
+    # measured on the link side) is no prior to pull towards: the data alone decide it
+    s[10 * n_links : 10 * n_links + nv] = np.where(ia == 0.0, np.inf, np.maximum(np.abs(ia), 1e-2))
     # friction and offsets are always identifiable: no pull towards the nominal values
     s[10 * n_links + nv :] = np.inf
     return s

@@ -23,7 +23,12 @@ from pipeline.core.errors import InfeasibleError, PipelineError
 from pipeline.identification import design as design_mod
 from pipeline.identification import fourier
 from pipeline.identification import measure as meas_mod
-from pipeline.identification.base_set import structural_base_parameters
+from pipeline.identification.base_set import (
+    DESIGN_COND_MARGIN,
+    columns_over_condition,
+    structural_base_parameters,
+    without_columns,
+)
 from pipeline.identification.config import DATA_BORDER_SAMPLES, Config
 from pipeline.identification.friction_terms import FrictionTerms, record_terms
 from pipeline.identification.joints import select_joints
@@ -82,11 +87,18 @@ def excite_and_measure(ctx: StageContext, cfg: Config, regs: Regressors, timings
     limits = fourier.ExcitationLimits.from_robot(
         robot, ex.position_margin, ex.velocity_margin, ex.acceleration_margin, ex.torque_margin,
         ex.floor_clearance_m, ex.self_clearance_m, ex.max_tcp_speed_m_s, ex.max_tcp_acceleration_m_s2)
-    exc = design_mod.optimize_excitation(
-        robot, SymbolicRobot(robot), regs.reg, regs.base_design, limits, ctx.rng, harmonics=ex.harmonics,
-        base_frequency_hz=ex.base_frequency_hz, n_samples=ex.n_samples, n_starts=ex.n_starts,
-        n_random=ex.n_random, max_iter=ex.max_iter, criterion=ex.criterion, n_check=ex.n_check,
-        progress=ctx.progress, softness=ex.cond_softness, objective_change_tol=ex.objective_change_tol)
+    sym = SymbolicRobot(robot)
+
+    def design() -> design_mod.ExcitationResult:
+        return design_mod.optimize_excitation(
+            robot, sym, regs.reg, regs.base_design, limits, ctx.rng, harmonics=ex.harmonics,
+            base_frequency_hz=ex.base_frequency_hz, n_samples=ex.n_samples, n_starts=ex.n_starts,
+            n_random=ex.n_random, max_iter=ex.max_iter, criterion=ex.criterion, n_check=ex.n_check,
+            progress=ctx.progress, softness=ex.cond_softness, objective_change_tol=ex.objective_change_tol)
+
+    exc = design()
+    if exc.cond_optimized > cfg.max_cond_base_regressor_data and shrink_base_set(regs, exc, cfg):
+        exc = design()                  # the rest optimised
     timings["excitation_s"] = time.perf_counter() - t1
     traj = exc.trajectory
     if not exc.feasibility.feasible:
@@ -99,6 +111,28 @@ def excite_and_measure(ctx: StageContext, cfg: Config, regs: Regressors, timings
     data = meas_mod.process_periodic(sim, regs.reg, n_per, cutoff, cfg.decimation)
     timings["data_s"] = time.perf_counter() - t1
     return Measured(data, "simulation (ideal tracking of the hidden robot)", exc, limits, traj)
+
+
+def shrink_base_set(regs: Regressors, exc: design_mod.ExcitationResult, cfg: Config) -> bool:
+    """The base parameters that the best excitation within the limits cannot excite: with the full
+    structural set its base regressor on the design's samples has ``cond`` above
+    ``identification.max_cond_base_regressor_data``, so the fit would be refused. The columns over
+    the bound (:func:`.base_set.columns_over_condition`, target the bound over
+    :data:`.base_set.DESIGN_COND_MARGIN`) leave the set, each replaced by its least-squares
+    combination of the kept ones on those samples (:func:`.base_set.without_columns`), for the nominal
+    set and the current model's alike; ``regs`` is updated and names them (``regs.dropped``). False
+    when nothing would be left out."""
+    traj = exc.trajectory
+    Y = regs.reg.stacked(*traj.evaluate(traj.sample_times(exc.n_samples)))
+    drop = columns_over_condition(regs.base_design.base_regressor(Y), cfg.max_cond_base_regressor_data
+                                  / DESIGN_COND_MARGIN)
+    if not len(drop) or len(drop) == regs.base_design.n_base:
+        return False
+    regs.dropped = [regs.base_design.names[i] for i in drop]
+    regs.dropped_cond = exc.cond_optimized
+    regs.base_design = without_columns(regs.base_design, drop, Y)
+    regs.base = without_columns(regs.base, drop, Y)
+    return True
 
 
 def take_off_record_terms(robot: RobotModel, cfg: Config, regs: Regressors, measured: Measured,

@@ -407,9 +407,14 @@ def load_summary(load: LoadFriction, status: str, per_joint: Callable[[np.ndarra
 
 
 def best_friction_model(rms_Nm: dict[str, np.ndarray], sigma_Nm: np.ndarray | None) -> str:
-    """The model whose held-out RMS / noise sigma is smallest on average over the joints."""
+    """The model whose held-out RMS / noise sigma is smallest on average over the joints scored (a
+    joint the validation could not score, NaN, left out of every model's average alike)."""
     sigma = np.ones_like(next(iter(rms_Nm.values()))) if sigma_Nm is None else np.asarray(sigma_Nm, float)
-    return min(rms_Nm, key=lambda k: float(np.mean(np.asarray(rms_Nm[k]) / sigma)))
+
+    def mean_ratio(rms: np.ndarray) -> float:
+        ratio = np.asarray(rms, float) / sigma
+        return float(np.mean(ratio[np.isfinite(ratio)])) if np.any(np.isfinite(ratio)) else float("inf")
+    return min(rms_Nm, key=lambda k: mean_ratio(rms_Nm[k]))
 
 
 def friction_summary(rms_Nm: dict[str, np.ndarray], sigma_Nm: np.ndarray | None, fit: StribeckFit | None,

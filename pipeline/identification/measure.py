@@ -206,6 +206,11 @@ def load_joint_csv(
     return _uniform_record(t, q, tau, str(path), line_numbers, nq, min_samples)
 
 
+#: a record resampled onto more than this many uniform steps per logged sample is mostly gaps: refused
+#: before the grid is built (a stray time stamp of 1e6 s would otherwise allocate gigabytes)
+MAX_RESAMPLED_PER_LOGGED = 4
+
+
 def _uniform_record(t: np.ndarray, q: np.ndarray, tau: np.ndarray, source: str, line_numbers: np.ndarray | None,
                     nq: int, min_samples: int) -> JointRecord:
     """A :class:`JointRecord` on uniform time stamps: non-uniform ones resampled
@@ -214,6 +219,13 @@ def _uniform_record(t: np.ndarray, q: np.ndarray, tau: np.ndarray, source: str, 
     max_gap_s, gap_where, how = None, "", ""
     dt = np.diff(t)
     if len(t) > 2 and np.max(np.abs(dt - np.median(dt))) > 1e-3 * np.median(dt) + 1e-9:
+        grid_samples = (t[-1] - t[0]) / np.median(dt) + 1
+        if not grid_samples <= MAX_RESAMPLED_PER_LOGGED * len(t):
+            k = int(np.argmax(dt))
+            where = f"line {line_numbers[k + 1]}" if line_numbers is not None else f"message {k + 2}"
+            raise DataFileError(source, "t", f"the time stamps leave a gap of {dt[k]:g} s ({where}): the record's "
+                                f"{len(t)} samples span {t[-1] - t[0]:g} s, {grid_samples:.3g} steps of the median "
+                                f"interval {np.median(dt):g} s; cut the record at its gaps")
         logged_t = t
         res = signals.resample_uniform(t, q, tau)
         t, q, tau, max_gap_s, how = res.t_s, res.q, res.tau, res.max_gap_s, res.method

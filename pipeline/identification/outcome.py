@@ -9,7 +9,7 @@ validation torques (:class:`Validation`), all of them for the report (:class:`Ou
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -39,6 +39,11 @@ class Regressors:
     reg: RegressorModel
     base_design: BaseParameters      # structural base set, decided on the nominal model
     base: BaseParameters             # the same set with the current model's combinations
+    #: base parameters the excitation could not bring under the condition-number bound, left out of
+    #: the design and the fits (:func:`pipeline.identification.experiment.excite_and_measure`), and
+    #: the condition number of the full set's best excitation
+    dropped: list[str] = field(default_factory=list)
+    dropped_cond: float | None = None
 
     @property
     def used(self) -> np.ndarray:

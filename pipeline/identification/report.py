@@ -192,6 +192,8 @@ def summary(cfg: Config, o: Outcome) -> dict[str, Any]:
         "excitation": excitation_label(exc, ex.criterion),
         "excitation_fallback_reason": None if exc is None else (exc.fallback_reason or None),
         "base_parameter_set": base.set_names,
+        "design_dropped_base_parameters": list(o.regs.dropped),
+        "design_dropped_cond_full_set": o.regs.dropped_cond,
         "cond_optimized": None if exc is None else exc.cond_optimized,
         "cond_random_median": None if exc is None else exc.cond_random_median,
         "cond_improvement": None if exc is None else exc.cond_random_median / exc.cond_optimized,
@@ -340,6 +342,13 @@ def stage_result(cfg: Config, o: Outcome, robot: RobotModel) -> StageResult:
     s = summary(cfg, o)
     fallback_md = "" if exc is None or not exc.fallback_reason else (
         f"**Excitation: the best random feasible trajectory is used** ({exc.fallback_reason}).\n\n")
+    if o.regs.dropped:
+        fallback_md += (f"**Excitation: {len(o.regs.dropped)} base parameter(s) left out of the design and the fits**: "
+                        f"the best excitation of the full set within the limits has cond {o.regs.dropped_cond:.3g} > "
+                        f"`identification.max_cond_base_regressor_data` = {cfg.max_cond_base_regressor_data:.3g}, "
+                        "so the columns over the bound (pivoted QR) are each replaced by their least-squares "
+                        "combination of the others on the excitation: "
+                        + "; ".join(f"`{n}`" for n in o.regs.dropped) + ".\n\n")
     validation_md = "" if o.val.iso is None else validation_markdown(cfg, o.val.trajectory, o.val.iso, robot)
     return StageResult(summary=s, arrays=arrays(cfg, o), data=data(cfg, o), figures=figures(o), robot=robot,
                        report_md=fallback_md + validation_md + report_markdown(s, o.tx))

@@ -11,8 +11,10 @@ and the real Stäubli TX40 record (paper ``004_abbe750b8bbcc3aa.txt`` §4).
    number of the base regressor under limits, torques, floor and self-collision (CasADi/IPOPT,
    :mod:`.design`), never worse than the best of 20 random feasible ones (fallback, stated in
    summary and report), run on the hidden robot for ``periods`` periods; or the user's record
-   (``data_file``): no excitation, the hidden robot (``ctx.real``) never used. Period averaging,
-   zero-phase filtering, differentiation, block decimation (:mod:`.measure`);
+   (``data_file``): no excitation, the hidden robot (``ctx.real``) never used. An excitation whose
+   base regressor stays above the condition-number bound leaves the base parameters over it out of
+   the design, which then optimises the rest (:func:`.experiment.shrink_base_set`; named in the
+   report). Period averaging, zero-phase filtering, differentiation, block decimation (:mod:`.measure`);
 3. fits (:func:`.fit.fit_models`): the data must excite the model (:mod:`.gates`); OLS, Gautier's
    WLS and the physically consistent fit (log-Cholesky, IPOPT); with ``friction_model: stribeck``
    a Stribeck term first (:mod:`.friction`); the candidate with load-dependent Coulomb friction;
@@ -129,6 +131,11 @@ def _run(ctx: StageContext) -> StageResult:
     result = report.stage_result(cfg, outcome, new_robot)
     if unmeasured_joints_note(regs.selection):
         result.summary["warnings"] = [*result.summary.get("warnings", []), unmeasured_joints_note(regs.selection)]
+    if regs.dropped:
+        result.summary["warnings"] = [*result.summary.get("warnings", []), (
+            f"{len(regs.dropped)} base parameter(s) the excitation cannot bring under identification."
+            "max_cond_base_regressor_data are left out of the design and the fits (combined into the others; "
+            "report.md names them)")]
     return gated(ctx, cfg, regs, measured, fits, val, result)
 
 

@@ -14,11 +14,29 @@ The stage's step 6 (:mod:`pipeline.identification.stage`): :func:`validate_on_pa
 robot on the run's ISO path) or :func:`validate_on_record` (the held-out tail of the user's record,
 fitted on its first part), and :func:`choose_friction_model`: the friction model whose physically
 consistent fit predicts the validation torques best is handed on.
+
+**An arm in closed loop whose dry friction sticks** (the hidden robot says so: ``torques_in_closed_loop``,
+``dry_friction_sticks``; the own simulator's arm tracks ideally and its friction is smooth, so neither
+applies to it). Its torque readings are its drives' commands: they carry the servo's reaction to the
+encoder noise, which depends on the gains and the inertia along the path, so the excitation's noise
+sigma is not the validation path's. The path is run twice and the noise sigma is the spread between the
+two runs, ``sigma_j = std(tau_1 - tau_2) / sqrt(2)`` (the same principle as the spread between
+excitation periods). Where a joint's commanded speed is below ``v_s = STICTION_BAND_OVER_WIDTH * w``
+(``w`` the model's Coulomb smoothing width) the joint is held by its dry friction or breaking away: its
+torque is what the drive commands within the friction band, not a function of the state that any
+smooth friction model predicts, and below ``2 w`` the model's ``tanh(v / w)`` is under 96 % of its level,
+a smoothing of the sign rather than a friction law. Those samples are left out of the validation RMS
+(as velocity thresholds in Gautier & Khalil's and Swevers et al.'s identification practice). A joint
+with none left (at rest on the whole path) is scored by the Coulomb law at rest, any friction torque in
+``[-F_c, F_c]``: the RMS of its residual's excess over the identified Coulomb level
+(:func:`score_stiction_band`). The summary states ``v_s``, the fraction scored per joint and, for the
+held samples, the fraction whose residual lies within the identified Coulomb level plus three sigma.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -134,12 +152,69 @@ def validation_trajectory(
     return vt
 
 
-def torque_rms(measured: np.ndarray, predicted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per joint RMS error and relative error ``RMS(err) / RMS(measured)``."""
-    err = np.asarray(measured, float) - np.asarray(predicted, float)
-    rms = np.sqrt(np.mean(err**2, axis=0))
-    rel = rms / np.maximum(np.sqrt(np.mean(np.asarray(measured, float) ** 2, axis=0)), 1e-12)
-    return rms, rel
+#: the stiction band of an arm whose dry friction sticks, in multiples of the model's Coulomb smoothing width
+#: (``tanh(2) = 0.96``: below ``2 w`` the smooth sign is not yet the Coulomb level; module docstring)
+STICTION_BAND_OVER_WIDTH = 2.0
+
+
+def torque_rms(measured: np.ndarray, predicted: np.ndarray,
+               scored: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Per joint RMS error and relative error ``RMS(err) / RMS(measured)``; ``scored`` (N, n) bool:
+    the samples each joint's RMS counts (None: all; a joint with none: NaN)."""
+    measured, err = np.asarray(measured, float), np.asarray(measured, float) - np.asarray(predicted, float)
+    if scored is None:
+        rms = np.sqrt(np.mean(err**2, axis=0))
+        rel = rms / np.maximum(np.sqrt(np.mean(measured**2, axis=0)), 1e-12)
+        return rms, rel
+    n = np.sum(scored, axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rms = np.where(n > 0, np.sqrt(np.sum(np.where(scored, err**2, 0.0), axis=0) / n), np.nan)
+        ms = np.where(n > 0, np.sum(np.where(scored, measured**2, 0.0), axis=0) / n, np.nan)
+    return rms, rms / np.maximum(np.sqrt(ms), 1e-12)
+
+
+@dataclass
+class StictionBandValidation(Validation):
+    """:class:`Validation` on an arm whose dry friction sticks: ``scored`` (N, n_used) marks the samples
+    outside the stiction band ``|v| >= min_speed_rad_s`` (module docstring)."""
+
+    scored: np.ndarray | None = None
+    min_speed_rad_s: float = 0.0
+
+
+def scored_samples(val: Validation) -> np.ndarray | None:
+    """The samples the validation RMS counts (None: all)."""
+    return val.scored if isinstance(val, StictionBandValidation) else None
+
+
+def score_stiction_band(val: Validation, fits: Fits, regs: Regressors) -> dict[str, Any]:
+    """A stiction-band validation's last step ({} and nothing done otherwise), with the handed-on fit:
+    a joint with no sample outside the band (at rest on the whole path) is scored by the Coulomb law at
+    rest, any friction torque in ``[-F_c, F_c]``: its RMS is that of the residual's excess over the
+    identified ``|F_c|``, ``max(|tau - tau_hat| - |F_c|, 0)`` (physical and WLS fits alike). Returns the
+    summary entries: ``v_s``, the fraction of samples scored per joint, and per joint the fraction of its
+    held samples whose residual lies within ``|F_c|`` plus three noise sigmas (None: no held sample)."""
+    scored = scored_samples(val)
+    if scored is None or not isinstance(val, StictionBandValidation):
+        return {}
+    nq, nm = regs.reg.nv, regs.n_used
+    coulomb = np.abs(fits.phys.p[len(fits.phys.p) - 2 * nq: len(fits.phys.p) - nq])[regs.used]
+    sigma = np.zeros(nm) if val.noise_sigma is None else np.asarray(val.noise_sigma, float)
+    residual = val.tau_Nm - val.pred_phys
+    held = ~scored
+    inside = np.abs(residual) <= coulomb + 3.0 * sigma
+    within = [float(np.mean(inside[held[:, j], j])) if held[:, j].any() else float("nan") for j in range(nm)]
+    at_rest = ~np.any(scored, axis=0)
+    if np.any(at_rest):
+        measured_rms = np.maximum(np.sqrt(np.mean(val.tau_Nm**2, axis=0)), 1e-12)
+        for rms, rel, pred in ((val.rms_phys, val.rel_phys, val.pred_phys), (val.rms_wls, val.rel_wls, val.pred_wls)):
+            excess = np.maximum(np.abs(val.tau_Nm - pred) - coulomb, 0.0)
+            rms[at_rest] = np.sqrt(np.mean(excess**2, axis=0))[at_rest]
+            rel[at_rest] = rms[at_rest] / measured_rms[at_rest]
+    pj = regs.selection.per_joint
+    return {"validation_stiction_band_rad_s": val.min_speed_rad_s,
+            "validation_fraction_scored": pj(np.mean(scored, axis=0)),
+            "validation_held_within_coulomb_band": pj(np.asarray(within))}
 
 
 def z_scores(beta: np.ndarray, sigma: np.ndarray, beta_true: np.ndarray) -> np.ndarray:
@@ -216,6 +291,14 @@ def validate_on_path(ctx: StageContext, cfg: Config, regs: Regressors, measured:
     noise_sigma, noise_source = measured.data.noise_sigma_Nm, "spread between excitation periods"
     meas_v = real.execute_joint_trajectory(vt.t_s, vt.q, vt.v, vt.a, ctx.rng)
     tau_v = meas_v.tau_Nm[:, regs.used]
+    if getattr(real, "torques_in_closed_loop", False):   # the path's own noise: a second run (module docstring)
+        tau_2 = real.execute_joint_trajectory(vt.t_s, vt.q, vt.v, vt.a, ctx.rng).tau_Nm[:, regs.used]
+        noise_sigma = np.std(tau_v - tau_2, axis=0) / np.sqrt(2.0)
+        noise_source = "spread between two runs of the validation path (the drives' torques in closed loop)"
+    scored, v_s = None, 0.0
+    if getattr(real, "dry_friction_sticks", False):
+        v_s = STICTION_BAND_OVER_WIDTH * float(regs.reg.coulomb_width_rad_s)
+        scored = np.abs(vt.v[:, regs.used]) >= max(v_s, 1e-300)
     Yv = regs.reg.stacked(vt.q, vt.v, vt.a)
     st_v = 0.0 if fits.stribeck is None else fits.stribeck.stribeck_torque(vt.v[:, regs.used])
     pred_phys = (Yv @ fits.phys.p).reshape(-1, nm) + st_v
@@ -223,11 +306,15 @@ def validate_on_path(ctx: StageContext, cfg: Config, regs: Regressors, measured:
     pred_vc = (Yv @ fits.phys_vc.p).reshape(-1, nm)
     pred_l, pred_l_wls = (None, None) if fits.load_candidate is None else load_candidate_predictions(
         regs, fits.load_candidate, Yv, vt.v[:, regs.used], robot.nq)
-    rms_phys, rel_phys = torque_rms(tau_v, pred_phys)
-    rms_wls, rel_wls = torque_rms(tau_v, pred_wls)
+    rms_phys, rel_phys = torque_rms(tau_v, pred_phys, scored)
+    rms_wls, rel_wls = torque_rms(tau_v, pred_wls, scored)
     if noise_sigma is None or not np.all(np.isfinite(noise_sigma)):
         noise_sigma = np.asarray(meas_v.tau_sigma_Nm, float)[regs.used]
         noise_source = "torque sensor of the simulation"
+    if scored is not None:
+        return StictionBandValidation(vt, tau_v, pred_phys, pred_wls, pred_vc, rms_phys, rel_phys, rms_wls, rel_wls,
+                                      noise_sigma, noise_source, iso, pred_load=pred_l, pred_load_wls=pred_l_wls,
+                                      scored=scored, min_speed_rad_s=v_s)
     return Validation(vt, tau_v, pred_phys, pred_wls, pred_vc, rms_phys, rel_phys, rms_wls, rel_wls,
                       noise_sigma, noise_source, iso, pred_load=pred_l, pred_load_wls=pred_l_wls)
 
@@ -252,11 +339,12 @@ def choose_friction_model(robot: RobotModel, regs: Regressors, fits: Fits, val: 
     with load-dependent Coulomb friction) scored on the same held-out torques; the best one is handed on
     (``fits`` and ``val`` switched to it). Returns the summary's friction part."""
     friction: dict[str, Any] = {}
+    mask = scored_samples(val)
     configured = "viscous_coulomb" if fits.stribeck is None else "stribeck"
     scored: dict[str, np.ndarray] = {configured: val.rms_phys}
     if fits.stribeck is not None:
         vc_status = fits.phys_vc.status if val.heldout is None else val.heldout.phys.status   # a record's tail
-        scored = ({"viscous_coulomb": torque_rms(val.tau_Nm, val.pred_vc)[0]} if is_success(vc_status)
+        scored = ({"viscous_coulomb": torque_rms(val.tau_Nm, val.pred_vc, mask)[0]} if is_success(vc_status)
                   else {}) | scored
         friction["friction_viscous_coulomb_status"] = vc_status   # not scored unless IPOPT succeeded
     c, with_load = fits.load_candidate, f"{configured}_load"
@@ -265,12 +353,12 @@ def choose_friction_model(robot: RobotModel, regs: Regressors, fits: Fits, val: 
     elif c is not None and val.pred_load is not None:
         friction |= load_summary(c.fit.load, c.phys.status, regs.selection.per_joint)
         if is_success(c.phys.status):   # not scored unless IPOPT succeeded
-            scored[with_load] = torque_rms(val.tau_Nm, val.pred_load)[0]
+            scored[with_load] = torque_rms(val.tau_Nm, val.pred_load, mask)[0]
     best = best_friction_model(scored, val.noise_sigma)     # the held-out data select the handed-on model
     reported = fits.stribeck
     if best == "viscous_coulomb" and fits.stribeck is not None:
         fits.stribeck, fits.phys, val.pred_phys = None, fits.phys_vc, val.pred_vc
-        val.rms_phys, val.rel_phys = torque_rms(val.tau_Nm, val.pred_phys)
+        val.rms_phys, val.rel_phys = torque_rms(val.tau_Nm, val.pred_phys, mask)
     elif best == with_load and c is not None:
         hand_on_load_candidate(regs, fits, val, c)
         reported = fits.stribeck
@@ -280,7 +368,7 @@ def choose_friction_model(robot: RobotModel, regs: Regressors, fits: Fits, val: 
         "" if fits.load is None else "_load")
     if fits.stribeck is None and fits.load is None and fits.wls is not fits.wls_vc:   # the handed-on base estimate
         fits.wls, fits.y_fit, fits.ols = fits.wls_vc, fits.y, est_mod.ols(fits.Wb, fits.y, regs.n_used)
-    return friction
+    return friction | score_stiction_band(val, fits, regs)
 
 
 def hand_on_load_candidate(regs: Regressors, fits: Fits, val: Validation, c: LoadCandidate) -> None:
@@ -289,8 +377,9 @@ def hand_on_load_candidate(regs: Regressors, fits: Fits, val: Validation, c: Loa
     fits.ols = est_mod.ols(fits.Wb, fits.y_fit, regs.n_used)
     if val.pred_load is not None and val.pred_load_wls is not None:
         val.pred_phys, val.pred_wls = val.pred_load, val.pred_load_wls
-        val.rms_phys, val.rel_phys = torque_rms(val.tau_Nm, val.pred_phys)
-        val.rms_wls, val.rel_wls = torque_rms(val.tau_Nm, val.pred_wls)
+        mask = scored_samples(val)
+        val.rms_phys, val.rel_phys = torque_rms(val.tau_Nm, val.pred_phys, mask)
+        val.rms_wls, val.rel_wls = torque_rms(val.tau_Nm, val.pred_wls, mask)
 
 
 def scored_against_truth(ctx: StageContext, cfg: Config, regs: Regressors, fits: Fits) -> dict[str, Any] | None:

@@ -11,6 +11,7 @@ reads the file.
 from __future__ import annotations
 
 import math
+import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -44,11 +45,27 @@ def _owner(element: ET.Element, kind: str) -> str:
     return f"{kind} {element.get('name', '?')}"
 
 
-def _numbers(text: str) -> list[float] | None:
-    try:
-        return [float(token) for token in text.split()]
-    except ValueError:
-        return None
+#: a number as urdfdom's ``strToDouble`` reads it (``std::istream >> double``, classic locale): ASCII
+#: digits, an optional fraction and exponent; no ``nan``/``inf``, digit separators or non-ASCII digits
+_CPP_DOUBLE = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+_CPP_SPACE = " \t\n\r\f\v"
+_NOT_FINITE = re.compile(r"[+-]?(?:nan|inf|infinity)", re.IGNORECASE)
+
+
+def _number(token: str) -> float | None:
+    """``token`` as urdfdom reads it: leading blanks skipped, then one number and nothing after it."""
+    token = token.lstrip(_CPP_SPACE)
+    if _CPP_DOUBLE.fullmatch(token) or _NOT_FINITE.fullmatch(token):
+        return float(token)
+    return None
+
+
+def _numbers(text: str, count: int) -> list[float] | None:
+    """The numbers of an attribute value: one scalar, or a vector split at ASCII spaces as urdfdom's
+    ``Vector3::init`` does (a tab inside a vector is part of a token, and so refused)."""
+    tokens = [text] if count == 1 else [token for token in text.split(" ") if token]
+    numbers = [_number(token) for token in tokens]
+    return None if any(x is None for x in numbers) else [float(x) for x in numbers if x is not None]
 
 
 def check_urdf_values(urdf: Path, root: ET.Element) -> None:
@@ -66,7 +83,7 @@ def check_urdf_values(urdf: Path, root: ET.Element) -> None:
                             raise RobotFileError(urdf, f"{_owner(owner, kind)}: <{element.tag}>",
                                                  f"the {attribute} attribute is missing")
                         continue
-                    numbers = _numbers(text)
+                    numbers = _numbers(text, count)
                     where = f"{_owner(owner, kind)}: <{element.tag} {attribute}>"
                     if numbers is None or len(numbers) != count:
                         expected = "a number" if count == 1 else f"{count} numbers"

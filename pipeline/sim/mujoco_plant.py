@@ -10,6 +10,15 @@ quantisation, the torque reading is MuJoCo's actuator force, the TCP is a site p
 Engine: MuJoCo is rigid (no elastic joints, no Stribeck or load-dependent friction, no gear
 transmission error); its ``frictionloss`` is a dry-friction constraint of the solver (true sticking,
 softened by the solver's impedance), where the own plant uses ``coulomb tanh(v / width)``.
+
+The friction constraint's softness: MuJoCo's soft constraint drives the joint towards the reference
+acceleration ``-b v`` with ``b = 2 / (d_max * timeconst)``, so below the friction level the friction acts
+like a damper of rate ``b``, and a joint sliding at ``|v| < a / b`` under an acceleration ``a`` gets less
+than its Coulomb friction. MuJoCo's default time constant, 0.02 s, is ten of its default 2 ms steps
+(``b`` about 105 / s: at 5 rad/s² a band of 0.05 rad/s, at a wrist's 20 rad/s² 0.2 rad/s, where the
+constraint is then not Coulomb friction but its regularisation); stepped at 100 µs the arm keeps
+MuJoCo's ratio, ten steps (:data:`FRICTION_TIMECONST_STEPS`: 1 ms, ``b`` about 2100 / s), set on
+``dof_solref`` with the step in :meth:`MujocoPlant.run_servo`.
 """
 
 from __future__ import annotations
@@ -24,6 +33,11 @@ from pipeline.robot.model import RobotModel
 from pipeline.sim.mujoco_model import MujocoArm
 from pipeline.sim.plant import ServoRecord
 from pipeline.sim.servo_law import CascadeState, ServoLaw
+
+#: time constant of the dry-friction constraint (``frictionloss``'s ``solref``, ``mjModel.dof_solref``) in
+#: integration steps: MuJoCo's default, 0.02 s, is ten of its default 2 ms steps; kept at ten of ours
+#: (module docstring)
+FRICTION_TIMECONST_STEPS = 10.0
 
 
 def _as_slice(index: np.ndarray) -> slice | np.ndarray:
@@ -54,6 +68,7 @@ class MujocoPlant:
         self.integration_rate_hz = float(integration_rate_hz)
         self.nq = len(arm.joint_names)
         self.effort_Nm = np.asarray(truth.limits.effort_Nm, float).copy()
+        self.friction_timeconst_steps = FRICTION_TIMECONST_STEPS
 
     # --- static readings -----------------------------------------------------------------------
     def _kinematics(self, q: np.ndarray) -> None:
@@ -105,6 +120,7 @@ class MujocoPlant:
         n_sub = self.substeps_for(Tv)
         m, d = self.model, self.data
         m.opt.timestep = Tv / n_sub
+        m.dof_solref[:] = [self.friction_timeconst_steps * m.opt.timestep, 1.0]   # the dry friction's softness
         law = ServoLaw(np.asarray(gains["kp"], float), np.asarray(gains["kv"], float),
                        np.asarray(gains["ki"], float), float(velocity_filter_alpha), self.encoder_resolution_rad,
                        Tv, self.effort_Nm)

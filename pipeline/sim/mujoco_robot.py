@@ -34,6 +34,12 @@ from pipeline.sim.truth import JointMeasurement, RealRobot, TruthConfig
 class MujocoRealRobot(RealRobot):
     """:class:`RealRobot` whose arm is a MuJoCo model (module docstring)."""
 
+    #: its torque readings are its drives' commands in closed loop (the servo's reaction to the encoder
+    #: noise, which depends on the path, is in them) and its dry friction (``frictionloss``) holds a joint
+    #: at rest: the identification's validation counts both (:mod:`pipeline.identification.validate`)
+    torques_in_closed_loop = True
+    dry_friction_sticks = True
+
     def __init__(self, drawn: RealRobot, nominal: RobotModel, drive: DriveSettings | None = None) -> None:
         config = drawn.config
         super().__init__(drawn.truth, drawn.kinematic_errors, drawn.transform_tracker_to_base, config,

@@ -8,7 +8,8 @@ The record is what the arm's logging would write:
 
 - ``sensor_msgs/JointState`` at the logging rate (a bag folder, or a joint-state CSV when ``RECORD``
   ends in ``.csv``): encoder positions (noise and quantisation), the drive's velocity estimate, and
-  the motor torque (actuator torque, saturated) plus the torque sensor's noise;
+  the motor torque (actuator torque, saturated; the own plant's averaged over the control sample
+  centred on the encoder reading) plus the torque sensor's noise;
 - at every dwell of the motion (all joints at rest for at least ``dwell_min_s``, as the calibration
   tour stops at each pose), one laser-tracker reading of the reflector in the tracker frame, taken at
   the end of the dwell (after the arm has settled), as a ``geometry_msgs/PointStamped`` bag beside the
@@ -98,7 +99,14 @@ def play(motion: SampledMotion, real: RealRobot, robot: RobotModel, rng: np.rand
                                s.velocity_samples, s.measurement_delay_samples, s.alpha, inputs.q_d_fb, inputs.v_ff,
                                inputs.tau_ff, inputs.q_d[0], rng, measure_tcp=False, v0=inputs.v0)
     effort = robot.limits.effort_Nm
-    tau = rec.extra.get("actuator_torque_Nm", np.clip(rec.tau_cmd, -effort, effort))
+    if "actuator_torque_Nm" in rec.extra:      # MuJoCo: the force right after the encoder sample
+        tau = rec.extra["actuator_torque_Nm"]
+    else:
+        # the own loop's torque row k is the mean over [t_k, t_k + T), its encoder row the reading at t_k:
+        # logged with it is the mean over the sample centred on t_k (a half-sample offset, 0.2 ms at
+        # 400 µs, biases the parameters fitted to a long record by about a sigma)
+        tau = np.clip(rec.tau_cmd, -effort, effort)
+        tau = np.vstack([tau[:1], 0.5 * (tau[1:] + tau[:-1])])
     keep = slice(inputs.n_settle, None)
     t = inputs.t_s[keep] - inputs.t_s[inputs.n_settle]
     q, v, tau = rec.q_meas[keep], rec.v_est[keep], tau[keep]

@@ -15,7 +15,6 @@ import sys
 import time
 from pathlib import Path
 from types import FrameType
-from typing import Any
 
 import numpy as np
 
@@ -74,15 +73,13 @@ def latest_run_dir(runs_dir: str | Path | None = None) -> Path | None:
     return max(runs, key=lambda p: p.stat().st_mtime) if runs else None
 
 
-def robot_of_run(run_dir: Path) -> Any:
+def robot_of_run(run_dir: Path) -> RobotModel:
     """The last robot a stage of the run handed on, else the run's nominal robot."""
-
-
     for stage in reversed(stage_names()):
         if (run_dir / stage / "robot" / "robot.yaml").exists():
             return RobotModel.load(run_dir / stage / "robot")
     cfg_file = run_dir / "config.yaml"
-    robot = "rx130l"
+    robot = RunConfig().robot
     if cfg_file.exists():
         robot = (load_yaml(cfg_file.read_text(encoding="utf-8")) or {}).get("robot", robot)
     return RobotModel.load(resolve_robot_dir(RunConfig(robot=str(robot), source=str(cfg_file))))

@@ -13,6 +13,7 @@ from pipeline.calibration import error_model as em
 from pipeline.calibration import measure as ms
 from pipeline.calibration import noise_model as nm
 from pipeline.calibration import report
+from pipeline.calibration import robust as robust_module
 from pipeline.calibration import stage as st
 from pipeline.calibration.robust import robust_estimate
 from pipeline.calibration.validate import gate_figures
@@ -174,3 +175,32 @@ def test_summary_noise_parts_add_up_to_the_total():
                                        "noise_remainder_sigma_m")]
     assert sum(squares) == pytest.approx(total ** 2, rel=1e-9)
     assert report.noise_components(None, None)["noise_sensor_sigma_m"] is None
+
+
+def test_fit_without_a_warm_start_starts_every_fit_from_the_nominal_model(monkeypatch):
+    """The fit a run hands on (no ``theta0``) starts each of its LM fits (first fit, outlier refits,
+    noise-model rounds) from the nominal model, so its iterations are those of a cold fit; a warm
+    start (a neighbouring fold's fit) chains through the fits and reaches the same optimum."""
+    robot = RobotModel.load("rx130l")
+    real = RealRobot.create(robot, 8)
+    rng = np.random.default_rng(8)
+    meas = ms.measure_simulated(real, cd.random_candidates(cd.chain_from_robot(robot), 60, rng)[0], rng)
+    meas.Y[7, 0] += 2e-3                       # a gross error: the outlier test refits
+    mm = em.MeasurementModel(robot)
+    _, basis = st.identify_parameter_set(robot, mm, st.Config(identifiability_samples=60), rng)
+    starts: list[np.ndarray | None] = []
+    real_estimate = robust_module.estimate
+
+    def recording(*args, theta0=None, **kwargs):
+        starts.append(theta0)
+        return real_estimate(*args, theta0=theta0, **kwargs)
+
+    monkeypatch.setattr(robust_module, "estimate", recording)
+    settings = {"max_iterations": 50, "loss": "huber", "confidence": 0.999, "max_fraction": 0.1}
+    cold, rejection, _ = nm.fit_with_noise_model(mm, meas, basis, nm.NoiseModel(), None, **settings)
+    assert 7 in rejection.rejected and len(starts) >= 2 and all(s is None for s in starts)
+    starts.clear()
+    warm, _, _ = nm.fit_with_noise_model(mm, meas, basis, nm.NoiseModel(), None, theta0=cold.theta, **settings)
+    assert starts[0] is cold.theta and all(s is not None for s in starts[1:])
+    moved = mm.predict(meas.Q, warm.x, warm.registration) - mm.predict(meas.Q, cold.x, cold.registration)
+    assert np.max(np.abs(moved)) < 1e-9

@@ -61,6 +61,21 @@ def test_joint_states_bare_storage_file_and_name_matching(tmp_path: Path, bag_fo
         ros2_bag.read_joint_states(bag, ("shoulder", "elbow"))
 
 
+@pytest.mark.parametrize("bag_format", ["sqlite3", "mcap"])
+def test_first_stamp_is_the_first_time_the_readers_count(tmp_path: Path, bag_format: ros2_bag.BagFormat) -> None:
+    """From the header stamps read off the CDR bytes when they increase, else from the log times."""
+    states = JointStates(NAMES, 1.7e9 + 0.01 * np.arange(1, 6), np.zeros((5, 3)), np.zeros((5, 3)), np.zeros((5, 3)))
+    bag = ros2_bag.write_joint_states(tmp_path / "rec", states, bag_format=bag_format)
+    assert ros2_bag.first_stamp_s(bag) == pytest.approx(1.7e9 + 0.01, abs=1e-6)
+    points = TrackerPoints(np.array([2.5, 3.25]), np.ones((2, 3)), "tracker")
+    tracker = ros2_bag.write_points(tmp_path / "pts", points, "/tracker/reflector", bag_format=bag_format)
+    assert ros2_bag.first_stamp_s(tracker, ros2_bag.TRACKER_TYPES, preferred_topic=None) == pytest.approx(2.5)
+    _, raw = ros2_bag._raw_messages(bag, [ros2_bag.JOINT_STATE], None)
+    _, messages = ros2_bag._messages(bag, [ros2_bag.JOINT_STATE], None)
+    assert [ros2_bag._header_stamp_s(data) for _, _, data in raw] == \
+        [ros2_bag._stamp_s(m.header.stamp) for _, m in messages]
+
+
 @pytest.mark.parametrize("msgtype", list(ros2_bag.TRACKER_TYPES))
 def test_tracker_points_round_trip(tmp_path: Path, msgtype: str) -> None:
     rng = np.random.default_rng(5)

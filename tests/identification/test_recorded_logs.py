@@ -70,6 +70,17 @@ def test_a_gap_too_long_for_the_filter_is_refused_in_one_line(tmp_path, rx130l: 
     assert "line 2002" in message and "0.025" in message      # where, and the bound 1 / (2 x 20 Hz)
 
 
+def test_a_stray_time_stamp_is_refused_before_a_grid_is_built(tmp_path, rx130l: RobotModel):
+    """One time stamp of 1e6 s in a 4 ms log would resample onto 2.5e8 steps: refused, naming its line."""
+    t = np.arange(4000) * 0.004
+    t[-1] = 1e6
+    path, _ = _record(tmp_path, t)
+    with pytest.raises(DataFileError) as info:
+        load_user_record(Config(data_file=str(path)), rx130l)
+    message = info.value.one_line()
+    assert message.startswith(f"{path}: t: ") and "line 4001" in message and "gap" in message
+
+
 def test_torque_columns_without_a_signal_are_detected():
     rng = np.random.default_rng(0)
     n = 5000

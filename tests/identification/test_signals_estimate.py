@@ -79,6 +79,21 @@ def test_physical_fit_is_consistent_and_fits_consistent_data(rx130l):
     assert fit_bad.consistent and 0 < fit_bad.p[65] < 1e-3 * p_nom[65]
 
 
+def test_physical_fit_does_not_pull_a_rotor_inertia_the_nominal_model_leaves_out(rx130l):
+    """An assumed (or link-side) rotor inertia is 0 in the nominal prediction: no prior, so the data
+    decide it, at the default regularisation (a pull towards 0 put a UR3's joint-2 value at a third)."""
+    act = rx130l.actuation
+    reg = RegressorModel(rx130l.model, act.gear_matrix, act.coulomb_smoothing_rad_s)
+    p_true = standard_parameters(rx130l.model, act.rotor_inertia_kgm2, act.viscous_Nms_rad, act.coulomb_Nm)
+    p_nom = p_true.copy()
+    p_nom[60:66] = 0.0                                  # rotor inertia left out of the nominal model
+    rng = np.random.default_rng(5)
+    Q, V, A = rng.normal(size=(3, 300, 6))
+    Y = reg.stacked(Q, V, A)
+    fit = E.physical_fit(Y, Y @ p_true + 0.01 * rng.normal(size=Y.shape[0]), 6, p_nom, regularization=1e-3)
+    np.testing.assert_allclose(fit.p[60:66], p_true[60:66], rtol=0.05)
+
+
 def test_bad_inputs_raise_data_file_errors(rx130l):
     act = rx130l.actuation
     reg = RegressorModel(rx130l.model, act.gear_matrix, act.coulomb_smoothing_rad_s)

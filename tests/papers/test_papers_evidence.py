@@ -4,19 +4,21 @@ Every row of a results table in docs/PAPERS.md names its evidence in the last co
 results folder (first code span, e.g. `calib-002`) and the keys of its ``results.json``
 (further code spans, dotted paths into ``result``; ``*`` takes every item of a list or dict,
 ``name=value`` the items of a list whose field ``name`` is ``value``).
-Each number printed in the row's "ours" cell is matched to ONE of those keys, in order: the first
-number to the first key that holds it, each further number to the same key or a later one (never
-an earlier one), and to a value under it that no earlier number took. It must equal that value
-within the rounding of its printed digits, with its sign, in the units of the file or scaled by 100
-(fraction to %), 10³ (m to mm, mm to µm), 10⁶ (m to µm), 10¹² (m² to µm²) or 180/π (rad to
-degrees); a number moved by one unit in its last digit fails unless it lands on another value of the
-same key (:func:`test_a_moved_digit_fails`). Sample labels ("30 poses") must be settings or values of
-the study. The numbers of the "verdict" (or "status") cell must each be a value under the row's keys
-or of the study's settings, a number printed in another cell of the row or in a "paper" cell of the
-file, or the ratio or relative difference of two numbers printed in its "paper", "ours" and verdict
-cells; references ("Table 5", "Fig. 2", "KR 500") are not figures. A folder of a sweep
-(``python -m pipeline sweep``) holds ``sweep.csv`` instead; its keys are column names. A row without
-evidence says so in words and prints no number of ours.
+Each number printed in the row's "ours" cell is matched to ONE value under those keys, in order: the
+first number to the first value that equals it under the first key that holds one, each further
+number to a later value of the same key (after the value its predecessor took, in the file's order)
+or to a value of a later key (never an earlier key, never an earlier value): a row prints its
+numbers in the order of its keys and, within a key, in the order the file holds them. A number
+equals a value within the rounding of its printed digits, with its sign, in the units of the file or
+scaled by 100 (fraction to %), 10³ (m to mm, mm to µm), 10⁶ (m to µm), 10¹² (m² to µm²) or 180/π
+(rad to degrees); a number moved by one unit in its last digit fails unless it lands on a later
+value of the same key (:func:`test_a_moved_digit_fails`). Sample labels ("30 poses") must be
+settings or values of the study. The numbers of the "verdict" (or "status") cell must each be a
+value under the row's keys or of the study's settings, a number printed in another cell of the row
+or in a "paper" cell of the file, or the ratio or relative difference of two numbers printed in its
+"paper", "ours" and verdict cells; references ("Table 5", "Fig. 2", "KR 500") are not figures. A
+folder of a sweep (``python -m pipeline sweep``) holds ``sweep.csv`` instead; its keys are column
+names. A row without evidence says so in words and prints no number of ours.
 """
 
 from __future__ import annotations
@@ -140,17 +142,17 @@ def matches(value: float, half_ulp: float, candidates: list[float], signed: bool
 
 def ordered_mismatch(printed: list[tuple[float, float]], key_values: list[list[float]]) -> tuple[float, int] | None:
     """The first printed number (value, its position) that breaks the matching of the module doc:
-    each number goes to the first key at or after the previous number's that holds a value it equals
-    and no earlier number took. None when all match."""
-    k, used = 0, [set() for _ in key_values]
+    number i goes to the first value it equals under key k (the key of number i − 1 or a later one)
+    at an index j after the index number i − 1 took under that same key (any index under a key not
+    yet used). None when all match."""
+    k, last = 0, -1                     # the key of the previous match and its index under that key
     for i, (value, half_ulp) in enumerate(printed):
         while k < len(key_values):
-            j = next((j for j, v in enumerate(key_values[k]) if j not in used[k] and matches(value, half_ulp, [v])),
-                     None)
+            j = next((j for j, v in enumerate(key_values[k]) if j > last and matches(value, half_ulp, [v])), None)
             if j is not None:
-                used[k].add(j)
+                last = j
                 break
-            k += 1
+            k, last = k + 1, -1
         if k == len(key_values):
             return value, i
     return None
@@ -326,14 +328,23 @@ def moved_rows() -> list[tuple[str, dict, int, int]]:
 
 def test_a_moved_digit_fails():
     """A test of the test: every number of ours moved by one unit in its last printed digit, one at a
-    time, makes its row fail, except where the move lands on another value of the same key within
-    the printed rounding (close values such as three axes' 0.043 / 0.044 mm under one key): at most a
-    fifth of the moves (one key per printed number would close that gap)."""
+    time, makes its row fail, except where the moved number equals, within its printed rounding, a
+    later value of the same key and the numbers after it still find theirs (measured: 36 of 558
+    moves, 6.5 %). Such a later value is
+    - a close value of the same quantity: the standard errors of the searches under
+      ``table_realistic.*.paired_diff`` (0.0011 … 0.0016 mm) and their means (0.0020 … 0.0036 mm,
+      printed as the range "+0.002 … +0.004"); one design's ``before`` / ``after`` record, whose
+      maxima and half peak-to-peak spans of the axes lie within 0.01 mm or 0.01° of each other
+      (0.274 → 0.273 mm lands on ez's half peak-to-peak, 0.273 mm, after its maximum, 0.274 mm);
+    - a value read at another of the scales: a Cardan error in rad times 100 (0.0038 rad as "0.38"),
+      a fraction's standard error times 180/π ("0.1" from 0.00195) — most often for numbers printed
+      with one or two significant digits.
+    At most 8 % of the moves."""
     cases = moved_rows()
     assert len(cases) > 200
     passed = [(label, row["ours"], i, step) for label, row, i, step in cases
               if row_problem(label, row | {"ours": moved(row["ours"], i, step)}) is None]
-    assert len(passed) <= 0.2 * len(cases), (len(passed), len(cases), passed[:5])
+    assert len(passed) <= 0.08 * len(cases), (len(passed), len(cases), passed[:5])
 
 
 def test_the_wrong_detmax_figure_fails():

@@ -111,6 +111,11 @@ def _urdf_with(tmp_path: Path, old: str, new: str) -> Path:
     ('izz="0.729"', 'izz="abc"', "<inertia izz>: expected a number, got 'abc'"),
     ('<origin xyz="0 0 0.55000000000000004"', '<origin xyz="0 nan 0.55"', "<origin xyz>: not a finite number"),
     ('<origin xyz="0 0 0.55000000000000004"', '<origin xyz="0 0.55"', "<origin xyz>: expected 3 numbers"),
+    # numbers Python's float() reads and urdfdom's istream does not: each would leave an Error on stderr
+    ('<cylinder radius="0.25"', '<cylinder radius="\u00a00.25"', "<cylinder radius>: expected a number"),
+    ('<mass value="45"/>', '<mass value="4_5"/>', "<mass value>: expected a number, got '4_5'"),
+    ('<mass value="45"/>', '<mass value="45 "/>', "<mass value>: expected a number, got '45 '"),
+    ('<origin xyz="0 0 0.55000000000000004"', '<origin xyz="0 0 \u0665"', "<origin xyz>: expected 3 numbers"),
     ('lower="-2.79252680319" upper="2.79252680319"', 'lower="2.79252680319" upper="-2.79252680319"',
      "joint joint_1: limit: lower 2.79252680319 is above upper -2.79252680319"),
 ])
