@@ -10,6 +10,7 @@ from matplotlib.figure import Figure
 
 from pipeline.identification import design as design_mod
 from pipeline.identification.config import Config
+from pipeline.identification.fit import unmeasured_joints_note
 from pipeline.identification.friction_terms import report_lines
 from pipeline.identification.outcome import Outcome, ValidationTrajectory
 from pipeline.identification.regressor import BaseParameters
@@ -340,6 +341,13 @@ def stage_result(cfg: Config, o: Outcome, robot: RobotModel) -> StageResult:
     """The stage's result (summary, arrays, data, figures, report text) handing on ``robot``."""
     exc = o.measured.excitation
     s = summary(cfg, o)
+    if unmeasured_joints_note(o.regs.selection):
+        s["warnings"] = [*s.get("warnings", []), unmeasured_joints_note(o.regs.selection)]
+    if o.regs.dropped:
+        s["warnings"] = [*s.get("warnings", []), (
+            f"{len(o.regs.dropped)} base parameter(s) the excitation cannot bring under identification."
+            "max_cond_base_regressor_data are left out of the design and the fits (combined into the others; "
+            "report.md names them)")]
     fallback_md = "" if exc is None or not exc.fallback_reason else (
         f"**Excitation: the best random feasible trajectory is used** ({exc.fallback_reason}).\n\n")
     if o.regs.dropped:

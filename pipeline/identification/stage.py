@@ -41,7 +41,7 @@ from pipeline.core.errors import ConfigError, PipelineError
 from pipeline.identification import report
 from pipeline.identification.config import Config, ExcitationConfig
 from pipeline.identification.experiment import excite_and_measure, regressors, take_off_record_terms
-from pipeline.identification.fit import base_covariance, fit_models, handed_on_robot, unmeasured_joints_note
+from pipeline.identification.fit import base_covariance, fit_models, handed_on_robot
 from pipeline.identification.gates import add_result_gates
 from pipeline.identification.joints import select_joints
 from pipeline.identification.outcome import Fits, Measured, Outcome, Regressors, Validation, identified_robot
@@ -129,13 +129,6 @@ def _run(ctx: StageContext) -> StageResult:
     timings["total_s"] = time.perf_counter() - t0
     outcome = Outcome(regs, measured, fits, val, friction, hac, white_sigma, truth, tx, timings)
     result = report.stage_result(cfg, outcome, new_robot)
-    if unmeasured_joints_note(regs.selection):
-        result.summary["warnings"] = [*result.summary.get("warnings", []), unmeasured_joints_note(regs.selection)]
-    if regs.dropped:
-        result.summary["warnings"] = [*result.summary.get("warnings", []), (
-            f"{len(regs.dropped)} base parameter(s) the excitation cannot bring under identification."
-            "max_cond_base_regressor_data are left out of the design and the fits (combined into the others; "
-            "report.md names them)")]
     return gated(ctx, cfg, regs, measured, fits, val, result)
 
 

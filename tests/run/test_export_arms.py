@@ -17,10 +17,10 @@ from pipeline.core.config import CONFIGS_DIR
 from pipeline.exchange.joint_limits import read_joint_limits_yaml, source_joint_types
 from pipeline.exchange.motion_csv import read_motion_csv
 from pipeline.exchange.ros2_bag import read_joint_trajectory
-from pipeline.robot.example_robots import example_arm_urdf
 from pipeline.robot.model import RobotModel
 from pipeline.run import export_motions as em
 from pipeline.run.stage_io import load_run
+from tests.example_arms import robot_setting
 
 #: the quick profile made cheaper where no exported file depends on the size
 CHEAPER = ["calibration.n_heldout=100", "calibration.design_table=false", "calibration.second_pass=never",
@@ -28,19 +28,10 @@ CHEAPER = ["calibration.n_heldout=100", "calibration.design_table=false", "calib
 MOTIONS = ("calibration_tour", "excitation", "trajectory_cp", "trajectory_ptp")
 
 
-def _robot(name: str) -> str:
-    if name == "panda":
-        urdf = example_arm_urdf("panda")
-        if urdf is None:
-            pytest.skip("example-robot-data not installed")
-        return str(urdf)
-    return name
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["rx130l", "panda"])
 def test_export_of_a_quick_run_writes_every_file_and_keeps_the_plans(name: str, tmp_path: Path) -> None:
-    robot_arg = _robot(name)
+    robot_arg = robot_setting(name)
     sets = [f"robot={robot_arg}", f"name={name}", *CHEAPER]
     args = ["run", "--config", str(CONFIGS_DIR / "quick.yaml"), "--out", str(tmp_path / "runs"), "--accept-poor"]
     assert main([*args, *[a for s in sets for a in ("--set", s)]]) == 0

@@ -25,24 +25,15 @@ from pathlib import Path
 import pytest
 
 from pipeline.core.config import CONFIGS_DIR
-from pipeline.robot.example_robots import example_arm_urdf
 from pipeline.run.runner import run_pipeline
 from pipeline.run.stages import load_config
+from tests.example_arms import robot_setting
 
 REPO = Path(__file__).resolve().parents[2]
 
 
 def _summary(run: Path, stage: str) -> dict:
     return json.loads((run / stage / "summary.json").read_text())
-
-
-def _robot(name: str) -> str:
-    if name == "panda":
-        urdf = example_arm_urdf("panda")
-        if urdf is None:
-            pytest.skip("example-robot-data not installed")
-        return str(urdf)
-    return name
 
 
 def executed_plans(traj: dict) -> dict[str, tuple[float, float, float]]:
@@ -61,7 +52,7 @@ def executed_plans(traj: dict) -> dict[str, tuple[float, float, float]]:
 @pytest.mark.study   # default profile on two arms: about an hour on 2 cores
 @pytest.mark.parametrize("name", ["rx130l", "panda"])
 def test_identification_control_and_trajectories_hold_in_mujoco(name: str, tmp_path: Path) -> None:
-    cfg = load_config(None, [f"robot={_robot(name)}", f"name={name}", "truth.engine=mujoco"])
+    cfg = load_config(None, [f"robot={robot_setting(name)}", f"name={name}", "truth.engine=mujoco"])
     run_pipeline(cfg, out_root=tmp_path, log=lambda m: None)
     run = tmp_path / name
     ident = _summary(run, "identification")
@@ -87,7 +78,7 @@ def _cli(*args: str) -> None:
 @pytest.mark.study   # default profile on two arms: about an hour on 2 cores
 @pytest.mark.parametrize("name", ["rx130l", "panda"])
 def test_the_loop_to_the_arm_runs_through_files_alone(name: str, tmp_path: Path) -> None:
-    robot = _robot(name)
+    robot = robot_setting(name)
     quick = str(CONFIGS_DIR / "quick.yaml")
     common = ["--config", quick, "--set", f"robot={robot}", "--set", f"name={name}", "--set", "truth.engine=mujoco"]
     _cli("run", *common, "--stages", "identification", "--out", str(tmp_path / "design"))          # design
