@@ -183,6 +183,9 @@ class TrajectorySummary(SummaryRecord):
     cp_segment: str | None = None
     cp_duration_s: float | None = None
     cp_toppra_duration_s: float | None = None
+    #: the CP the elastic arm executes (``time_optimal`` or a remedy, :mod:`pipeline.trajectory.executable`)
+    cp_executed: str | None = None
+    cp_executed_duration_s: float | None = None
     ptp_duration_s: float | None = None
     ptp_ruckig_duration_s: float | None = None
     ptp_energy_at_ruckig_duration: float | None = None

@@ -233,6 +233,21 @@ def _duration_row(figure: str, a: float | None, b: float | None, name: str) -> R
                SERVO_SIMULATION, ratio(a / b))
 
 
+def _cp_row(s: TrajectorySummary) -> Row | None:
+    """The CP's duration against toppra's; when a remedy of the time-optimal plan is executed (its
+    servo run over the gate on the elastic arm), the executed plan's duration is the one judged."""
+    figure = f"CP duration ({s.cp_segment or 'ISO'} path)"
+    executed = s.cp_executed_duration_s
+    if s.cp_executed in (None, "time_optimal") or executed is None or s.cp_duration_s is None:
+        return _duration_row(figure, s.cp_duration_s, s.cp_toppra_duration_s, "toppra")
+    toppra = s.cp_toppra_duration_s
+    if toppra is None or toppra <= 0:
+        return None
+    return Row("trajectory", figure, f"time-optimal {s.cp_duration_s:.3f} s, executed ({s.cp_executed}) "
+               f"{executed:.3f} s", f"toppra {toppra:.3f} s", _anchor_verdict(executed / toppra, True),
+               SERVO_SIMULATION, ratio(executed / toppra))
+
+
 def _settle_row(s: TrajectorySummary, elastic_feedforward: bool, label: str) -> Row | None:
     opt = s.move_and_settle_s("ptp", elastic_feedforward)
     smooth = s.move_and_settle_s("ptp_smooth", elastic_feedforward)
@@ -247,8 +262,7 @@ def _settle_row(s: TrajectorySummary, elastic_feedforward: bool, label: str) -> 
 
 def _trajectory_rows(s: TrajectorySummary, gates: StageSummary) -> list[Row]:
     rows: list[Row | None] = [
-        _duration_row(f"CP duration ({s.cp_segment or 'ISO'} path)", s.cp_duration_s, s.cp_toppra_duration_s,
-                      "toppra"),
+        _cp_row(s),
         _duration_row("PtP duration", s.ptp_duration_s, s.ptp_ruckig_duration_s, "ruckig"),
     ]
     energy, ruckig_energy = s.ptp_energy_at_ruckig_duration, s.ptp_ruckig_energy

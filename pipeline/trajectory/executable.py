@@ -20,7 +20,9 @@ measured ratio (:func:`to_gate`, a few servo runs of ~1 s each).
 The executed CP is the shortest candidate whose servo simulation keeps the gate (the time-optimal
 plan itself when it does; the remedies are then not run, the smooth CP is still measured); the pure
 time-optimal plan is reported beside it (``cp_sim_*``), as the time-optimal PtP is on an elastic
-plant. Every figure here is simulated (the hidden robot of the run).
+plant. A remedy is stored beside the plans (``trajectory_cp_executed``), so ``python -m pipeline
+export`` writes the motion the servo simulation vouched for. Every figure here is simulated (the
+hidden robot of the run).
 """
 
 from __future__ import annotations

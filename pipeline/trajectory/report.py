@@ -88,6 +88,9 @@ def arrays(cp: CPPlan, ptp: PTPPlan) -> dict[str, np.ndarray]:
     if cp.smooth is not None:
         out["trajectory_cp_smooth_t"] = cp.trajectories["cp_smooth"].t_s
         out["trajectory_cp_smooth_q"] = cp.trajectories["cp_smooth"].q
+    if "cp_executed" in cp.trajectories:     # a remedy of the time-optimal CP (executable.py) is what runs
+        out["trajectory_cp_executed_t"] = cp.trajectories["cp_executed"].t_s
+        out["trajectory_cp_executed_q"] = cp.trajectories["cp_executed"].q
     return out
 
 

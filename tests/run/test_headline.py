@@ -85,6 +85,21 @@ def test_each_stage_figure_stands_against_its_anchor_with_a_verdict(tmp_path):
     assert model.verdict == hl.WARN and "1 warning(s)" in model.against
 
 
+def test_an_executed_remedy_of_the_cp_is_the_duration_judged(tmp_path):
+    """A slowed CP executed (its time-optimal plan over the servo gate): both durations shown, the
+    executed one against toppra's; the time-optimal plan executed: the plain row."""
+    slowed = {**SUMMARIES["trajectory"], "cp_duration_s": 0.48, "cp_executed": "slowed",
+              "cp_executed_duration_s": 0.53}
+    headline = hl.read_headline(_write_run(tmp_path, {"trajectory": slowed}), ["trajectory"])
+    (row,) = _rows(headline, "trajectory", "CP duration")
+    assert row.value == "time-optimal 0.480 s, executed (slowed) 0.530 s" and row.against == "toppra 0.500 s"
+    assert row.ratio == hl.ratio(0.53 / 0.50) and row.verdict == hl.WARN
+    as_planned = {**slowed, "cp_executed": "time_optimal", "cp_executed_duration_s": 0.48}
+    headline = hl.read_headline(_write_run(tmp_path / "b", {"trajectory": as_planned}), ["trajectory"])
+    (row,) = _rows(headline, "trajectory", "CP duration")
+    assert row.value == "0.480 s" and row.ratio == hl.ratio(0.48 / 0.50) and row.verdict == hl.PASS
+
+
 def test_missing_stages_and_figures_leave_rows_out(tmp_path):
     run = _write_run(tmp_path, {"model": {"name": "x"}, "control": {"tcp_error_max_m": {"none": 1e-3}}})
     headline = hl.read_headline(run, ["model", "calibration", "control"])

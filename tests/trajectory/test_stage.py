@@ -72,6 +72,11 @@ def test_stage_quick(quick_config, rx130l, ptp_problem, tmp_path):
     assert s["cp_executed"] in ("time_optimal", "reserve", "smooth", "slowed")
     assert s["cp_executed_duration_s"] >= s["cp_duration_s"] * (1 - 1e-6)
     assert "Executable CP on the elastic arm" in res.report_md
+    # a remedy is stored as a plan of its own (export writes it); the time-optimal plan is not stored twice
+    executed = res.arrays.get("trajectory_cp_executed_t")
+    assert (executed is None) == (s["cp_executed"] == "time_optimal")
+    if executed is not None:
+        assert executed[-1] - executed[0] == pytest.approx(s["cp_executed_duration_s"], rel=1e-9)
     assert s["ptp_smooth_sim_tcp_error_max_m"] is not None
     assert s["ptp_smooth_fine_violation"] <= tol and "ptp_smooth_fine_violation" in gates
     assert s["ptp_smooth_duration_s"] == s["ptp_smooth_settle_duration_s"]
