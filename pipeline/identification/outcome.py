@@ -140,6 +140,10 @@ class Validation:
     #: predictions of the load-dependent candidate (physical, WLS), None when it was not fitted
     pred_load: np.ndarray | None = None
     pred_load_wls: np.ndarray | None = None
+    #: (N, n_used) bool: the samples the RMS counts, outside the stiction band ``|v| >= min_speed_rad_s``
+    #: of an arm whose dry friction sticks (None: every sample; :mod:`pipeline.identification.validate`)
+    scored: np.ndarray | None = None
+    min_speed_rad_s: float = 0.0
 
     @property
     def rms_over_noise(self) -> np.ndarray:

@@ -36,7 +36,6 @@ held samples, the fraction whose residual lies within the identified Coulomb lev
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -173,20 +172,6 @@ def torque_rms(measured: np.ndarray, predicted: np.ndarray,
     return rms, rms / np.maximum(np.sqrt(ms), 1e-12)
 
 
-@dataclass
-class StictionBandValidation(Validation):
-    """:class:`Validation` on an arm whose dry friction sticks: ``scored`` (N, n_used) marks the samples
-    outside the stiction band ``|v| >= min_speed_rad_s`` (module docstring)."""
-
-    scored: np.ndarray | None = None
-    min_speed_rad_s: float = 0.0
-
-
-def scored_samples(val: Validation) -> np.ndarray | None:
-    """The samples the validation RMS counts (None: all)."""
-    return val.scored if isinstance(val, StictionBandValidation) else None
-
-
 def score_stiction_band(val: Validation, fits: Fits, regs: Regressors) -> dict[str, Any]:
     """A stiction-band validation's last step ({} and nothing done otherwise), with the handed-on fit:
     a joint with no sample outside the band (at rest on the whole path) is scored by the Coulomb law at
@@ -194,8 +179,8 @@ def score_stiction_band(val: Validation, fits: Fits, regs: Regressors) -> dict[s
     identified ``|F_c|``, ``max(|tau - tau_hat| - |F_c|, 0)`` (physical and WLS fits alike). Returns the
     summary entries: ``v_s``, the fraction of samples scored per joint, and per joint the fraction of its
     held samples whose residual lies within ``|F_c|`` plus three noise sigmas (None: no held sample)."""
-    scored = scored_samples(val)
-    if scored is None or not isinstance(val, StictionBandValidation):
+    scored = val.scored
+    if scored is None:
         return {}
     nq, nm = regs.reg.nv, regs.n_used
     coulomb = np.abs(fits.phys.p[len(fits.phys.p) - 2 * nq: len(fits.phys.p) - nq])[regs.used]
@@ -291,12 +276,12 @@ def validate_on_path(ctx: StageContext, cfg: Config, regs: Regressors, measured:
     noise_sigma, noise_source = measured.data.noise_sigma_Nm, "spread between excitation periods"
     meas_v = real.execute_joint_trajectory(vt.t_s, vt.q, vt.v, vt.a, ctx.rng)
     tau_v = meas_v.tau_Nm[:, regs.used]
-    if getattr(real, "torques_in_closed_loop", False):   # the path's own noise: a second run (module docstring)
+    if real.torques_in_closed_loop:   # the path's own noise: a second run (module docstring)
         tau_2 = real.execute_joint_trajectory(vt.t_s, vt.q, vt.v, vt.a, ctx.rng).tau_Nm[:, regs.used]
         noise_sigma = np.std(tau_v - tau_2, axis=0) / np.sqrt(2.0)
         noise_source = "spread between two runs of the validation path (the drives' torques in closed loop)"
     scored, v_s = None, 0.0
-    if getattr(real, "dry_friction_sticks", False):
+    if real.dry_friction_sticks:
         v_s = STICTION_BAND_OVER_WIDTH * float(regs.reg.coulomb_width_rad_s)
         scored = np.abs(vt.v[:, regs.used]) >= max(v_s, 1e-300)
     Yv = regs.reg.stacked(vt.q, vt.v, vt.a)
@@ -311,12 +296,9 @@ def validate_on_path(ctx: StageContext, cfg: Config, regs: Regressors, measured:
     if noise_sigma is None or not np.all(np.isfinite(noise_sigma)):
         noise_sigma = np.asarray(meas_v.tau_sigma_Nm, float)[regs.used]
         noise_source = "torque sensor of the simulation"
-    if scored is not None:
-        return StictionBandValidation(vt, tau_v, pred_phys, pred_wls, pred_vc, rms_phys, rel_phys, rms_wls, rel_wls,
-                                      noise_sigma, noise_source, iso, pred_load=pred_l, pred_load_wls=pred_l_wls,
-                                      scored=scored, min_speed_rad_s=v_s)
     return Validation(vt, tau_v, pred_phys, pred_wls, pred_vc, rms_phys, rel_phys, rms_wls, rel_wls,
-                      noise_sigma, noise_source, iso, pred_load=pred_l, pred_load_wls=pred_l_wls)
+                      noise_sigma, noise_source, iso, pred_load=pred_l, pred_load_wls=pred_l_wls,
+                      scored=scored, min_speed_rad_s=v_s)
 
 
 def load_candidate_predictions(regs: Regressors, c: LoadCandidate, Y: np.ndarray, v: np.ndarray,
@@ -339,7 +321,7 @@ def choose_friction_model(robot: RobotModel, regs: Regressors, fits: Fits, val: 
     with load-dependent Coulomb friction) scored on the same held-out torques; the best one is handed on
     (``fits`` and ``val`` switched to it). Returns the summary's friction part."""
     friction: dict[str, Any] = {}
-    mask = scored_samples(val)
+    mask = val.scored
     configured = "viscous_coulomb" if fits.stribeck is None else "stribeck"
     scored: dict[str, np.ndarray] = {configured: val.rms_phys}
     if fits.stribeck is not None:
@@ -377,7 +359,7 @@ def hand_on_load_candidate(regs: Regressors, fits: Fits, val: Validation, c: Loa
     fits.ols = est_mod.ols(fits.Wb, fits.y_fit, regs.n_used)
     if val.pred_load is not None and val.pred_load_wls is not None:
         val.pred_phys, val.pred_wls = val.pred_load, val.pred_load_wls
-        mask = scored_samples(val)
+        mask = val.scored
         val.rms_phys, val.rel_phys = torque_rms(val.tau_Nm, val.pred_phys, mask)
         val.rms_wls, val.rel_wls = torque_rms(val.tau_Nm, val.pred_wls, mask)
 

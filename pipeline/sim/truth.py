@@ -179,6 +179,12 @@ def _perturb_inertia(inertia: pin.Inertia, rng: np.random.Generator, cfg: TruthC
 class RealRobot:
     """A perturbed copy of the nominal robot with its sensors (see the module docstring)."""
 
+    #: its torque readings are its drives' commands in closed loop (False: this simulator's arm follows
+    #: the commanded motion exactly) and its dry friction holds a joint at rest (False: smooth Coulomb);
+    #: the identification's validation counts both (:mod:`pipeline.identification.validate`)
+    torques_in_closed_loop: bool = False
+    dry_friction_sticks: bool = False
+
     def __init__(self, truth: RobotModel, kinematic_errors: np.ndarray, transform_tracker_to_base: pin.SE3,
                  config: TruthConfig, joint_stiffness_Nm_rad: np.ndarray | None = None,
                  transmission_cycles: np.ndarray | None = None, transmission_phase_rad: np.ndarray | None = None,

@@ -45,7 +45,7 @@ def test_only_the_mujoco_arm_asks_for_the_closed_loop_and_stiction_validation(tx
     mj = create_hidden_robot(tx40, 5, TruthConfig(engine="mujoco"))
     assert isinstance(mj, MujocoRealRobot) and not isinstance(own, MujocoRealRobot)
     assert isinstance(own, RealRobot)
-    assert not getattr(own, "torques_in_closed_loop", False) and not getattr(own, "dry_friction_sticks", False)
+    assert not own.torques_in_closed_loop and not own.dry_friction_sticks
     assert mj.torques_in_closed_loop and mj.dry_friction_sticks
 
 
