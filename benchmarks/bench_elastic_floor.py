@@ -140,7 +140,8 @@ def main(run_dir: str = "data/runs/rx130l") -> None:
     seed, robot_name, cfg, pipe, real = m.seed, m.robot_name, m.config, m.pipe, m.real
     tr = real.transmission
     t0 = time.perf_counter()
-    ref, _, frame, _, _ = iso_reference(pipe, cfg)
+    iso_run = iso_reference(pipe, cfg)
+    ref, frame = iso_run.ref, iso_run.frame
     q_mean = np.mean(ref.q_d, axis=0)
     gains = servo_gains(pipe, q_mean, dataclasses.replace(cfg, stick_slip_margin=0.0))   # bandwidth design only
     stage_gains = servo_gains(pipe, q_mean, cfg)                                      # + the stage's floor

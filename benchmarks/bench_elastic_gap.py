@@ -166,7 +166,8 @@ def main(run_dir: str = "data/runs/rx130l") -> None:
     seed, robot_name, cfg, nominal, handed_on, choice, pipe, real = (
         m.seed, m.robot_name, m.config, m.nominal, m.handed_on, m.choice, m.pipe, m.real)
     t0 = time.perf_counter()
-    ref, _, frame, _, _ = iso_reference(pipe, cfg)
+    iso_run = iso_reference(pipe, cfg)
+    ref, frame = iso_run.ref, iso_run.frame
     gains = servo_gains(pipe, np.mean(ref.q_d, axis=0), cfg)
     noise_seed = int(stage_rng(seed, "control").integers(2**32))   # the control stage's first draw
     at_ref = real.plant.measure_tcp(ref.q_d, frame)

@@ -30,6 +30,8 @@ with a ruckig speed profile and IK at every sample (paper 004 §2.3.3).
 
 from __future__ import annotations
 
+import copy
+import time
 import warnings
 from dataclasses import dataclass
 
@@ -43,7 +45,7 @@ from pipeline.robot.defaults import ik_seeds_or_derived_rad, iso_or_derived, iso
 from pipeline.robot.iso9283 import IsoPath, IsoPathConfig, iso9283_path
 from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import start_configuration
-from pipeline.robot.reference import Reference, cartesian_reference
+from pipeline.robot.reference import Reference, cartesian_reference, torque_time_scale
 
 
 @dataclass
@@ -146,17 +148,39 @@ def filter_alpha(cutoff_hz: float, velocity_sample_time_s: float) -> float:
     return float(1.0 - np.exp(-2 * np.pi * cutoff_hz * velocity_sample_time_s))
 
 
-def iso_reference(robot: RobotModel, cfg: ControlConfig
-                  ) -> tuple[Reference, IsoPath, str, np.ndarray, np.ndarray]:
-    """The EN ISO 9283 path of ``cfg.iso`` (None fields derived from ``robot``) and its joint reference:
-    ``(ref, path, frame, ik_seeds, q_start)``; ``ref`` from ruckig + IK at every sample with ``robot``'s
-    kinematics. Raises InfeasibleError naming ``control.iso`` when the path leaves the workspace."""
+@dataclass
+class IsoReference:
+    """The reference the stage follows (:func:`iso_reference`): the joint reference, the path, its frame,
+    the IK seeds and start, the ISO settings it ran (None fields derived from the robot, a derived path
+    slowed), the seconds it took, whether the cube was derived (``control.iso`` gave no centre or edge)
+    and the time scale ``s`` of the slowing (1: none)."""
+
+    ref: Reference
+    path: IsoPath
+    frame: str
+    seeds: np.ndarray
+    q_start: np.ndarray
+    iso: IsoPathConfig
+    time_s: float
+    derived_cube: bool = True
+    time_scale: float = 1.0
+
+
+def iso_reference(robot: RobotModel, cfg: ControlConfig) -> IsoReference:
+    """The EN ISO 9283 path of ``cfg.iso`` (None fields derived from ``robot``) and its joint reference
+    (:class:`IsoReference`), from ruckig + IK at every sample with ``robot``'s kinematics. A derived
+    cube's path is slowed (:func:`slowed_reference`) until ``robot``'s inverse dynamics asks at most
+    ``PATH_TORQUE_SHARE`` of every torque limit (:func:`pipeline.robot.reference.torque_time_scale`); a
+    cube given in the config runs as given. Raises InfeasibleError naming ``control.iso`` when the path
+    leaves the workspace."""
+    t0 = time.perf_counter()
     iso = iso_or_derived(robot, cfg.iso)
     frame = robot.frame_reflector if cfg.path_frame == "reflector" else robot.frame_tcp
     rotation = iso_rotation(robot, iso.plane, iso.tool_orientation)
     path = iso9283_path(robot, iso.edge_m, iso.centre_m, iso.plane, rotation, iso.corner_fraction,
                         iso.large_circle_fraction, iso.small_circle_fraction, tuple(iso.segments))
     seeds = ik_seeds_or_derived_rad(robot, cfg.ik_seeds_deg)
+    derived_cube = cfg.iso.centre_m is None or cfg.iso.edge_m is None
     try:
         q_start = start_configuration(robot, path.poses(np.array([0.0]))[0], seeds, frame)
         ref = cartesian_reference(robot, path, cfg.sample_time_s, iso.speed_m_s, iso.acceleration_m_s2,
@@ -166,21 +190,26 @@ def iso_reference(robot: RobotModel, cfg: ControlConfig
                               f"{iso.centre_m} m, edge {iso.edge_m} m) must lie in this robot's workspace: set "
                               "control.iso.centre_m / edge_m in the run config, or run_defaults in its robot.yaml"
                               ) from None
-    return ref, path, frame, seeds, q_start
+    out = IsoReference(ref, path, frame, seeds, q_start, iso, 0.0, derived_cube)
+    scale = torque_time_scale(robot, ref) if derived_cube else 1.0
+    if scale < 1.0:
+        out = slowed_reference(robot, cfg, out, scale)
+    out.time_s = time.perf_counter() - t0
+    return out
 
 
-@dataclass
-class IsoReference:
-    """The reference the stage follows: :func:`iso_reference`'s parts, the ISO settings it used (None
-    fields derived from the robot) and the seconds it took."""
-
-    ref: Reference
-    path: IsoPath
-    frame: str
-    seeds: np.ndarray
-    q_start: np.ndarray
-    iso: IsoPathConfig
-    time_s: float
+def slowed_reference(robot: RobotModel, cfg: ControlConfig, iso: IsoReference, scale: float) -> IsoReference:
+    """``iso`` slowed by ``scale`` (rounded down to whole percent): the same path and start, speed,
+    acceleration and jerk times ``s``, ``s^2``, ``s^3`` (exactly the time-scaled motion
+    ``q(s t)``, :mod:`pipeline.robot.reference`), IK at every sample again; ``time_scale`` multiplies."""
+    scale = float(np.floor(100 * scale) / 100)
+    settings = copy.copy(iso.iso)
+    settings.speed_m_s, settings.acceleration_m_s2, settings.jerk_m_s3 = (
+        settings.speed_m_s * scale, settings.acceleration_m_s2 * scale**2, settings.jerk_m_s3 * scale**3)
+    ref = cartesian_reference(robot, iso.path, cfg.sample_time_s, settings.speed_m_s, settings.acceleration_m_s2,
+                              settings.jerk_m_s3, iso.q_start, iso.frame, cfg.ik_tolerance_m)
+    return IsoReference(ref, iso.path, iso.frame, iso.seeds, iso.q_start, settings, iso.time_s, iso.derived_cube,
+                        iso.time_scale * scale)
 
 
 @dataclass

@@ -10,20 +10,24 @@ speed of the compiled loop against the plain Python loop.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from pipeline.control.config import ControlConfig
-from pipeline.control.design import IsoReference, ServoDesign
+from pipeline.control.design import IsoReference, ServoDesign, slowed_reference
 from pipeline.control.estimate import ControlModels, with_dynamics_of
-from pipeline.control.simulate import ClosedLoopResult, first_saturation, simulate_joint_trajectory
+from pipeline.control.simulate import ClosedLoopResult, check_saturation, first_saturation, simulate_joint_trajectory
 from pipeline.control.validate import registered_error, run_metrics
 from pipeline.core.errors import PipelineError
 from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import start_configuration
-from pipeline.robot.reference import cartesian_reference
+from pipeline.robot.reference import PATH_TORQUE_SHARE, cartesian_reference
 from pipeline.stage_api import RealRobot, StageContext
+
+#: slowings of a derived ISO path whose closed-loop commands exceed the torque limits
+MAX_SLOWINGS = 3
 
 
 @dataclass
@@ -54,10 +58,12 @@ def run_variant(real: RealRobot, model: RobotModel, iso: IsoReference, q_d: np.n
                                      rng=np.random.default_rng(noise_seed), gains=servo.gains, tcp_frame=iso.frame)
 
 
-def variant_runs(ctx: StageContext, models: ControlModels, iso: IsoReference, servo: ServoDesign) -> ServoRuns:
+def variant_runs(ctx: StageContext, models: ControlModels, iso: IsoReference, servo: ServoDesign,
+                 config: ControlConfig | None = None) -> ServoRuns:
     """Every feedforward variant of ``control.variants`` (and, with identified dynamics and
-    ``compare_nominal_feedforward``, full_friction from the nominal dynamics) on the ISO reference."""
-    cfg: ControlConfig = ctx.config
+    ``compare_nominal_feedforward``, full_friction from the nominal dynamics) on the ISO reference;
+    ``config`` instead of the stage's (``ctx.config``) when given."""
+    cfg: ControlConfig = config or ctx.config
     ref, robot = iso.ref, models.robot
     assert ctx.real is not None          # the stage checked it before any step
     tcp_at_ref = ctx.real.plant.measure_tcp(ref.q_d, iso.frame)
@@ -79,6 +85,27 @@ def variant_runs(ctx: StageContext, models: ControlModels, iso: IsoReference, se
     # (never the nominal-model comparison run)
     main = "full_friction" if "full_friction" in cfg.variants else cfg.variants[-1]
     return ServoRuns(runs, metrics, main, tcp_at_ref, noise_seed)
+
+
+def runs_within_torque(ctx: StageContext, models: ControlModels, iso: IsoReference, servo: ServoDesign
+                       ) -> tuple[IsoReference, ServoRuns]:
+    """:func:`variant_runs`, and the reference they ran. A derived path (:class:`IsoReference`) whose
+    closed-loop commands still exceed the torque limits (the servo's corrections and the hidden robot's
+    deviations on top of the model's torque) is slowed by ``s = sqrt(PATH_TORQUE_SHARE / peak ratio)``
+    and run again, at most ``MAX_SLOWINGS`` times, as a commissioning engineer lowers the override; the
+    runs that are kept are then checked by ``control.on_saturation`` (an error, or clipped and reported)."""
+    cfg: ControlConfig = ctx.config
+    clipped = replace(cfg, on_saturation="clip")        # every variant runs; the check comes after
+    for slowing in range(MAX_SLOWINGS + 1):
+        measured = variant_runs(ctx, models, iso, servo, clipped)
+        peak = max((m["saturation"]["max_ratio"] for m in measured.metrics.values() if m["saturation"]),
+                   default=0.0)
+        if peak <= cfg.saturation_ratio or not iso.derived_cube or slowing == MAX_SLOWINGS:
+            break
+        iso = slowed_reference(models.robot, cfg, iso, math.sqrt(PATH_TORQUE_SHARE / peak))
+    for res in measured.runs.values():
+        check_saturation(res, cfg)
+    return iso, measured
 
 
 def kinematics_comparison(ctx: StageContext, models: ControlModels, iso: IsoReference, servo: ServoDesign,

@@ -31,20 +31,23 @@ from pipeline.control.design import IsoReference, ServoDesign
 from pipeline.control.joint_stiffness import StiffnessChoice
 from pipeline.control.measure import ServoRuns, measured_tcp
 from pipeline.robot.plotting import LINE_STYLES, distinct_colors
-from pipeline.robot.reference import Reference
+from pipeline.robot.reference import PATH_TORQUE_SHARE
 
 
-def summary(cfg: ControlConfig, ref: Reference, metrics: dict[str, dict], main: str, speed: dict[str, float],
-            rms_nominal_kin: float, calibrated: bool, identified: bool, servo: list[dict],
-            t_ref: float) -> dict[str, Any]:
-    """The stage's summary.json (module docstring) from the runs' metrics."""
+def summary(cfg: ControlConfig, iso_run: IsoReference, metrics: dict[str, dict], main: str,
+            speed: dict[str, float], rms_nominal_kin: float, calibrated: bool, identified: bool, servo: list[dict]
+            ) -> dict[str, Any]:
+    """The stage's summary.json (module docstring) from the runs' metrics; the speeds are those the
+    reference ran (``iso_run.iso``: derived fields filled, a derived path slowed to the torque limits,
+    then ``path_time_scale`` states by how much)."""
+    ref, iso, t_ref = iso_run.ref, iso_run.iso, iso_run.time_s
     s = {
         "sample_time_s": cfg.sample_time_s,
         "velocity_sample_time_s": cfg.sample_time_s / cfg.velocity_samples_per_position_sample,
         "delay_samples": {"setpoint": cfg.setpoint_delay_samples, "measurement": cfg.measurement_delay_samples},
         "feedforward_advanced": cfg.advance_feedforward,
         "path_length_m": float(ref.s_m[-1]), "path_duration_s": float(ref.t_s[-1]),
-        "tcp_speed_m_s": cfg.iso.speed_m_s, "tcp_acceleration_m_s2": cfg.iso.acceleration_m_s2,
+        "tcp_speed_m_s": iso.speed_m_s, "tcp_acceleration_m_s2": iso.acceleration_m_s2,
         "feedforward_model": "identified" if identified else "nominal",
         "kinematics": "calibrated" if calibrated else "nominal",
         "tcp_error_max_m": {k: m["tcp_error_max_m"] for k, m in metrics.items()},
@@ -68,6 +71,8 @@ def summary(cfg: ControlConfig, ref: Reference, metrics: dict[str, dict], main: 
         "reference_time_s": t_ref,
         **speed,
     }
+    if iso_run.time_scale < 1.0:
+        s["path_time_scale"] = iso_run.time_scale
     if "none" in metrics and main != "none":
         a, b = metrics["none"], metrics[main]
         s["improvement"] = {
@@ -124,6 +129,10 @@ def report_markdown(summary: dict[str, Any], metrics: dict[str, dict], servo: li
         rows += ["", "**Torque saturation** (control.on_saturation = clip; errors are limited by it): "
                  + "; ".join(f"{k}: first at t = {v['t_s']:.3f} s on joint {v['joint']}, peak |tau_cmd| / tau_max "
                              f"{v['max_ratio']:.2f}" for k, v in sat.items())]
+    if "path_time_scale" in summary:
+        rows += ["", f"The derived ISO path is slowed by {summary['path_time_scale']:.2f} (speed "
+                 f"{summary['tcp_speed_m_s']:.3g} m/s, acceleration {summary['tcp_acceleration_m_s2']:.3g} m/s²) "
+                 f"so that the model's inverse dynamics asks at most {PATH_TORQUE_SHARE:.0%} of every torque limit."]
     rows += ["", f"Real-time factor of the compiled loop: {summary['realtime_factor']:.1f}"
              + (f" (plain Python loop {summary['python_loop_realtime_factor']:.1f}, speed-up "
                 f"{summary['speedup_vs_python_loop']:.1f}x)" if "python_loop_realtime_factor" in summary else ""),

@@ -22,8 +22,6 @@ listed in :mod:`pipeline.control.report`.
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
 from pipeline.control import report
@@ -38,10 +36,9 @@ from pipeline.control.design import (
 from pipeline.control.elastic_feedforward import ELASTIC_VARIANTS
 from pipeline.control.estimate import ControlModels, control_models, elastic_stiffness
 from pipeline.control.joint_stiffness import StiffnessChoice, deflection_budget, stiffness_markdown
-from pipeline.control.measure import ServoRuns, kinematics_comparison, loop_speed, variant_runs
+from pipeline.control.measure import ServoRuns, kinematics_comparison, loop_speed, runs_within_torque
 from pipeline.control.simulate import servo_gains
 from pipeline.core.errors import ConfigError, PipelineError
-from pipeline.robot.defaults import iso_or_derived
 from pipeline.robot.model import RobotModel
 from pipeline.stage_api import StageContext, StageResult
 
@@ -72,21 +69,13 @@ def run(ctx: StageContext[ControlConfig]) -> StageResult:
     if ctx.real is None:
         raise PipelineError(None, "control", "the hidden robot (pipeline.sim.truth) is not available")
     models = control_models(ctx)
-    iso = design_reference(models.robot, cfg)
+    iso = iso_reference(models.robot, cfg)
     stiffness = elastic_stiffness(ctx, models)
     servo = design_servo(models.robot, iso, cfg)
-    measured = variant_runs(ctx, models, iso, servo)
+    iso, measured = runs_within_torque(ctx, models, iso, servo)
     rms_nominal_kin, registered = kinematics_comparison(ctx, models, iso, servo, measured)
     speed = loop_speed(ctx, iso, servo, measured)
     return outputs(cfg, models, iso, servo, measured, stiffness, speed, rms_nominal_kin, registered)
-
-
-def design_reference(robot: RobotModel, cfg: ControlConfig) -> IsoReference:
-    """The ISO path and its joint reference (:func:`pipeline.control.design.iso_reference`), timed."""
-    iso = iso_or_derived(robot, cfg.iso)          # None fields derived from the robot
-    t0 = time.perf_counter()
-    ref, path, frame, seeds, q_start = iso_reference(robot, cfg)
-    return IsoReference(ref, path, frame, seeds, q_start, iso, time.perf_counter() - t0)
 
 
 def design_servo(robot: RobotModel, iso: IsoReference, cfg: ControlConfig) -> ServoDesign:
@@ -102,8 +91,8 @@ def outputs(cfg: ControlConfig, models: ControlModels, iso: IsoReference, servo:
             stiffness: StiffnessChoice, speed: dict[str, float], rms_nominal_kin: float,
             registered: dict[str, float]) -> StageResult:
     """Summary, figures, arrays, data and report text of the runs (:mod:`pipeline.control.report`)."""
-    summary = report.summary(cfg, iso.ref, measured.metrics, measured.main, speed, rms_nominal_kin,
-                             models.calibrated, models.identified, servo.report, iso.time_s)
+    summary = report.summary(cfg, iso, measured.metrics, measured.main, speed, rms_nominal_kin,
+                             models.calibrated, models.identified, servo.report)
     summary.update(registered)
     stiffness_md = ""
     if any(v in ELASTIC_VARIANTS for v in cfg.variants):

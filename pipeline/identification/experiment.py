@@ -109,8 +109,11 @@ def excite_and_measure(ctx: StageContext, cfg: Config, regs: Regressors, timings
     n_per = int(round(traj.period_s / cfg.sample_time_s))
     cutoff = cfg.state_cutoff_factor * ex.harmonics * ex.base_frequency_hz
     data = meas_mod.process_periodic(sim, regs.reg, n_per, cutoff, cfg.decimation)
+    stiction = None
+    if ctx.real is not None and ctx.real.dry_friction_sticks:   # held joints: out of the fits (without_stiction_band)
+        data, stiction = meas_mod.without_stiction_band(data, regs.reg.coulomb_width_rad_s)
     timings["data_s"] = time.perf_counter() - t1
-    return Measured(data, "simulation (ideal tracking of the hidden robot)", exc, limits, traj)
+    return Measured(data, "simulation (ideal tracking of the hidden robot)", exc, limits, traj, stiction)
 
 
 def shrink_base_set(regs: Regressors, exc: design_mod.ExcitationResult, cfg: Config) -> bool:

@@ -393,3 +393,54 @@ def process_record(
     q, v, a, tau = (x[b:-b] if b > 0 else x for x in (q, v, a, tau))
     check_state_arrays(q, v, a, nq, rec.source or None)
     return ProcessedData(q, v, a, tau, reg.stacked(q, v, a), dt * decimation, rows=reg.rows)
+
+
+# ------------------------------------------------------------ the stiction band (an arm whose dry friction sticks)
+#: the stiction band of an arm whose dry friction sticks, in multiples of the model's Coulomb smoothing width
+#: (``tanh(2) = 0.96``: below ``2 w`` the smooth sign is not yet the Coulomb level;
+#: :mod:`pipeline.identification.validate`)
+STICTION_BAND_OVER_WIDTH = 2.0
+
+
+def stiction_band_speed(coulomb_width_rad_s: float) -> float:
+    """``v_s = STICTION_BAND_OVER_WIDTH * w`` (rad/s): below it a joint whose dry friction sticks is held
+    or breaking away, and the model's ``tanh(v / w)`` is a smoothing of the sign, not a friction law."""
+    return STICTION_BAND_OVER_WIDTH * float(coulomb_width_rad_s)
+
+
+def in_stiction_band(v_rad_s: np.ndarray, coulomb_width_rad_s: float) -> np.ndarray:
+    """``|v| < v_s`` elementwise (:func:`stiction_band_speed`; ``w = 0``: only ``v = 0``)."""
+    return np.abs(np.asarray(v_rad_s, float)) < max(stiction_band_speed(coulomb_width_rad_s), 1e-300)
+
+
+@dataclass
+class StictionExclusion:
+    """The samples a fit on an arm whose dry friction sticks leaves out (:func:`without_stiction_band`)."""
+
+    band_rad_s: float                 # v_s
+    in_band_per_joint: np.ndarray     # (n_rows,) int: samples in which that joint's block is in the band
+    n_left_out: int                   # samples left out (any joint in the band)
+    n_total: int                      # samples before
+
+
+def without_stiction_band(data: ProcessedData, coulomb_width_rad_s: float) -> tuple[ProcessedData, StictionExclusion]:
+    """``data`` without the samples in which a measured joint is in the stiction band, and what was left out.
+
+    A joint held by its dry friction or breaking away carries the torque its drive commands within the
+    friction band, not a function of the state (the validation leaves such samples out for the same
+    reason, :mod:`pipeline.identification.validate`); fitted, they pull the Coulomb level towards the
+    breakaway torque. Sample ``k`` is in the band for joint ``j`` when a full-rate velocity of its
+    decimation block (:attr:`ProcessedData.v_blocks`) has ``|v_j| < v_s`` or the block holds a reversal
+    (``v_j`` of both signs: the continuous velocity crossed the band between two readings). The whole
+    sample (all its rows) is left out, so every sample keeps one row per measured joint; the torque noise
+    (``noise_sigma_Nm``, from the spread between periods) is kept."""
+    vb = data.v_blocks
+    band = (np.any(in_stiction_band(vb, coulomb_width_rad_s), axis=1)
+            | (np.any(vb > 0.0, axis=1) & np.any(vb < 0.0, axis=1)))      # (N, n_rows)
+    keep = ~np.any(band, axis=1)
+    n, nr = data.tau.shape
+    Y = data.Y.reshape(n, nr, -1)[keep].reshape(-1, data.Y.shape[1])
+    kept = ProcessedData(data.q[keep], data.v[keep], data.a[keep], data.tau[keep], Y, data.sample_time_s,
+                         data.noise_sigma_Nm, None if data.v_full is None else data.v_full[keep], data.rows)
+    return kept, StictionExclusion(stiction_band_speed(coulomb_width_rad_s), np.sum(band, axis=0).astype(int),
+                                   int(n - np.sum(keep)), int(n))

@@ -19,7 +19,7 @@ from pipeline.identification.estimate import HacCovariance, LeastSquaresEstimate
 from pipeline.identification.fourier import ExcitationLimits, FourierTrajectory
 from pipeline.identification.friction import LoadFit, LoadFriction, StribeckFit
 from pipeline.identification.joints import JointSelection
-from pipeline.identification.measure import JointRecord, ProcessedData
+from pipeline.identification.measure import JointRecord, ProcessedData, StictionExclusion
 from pipeline.identification.regressor import BaseParameters, RegressorModel
 from pipeline.identification.tx40 import HeldOutValidation, Tx40Result
 from pipeline.robot.handoff import JointFriction
@@ -65,6 +65,8 @@ class Measured:
     excitation: ExcitationResult | None = None
     limits: ExcitationLimits | None = None
     trajectory: FourierTrajectory | None = None
+    #: an arm whose dry friction sticks: the samples in the stiction band left out of the fits (None: none)
+    stiction: StictionExclusion | None = None
 
 
 @dataclass

@@ -3,6 +3,7 @@ predicted torques, parameter errors, condition-number convergence, the TX40 comp
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -12,6 +13,7 @@ from pipeline.identification import design as design_mod
 from pipeline.identification.config import Config
 from pipeline.identification.fit import unmeasured_joints_note
 from pipeline.identification.friction_terms import report_lines
+from pipeline.identification.measure import StictionExclusion
 from pipeline.identification.outcome import Outcome, ValidationTrajectory
 from pipeline.identification.regressor import BaseParameters
 from pipeline.identification.tx40 import Tx40Result
@@ -110,6 +112,11 @@ def report_markdown(summary: dict, tx: Tx40Result | None) -> str:
                 "structural base parameters (decided on the nominal model, the same set is fitted). "
                 f"Condition number of the fitted base regressor on the measured data: "
                 f"{summary['cond_base_regressor_data']:.3g}.")
+    if summary.get("fit_samples_left_out_stiction") is not None:
+        head += (f" The arm's dry friction sticks: {summary['fit_samples_left_out_stiction']} of "
+                 f"{summary['fit_samples_before_stiction_exclusion']} samples, those with a joint in the stiction "
+                 f"band (|v| < {summary['fit_stiction_band_rad_s']:.3g} rad/s or a reversal in the block; per "
+                 f"joint {_numbers(summary['fit_samples_in_stiction_band_per_joint'])}), are left out of the fits.")
     lines = [
         head,
         "",
@@ -226,6 +233,7 @@ def summary(cfg: Config, o: Outcome) -> dict[str, Any]:
         "data_source": o.measured.source,
         "actuator_coupling": "gear matrix" if o.regs.coupled else "diagonal (joint side)",
         "n_samples_fit": o.measured.data.n_samples,
+        **stiction_summary(o.measured.stiction, pj),
         "friction_model": cfg.friction_model,
         **o.friction,
         "runtime_s": o.timings["total_s"],
@@ -233,6 +241,17 @@ def summary(cfg: Config, o: Outcome) -> dict[str, Any]:
     if o.tx is not None:
         summary.update(o.tx.summary())
     return summary
+
+
+def stiction_summary(ex: StictionExclusion | None, pj: Callable[[np.ndarray], list[float | None]]) -> dict[str, Any]:
+    """The summary entries of the samples left out of the fits in the stiction band
+    (:func:`.measure.without_stiction_band`); {} when none were (the arm's friction does not stick)."""
+    if ex is None:
+        return {}
+    return {"fit_stiction_band_rad_s": ex.band_rad_s,
+            "fit_samples_in_stiction_band_per_joint": pj(ex.in_band_per_joint),
+            "fit_samples_left_out_stiction": ex.n_left_out,
+            "fit_samples_before_stiction_exclusion": ex.n_total}
 
 
 def arrays(cfg: Config, o: Outcome) -> dict[str, np.ndarray]:

@@ -21,12 +21,16 @@ applies to it). Its torque readings are its drives' commands: they carry the ser
 encoder noise, which depends on the gains and the inertia along the path, so the excitation's noise
 sigma is not the validation path's. The path is run twice and the noise sigma is the spread between the
 two runs, ``sigma_j = std(tau_1 - tau_2) / sqrt(2)`` (the same principle as the spread between
-excitation periods). Where a joint's commanded speed is below ``v_s = STICTION_BAND_OVER_WIDTH * w``
-(``w`` the model's Coulomb smoothing width) the joint is held by its dry friction or breaking away: its
+excitation periods). Where a joint's commanded speed, or its own speed read from its encoders (central
+differences of the readings), is below ``v_s = STICTION_BAND_OVER_WIDTH * w`` (``w`` the model's Coulomb
+smoothing width) the joint is held by its dry friction or breaking away (a joint whose drive commands less
+than its breakaway torque stays held after its commanded speed has left the band, until the servo's
+error has built the rest of the torque): its
 torque is what the drive commands within the friction band, not a function of the state that any
 smooth friction model predicts, and below ``2 w`` the model's ``tanh(v / w)`` is under 96 % of its level,
 a smoothing of the sign rather than a friction law. Those samples are left out of the validation RMS
-(as velocity thresholds in Gautier & Khalil's and Swevers et al.'s identification practice). A joint
+(as velocity thresholds in Gautier & Khalil's and Swevers et al.'s identification practice), and the
+excitation's samples in the band out of the fits (:func:`.measure.without_stiction_band`). A joint
 with none left (at rest on the whole path) is scored by the Coulomb law at rest, any friction torque in
 ``[-F_c, F_c]``: the RMS of its residual's excess over the identified Coulomb level
 (:func:`score_stiction_band`). The summary states ``v_s``, the fraction scored per joint and, for the
@@ -56,6 +60,11 @@ from pipeline.identification.friction import (
     stribeck_heldout,
 )
 from pipeline.identification.friction_terms import FrictionTerms, record_scores
+from pipeline.identification.measure import (  # noqa: F401 - STICTION_BAND_OVER_WIDTH: the band's definition
+    STICTION_BAND_OVER_WIDTH,
+    in_stiction_band,
+    stiction_band_speed,
+)
 from pipeline.identification.outcome import Fits, LoadCandidate, Measured, Regressors, Validation, ValidationTrajectory
 from pipeline.identification.regressor import BaseParameters
 from pipeline.identification.tx40 import heldout_validation
@@ -151,9 +160,13 @@ def validation_trajectory(
     return vt
 
 
-#: the stiction band of an arm whose dry friction sticks, in multiples of the model's Coulomb smoothing width
-#: (``tanh(2) = 0.96``: below ``2 w`` the smooth sign is not yet the Coulomb level; module docstring)
-STICTION_BAND_OVER_WIDTH = 2.0
+def outside_stiction_band(t_s: np.ndarray, v_commanded_rad_s: np.ndarray, q_read_rad: np.ndarray,
+                          coulomb_width_rad_s: float) -> np.ndarray:
+    """(N, n) bool: the samples a stiction-band validation scores, those where neither the commanded speed
+    nor the joint's own speed (central differences of its encoder readings ``q_read_rad`` at ``t_s``) is in
+    the band ``|v| < v_s`` (:func:`.measure.in_stiction_band`; module docstring)."""
+    v_read = np.gradient(np.asarray(q_read_rad, float), np.asarray(t_s, float), axis=0)
+    return ~(in_stiction_band(v_commanded_rad_s, coulomb_width_rad_s) | in_stiction_band(v_read, coulomb_width_rad_s))
 
 
 def torque_rms(measured: np.ndarray, predicted: np.ndarray,
@@ -282,8 +295,9 @@ def validate_on_path(ctx: StageContext, cfg: Config, regs: Regressors, measured:
         noise_source = "spread between two runs of the validation path (the drives' torques in closed loop)"
     scored, v_s = None, 0.0
     if real.dry_friction_sticks:
-        v_s = STICTION_BAND_OVER_WIDTH * float(regs.reg.coulomb_width_rad_s)
-        scored = np.abs(vt.v[:, regs.used]) >= max(v_s, 1e-300)
+        v_s = stiction_band_speed(regs.reg.coulomb_width_rad_s)
+        scored = outside_stiction_band(vt.t_s, vt.v[:, regs.used], meas_v.q_rad[:, regs.used],
+                                       regs.reg.coulomb_width_rad_s)
     Yv = regs.reg.stacked(vt.q, vt.v, vt.a)
     st_v = 0.0 if fits.stribeck is None else fits.stribeck.stribeck_torque(vt.v[:, regs.used])
     pred_phys = (Yv @ fits.phys.p).reshape(-1, nm) + st_v

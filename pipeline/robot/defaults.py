@@ -9,7 +9,10 @@ kinematics and capsules with a fixed-seed search (same robot -> same defaults).
 * ``ik_seeds_rad``: the best few of that ranking (distinct by > 30°), ready pose first.
 * ``ptp_move_rad``: ready pose -/+ a fraction of each joint's range (40 %, else smaller), both ends and
   the joint-space midpoint collision-free; else the pair of well-ranked poses with the largest
-  smallest joint motion (no joint beyond ``MAX_MOVE_RAD``) whose midpoint is collision-free.
+  smallest joint motion (no joint beyond ``MAX_MOVE_RAD``) whose midpoint is collision-free. Either way
+  the arm must hold itself along the move: the static (gravity) torques on the straight joint-space
+  line, sampled every 1/``HOLD_SAMPLES``, at most ``GRAVITY_TORQUE_SHARE`` of the torque limits, as on
+  the ISO cube's path (an arm with a weak wrist cannot hold it out level: that move is skipped).
 * ``iso_cube``: EN ISO 9283 (DESIGN.md): the largest cube, with its diagonal plane, whose whole path
   is reachable from the stages' IK branch, away from limits and singularities and within the joint
   speeds at the path speed, found by a search over the workspace (:mod:`pipeline.robot.iso_search`,
@@ -32,6 +35,7 @@ import numpy as np
 from pipeline.core.errors import InfeasibleError
 from pipeline.robot.iso9283 import TOOL_ORIENTATIONS, IsoPathConfig, ToolOrientation, tool_rotation
 from pipeline.robot.iso_search import (
+    GRAVITY_TORQUE_SHARE,
     MIN_EDGE_REACH,
     SEARCH_DIRECTIONS,
     VELOCITY_SHARE,
@@ -43,6 +47,7 @@ from pipeline.robot.model import RobotModel
 N_SAMPLES = 3000
 SLOW_SHARE = 0.8              # lowered ISO speed: this share of the highest speed a small cube allows
 MAX_MOVE_RAD = np.pi / 2      # the searched PtP move turns no joint by more than this
+HOLD_SAMPLES = 20             # static-torque samples along the default PtP move
 
 
 @dataclass
@@ -130,16 +135,26 @@ def ik_seeds_rad(robot: RobotModel, count: int = 4) -> np.ndarray:
     return np.array(seeds)
 
 
+def holds_itself(robot: RobotModel, start: np.ndarray, goal: np.ndarray) -> bool:
+    """Whether the gravity torques on the straight joint-space line from ``start`` to ``goal`` stay
+    within ``GRAVITY_TORQUE_SHARE`` of every torque limit (module docstring)."""
+    return all(np.all(np.abs(robot.gravity_torque(start + t * (goal - start)))
+                      <= GRAVITY_TORQUE_SHARE * robot.limits.effort_Nm)
+               for t in np.linspace(0.0, 1.0, HOLD_SAMPLES + 1))
+
+
 def ptp_move_rad(robot: RobotModel, fractions: tuple[float, ...] = (0.4, 0.3, 0.2, 0.1)) -> tuple[np.ndarray,
                  np.ndarray]:
-    """(start, goal): mid-range -/+ ``fraction`` of each range, the first fraction collision-free."""
+    """(start, goal): mid-range -/+ ``fraction`` of each range, the first fraction collision-free on
+    which the arm holds itself; else the searched pair (module docstring)."""
     lo, hi = robot.limits.lower_rad, robot.limits.upper_rad
     mid = ready_pose_rad(robot)
     for f in fractions:
         half = 0.5 * f * np.minimum(hi - lo, 2 * np.pi)
         start, goal = np.clip(mid - half, lo, hi), np.clip(mid + half, lo, hi)
         ends = [start, goal, 0.5 * (start + goal)]
-        if not robot.capsules or not any(robot.in_collision(q, 0.0) for q in ends):
+        if (not robot.capsules or not any(robot.in_collision(q, 0.0) for q in ends)) and holds_itself(robot, start,
+                                                                                                        goal):
             return start, goal
     # else the largest move between two well-ranked poses whose midpoint is collision-free too
     ranked = _ranked_poses(robot)[:60]
@@ -147,10 +162,12 @@ def ptp_move_rad(robot: RobotModel, fractions: tuple[float, ...] = (0.4, 0.3, 0.
     for i, a in enumerate(ranked):
         for b in ranked[i + 1:]:
             size = float(np.min(np.abs(b - a)))
-            if size > best and np.max(np.abs(b - a)) <= MAX_MOVE_RAD and not robot.in_collision(0.5 * (a + b), 0.0):
+            if (size > best and np.max(np.abs(b - a)) <= MAX_MOVE_RAD and not robot.in_collision(0.5 * (a + b), 0.0)
+                    and holds_itself(robot, a, b)):
                 best, pair = size, (a.copy(), b.copy())
     if pair is None:
-        raise InfeasibleError(None, "trajectory.ptp_start_deg", "no collision-free default move found: set "
+        raise InfeasibleError(None, "trajectory.ptp_start_deg", "no collision-free default move on which the arm "
+                              f"holds itself (static torques <= {GRAVITY_TORQUE_SHARE:.0%} of the limits) found: set "
                               "trajectory.ptp_start_deg and ptp_goal_deg")
     return pair
 

@@ -16,6 +16,14 @@ transform the desired end-effector movement into joint positions, velocities and
   joint path, so control and trajectory move a redundant arm the same way. For 6 axes ``J^+ = J^-1``.
   Undamped on purpose: ``v_d`` and ``a_d`` must be the exact derivatives of the path; singular
   points are refused (``cond(J) > 1e6``) instead of being damped.
+
+Time scaling to the torque limits (:func:`torque_time_scale`): slowing a reference by ``s <= 1``
+(speed ``s v``, acceleration ``s^2 a``, jerk ``s^3 j``; the curvature cap scales alike) keeps its path
+``q(s t)`` and gives ``v -> s v``, ``a -> s^2 a``, so the rigid-body torque is exactly
+``tau(s) = s^2 (rnea(q, v, a) - g(q)) + g(q)`` (``C(q, v) v`` is quadratic in ``v``) plus the friction
+at ``s v``. The largest ``s`` with every joint within ``PATH_TORQUE_SHARE`` of its torque limit is
+found by bisection on that closed form; no ``s`` helps where gravity and friction at rest already
+exceed it (the ISO cube search caps the static torques, :mod:`pipeline.robot.iso_search`).
 """
 
 from __future__ import annotations
@@ -29,6 +37,11 @@ from ruckig import InputParameter, Result, Ruckig, Trajectory
 from pipeline.core.errors import InfeasibleError, SolverError
 from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import CartesianPath, check_within_limits, limiting_joint, pose_error
+
+#: the share of each joint's torque limit a derived reference may ask of the model's inverse
+#: dynamics; the rest is for the servo's corrections and the model's errors
+PATH_TORQUE_SHARE = 0.9
+TIME_SCALE_BISECTIONS = 40
 
 
 @dataclass
@@ -174,3 +187,32 @@ def track(robot: RobotModel, rotation: np.ndarray, P: np.ndarray, Pd: np.ndarray
         q_out[k], v_out[k], a_out[k] = q, v, a
         v_prev, a_prev = v, a
     return q_out, v_out, a_out
+
+
+def _torque_ratio(robot: RobotModel, dynamic_Nm: np.ndarray, gravity_Nm: np.ndarray, v: np.ndarray,
+                  scale: float) -> float:
+    """Largest ``|tau(s)| / tau_max`` over samples and joints of the reference slowed by ``scale``."""
+    sv = scale * v
+    tau = scale**2 * dynamic_Nm + gravity_Nm + robot.friction_torque(sv)
+    if robot.spec.actuation.coulomb_load_coefficient is not None:
+        tau = tau + robot.load_friction_torque(tau, sv)
+    return float(np.max(np.abs(tau) / robot.limits.effort_Nm))
+
+
+def torque_time_scale(robot: RobotModel, ref: Reference, share: float = PATH_TORQUE_SHARE) -> float:
+    """The largest time scale ``s`` in (0, 1] for which ``ref`` slowed by ``s`` asks at most ``share``
+    of every joint's torque limit of ``robot``'s inverse dynamics (module docstring); 1 when ``ref``
+    already does, or when no slowing can (gravity and friction at rest above ``share``)."""
+    data = robot.model.createData()
+    rigid = np.array([pin.rnea(robot.model, data, q, v, a) for q, v, a in zip(ref.q_d, ref.v_d, ref.a_d, strict=True)])
+    gravity = np.array([robot.gravity_torque(q) for q in ref.q_d])
+    dynamic = rigid - gravity
+    if _torque_ratio(robot, dynamic, gravity, ref.v_d, 1.0) <= share:
+        return 1.0
+    if _torque_ratio(robot, dynamic, gravity, ref.v_d, 0.0) > share:
+        return 1.0
+    low, high = 0.0, 1.0
+    for _ in range(TIME_SCALE_BISECTIONS):
+        mid = 0.5 * (low + high)
+        low, high = (mid, high) if _torque_ratio(robot, dynamic, gravity, ref.v_d, mid) <= share else (low, mid)
+    return low

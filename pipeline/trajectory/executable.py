@@ -95,9 +95,9 @@ def to_gate(run: Callable[[float], tuple[JointTrajectory, ServoRun]], first: tup
     falsi on the 4 ms mean ratio: ``step(ratio)`` proposes the first strength from the measured
     excess, later rounds interpolate between the strongest failing and the weakest passing run,
     aiming ``GATE_AIM`` below the gate. Returns the shortest passing run (else the last) and the
-    number of servo runs."""
+    number of servo runs; a run that diverged ends the search (its ratio measures nothing)."""
     fail_x, fail_r = 0.0, first[1].max_averaged_torque_ratio
-    if fail_r <= gate:
+    if fail_r <= gate or first[1].diverged:
         return first[0], first[1], 0
     best, rounds = None, 0
     x, last = step(fail_r), first
@@ -107,6 +107,8 @@ def to_gate(run: Callable[[float], tuple[JointTrajectory, ServoRun]], first: tup
         last = run(x)
         rounds += 1
         r = last[1].max_averaged_torque_ratio
+        if last[1].diverged:
+            break
         if r <= gate:
             if best is None or last[0].duration_s < best[0].duration_s:
                 best = last

@@ -58,13 +58,14 @@ def executable_smooth_ptp(ctx: StageContext, pm: PlanningModel, ptp: PTPPlan, cc
     """The smooth PtP verified in the servo simulation on the real (elastic) arm: while its 4 ms mean
     command exceeds ``max_sim_averaged_torque_ratio`` (the servo's feedback on the ringing joints comes
     on top of the planned torques), slow it down by ``sqrt(excess)`` (inertial torques scale with the
-    square of the speed) and run it again; the last run is returned with its simulation."""
+    square of the speed) and run it again; the last run is returned with its simulation. A run that
+    diverged is not slowed further: its ratio measures nothing (the stage's gates name it)."""
     smooth = ptp.trajectories["ptp_smooth"]
     base, factor = smooth, 1.0
     sim = simulate_on_real(ctx.real, ctx.robot, smooth, ccfg, np.random.default_rng(seed))
     for _ in range(SERVO_SCALING_ROUNDS):
         ratio = sim.max_averaged_torque_ratio / cfg.max_sim_averaged_torque_ratio
-        if ratio <= 1.0:
+        if ratio <= 1.0 or sim.diverged:
             break
         factor *= max(1.01, float(np.sqrt(ratio)) * 1.01)
         smooth = time_scaled(base, factor, "ptp_smooth")
@@ -77,8 +78,9 @@ def executable_smooth_ptp(ctx: StageContext, pm: PlanningModel, ptp: PTPPlan, cc
 
 
 def sim_summary(name: str, sim: ServoRun) -> dict[str, Any]:
-    """The summary entries of one plan's servo run."""
-    return {f"{name}_sim_max_torque_ratio": sim.max_torque_ratio,
+    """The summary entries of one plan's servo run (``<name>_sim_diverged_at_s`` only for a run that diverged)."""
+    diverged = {} if not sim.diverged else {f"{name}_sim_diverged_at_s": sim.diverged_at_s}
+    return {**diverged, f"{name}_sim_max_torque_ratio": sim.max_torque_ratio,
             f"{name}_sim_tcp_error_max_m": sim.tcp_error_max_m,
             f"{name}_sim_tcp_tracking_error_max_m": sim.tcp_tracking_error_max_m,
             f"{name}_sim_duration_s": sim.duration_s,

@@ -173,6 +173,9 @@ def report_markdown(cfg: TrajectoryConfig, summary: dict[str, Any], servo: Servo
                      "torque limits in the servo (4 ms mean); not vouched for, the smooth plan is",
                      summary["ptp_sim_max_averaged_torque_ratio"]))
     for name, s in sims.items():
+        if s.diverged:
+            rows.append((f"{name}: servo simulation", f"diverged at t = {s.diverged_at_s:.4f} s (non-finite state)"))
+            continue
         rows.append((f"{name}: simulated max torque ratio (raw / {1e3 * s.average_window_s:.0f} ms mean / "
                      "feedforward; feedback std), TCP error max [mm]",
                      f"{s.max_torque_ratio:.4f} / {s.max_averaged_torque_ratio:.4f} / "
@@ -191,7 +194,7 @@ def report_markdown(cfg: TrajectoryConfig, summary: dict[str, Any], servo: Servo
         report += "\n\n" + settling_table(list(settle.values())) + "\n\n" + settling_verdict(summary)
     if summary["ptp_pareto"]:
         report += "\n\n" + pareto_table(summary["ptp_pareto"], label)
-    over = {name: s for name, s in sims.items() if s.max_torque_ratio > 1.0}
+    over = {name: s for name, s in sims.items() if s.max_torque_ratio > 1.0 and not s.diverged}
     if over:
         listed = ", ".join(
             f"{name} {s.max_torque_ratio:.3f} (feedforward {s.max_feedforward_ratio:.3f}, "

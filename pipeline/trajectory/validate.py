@@ -25,7 +25,8 @@ class ServoRun:
 
     Torque ratios are ``|tau| / tau_max`` with the full limits (no reserve); the ``*_per_joint``
     arrays have one entry per joint. The TCP errors are ``None`` when the simulation has no TCP
-    (``tcp_tracking_*`` also when the plant has no tracker)."""
+    (``tcp_tracking_*`` also when the plant has no tracker). ``diverged_at_s`` is the time of the
+    first non-finite sample of a run that diverged (its ratios are then no measurement), else ``None``."""
 
     duration_s: float
     max_torque_ratio: float
@@ -42,6 +43,12 @@ class ServoRun:
     tcp_error_rms_m: float | None = None
     tcp_tracking_error_max_m: float | None = None
     tcp_tracking_error_rms_m: float | None = None
+    diverged_at_s: float | None = None
+
+    @property
+    def diverged(self) -> bool:
+        """Whether the simulation left the finite numbers (its ratios are then NaN or inf)."""
+        return self.diverged_at_s is not None
 
     def to_summary(self) -> dict[str, Any]:
         """The run as a summary entry: arrays as lists, TCP errors only when measured."""
@@ -65,7 +72,8 @@ def simulate_on_real(real: Any, robot: RobotModel, traj: JointTrajectory,  # Any
     ``max_torque_ratio`` of the raw command (per servo sample), ``max_feedforward_ratio`` of the
     feedforward alone, ``max_averaged_torque_ratio`` of the command averaged over
     ``average_window_s``, and the feedback share ``(tau_cmd - tau_ff) / tau_max`` per joint
-    (standard deviation and maximum)."""
+    (standard deviation and maximum). A run whose encoder readings, velocity estimates or commands
+    turn non-finite has diverged: ``diverged_at_s`` names the first such sample."""
     cfg = control_config or ControlConfig(on_saturation="clip", benchmark_python_seconds=0.0)
     if getattr(cfg, "on_saturation", "clip") != "clip":
         cfg = ControlConfig(**{**cfg.__dict__, "on_saturation": "clip"})
@@ -82,6 +90,8 @@ def simulate_on_real(real: Any, robot: RobotModel, traj: JointTrajectory,  # Any
     kernel = np.ones(width) / width
     averaged = np.stack([np.convolve(np.asarray(res.tau_cmd)[:, j], kernel, mode="valid")
                          for j in range(limit.size)], axis=1) / limit
+    finite = np.all(np.isfinite(np.hstack([res.q, res.v, res.tau_cmd])), axis=1)
+    diverged_at_s = None if finite.all() else float(res.t_s[int(np.argmin(finite))] - res.t_s[0])
     tcp: dict[str, float] = {}
     if res.tcp_position_m is not None:
         # against the planned TCP of the model (includes the residual kinematic error) ...
@@ -104,7 +114,7 @@ def simulate_on_real(real: Any, robot: RobotModel, traj: JointTrajectory,  # Any
                     feedback_std_ratio_per_joint=feedback.std(axis=0),
                     feedback_max_ratio_per_joint=np.abs(feedback).max(axis=0),
                     lag_error_max_rad=float(np.max(np.abs(res.lag_error_rad))),
-                    realtime_factor=float(res.realtime_factor), **tcp)
+                    realtime_factor=float(res.realtime_factor), diverged_at_s=diverged_at_s, **tcp)
 
 
 def quality_gates(cfg: TrajectoryConfig, cp: CPPlan, ptp: PTPPlan, sims: dict[str, ServoRun],
@@ -114,7 +124,9 @@ def quality_gates(cfg: TrajectoryConfig, cp: CPPlan, ptp: PTPPlan, sims: dict[st
     solve of a stored plan ``Solve_Succeeded`` (or acceptable), and in the servo simulation the
     command averaged over 4 ms within ``max_sim_averaged_torque_ratio`` x the full torque limits.
     On an elastic plant the time-optimal (rigid-model) PtP is reported, not vouched for: its torque
-    steps ring the joints (paper 004 §5: hence jerk-limited plans); the smooth PtP is the one gated."""
+    steps ring the joints (paper 004 §5: hence jerk-limited plans); the smooth PtP is the one gated.
+    A servo run that diverged fails a gate of its own (``<name>_sim_diverged``, naming the plan and the
+    time) whether its plan is vouched for or reported: its numbers are no measurement."""
     gates = QualityGates("trajectory", accept_poor=accept_poor)
     tol = cfg.violation_tolerance
     plans = {**cp.checks, **ptp.checks}
@@ -148,6 +160,11 @@ def quality_gates(cfg: TrajectoryConfig, cp: CPPlan, ptp: PTPPlan, sims: dict[st
         if cfg.acceleration_limits:
             gates.check("cp_executed_fine_max_acceleration_ratio", chk.max_acceleration_ratio, "<=", 1.0 + tol)
     for name, s in sims.items():
+        if s.diverged:
+            gates.require(f"{name}_sim_diverged", False, f"the servo simulation of plan {name} diverged at "
+                          f"t = {s.diverged_at_s:.4f} s of {s.duration_s:.4f} s (non-finite state): no torque "
+                          "ratio to judge")
+            continue
         if name in ("ptp_ruckig", "ptp_energy_at_ruckig_duration"):
             continue                 # the baseline is reported, not vouched for
         if torque_limited_cp and name in ("cp", "cp_smooth"):

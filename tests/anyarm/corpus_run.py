@@ -16,6 +16,7 @@ from typing import Any
 
 from pipeline.cli import main
 from pipeline.core.config import CONFIGS_DIR, REPO_ROOT
+from pipeline.robot.model import RobotModel
 from pipeline.robot.plausibility import placeholder_kind
 from pipeline.robot.public_arms import PublicArm, arm_file
 
@@ -89,7 +90,6 @@ def run_arm(arm: PublicArm, work: Path, run: bool = True, stages: list[str] | No
     common = ["--config", str(CORPUS_CONFIG), "--set", f"robot={folder}", "--set", f"name={arm.name}",
               "--out", str(runs), *(["--stages", ",".join(stages)] if stages else [])]
     if row["init_exit"] == 0:
-        from pipeline.robot.model import RobotModel
         row["axes"] = RobotModel.load(folder).nq
         row["check_exit"], row["check_lines"] = run_cli(["check", *common])
         if run:

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 
-from pipeline.trajectory.executable import choose
+from pipeline.trajectory.executable import choose, to_gate
 
 
 def test_the_shortest_passing_remedy_is_executed_else_the_lowest_ratio():
@@ -21,3 +23,21 @@ def test_the_shortest_passing_remedy_is_executed_else_the_lowest_ratio():
         else:
             assert all(cands[pick]["max_averaged_torque_ratio"] <= c["max_averaged_torque_ratio"]
                        for c in cands.values())
+
+
+def _servo(ratio: float, diverged: bool = False) -> SimpleNamespace:
+    return SimpleNamespace(max_averaged_torque_ratio=ratio, diverged=diverged)
+
+
+def test_a_diverged_servo_run_ends_the_remedy_search():
+    runs: list[float] = []
+
+    def run(x: float):
+        runs.append(x)
+        return SimpleNamespace(duration_s=1.0 + x), _servo(float("nan"), diverged=True)
+
+    first = (SimpleNamespace(duration_s=1.0), _servo(1.5))
+    _, sim, rounds = to_gate(run, first, lambda r: r - 1.0, 1.0)
+    assert rounds == len(runs) == 1 and sim.diverged      # not slowed on: a NaN ratio measures nothing
+    diverged_first = (SimpleNamespace(duration_s=1.0), _servo(float("nan"), diverged=True))
+    assert to_gate(run, diverged_first, lambda r: r - 1.0, 1.0)[2] == 0

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -9,6 +10,7 @@ import pytest
 
 from pipeline.core.errors import QualityGateError
 from pipeline.stage_api import StageResult
+from pipeline.trajectory import validate
 from pipeline.trajectory.config import TrajectoryConfig
 from pipeline.trajectory.trajectories import TorqueCheck
 from pipeline.trajectory.validate import ServoRun, quality_gates
@@ -118,3 +120,43 @@ def test_torque_limited_cp_on_an_elastic_plant_gates_the_executed_cp():
     cp.checks["cp_executed"] = _check(violation=0.02)
     with pytest.raises(QualityGateError, match="cp_executed_fine_violation"):
         _finish(quality_gates(torque_limited, cp, ptp, sims, elastic_plant=True))
+
+
+def _diverged(at_s: float) -> ServoRun:
+    """A servo run that left the finite numbers at ``at_s``: its ratios are NaN."""
+    return replace(_run(float("nan")), diverged_at_s=at_s)
+
+
+def test_a_diverged_servo_simulation_fails_naming_the_plan_not_a_nan_ratio():
+    cp, ptp = _plans()
+    sims = {"ptp": _run(0.9), "ptp_smooth": _diverged(0.0032)}
+    with pytest.raises(QualityGateError) as err:
+        _finish(quality_gates(TrajectoryConfig(), cp, ptp, sims, elastic_plant=True))
+    text = str(err.value)
+    assert "ptp_smooth_sim_diverged" in text and "plan ptp_smooth diverged at t = 0.0032 s" in text
+    assert "nan" not in text.lower()
+    # a reported (not vouched for) plan that diverged fails too: its figures are no measurement
+    sims = {"ptp": _run(0.9), "ptp_smooth": _run(0.9), "ptp_ruckig": _diverged(0.5)}
+    res = _finish(quality_gates(TrajectoryConfig(), cp, ptp, sims, elastic_plant=True, accept_poor=True))
+    failed = [c["name"] for c in res.summary["quality_gates"]["checks"] if not c["passed"]]
+    assert failed == ["ptp_ruckig_sim_diverged"]
+
+
+def test_simulate_on_real_names_the_first_non_finite_sample(monkeypatch):
+    n, dt = 50, 4e-4
+    t = dt * np.arange(n)
+    q = np.zeros((n, 6))
+    tau = np.ones((n, 6))
+    tau[20:, 3] = np.nan                            # the command turns NaN first, then the state
+    q[21:] = np.nan
+    res = SimpleNamespace(t_s=t, q=q, v=np.zeros((n, 6)), tau_cmd=tau, tau_ff=np.ones((n, 6)),
+                          max_torque_ratio=np.full(6, np.inf), lag_error_rad=q, realtime_factor=1.0,
+                          tcp_position_m=None)
+    monkeypatch.setattr(validate, "simulate_joint_trajectory", lambda *args, **kwargs: res)
+    robot = SimpleNamespace(limits=SimpleNamespace(effort_Nm=np.full(6, 10.0)))
+    traj = SimpleNamespace(t_s=t, q=q, v=q, a=q)
+    run = validate.simulate_on_real(None, robot, traj)
+    assert run.diverged and run.diverged_at_s == pytest.approx(20 * dt)
+    res.tau_cmd = np.ones((n, 6))
+    res.q = np.zeros((n, 6))
+    assert not validate.simulate_on_real(None, robot, traj).diverged
