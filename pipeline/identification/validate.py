@@ -60,11 +60,7 @@ from pipeline.identification.friction import (
     stribeck_heldout,
 )
 from pipeline.identification.friction_terms import FrictionTerms, record_scores
-from pipeline.identification.measure import (  # noqa: F401 - STICTION_BAND_OVER_WIDTH: the band's definition
-    STICTION_BAND_OVER_WIDTH,
-    in_stiction_band,
-    stiction_band_speed,
-)
+from pipeline.identification.measure import in_stiction_band, stiction_band_speed
 from pipeline.identification.outcome import Fits, LoadCandidate, Measured, Regressors, Validation, ValidationTrajectory
 from pipeline.identification.regressor import BaseParameters
 from pipeline.identification.tx40 import heldout_validation

@@ -6,8 +6,14 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.identification import estimate as est_mod
-from pipeline.identification.measure import ProcessedData, in_stiction_band, stiction_band_speed, without_stiction_band
-from pipeline.identification.validate import STICTION_BAND_OVER_WIDTH
+from pipeline.identification.measure import (
+    STICTION_BAND_OVER_WIDTH,
+    ProcessedData,
+    in_stiction_band,
+    stiction_band_speed,
+    without_stiction_band,
+)
+from pipeline.identification.validate import outside_stiction_band
 
 WIDTH_RAD_S = 0.01
 
@@ -73,7 +79,6 @@ def test_held_samples_bias_the_coulomb_level_and_leaving_them_out_removes_it() -
     left_out = est_mod.wls(kept.Y, kept.y, 1).beta
     assert 0 < ex.n_left_out < ex.n_total
     err_all, err_out = abs(all_samples[1] / fc - 1.0), abs(left_out[1] / fc - 1.0)
-    print(f"Coulomb level off by {err_all:.2%} (every sample) / {err_out:.2%} (band left out)")
     assert err_out < 0.005 and err_out < 0.2 * err_all
 
 
@@ -81,8 +86,6 @@ def test_the_validation_leaves_out_a_joint_held_after_its_commanded_speed_left_t
     """Joint 1 commanded through a reversal but held by its dry friction for 0.1 s after it (encoder readings
     constant, noise 2 µrad), joint 2 moving throughout: joint 1's held samples are not scored although their
     commanded speed is outside the band; joint 2 is scored everywhere."""
-    from pipeline.identification.validate import outside_stiction_band
-
     t = np.arange(0.0, 1.0, 0.004)
     v_cmd = np.stack([0.5 * (t - 0.5), np.full_like(t, 0.3)], axis=1)     # joint 1 reverses at 0.5 s
     q_cmd = np.stack([0.25 * (t - 0.5) ** 2, 0.3 * t], axis=1)

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from pipeline.identification.friction import best_friction_model
-from pipeline.identification.validate import STICTION_BAND_OVER_WIDTH, iso_validation_trajectory, torque_rms
+from pipeline.identification.measure import STICTION_BAND_OVER_WIDTH
+from pipeline.identification.validate import iso_validation_trajectory, torque_rms
 from pipeline.robot.model import RobotModel
 from pipeline.sim.mujoco_robot import MujocoRealRobot, create_hidden_robot
 from pipeline.sim.truth import RealRobot, TruthConfig
