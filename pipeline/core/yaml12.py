@@ -40,6 +40,7 @@ from typing import Any
 from ruamel.yaml import YAML
 from ruamel.yaml.composer import Composer
 from ruamel.yaml.constructor import SafeConstructor
+from ruamel.yaml.emitter import Emitter
 from ruamel.yaml.error import MarkedYAMLError, YAMLError
 from ruamel.yaml.events import AliasEvent
 from ruamel.yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
@@ -202,19 +203,30 @@ _ESCAPED_BREAKS = frozenset("\x85\u2028\u2029")
 
 class _PlainRepresenter(SafeRepresenter):
     """Safe representer writing shared objects out in full (no anchors/aliases), tuples as lists,
-    and strings holding NEL, LS or PS double-quoted (in any other style they would be folded)."""
+    and double-quoted: strings holding NEL, LS or PS (in any other style they would be folded) and
+    strings starting with ``?`` or ``:`` (written plain in a flow collection, ``[?0]`` or ``{:0: x}``,
+    ruamel's parser reads a mapping key or fails)."""
 
     def ignore_aliases(self, data: Any) -> bool:
         return True
 
     def represent_str(self, data: str) -> ScalarNode:
-        if _ESCAPED_BREAKS.intersection(data):
+        if _ESCAPED_BREAKS.intersection(data) or data.startswith(("?", ":")):
             return self.represent_scalar(_STR_TAG, data, style='"')
         return super().represent_str(data)
 
 
 _PlainRepresenter.add_representer(tuple, SafeRepresenter.represent_list)
 _PlainRepresenter.add_representer(str, _PlainRepresenter.represent_str)
+
+
+class _Emitter(Emitter):
+    """ruamel's emitter with every double-quoted scalar on one line. Folding a long double-quoted
+    scalar, ruamel may break the line right after an escape (``\\x7F``, ``\\x1F``) where the text has no
+    space, and a reader folds that break into a space: the text would not read back as written."""
+
+    def write_double_quoted(self, text: str, split: bool = True) -> None:
+        super().write_double_quoted(text, split=False)
 
 
 def _yaml() -> YAML:
@@ -225,6 +237,7 @@ def _yaml() -> YAML:
     yaml.Composer = _BoundedComposer
     yaml.Constructor = _Constructor
     yaml.Representer = _PlainRepresenter
+    yaml.Emitter = _Emitter
     yaml.allow_duplicate_keys = True      # refused by _Constructor, with both lines
     return yaml
 

@@ -100,7 +100,7 @@ def test_a_text_parsed_again_gives_equal_data_that_is_not_shared():
 LOOK_ALIKES = ["30425e4453996520", "3042544539965201", "0123456789012345", "1e5", "1E-5", ".5", "+1", "-0",
                "0o17", "0x1F", "true", "False", "null", "~", "", ".inf", "-.Inf", ".nan", "1_000", "yes", "0.",
                " lead", "trail ", "a: b", "- x", "#c", "'q'", '"d"', "{x}", "[1]", "&a", "*a", "!t", "%p", "@x",
-               "\ufeffbom", "tab\there", "line\nbreak", "é ü 中", "\x85", "\u2028"]
+               "\ufeffbom", "tab\there", "line\nbreak", "é ü 中", "\x85", "\u2028", "?0", "? x", "?", ":0", ": x"]
 
 digests = st.text("0123456789abcdef", min_size=16, max_size=16)
 scalars = st.one_of(st.none(), st.booleans(), st.integers(), st.floats(allow_nan=False), digests, st.text(),
@@ -184,3 +184,13 @@ def test_a_hostile_config_file_is_one_line_exit_2_and_nothing_written(tmp_path, 
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith(f"error: {path}: line ") and "refused" in err[0]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["hostile.yaml"]
+
+
+def test_a_long_double_quoted_string_is_not_folded_after_an_escape():
+    """A long string of escapes and spaces, in block and flow style, reads back without a space added
+    where ruamel's emitter would have broken the line after an escape."""
+    value = [[None, 1.1207088533414202e+16, "000000000000\x1f\x1f\x1f\x1f", '000000"\x1f\x7f0 0']]
+    long_text = "".join("0 a\x1f\x7f\"\\é\n\t"[(7 * k) % 10] for k in range(300))
+    for flow in (False, None, True):
+        assert load_yaml(dump_yaml(value, flow=flow)) == value
+        assert load_yaml(dump_yaml({"k": [long_text]}, flow=flow, width=40)) == {"k": [long_text]}
