@@ -32,9 +32,7 @@ def test_meshes_resolved_from_package_paths_else_capsules(tmp_path):
 
 
 @pytest.mark.skipif(CHROMIUM is None, reason="chromium not installed (make test installs it via apt)")
-# the mesh scene (several MB of UR5 triangles) does not always reach headless Chromium within its
-# virtual time budget on a loaded machine: that case runs with the slow tests
-@pytest.mark.parametrize("meshes", [pytest.param(True, marks=pytest.mark.slow), False])
+@pytest.mark.parametrize("meshes", [True, False])
 def test_real_urdf_is_drawn_and_framed(meshes, tmp_path):
     """The UR5 in meshcat, seen by headless Chromium: drawn (pixels change when it is hidden) as
     meshes or, without them, as capsules, and framed by the camera."""

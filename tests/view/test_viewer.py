@@ -136,28 +136,36 @@ class Shots(NamedTuple):
     moved: np.ndarray | None        # the robot at the second pose, if one was given
 
 
+def scene_screenshot(vis: meshcat.Visualizer, out: Path, tmp_path: Path, budget_ms: int) -> np.ndarray:
+    """Screenshot of the scene ``vis`` holds now, from meshcat's static HTML export: the whole scene
+    (objects, transforms, properties, camera) is inside the page, so the browser draws it without the
+    websocket, whose several MB of mesh messages do not always arrive within the page time of a
+    loaded machine."""
+    page = out.with_suffix(".html")
+    page.write_text(vis.static_html())
+    return screenshot(page.as_uri(), out, tmp_path, budget_ms=budget_ms)
+
+
 def framed_screenshots(robot, q: np.ndarray, tmp_path: Path, moved_q: np.ndarray | None = None) -> Shots:
-    """Screenshots of the viewer with ``robot`` at ``q`` and with the robot hidden (up to four
-    tries while a heavy mesh scene has not reached the browser, i.e. fewer than ``DRAWN_FRACTION`` of
-    the pixels differ, each waiting three times longer:
-    5 s to 135 s of page time, for a loaded machine), then, with ``moved_q``, one with the robot
-    moved there."""
+    """Screenshots of the viewer's scene with ``robot`` at ``q`` and with the robot hidden (up to
+    three tries while fewer than ``DRAWN_FRACTION`` of the pixels differ, each with three times the
+    page time: 5 s to 45 s), then, with ``moved_q``, one with the robot moved there."""
     vis = meshcat.Visualizer()
     moved = None
     try:
         viewer = Viewer(robot, viewer=vis)
         viewer.show(q)
-        for attempt in range(4):
+        for attempt in range(3):
             budget_ms = 5000 * 3 ** attempt
-            with_robot = screenshot(vis.url(), tmp_path / f"robot{attempt}.png", tmp_path, budget_ms=budget_ms)
+            with_robot = scene_screenshot(vis, tmp_path / f"robot{attempt}.png", tmp_path, budget_ms)
             vis[viewer.root].set_property("visible", False)
-            without = screenshot(vis.url(), tmp_path / f"hidden{attempt}.png", tmp_path, budget_ms=budget_ms)
+            without = scene_screenshot(vis, tmp_path / f"hidden{attempt}.png", tmp_path, budget_ms)
             vis[viewer.root].set_property("visible", True)
             if changed_fraction(with_robot, without) > DRAWN_FRACTION:
                 break
         if moved_q is not None:
             viewer.show(moved_q)
-            moved = screenshot(vis.url(), tmp_path / "moved.png", tmp_path, budget_ms=budget_ms)
+            moved = scene_screenshot(vis, tmp_path / "moved.png", tmp_path, budget_ms)
     finally:
         vis.window.server_proc.kill()
         vis.window.server_proc.wait(timeout=10)
