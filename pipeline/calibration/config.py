@@ -167,6 +167,14 @@ class Config:
     #: simulation also measured on design_table_heldout visible poses of the working region)
     design_table: bool = True
     design_table_heldout: int = 300
+    #: the design table's certified lower bound of the held-out prediction over the candidate pool
+    #: (pipeline.calibration.design_bound; a few seconds for 20000 candidates)
+    design_table_bound: bool = True
+    #: the design table measures and calibrates every design this many more times (fresh tracker noise,
+    #: the plain weighted least-squares fit) and gives the RMS over the repeats beside the single
+    #: calibration: one calibration is one draw of the estimation error (0: the single draw only; 8 add
+    #: about 10 s to the RX130L stage)
+    design_table_repeats: int = 8
 
     def gravity_prior(self) -> GravityPrior:
         """Prior uncertainty of the gravity model (scaled down for an identified one)."""

@@ -385,10 +385,14 @@ def working_jacobian(robot: RobotModel, mm: em.MeasurementModel, Qw: np.ndarray,
 def index_spec(cfg: Config, robot: RobotModel, mm: em.MeasurementModel, basis: np.ndarray, rng: np.random.Generator,
                region: ts.WorkingRegion | None = None) -> tuple[ix.IndexSpec, np.ndarray | None]:
     """The observability index; for the TCP criteria random collision-free working poses (``V``: in
-    the working region, :mod:`pipeline.calibration.task_space`)."""
+    the working region, :mod:`pipeline.calibration.task_space`; its reflector term at the working
+    poses the tracker sees, where held-out readings verify it)."""
     if cfg.index_name == "V":
-        Qw = ts.sample_region(robot, region or ts.default_region(robot), cfg.n_region_configurations, rng)
-        return ts.task_space_spec(mm, Qw, basis, cfg.design_figure), Qw
+        region = region or ts.default_region(robot)
+        Qw = ts.sample_region(robot, region, cfg.n_region_configurations, rng)
+        Qv = (ts.verifiable_configurations(robot, region, cfg.n_region_configurations, rng, cfg.margin_collision_m)
+              if "reflector" in cfg.design_figure.split("+") else None)
+        return ts.task_space_spec(mm, Qw, basis, cfg.design_figure, Qv), Qw
     if not cfg.index_name.startswith("tcp_A"):
         return ix.IndexSpec(cfg.index_name), None
     chain = cd.chain_from_robot(robot)

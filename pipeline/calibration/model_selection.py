@@ -38,8 +38,20 @@ walked from 1 over :data:`ORIENTATION_SCALES` while the held-out score improves;
 is ``MSE_pos(kappa) / MSE_pos(1) + MSE_rot(kappa) / MSE_rot(1)`` (both errors count alike, free of
 units). The REML variances alone are not the best weights here: a marker-point row repeats its
 pose's position error (its reading is the origin plus a lever along the marker axes), a correlation
-the row-wise noise model neglects. The factor is chosen on :data:`WEIGHT_SUBSET` and used by every
-candidate and by the final fit.
+the row-wise noise model neglects. The factor is chosen on :data:`WEIGHT_SUBSET`.
+
+The weight is chosen twice, for two purposes (nested cross-validation, Varma & Simon 2006, "Bias in
+error estimation when using cross-validation for model selection", BMC Bioinformatics 7:91; Cawley
+& Talbot 2010, JMLR 11). The final fit's weight is chosen by the cross-validation of the whole
+record, and the candidates are compared (the one-standard-error rule) at that weight. The chosen
+candidate's held-out figures (:meth:`ModelSelection.cross_validation`, the run's
+``cross_validation``) are those of a nested cross-validation: each outer fold's weight is chosen by
+a cross-validation of that fold's training poses alone (:func:`nested_orientation_weights`, inner
+folds grouped in joint space as the outer ones) and the fold's fit uses it, so no held-out pose
+takes part in choosing the weight of the fit that predicts it; a weight chosen on the folds it is
+then scored on would report the minimum of a noisy curve, an optimistic figure. (The position rows'
+weight, their REML remainder, is estimated on each training fold alone already.) The choice among
+the candidates is not nested: the reported figure is that of the chosen model.
 """
 
 from __future__ import annotations
@@ -122,17 +134,21 @@ def map_noise_floor_m(noise: NoiseModel, sensor_sigma_m: np.ndarray) -> float:
 
 
 def score_subset(mm: MeasurementModel, basis: np.ndarray, meas: ms.Measurements, orientation_sigma_rad: float,
-                 fold_of_pose: np.ndarray, max_iterations: int, rng: np.random.Generator, robust: dict | None = None,
-                 noise: NoiseModel | None = None) -> tuple[CandidateScore, Callable[[], CandidateScore]]:
+                 fold_of_pose: np.ndarray, max_iterations: int, rng: np.random.Generator | None,
+                 robust: dict | None = None, noise: NoiseModel | None = None,
+                 fold_scales: np.ndarray | None = None) -> tuple[CandidateScore, Callable[[], CandidateScore]]:
     """Held-out errors of one parameter subset without and with the residual map, on the folds
     ``fold_of_pose`` (n,); each training fold
     is fitted with the noise model ``noise`` (its REML remainder estimated on the training fold,
     :func:`pipeline.calibration.noise_model.fit_with_noise_model`; ``robust``: the robust fit's loss,
     confidence and max_fraction), so gross errors are rejected inside the training folds only and
     every held-out pose is scored, with its predicted error under the fold's fit and noise model.
+    ``fold_scales`` (one per fold): the orientation weight of each fold's fit (chosen on that fold's
+    training poses, :func:`nested_orientation_weights`), else ``noise.orientation_scale`` in every fold.
     The score with the map is computed when its callable is called
     (the seeds of its fits are drawn from ``rng`` fold by fold here: an orientation weight that is
-    not chosen skips the maps and leaves every later draw as it was)."""
+    not chosen skips the maps and leaves every later draw as it was; ``rng`` None: no map, the
+    callable gives the plain score)."""
     robust = ROBUST_DEFAULTS | (robust or {})
     noise = noise or NoiseModel()
     n = len(meas)
@@ -156,8 +172,9 @@ def score_subset(mm: MeasurementModel, basis: np.ndarray, meas: ms.Measurements,
 
         fold = ms.Measurements(rec.Q[train], rec.Y[train], rec.sigma_m[train], f"fold {f + 1}",
                                payload_mounted=part(rec.payload_mounted), offset_m=part(rec.offset_m))
+        weighted = noise if fold_scales is None else replace(noise, orientation_scale=float(fold_scales[f]))
         try:
-            est, _, fold_noise = fit_with_noise_model(mm, fold, basis, noise, None, max_iterations=max_iterations,
+            est, _, fold_noise = fit_with_noise_model(mm, fold, basis, weighted, None, max_iterations=max_iterations,
                                                       theta0=warm, **robust)
         except PipelineError:
             continue   # this fold's training poses do not excite every parameter
@@ -171,11 +188,15 @@ def score_subset(mm: MeasurementModel, basis: np.ndarray, meas: ms.Measurements,
                                                                 None, _origins(mm, len(test))), axis=1)
         if e_rot is not None and ang is not None:
             e_rot[test] = ang
-        maps.append((est, train_poses, restart_seed(rng), test, e))
+        if rng is not None:
+            maps.append((est, train_poses, restart_seed(rng), test, e))
     p = basis.shape[1]
     floor = map_noise_floor_m(noise, meas.sigma_m)
+    plain = CandidateScore(Candidate("", False), p, fold_of_pose, e_plain, e_rot, None, var, before)
 
     def mapped() -> CandidateScore:
+        if rng is None:
+            return plain
         e_map, var_map = np.full(n, np.nan), var.copy()
         for est, train_poses, seed, test, e in maps:
             e_train, R_tb, _ = heldout_errors(mm, est, meas, train_poses)
@@ -185,7 +206,7 @@ def score_subset(mm: MeasurementModel, basis: np.ndarray, meas: ms.Measurements,
             var_map[test] += 3.0 * std ** 2
         return CandidateScore(Candidate("", True), p, fold_of_pose, e_map, e_rot, None, var_map, before)
 
-    return CandidateScore(Candidate("", False), p, fold_of_pose, e_plain, e_rot, None, var, before), mapped
+    return plain, mapped
 
 
 def select_model(meas: ms.Measurements, setup: Callable[[str], tuple[MeasurementModel, np.ndarray]],
@@ -209,19 +230,26 @@ def select_model(meas: ms.Measurements, setup: Callable[[str], tuple[Measurement
         readings = len(ms.expand_orientation(meas, orientation_sigma_rad)) if mm.marker_points else len(meas)
         mm.expect_readings((2 if mm.compliance else 1) * (folds - 1) * readings * EVALUATIONS_PER_READING)
 
-    def scored_with(subset: str, kappa: float) -> tuple[CandidateScore, Callable[[], CandidateScore]]:
+    def scored_with(subset: str, kappa: float, fold_scales: np.ndarray | None = None
+                    ) -> tuple[CandidateScore, Callable[[], CandidateScore]]:
         mm, basis = models[subset]
         return score_subset(mm, basis, meas, orientation_sigma_rad, fold_of_pose, max_iterations, rng, robust,
-                            replace(noise, orientation_scale=kappa))
+                            replace(noise, orientation_scale=kappa), fold_scales)
 
     kappa = 1.0
     tried: list[tuple[float, float, float]] = []
     done: dict[float, tuple[CandidateScore, Callable[[], CandidateScore]]] = {}
+    fold_scales: np.ndarray | None = None
     weight_subset = WEIGHT_SUBSET if WEIGHT_SUBSET in models else next(iter(models), "")
     if meas.rotvec is not None and weight_subset and models[weight_subset][0].marker_points:
-        kappa, done = orientation_weight(lambda k: scored_with(weight_subset, k))
+        kappa, done = orientation_weight(lambda k: scored_with(weight_subset, k))    # the final fit's weight
         tried = [(k, *rms_errors(pair[0])) for k, pair in sorted(done.items())]
-    for subset in models:
+        mm_w, basis_w = models[weight_subset]
+        fold_scales = nested_orientation_weights(
+            meas, fold_of_pose, folds,
+            lambda sub, inner, k: score_subset(mm_w, basis_w, sub, orientation_sigma_rad, inner, max_iterations,
+                                               None, robust, replace(noise, orientation_scale=k))[0])
+    for subset in models:     # the candidates compared at the final fit's weight
         plain, with_map = done[kappa] if subset == weight_subset and kappa in done else scored_with(subset, kappa)
         mapped = with_map()
         plain.candidate, mapped.candidate = Candidate(subset, False), Candidate(subset, True)
@@ -239,7 +267,16 @@ def select_model(meas: ms.Measurements, setup: Callable[[str], tuple[Measurement
         notes.append(f"{int(gross.sum())} held-out pose(s) beyond the chi-square bound of the best candidate's "
                      "robust error scale (gross errors) left out of every candidate's score")
     chosen = one_standard_error(scores)
-    return ModelSelection(folds, scores, chosen, notes, kappa, tried, gross, max_fraction)
+    sel = ModelSelection(folds, scores, chosen, notes, kappa, tried, gross, max_fraction)
+    if fold_scales is not None:    # the chosen model's held-out figures, each fold with its own fold's weight
+        plain, with_map = scored_with(chosen.parameters, kappa, fold_scales)
+        held = with_map() if chosen.residual_map else plain
+        held.candidate = chosen
+        nested_gross = gross_heldout_poses([held], float(settings["confidence"]))
+        sel.fold_orientation_scales = [float(k) for k in fold_scales]
+        sel.nested = held
+        sel.nested_gross = np.zeros_like(nested_gross) if screen_capped(nested_gross, max_fraction) else nested_gross
+    return sel
 
 
 def rms_errors(score: CandidateScore) -> tuple[float, float]:
@@ -280,6 +317,41 @@ def orientation_weight(scored: Callable[[float], tuple[CandidateScore, T]]
         if best_i != i0:
             break
     return ORIENTATION_SCALES[best_i], done
+
+
+def pose_subset(meas: ms.Measurements, poses: np.ndarray) -> ms.Measurements:
+    """The readings of ``meas`` at the poses (rows) ``poses``, a record of its own."""
+    def part(a: np.ndarray | None) -> np.ndarray | None:
+        return None if a is None else a[poses]
+
+    return ms.Measurements(meas.Q[poses], meas.Y[poses], meas.sigma_m[poses], meas.source, part(meas.rotvec),
+                           len(poses), payload_mounted=part(meas.payload_mounted), lines=part(meas.lines))
+
+
+def nested_orientation_weights(meas: ms.Measurements, fold_of_pose: np.ndarray, folds: int,
+                               scored: Callable[[ms.Measurements, np.ndarray, float], CandidateScore]) -> np.ndarray:
+    """``(folds,)`` orientation weight of each outer fold, chosen by :func:`orientation_weight` on a
+    cross-validation of that fold's training poses alone (nested cross-validation: the held-out
+    fold neither fits nor chooses the weight it is scored with, Cawley & Talbot 2010, "On
+    over-fitting in model selection and subsequent selection bias in performance evaluation",
+    JMLR 11; Varma & Simon 2006, BMC Bioinformatics 7:91). The inner folds are
+    :func:`pipeline.calibration.crossval.spatial_folds` of the training poses, as many as the outer
+    ones (at most one per pose); ``scored(record, inner_fold_of_pose, kappa)`` scores the weight subset."""
+    fold_of_pose = np.asarray(fold_of_pose, int)
+    scales = np.ones(int(fold_of_pose.max()) + 1 if fold_of_pose.size else 0)
+    for f in range(len(scales)):
+        train = np.flatnonzero(fold_of_pose != f)
+        if not len(train) or len(train) == len(fold_of_pose):
+            continue
+        sub = pose_subset(meas, train)
+        inner = spatial_folds(sub.Q, min(folds, len(sub)))
+
+        def inner_score(kappa: float, sub: ms.Measurements = sub, inner: np.ndarray = inner
+                        ) -> tuple[CandidateScore, None]:
+            return scored(sub, inner, kappa), None
+
+        scales[f] = orientation_weight(inner_score)[0]
+    return scales
 
 
 def choose_parameters(robot: RobotModel, cfg: Config, user: ms.Measurements | None, six_d: bool,

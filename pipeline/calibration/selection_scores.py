@@ -97,16 +97,26 @@ class ModelSelection:
     #: (n,) held-out poses the gross-error screen found (before its cap), and the cap's fraction
     gross: np.ndarray | None = None
     max_fraction: float = 0.1
+    #: the orientation weight of each fold's fit in :attr:`nested`, chosen on that fold's training poses
+    #: alone (:func:`pipeline.calibration.model_selection.nested_orientation_weights`)
+    fold_orientation_scales: list[float] | None = None
+    #: the chosen candidate's held-out errors with those weights (nested cross-validation), and the poses
+    #: its gross-error screen leaves out; None: the figures are those of the table (no weight was chosen)
+    nested: CandidateScore | None = None
+    nested_gross: np.ndarray | None = None
 
     def score_of(self, c: Candidate) -> CandidateScore:
         return next(s for s in self.scores if s.candidate == c)
 
     def cross_validation(self) -> dict:
         """The chosen candidate's held-out figures (``summary.json`` ``cross_validation``): the
-        screened ones and those over every pose, each ratio of the figures beside it."""
-        s = self.score_of(self.chosen)
+        screened ones and those over every pose, each ratio of the figures beside it; with a chosen
+        orientation weight those of the nested cross-validation (:attr:`nested`: no held-out pose
+        chose the weight of the fit predicting it), else those of the table."""
+        s = self.nested if self.nested is not None else self.score_of(self.chosen)
         n = len(s.position_error_m)
-        gross = np.zeros(n, bool) if self.gross is None else np.asarray(self.gross, bool)
+        screen = self.nested_gross if self.nested is not None else self.gross
+        gross = np.zeros(n, bool) if screen is None else np.asarray(screen, bool)
         var = s.predicted_var_m2 if s.predicted_var_m2 is not None else np.full(n, np.nan)
         before = s.before_error_m if s.before_error_m is not None else np.full(n, np.nan)
         fitted = np.isfinite(s.position_error_m)
@@ -118,7 +128,8 @@ class ModelSelection:
         out |= {"n_gross_left_out": out["n_rejected"], "model": self.chosen.name,
                 "rms_orientation_error_rad": None if rot is None else _rms(rot[keep]),
                 "rms_orientation_error_all_poses_rad": None if rot is None else _rms(rot[fitted]),
-                "orientation_weight_scale": self.orientation_scale}
+                "orientation_weight_scale": self.orientation_scale,
+                "orientation_weight_scale_per_fold": self.fold_orientation_scales}
         return out
 
     def as_dict(self) -> dict:
@@ -126,6 +137,7 @@ class ModelSelection:
                 "fold_grouping": "spatial (k-means in joint space)",
                 "candidates": [s.as_dict() for s in self.scores], "notes": self.notes,
                 "orientation_weight_scale": self.orientation_scale,
+                "orientation_weight_scale_per_fold": self.fold_orientation_scales,
                 "orientation_scales_tried": [{"scale": k, "rms_position_error_m": p, "rms_orientation_error_rad": r}
                                              for k, p, r in self.orientation_scales_tried]}
 
@@ -157,9 +169,19 @@ class ModelSelection:
         if self.orientation_scales_tried:
             tried = ", ".join(f"{k:g}: {1e3 * p:.3f} mm / {np.degrees(r):.3f}°"
                               for k, p, r in self.orientation_scales_tried)
-            lines.append(f"- orientation weight: the marker-point rows' REML sigma times {self.orientation_scale:g}, "
-                         f"chosen by cross-validation of {weight_subset} (factor: CV RMS position / orientation: "
-                         f"{tried})")
+            lines.append(f"- orientation weight of the final fit and of the table: the marker-point rows' REML sigma "
+                         f"times {self.orientation_scale:g}, chosen by cross-validation of {weight_subset} (factor: CV "
+                         f"RMS position / orientation: {tried})")
+        if self.fold_orientation_scales is not None:
+            per_fold = ", ".join(f"{k:.3g}" for k in self.fold_orientation_scales)
+            over = ""
+            if self.nested is not None and len(self.nested.position_error_m):
+                over = f"; over every pose {1e3 * float(np.sqrt(np.mean(self.nested.position_error_m ** 2))):.3f} mm"
+                if self.nested.orientation_error_rad is not None:
+                    over += f" / {np.degrees(np.sqrt(np.mean(self.nested.orientation_error_rad ** 2))):.3f}°"
+            lines.append(f"- the chosen model's held-out figures (cross_validation) are nested: each fold's fit has "
+                         f"the orientation weight chosen the same way by a cross-validation of its own training "
+                         f"poses (per fold: {per_fold}), so no held-out pose chose the weight it is scored with{over}")
         lines += [f"- {n}" for n in self.notes]
         return "\n".join(lines + [""])
 

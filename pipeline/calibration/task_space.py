@@ -26,7 +26,10 @@ The working region (``calibration.working_region``):
 For a region (cube or box) the working configurations are uniformly random joint configurations
 inside the joint limits, free of self/floor collision, whose TCP lies in the region: every
 orientation the arm can take there (the tracker need not see them: they are where the arm works,
-not where it is measured).
+not where it is measured). The reflector term of ``design_figure`` is what a held-out reading can
+verify, so it is taken at working configurations the tracker sees at its nominal pose (the held-out
+poses' margins, :func:`verifiable_configurations`): there the flange faces the tracker, and the
+predicted reading error differs from the one over every orientation of the region.
 """
 
 from __future__ import annotations
@@ -48,7 +51,8 @@ from pipeline.robot.model import RobotModel
 
 WORKING_REGIONS = ("iso_cube", "box", "csv")
 #: what V weights over the working configurations (``calibration.design_figure``): the TCP (the task),
-#: the reflector in the tracker frame (what held-out tracker readings verify), or both
+#: the reflector in the tracker frame at the working poses the tracker sees (what held-out tracker
+#: readings verify), or both
 DESIGN_FIGURES = ("tcp+reflector", "tcp", "reflector")
 
 
@@ -197,18 +201,45 @@ def reflector_jacobian(mm: MeasurementModel, Q: np.ndarray, basis: np.ndarray, T
     return J.reshape(-1, J.shape[2])
 
 
-def task_space_spec(mm: MeasurementModel, Qw: np.ndarray, basis: np.ndarray, figure: str = "tcp") -> ix.IndexSpec:
+def task_space_spec(mm: MeasurementModel, Qw: np.ndarray, basis: np.ndarray, figure: str = "tcp",
+                    Qv: np.ndarray | None = None) -> ix.IndexSpec:
     """The ``V`` index over the working configurations ``Qw`` on ``figure`` (:data:`DESIGN_FIGURES`):
     the TCP, the reflector in the tracker frame, or both (``W = (W_tcp + W_reflector) / 2``, the
-    mean of the two points' predicted variances)."""
+    mean of the two points' predicted variances).
+
+    ``Qv``: the working configurations the tracker sees (:func:`verifiable_configurations`), where
+    the reflector term is taken (None: ``Qw``). A held-out reading verifies the reflector only
+    where the beam reaches it, and there the arm's orientations are those facing the tracker, a
+    different part of the region's orientations than ``Qw``'s; the reflector rows are scaled by
+    ``sqrt(n_w / n_v)`` so that ``W_reflector = sum_v J_v^T J_v / n_v`` whatever the two counts."""
     if figure not in DESIGN_FIGURES:
         raise ValueError(f"design figure must be one of {DESIGN_FIGURES}, got {figure!r}")
+    Qv = Qw if Qv is None or len(Qv) == 0 else Qv
     rows = []
     if "tcp" in figure.split("+"):
         rows.append(tcp_jacobian(mm, Qw, basis))
     if "reflector" in figure.split("+"):
-        rows.append(reflector_jacobian(mm, Qw, basis))
+        rows.append(math.sqrt(len(Qw) / len(Qv)) * reflector_jacobian(mm, Qv, basis))
     return ix.IndexSpec("V", working_jacobian=np.vstack(rows), n_working=len(rows) * len(Qw))
+
+
+#: margins of a verifiable working pose: those of the held-out poses (collision margin of the run,
+#: 1 degree of incidence, 5 mm of beam clearance; :func:`pipeline.calibration.measure.heldout_measurements`)
+VERIFIABLE_INCIDENCE_MARGIN_RAD = math.radians(1.0)
+VERIFIABLE_BEAM_MARGIN_M = 0.005
+
+
+def verifiable_configurations(robot: RobotModel, region: WorkingRegion, n: int, rng: np.random.Generator,
+                              collision_margin_m: float) -> np.ndarray | None:
+    """Up to ``n`` working configurations of ``region`` that the tracker at its nominal pose sees
+    (the held-out poses' margins), where held-out readings can verify the reflector; None when the
+    tracker sees no pose of the region."""
+    margins = cd.FilterMargins(collision_margin_m, VERIFIABLE_INCIDENCE_MARGIN_RAD, VERIFIABLE_BEAM_MARGIN_M)
+    try:
+        Qv = sample_region(robot, region, n, rng, visibility=True, margins=margins)
+    except InfeasibleError:
+        return None
+    return Qv if len(Qv) else None
 
 
 def tcp_part(spec: ix.IndexSpec, figure: str) -> ix.IndexSpec | None:
@@ -253,6 +284,9 @@ def check_task_fields(cfg, source: str = "config") -> None:
     for key in ("n_region_configurations", "design_table_heldout"):
         if getattr(cfg, key) < 1:
             raise bad(key, f"must be >= 1, got {getattr(cfg, key)}")
+    repeats = getattr(cfg, "design_table_repeats", 0)
+    if isinstance(repeats, bool) or not isinstance(repeats, int) or not 0 <= repeats <= 100:
+        raise bad("design_table_repeats", f"must be an integer in [0, 100], got {repeats!r}")
 
 
 def default_region(robot: RobotModel) -> WorkingRegion:

@@ -43,6 +43,12 @@ class ControlConfig:
     #: axis 2's torque limit of feedback noise on the command (150 Hz: half, 64 deg velocity-loop margin)
     velocity_filter_hz: float = 150.0
     compensate_velocity_estimate_delay: bool = True   # delay v_ff like the velocity estimate
+    #: Coulomb switching width (rad/s) of the friction feedforward on an arm whose dry friction sticks
+    #: (``RealRobot.dry_friction_sticks``): its friction changes sign with its velocity, not smoothly, and
+    #: the feedforward's reference velocity is exact, so ``tanh(v_d / w)`` switches this narrowly (the
+    #: model's own width, the identification's smoothing of measured speeds, where it is narrower); an
+    #: arm with smooth Coulomb friction gets the model's law (pipeline.control.simulate)
+    sticking_friction_width_rad_s: float = 1e-3
     settle_time_s: float = 0.3                  # hold the start pose before the path (integrators settle)
     engine: Engine = "compiled"
     chunk_samples: int = 250
@@ -87,6 +93,8 @@ class ControlConfig:
                      why=" (PI zero at velocity bandwidth / pi_zero_ratio)")
         check_number(s, "control.stick_slip_margin", self.stick_slip_margin, ge=0,
                      why=" (Kv >= margin x the identified Stribeck slope; 0 turns the floor off)")
+        check_number(s, "control.sticking_friction_width_rad_s", self.sticking_friction_width_rad_s, gt=0,
+                     unit="rad/s", why=" (the friction feedforward's sign switching on an arm whose friction sticks)")
         check_number(s, "control.settle_time_s", self.settle_time_s, ge=0, unit="s")
         check_choices(self, "control", s)
         check_count(s, "control.chunk_samples", self.chunk_samples, 1)

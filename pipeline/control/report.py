@@ -7,6 +7,8 @@ desired path in the base frame), ``tcp_error_registered_*`` (after a best-fit ri
 ``on_saturation = clip``), ``realtime_factor`` (wall) and ``realtime_factor_cpu``, the speed-up
 against the plain Python loop, ``tcp_error_rms_{nominal,calibrated}_kinematics_m`` (and registered),
 ``servo_stick_slip_joints`` (joints whose ``Kv`` the stick-slip floor raised, :mod:`pipeline.control.design`),
+``feedforward_coulomb_width_rad_s`` (only on an arm whose dry friction sticks: the friction feedforward's
+Coulomb switching width, :func:`pipeline.control.simulate.feedforward_coulomb_width`),
 ``improvement`` (none / full_friction ratios), ``elastic_improvement`` (with an elastic variant:
 max TCP tracking error of none and of rigid full_friction over the best elastic variant's, and the
 same for the max path error ``path_error_max_*_over_elastic``), ``joint_stiffness`` (with an elastic

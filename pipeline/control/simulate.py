@@ -8,6 +8,7 @@ the current set value::
     gravity        tau_ff = g(q_d)
     full           tau_ff = M(q_d) a_d + h(q_d, v_d)            (rotor inertia included)
     full_friction  tau_ff = M(q_d) a_d + h(q_d, v_d) + viscous v_d + coulomb tanh(v_d / width)
+                   (+ the identified Stribeck and load-dependent terms, same width)
     elastic_static / elastic_flat   motor set points leading the link by the joint deflection
                    (:mod:`pipeline.control.elastic_feedforward`)
 
@@ -18,11 +19,23 @@ loop gets its own set points: ``v_d`` delayed by the known group delay of the di
 low-passed encoder velocity, and ``tau_ff`` at the middle of each 200 µs hold (both interpolated);
 without that a held 400 µs set point lags by 100 µs on average, which alone leaves a lag error
 ``~ a * 100 µs / Kp`` (measured: 1.3 mdeg on axis 1 of the ISO path with the exact model).
+
+The friction feedforward's Coulomb width (:func:`feedforward_coulomb_width`). The model's ``width``
+(0.01 rad/s by default) is the identification's smoothing of the sign of measured, noisy speeds. On an
+arm with that smooth law (the own simulator's) the feedforward takes it as it is. On an arm whose dry
+friction sticks (``real.dry_friction_sticks``: the friction opposes the joint's velocity with its full
+Coulomb level at any speed and holds it at rest) ``tanh(v_d / width)`` would feed forward less than the
+arm's friction wherever the joint moves slower than about ``2 width``: at 0.003 rad/s 29 % of it, and
+the servo must build the rest from a lag (RX130L in MuJoCo, ISO path: axis 5 creeping through a slow
+stretch at t = 3.17 s, 731 µrad). The reference velocity is exact (no noise to smooth), so there the
+sign switches with ``control.sticking_friction_width_rad_s`` (1e-3 rad/s; the model's width where that
+is narrower), above the joint's own velocity jitter about its set point under the encoder noise
+(1-3e-4 rad/s on that path), below which the sign of its velocity is the noise's.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pinocchio as pin
@@ -32,7 +45,8 @@ from pipeline.control.config import FEEDFORWARD_VARIANTS, ControlConfig
 from pipeline.control.design import ServoGains, design_gains, filter_alpha, reflected_inertia, stick_slip_gains
 from pipeline.control.elastic_feedforward import ELASTIC_VARIANTS, elastic_feedforward
 from pipeline.core.errors import ConfigError, InfeasibleError
-from pipeline.robot.friction import has_stribeck, stribeck_slope_Nms_rad
+from pipeline.robot.friction import has_stribeck, joint_friction_torque, load_friction_torque, stribeck_slope_Nms_rad
+from pipeline.robot.model import RobotModel
 
 
 @dataclass
@@ -56,8 +70,21 @@ class ClosedLoopResult:
     realtime_factor_cpu: float = 0.0           # simulated time / CPU time of the loop thread
 
 
-def feedforward_torque(model, q_d: np.ndarray, v_d: np.ndarray, a_d: np.ndarray, variant: str) -> np.ndarray:
-    """Feedforward torques (N, nq) of a variant from ``model`` (RobotModel)."""
+def feedforward_coulomb_width(real, model: RobotModel, config: ControlConfig) -> float | None:
+    """The Coulomb switching width (rad/s) of the friction feedforward on ``real``: on an arm whose dry
+    friction sticks (``real.dry_friction_sticks``) ``min(config.sticking_friction_width_rad_s, w)``, ``w``
+    the model's smoothing width; None (the model's own law) on an arm with smooth Coulomb friction
+    (module docstring)."""
+    if not getattr(real, "dry_friction_sticks", False):
+        return None
+    return min(float(config.sticking_friction_width_rad_s), float(model.spec.actuation.coulomb_smoothing_rad_s))
+
+
+def feedforward_torque(model, q_d: np.ndarray, v_d: np.ndarray, a_d: np.ndarray, variant: str,
+                       coulomb_width_rad_s: float | None = None) -> np.ndarray:
+    """Feedforward torques (N, nq) of a variant from ``model`` (RobotModel); the friction's smooth sign
+    ``tanh(v_d / w)`` with ``w = coulomb_width_rad_s`` (None: the model's width,
+    :func:`feedforward_coulomb_width`)."""
     if variant not in FEEDFORWARD_VARIANTS:
         raise ConfigError(None, "feedforward", f"unknown variant {variant!r}; one of {FEEDFORWARD_VARIANTS}")
     N, n = q_d.shape
@@ -72,8 +99,13 @@ def feedforward_torque(model, q_d: np.ndarray, v_d: np.ndarray, a_d: np.ndarray,
         else:
             out[k] = pin.rnea(model.model, data, q_d[k], v_d[k], a_d[k])
     if variant in ("full_friction", *ELASTIC_VARIANTS):
-        out += model.friction_torque(v_d)
-        out += model.load_friction_torque(out, v_d)   # load: the model's torque without that term
+        if coulomb_width_rad_s is None:
+            out += model.friction_torque(v_d)
+            out += model.load_friction_torque(out, v_d)   # load: the model's torque without that term
+        else:
+            act = replace(model.spec.actuation, coulomb_smoothing_rad_s=float(coulomb_width_rad_s))
+            out += joint_friction_torque(act, v_d)
+            out += load_friction_torque(act, out, v_d)
     return out
 
 
@@ -162,7 +194,7 @@ def simulate_joint_trajectory(real, model, t_s, q_d, v_d, a_d, config: ControlCo
     pad = lambda x, first: np.vstack([np.repeat(first[None], n_settle, 0), x])  # noqa: E731
     zero = np.zeros_like(q_d[0])
     Q, V, A = pad(q_d, q_d[0]), pad(v_d, zero), pad(a_d, zero)
-    tau_ff = feedforward_torque(model, Q, V, A, feedforward)
+    tau_ff = feedforward_torque(model, Q, V, A, feedforward, feedforward_coulomb_width(real, model, config))
     Q_set, V_set = Q, V
     if feedforward in ELASTIC_VARIANTS:
         Q_set, V_set, tau_ff = elastic_feedforward(model, dt, Q, V, A, feedforward, tau_ff)

@@ -37,7 +37,7 @@ from pipeline.control.elastic_feedforward import ELASTIC_VARIANTS
 from pipeline.control.estimate import ControlModels, control_models, elastic_stiffness
 from pipeline.control.joint_stiffness import StiffnessChoice, deflection_budget, stiffness_markdown
 from pipeline.control.measure import ServoRuns, kinematics_comparison, loop_speed, runs_within_torque
-from pipeline.control.simulate import servo_gains
+from pipeline.control.simulate import feedforward_coulomb_width, servo_gains
 from pipeline.core.errors import ConfigError, PipelineError
 from pipeline.robot.model import RobotModel
 from pipeline.stage_api import StageContext, StageResult
@@ -75,7 +75,11 @@ def run(ctx: StageContext[ControlConfig]) -> StageResult:
     iso, measured = runs_within_torque(ctx, models, iso, servo)
     rms_nominal_kin, registered = kinematics_comparison(ctx, models, iso, servo, measured)
     speed = loop_speed(ctx, iso, servo, measured)
-    return outputs(cfg, models, iso, servo, measured, stiffness, speed, rms_nominal_kin, registered)
+    out = outputs(cfg, models, iso, servo, measured, stiffness, speed, rms_nominal_kin, registered)
+    width = feedforward_coulomb_width(ctx.real, models.robot, cfg)
+    if width is not None:      # the arm's dry friction sticks: the feedforward's sign switching (.simulate)
+        out.summary["feedforward_coulomb_width_rad_s"] = width
+    return out
 
 
 def design_servo(robot: RobotModel, iso: IsoReference, cfg: ControlConfig) -> ServoDesign:

@@ -107,6 +107,14 @@ def test_design_table_rows_and_user_mode(robot, setup):
     assert table["n_heldout_region"] >= 3
     for r in rows.values():
         assert r["actual_model_rms_m"] is not None and 0 < r["predicted_model_rms_m"] < 1e-3
+    # the certified bound over the pool lies below the verified prediction of every design of that size
+    b = table["bound"]
+    assert b is not None and b["n_configurations"] == len(meas.Q) and b["n_candidates"] == len(cs)
+    assert all(0 < b["bound_verified_rms_m"] <= r["predicted_verified_rms_m"] for r in rows.values())
+    assert rows["chosen"]["n_measured"] == len(meas.Q)
+    assert all(r["n_measured"] <= r["n_configurations"] for r in rows.values())
+    assert "Certified bound" in dtab.markdown(table) and dtab.summary(table)["bound"] == b
+    assert all(r.get("repeated_model_rms_m") is None for r in rows.values())
     text = dtab.markdown(table)
     assert "O3 remove-and-replace" in text and "predicted TCP RMS" in text
     # user data: predicted figure of the user's configurations only, nothing measured
@@ -117,7 +125,55 @@ def test_design_table_rows_and_user_mode(robot, setup):
     assert "predicted figures only" in dtab.markdown(user)
 
 
+def test_design_table_repeats_leave_the_single_draws_unchanged(robot, setup):
+    mm, basis, cs, region, Qw = setup
+    spec = ts.task_space_spec(mm, Qw, basis)
+    real = RealRobot.create(robot, 2)
+    Q = cs.Q[ds.remove_and_replace(cs.G, spec, 24, np.random.default_rng(5)).selected]
+    meas = ms.measure_simulated(real, Q, np.random.default_rng(6))
+    est = estimate(mm, meas.Q, meas.Y, meas.sigma_m, basis)
+
+    def table(repeats):
+        return dtab.design_table(robot, real, mm, basis, spec, "chosen", meas.Q, est, cs, region,
+                                 np.random.default_rng(7), n_heldout=60, bound=False, repeats=repeats)
+
+    single, rep = table(0), table(3)
+    assert single["bound"] is None
+    for a, b in zip(single["rows"], rep["rows"], strict=True):
+        assert a["actual_model_rms_m"] == b["actual_model_rms_m"]
+        assert 0 < b["repeated_model_rms_m"] < 1e-3
+    # the expected figure of a design: the repeats of the best-predicted design beat those of O3 on this seed
+    r = {row["design"]: row["repeated_model_rms_m"] for row in rep["rows"]}
+    assert r["chosen"] < r["O3 remove-and-replace"]
+    assert "repeated calibrations" in dtab.markdown(rep)
+
+
+def test_reflector_term_at_the_poses_the_tracker_sees(robot, setup):
+    mm, basis, _, region, Qw = setup
+    Qv = ts.verifiable_configurations(robot, region, 40, np.random.default_rng(4), 0.01)
+    assert Qv is not None and len(Qv) == 40
+    margins = cd.FilterMargins(0.01, ts.VERIFIABLE_INCIDENCE_MARGIN_RAD, ts.VERIFIABLE_BEAM_MARGIN_M)
+    assert cd.filter_configurations(cd.chain_from_robot(robot), Qv, margins)[0].all()
+    p = robot.positions(Qv, robot.frame_tcp)
+    assert np.all(p >= region.lower_m - 1e-12) and np.all(p <= region.upper_m + 1e-12)
+    # W = (W_tcp over the region + W_reflector over the visible poses) / 2, whatever the two counts
+    spec = ts.task_space_spec(mm, Qw, basis, "tcp+reflector", Qv)
+    Jt, Jv = ts.tcp_jacobian(mm, Qw, basis), ts.reflector_jacobian(mm, Qv, basis)
+    W = 0.5 * (Jt.T @ Jt / len(Qw) + Jv.T @ Jv / len(Qv))
+    np.testing.assert_allclose(spec.weight_matrix(basis.shape[1]), W, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(ts.tcp_part(spec, "tcp+reflector").weight_matrix(basis.shape[1]), Jt.T @ Jt / len(Qw),
+                               rtol=1e-10, atol=1e-12)
+    # the visible poses face the tracker: a different weighting than the reflector over all working poses
+    Jr = ts.reflector_jacobian(mm, Qw, basis)
+    assert np.linalg.norm(Jv.T @ Jv / len(Qv) - Jr.T @ Jr / len(Qw)) > 0.05 * np.linalg.norm(Jr.T @ Jr / len(Qw))
+    # without visible poses the reflector term stays on the working poses
+    np.testing.assert_allclose(ts.task_space_spec(mm, Qw, basis, "tcp+reflector").weight_matrix(basis.shape[1]),
+                               0.5 * (Jt.T @ Jt + Jr.T @ Jr) / len(Qw), rtol=1e-10, atol=1e-12)
+
+
 def test_region_config_fields(robot, tmp_path):
+    with pytest.raises(ConfigError, match="design_table_repeats"):
+        st.Config(design_table_repeats=-1).validate()
     with pytest.raises(ConfigError, match="working_region"):
         st.Config(working_region="sphere").validate()
     with pytest.raises(ConfigError, match="working_box_m"):

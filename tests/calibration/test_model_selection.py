@@ -1,4 +1,5 @@
-"""parameters auto: the one-standard-error rule and the Gaussian-process residual map."""
+"""parameters auto: the one-standard-error rule, the orientation weight (nested per fold) and the
+Gaussian-process residual map."""
 
 from __future__ import annotations
 
@@ -6,12 +7,15 @@ import numpy as np
 import pytest
 
 from pipeline.calibration import marker_frame as mf
+from pipeline.calibration import measure as ms
 from pipeline.calibration import subsets
 from pipeline.calibration.config import Config
+from pipeline.calibration.crossval import spatial_folds
 from pipeline.calibration.model_selection import (
     ORIENTATION_SCALES,
     Candidate,
     CandidateScore,
+    nested_orientation_weights,
     one_standard_error,
     orientation_weight,
 )
@@ -134,6 +138,39 @@ def test_orientation_weight_walks_to_the_best_factor(best):
     assert kappa == best and set(done) == set(calls) and len(calls) == len(set(calls))
     # the walk stops one step past the optimum: it never scores the whole grid
     assert len(calls) <= len(ORIENTATION_SCALES) - 1
+
+
+def _six_d_record(n: int = 25) -> ms.Measurements:
+    rng = np.random.default_rng(7)
+    return ms.Measurements(rng.uniform(-2.0, 2.0, (n, 6)), rng.uniform(-1.0, 1.0, (n, 3)), np.full(n, 1e-4),
+                           "synthetic", rng.normal(0.0, 0.3, (n, 3)))
+
+
+def test_nested_weights_are_chosen_on_each_folds_training_poses_alone():
+    """Each outer fold's weight comes from a cross-validation of its training poses: readings of a
+    held-out fold, however changed, leave that fold's weight as it was and move the others'."""
+    meas = _six_d_record()
+    fold = spatial_folds(meas.Q, 5)
+    seen: list[np.ndarray] = []
+
+    def scored(sub: ms.Measurements, inner: np.ndarray, kappa: float) -> CandidateScore:
+        # a score whose best factor is 2 ** (5 x mean x reading of the training poses): a function of them
+        seen.append(sub.Q)
+        assert len(inner) == len(sub) and inner.max() + 1 == 5 and sub.rotvec is not None
+        best = np.clip(5.0 * float(np.mean(sub.Y[:, 0])), -2.0, 2.0)
+        grow = np.sqrt(1.0 + 0.3 * (np.log2(kappa) - best) ** 2) * np.ones(len(sub))
+        return CandidateScore(Candidate("geometric", False), 30, inner, 1e-3 * grow, 5e-3 * grow)
+
+    scales = nested_orientation_weights(meas, fold, 5, scored)
+    assert scales.shape == (5,) and np.all((scales >= 0.25) & (scales <= 4.0))
+    for Q in seen:      # no inner cross-validation saw a pose of the fold it chose the weight for
+        held = [f for f in range(5) if not any((Q == q).all(axis=1).any() for q in meas.Q[fold == f])]
+        assert len(held) == 1
+    moved = ms.Measurements(meas.Q, meas.Y + np.where(fold == 0, 0.8, 0.0)[:, None], meas.sigma_m, "moved",
+                            meas.rotvec)
+    again = nested_orientation_weights(moved, fold, 5, scored)
+    assert again[0] == scales[0]
+    assert np.all(again[1:] > scales[1:])
 
 
 def test_orientation_scale_weights_only_the_marker_point_rows():
