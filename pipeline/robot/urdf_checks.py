@@ -50,6 +50,10 @@ def _owner(element: ET.Element, kind: str) -> str:
 _CPP_DOUBLE = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 _CPP_SPACE = " \t\n\r\f\v"
 _NOT_FINITE = re.compile(r"[+-]?(?:nan|inf|infinity)", re.IGNORECASE)
+#: the largest magnitude a URDF number may have: the loader multiplies up to three of them (a mass
+#: times a squared lever arm, a rotation of an inertia), and a product of three numbers below 1e100
+#: stays inside the double range (1.8e308); no quantity of an arm in SI units comes near it
+MAX_MAGNITUDE = 1e100
 
 
 def _number(token: str) -> float | None:
@@ -69,7 +73,8 @@ def _numbers(text: str, count: int) -> list[float] | None:
 
 
 def check_urdf_values(urdf: Path, root: ET.Element) -> None:
-    """Every number of every link, joint and material of ``root`` is finite and of the right count,
+    """Every number of every link, joint and material of ``root`` is finite, at most
+    :data:`MAX_MAGNITUDE` in magnitude and of the right count,
     and no joint's ``<limit lower>`` is above its ``upper``; else :class:`RobotFileError`
     (``<urdf>: link l1: <inertia izz>: not a finite number: 'nan'``). Extension elements
     (``<gazebo>``, ``<transmission>``) are not URDF geometry and are not read."""
@@ -90,6 +95,9 @@ def check_urdf_values(urdf: Path, root: ET.Element) -> None:
                         raise RobotFileError(urdf, where, f"expected {expected}, got {text!r}")
                     if not all(math.isfinite(x) for x in numbers):
                         raise RobotFileError(urdf, where, f"not a finite number: {text!r}")
+                    if any(abs(x) > MAX_MAGNITUDE for x in numbers):
+                        raise RobotFileError(urdf, where, f"{text!r} is beyond {MAX_MAGNITUDE:g} in magnitude "
+                                             "(products of such numbers leave the floating-point range)")
     for joint in root.findall("joint"):
         limit = joint.find("limit")
         if limit is None or limit.get("lower") is None or limit.get("upper") is None:

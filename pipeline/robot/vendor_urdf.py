@@ -141,7 +141,9 @@ def repair_inertias(model: pin.Model, root: ET.Element) -> list[str]:
             fixed[order[0]] = c - b
         if np.allclose(fixed, moments, rtol=0, atol=1e-12):
             continue
-        model.inertias[j] = pin.Inertia(body.mass, body.lever, axes @ np.diag(fixed) @ axes.T)
+        repaired = axes @ np.diag(fixed) @ axes.T
+        # exactly symmetric (halves first: no overflow near the float range)
+        model.inertias[j] = pin.Inertia(body.mass, body.lever, 0.5 * repaired + 0.5 * repaired.T)
         link = links.get(str(model.names[j]), str(model.names[j]))
         note = (f"inertia of link {link} repaired (principal moments {np.round(moments, 6).tolist()} kg m² -> "
                 f"{np.round(fixed, 6).tolist()}: not positive or violating I1 + I2 >= I3; smallest change)")

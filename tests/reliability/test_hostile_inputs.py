@@ -108,6 +108,7 @@ def _urdf_with(tmp_path: Path, old: str, new: str) -> Path:
     ('izz="0.729"', 'izz="nan"', "link link_1: <inertia izz>: not a finite number: 'nan'"),
     ('<mass value="45"/>', '<mass value="inf"/>', "link link_1: <mass value>: not a finite number: 'inf'"),
     ('izz="0.729"', 'izz="1e999"', "<inertia izz>: not a finite number"),
+    ('izz="0.729"', 'izz="8.98846567431158e+307"', "<inertia izz>: '8.98846567431158e+307' is beyond 1e+100"),
     ('izz="0.729"', 'izz="abc"', "<inertia izz>: expected a number, got 'abc'"),
     ('<origin xyz="0 0 0.55000000000000004"', '<origin xyz="0 nan 0.55"', "<origin xyz>: not a finite number"),
     ('<origin xyz="0 0 0.55000000000000004"', '<origin xyz="0 0.55"', "<origin xyz>: expected 3 numbers"),
