@@ -12,25 +12,17 @@ from pipeline.control.config import ControlConfig
 from pipeline.control.simulate import feedforward_coulomb_width, feedforward_torque, simulate_joint_trajectory
 from pipeline.core.errors import ConfigError
 from pipeline.robot.model import RobotModel
-from pipeline.sim.mujoco_robot import MujocoRealRobot, create_hidden_robot
-from pipeline.sim.truth import RealRobot, TruthConfig
+from pipeline.sim.mujoco_robot import MujocoRealRobot
+from pipeline.sim.truth import RealRobot
+from tests.sim import test_mujoco
+
+#: the TX40 and its MuJoCo arm (seed 5), the module fixtures of the MuJoCo arm's own tests
+tx40, mj = test_mujoco.tx40, test_mujoco.mj
 
 Q0 = np.array([0.1, 0.3, 1.5, 0.2, 1.0, -0.3])
 #: the joint that creeps (axis 3) and its speed (rad/s): below the model's 2 w = 0.02 rad/s, above the speed
 #: below which MuJoCo's soft friction constraint acts as a damper on that joint (about 1e-3 rad/s)
 JOINT, CREEP_RAD_S = 2, 0.003
-
-
-@pytest.fixture(scope="module")
-def tx40() -> RobotModel:
-    return RobotModel.load("staubli_tx40")
-
-
-@pytest.fixture(scope="module")
-def mj(tx40: RobotModel) -> MujocoRealRobot:
-    real = create_hidden_robot(tx40, 5, TruthConfig(engine="mujoco"))
-    assert isinstance(real, MujocoRealRobot)
-    return real
 
 
 def test_width_is_the_models_on_smooth_friction_and_the_narrow_one_where_friction_sticks(
