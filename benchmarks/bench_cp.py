@@ -69,10 +69,10 @@ def first_time(fn) -> tuple[float, object]:
 
 def verified(pm: PlanningModel, path: JointPath, cfg, acceleration_limits: bool):
     """One reachability solve, then the stage's fine-grid verification and local re-solves."""
-    def solve(scale, warm):
+    def solve(scale, acceleration_scale, warm):
         return solve_cp_reachability(pm, path, N_GRID, torque_scale=scale, acceleration_limits=acceleration_limits,
-                                     warm=warm)
-    first = solve(None, None)
+                                     warm=warm, acceleration_scale=acceleration_scale)
+    first = solve(None, None, None)
     return verified_cp(pm, path, first, cfg, solve)
 
 

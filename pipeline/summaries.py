@@ -134,6 +134,19 @@ class CrossValidationSummary(SummaryRecord):
 
 
 @dataclass(frozen=True)
+class RatioTestSummary(SummaryRecord):
+    """``calibration.actual_over_predicted_test``: the one-sided tests on the held-out actual/predicted
+    ratio (:func:`pipeline.calibration.validate.ratio_test`): optimistic above ``threshold`` (the
+    gate), pessimistic below ``lower_threshold`` (a warning), at ``confidence``."""
+
+    threshold: float | None = None
+    lower_threshold: float | None = None
+    effective_dof: float | None = None
+    n_scored_poses: int | None = None
+    confidence: float | None = None
+
+
+@dataclass(frozen=True)
 class CalibrationSummary(SummaryRecord):
     STAGE: ClassVar[str] = "calibration"
 
@@ -141,6 +154,7 @@ class CalibrationSummary(SummaryRecord):
     heldout_rms_position_error_before_m: float | None = None
     predicted_rms_position_error_m: float | None = None
     actual_over_predicted: float | None = None
+    actual_over_predicted_test: RatioTestSummary | None = None
     cross_validation: CrossValidationSummary | None = None
     validation_source: str | None = None
     measurement_source: str | None = None

@@ -115,8 +115,16 @@ class Config:
     #: the covariance, pipeline.calibration.gravity_uncertainty)
     max_chi2_per_dof: float = 10.0
     #: quality gate: held-out (or cross-validated) RMS error over its covariance prediction must not
-    #: exceed max_actual_over_predicted (optimistic); below its inverse (pessimistic) is a warning
+    #: exceed max_actual_over_predicted (optimistic); below its inverse (pessimistic) is a warning.
+    #: On held-out poses a one-sided test (pipeline.calibration.validate): "the true ratio is at most
+    #: max_actual_over_predicted" fails only when the held-out sum of squared errors passes its
+    #: actual_over_predicted_confidence quantile under that hypothesis (few poses: a wider bound on
+    #: the sample ratio; many poses: close to max_actual_over_predicted); the pessimistic warning is
+    #: the mirror test at 1 - actual_over_predicted_confidence
     max_actual_over_predicted: float = 1.5
+    #: level of that test (a probability, in (0.5, 1)): the gate fails when the held-out sum of squared
+    #: errors lies beyond this quantile of its distribution with the true ratio at max_actual_over_predicted
+    actual_over_predicted_confidence: float = 0.99
     #: quality gate (gross inadequacy): held-out (or cross-validated) RMS error after calibration
     #: over the nominal model's must not exceed this
     max_error_after_over_before: float = 0.5
@@ -261,6 +269,9 @@ class Config:
             raise bad("max_chi2_per_dof", f"must be > 1 (chi²/dof is 1 for a right model), got {self.max_chi2_per_dof}")
         if not (math.isfinite(self.max_actual_over_predicted) and self.max_actual_over_predicted > 1):
             raise bad("max_actual_over_predicted", f"must be > 1, got {self.max_actual_over_predicted}")
+        level = self.actual_over_predicted_confidence
+        if not (math.isfinite(level) and 0.5 < level < 1):
+            raise bad("actual_over_predicted_confidence", f"must be in (0.5, 1) (the test's level; 0.99), got {level}")
         if not (math.isfinite(self.max_error_after_over_before) and 0 < self.max_error_after_over_before <= 1):
             raise bad("max_error_after_over_before", f"must be in (0, 1], got {self.max_error_after_over_before}")
         self._validate_payload(bad)

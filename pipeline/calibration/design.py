@@ -62,6 +62,13 @@ class SelectionResult:
     run_time_s: float
     evaluations: int                # number of index evaluations (candidate designs scored)
     history: list[tuple[int, float]] = field(default_factory=list)  # (iteration, index value)
+    #: index value of the rounded optimal approximate design the exchanges started from (None: no
+    #: such start, :mod:`pipeline.calibration.design_rounding`)
+    start_value: float | None = None
+    #: certified lower bound ``V*/n`` of a trace index over every design of the candidate pool with
+    #: as many configurations (None: not computed; ``index_value / bound_value >= 1`` is how far the
+    #: selection can be from the best exact design at most)
+    bound_value: float | None = None
 
     def as_dict(self) -> dict:
         return {"method": self.method, "index_name": self.index_name,

@@ -24,10 +24,21 @@ bound ``V*/n``. Only the trace criteria (``A``, ``tcp_A``, ``tcp_A_mixed``, ``V`
 ``W`` for the approximate design; other indices get plain remove-and-replace, and so does a trace
 index whose multiplicative algorithm stops being monotone (the start is a heuristic; the random-start
 runs stand on their own).
+
+The result carries the rounded start's value and the approximate design's certified bound ``V*/n``
+(``start_value``, ``bound_value`` of :class:`pipeline.calibration.design.SelectionResult`; the bound
+at the start's equivalence-theorem gap :data:`START_TOL`, so ``index_value / bound_value`` overstates
+the distance to the best exact design by at most that factor). On the default run's pool (20488 grid
+candidates, 29 parameters, n = 50) the polished design is 1.018-1.020 times the bound (at a gap of
+1e-3) on seeds 1-5, and an iterated local search (perturbations of 3-9 exchanges towards the support
+of the approximate design, each polished) finds at most 0.2 % of V below it: the exchanges are at a
+local optimum next to the exact optimum, and the rest is the bound's own gap (the approximate design
+spreads its weight over 160-370 candidates, an exact design of 50 cannot).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable
@@ -126,15 +137,18 @@ def approximate_remove_and_replace(G: np.ndarray, spec: ix.IndexSpec, n: int, rn
     if not math.isfinite(best.index_value):
         return best
     return ds.SelectionResult("remove_and_replace", spec.name, best.selected, best.index_value,
-                              time.perf_counter() - t0, sum(r.evaluations for r in runs), best.history)
+                              time.perf_counter() - t0, sum(r.evaluations for r in runs), best.history,
+                              start_value=None if rounded is None else rounded.start_value,
+                              bound_value=None if rounded is None else rounded.bound_value)
 
 
 def _rounded_start_run(G: np.ndarray, spec: ix.IndexSpec, n: int, rng: np.random.Generator,
                        positions: np.ndarray | None, approximate: db.ApproximateDesign | None
                        ) -> ds.SelectionResult | None:
     """Remove-and-replace from the efficient rounding of the optimal approximate design (a trace
-    index); None when the pool is singular, the multiplicative algorithm lost monotonicity or the
-    rounded start is singular. Draws nothing from ``rng``."""
+    index), with the rounded start's value and the certified bound ``V*/n`` of the approximate
+    design (``start_value``, ``bound_value``); None when the pool is singular, the multiplicative
+    algorithm lost monotonicity or the rounded start is singular. Draws nothing from ``rng``."""
     W = spec.weight_matrix(G.shape[2])
     try:
         opt = approximate or db.optimal_approximate_design(G, W, tol=START_TOL, max_iterations=START_MAX_ITERATIONS)
@@ -143,7 +157,8 @@ def _rounded_start_run(G: np.ndarray, spec: ix.IndexSpec, n: int, rng: np.random
         return None                     # multiplicative algorithm lost monotonicity: no second start
     if not is_regular(db.exact_information(G, start)):
         return None
-    return ds.remove_and_replace(G, spec, n, rng, positions=positions, initial=start)
+    polished = ds.remove_and_replace(G, spec, n, rng, positions=positions, initial=start)
+    return dataclasses.replace(polished, start_value=db.design_value(G, W, start), bound_value=opt.exact_bound(n))
 
 
 def _side_by_side(random_runs: Callable[[], list[ds.SelectionResult]],

@@ -61,6 +61,8 @@ def summary_of(out: CalibrationOutcome, cfg: Config) -> dict:
         "heldout_max_position_error_before_m": v["before"]["max"] if v is not None else None,
         "predicted_rms_position_error_m": predicted,
         "actual_over_predicted": v["after"]["rms"] / v["predicted_rms_m"] if v is not None else None,
+        "actual_over_predicted_test": (va.ratio_test(v, cfg.max_actual_over_predicted,
+                                                     cfg.actual_over_predicted_confidence) if v is not None else None),
         "predicted_gravity_model_rms_m": pred.get("predicted_gravity_model_rms_m") if pred is not None else None,
         "gravity_model_share": pred.get("gravity_model_share") if pred is not None else None,
         "gravity_model_prior": gravity_prior_of(out, cfg),

@@ -340,8 +340,13 @@ def _optimize_excitation_impl(
         reason = (f"the optimised trajectory ({criterion} criterion {best[3]:.4g}, cond {best[0]:.4g}) is not better "
                   f"than the best random feasible one ({score0:.4g}, cond {cond_random[i0]:.4g})")
     if reason:
+        # the randoms passed a grid of n_check // 2 samples: on the fine grid a peak between those
+        # samples may cross a limit, so the fallback is scaled into it as every optimised start is
         source = "best random"
-        best = (cond_random[i0], randoms[i0], check_trajectory(robot, randoms[i0], limits, n_check), score0)
+        fallback, feasibility = shrink_to_feasible(robot, randoms[i0], limits, n_check)
+        cond_fallback = (cond_random[i0] if fallback is randoms[i0]
+                         else condition_number(crit.matrix(fallback.coefficients.ravel())))
+        best = (cond_fallback, fallback, feasibility, score0)
     return ExcitationResult(
         trajectory=best[1],
         cond_optimized=float(best[0]),

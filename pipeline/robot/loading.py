@@ -231,10 +231,10 @@ def load_robot_files(robot: str | Path, yaml_path: str | Path | None = None, *, 
     reach = reach_m(model, tip_link)
     keep = {k for k in ("velocity", "effort") if spec is not None
             and f"{k}_{'rad_s' if k == 'velocity' else 'Nm'}" in spec.limit_overrides}
-    assumptions: list[str] = [
-        *placeholder_inertias(model, root, model.frames[model.getFrameId(tip_link)].placement.translation, reach,
-                              urdf),
-        *repair_inertias(model, root), *placeholder_limits(model, root, reach, keep)]
+    inertials = placeholder_inertias(model, root, model.frames[model.getFrameId(tip_link)].placement.translation,
+                                     reach, urdf)
+    assumptions: list[str] = [*inertials, *repair_inertias(model, root),
+                              *placeholder_limits(model, root, reach, keep, masses_stated=not inertials)]
     validate_inertials(urdf, model)
     if turned:
         assumptions.append(f"continuous joints loaded as revolute ones with limits of one turn each way "

@@ -29,6 +29,7 @@ here only, no robot is named in the checks):
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -263,6 +264,10 @@ def placeholder_kind(line: str) -> str | None:
     return next((kind for start, kind in _YAML_PLACEHOLDERS.items() if line.startswith(start)), None)
 
 
+#: the most characters of an assumption a placeholder warning repeats (the whole line is in the report)
+WARNING_DETAIL_CHARS = 200
+
+
 def placeholder_warnings(robot: RobotModel, stages: list[str]) -> list[str]:
     """One line per placeholder of ``robot`` that a result of ``stages`` depends on."""
     out = []
@@ -272,6 +277,7 @@ def placeholder_warnings(robot: RobotModel, stages: list[str]) -> list[str]:
             continue
         using = [s for s in PLACEHOLDER_STAGES.get(kind, ("identification", "control", "trajectory")) if s in stages]
         if using:
-            out.append(f"placeholder {kind} ({line.split(': ', 1)[-1][:160]}): the results of "
+            detail = textwrap.shorten(line.split(": ", 1)[-1], WARNING_DETAIL_CHARS, placeholder=" …")
+            out.append(f"placeholder {kind} ({detail}): the results of "
                        f"{', '.join(using)} depend on them; give the real values in the URDF or robot.yaml")
     return out

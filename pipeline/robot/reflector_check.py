@@ -29,9 +29,10 @@ def _point_segment_m(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
 
 
 def capsules_holding(model: pin.Model, flange_frame: str, offset_m: np.ndarray,
-                     capsules: Sequence[Capsule]) -> list[tuple[str, float, float]]:
+                     capsules: Sequence[Capsule], clearance_m: float = 0.0) -> list[tuple[str, float, float]]:
     """(capsule name, share of configurations, largest depth m) of every capsule that holds the point
-    ``offset_m`` (flange frame) in at least ``INSIDE_SHARE`` of random configurations."""
+    ``offset_m`` (flange frame) in at least ``INSIDE_SHARE`` of random configurations; with
+    ``clearance_m``, a capsule grown by it (the point closer than that to its surface)."""
     if not capsules:
         return []
     data = model.createData()
@@ -52,7 +53,8 @@ def capsules_holding(model: pin.Model, flange_frame: str, offset_m: np.ndarray,
                 depth[n, k] = -np.inf
                 continue
             pose = data.oMf[frame[1]] if frame[0] == "f" else data.oMi[frame[1]]
-            depth[n, k] = capsule.radius_m - _point_segment_m(point, pose.act(capsule.p0), pose.act(capsule.p1))
+            distance_m = _point_segment_m(point, pose.act(capsule.p0), pose.act(capsule.p1))
+            depth[n, k] = capsule.radius_m + clearance_m - distance_m
     share = (depth > 0).mean(axis=0)
     return [(capsules[k].name, float(share[k]), float(depth[:, k].max()))
             for k in map(int, np.flatnonzero(share >= INSIDE_SHARE))]

@@ -220,15 +220,32 @@ def lock_positions(urdf: Path, full: pin.Model, locked: list[str], lock: dict[st
     return q_ref
 
 
+#: how a Git LFS pointer file starts (a mesh a repository stores in LFS, cloned without it)
+GIT_LFS_POINTER_START = b"version https://git-lfs"
+
+
+def _unreadable_mesh(path: Path) -> str | None:
+    """Why a mesh file that exists cannot be a mesh (empty, or a Git LFS pointer), else None."""
+    with path.open("rb") as handle:
+        start = handle.read(len(GIT_LFS_POINTER_START))
+    if not start:
+        return "empty"
+    return "a Git LFS pointer, not the mesh" if start == GIT_LFS_POINTER_START else None
+
+
 def missing_collision_meshes(urdf: Path) -> list[str]:
-    """The packages (``package://NAME``) or files of collision meshes that cannot be found."""
+    """The packages (``package://NAME``) or files of collision meshes that cannot be found, and the
+    files found that hold no mesh (empty, or a Git LFS pointer: ``FILE (why)``)."""
     missing = []
     for collision in ET.parse(urdf).getroot().iter("collision"):
         for mesh in collision.iter("mesh"):
             filename = mesh.get("filename", "")
-            if resolve_mesh(filename, urdf) is None:
+            path = resolve_mesh(filename, urdf)
+            if path is None:
                 name = filename[len("package://"):].split("/")[0] if filename.startswith("package://") else filename
                 missing.append(f"package {name}" if filename.startswith("package://") else filename)
+            elif (why := _unreadable_mesh(path)) is not None:
+                missing.append(f"{path} ({why})")
     return list(dict.fromkeys(missing))
 
 
@@ -295,7 +312,8 @@ def fit_capsules(model: pin.Model, urdf: Path, flange: str, reach_m: float) -> t
             radius = float(np.clip(0.25 * np.linalg.norm(p1), 0.02, 0.12 * reach_m))
         capsules.append(Capsule(f"link{j}" if j else "base", frame, p0, p1, radius))
     missing = missing_collision_meshes(urdf)
-    why = (f"collision meshes not found: {', '.join(missing)}; set ROS_PACKAGE_PATH to the folder holding them"
+    why = (f"collision meshes not found or unreadable: {', '.join(missing)}; set ROS_PACKAGE_PATH to the folder "
+           "holding them"
            if missing else "no collision geometry loaded")
     how = ("fitted to the URDF collision geometry" if clouds else
            f"from each joint to the next, radius a quarter of that length ({why})")
@@ -326,6 +344,12 @@ def _outward_sign(model: pin.Model, flange_frame: pin.Frame, last_body: list[Cap
     return 1.0
 
 
+#: how far the assumed reflector stays from the surface of every capsule but its own link's: the
+#: beam to the tracker must pass clear of the arm's other links (the calibration's default beam
+#: margin is 20 mm), 10 mm more
+REFLECTOR_BEAM_CLEARANCE_M = 0.03
+
+
 def reflector_placement(model: pin.Model, flange: str, capsules: list[Capsule]) -> tuple[np.ndarray, np.ndarray]:
     """(position, opening axis) of the assumed reflector in the flange frame.
 
@@ -335,18 +359,24 @@ def reflector_placement(model: pin.Model, flange: str, capsules: list[Capsule]) 
     a URDF whose last link frame points back into the wrist, as Kinova's Jaco or Talos' arm),
     beyond every capsule of the last body (including locked fingers merged into it) by 10 mm, at
     least ``REFLECTOR_OFFSET_M`` from the flange. A reflector inside or behind the wrist would be
-    hidden from the tracker in every pose; one that another capsule holds in most configurations
-    (:mod:`pipeline.robot.reflector_check`) is moved further out along the axis."""
+    hidden from the tracker in every pose; one that another capsule, grown by
+    ``REFLECTOR_BEAM_CLEARANCE_M``, holds in most configurations (:mod:`pipeline.robot.reflector_check`:
+    a wrist around the flange, or a reflector a few millimetres off the capsule of the forearm that
+    turns about it, whose beam could never leave clear of that capsule) is moved further out along
+    the axis."""
     flange_frame = model.frames[model.getFrameId(flange)]
-    last_body = [c for c in capsules if c.frame == str(model.names[flange_frame.parentJoint])]
+    last_link = str(model.names[flange_frame.parentJoint])
+    last_body = [c for c in capsules if c.frame == last_link]
     sign = 1.0 if flange in FLANGE_LINKS else _outward_sign(model, flange_frame, last_body)
     offset = REFLECTOR_OFFSET_M
     for capsule in last_body:
         ends = [flange_frame.placement.actInv(p) for p in (capsule.p0, capsule.p1)]
         offset = max(offset, max(sign * e[2] for e in ends) + capsule.radius_m + 0.01)
     axis = np.array([0.0, 0.0, sign])
+    others = [c for c in capsules if c.frame != last_link]
     for _ in range(10):       # then out of every other capsule that holds it (a wrist around the flange)
-        holding = capsules_holding(model, flange, offset * axis, capsules)
+        holding = [*capsules_holding(model, flange, offset * axis, last_body),
+                   *capsules_holding(model, flange, offset * axis, others, REFLECTOR_BEAM_CLEARANCE_M)]
         if not holding:
             break
         offset += max(depth for _, _, depth in holding) + 0.01

@@ -23,7 +23,10 @@ like a catalogue arm of the same reach, and every placeholder is listed as an as
   times the largest gravity torque and ``EFFORT_INERTIA_FACTOR`` times the largest diagonal mass
   matrix entry times the acceleration limit assumed later (``5/s x velocity limit``, a vertical
   first axis has no gravity torque), over random configurations of the (placeholder) model; at
-  least ``MIN_EFFORT_SHARE`` of the largest.
+  least ``MIN_EFFORT_SHARE`` of the largest. A stated effort limit below the largest gravity torque
+  of its joint over those configurations, with the file's own masses, cannot be the arm's (the arm
+  could not hold itself; a value such as ``effort="30"`` on every joint of a 30 kg arm is a file's
+  default): it is replaced the same way, and so is every joint's when the file gives one value for all.
 
 An inertia that is not physically consistent (principal moments not positive or violating the
 triangle inequality ``I1 + I2 >= I3``, Traversaro et al., IROS 2016) is repaired by the smallest
@@ -113,9 +116,9 @@ def placeholder_inertias(model: pin.Model, root: ET.Element, flange_local: np.nd
     if from_meshes:
         total = sum(model.inertias[j].mass for j in bad)
         litres = 1e3 * sum(float(v or 0.0) for v in volumes.values())
-        how = (f"estimated from the links' mesh volumes ({litres:.3g} L of convex hulls) at "
-               f"{LINK_DENSITY_KG_M3:g} kg/m³, {total:.0f} kg in all against {sum(rule_kg.values()):.0f} kg by the "
-               f"reach-class rule ({rule})")
+        how = (f"{total:.0f} kg in all against {sum(rule_kg.values()):.0f} kg by the reach-class rule, estimated "
+               f"from the links' mesh volumes ({litres:.3g} L of convex hulls at {LINK_DENSITY_KG_M3:g} kg/m³; "
+               f"the rule: {rule})")
     else:
         why = "no meshes found for every such link" if urdf is not None else "no meshes looked up"
         how = f"sized like {rule} ({why})"
@@ -153,23 +156,37 @@ def repair_inertias(model: pin.Model, root: ET.Element) -> list[str]:
     return notes
 
 
-def _random_torque_max(model: pin.Model, acceleration_rad_s2: np.ndarray, samples: int = 200) -> np.ndarray:
-    """Per joint, over random configurations: the larger of the gravity and acceleration torque terms."""
+def _random_torque_terms(model: pin.Model, acceleration_rad_s2: np.ndarray,
+                         samples: int = 200) -> tuple[np.ndarray, np.ndarray]:
+    """Per joint, over random configurations: the largest gravity torque ``|g(q)|`` and the largest
+    ``diag(M(q)) x acceleration limit``."""
     data = model.createData()
     lo, hi = np.sort([model.lowerPositionLimit, model.upperPositionLimit], axis=0)   # swapped: refused later
-    worst = np.zeros(model.nq)
+    gravity, inertia = np.zeros(model.nq), np.zeros(model.nq)
     for q in np.random.default_rng(0).uniform(lo, hi, (samples, model.nq)):
-        gravity = EFFORT_GRAVITY_FACTOR * np.abs(pin.computeGeneralizedGravity(model, data, q))
-        inertia = EFFORT_INERTIA_FACTOR * np.diag(pin.crba(model, data, q)) * acceleration_rad_s2
-        worst = np.maximum(worst, np.maximum(gravity, inertia))
-    return worst
+        gravity = np.maximum(gravity, np.abs(pin.computeGeneralizedGravity(model, data, q)))
+        inertia = np.maximum(inertia, np.diag(pin.crba(model, data, q)) * acceleration_rad_s2)
+    return gravity, inertia
+
+
+def _efforts_to_replace(effort_Nm: np.ndarray, gravity_Nm: np.ndarray) -> tuple[list[int], list[int]]:
+    """Joints whose effort limit is 0 or missing, and joints whose stated limit cannot hold the arm
+    (below the joint's largest gravity torque; every joint when the file gives one value for all)."""
+    missing = [i for i, e in enumerate(effort_Nm) if not e > 0]
+    weak = [i for i, e in enumerate(effort_Nm) if e > 0 and e < gravity_Nm[i]]
+    stated = effort_Nm[effort_Nm > 0]
+    if weak and stated.size == effort_Nm.size >= 3 and np.ptp(stated) <= 1e-9 * stated.max():
+        weak = [i for i in range(effort_Nm.size) if i not in missing]
+    return missing, weak
 
 
 def placeholder_limits(model: pin.Model, root: ET.Element, reach_m: float,
-                       keep: frozenset[str] | set[str] = frozenset()) -> list[str]:
+                       keep: frozenset[str] | set[str] = frozenset(), masses_stated: bool = True) -> list[str]:
     """Replace velocity and effort limits <= 0 (``velocity="0"``, ``effort="0"``) by placeholders (in place).
 
-    ``keep``: ``"velocity"`` / ``"effort"`` when robot.yaml sets that limit (nothing stated for it)."""
+    ``keep``: ``"velocity"`` / ``"effort"`` when robot.yaml sets that limit (nothing stated for it).
+    A stated effort limit that cannot hold the arm is replaced only when the masses are the file's
+    own (``masses_stated``): against placeholder masses the file's limit is the better fact."""
     notes = []
     nq = model.nq
     names = [str(n) for n in model.names[1:]]
@@ -184,17 +201,31 @@ def placeholder_limits(model: pin.Model, root: ET.Element, reach_m: float,
             notes.append(f"PLACEHOLDER velocity limits (velocity 0 or missing in the URDF) on "
                          f"{', '.join(f'{names[i]} {velocity[i]:.2f} rad/s' for i in bad_v)}: axes 1-3 at "
                          f"{ARM_SPEED_RAD_S:g} rad/s x sqrt(1.6 m / reach), the wrist twice that (catalogue arms)")
+    if "effort" in keep:             # robot.yaml states them: read there
+        return notes
     effort = model.effortLimit.copy()
-    bad_e = [i for i in range(nq) if not effort[i] > 0]
-    if bad_e:
-        needed = _random_torque_max(model, ACCELERATION_PER_VELOCITY_1_S * model.velocityLimit)
+    gravity, inertia = _random_torque_terms(model, ACCELERATION_PER_VELOCITY_1_S * model.velocityLimit)
+    missing, weak = _efforts_to_replace(effort, gravity)
+    if not masses_stated:
+        weak = []
+    if missing or weak:
+        needed = np.maximum(EFFORT_GRAVITY_FACTOR * gravity, EFFORT_INERTIA_FACTOR * inertia)
         floor = MIN_EFFORT_SHARE * max(float(needed.max()), 1.0)
-        for i in bad_e:
+        stated = {i: float(effort[i]) for i in weak}
+        for i in sorted({*missing, *weak}):
             effort[i] = max(float(needed[i]), floor)
         model.effortLimit = effort
-        if "effort" not in keep:
-            notes.append(f"PLACEHOLDER effort limits (effort 0 or missing in the URDF) on "
-                         f"{', '.join(f'{names[i]} {effort[i]:.0f} N·m' for i in bad_e)}: "
-                         f"{EFFORT_GRAVITY_FACTOR:g} x the largest gravity torque or {EFFORT_INERTIA_FACTOR:g} x "
-                         f"inertia x acceleration limit, at least {MIN_EFFORT_SHARE:.0%} of the largest")
+        why = []
+        if missing:
+            why.append("effort 0 or missing in the URDF on " + ", ".join(names[i] for i in missing))
+        short = [i for i in weak if stated[i] < gravity[i]]
+        if short:
+            why.append("the URDF's limit below the largest gravity torque over random configurations, the arm "
+                       "could not hold itself, on " + ", ".join(f"{names[i]} ({stated[i]:.4g} < {gravity[i]:.4g} "
+                                                                "N·m)" for i in short)
+                       + ("; one value on every joint, so replaced on all" if len(short) < len(weak) else ""))
+        notes.append(f"PLACEHOLDER effort limits ({'; '.join(why)}) on "
+                     f"{', '.join(f'{names[i]} {effort[i]:.0f} N·m' for i in sorted({*missing, *weak}))}: "
+                     f"{EFFORT_GRAVITY_FACTOR:g} x the largest gravity torque or {EFFORT_INERTIA_FACTOR:g} x "
+                     f"inertia x acceleration limit, at least {MIN_EFFORT_SHARE:.0%} of the largest")
     return notes

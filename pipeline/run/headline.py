@@ -189,7 +189,11 @@ def _calibration_rows(s: CalibrationSummary, gates: StageSummary) -> list[Row]:
         check = gates.gate("actual_over_predicted")
         verdict = _gate_verdict(check)
         threshold = check.threshold if check is not None else None
-        if verdict == PASS and threshold and actual_over < 1.0 / threshold:
+        # the pessimistic bound: the held-out test's (its spread over the scored poses), else 1 / gate
+        test = s.actual_over_predicted_test if s.heldout_rms_position_error_after_m is not None else None
+        lower = (test.lower_threshold if test is not None and test.lower_threshold is not None
+                 else 1.0 / threshold if threshold else None)
+        if verdict == PASS and lower is not None and actual_over < lower:
             verdict = WARN                 # a pessimistic prediction: its gate passes, the stage warns
         rows.append(Row("calibration", f"{label}, actual / predicted", length(after) + every,
                         f"predicted {length(predicted)}", verdict, source, ratio(actual_over)))

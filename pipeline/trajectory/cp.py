@@ -269,16 +269,25 @@ def _refined_nlp(pm: PlanningModel, path: JointPath, s: np.ndarray, midpoints: b
                        np.concatenate(lbg), np.concatenate(ubg), ubx, len(kinds))
 
 
+def _row_bounds(scale: np.ndarray, n_kinds: int, n_intervals: int, nq: int) -> np.ndarray:
+    """Bounds (kinds x N, nq) of one block of normalised rows from a scale per joint (nq,) or per
+    grid interval and joint (N, nq), the same for each kind of check point of an interval."""
+    bound = np.ones((n_kinds * n_intervals, nq))
+    return bound * (np.tile(scale, (n_kinds, 1)) if scale.ndim == 2 else scale)
+
+
 def solve_cp_refined(pm: PlanningModel, path: JointPath, warm: CPProfile, midpoints: bool = True,
                      name: str = "cp", torque_margin: float = 0.0,
-                     torque_scale: np.ndarray | None = None, acceleration_limits: bool = False) -> CPProfile:
+                     torque_scale: np.ndarray | None = None, acceleration_limits: bool = False,
+                     acceleration_scale: np.ndarray | None = None) -> CPProfile:
     """Non-convex refinement in ``x = sdot`` with viscous + smooth Coulomb friction.
 
     Warm-started from ``warm`` (same grid): its speeds; when ``warm`` came from this problem (a
     re-solve with tightened limits) also its multipliers and its built solver, so such a re-solve
     takes a few iterations and no build. ``torque_margin`` (e.g. 0.002) or ``torque_scale`` (per
     joint (nq,), or per grid interval and joint (N, nq): only the intervals whose fine samples
-    exceed) tighten the torque limits; ``acceleration_limits`` adds the joint acceleration rows.
+    exceed) tighten the torque limits; ``acceleration_limits`` adds the joint acceleration rows,
+    which ``acceleration_scale`` (same shapes) tightens likewise.
     """
     t0 = time.perf_counter()
     s = warm.s
@@ -288,12 +297,14 @@ def solve_cp_refined(pm: PlanningModel, path: JointPath, warm: CPProfile, midpoi
     key = (N, midpoints, torque_margin, acceleration_limits)
     if not (isinstance(nlp, _RefinedNLP) and nlp.key[0] is pm and nlp.key[1] is path and nlp.key[2:] == key):
         nlp = _refined_nlp(pm, path, s, midpoints, name, torque_margin, acceleration_limits)
-    bound = np.ones((nlp.n_kinds * N, pm.nq))
-    if torque_scale is not None:
-        scale = np.asarray(torque_scale, float)              # (nq,) or per interval (N, nq)
-        bound = bound * (np.tile(scale, (nlp.n_kinds, 1)) if scale.ndim == 2 else scale)
     lbg, ubg = nlp.lbg.copy(), nlp.ubg.copy()
-    lbg[: bound.size], ubg[: bound.size] = -bound.ravel(order="F"), bound.ravel(order="F")
+    # the torque rows, then (acceleration_limits) the acceleration rows: (kinds x N, nq) each, by column
+    for block, limit_scale in enumerate((torque_scale, acceleration_scale if acceleration_limits else None)):
+        if limit_scale is None:
+            continue
+        bound = _row_bounds(np.asarray(limit_scale, float), nlp.n_kinds, N, pm.nq).ravel(order="F")
+        rows = slice(block * bound.size, (block + 1) * bound.size)
+        lbg[rows], ubg[rows] = -bound, bound
     lam = warm.multipliers if warm.nlp is nlp else None
     extra = {"lam_x0": lam[0], "lam_g0": lam[1]} if lam is not None else {}
     sol = nlp.solver(x0=np.minimum(warm.sdot, nlp.ubx), lbx=np.zeros(N + 1), ubx=nlp.ubx, lbg=lbg, ubg=ubg, **extra)
@@ -306,7 +317,9 @@ def solve_cp_refined(pm: PlanningModel, path: JointPath, warm: CPProfile, midpoi
                            "solver_status": stats["return_status"], "acceleration_limits": acceleration_limits,
                            "friction": "viscous+tanh coulomb", "n_grid": N,
                            "torque_margin": torque_margin, "warm_started_multipliers": lam is not None,
-                           "torque_scale": None if torque_scale is None else np.asarray(torque_scale).tolist()},
+                           "torque_scale": None if torque_scale is None else np.asarray(torque_scale).tolist(),
+                           "acceleration_scale": (None if acceleration_scale is None
+                                                  else np.asarray(acceleration_scale).tolist())},
                      multipliers=(np.asarray(sol["lam_x"]).ravel(), np.asarray(sol["lam_g"]).ravel()), nlp=nlp)
 
 

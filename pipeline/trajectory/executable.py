@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.control.config import ControlConfig
+from pipeline.core.errors import InfeasibleError, SolverError
 from pipeline.robot.model import RobotModel
 from pipeline.stage_api import RealRobot
 from pipeline.trajectory.config import TrajectoryConfig
@@ -50,6 +51,9 @@ from pipeline.trajectory.validate import ServoRun, simulate_on_real
 SERVO_ROUNDS = 6
 #: a remedy is strong enough once its ratio is within [GATE_AIM, 1] x the gate (regula falsi aims here)
 GATE_AIM = 0.97
+#: the reserve remedy keeps each joint's limit at least this many times the torque that holds the path
+#: at rest: at exactly that torque the path can only be crawled, and the re-solve has no motion
+RESERVE_HOLDING_MARGIN = 1.1
 
 
 @dataclass
@@ -60,6 +64,8 @@ class ExecutableCP:
     trajectory: JointTrajectory
     sim: ServoRun
     candidates: dict[str, dict] = field(default_factory=dict)
+    #: remedies that could not be planned, and why (one line each)
+    unavailable: dict[str, str] = field(default_factory=dict)
 
     def summary(self, optimal_duration_s: float) -> dict:
         s: dict[str, Any] = {"cp_executed": self.name, "cp_executed_duration_s": self.trajectory.duration_s,
@@ -68,6 +74,8 @@ class ExecutableCP:
             s[f"cp_executable_{name}_duration_s"] = c["duration_s"]
             s[f"cp_executable_{name}_time_cost"] = c["duration_s"] / optimal_duration_s - 1.0
             s[f"cp_executable_{name}_sim_max_averaged_torque_ratio"] = c["max_averaged_torque_ratio"]
+        for name, why in self.unavailable.items():
+            s[f"cp_executable_{name}_unavailable"] = why
         return s
 
     def table(self, optimal_duration_s: float, gate: float) -> str:
@@ -81,6 +89,8 @@ class ExecutableCP:
                          f"{100 * (c['duration_s'] / optimal_duration_s - 1):.1f} % | "
                          f"{c['max_averaged_torque_ratio']:.3f} | {c['rounds']} | "
                          f"{'yes' if name == self.name else '-'} |")
+        for name, why in self.unavailable.items():
+            lines.append(f"| {name} (not available: {why}) | – | – | – | – | - |")
         return "\n".join(lines)
 
 
@@ -139,17 +149,29 @@ def servo_slowed(real: RealRobot, robot: RobotModel, traj: JointTrajectory, ccfg
     return to_gate(run, first, lambda r: float(np.sqrt(r / gate)) - 1.0, gate)
 
 
+def reserve_floor(pm: PlanningModel, path: JointPath, n_grid: int) -> np.ndarray:
+    """Per joint, the smallest torque-limit scale the reserve remedy may use on ``path``:
+    ``RESERVE_HOLDING_MARGIN x max_s (|g_j(q(s))| + F_c,j) / tau_max,j`` on the ``n_grid`` grid (at
+    most 1): below it the arm cannot hold the path at rest, let alone move along it."""
+    q = path(np.linspace(0.0, 1.0, n_grid + 1))
+    holding_Nm = np.max(np.abs(pm.rigid_torques(q, np.zeros_like(q), np.zeros_like(q))), axis=0) + pm.coulomb_Nm
+    return np.minimum(RESERVE_HOLDING_MARGIN * holding_Nm / pm.effort_Nm, 1.0)
+
+
 def servo_reserved(real: RealRobot, robot: RobotModel, pm: PlanningModel, path: JointPath, profile: CPProfile,
                    ccfg: ControlConfig,
                    seed: int, gate: float, n_grid: int, fine_dt_s: float,
                    first_sim: ServoRun) -> tuple[JointTrajectory, ServoRun, int]:
     """The time-optimal profile re-solved with the torque limits of the joints over the gate lowered,
     ``scale_j = 1 / (1 + x (r_j - 1))`` with ``r_j`` their 4 ms mean ratio on the time-optimal plan
-    (``x = 1``: each by its whole excess), ``x`` by :func:`to_gate`."""
+    (``x = 1``: each by its whole excess), ``x`` by :func:`to_gate`; never below
+    ``RESERVE_HOLDING_MARGIN`` times the share of the limit that holds the path at rest (gravity and
+    Coulomb friction, on the grid), below which no motion along the path exists."""
     r0 = np.maximum(averaged_ratio_per_joint(first_sim) / gate, 1.0)
+    floor = reserve_floor(pm, path, n_grid)
 
     def run(x: float) -> tuple[JointTrajectory, ServoRun]:
-        scale = 1.0 / (1.0 + x * (r0 - 1.0))
+        scale = np.maximum(1.0 / (1.0 + x * (r0 - 1.0)), floor)
         prof = solve_cp_reachability(pm, path, n_grid, name="cp_reserve", torque_scale=scale,
                                      acceleration_limits=False)
         tr = prof.sample(path, fine_dt_s)
@@ -172,11 +194,15 @@ def executable_cp(real: RealRobot, robot: RobotModel, pm: PlanningModel, cp: CPP
     cands: dict[str, tuple[JointTrajectory, ServoRun, int, str]] = {
         "time_optimal": (cp.trajectories["cp"], cp_sim, 0, "as planned")}
     over = cp_sim.max_averaged_torque_ratio > gate
+    unavailable: dict[str, str] = {}
     if over:
-        tr, sim, rounds = servo_reserved(real, robot, pm, cp.path, cp.optimal, ccfg, seed, gate,
-                                         cfg.cp_n_grid, cfg.fine_dt_s, cp_sim)
-        scale = tr.info.get("torque_scale", [1.0] * pm.nq)
-        cands["reserve"] = (tr, sim, rounds, "torque limits x " + ", ".join(f"{s:.2f}" for s in scale))
+        try:
+            tr, sim, rounds = servo_reserved(real, robot, pm, cp.path, cp.optimal, ccfg, seed, gate,
+                                             cfg.cp_n_grid, cfg.fine_dt_s, cp_sim)
+            scale = tr.info.get("torque_scale", [1.0] * pm.nq)
+            cands["reserve"] = (tr, sim, rounds, "torque limits x " + ", ".join(f"{s:.2f}" for s in scale))
+        except (InfeasibleError, SolverError) as exc:    # lowered limits no profile meets: the other remedies
+            unavailable["reserve"] = str(exc)
     if "cp_smooth" in cp.trajectories:
         tr, sim, rounds = servo_slowed(real, robot, cp.trajectories["cp_smooth"], ccfg, seed, gate)
         cands["smooth"] = (tr, sim, rounds, f"jerk-limited, slowed x {tr.info.get('servo_time_scale', 1.0):.3f}")
@@ -188,7 +214,7 @@ def executable_cp(real: RealRobot, robot: RobotModel, pm: PlanningModel, cp: CPP
     best = choose(table, gate)
     tr, sim = cands[best][0], cands[best][1]
     executed = JointTrajectory("cp_executed", tr.t_s, tr.q, tr.v, tr.a, {**tr.info, "remedy": best})
-    return ExecutableCP(best, executed, sim, table)
+    return ExecutableCP(best, executed, sim, table, unavailable)
 
 
 def choose(candidates: dict[str, dict], gate: float) -> str:

@@ -58,8 +58,10 @@ _BIG = 1e30
 
 
 def _rows(pm: PlanningModel, path: JointPath, s: np.ndarray, tau_max: np.ndarray,
-          acceleration: bool) -> dict:
-    """Stage rows normalised by their limits, for points start / mid / end of every interval.
+          acceleration: bool, acceleration_scale: np.ndarray | None = None) -> dict:
+    """Stage rows normalised by their limits, for points start / mid / end of every interval;
+    ``acceleration_scale`` (nq,) or (N, nq) shrinks the acceleration limits as ``tau_max`` does the
+    torque limits (per interval: the intervals whose fine samples exceed).
 
     Returns per point P (0 start, 1 mid, 2 end) arrays of shape (N, R): ``A`` (coefficient of
     ``a``), ``C`` (of ``b_P``), ``G`` (constant), ``FV``, ``FC`` (friction coefficients on
@@ -93,6 +95,8 @@ def _rows(pm: PlanningModel, path: JointPath, s: np.ndarray, tau_max: np.ndarray
     for P, i in idx.items():
         scale = np.ones((N, A.shape[1]))
         scale[:, :pm.nq] = tau_pts[P]
+        if acceleration and acceleration_scale is not None:
+            scale[:, pm.nq:] = np.broadcast_to(np.asarray(acceleration_scale, float), (N, pm.nq))
         out[P] = {"A": A[i] / scale, "C": C[i] / scale, "G": G[i] / scale, "FV": FV[i] / scale,
                   "FC": FC[i] / scale, "D": D[i], "vb": vb[i], "nq": pm.nq}
     return out
@@ -253,12 +257,14 @@ def _call(fold: ca.Function, stages: np.ndarray, n: int) -> np.ndarray:
 def solve_cp_reachability(pm: PlanningModel, path: JointPath, n_grid: int = 400, name: str = "cp",
                           torque_margin: float = 0.0, torque_scale: np.ndarray | None = None,
                           acceleration_limits: bool = True, tol: float = 1e-4,
-                          max_rounds: int = 30, warm: CPProfile | None = None) -> CPProfile:
+                          max_rounds: int = 30, warm: CPProfile | None = None,
+                          acceleration_scale: np.ndarray | None = None) -> CPProfile:
     """Time-optimal profile with viscous + smooth Coulomb friction (module docstring).
 
     ``torque_margin`` / ``torque_scale`` tighten the torque limits as in
     :func:`pipeline.trajectory.cp.solve_cp_refined`: per joint (nq,) or per grid interval and
-    joint (N, nq), the latter to tighten only where a fine-grid check found an excess. ``warm``:
+    joint (N, nq), the latter to tighten only where a fine-grid check found an excess;
+    ``acceleration_scale`` likewise the acceleration limits. ``warm``:
     a profile on the same grid whose speeds start the friction iteration (fewer rounds). Raises
     InfeasibleError when the path cannot be held at rest within the torque limits, SolverError when
     the friction iteration does not settle within ``max_rounds``.
@@ -270,7 +276,7 @@ def solve_cp_reachability(pm: PlanningModel, path: JointPath, n_grid: int = 400,
     tau_max = pm.effort_Nm * (1.0 - torque_margin)
     if torque_scale is not None:
         tau_max = tau_max * np.asarray(torque_scale, float)
-    rows = _rows(pm, path, s, tau_max, acceleration_limits)
+    rows = _rows(pm, path, s, tau_max, acceleration_limits, acceleration_scale)
     nq = pm.nq
     limits = np.broadcast_to(tau_max, (N, nq))
     for P in (0, 2):
@@ -318,4 +324,6 @@ def solve_cp_reachability(pm: PlanningModel, path: JointPath, n_grid: int = 400,
                      info={"method": "reachability", "friction_rounds": rounds, "midpoints": True,
                            "friction": "viscous+tanh coulomb", "n_grid": N, "torque_margin": torque_margin,
                            "acceleration_limits": acceleration_limits,
-                           "torque_scale": None if torque_scale is None else np.asarray(torque_scale).tolist()})
+                           "torque_scale": None if torque_scale is None else np.asarray(torque_scale).tolist(),
+                           "acceleration_scale": (None if acceleration_scale is None
+                                                  else np.asarray(acceleration_scale).tolist())})

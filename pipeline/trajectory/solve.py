@@ -132,27 +132,33 @@ class CPPlan:
 
 
 def verified_cp(pm: PlanningModel, path: JointPath, opt: CPProfile, cfg: TrajectoryConfig,
-                 solve: Callable[[np.ndarray | None, CPProfile | None], CPProfile]) -> tuple[CPProfile, int]:
-    """Check ``opt`` on the fine time grid (full friction model) and, while a torque exceeds its limit
-    by more than ``cfg.violation_tolerance``, tighten and re-solve warm-started from it (the
-    reachability solver from its speeds, the NLP from its primal and dual solution). Tightening is
-    local: only the grid intervals (and joints) whose fine samples exceed, by their excess.
-    Returns the plan and the number of re-solves."""
+                 solve: Callable[[np.ndarray | None, np.ndarray | None, CPProfile | None], CPProfile],
+                 ) -> tuple[CPProfile, int]:
+    """Check ``opt`` on the fine time grid (full friction model) and, while a torque (or, with
+    ``cfg.acceleration_limits``, a joint acceleration) exceeds its limit by more than
+    ``cfg.violation_tolerance``, tighten and re-solve warm-started from it (the reachability solver
+    from its speeds, the NLP from its primal and dual solution). Tightening is local: only the grid
+    intervals (and joints) whose fine samples exceed, by their excess; the grid enforces the limits
+    at each interval's ends and midpoint, and between them the path's curvature moves both.
+    ``solve(torque_scale, acceleration_scale, warm)``. Returns the plan and the number of re-solves."""
     N = len(opt.s) - 1
-    scale = np.ones((N, pm.nq))
+    scales = {"torque": np.ones((N, pm.nq)), "acceleration": np.ones((N, pm.nq))}
     rounds = 0
     for _ in range(cfg.max_tightening_rounds):
         tr = opt.sample(path, cfg.fine_dt_s)
-        ratio = torque_ratio(pm, pm.torques(tr.q, tr.v, tr.a))          # full model, every fine sample
-        if ratio.max() <= 1.0 + cfg.violation_tolerance:
+        ratios = {"torque": torque_ratio(pm, pm.torques(tr.q, tr.v, tr.a))}     # full model, every fine sample
+        if cfg.acceleration_limits:
+            ratios["acceleration"] = np.abs(tr.a) / pm.acceleration_rad_s2
+        if max(r.max() for r in ratios.values()) <= 1.0 + cfg.violation_tolerance:
             break
         rounds += 1
         k = np.clip(np.searchsorted(opt.grid_times(), tr.t_s, side="right") - 1, 0, N - 1)
-        worst = np.zeros((N, pm.nq))
-        np.maximum.at(worst, k, ratio)
-        bad = worst > 1.0 + cfg.violation_tolerance
-        scale[bad] = scale[bad] / worst[bad] * (1.0 - 0.25 * cfg.violation_tolerance)
-        opt = solve(scale, opt)
+        for kind, ratio in ratios.items():
+            worst = np.zeros((N, pm.nq))
+            np.maximum.at(worst, k, ratio)
+            bad = worst > 1.0 + cfg.violation_tolerance
+            scales[kind][bad] = scales[kind][bad] / worst[bad] * (1.0 - 0.25 * cfg.violation_tolerance)
+        opt = solve(scales["torque"], scales["acceleration"] if cfg.acceleration_limits else None, opt)
     return opt, rounds
 
 
@@ -169,19 +175,20 @@ def plan_cp(pm: PlanningModel, path: JointPath, cfg: TrajectoryConfig) -> CPPlan
     eq = solve_cp_convex(pm, path, N, midpoints=False, name="cp_equal", acceleration_limits=acc)
     cv = None
 
-    def solve(scale: np.ndarray | None, warm: CPProfile | None) -> CPProfile:
+    def solve(scale: np.ndarray | None, acceleration_scale: np.ndarray | None, warm: CPProfile | None) -> CPProfile:
         if cfg.cp_method == "reachability":
             return solve_cp_reachability(pm, path, N, name="cp", torque_margin=cfg.cp_torque_margin,
-                                         torque_scale=scale, acceleration_limits=acc, warm=warm)
+                                         torque_scale=scale, acceleration_limits=acc, warm=warm,
+                                         acceleration_scale=acceleration_scale)
         return solve_cp_refined(pm, path, warm, midpoints=True, name="cp", torque_margin=cfg.cp_torque_margin,
-                                torque_scale=scale, acceleration_limits=acc)
+                                torque_scale=scale, acceleration_limits=acc, acceleration_scale=acceleration_scale)
 
     if cfg.cp_method == "nlp":
         t0 = time.perf_counter()
         cv = solve_cp_convex(pm, path, N, midpoints=True, name="cp_convex", acceleration_limits=acc)
         tim["cp_convex"] = time.perf_counter() - t0
     t0, c0 = time.perf_counter(), time.process_time()
-    opt = solve(None, cv)
+    opt = solve(None, None, cv)
     tim["cp_first_solve"], tim["cp_first_solve_cpu"] = time.perf_counter() - t0, time.process_time() - c0
     opt, tim["cp_tightening_rounds"] = verified_cp(pm, path, opt, cfg, solve)
     tim["cp_verified_cpu"] = time.process_time() - c0

@@ -14,7 +14,7 @@ from pipeline.calibration.candidates import chain_from_robot, filter_configurati
 from pipeline.robot.example_robots import EXAMPLE_ARMS, example_arm_urdf
 from pipeline.robot.model import RobotModel
 from pipeline.robot.spec import Capsule
-from pipeline.robot.urdf_import import REFLECTOR_OFFSET_M, reflector_placement
+from pipeline.robot.urdf_import import REFLECTOR_BEAM_CLEARANCE_M, REFLECTOR_OFFSET_M, reflector_placement
 
 #: public arms whose last link frame points into the wrist or along it, beside the named ones
 OTHER_ARMS = ("kinova_description/robots/kinova.urdf",)
@@ -68,3 +68,15 @@ def test_reflector_goes_to_the_side_the_tool_geometry_lies_on():
     position, axis = reflector_placement(model, "tip", [gripper])
     assert axis[2] == -1.0
     assert -position[2] > 0.2 + gripper.radius_m        # beyond the gripper's end
+
+
+def test_reflector_leaves_a_beams_clearance_to_the_other_links():
+    """A forearm capsule whose end cap the assumed reflector would touch (1 mm outside it in every
+    pose: a wrist that turns about it): moved out by the beam clearance, as the tracker's beam
+    must pass clear of that capsule."""
+    model = _chain_model(0.0)
+    start = reflector_placement(model, "tip", [])[0]
+    cap = Capsule("link1", "j1", np.array([0.0, 0.0, 0.0]), np.array([0.3, 0.0, 0.0]),
+                  float(np.linalg.norm(start)) - 1e-3)
+    position, _ = reflector_placement(model, "tip", [cap])
+    assert np.linalg.norm(position) >= cap.radius_m + REFLECTOR_BEAM_CLEARANCE_M

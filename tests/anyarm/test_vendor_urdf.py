@@ -20,6 +20,7 @@ from pipeline.robot.example_robots import example_arm_urdf
 from pipeline.robot.model import RobotModel
 from pipeline.robot.plausibility import robot_warnings
 from pipeline.robot.reflector_check import capsules_holding
+from pipeline.robot.urdf_import import absolute_mesh_paths, missing_collision_meshes
 from pipeline.robot.vendor_urdf import BASE_MASS_SHARE, datasheet_mass_kg
 
 ARM_LINKS = ("shoulder_link", "upper_arm_link", "forearm_link", "wrist_1_link", "wrist_2_link", "wrist_3_link")
@@ -206,3 +207,45 @@ def test_bad_lock_option_is_one_line(tmp_path, capsys):
     assert main(["robot", "init", str(urdf), "--lock", "rail"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("error: --lock:") and "\n" not in err
+
+
+def test_one_effort_limit_on_every_joint_that_cannot_hold_the_arm_is_a_placeholder(tmp_path):
+    """``effort="5"`` on every joint of the UR5 (shoulder holding torque ~100 N·m): not the arm's."""
+    urdf = _write(tmp_path, re.sub(r'effort="[^"]*"', 'effort="5"', _source()))
+    robot = RobotModel.load(urdf)
+    line = next(a for a in robot.assumptions if a.startswith("PLACEHOLDER effort limits"))
+    assert "could not hold itself" in line and "one value on every joint, so replaced on all" in line
+    data = robot.model.createData()
+    for q in np.random.default_rng(1).uniform(robot.limits.lower_rad, robot.limits.upper_rad, (50, robot.nq)):
+        assert np.all(np.abs(pin.computeGeneralizedGravity(robot.model, data, q)) <= robot.limits.effort_Nm)
+    assert main(["robot", "init", str(urdf)]) == 0
+    assert re.search(r"effort_Nm: \[.*\]  # ASSUMED: PLACEHOLDER", (urdf.parent / "robot.yaml").read_text())
+
+
+def test_a_stated_effort_limit_the_arm_can_hold_with_is_kept(tmp_path):
+    """Only the joints below their gravity torque are replaced; a file's own limits that hold stay."""
+    stated = RobotModel.load(example_arm_urdf("ur5") or pytest.skip("example-robot-data not installed"))
+    weak = re.sub(r'(<joint name="shoulder_lift_joint".*?effort=")[^"]*"', r'\g<1>5"', _source(), flags=re.S)
+    robot = RobotModel.load(_write(tmp_path, weak))
+    changed = np.flatnonzero(robot.limits.effort_Nm != stated.limits.effort_Nm)
+    assert changed.tolist() == [1] and robot.limits.effort_Nm[1] > 5
+    assert not any("PLACEHOLDER effort" in a for a in stated.assumptions)
+
+
+def test_an_empty_or_lfs_pointer_mesh_counts_as_missing(tmp_path):
+    """A mesh file cloned without Git LFS (its pointer) or left empty is named; capsules come from the chain."""
+    folder = tmp_path / "arm"
+    folder.mkdir()
+    text = absolute_mesh_paths(_source(), example_arm_urdf("ur5"))
+    first = re.search(r'<collision>.*?filename="([^"]+)"', text, flags=re.S).group(1)
+    pointer = folder / "pointer.stl"
+    pointer.write_text("version https://git-lfs.github.com/spec/v1\noid sha256:0\nsize 1\n")
+    (folder / "empty.stl").write_bytes(b"")
+    text = text.replace(first, str(pointer), 1)
+    second = re.findall(r'<collision>.*?filename="([^"]+)"', text, flags=re.S)[1]
+    urdf = folder / "arm.urdf"
+    urdf.write_text(text.replace(second, str(folder / "empty.stl"), 1))
+    missing = missing_collision_meshes(urdf)
+    assert f"{pointer} (a Git LFS pointer, not the mesh)" in missing and f"{folder / 'empty.stl'} (empty)" in missing
+    robot = RobotModel.load(urdf)
+    assert any("not found or unreadable" in a and "pointer.stl" in a for a in robot.assumptions)

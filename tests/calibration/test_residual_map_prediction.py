@@ -8,17 +8,12 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from pipeline.calibration import error_model as em
-from pipeline.calibration import measure as ms
 from pipeline.calibration import model_selection as msel
-from pipeline.calibration import stage as st
 from pipeline.calibration import validate as va
 from pipeline.calibration.crossval import cross_validate
 from pipeline.calibration.estimate import estimate
 from pipeline.calibration.residual_map import fit_residual_map
-from pipeline.robot.model import RobotModel
-
-SIGMA_M = 10e-6
+from tests.calibration.simulated_readings import SIGMA_M, rx130l_readings
 
 
 def _field_m(Q: np.ndarray) -> np.ndarray:
@@ -29,18 +24,7 @@ def _field_m(Q: np.ndarray) -> np.ndarray:
 
 @pytest.fixture(scope="session")
 def setting():
-    robot = RobotModel.load("rx130l")
-    mm = em.MeasurementModel(robot)
-    rng = np.random.default_rng(7)
-    _, basis = st.identify_parameter_set(robot, mm, st.Config(parameters="geometric"), rng)
-    T = robot.tracker.transform_tracker_to_base
-    lo, hi = robot.limits.lower_rad, robot.limits.upper_rad
-    mid, half = 0.5 * (lo + hi), 0.25 * (hi - lo)      # a working region the map can cover
-    Q = rng.uniform(mid - half, mid + half, (120, robot.nq))
-    Y = (mm.predict(Q, np.zeros(mm.n), T) + _field_m(Q) @ T.rotation
-         + SIGMA_M * rng.standard_normal((len(Q), 3)))
-    meas = ms.Measurements(Q, Y, np.full(len(Q), SIGMA_M), "simulated (field)")
-    return robot, mm, basis, meas, rng
+    return rx130l_readings(120, "simulated (field)", _field_m)
 
 
 def test_predicted_error_adds_the_maps_posterior_variance(setting):

@@ -158,14 +158,29 @@ def test_diverged_excitation_falls_back_to_the_best_random(rx130l, setup):
     assert res.feasibility.feasible
 
 
+def test_the_best_random_fallback_passes_the_fine_grid_check(rx130l, setup):
+    """The random starts pass a grid of n_check // 2 samples; the fallback is scaled into the limits
+    on the grid of n_check, where all four of these randoms peak over a limit between samples."""
+    reg, base, limits, sym = setup
+    randoms = F.random_feasible_trajectories(rx130l, limits, 5, 0.1, 4, np.random.default_rng(12), n_check=4)
+    assert not any(F.check_trajectory(rx130l, r, limits, 8).feasible for r in randoms)
+    res = D.optimize_excitation(rx130l, sym, reg, base, limits, np.random.default_rng(12), n_samples=40,
+                                n_starts=2, n_random=4, max_iter=1, n_check=8)
+    assert res.source == "best random"
+    assert res.feasibility.feasible and F.check_trajectory(rx130l, res.trajectory, limits, 8).feasible
+
+
 def test_optimum_worse_than_random_is_not_used(rx130l, setup, monkeypatch):
     """A (forced) converged optimum worse than the best random start: the best random is used."""
     reg, base, limits, sym = setup
     worst: dict = {}
+    shrink = D.shrink_to_feasible
 
     def bad_shrink(robot, traj, lim, n_check):
         randoms = F.random_feasible_trajectories(rx130l, limits, 5, 0.1, 4, np.random.default_rng(12),
                                                  n_check=n_check // 2)
+        if any(np.array_equal(traj.coefficients, r.coefficients) for r in randoms):
+            return shrink(robot, traj, lim, n_check)       # the fallback's own fine-grid check
         crit_c = [D.condition_number(D.ExcitationCriterion(D.regressor_casadi(sym, reg, base),
                                                            F.fourier_basis(np.arange(40) * 0.25, 0.1, 5),
                                                            rx130l.nq).matrix(t.coefficients.ravel()))

@@ -69,10 +69,16 @@ def test_a_real_size_urdf_passes_and_two_kilogram_links_are_flagged(tmp_path):
 
 
 def test_placeholder_limits_identical_on_every_joint_are_flagged(tmp_path):
-    robot = _urdf(tmp_path, REAL_MASS_KG, [300.0] * 6, [10.0] * 6, "same")
+    """One torque limit on every joint that holds the arm stays (and is warned about); one that cannot
+    hold it is a placeholder (:mod:`pipeline.robot.vendor_urdf`), replaced and labelled."""
+    robot = _urdf(tmp_path, REAL_MASS_KG, [1000.0] * 6, [10.0] * 6, "same")
     warnings = pl.robot_warnings(robot)
-    assert any("every joint has the same torque limit 300 N·m and the same speed limit 10 rad/s" in w
+    assert any("every joint has the same torque limit 1000 N·m and the same speed limit 10 rad/s" in w
                for w in warnings), warnings
+    weak = _urdf(tmp_path, REAL_MASS_KG, [300.0] * 6, [10.0] * 6, "same_weak")
+    assert any(a.startswith("PLACEHOLDER effort limits") and "one value on every joint" in a
+               for a in weak.assumptions)
+    assert len(set(weak.limits.effort_Nm)) > 1
 
 
 def test_the_same_speed_on_every_joint_alone_is_no_warning(tmp_path):

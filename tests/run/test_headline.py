@@ -187,3 +187,19 @@ def test_actual_over_predicted_takes_its_gate_and_warns_when_pessimistic():
         return out.verdict
 
     assert (row(1.2), row(0.3), row(2.5)) == (hl.PASS, hl.WARN, hl.FAIL)
+
+
+def test_the_pessimistic_warning_takes_the_held_out_tests_lower_bound():
+    """Few held-out poses: the test's lower bound (the spread of an RMS over them) replaces 1 / gate."""
+    def verdict(ratio_: float, lower: float | None) -> str:
+        check = {"name": "actual_over_predicted", "passed": True, "value": ratio_, "op": "<=", "threshold": 2.4}
+        test = None if lower is None else {"threshold": 2.4, "lower_threshold": lower}
+        summary = {"heldout_rms_position_error_after_m": ratio_ * 10e-6, "predicted_rms_position_error_m": 10e-6,
+                   "actual_over_predicted": ratio_, "actual_over_predicted_test": test,
+                   "quality_gates": {"passed": True, "checks": [check]}}
+        (out,) = [r for r in hl.stage_rows("calibration", summary) if "actual / predicted" in r.figure]
+        return out.verdict
+
+    assert verdict(0.35, None) == hl.WARN            # below 1 / 2.4
+    assert verdict(0.35, 0.316) == hl.PASS           # within the test's spread
+    assert verdict(0.30, 0.316) == hl.WARN

@@ -17,7 +17,7 @@ from pipeline.trajectory.cp import cp_grid_activity, solve_cp_convex, solve_cp_r
 from pipeline.trajectory.design import JointPath
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.reachability import _argmax_concave, solve_cp_reachability
-from pipeline.trajectory.solve import plan_cp
+from pipeline.trajectory.solve import plan_cp, verified_cp
 from pipeline.trajectory.trajectories import check_trajectory
 
 N_SMALL = 80
@@ -160,3 +160,31 @@ def test_batched_inverse_dynamics_equals_one_call_per_sample(pm):
     data = pm.model.createData()
     one_by_one = np.array([pin.rnea(pm.model, data, q[k], v[k], a[k]) for k in range(40)])
     assert np.allclose(pm.rigid_torques(q, v, a), one_by_one, rtol=1e-12, atol=1e-9)
+
+
+@pytest.mark.parametrize("method", ["reachability", "nlp"])
+def test_fine_grid_acceleration_excess_is_tightened_away(pm, quick_traj_config, method):
+    """A coarse grid on a curved path: the joint accelerations, enforced at each interval's ends and
+    midpoint, exceed their limits between them; the fine-grid verification tightens those intervals."""
+    cfg = dataclasses.replace(quick_traj_config, acceleration_limits=True)
+    s = np.linspace(0.0, 1.0, 41)
+    q = np.radians([0, 30, 60, 0, 45, 0]) + np.outer(np.sin(3 * np.pi * s), np.radians([40, 10, 15, 60, 30, 90]))
+    path = JointPath(s, q, "wavy")
+    n_grid = 20
+
+    def solve(torque_scale, acceleration_scale, warm):
+        if method == "reachability":
+            return solve_cp_reachability(pm, path, n_grid, torque_scale=torque_scale, acceleration_limits=True,
+                                         warm=warm, acceleration_scale=acceleration_scale)
+        return solve_cp_refined(pm, path, warm, torque_scale=torque_scale, acceleration_limits=True,
+                                acceleration_scale=acceleration_scale)
+
+    first = solve(None, None, None if method == "reachability"
+                  else solve_cp_convex(pm, path, n_grid, midpoints=True, acceleration_limits=True))
+    tol = cfg.violation_tolerance
+    assert check_trajectory(pm, first.sample(path, cfg.fine_dt_s)).max_acceleration_ratio > 1.0 + tol
+    verified, rounds = verified_cp(pm, path, first, cfg, solve)
+    check = check_trajectory(pm, verified.sample(path, cfg.fine_dt_s))
+    assert rounds >= 1 and check.max_acceleration_ratio <= 1.0 + tol and check.violation <= tol
+    assert verified.info["acceleration_scale"] is not None
+    assert 1.0 <= verified.duration_s / first.duration_s < 1.01          # tightened only where it exceeded
