@@ -58,6 +58,20 @@ def resolve_robot_files(robot: str | Path, yaml_path: str | Path | None = None) 
                          f"under {ROBOTS_DIR} (known: {', '.join(known)})")
 
 
+#: how the lines of an unresolved Git merge conflict start
+MERGE_CONFLICT_MARKERS = ("<<<<<<< ", "=======", ">>>>>>> ")
+
+
+def _conflict_note(urdf: Path) -> str:
+    """``: an unresolved merge conflict (<<<<<<< on line N)`` when the file holds Git's conflict
+    markers (a file committed mid-merge), else ``""``."""
+    with urdf.open(encoding="utf-8", errors="replace") as text:
+        for number, line in enumerate(text, 1):
+            if line.startswith(MERGE_CONFLICT_MARKERS):
+                return f": an unresolved merge conflict ({line.split()[0]} on line {number})"
+    return ""
+
+
 def check_urdf_xml(urdf: Path) -> ET.Element:
     """Parse the URDF and check what urdfdom would reject with lines of C++ errors on stderr."""
     if not urdf.is_file():
@@ -65,7 +79,7 @@ def check_urdf_xml(urdf: Path) -> ET.Element:
     try:
         root = ET.parse(urdf).getroot()
     except ET.ParseError as exc:
-        raise RobotFileError(urdf, "xml", f"not valid XML ({exc})") from None
+        raise RobotFileError(urdf, "xml", f"not valid XML ({exc}){_conflict_note(urdf)}") from None
     if root.tag != "robot":
         raise RobotFileError(urdf, "xml", f"root element is <{root.tag}>, expected <robot>")
     links = {link.get("name") for link in root.findall("link")}

@@ -119,6 +119,8 @@ def _urdf_with(tmp_path: Path, old: str, new: str) -> Path:
     ('<origin xyz="0 0 0.55000000000000004"', '<origin xyz="0 0 \u0665"', "<origin xyz>: expected 3 numbers"),
     ('lower="-2.79252680319" upper="2.79252680319"', 'lower="2.79252680319" upper="-2.79252680319"',
      "joint joint_1: limit: lower 2.79252680319 is above upper -2.79252680319"),
+    # a file committed in the middle of a merge
+    ('<robot name="', '<<<<<<< HEAD\n<robot name="', "not valid XML"),
 ])
 def test_a_hostile_urdf_value_is_one_line_exit_2_and_nothing_written(tmp_path, capfd, old, new, words):
     path = _urdf_with(tmp_path, old, new)
@@ -128,6 +130,8 @@ def test_a_hostile_urdf_value_is_one_line_exit_2_and_nothing_written(tmp_path, c
     assert len(err) == 1 and err[0].startswith(f"error: {path}: ") and words in err[0], captured.err
     assert "urdfdom" not in captured.err and not captured.out.strip()
     assert sorted(p.name for p in path.parent.iterdir()) == ["arm.urdf"]
+    if new.startswith("<<<<<<<"):
+        assert "an unresolved merge conflict (<<<<<<< on line" in err[0]
 
 
 # ------------------------------------------------------------------ a single identified joint
