@@ -136,7 +136,7 @@ class CrossValidationSummary(SummaryRecord):
 @dataclass(frozen=True)
 class RatioTestSummary(SummaryRecord):
     """``calibration.actual_over_predicted_test``: the one-sided tests on the held-out actual/predicted
-    ratio (:func:`pipeline.calibration.validate.ratio_test`): optimistic above ``threshold`` (the
+    ratio (:func:`pipeline.calibration.gates.ratio_test`): optimistic above ``threshold`` (the
     gate), pessimistic below ``lower_threshold`` (a warning), at ``confidence``."""
 
     threshold: float | None = None

@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 
+from pipeline.calibration import gates as cg
 from pipeline.calibration import validate as va
 from pipeline.calibration.config import Config
 from pipeline.calibration.estimate import MAX_COMPLIANCE_RELATIVE_STD
@@ -61,7 +62,7 @@ def summary_of(out: CalibrationOutcome, cfg: Config) -> dict:
         "heldout_max_position_error_before_m": v["before"]["max"] if v is not None else None,
         "predicted_rms_position_error_m": predicted,
         "actual_over_predicted": v["after"]["rms"] / v["predicted_rms_m"] if v is not None else None,
-        "actual_over_predicted_test": (va.ratio_test(v, cfg.max_actual_over_predicted,
+        "actual_over_predicted_test": (cg.ratio_test(v, cfg.max_actual_over_predicted,
                                                      cfg.actual_over_predicted_confidence) if v is not None else None),
         "predicted_gravity_model_rms_m": pred.get("predicted_gravity_model_rms_m") if pred is not None else None,
         "gravity_model_share": pred.get("gravity_model_share") if pred is not None else None,

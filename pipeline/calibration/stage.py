@@ -36,6 +36,7 @@ import numpy as np
 from pipeline.calibration import design as ds
 from pipeline.calibration import design_rounding as dr
 from pipeline.calibration import design_table as dtab
+from pipeline.calibration import gates as cg
 from pipeline.calibration import indices as ix
 from pipeline.calibration import marker_frame as mf
 from pipeline.calibration import measure as ms
@@ -124,7 +125,7 @@ def run(ctx: StageContext[Config]) -> StageResult:
     out = calibrate(ctx.robot, ctx.real, cfg, ctx.rng, getattr(ctx, "progress", None), region)
     result = outputs(out, cfg, ctx.robot, t0)
     gates = QualityGates(NAME, accept_poor=ctx.run.accept_poor)
-    va.check_gates(gates, result.summary, cfg)
+    cg.check_gates(gates, result.summary, cfg)
     gates.finish(result)   # records the gates in the summary; raises unless passed or accepted
     return result
 

@@ -169,15 +169,17 @@ def _random_torque_terms(model: pin.Model, acceleration_rad_s2: np.ndarray,
     return gravity, inertia
 
 
-def _efforts_to_replace(effort_Nm: np.ndarray, gravity_Nm: np.ndarray) -> tuple[list[int], list[int]]:
-    """Joints whose effort limit is 0 or missing, and joints whose stated limit cannot hold the arm
-    (below the joint's largest gravity torque; every joint when the file gives one value for all)."""
+def _efforts_to_replace(effort_Nm: np.ndarray, gravity_Nm: np.ndarray, masses_stated: bool
+                        ) -> tuple[list[int], list[int], bool]:
+    """``(missing, short, all_stated)``: joints whose effort limit is 0 or missing; with the file's
+    own masses (``masses_stated``) joints whose stated limit is below their largest gravity torque
+    (the arm could not hold itself); and whether every stated limit goes with them, the file giving
+    one value for all."""
     missing = [i for i, e in enumerate(effort_Nm) if not e > 0]
-    weak = [i for i, e in enumerate(effort_Nm) if e > 0 and e < gravity_Nm[i]]
+    short = [i for i, e in enumerate(effort_Nm) if masses_stated and 0 < e < gravity_Nm[i]]
     stated = effort_Nm[effort_Nm > 0]
-    if weak and stated.size == effort_Nm.size >= 3 and np.ptp(stated) <= 1e-9 * stated.max():
-        weak = [i for i in range(effort_Nm.size) if i not in missing]
-    return missing, weak
+    one_value = stated.size == effort_Nm.size >= 3 and np.ptp(stated) <= 1e-9 * stated.max()
+    return missing, short, bool(short) and bool(one_value)
 
 
 def placeholder_limits(model: pin.Model, root: ET.Element, reach_m: float,
@@ -201,31 +203,23 @@ def placeholder_limits(model: pin.Model, root: ET.Element, reach_m: float,
             notes.append(f"PLACEHOLDER velocity limits (velocity 0 or missing in the URDF) on "
                          f"{', '.join(f'{names[i]} {velocity[i]:.2f} rad/s' for i in bad_v)}: axes 1-3 at "
                          f"{ARM_SPEED_RAD_S:g} rad/s x sqrt(1.6 m / reach), the wrist twice that (catalogue arms)")
-    if "effort" in keep:             # robot.yaml states them: read there
-        return notes
     effort = model.effortLimit.copy()
     gravity, inertia = _random_torque_terms(model, ACCELERATION_PER_VELOCITY_1_S * model.velocityLimit)
-    missing, weak = _efforts_to_replace(effort, gravity)
-    if not masses_stated:
-        weak = []
-    if missing or weak:
+    missing, short, all_stated = _efforts_to_replace(effort, gravity, masses_stated)
+    replaced = sorted({*missing, *(range(nq) if all_stated else short)})
+    if replaced:
         needed = np.maximum(EFFORT_GRAVITY_FACTOR * gravity, EFFORT_INERTIA_FACTOR * inertia)
         floor = MIN_EFFORT_SHARE * max(float(needed.max()), 1.0)
-        stated = {i: float(effort[i]) for i in weak}
-        for i in sorted({*missing, *weak}):
+        why = ([f"effort 0 or missing in the URDF on {', '.join(names[i] for i in missing)}"] if missing else []) + (
+            ["the URDF's limit below the largest gravity torque over random configurations, the arm could not hold "
+             "itself, on " + ", ".join(f"{names[i]} ({effort[i]:.4g} < {gravity[i]:.4g} N·m)" for i in short)
+             + ("; one value on every joint, so replaced on all" if all_stated else "")] if short else [])
+        for i in replaced:
             effort[i] = max(float(needed[i]), floor)
         model.effortLimit = effort
-        why = []
-        if missing:
-            why.append("effort 0 or missing in the URDF on " + ", ".join(names[i] for i in missing))
-        short = [i for i in weak if stated[i] < gravity[i]]
-        if short:
-            why.append("the URDF's limit below the largest gravity torque over random configurations, the arm "
-                       "could not hold itself, on " + ", ".join(f"{names[i]} ({stated[i]:.4g} < {gravity[i]:.4g} "
-                                                                "N·m)" for i in short)
-                       + ("; one value on every joint, so replaced on all" if len(short) < len(weak) else ""))
-        notes.append(f"PLACEHOLDER effort limits ({'; '.join(why)}) on "
-                     f"{', '.join(f'{names[i]} {effort[i]:.0f} N·m' for i in sorted({*missing, *weak}))}: "
-                     f"{EFFORT_GRAVITY_FACTOR:g} x the largest gravity torque or {EFFORT_INERTIA_FACTOR:g} x "
-                     f"inertia x acceleration limit, at least {MIN_EFFORT_SHARE:.0%} of the largest")
+        if "effort" not in keep:
+            notes.append(f"PLACEHOLDER effort limits ({'; '.join(why)}) on "
+                         f"{', '.join(f'{names[i]} {effort[i]:.0f} N·m' for i in replaced)}: "
+                         f"{EFFORT_GRAVITY_FACTOR:g} x the largest gravity torque or {EFFORT_INERTIA_FACTOR:g} x "
+                         f"inertia x acceleration limit, at least {MIN_EFFORT_SHARE:.0%} of the largest")
     return notes

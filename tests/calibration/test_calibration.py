@@ -13,10 +13,10 @@ import pytest
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import design as ds
 from pipeline.calibration import error_model as em
+from pipeline.calibration import gates as cg
 from pipeline.calibration import indices as ix
 from pipeline.calibration import measure as ms
 from pipeline.calibration import stage as st
-from pipeline.calibration import validate as va
 from pipeline.calibration.elastostatic import design_basis, design_blocks, measurement_model
 from pipeline.calibration.estimate import estimate, register_points
 from pipeline.core.config import quick_config
@@ -386,7 +386,7 @@ def test_measurement_and_validation_files_validate_on_the_validation_file(robot,
     # this one: the same files, settings and seed)
     res = st.outputs(out, cfg, robot, time.perf_counter())
     gates = QualityGates(st.NAME)
-    va.check_gates(gates, res.summary, cfg)
+    cg.check_gates(gates, res.summary, cfg)
     gates.finish(res)   # raises on a failed gate
     assert "Held-out validation" in res.report_md and str(vpath) in res.report_md
     assert "no held-out validation" not in res.report_md

@@ -9,6 +9,7 @@ from scipy.stats import chi2
 
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import error_model as em
+from pipeline.calibration import gates as cg
 from pipeline.calibration import measure as ms
 from pipeline.calibration import stage as st
 from pipeline.calibration import validate as va
@@ -26,7 +27,7 @@ LEVEL = 0.99
 
 
 def _moments(C: np.ndarray, exact: bool = True) -> dict:
-    """The stacked-covariance entries :func:`va.ratio_test` reads, of a given covariance."""
+    """The stacked-covariance entries :func:`cg.ratio_test` reads, of a given covariance."""
     return {"stacked_components": len(C), "stacked_trace_m2": float(np.trace(C)),
             "stacked_square_trace_m4": float(np.sum(C * C)),
             "stacked_eigenvalues_m2": np.linalg.eigvalsh(C) if exact else None}
@@ -45,13 +46,13 @@ def test_threshold_of_a_large_isotropic_sample_approaches_m():
     bounds = []
     for n_poses in (3, 30, 200, 1000):
         C = np.eye(3 * n_poses) * SIGMA_M ** 2
-        test = va.ratio_test(_moments(C, exact=3 * n_poses <= va.EXACT_QUANTILE_MAX_COMPONENTS), M, LEVEL)
+        test = cg.ratio_test(_moments(C, exact=3 * n_poses <= va.EXACT_QUANTILE_MAX_COMPONENTS), M, LEVEL)
         assert test["effective_dof"] == pytest.approx(3 * n_poses)
         assert test["threshold"] == pytest.approx(M * np.sqrt(chi2.ppf(LEVEL, 3 * n_poses) / (3 * n_poses)), rel=1e-6)
         bounds.append(test["threshold"] / M)
     assert bounds == sorted(bounds, reverse=True) and bounds[-1] > 1.0
     assert bounds[-1] < 1.05 and bounds[-2] < 1.10 and bounds[0] > 1.5
-    big = va.ratio_test(_moments(np.eye(3000) * SIGMA_M ** 2, exact=False), M, LEVEL)
+    big = cg.ratio_test(_moments(np.eye(3000) * SIGMA_M ** 2, exact=False), M, LEVEL)
     assert big["method"] == "Satterthwaite-Welch"
 
 
@@ -59,8 +60,8 @@ def test_three_poses_of_a_dominated_covariance_widen_the_bound():
     """Three poses whose prediction is mostly the shared parameter error: few effective degrees of
     freedom, so a sample ratio well above m is still within the spread of an RMS over them."""
     C = _dominated(np.random.default_rng(0), 3)
-    test = va.ratio_test(_moments(C), M, LEVEL)
-    iso = va.ratio_test(_moments(np.eye(9) * np.trace(C) / 9), M, LEVEL)
+    test = cg.ratio_test(_moments(C), M, LEVEL)
+    iso = cg.ratio_test(_moments(np.eye(9) * np.trace(C) / 9), M, LEVEL)
     assert test["method"] == "Imhof" and test["n_scored_poses"] == 3
     assert test["effective_dof"] < 3
     assert test["threshold"] > 1.3 * iso["threshold"] > 1.3 * M
@@ -74,7 +75,7 @@ def test_the_test_holds_its_level_and_rejects_a_doubled_error(n_poses):
     mirror edge k = 1/m^2 (ratio 1/m) fires at about 1 - a too."""
     rng = np.random.default_rng(11 + n_poses)
     C = _dominated(rng, n_poses)
-    test = va.ratio_test(_moments(C), M, LEVEL)
+    test = cg.ratio_test(_moments(C), M, LEVEL)
     L = np.linalg.cholesky(C)
     draws = 4000
     z = rng.standard_normal((draws, len(C))) @ L.T
@@ -88,7 +89,7 @@ def test_the_test_holds_its_level_and_rejects_a_doubled_error(n_poses):
     assert 20 <= np.sum(ratio(1 / M) < test["lower_threshold"]) <= 62
     if n_poses >= 40:
         big = np.eye(3 * 400) * SIGMA_M ** 2       # many poses, noise-dominated
-        t_big = va.ratio_test(_moments(big, exact=False), M, LEVEL)
+        t_big = cg.ratio_test(_moments(big, exact=False), M, LEVEL)
         e = 2 * M * SIGMA_M * rng.standard_normal((200, len(big)))
         assert np.all(np.sqrt(np.sum(e ** 2, axis=1) / np.trace(big)) > t_big["threshold"])
 
@@ -122,7 +123,7 @@ def test_stacked_covariance_holds_the_per_pose_prediction(fitted):
 
 def _gated(summary: dict) -> QualityGates:
     gates = QualityGates("calibration")
-    va.check_gates(gates, summary, st.Config())
+    cg.check_gates(gates, summary, st.Config())
     return gates
 
 

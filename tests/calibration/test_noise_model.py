@@ -15,8 +15,8 @@ from pipeline.calibration import noise_model as nm
 from pipeline.calibration import report
 from pipeline.calibration import robust as robust_module
 from pipeline.calibration import stage as st
+from pipeline.calibration.gates import gate_figures
 from pipeline.calibration.robust import robust_estimate
-from pipeline.calibration.validate import gate_figures
 from pipeline.core.errors import QualityGateError
 from pipeline.robot import repeatability as rp
 from pipeline.robot.model import RobotModel

@@ -1,0 +1,114 @@
+"""The calibration's quality gates: the fit's chi²/dof under the noise model, actual/predicted on
+held-out or cross-validated poses, and the error after calibration against the nominal model's.
+
+The gate on actual/predicted (:func:`check_gates`) is a one-sided test, not a comparison of the
+sample ratio with a fixed bound. The stacked held-out position errors ``e = (e_1, ..., e_N)`` of the
+scored poses are, under the prediction, ``N(0, C)`` with ``C`` (3N x 3N,
+:func:`pipeline.calibration.validate.heldout_error_moments`) the parameter covariance propagated
+through the stacked Jacobian (the parameter error, and with the gravity prior the inertial error,
+are common to every pose: ``C_hl = J_h C_theta J_l^T`` off the diagonal) plus each reading's noise.
+With ``m`` = ``max_actual_over_predicted`` the hypothesis ``H0: e ~ N(0, s^2 C), s <= m`` is
+rejected when ``e^T e`` exceeds ``m^2 q_a``, ``q_a`` the ``a``-quantile (``a`` =
+``actual_over_predicted_confidence``) of ``e^T e`` under ``N(0, C)``: a generalized chi-square
+``sum_j lambda_j chi2_1`` over the eigenvalues ``lambda_j`` of ``C``. Since actual/predicted is
+``sqrt(e^T e / trace C)``, the bound on the ratio is ``m sqrt(q_a / trace C)`` (:func:`ratio_test`).
+``q_a`` is exact (Imhof 1961, numerical inversion of the characteristic function,
+:mod:`pipeline.core.quadratic_forms`) up to
+:data:`pipeline.calibration.validate.EXACT_QUANTILE_MAX_COMPONENTS` components, beyond that the
+Satterthwaite–Welch approximation ``e^T e ~ g chi2_nu``, ``g = sum lambda^2 / sum lambda``,
+effective degrees of freedom ``nu = (sum lambda)^2 / sum lambda^2``, whose bound is ``m
+sqrt(chi2_nu(a) / nu)``. Few poses, or a covariance dominated by a few directions (the parameter
+part, common to every pose), give few effective degrees of freedom and a wide bound; many poses of a
+noise-dominated prediction give ``nu`` of the order of 3N and a bound that shrinks towards ``m``, as
+``m (1 + z_a / sqrt(2 nu))`` roughly, never to ``m`` itself (the sampling spread of an RMS only
+vanishes with infinitely many poses). The pessimistic side is the mirror test, a warning only: ``H0:
+s >= 1/m`` rejected when ``e^T e < q_(1-a) / m^2``.
+"""
+
+from __future__ import annotations
+
+import math
+
+from scipy.stats import chi2
+
+from pipeline.core.quadratic_forms import weighted_chi2_quantile
+from pipeline.quality import QualityGates
+
+
+def ratio_test(moments: dict, max_ratio: float, confidence: float) -> dict:
+    """Bounds of the one-sided tests on actual/predicted ``sqrt(e^T e / trace C)`` (module
+    docstring) from the stacked covariance's ``moments`` of the scored poses
+    (:func:`pipeline.calibration.validate.heldout_error_moments`, also in the validation dict):
+    ``threshold = m sqrt(q_a / trace C)`` (rejects ``s <= m``, the gate) and ``lower_threshold =
+    (1/m) sqrt(q_(1-a) / trace C)`` (rejects ``s >= 1/m``, a warning), with ``effective_dof =
+    (trace C)^2 / trace C^2``; ``method`` "Imhof" (exact) or "Satterthwaite-Welch" (``q = g chi2_nu``)."""
+    trace = moments["stacked_trace_m2"]
+    nu = trace ** 2 / moments["stacked_square_trace_m4"]
+    eig = moments.get("stacked_eigenvalues_m2")
+    if eig is not None:
+        method = "Imhof"
+        q_hi, q_lo = (weighted_chi2_quantile(eig, p) / trace for p in (confidence, 1.0 - confidence))
+    else:
+        method = "Satterthwaite-Welch"
+        q_hi, q_lo = (float(chi2.ppf(p, nu)) / nu for p in (confidence, 1.0 - confidence))
+    return {"source": "held-out", "method": method, "confidence": float(confidence),
+            "n_scored_poses": int(moments["stacked_components"]) // 3,
+            "effective_dof": float(nu), "max_actual_over_predicted": float(max_ratio),
+            "threshold": float(max_ratio * math.sqrt(q_hi)), "lower_threshold": float(math.sqrt(q_lo) / max_ratio)}
+
+
+def gate_figures(summary: dict) -> tuple[str, float | None, float | None]:
+    """The out-of-sample figures the gates judge: ``(source, actual/predicted, after/before)`` from
+    the held-out validation, else from the cross-validation, else ``("none", None, None)``."""
+    if summary.get("actual_over_predicted") is not None:
+        before = summary["heldout_rms_position_error_before_m"]
+        return ("held-out", summary["actual_over_predicted"],
+                summary["heldout_rms_position_error_after_m"] / before if before else None)
+    cv = summary.get("cross_validation") or {}
+    if cv.get("actual_over_predicted") is not None:
+        before = cv.get("rms_position_error_before_m")
+        return "cross-validated", cv["actual_over_predicted"], cv["rms_position_error_m"] / before if before else None
+    return "none", None, None
+
+
+def ratio_bounds(summary: dict, source: str, max_ratio: float) -> tuple[float, float, str]:
+    """``(threshold, lower_threshold, how)`` of the actual/predicted gate: the held-out test's
+    bounds (``summary["actual_over_predicted_test"]``, :func:`ratio_test`) and a phrase stating
+    them, else (the cross-validated figures, or a summary without the test) the fixed ``m`` and
+    ``1/m``. The cross-validated errors come from k fits whose parameter errors are correlated
+    through the training readings they share, a covariance no fold's prediction holds, so their
+    sum of squares has no stated distribution to test against."""
+    test = summary.get("actual_over_predicted_test")
+    if source != "held-out" or not test:
+        return max_ratio, 1.0 / max_ratio, f"fixed bound {max_ratio:g}"
+    how = (f"H0 'true ratio <= {max_ratio:g}' rejected above {test['threshold']:.4g}, where the sum of squared "
+           f"errors of the {test['n_scored_poses']} scored pose(s) passes its {100 * test['confidence']:g} % quantile "
+           f"under H0 ({test['effective_dof']:.3g} effective dof, {test['method']})")
+    return test["threshold"], test["lower_threshold"], how
+
+
+def check_gates(gates: QualityGates, summary: dict, cfg) -> None:
+    """The calibration's quality gates: chi²/dof of the fit under the full noise model (sensor,
+    repeatability, remainder: :mod:`pipeline.calibration.noise_model`), actual/predicted on held-out
+    or cross-validated poses and the error after calibration against the nominal model's (gross
+    inadequacy). Held-out actual/predicted fails when the one-sided test of the module docstring
+    rejects "the true ratio is at most ``m``" (``max_actual_over_predicted``) at
+    ``actual_over_predicted_confidence``: the gate's threshold on the ratio is ``m sqrt(q_a / trace C)``;
+    below ``(1/m) sqrt(q_(1-a) / trace C)``, a pessimistic prediction, is a warning in the summary.
+    The cross-validated ratio is compared with ``m`` and ``1/m`` (:func:`ratio_bounds`)."""
+    gates.check("chi2_per_dof", summary["chi2_per_dof"], "<=", cfg.max_chi2_per_dof,
+                "whitened fit residuals after the outlier test under the noise model (sensor, arm repeatability, "
+                "remainder estimated by REML); far above 1: the fit did not converge or the remainder estimate failed")
+    source, ratio, after_before = gate_figures(summary)
+    if ratio is not None:
+        threshold, lower, how = ratio_bounds(summary, source, cfg.max_actual_over_predicted)
+        what = f"{source} RMS error over its covariance prediction"
+        gates.check("actual_over_predicted", ratio, "<=", threshold, f"{what}: the prediction is optimistic; {how}")
+        if ratio < lower:   # a pessimistic prediction hands on a sound model with error bars too wide: warned
+            summary.setdefault("warnings", []).append(
+                f"{what} is {ratio:.3g}, below {lower:.3g}: the prediction is pessimistic (a remainder "
+                "estimated from few readings, or a sensor noise stated too high)")
+    if after_before is not None:
+        gates.check("error_after_over_before", after_before, "<=", cfg.max_error_after_over_before,
+                    f"{source} RMS error of the calibrated model over the nominal model's: the error model does not "
+                    "explain the readings (calibration.parameters; a wrong tool, tracker or joint order?)")
