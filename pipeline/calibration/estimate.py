@@ -217,8 +217,8 @@ def calibrated_robot(robot: RobotModel, mm: MeasurementModel, x: np.ndarray, bas
       load, or not in the parameter subset), came out non-positive or, given ``covariance``, is
       not determined to :data:`MAX_COMPLIANCE_RELATIVE_STD` keeps the nominal stiffness
       (:func:`pipeline.robot.stiffness.nominal_joint_stiffness_Nm_rad`).
-    The robot.yaml facts (TCP and reflector in the flange frame) are updated to match, so
-    ``save``/``load`` reproduce the model.
+    The robot.yaml facts (TCP and reflector in robot.yaml's ``flange_frame``,
+    :meth:`RobotModel.tool_facts`) are updated to match, so ``save``/``load`` reproduce the model.
     """
     x = np.asarray(x, float)
     x_kin = x[mm.sl_kin].copy()
@@ -230,11 +230,8 @@ def calibrated_robot(robot: RobotModel, mm: MeasurementModel, x: np.ndarray, bas
     model = apply_kinematic_errors(robot.model, x_kin, robot.frame_flange,
                                    (robot.frame_tcp, robot.frame_reflector))
     new = robot.with_model(model)
-    fl = model.frames[model.getFrameId(robot.frame_flange)].placement
-    tcp = fl.inverse() * model.frames[model.getFrameId(robot.frame_tcp)].placement
-    rfl = fl.inverse() * model.frames[model.getFrameId(robot.frame_reflector)].placement
-    new.spec.tool.transform_tcp_to_flange = pin.SE3(tcp.rotation.copy(), tcp.translation.copy())
-    new.spec.tool.reflector_offset_m = np.asarray(rfl.translation, float).copy()
+    # the stated flange frame's facts (the reflector's axis stays in its frame, which turned with the tool)
+    new.spec.tool.transform_tcp_to_flange, new.spec.tool.reflector_offset_m, _ = new.tool_facts()
     if mm.compliance:
         c = x[mm.sl_compliance]
         known = identified_compliance(mm, x, basis, covariance)

@@ -174,9 +174,24 @@ class RobotModel:
     def capsules(self) -> list[Capsule]:
         return self.spec.capsules
 
-    def _relative_to_flange(self, frame: str) -> pin.SE3:
+    def _relative_to_flange(self, frame: str, flange: str | None = None) -> pin.SE3:
+        """``frame``'s placement in ``flange`` (None: :attr:`frame_flange`)."""
         frames = self.model.frames
-        return frames[self.frame_id(self.frame_flange)].placement.actInv(frames[self.frame_id(frame)].placement)
+        base = self.frame_flange if flange is None else flange
+        return frames[self.frame_id(base)].placement.actInv(frames[self.frame_id(frame)].placement)
+
+    def tool_facts(self) -> tuple[pin.SE3, np.ndarray, np.ndarray]:
+        """TCP pose, reflector centre and reflector opening axis in the frame robot.yaml states them
+        in (``flange_frame``), read from the model's frames: what :meth:`save` writes and ``load``
+        rebuilds. A URDF may have a ``flange`` frame of its own, turned against ``flange_frame``
+        (ROS-Industrial's ``flange`` and ``tool0``, REP 199): :attr:`frame_flange` is then that frame,
+        and the TCP and reflector properties are in it, not in the stated one. The reflector frame's
+        rotation (a calibrated tool rotation) is folded into the axis: ``load`` builds the reflector
+        frame unturned."""
+        stated = self.spec.flange_frame
+        tcp = self._relative_to_flange(self.frame_tcp, stated)
+        reflector = self._relative_to_flange(self.frame_reflector, stated)
+        return tcp, reflector.translation.copy(), reflector.rotation @ self.reflector_axis
 
     @property
     def transform_tcp_to_flange(self) -> pin.SE3:
@@ -190,8 +205,10 @@ class RobotModel:
 
     @property
     def reflector_axis(self) -> np.ndarray:
-        """Reflector opening axis in the flange frame: the yaml axis turned with the reflector frame."""
-        return self._relative_to_flange(self.frame_reflector).rotation @ self.spec.tool.reflector_axis
+        """Reflector opening axis in the reflector frame: robot.yaml's axis, stated in ``flange_frame``,
+        in which ``load`` builds the reflector frame unturned; the axis turns with the reflector frame
+        (a calibrated tool rotation), so in the base frame it is ``R_reflector @ reflector_axis``."""
+        return np.asarray(self.spec.tool.reflector_axis, float).copy()
 
     @property
     def payload_kg(self) -> float:
@@ -428,9 +445,7 @@ class RobotModel:
         spec = _copy.deepcopy(self.spec)
         spec.actuation.rotor_inertia_kgm2 = np.asarray(self.model.armature, float).copy()
         # tool frames as the model holds them (load() rebuilds them from these three facts)
-        spec.tool.transform_tcp_to_flange = self.transform_tcp_to_flange
-        spec.tool.reflector_offset_m = self.reflector_offset_m
-        spec.tool.reflector_axis = self.reflector_axis
+        spec.tool.transform_tcp_to_flange, spec.tool.reflector_offset_m, spec.tool.reflector_axis = self.tool_facts()
         spec.limit_overrides = {}
         urdf_text = export_urdf(self.model, self.urdf_text)
         if self.urdf_path is not None and Path(self.urdf_path).is_file():

@@ -78,6 +78,39 @@ def test_marker_rotation_on_the_flange_is_found_in_closed_form(record):
     assert before > np.radians(15.0) and after < 0.2 * before
 
 
+def _robot_with_reflector_at(folder: Path, offset_m: list[float]) -> RobotModel:
+    folder.mkdir()
+    shutil.copy(DATA / "robot.urdf", folder / "robot.urdf")
+    write_robot_yaml(folder / "robot.urdf")
+    text = (folder / "robot.yaml").read_text()
+    start = text.index("reflector_offset_m: [")
+    end = text.index("]", start)
+    (folder / "robot.yaml").write_text(text[:start] + f"reflector_offset_m: {offset_m}" + text[end + 1:])
+    return RobotModel.load(folder)
+
+
+def test_marker_rotation_does_not_depend_on_the_stated_reflector_offset(record, tmp_path):
+    """The marker sits about 12 cm off the last joint's axis: registered on the record's own marker
+    origins, the closed-form rotation is the same for a reflector stated on that axis at 0 or 100 mm,
+    and differs from the rotation registered on the nominal origin by more than a degree."""
+    _, meas = record
+    rotations, origins = [], []
+    for k, z in enumerate((0.0, 0.1)):
+        robot = _robot_with_reflector_at(tmp_path / f"z{k}", [0.0, 0.0, z])
+        mm = em.MeasurementModel(robot, marker_points=True)
+        rotations.append(mf.marker_rotation_on_flange(mm, meas))
+        P, R_refl = mm.base_positions(meas.Q, np.zeros(mm.n), None, np.zeros((len(meas), 3)))
+        d = mf.record_marker_origin(P, R_refl, meas.Y)
+        assert d is not None
+        origins.append(np.array([0.0, 0.0, z]) + d)    # the reflector frame is tool0's, unturned
+    assert np.allclose(rotations[0], rotations[1], atol=1e-9)
+    assert np.allclose(origins[0], origins[1], atol=1e-9) and np.hypot(*origins[0][:2]) > 0.1
+    R_nominal = mf.project_to_rotation(np.einsum(
+        "nji,jk,nkl->nil", R_refl, register_points(meas.Y, P).rotation,
+        Rotation.from_rotvec(meas.rotvec).as_matrix()).sum(axis=0))
+    assert mf.mount_rotation_deg(R_nominal.T @ rotations[1]) > 1.0
+
+
 #: session fixtures that take seconds and serve several tests: their tests run on one pytest-xdist
 #: worker, so each is built once per ``make test`` (tests/conftest.py, pytest_collection_modifyitems)
 SHARED_COSTLY_FIXTURES = frozenset({"selection"})

@@ -13,6 +13,9 @@ import yaml
 from pipeline.core.errors import RobotFileError
 from pipeline.robot.collision import coal_capsule_distance, segment_distances
 from pipeline.robot.model import ROBOTS_DIR, RobotModel
+from pipeline.robot.yaml_init import write_robot_yaml
+
+REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
@@ -101,23 +104,51 @@ def test_capsules_detect_floor_and_self_collision(rx130l: RobotModel) -> None:
     assert rx130l.capsule_distances(down).floor_min_m < 0
 
 
-def test_save_and_load_round_trip(tmp_path: Path, rx130l: RobotModel) -> None:
-    changed = rx130l.copy()
+def _calibrated_looking(robot: RobotModel) -> RobotModel:
+    """``robot`` with a joint placement, an inertia, the armature and both tool frames changed."""
+    changed = robot.copy()
     changed.model.jointPlacements[3] = changed.model.jointPlacements[3] * pin.exp6(np.full(6, 1e-3))
     changed.model.inertias[2] = pin.Inertia(40.0, np.array([0.3, 0.01, 0.0]), np.diag([0.2, 1.0, 1.1]))
     changed.model.armature = changed.model.armature * 1.1
-    for name in ("tcp", "reflector"):  # a calibrated tool: frames moved on the flange
+    for name in ("tcp", "reflector"):  # a calibrated tool: frames moved and turned on the flange
         fid = changed.model.getFrameId(name)
         changed.model.frames[fid].placement = changed.model.frames[fid].placement * pin.exp6(np.full(6, 2e-3))
-    changed.save(tmp_path / "saved")
-    loaded = RobotModel.load(tmp_path / "saved")
+    return changed
+
+
+def _assert_same_arm(loaded: RobotModel, changed: RobotModel) -> None:
     rng = np.random.default_rng(6)
     for _ in range(10):
-        q, v, a = rng.normal(size=(3, 6))
+        q, v, a = rng.normal(size=(3, changed.nq))
         assert np.allclose(loaded.fk(q).homogeneous, changed.fk(q).homogeneous, atol=1e-12)
-        assert np.allclose(loaded.fk(q, "reflector").translation, changed.fk(q, "reflector").translation, atol=1e-12)
-        assert np.allclose(loaded.reflector_axis, changed.reflector_axis, atol=1e-12)
+        r_loaded, r_changed = loaded.fk(q, "reflector"), changed.fk(q, "reflector")
+        assert np.allclose(r_loaded.translation, r_changed.translation, atol=1e-12)
+        # the opening axis in the base frame: the axis turns with the reflector frame
+        assert np.allclose(r_loaded.rotation @ loaded.reflector_axis, r_changed.rotation @ changed.reflector_axis,
+                           atol=1e-12)
         assert np.allclose(loaded.inverse_dynamics(q, v, a), changed.inverse_dynamics(q, v, a), atol=1e-9)
+
+
+def test_save_and_load_round_trip(tmp_path: Path, rx130l: RobotModel) -> None:
+    changed = _calibrated_looking(rx130l)
+    _assert_same_arm(RobotModel.load(changed.save(tmp_path / "saved")), changed)
+
+
+def test_tool_facts_are_saved_in_the_stated_flange_frame_when_the_urdf_has_a_flange_of_its_own(
+        tmp_path: Path) -> None:
+    """FIGAROH's UR10 URDF has a ``flange`` link turned against ``tool0`` (x forward, REP 199), and
+    ``robot init`` states the tool in ``tool0``: the saved robot.yaml states the TCP and reflector
+    there, and the reloaded arm is the same arm; the assumed reflector opens along tool0's z axis."""
+    shutil.copy(REPO / "data" / "figaroh_ur10_mocap" / "robot.urdf", tmp_path / "robot.urdf")
+    write_robot_yaml(tmp_path / "robot.urdf")
+    ur10 = RobotModel.load(tmp_path)
+    assert ur10.spec.flange_frame == "tool0" and ur10.frame_flange == "flange"
+    q = np.full(ur10.nq, 0.3)
+    assert not np.allclose(ur10.fk(q, "flange").rotation, ur10.fk(q, "tool0").rotation)
+    reflector = ur10.fk(q, "reflector")
+    assert np.allclose(reflector.rotation @ ur10.reflector_axis, ur10.fk(q, "tool0").rotation[:, 2], atol=1e-12)
+    changed = _calibrated_looking(ur10)
+    _assert_same_arm(RobotModel.load(changed.save(tmp_path / "saved")), changed)
 
 
 # ------------------------------------------------------------------ validation errors
