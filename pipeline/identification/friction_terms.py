@@ -404,6 +404,19 @@ def record_scores(terms: FrictionTerms, val: Validation, residual_Nm: np.ndarray
     return terms.summary(per_joint, joint_numbers) | check
 
 
+def not_handed_on_note(summary: dict) -> str | None:
+    """The warning that the chosen terms stay in this stage (None: none chosen): robot.yaml's friction
+    law has viscous, Coulomb, Stribeck and load-dependent Coulomb terms only, so the robot handed on
+    to the control and trajectory stages lacks them."""
+    chosen = {n: [t["kind"] for t in terms] for n, terms in (summary.get("friction_terms") or {}).items() if terms}
+    if not chosen:
+        return None
+    return ("friction and actuation terms chosen on "
+            + "; ".join(f"joint {n} ({', '.join(kinds)})" for n, kinds in chosen.items())
+            + " enter this stage's predictions and validation only: the robot handed on keeps robot.yaml's "
+              "friction law (viscous, Coulomb, Stribeck), so the control and trajectory stages do not use them")
+
+
 def report_lines(summary: dict) -> list[str]:
     """The report's paragraph on a record's terms and the model-class check (none without a record)."""
     if "friction_terms" not in summary:
@@ -412,6 +425,9 @@ def report_lines(summary: dict) -> list[str]:
     out = ["", "Friction and actuation terms beyond viscous + Coulomb, chosen by "
            f"{summary.get('friction_terms_cv', 'cross-validation')}: "
            + ("; ".join(f"joint {n}: {', '.join(kinds)}" for n, kinds in chosen.items()) if chosen else "none") + "."]
+    note = not_handed_on_note(summary)
+    if note:
+        out += ["", f"**Not handed on:** {note[0].upper()}{note[1:]}."]
     flagged = summary.get("model_class_structure_joints") or []
     out += ["", ("**Warning:** " + "; ".join(w for w in summary.get("warnings", []) if "model class" in w) + ".")
             if flagged else "Model-class check: no joint's residual keeps structure (autocorrelation, held-out "
@@ -420,5 +436,6 @@ def report_lines(summary: dict) -> list[str]:
 
 
 __all__ = ["MIN_RELATIVE_GAIN", "N_FOLDS", "N_SCORED_BLOCKS", "TERM_CLASSES", "BlockedFolds", "FrictionTerms",
-           "JointTerm", "add_back", "columns", "fit_terms", "record_scores", "record_terms", "report_lines",
+           "JointTerm", "add_back", "columns", "fit_terms", "not_handed_on_note", "record_scores", "record_terms",
+           "report_lines",
            "select_terms", "take_off"]

@@ -12,7 +12,7 @@ from matplotlib.figure import Figure
 from pipeline.identification import design as design_mod
 from pipeline.identification.config import Config
 from pipeline.identification.fit import unmeasured_joints_note
-from pipeline.identification.friction_terms import report_lines
+from pipeline.identification.friction_terms import not_handed_on_note, report_lines
 from pipeline.identification.measure import StictionExclusion
 from pipeline.identification.outcome import Outcome, ValidationTrajectory
 from pipeline.identification.regressor import BaseParameters
@@ -367,6 +367,9 @@ def stage_result(cfg: Config, o: Outcome, robot: RobotModel) -> StageResult:
             f"{len(o.regs.dropped)} base parameter(s) the excitation cannot bring under identification."
             "max_cond_base_regressor_data are left out of the design and the fits (combined into the others; "
             "report.md names them)")]
+    terms_note = not_handed_on_note(s)
+    if terms_note:
+        s["warnings"] = [*s.get("warnings", []), terms_note]
     fallback_md = "" if exc is None or not exc.fallback_reason else (
         f"**Excitation: the best random feasible trajectory is used** ({exc.fallback_reason}).\n\n")
     if o.regs.dropped:

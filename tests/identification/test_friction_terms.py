@@ -13,6 +13,8 @@ from pipeline.identification.friction_terms import (
     MAX_EFFORT_GAIN,
     JointTerm,
     add_back,
+    not_handed_on_note,
+    report_lines,
     select_terms,
     take_off,
 )
@@ -115,6 +117,18 @@ def test_viscous_coulomb_data_take_no_term():
     data = _record(lambda q, v: np.zeros_like(v), seed=3)
     terms = _selected(data, int(0.7 * data.n_samples))
     assert terms.terms == [] and take_off(data, terms, lambda Y: Y) is data
+    summary = terms.summary(lambda a: list(a), np.array([1, 2]))
+    assert not_handed_on_note(summary) is None and not any("Not handed on" in line for line in report_lines(summary))
+
+
+def test_chosen_terms_are_stated_as_not_handed_on():
+    """The robot handed on has robot.yaml's friction law only: the summary's warning and the report
+    name the joint and the class that stay in the identification."""
+    terms = _selected(_record(_sigmoid), int(0.7 * _record(_sigmoid).n_samples))
+    summary = terms.summary(lambda a: list(a), np.array([1, 2]))
+    note = not_handed_on_note(summary)
+    assert note is not None and "joint 1 (sigmoid)" in note and "joint 2" not in note
+    assert any(line.startswith("**Not handed on:**") and "joint 1 (sigmoid)" in line for line in report_lines(summary))
 
 
 def test_implausible_terms_are_refused():
