@@ -96,6 +96,15 @@ class DuplicateKeyError(MarkedYAMLError):
                          problem_mark=node.start_mark)
 
 
+class UnhashableKeyError(MarkedYAMLError):
+    """A mapping key that is itself a mapping or holds one (``? {a: 1}``, ``? [- {a: 1}]``): no
+    dictionary can hold it."""
+
+    def __init__(self, node: Node) -> None:
+        super().__init__(problem=f"a mapping key that is a collection (line {node.start_mark.line + 1}): "
+                                 "keys must be plain values", problem_mark=node.start_mark)
+
+
 class NestingTooDeepError(MarkedYAMLError):
     """Collections nested deeper than :data:`MAX_DEPTH`."""
 
@@ -177,8 +186,8 @@ class _Constructor(SafeConstructor):
                     value_node.tag = _STR_TAG
                 try:
                     first = lines.get(key)
-                except TypeError:                 # an unhashable key: the constructor names it
-                    continue
+                except TypeError:                 # a mapping, or a sequence holding one (made a tuple)
+                    raise UnhashableKeyError(key_node) from None
                 if first is not None:
                     raise DuplicateKeyError(key, first, key_node)
                 lines[key] = key_node.start_mark.line + 1

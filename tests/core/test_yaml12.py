@@ -77,6 +77,16 @@ def test_robot_yaml_duplicate_key_names_both_lines(robot_yaml):
         load_robot_spec(robot_yaml)
 
 
+@pytest.mark.parametrize("key", ["? [{name: base}]\n", "? {a: 1}\n", "? [1, 2]\n"])
+def test_a_collection_as_a_mapping_key_names_its_line(robot_yaml, key):
+    """``? `` before a collection makes it a key (here the capsule list of robot.yaml): refused in the
+    file's own terms, with the line, not a TypeError from the YAML reader."""
+    lines = robot_yaml.read_text().splitlines()
+    robot_yaml.write_text("\n".join([*lines, key + ": 1"]) + "\n")
+    with pytest.raises(RobotFileError, match=rf"a mapping key that is a collection \(line {len(lines) + 1}\)"):
+        load_robot_spec(robot_yaml)
+
+
 def test_robot_yaml_exponent_floats_are_numbers(robot_yaml):
     text = robot_yaml.read_text()
     old = "viscous_Nms_rad: [20.0, 20.0, 10.0, 3.0, 3.0, 1.5]"
