@@ -437,5 +437,4 @@ def report_lines(summary: dict) -> list[str]:
 
 __all__ = ["MIN_RELATIVE_GAIN", "N_FOLDS", "N_SCORED_BLOCKS", "TERM_CLASSES", "BlockedFolds", "FrictionTerms",
            "JointTerm", "add_back", "columns", "fit_terms", "not_handed_on_note", "record_scores", "record_terms",
-           "report_lines",
-           "select_terms", "take_off"]
+           "report_lines", "select_terms", "take_off"]

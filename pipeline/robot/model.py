@@ -195,12 +195,14 @@ class RobotModel:
 
     @property
     def transform_tcp_to_flange(self) -> pin.SE3:
-        """TCP pose in the flange frame, read from the model's frames (calibrated tool errors included)."""
+        """TCP pose in :attr:`frame_flange`, read from the model's frames (calibrated tool errors
+        included); robot.yaml's own frame: :meth:`tool_facts`."""
         return self._relative_to_flange(self.frame_tcp)
 
     @property
     def reflector_offset_m(self) -> np.ndarray:
-        """Reflector centre in the flange frame (from the model's frames)."""
+        """Reflector centre in :attr:`frame_flange` (from the model's frames); robot.yaml's own frame:
+        :meth:`tool_facts`."""
         return self._relative_to_flange(self.frame_reflector).translation.copy()
 
     @property
