@@ -336,6 +336,9 @@ def bench_recorded(n_poses: int = 1000, robot_name: str = "rx130l") -> None:
 
 if __name__ == "__main__":
     args = sys.argv[1:]
+    if args and args[0] in ("-h", "--help"):
+        print(__doc__)
+        sys.exit(0)
     if args and args[0] == "_calibrate_file":
         calibrate_file(args[1], args[2])
         sys.exit(0)
