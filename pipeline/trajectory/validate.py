@@ -26,7 +26,8 @@ class ServoRun:
     Torque ratios are ``|tau| / tau_max`` with the full limits (no reserve); the ``*_per_joint``
     arrays have one entry per joint. The TCP errors are ``None`` when the simulation has no TCP
     (``tcp_tracking_*`` also when the plant has no tracker). ``diverged_at_s`` is the time of the
-    first non-finite sample of a run that diverged (its ratios are then no measurement), else ``None``."""
+    first sample of a run that diverged (:func:`first_divergence_s`; its ratios are then no
+    measurement), else ``None``."""
 
     duration_s: float
     max_torque_ratio: float
@@ -47,7 +48,7 @@ class ServoRun:
 
     @property
     def diverged(self) -> bool:
-        """Whether the simulation left the finite numbers (its ratios are then NaN or inf)."""
+        """Whether the simulation diverged (:func:`first_divergence_s`; its ratios measure nothing)."""
         return self.diverged_at_s is not None
 
     def to_summary(self) -> dict[str, Any]:
@@ -59,6 +60,21 @@ class ServoRun:
                 continue
             out[f.name] = value.tolist() if isinstance(value, np.ndarray) else value
         return out
+
+
+def first_divergence_s(t_s: np.ndarray, q: np.ndarray, v: np.ndarray, tau: np.ndarray, q_d: np.ndarray,
+                       span_rad: np.ndarray) -> float | None:
+    """Time from the start (s) of the first sample of a servo run that has diverged, else None: its
+    joint readings, velocity estimates or commands are not finite, or the following error
+    ``|q - q_d|`` of a joint exceeds ``span_rad`` (the joint's range, at most one turn). A servo
+    that still tracks cannot be that far off, so a run growing without bound is caught while its
+    numbers are still finite, before its ratios turn into huge finite figures."""
+    q, v, tau, q_d = (np.asarray(a, float) for a in (q, v, tau, q_d))
+    finite = np.all(np.isfinite(np.hstack([q, v, tau])), axis=1)
+    with np.errstate(invalid="ignore"):
+        runaway = np.any(np.abs(q - q_d) > np.asarray(span_rad, float), axis=1)
+    bad = ~finite | runaway
+    return float(t_s[int(np.argmax(bad))] - t_s[0]) if bad.any() else None
 
 
 def simulate_on_real(real: Any, robot: RobotModel, traj: JointTrajectory,  # Any: the simulated hidden robot
@@ -73,7 +89,8 @@ def simulate_on_real(real: Any, robot: RobotModel, traj: JointTrajectory,  # Any
     feedforward alone, ``max_averaged_torque_ratio`` of the command averaged over
     ``average_window_s``, and the feedback share ``(tau_cmd - tau_ff) / tau_max`` per joint
     (standard deviation and maximum). A run whose encoder readings, velocity estimates or commands
-    turn non-finite has diverged: ``diverged_at_s`` names the first such sample."""
+    turn non-finite, or whose following error exceeds a joint's range, has diverged:
+    ``diverged_at_s`` names the first such sample (:func:`first_divergence_s`)."""
     cfg = control_config or ControlConfig(on_saturation="clip", benchmark_python_seconds=0.0)
     if getattr(cfg, "on_saturation", "clip") != "clip":
         cfg = ControlConfig(**{**cfg.__dict__, "on_saturation": "clip"})
@@ -90,8 +107,9 @@ def simulate_on_real(real: Any, robot: RobotModel, traj: JointTrajectory,  # Any
     kernel = np.ones(width) / width
     averaged = np.stack([np.convolve(np.asarray(res.tau_cmd)[:, j], kernel, mode="valid")
                          for j in range(limit.size)], axis=1) / limit
-    finite = np.all(np.isfinite(np.hstack([res.q, res.v, res.tau_cmd])), axis=1)
-    diverged_at_s = None if finite.all() else float(res.t_s[int(np.argmin(finite))] - res.t_s[0])
+    span = np.minimum(np.asarray(robot.limits.upper_rad, float) - np.asarray(robot.limits.lower_rad, float),
+                      2.0 * np.pi)
+    diverged_at_s = first_divergence_s(res.t_s, res.q, res.v, res.tau_cmd, res.q_d, span)
     tcp: dict[str, float] = {}
     if res.tcp_position_m is not None:
         # against the planned TCP of the model (includes the residual kinematic error) ...
@@ -162,8 +180,8 @@ def quality_gates(cfg: TrajectoryConfig, cp: CPPlan, ptp: PTPPlan, sims: dict[st
     for name, s in sims.items():
         if s.diverged:
             gates.require(f"{name}_sim_diverged", False, f"the servo simulation of plan {name} diverged at "
-                          f"t = {s.diverged_at_s:.4f} s of {s.duration_s:.4f} s (non-finite state): no torque "
-                          "ratio to judge")
+                          f"t = {s.diverged_at_s:.4f} s of {s.duration_s:.4f} s (a non-finite state, or a joint "
+                          "further off its reference than its whole range): no torque ratio to judge")
             continue
         if name in ("ptp_ruckig", "ptp_energy_at_ruckig_duration"):
             continue                 # the baseline is reported, not vouched for

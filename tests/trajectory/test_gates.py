@@ -122,6 +122,21 @@ def test_torque_limited_cp_on_an_elastic_plant_gates_the_executed_cp():
         _finish(quality_gates(torque_limited, cp, ptp, sims, elastic_plant=True))
 
 
+def test_a_run_is_diverged_at_its_first_non_finite_or_runaway_sample():
+    """Finite but further off the reference than the joint's range (one turn at most) is diverged too."""
+    t = np.arange(6) * 4e-4
+    q_d = np.zeros((6, 2))
+    q, v, tau = q_d.copy(), np.zeros((6, 2)), np.zeros((6, 2))
+    span = np.array([0.5, 2 * np.pi])
+    assert validate.first_divergence_s(t, q, v, tau, q_d, span) is None
+    q[3:, 1] = [3.0, 30.0, 3e30]                  # finite, growing: off by more than a turn from sample 4
+    assert validate.first_divergence_s(t, q, v, tau, q_d, span) == pytest.approx(t[4])
+    q[2, 0] = 0.6                                 # beyond joint 1's 0.5 rad range at sample 2
+    assert validate.first_divergence_s(t, q, v, tau, q_d, span) == pytest.approx(t[2])
+    tau[1, 1] = np.nan
+    assert validate.first_divergence_s(t, q, v, tau, q_d, span) == pytest.approx(t[1])
+
+
 def _diverged(at_s: float) -> ServoRun:
     """A servo run that left the finite numbers at ``at_s``: its ratios are NaN."""
     return replace(_run(float("nan")), diverged_at_s=at_s)
@@ -149,14 +164,18 @@ def test_simulate_on_real_names_the_first_non_finite_sample(monkeypatch):
     tau = np.ones((n, 6))
     tau[20:, 3] = np.nan                            # the command turns NaN first, then the state
     q[21:] = np.nan
-    res = SimpleNamespace(t_s=t, q=q, v=np.zeros((n, 6)), tau_cmd=tau, tau_ff=np.ones((n, 6)),
-                          max_torque_ratio=np.full(6, np.inf), lag_error_rad=q, realtime_factor=1.0,
-                          tcp_position_m=None)
+    res = SimpleNamespace(t_s=t, q=q, q_d=np.zeros((n, 6)), v=np.zeros((n, 6)), tau_cmd=tau,
+                          tau_ff=np.ones((n, 6)), max_torque_ratio=np.full(6, np.inf), lag_error_rad=q,
+                          realtime_factor=1.0, tcp_position_m=None)
     monkeypatch.setattr(validate, "simulate_joint_trajectory", lambda *args, **kwargs: res)
-    robot = SimpleNamespace(limits=SimpleNamespace(effort_Nm=np.full(6, 10.0)))
+    robot = SimpleNamespace(limits=SimpleNamespace(effort_Nm=np.full(6, 10.0), lower_rad=np.full(6, -3.0),
+                                                   upper_rad=np.full(6, 3.0)))
     traj = SimpleNamespace(t_s=t, q=q, v=q, a=q)
     run = validate.simulate_on_real(None, robot, traj)
     assert run.diverged and run.diverged_at_s == pytest.approx(20 * dt)
     res.tau_cmd = np.ones((n, 6))
     res.q = np.zeros((n, 6))
+    res.lag_error_rad = res.q
     assert not validate.simulate_on_real(None, robot, traj).diverged
+    res.q[30:, 2] = 7.0                             # finite, but more than a turn off its reference
+    assert validate.simulate_on_real(None, robot, traj).diverged_at_s == pytest.approx(30 * dt)
