@@ -29,7 +29,8 @@ for section 5 alone (default 1000 poses).
    one against the 30 s target and the first over the later one (target <= 2). On FIGAROH's UR10
    6-D record (``data/figaroh_ur10_mocap``) ours with the defaults and FIGAROH 1.0.2's
    ``BaseCalibration`` (full geometric parameters, 6-D marker, LM; the ``bench`` extra) in the same
-   run, with the ratio of the times.
+   run: the ratio of the times, and the held-out RMS position and orientation over all 23 poses, on
+   the same spatial folds as our model selection's (ours nested) and by FIGAROH's leave-one-out.
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import warnings
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -54,6 +56,7 @@ from pipeline.calibration import design as ds
 from pipeline.calibration import indices as ix
 from pipeline.calibration import measure as ms
 from pipeline.calibration import stage as st
+from pipeline.calibration.crossval import spatial_folds
 from pipeline.calibration.design_state import DesignState, is_regular
 from pipeline.calibration.elastostatic import design_basis, design_torques, measurement_model
 from pipeline.calibration.gradient_design import GradientDesignConfig, gradient_design
@@ -280,26 +283,103 @@ def ur10_robot(folder: Path) -> tuple[RobotModel, Path]:
     return RobotModel.load(folder), module.convert(UR10 / "calibration.csv", folder / "ur10.csv", UR10_JOINTS)
 
 
-#: FIGAROH 1.0.2 unified configuration of the UR10 record: full geometric parameters, unknown base
-#: frame (the camera's) and marker frame on wrist_3_link, 6-D marker (figaroh-examples ur10 layout)
-def figaroh_ur10_s(folder: Path) -> float:
-    """Seconds of FIGAROH's 6-D calibration of the UR10 record (initialise + LM solve)."""
+def _figaroh_fit(folder: Path, tag: str, train_rows: list[str], held_rows: list[str], header: str):
+    """FIGAROH 1.0.2's ``BaseCalibration`` of the UR10 record's ``train_rows`` (full geometric
+    parameters, unknown base frame (the camera's) and marker frame on wrist_3_link, 6-D marker, LM;
+    the figaroh-examples ur10 layout) with ``held_rows`` as its validation file: (seconds of
+    initialise + solve, its validation metrics or None without held-out rows)."""
     from figaroh.calibration.base_calibration import BaseCalibration
 
     model = pin.buildModelFromUrdf(str(UR10 / "robot.urdf"))
     robot = SimpleNamespace(model=model, data=model.createData(), q0=pin.neutral(model))
-    config = folder / "figaroh_ur10.yaml"
-    config.write_text(figaroh_calibration_yaml("ur10", list(UR10_JOINTS), UR10 / "calibration.csv", 23,
+    train = folder / f"figaroh_{tag}_train.csv"
+    train.write_text("\n".join([header, *train_rows]) + "\n")
+    config = folder / f"figaroh_{tag}.yaml"
+    config.write_text(figaroh_calibration_yaml("ur10", list(UR10_JOINTS), train, len(train_rows),
                                                tool_frame="wrist_3_link", marker="marker",
                                                reference_joint="wrist_3_joint", measured_dof=6))
     t0 = time.perf_counter()
     calib = BaseCalibration(robot, str(config))
     calib.calib_config["known_baseframe"] = False
     calib.calib_config["known_tipframe"] = False
-    with contextlib.redirect_stdout(io.StringIO()):
+    if held_rows:
+        held = folder / f"figaroh_{tag}_held.csv"
+        held.write_text("\n".join([header, *held_rows]) + "\n")
+        calib.calib_config["validation_data_file"] = str(held)
+    with contextlib.redirect_stdout(io.StringIO()), warnings.catch_warnings():
+        warnings.simplefilter("ignore")     # its default cost function's performance warning
         calib.initialize()
         calib.solve(method="lm", max_iterations=1, enable_logging=False, plotting=False, save_results=False)
-    return time.perf_counter() - t0
+        metrics = calib._compute_validation_metrics() if held_rows else None
+    seconds = time.perf_counter() - t0
+    if metrics is not None and metrics["validation_source"] != "validation_data":
+        raise RuntimeError(f"FIGAROH did not read its validation file ({metrics['validation_source']})")
+    return seconds, metrics
+
+
+def figaroh_ur10_heldout(folder: Path, fold_of_pose: np.ndarray) -> tuple[float, float, float]:
+    """FIGAROH's held-out RMS position (m) and orientation (rad) over every pose of the UR10 record
+    when each fold of ``fold_of_pose`` is predicted by the fit of the others, and the seconds of
+    all those fits."""
+    header, *rows = (UR10 / "calibration.csv").read_text().splitlines()
+    sq_pos = sq_rot = seconds = 0.0
+    for f in np.unique(fold_of_pose):
+        held = set(np.flatnonzero(fold_of_pose == f).tolist())
+        s, m = _figaroh_fit(folder, f"fold{f}", [r for i, r in enumerate(rows) if i not in held],
+                            [rows[i] for i in sorted(held)], header)
+        assert m is not None
+        seconds += s
+        sq_pos += len(held) * (m["pos_rmse_calibrated_mm"] * 1e-3) ** 2
+        sq_rot += len(held) * np.radians(m["orient_rmse_calibrated_deg"]) ** 2
+    return float(np.sqrt(sq_pos / len(rows))), float(np.sqrt(sq_rot / len(rows))), seconds
+
+
+def bench_ur10(folder: Path) -> None:
+    """Ours with the defaults against FIGAROH 1.0.2 on FIGAROH's UR10 6-D record, in the same run:
+    times, and the held-out figures over all 23 poses on the same spatial folds as our model
+    selection's, and FIGAROH's by leave-one-out (its own protocol)."""
+    robot, ur10_csv = ur10_robot(folder)
+    with single_thread_blas():
+        t0 = time.perf_counter()
+        cfg = st.Config(measurements_csv=str(ur10_csv), figures=False)
+        cfg.validate()
+        out = st.calibrate(robot, None, cfg, np.random.default_rng(0))
+        ours = time.perf_counter() - t0
+    cv = out.notes.cross_validation or {}
+    sel = out.notes.model_selection
+    ours_pos, ours_rot = cv.get("rms_position_error_all_poses_m"), cv.get("rms_orientation_error_all_poses_rad")
+    head = f"UR10 6-D record (23 poses): ours (defaults, model selection) {ours:.1f} s"
+    if sel is None or ours_pos is None or ours_rot is None:
+        print(f"{head}; no cross-validation to compare (model selection did not run)")
+        return
+    folds = spatial_folds(out.measurements.Q, sel.folds)
+    with single_thread_blas():   # the chosen parameter set fixed: one fit and its cross-validation
+        t0 = time.perf_counter()
+        fixed = st.Config(measurements_csv=str(ur10_csv), figures=False, parameters=sel.chosen.parameters)
+        fixed.validate()
+        st.calibrate(robot, None, fixed, np.random.default_rng(0))
+        ours_fixed = time.perf_counter() - t0
+    try:
+        one_fit, _ = _figaroh_fit(folder, "all", (UR10 / "calibration.csv").read_text().splitlines()[1:], [],
+                                  (UR10 / "calibration.csv").read_text().splitlines()[0])
+        f_pos, f_rot, f_s = figaroh_ur10_heldout(folder, folds)
+        l_pos, l_rot, l_s = figaroh_ur10_heldout(folder, np.arange(len(folds)))
+    except ImportError:
+        print(f"{head}; FIGAROH skipped (pip install 'pipeline[bench]')")
+        return
+    except Exception as exc:   # a peer's failure is a result to print, not a crash of the benchmark
+        print(f"{head}; FIGAROH failed: {type(exc).__name__}: {exc}")
+        return
+    print(f"{head}, FIGAROH 1.0.2 (one fit, no selection) {one_fit:.2f} s; ours / FIGAROH {ours / one_fit:.1f}; "
+          f"ours with the chosen set fixed ({sel.chosen.parameters}: one fit and a {sel.folds}-fold cross-validation) "
+          f"{ours_fixed:.2f} s, / FIGAROH's one fit {ours_fixed / one_fit:.1f}")
+    print(f"  held-out over all 23 poses, the same {sel.folds} spatial folds: ours {ours_pos * 1e3:.2f} mm / "
+          f"{np.degrees(ours_rot):.3f} deg (chose {sel.chosen.name}, nested), FIGAROH {f_pos * 1e3:.2f} mm / "
+          f"{np.degrees(f_rot):.3f} deg ({f_s:.1f} s); ours / FIGAROH {ours_pos / f_pos:.3f} position, "
+          f"{ours_rot / f_rot:.3f} orientation")
+    print(f"  FIGAROH leave-one-out (its protocol, 23 fits, {l_s:.1f} s): {l_pos * 1e3:.2f} mm / "
+          f"{np.degrees(l_rot):.3f} deg; ours in {sel.folds} spatial folds / FIGAROH leave-one-out "
+          f"{ours_pos / l_pos:.3f} position, {ours_rot / l_rot:.3f} orientation")
 
 
 def bench_recorded(n_poses: int = 1000, robot_name: str = "rx130l") -> None:
@@ -315,24 +395,7 @@ def bench_recorded(n_poses: int = 1000, robot_name: str = "rx130l") -> None:
               f"(CPU {later_cpu:.1f} s); "
               f"later / {RECORDED_TARGET_S:g} s target {later / RECORDED_TARGET_S:.2f}, first / later "
               f"{first / later:.2f} (target <= {FIRST_OVER_LATER_TARGET:g})")
-        robot, ur10_csv = ur10_robot(folder)
-        with single_thread_blas():
-            t0 = time.perf_counter()
-            cfg = st.Config(measurements_csv=str(ur10_csv), figures=False)
-            cfg.validate()
-            st.calibrate(robot, None, cfg, np.random.default_rng(0))
-            ours = time.perf_counter() - t0
-        try:
-            theirs = figaroh_ur10_s(folder)
-        except ImportError:
-            print(f"UR10 6-D record (23 poses): ours {ours:.1f} s; FIGAROH skipped (pip install 'pipeline[bench]')")
-            return
-        except Exception as exc:   # a peer's failure is a result to print, not a crash of the benchmark
-            print(f"UR10 6-D record (23 poses): ours {ours:.1f} s; FIGAROH failed: {type(exc).__name__}: {exc}")
-            return
-        print(f"UR10 6-D record (23 poses): ours (defaults, model selection) {ours:.1f} s, FIGAROH 1.0.2 "
-              f"(one fit, no selection) {theirs:.2f} s; ours / FIGAROH {ours / theirs:.1f}")
-
+        bench_ur10(folder)
 
 if __name__ == "__main__":
     args = sys.argv[1:]
