@@ -10,7 +10,12 @@ stale reading repeated after a blocked beam). One of them moves a least-squares 
    that the elastostatic fit explains comes back in step 3 (:func:`geometric_screen`);
 1. plain least squares (:func:`pipeline.calibration.estimate.estimate`, registration + LM);
 2. with ``loss`` "huber" or "cauchy": ``scipy.optimize.least_squares`` from that solution with the
-   robust loss on the whitened residual components (``f_scale`` = :data:`ROBUST_SCALE` sigma);
+   robust loss on the whitened residual components, ``f_scale`` = :data:`ROBUST_SCALE` ``u`` sigma
+   with ``u`` the robust scale of step 3 at that solution (Huber 1981, *Robust Statistics*, §7.7:
+   an M-estimate's loss is scaled by a robust estimate of the residuals' spread). With the stated
+   noise right ``u`` is 1; where the readings' noise exceeds it (a record's first fit, before the
+   noise model's remainder is estimated) a loss scaled by the stated sigma alone would treat most
+   good readings as outliers, an L1 fit in effect;
 3. outlier test: the whitened residual of a reading ``s_k = |r_k / sigma_k|^2`` is chi-square with
    3 degrees of freedom when the reading is good; readings with
    ``s_k > u^2 chi2.ppf(confidence, 3)`` are rejected (at most ``max_fraction`` of them, largest
@@ -82,9 +87,11 @@ def _whitened_norm(mm: MeasurementModel, est: Estimate, Q: np.ndarray, Y: np.nda
 def _robust_refit(mm: MeasurementModel, est: Estimate, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarray,
                   mounted: np.ndarray | None, loss: str, max_iterations: int,
                   offsets: np.ndarray | None, factors: np.ndarray | None = None) -> Estimate:
-    """``least_squares`` with the robust loss from the plain fit (same registration and basis)."""
+    """``least_squares`` with the robust loss from the plain fit (same registration and basis), its
+    scale :data:`ROBUST_SCALE` times the robust scale of the plain fit's residuals (step 2)."""
     P = est.basis
     wh = Whitener(sigma, factors)
+    scale = residual_scale(wh.reading_norm(Y - mm.predict(Q, est.x, est.registration, mounted, offsets)))
 
     def fun(th: np.ndarray) -> np.ndarray:
         return wh.vector(Y - mm.predict(Q, P @ th, est.registration, mounted, offsets))
@@ -93,10 +100,19 @@ def _robust_refit(mm: MeasurementModel, est: Estimate, Q: np.ndarray, Y: np.ndar
         _, J = mm.jacobian(Q, P @ th, est.registration, P, mounted, offsets)
         return -wh.matrix(J)
 
-    sol = least_squares(fun, est.theta, jac=jac, loss=loss, f_scale=ROBUST_SCALE, method="trf",
+    sol = least_squares(fun, est.theta, jac=jac, loss=loss, f_scale=ROBUST_SCALE * scale, method="trf",
                         max_nfev=max(4 * max_iterations, 20), x_scale="jac")
     return Estimate(P @ sol.x, sol.x, P, est.covariance, est.transform_tracker_to_base, est.registration,
                     int(sol.nfev), est.chi2_per_dof, est.residual_rms_m, bool(sol.success), est.cost_history)
+
+
+def residual_scale(norm: np.ndarray) -> float:
+    """Robust scale ``u = max(1, sqrt(median(s_k) / chi2.ppf(0.5, 3)))`` of readings whose whitened
+    norms are ``norm`` (``s_k = norm_k^2``, chi-square with 3 dof for good readings under the stated
+    noise): 1 when the stated noise holds, the factor by which the residuals exceed it otherwise."""
+    if not len(norm):
+        return 1.0
+    return max(1.0, float(np.sqrt(np.median(np.asarray(norm, float) ** 2) / chi2.ppf(0.5, 3))))
 
 
 def geometric_screen(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarray, basis: np.ndarray,
@@ -117,8 +133,7 @@ def geometric_screen(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: 
         return keep
     rigid = _robust_refit(mm, rigid, Q, Y, sigma, mounted, "cauchy", max_iterations, offsets)
     norm = _whitened_norm(mm, rigid, Q, Y, sigma, mounted, offsets)
-    scale = max(1.0, float(np.sqrt(np.median(norm ** 2) / chi2.ppf(0.5, 3))))
-    bad = np.flatnonzero(norm > np.sqrt(chi2.ppf(confidence, 3)) * scale)
+    bad = np.flatnonzero(norm > np.sqrt(chi2.ppf(confidence, 3)) * residual_scale(norm))
     keep[bad[np.argsort(-norm[bad])][: int(np.floor(max_fraction * n))]] = False
     return keep
 
@@ -135,7 +150,6 @@ def robust_estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: n
     Q, Y, sigma = np.asarray(Q, float), np.asarray(Y, float), np.asarray(sigma, float)
     n = len(Q)
     base_threshold = float(np.sqrt(chi2.ppf(confidence, 3)))
-    median_3 = float(chi2.ppf(0.5, 3))
     threshold = base_threshold
     max_rejected = int(np.floor(max_fraction * n))
     kept = geometric_screen(mm, Q, Y, sigma, basis, source, max_iterations, mounted, offsets, confidence, max_fraction)
@@ -163,7 +177,7 @@ def robust_estimate(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: n
     capped = False
     for _ in range(MAX_ROUNDS):
         norm = _whitened_norm(mm, probe, Q, Y, sigma, mounted, offsets, fac)
-        threshold = base_threshold * max(1.0, float(np.sqrt(np.median(norm ** 2) / median_3)))
+        threshold = base_threshold * residual_scale(norm)
         bad = np.flatnonzero(norm > threshold)
         capped = len(bad) > max_rejected
         bad = bad[np.argsort(-norm[bad])][:max_rejected]

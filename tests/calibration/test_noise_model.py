@@ -204,3 +204,29 @@ def test_fit_without_a_warm_start_starts_every_fit_from_the_nominal_model(monkey
     assert starts[0] is cold.theta and all(s is not None for s in starts[1:])
     moved = mm.predict(meas.Q, warm.x, warm.registration) - mm.predict(meas.Q, cold.x, cold.registration)
     assert np.max(np.abs(moved)) < 1e-9
+
+
+def test_robust_loss_is_scaled_by_the_residuals_when_the_stated_noise_is_too_small():
+    """The robust refit's loss scale is ROBUST_SCALE times the residuals' robust scale: with the stated
+    sigma 100 times too small (a record's first fit, before the remainder is estimated) it finds the
+    same Huber solution as with the right sigma, where a loss scaled by the stated sigma alone is an
+    L1 fit that takes far more evaluations; the gross reading stands out either way."""
+    robot = RobotModel.load("rx130l")
+    real = RealRobot.create(robot, 8, TruthConfig.ideal())
+    rng = np.random.default_rng(8)
+    meas = ms.measure_simulated(real, cd.random_candidates(cd.chain_from_robot(robot), 60, rng)[0], rng)
+    meas.Y[7, 0] += 2e-3
+    mm = em.MeasurementModel(robot)
+    _, basis = st.identify_parameter_set(robot, mm, st.Config(identifiability_samples=60), rng)
+    right = meas.sigma_m
+    plain = robust_module.estimate(mm, meas.Q, meas.Y, right, basis)
+    fits = {k: robust_module._robust_refit(mm, plain, meas.Q, meas.Y, right / k, None, "huber", 50, None)
+            for k in (1.0, 100.0)}
+    assert robust_module.residual_scale(np.ones(5)) == 1.0
+    assert robust_module.residual_scale(100.0 * np.ones(5)) == pytest.approx(100.0 / np.sqrt(2.3660), rel=1e-3)
+    # the solution does not depend on how far the stated sigma is off
+    assert np.allclose(fits[100.0].theta, fits[1.0].theta, rtol=1e-4, atol=1e-9)
+    assert fits[100.0].iterations <= 2 * fits[1.0].iterations + 5
+    for fit in fits.values():
+        norm = robust_module._whitened_norm(mm, fit, meas.Q, meas.Y, right, None, None)
+        assert int(np.argmax(norm)) == 7 and norm[7] > 10 * np.median(norm)
