@@ -60,6 +60,7 @@ def summary_of(out: CalibrationOutcome, cfg: Config) -> dict:
         "heldout_mean_position_error_after_m": v["after"]["mean"] if v is not None else None,
         "heldout_max_position_error_after_m": v["after"]["max"] if v is not None else None,
         "heldout_max_position_error_before_m": v["before"]["max"] if v is not None else None,
+        **heldout_every_reading(v),
         "predicted_rms_position_error_m": predicted,
         "actual_over_predicted": v["after"]["rms"] / v["predicted_rms_m"] if v is not None else None,
         "actual_over_predicted_test": (cg.ratio_test(v, cfg.max_actual_over_predicted,
@@ -86,6 +87,28 @@ def summary_of(out: CalibrationOutcome, cfg: Config) -> dict:
         "lm_iterations": out.estimate.iterations,
         "timings_s": {k: round(t, 3) for k, t in out.timings_s.items()},
     }
+
+
+def heldout_every_reading(v: dict | None) -> dict[str, float | None]:
+    """Summary keys of the held-out file over every reading (also those the outlier test left out,
+    the figures to compare with a published one) and, for 6-D readings, the orientation errors
+    (rad): screened (``heldout_*_orientation_error_*_rad``, the poses of the position figures) and
+    over every reading (``*_all_poses_*``). None where the file gives none (no validation file, no
+    orientation read)."""
+    every = None if v is None else v.get("after_all_poses", v["after"])
+    out: dict[str, float | None] = {
+        "heldout_rms_position_error_all_poses_after_m": every["rms"] if every is not None else None,
+        "heldout_max_position_error_all_poses_after_m": every["max"] if every is not None else None}
+    rot = {k: (v[k].get("orientation_rad") if v is not None else None) for k in ("before", "after")}
+    rot_every = every.get("orientation_rad") if every is not None else None
+    out |= {
+        "heldout_rms_orientation_error_before_rad": rot["before"]["rms"] if rot["before"] else None,
+        "heldout_rms_orientation_error_after_rad": rot["after"]["rms"] if rot["after"] else None,
+        "heldout_max_orientation_error_after_rad": rot["after"]["max"] if rot["after"] else None,
+        "heldout_predicted_rms_orientation_error_rad": rot["after"].get("predicted_rms") if rot["after"] else None,
+        "heldout_rms_orientation_error_all_poses_after_rad": rot_every["rms"] if rot_every else None,
+        "heldout_max_orientation_error_all_poses_after_rad": rot_every["max"] if rot_every else None}
+    return out
 
 
 def noise_components(noise, total_sigma_m: float | None) -> dict[str, float | None]:

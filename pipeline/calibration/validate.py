@@ -314,6 +314,18 @@ def recorded_gross_rows(mm: MeasurementModel, est: Estimate, meas: Measurements,
     return bad if len(bad) <= max(int(max_rows), 0) else np.zeros(0, int)
 
 
+def orientation_stats(mm: MeasurementModel, x: np.ndarray, R_tb: np.ndarray, Q: np.ndarray, rotvec: np.ndarray
+                      ) -> dict[str, float]:
+    """Mean, RMS and max (rad) of the angle between the read marker frames (rotation vectors
+    ``rotvec`` in the tracker frame) and those of the model ``x`` at ``Q``, ``R_tb`` the rotation of
+    the tracker-to-base registration."""
+    _, R_refl = mm.base_positions(Q, x)
+    R_pred = np.einsum("ji,njk->nik", R_tb, R_refl)  # tracker-frame orientation
+    err = Rotation.from_matrix(np.einsum("nji,njk->nik", R_pred, Rotation.from_rotvec(rotvec).as_matrix())).as_rotvec()
+    ang = np.linalg.norm(err, axis=1)
+    return {"mean": float(ang.mean()), "rms": float(np.sqrt(np.mean(ang ** 2))), "max": float(ang.max())}
+
+
 def validate(mm: MeasurementModel, est: Estimate, meas: Measurements, outlier_confidence: float | None = None,
              gravity: GravityCovariance | None = None, orientation_sigma_rad: float = 0.0,
              residual_map: ResidualMap | None = None, gross_rows: np.ndarray | None = None) -> dict:
@@ -367,21 +379,16 @@ def validate(mm: MeasurementModel, est: Estimate, meas: Measurements, outlier_co
         "n_rejected": int(len(rejected)),
         "rejected_rows": [int(i) for i in rejected],
     } | moments
-    if gross_rows is not None:      # every held-out reading counted, beside the screened figures
+    if gross_rows is not None or len(rejected):   # every held-out reading counted, beside the screened figures
         e_all = (every.Y - mm.predict(every.Q, est.x, est.registration)) @ R_after.T
         if residual_map is not None:
             e_all = e_all - residual_map.predict(every.Q)[0]
         out["after_all_poses"] = _stats(e_all)
+        if every.rotvec is not None:
+            out["after_all_poses"]["orientation_rad"] = orientation_stats(mm, est.x, R_after, every.Q, every.rotvec)
     if meas.rotvec is not None:
-        _, R_refl = mm.base_positions(Q, est.x)
-        _, R_refl0 = mm.base_positions(Q, x0)
-        R_meas = Rotation.from_rotvec(meas.rotvec).as_matrix()
-        for key, R_tb, Rr in (("before", est.registration.rotation, R_refl0), ("after", R_after, R_refl)):
-            R_pred = np.einsum("ji,njk->nik", R_tb, Rr)  # tracker-frame orientation
-            err = Rotation.from_matrix(np.einsum("nji,njk->nik", R_pred, R_meas)).as_rotvec()
-            ang = np.linalg.norm(err, axis=1)
-            out[key]["orientation_rad"] = {"mean": float(ang.mean()), "rms": float(np.sqrt(np.mean(ang ** 2))),
-                                           "max": float(ang.max())}
+        for key, R_tb, x in (("before", est.registration.rotation, x0), ("after", R_after, est.x)):
+            out[key]["orientation_rad"] = orientation_stats(mm, x, R_tb, Q, meas.rotvec)
         if mm.marker_points:
             cov_w, _ = predicted_orientation_covariance(mm, est, Q, gravity)
             var_w = np.trace(cov_w, axis1=1, axis2=2)
@@ -407,8 +414,11 @@ def table_markdown(v: dict) -> str:
         lines.append(f"\n{v['n_rejected']} held-out reading(s) failed the outlier test (gross tracker errors) and are "
                      "left out of these statistics.")
         if "after_all_poses" in v:
-            lines.append(f"Over every held-out reading: RMS {1e3 * v['after_all_poses']['rms']:.4f} mm, max "
-                         f"{1e3 * v['after_all_poses']['max']:.4f} mm after calibration.")
+            every = v["after_all_poses"]
+            rot = (f"; orientation RMS {np.rad2deg(every['orientation_rad']['rms']):.4f} deg, max "
+                   f"{np.rad2deg(every['orientation_rad']['max']):.4f} deg" if "orientation_rad" in every else "")
+            lines.append(f"Over every held-out reading: RMS {1e3 * every['rms']:.4f} mm, max "
+                         f"{1e3 * every['max']:.4f} mm after calibration{rot}.")
     if "orientation_rad" in a:
         lines += ["", "| orientation error | mean [deg] | RMS [deg] | max [deg] |", "|---|---|---|---|"]
         for key, s in (("before", b), ("after", a)):

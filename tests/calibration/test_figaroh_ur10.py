@@ -192,3 +192,41 @@ def test_two_gross_readings_of_four_held_out_are_left_out_and_still_counted(reco
     assert v["n_poses"] == 4 and v["rejected_rows"] == [0, 1]
     assert v["after_all_poses"]["rms"] > 3 * v["after"]["rms"] and v["after"]["rms"] < 6e-3
     assert "Over every held-out reading" in va.table_markdown(v)
+
+
+def test_six_d_heldout_file_reports_orientation_and_every_reading_in_the_summary(record, tmp_path):
+    """A held-out file of the record's own poses, 14 and 19 among them (the far-off pair the
+    outlier test may leave out): the summary holds the held-out orientation error (screened, and
+    over every reading) and the position error over every reading, equal to the validation's own
+    figures recomputed from the readings, so a comparison with a published figure needs no report
+    parsing."""
+    robot, _ = record
+    src = _converter().convert(DATA / "calibration.csv", tmp_path / "ur10.csv", JOINTS).read_text().splitlines()
+    head, rows = src[0], src[1:]
+    held = [2, 6, 14, 19, 21]
+    (tmp_path / "train.csv").write_text("\n".join([head] + [r for i, r in enumerate(rows) if i not in held]) + "\n")
+    (tmp_path / "val.csv").write_text("\n".join([head] + [rows[i] for i in held]) + "\n")
+    cfg = st.Config(measurements_csv=str(tmp_path / "train.csv"), validation_csv=str(tmp_path / "val.csv"),
+                    parameters="geometric", figures=False)
+    cfg.validate()
+    out = st.calibrate(robot, None, cfg, np.random.default_rng(0))
+    s, v = st.summary_of(out, cfg), out.validation
+    # recomputed here from the held-out readings and the handed-on estimate
+    train = ms.read_csv(tmp_path / "train.csv", robot)
+    _, _, val = mf.align_records(robot, train, ms.read_csv(tmp_path / "val.csv", robot))   # as the stage does
+    mm = em.MeasurementModel(robot, marker_points=True)
+    est = out.estimate
+    e = (val.Y - mm.predict(val.Q, est.x, est.registration, None, np.zeros((len(val), 3))))
+    every_pos = float(np.sqrt(np.mean(np.sum(e ** 2, axis=1))))
+    assert s["heldout_rms_position_error_all_poses_after_m"] == pytest.approx(every_pos, rel=1e-6)
+    every_rot = va.orientation_stats(mm, est.x, est.transform_tracker_to_base.rotation, val.Q, val.rotvec)
+    assert every_rot["rms"] < np.radians(2.0)
+    assert s["heldout_rms_orientation_error_all_poses_after_rad"] == pytest.approx(every_rot["rms"], rel=1e-9)
+    assert s["heldout_rms_orientation_error_after_rad"] == v["after"]["orientation_rad"]["rms"]
+    assert s["heldout_rms_orientation_error_before_rad"] > 3 * s["heldout_rms_orientation_error_after_rad"]
+    assert 0 < s["heldout_predicted_rms_orientation_error_rad"] < s["heldout_rms_orientation_error_before_rad"]
+    if v["n_rejected"]:
+        assert s["heldout_rms_position_error_all_poses_after_m"] > s["heldout_rms_position_error_after_m"]
+        assert "orientation RMS" in va.table_markdown(v)
+    else:
+        assert s["heldout_rms_position_error_all_poses_after_m"] == s["heldout_rms_position_error_after_m"]
