@@ -106,6 +106,7 @@ def heldout_every_reading(v: dict | None) -> dict[str, float | None]:
         "heldout_rms_orientation_error_after_rad": rot["after"]["rms"] if rot["after"] else None,
         "heldout_max_orientation_error_after_rad": rot["after"]["max"] if rot["after"] else None,
         "heldout_predicted_rms_orientation_error_rad": rot["after"].get("predicted_rms") if rot["after"] else None,
+        "heldout_orientation_noise_sigma_rad": rot["after"].get("reading_sigma") if rot["after"] else None,
         "heldout_rms_orientation_error_all_poses_after_rad": rot_every["rms"] if rot_every else None,
         "heldout_max_orientation_error_all_poses_after_rad": rot_every["max"] if rot_every else None}
     return out

@@ -362,8 +362,12 @@ def validate_heldout(robot: RobotModel, real, model: ModelSetUp, records: UserRe
         origin = nm.row_groups(rec.offset_m, len(rec)) == 0
         gross = va.recorded_gross_rows(model.mm, fit.estimate, held, cfg.outlier_confidence,
                                        fit.rejection.whitened_norm[origin], allowed, fit.gravity)
+    orientation_sigma_rad = cfg.orientation_sigma_rad
+    if records.six_d and model.mm.marker_points:     # the readings' orientation noise, as the fit left it
+        orientation_sigma_rad, _ = va.orientation_noise_rad(model.mm, fit.estimate, fit.record, fit.rejection.rejected,
+                                                            cfg.orientation_sigma_rad)
     validation = va.validate(model.mm, fit.estimate, held, cfg.outlier_confidence, fit.gravity,
-                             cfg.orientation_sigma_rad, notes.residual_map, gross)
+                             orientation_sigma_rad, notes.residual_map, gross)
     notes.heldout_configurations = held.Q      # drawn by the viewer
     return validation
 

@@ -19,7 +19,11 @@ expand_orientation`): the errors ``e_0, e_x, e_y`` of the marker origin and of t
 ``R^T (e_x - e_0) = L w x e_x`` and ``R^T (e_y - e_0) = L w x e_y`` (``R`` the marker orientation in
 the tracker frame), so ``w = (g_y[z], -g_x[z], g_x[y])`` with ``g_k = R^T (e_k - e_0) / L``: a linear
 map ``S`` of the point errors, whose covariance follows as above with ``J_h, B_h`` replaced by
-``S J_h, S B_h``; ``E|w|^2`` adds ``3 sigma_rot^2`` of a noisy reading.
+``S J_h, S B_h``; ``E|w|^2`` adds ``3 sigma_rot^2`` of a noisy reading. ``sigma_rot`` is the stated
+orientation noise and a remainder estimated by REML on the fit's own orientation residuals
+(:func:`orientation_noise_rad`), as the position rows' remainder is on theirs: a camera's
+orientation noise, the arm's and the model's unexplained part are in the readings, not in a
+data-sheet value.
 
 Without a held-out set (a measurement file, no validation file) only the prediction is reported,
 over random visible poses (:func:`predicted_on_random_poses`).
@@ -161,6 +165,38 @@ def predicted_orientation_covariance(mm: MeasurementModel, est: Estimate, Q: np.
         B = [gravity.factors(Q, x_g, est.registration, offsets=o) for o in _marker_offsets(len(Q), lever_m)]
         Bw = _orientation_rows(_marker_rotation(mm, est, Q), B, lever_m)
     return _model_covariance(Jw, est, Bw)
+
+
+def orientation_noise_rad(mm: MeasurementModel, est: Estimate, rec: Measurements, rejected_rows: np.ndarray,
+                          stated_sigma_rad: float, lever_m: float = MARKER_LEVER_M) -> tuple[float, float]:
+    """``(sigma_rot, remainder)``: 1-sigma per axis (rad) of a 6-D reading's orientation, the stated
+    ``stated_sigma_rad`` and a remainder ``tau`` combined, ``sigma_rot^2 = stated^2 + tau^2``.
+
+    ``tau`` is the REML estimate (:func:`pipeline.calibration.noise_model.reml_remainder`) on the
+    fit's orientation residuals ``w_i = S (e_0, e_x, e_y)_i`` (the map ``S`` of the module
+    docstring applied to the fitted marker-point residuals of pose ``i``) with their Jacobian
+    ``S J_i``, over the poses none of whose rows the fit rejected. REML removes the ``p`` fitted
+    directions from these ``3 n`` rows as if they alone had fitted the parameters, where the fit
+    also had the positions: ``tau`` is then on the large side, the prediction conservative.
+    ``rec``: the fitted rows (:func:`pipeline.calibration.measure.expand_orientation`: origins,
+    then the x and the y points, ``pose_index`` per row)."""
+    pose = rec.pose_index if rec.pose_index is not None else np.arange(len(rec))
+    n = int(pose.max()) + 1 if len(pose) else 0
+    bad = np.zeros(n, bool)
+    bad[pose[np.asarray(rejected_rows, int)]] = True
+    offsets = rec.offset_m if rec.offset_m is not None else np.zeros((len(rec), 3))
+    e = rec.Y - mm.predict(rec.Q, est.x, est.registration, None, offsets)
+    blocks = [np.flatnonzero(np.all(np.isclose(offsets, o[0]), axis=1)) for o in _marker_offsets(1, lever_m)]
+    if any(len(b) != n for b in blocks) or n - int(bad.sum()) < 2:
+        return stated_sigma_rad, 0.0
+    order = [b[np.argsort(pose[b])] for b in blocks]     # rows of each point, pose by pose
+    keep = ~bad
+    Q = rec.Q[order[0]][keep]
+    R = _marker_rotation(mm, est, Q)
+    w = _orientation_rows(R, [e[o][keep][:, :, None] for o in order], lever_m)[:, :, 0]
+    Jw = orientation_jacobian(mm, est, Q, lever_m)
+    tau, _ = nm.reml_remainder(w, Jw, np.full(len(Q), stated_sigma_rad))
+    return math.sqrt(stated_sigma_rad ** 2 + tau ** 2), tau
 
 
 def _stacked_factors(mm: MeasurementModel, est: Estimate, Q: np.ndarray, gravity: GravityCovariance | None
@@ -394,6 +430,7 @@ def validate(mm: MeasurementModel, est: Estimate, meas: Measurements, outlier_co
             var_w = np.trace(cov_w, axis1=1, axis2=2)
             out["after"]["orientation_rad"] |= {
                 "predicted_rms": float(np.sqrt(np.mean(var_w) + 3 * orientation_sigma_rad ** 2)),
+                "reading_sigma": float(orientation_sigma_rad),
                 "predicted_model_rms": float(np.sqrt(np.mean(var_w)))}
     return out
 
@@ -429,6 +466,11 @@ def table_markdown(v: dict) -> str:
             o = a["orientation_rad"]
             lines.append(f"| predicted (covariance + noise) | | {np.rad2deg(o['predicted_rms']):.4f} | |")
             lines.append(f"| predicted, model part (exact readings) | | {np.rad2deg(o['predicted_model_rms']):.4f} | |")
+            if "reading_sigma" in o:
+                lines.append("\nOrientation noise of a reading in the prediction: "
+                             f"{np.rad2deg(o['reading_sigma']):.4f} deg per axis (the stated "
+                             "calibration.orientation_sigma_rad and a remainder estimated by REML on the fit's "
+                             "orientation residuals).")
     else:
         lines.append("\nOrientation errors: not measured (the laser tracker reads positions only).")
     return "\n".join(lines)

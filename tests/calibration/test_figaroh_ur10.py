@@ -225,6 +225,10 @@ def test_six_d_heldout_file_reports_orientation_and_every_reading_in_the_summary
     assert s["heldout_rms_orientation_error_after_rad"] == v["after"]["orientation_rad"]["rms"]
     assert s["heldout_rms_orientation_error_before_rad"] > 3 * s["heldout_rms_orientation_error_after_rad"]
     assert 0 < s["heldout_predicted_rms_orientation_error_rad"] < s["heldout_rms_orientation_error_before_rad"]
+    # the camera's orientation noise comes from the fit, far above robot.yaml's stated 1 mrad
+    assert s["heldout_orientation_noise_sigma_rad"] > 2 * cfg.orientation_sigma_rad
+    ratio = s["heldout_rms_orientation_error_after_rad"] / s["heldout_predicted_rms_orientation_error_rad"]
+    assert 1 / 1.5 < ratio < 1.5
     if v["n_rejected"]:
         assert s["heldout_rms_position_error_all_poses_after_m"] > s["heldout_rms_position_error_after_m"]
         assert "orientation RMS" in va.table_markdown(v)

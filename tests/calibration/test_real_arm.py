@@ -219,6 +219,30 @@ def test_23_six_d_poses_calibrate_all_parameters(robot, tmp_path):
         st.check(_cfg(measurements_csv=str(few), use_orientation=False), robot)
 
 
+@pytest.mark.parametrize("true_sigma_rad", [1e-3, 3e-3])
+def test_heldout_orientation_prediction_takes_the_noise_from_the_fit(tmp_path, true_sigma_rad):
+    """6-D readings whose orientation noise is 1 or 3 mrad per axis, where robot.yaml states 1 mrad:
+    the prediction's reading noise is the stated value with a REML remainder of the fit's own
+    orientation residuals, so it finds the true noise (within 15 %) and the held-out orientation error
+    meets its prediction (a stated-only prediction would be about 3 times too small at 3 mrad)."""
+    rigid = RobotModel.load("rx130l")
+    real = RealRobot.create(rigid, 8)
+    rng = np.random.default_rng(8)
+    chain = cd.chain_from_robot(rigid)
+    fit = ms.write_csv(tmp_path / "fit.csv", simulate_six_d_record(
+        real, cd.random_candidates(chain, 60, rng, visibility=False)[0], rng, 1e-4, true_sigma_rad))
+    val = ms.write_csv(tmp_path / "val.csv", simulate_six_d_record(
+        real, cd.random_candidates(chain, 100, rng, visibility=False)[0], rng, 1e-4, true_sigma_rad))
+    cfg = _cfg(measurements_csv=str(fit), validation_csv=str(val), position_sigma_m=1e-4, orientation_sigma_rad=1e-3,
+               parameters="geometric")
+    out = st.calibrate(rigid, None, cfg, np.random.default_rng(0))
+    s = st.summary_of(out, cfg)
+    assert s["heldout_orientation_noise_sigma_rad"] == pytest.approx(true_sigma_rad, rel=0.15)
+    ratio = s["heldout_rms_orientation_error_after_rad"] / s["heldout_predicted_rms_orientation_error_rad"]
+    assert 1 / 1.2 < ratio < 1.2
+    assert "Orientation noise of a reading in the prediction" in va.table_markdown(out.validation)
+
+
 def test_rotation_columns_in_degrees_are_rejected(robot, tmp_path):
     rng = np.random.default_rng(1)
     real = RealRobot.create(robot, 1)
