@@ -95,7 +95,9 @@ def check_gates(gates: QualityGates, summary: dict, cfg) -> None:
     rejects "the true ratio is at most ``m``" (``max_actual_over_predicted``) at
     ``actual_over_predicted_confidence``: the gate's threshold on the ratio is ``m sqrt(q_a / trace C)``;
     below ``(1/m) sqrt(q_(1-a) / trace C)``, a pessimistic prediction, is a warning in the summary.
-    The cross-validated ratio is compared with ``m`` and ``1/m`` (:func:`ratio_bounds`)."""
+    The cross-validated ratio is compared with ``m`` and ``1/m`` (:func:`ratio_bounds`). A held-out
+    orientation error above its prediction beyond chance is a warning
+    (:func:`orientation_prediction_warning`)."""
     gates.check("chi2_per_dof", summary["chi2_per_dof"], "<=", cfg.max_chi2_per_dof,
                 "whitened fit residuals after the outlier test under the noise model (sensor, arm repeatability, "
                 "remainder estimated by REML); far above 1: the fit did not converge or the remainder estimate failed")
@@ -108,7 +110,33 @@ def check_gates(gates: QualityGates, summary: dict, cfg) -> None:
             summary.setdefault("warnings", []).append(
                 f"{what} is {ratio:.3g}, below {lower:.3g}: the prediction is pessimistic (a remainder "
                 "estimated from few readings, or a sensor noise stated too high)")
+    warning = orientation_prediction_warning(summary, cfg.max_actual_over_predicted,
+                                             cfg.actual_over_predicted_confidence)
+    if warning:
+        summary.setdefault("warnings", []).append(warning)
     if after_before is not None:
         gates.check("error_after_over_before", after_before, "<=", cfg.max_error_after_over_before,
                     f"{source} RMS error of the calibrated model over the nominal model's: the error model does not "
                     "explain the readings (calibration.parameters; a wrong tool, tracker or joint order?)")
+
+
+def orientation_prediction_warning(summary: dict, m: float, confidence: float) -> str | None:
+    """A warning when the held-out orientation error of 6-D readings is above its prediction beyond
+    chance: ``rms / predicted > m sqrt(q / (3 n))`` with ``q`` the ``confidence`` quantile of a
+    chi-square with ``3 n`` degrees of freedom (``n`` scored poses; the poses' errors taken as
+    independent, the parameter error they share neglected). Orientation is not gated: the held-out
+    position error is. None: no orientation read, no prediction, or within the bound."""
+    rms = summary.get("heldout_rms_orientation_error_after_rad")
+    predicted = summary.get("heldout_predicted_rms_orientation_error_rad")
+    n = int(summary.get("heldout_n_poses") or 0) - int(summary.get("heldout_n_rejected") or 0)
+    if rms is None or not predicted or n <= 0:
+        return None
+    dof = 3 * n
+    bound = m * math.sqrt(float(chi2.ppf(confidence, dof)) / dof)
+    ratio = rms / predicted
+    if ratio <= bound:
+        return None
+    return (f"held-out orientation RMS error over its prediction is {ratio:.3g}, above {bound:.3g} ({m:g} with the "
+            f"{100 * confidence:g} % chi-square quantile of {n} poses): the orientation noise model is optimistic "
+            "(orientation is reported, not gated)")
+
