@@ -373,11 +373,11 @@ def bench_ur10(folder: Path) -> None:
     print(f"{head}, FIGAROH 1.0.2 (one fit, no selection) {one_fit:.2f} s; ours / FIGAROH {ours / one_fit:.1f}; "
           f"ours with the chosen set fixed ({sel.chosen.parameters}: one fit and a {sel.folds}-fold cross-validation) "
           f"{ours_fixed:.2f} s, / FIGAROH's one fit {ours_fixed / one_fit:.1f}")
-    print(f"  held-out over all 23 poses, the same {sel.folds} spatial folds: ours {ours_pos * 1e3:.2f} mm / "
-          f"{np.degrees(ours_rot):.3f} deg (chose {sel.chosen.name}, nested), FIGAROH {f_pos * 1e3:.2f} mm / "
+    print(f"  held-out over all 23 poses, the same {sel.folds} spatial folds: ours {ours_pos * 1e3:.3f} mm / "
+          f"{np.degrees(ours_rot):.3f} deg (chose {sel.chosen.name}, nested), FIGAROH {f_pos * 1e3:.3f} mm / "
           f"{np.degrees(f_rot):.3f} deg ({f_s:.1f} s); ours / FIGAROH {ours_pos / f_pos:.3f} position, "
           f"{ours_rot / f_rot:.3f} orientation")
-    print(f"  FIGAROH leave-one-out (its protocol, 23 fits, {l_s:.1f} s): {l_pos * 1e3:.2f} mm / "
+    print(f"  FIGAROH leave-one-out (its protocol, 23 fits, {l_s:.1f} s): {l_pos * 1e3:.3f} mm / "
           f"{np.degrees(l_rot):.3f} deg; ours in {sel.folds} spatial folds / FIGAROH leave-one-out "
           f"{ours_pos / l_pos:.3f} position, {ours_rot / l_rot:.3f} orientation")
 
