@@ -175,7 +175,8 @@ def orientation_noise_rad(mm: MeasurementModel, est: Estimate, rec: Measurements
     ``tau`` is the REML estimate (:func:`pipeline.calibration.noise_model.reml_remainder`) on the
     fit's orientation residuals ``w_i = S (e_0, e_x, e_y)_i`` (the map ``S`` of the module
     docstring applied to the fitted marker-point residuals of pose ``i``) with their Jacobian
-    ``S J_i``, over the poses none of whose rows the fit rejected. REML removes the ``p`` fitted
+    ``S J_i``, over the poses none of whose rows the fit rejected (the stated value alone when those
+    give no more rows than the ``p`` parameters). REML removes the ``p`` fitted
     directions from these ``3 n`` rows as if they alone had fitted the parameters, where the fit
     also had the positions: ``tau`` is then on the large side, the prediction conservative.
     ``rec``: the fitted rows (:func:`pipeline.calibration.measure.expand_orientation`: origins,
@@ -187,8 +188,8 @@ def orientation_noise_rad(mm: MeasurementModel, est: Estimate, rec: Measurements
     offsets = rec.offset_m if rec.offset_m is not None else np.zeros((len(rec), 3))
     e = rec.Y - mm.predict(rec.Q, est.x, est.registration, None, offsets)
     blocks = [np.flatnonzero(np.all(np.isclose(offsets, o[0]), axis=1)) for o in _marker_offsets(1, lever_m)]
-    if any(len(b) != n for b in blocks) or n - int(bad.sum()) < 2:
-        return stated_sigma_rad, 0.0
+    if any(len(b) != n for b in blocks) or 3 * (n - int(bad.sum())) <= est.basis.shape[1]:
+        return stated_sigma_rad, 0.0    # no orientation rows beyond the fitted directions: nothing to estimate
     order = [b[np.argsort(pose[b])] for b in blocks]     # rows of each point, pose by pose
     keep = ~bad
     Q = rec.Q[order[0]][keep]

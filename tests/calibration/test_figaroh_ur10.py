@@ -17,7 +17,7 @@ from pipeline.calibration import measure as ms
 from pipeline.calibration import model_selection as msel
 from pipeline.calibration import stage as st
 from pipeline.calibration import validate as va
-from pipeline.calibration.estimate import register_points
+from pipeline.calibration.estimate import estimate, register_points
 from pipeline.robot.model import RobotModel
 from pipeline.robot.yaml_init import write_robot_yaml
 
@@ -234,3 +234,18 @@ def test_six_d_heldout_file_reports_orientation_and_every_reading_in_the_summary
         assert "orientation RMS" in va.table_markdown(v)
     else:
         assert s["heldout_rms_position_error_all_poses_after_m"] == s["heldout_rms_position_error_after_m"]
+
+
+def test_orientation_noise_needs_more_orientation_rows_than_parameters(record):
+    """The orientation remainder is estimated on the poses the fit kept; with no more of their rows
+    than fitted parameters there is nothing to estimate and the stated sigma stands."""
+    robot, meas = record
+    _, aligned, _ = mf.align_records(robot, meas, None)
+    mm = em.MeasurementModel(robot, marker_points=True)
+    rec = ms.expand_orientation(aligned, 1e-3)
+    _, basis = st.identify_parameter_set(robot, mm, st.Config(identifiability_samples=60), np.random.default_rng(0))
+    est = estimate(mm, rec.Q, rec.Y, np.full(len(rec), 2e-3), basis, "ur10", 50, None, rec.offset_m)
+    sigma, tau = va.orientation_noise_rad(mm, est, rec, np.zeros(0, int), 1e-3)
+    assert tau > 1e-3 and sigma == pytest.approx(np.hypot(1e-3, tau))
+    all_but_two = np.flatnonzero(rec.pose_index >= 2)
+    assert va.orientation_noise_rad(mm, est, rec, all_but_two, 1e-3) == (1e-3, 0.0)
