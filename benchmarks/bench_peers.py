@@ -42,7 +42,7 @@ import numpy as np
 import pinocchio as pin
 from figaroh_config import figaroh_calibration_yaml
 
-from pipeline.calibration.error_model import MeasurementModel
+from pipeline.calibration.elastostatic import measurement_model
 from pipeline.calibration.stage import calibrate, heldout_measurements
 from pipeline.core.blas import single_thread_blas
 from pipeline.core.config import REPO_ROOT
@@ -210,7 +210,7 @@ def calibration_side_by_side(seed: int = 0) -> dict:
     out = calibrate(robot, real, cal_cfg, stage_rng(cfg.seed, "calibration"))
     t_ours = time.perf_counter() - t0
     held = heldout_measurements(robot, real, out.estimate, cal_cfg, np.random.default_rng([seed, 7]))
-    mm = MeasurementModel(robot)
+    mm = measurement_model(robot, cal_cfg)     # the stage's error model (elastostatic when it fits compliances)
     ours_err = np.linalg.norm(mm.predict(held.Q, out.estimate.x, out.estimate.registration) - held.Y, axis=1)
     meas = out.measurements
     print(f"calibration ({robot.name}, hidden robot {seed}): {len(meas)} measured poses, {len(held)} held-out poses, "
