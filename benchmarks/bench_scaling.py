@@ -28,7 +28,6 @@ import numpy as np
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import design as ds
 from pipeline.calibration import error_model as em
-from pipeline.calibration import indices as ix
 from pipeline.calibration.config import Config as CalibrationConfig
 from pipeline.calibration.stage import identify_parameter_set
 from pipeline.control.config import ControlConfig
@@ -70,7 +69,7 @@ def design_curves(robot: RobotModel, quick: bool, progress: Progress) -> None:
     Q = em.random_configurations(robot, n_max, rng)
     chain = cd.chain_from_robot(robot)
     G = cd.build_candidate_set(chain, Q, basis, robot.tracker.transform_tracker_to_base).G
-    spec = ix.IndexSpec(cfg.index_name)
+    spec, _ = ds.index_spec(cfg, robot, mm, basis, rng)    # the stage's criterion (V: its working region)
 
     evaluations: list[int] = []
 
@@ -137,10 +136,14 @@ def control_curve(robot: RobotModel, quick: bool, progress: Progress) -> None:
         return _timed(lambda: simulate_joint_trajectory(real, robot, t, q_d, v_d, a_d, config))
 
     sizes = [0.25, 0.5, 1.0] if quick else [0.25, 0.5, 1.0, 2.0, 4.0]
+    run(0.05)     # warm-up: the first call builds the loop's compiled functions, which is not its scaling
     curve("control loop (400 us) vs simulated seconds", "s", sizes, run, progress)
 
 
 def main(argv: list[str]) -> None:
+    if any(a in ("-h", "--help") for a in argv):
+        print(__doc__)
+        return
     names = [a for a in argv if not a.startswith("--")]
     quick = "--quick" in argv
     robot = RobotModel.load(names[0] if names else "rx130l")
