@@ -224,4 +224,7 @@ def main(run_dir: str = "data/runs/rx130l") -> None:
 
 
 if __name__ == "__main__":
+    from bench_help import exit_on_help
+
+    exit_on_help(__doc__)
     main(*sys.argv[1:2])

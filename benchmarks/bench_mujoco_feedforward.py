@@ -91,6 +91,9 @@ def main(run_dir: Path, seed: int) -> None:
 
 
 if __name__ == "__main__":
+    from bench_help import exit_on_help
+
+    exit_on_help(__doc__)
     if len(sys.argv) < 2:
         raise SystemExit(__doc__)
     main(Path(sys.argv[1]), int(sys.argv[2]) if len(sys.argv) > 2 else 21)

@@ -50,4 +50,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    from bench_help import exit_on_help
+
+    exit_on_help(__doc__)
     main()

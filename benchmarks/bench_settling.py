@@ -79,4 +79,7 @@ def main(robot_name: str = "rx130l", seeds: str = "1,2,3") -> None:
 
 
 if __name__ == "__main__":
+    from bench_help import exit_on_help
+
+    exit_on_help(__doc__)
     main(*sys.argv[1:3])

@@ -104,4 +104,7 @@ def main(argv: list[str]) -> None:
 
 
 if __name__ == "__main__":
+    from bench_help import exit_on_help
+
+    exit_on_help(__doc__)
     main(sys.argv[1:])

@@ -335,6 +335,9 @@ def scaling(*_: str) -> None:
 
 
 if __name__ == "__main__":
+    from bench_help import exit_on_help
+
+    exit_on_help(__doc__)
     if sys.argv[1:2] == ["moves"]:
         sys.exit(moves(*sys.argv[2:]))
     elif sys.argv[1:2] == ["scaling"]:
