@@ -49,6 +49,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pinocchio as pin
+from bench_help import exit_on_help
 from figaroh_config import figaroh_calibration_yaml
 
 from pipeline.calibration import candidates as cd
@@ -65,6 +66,10 @@ from pipeline.core.config import REPO_ROOT
 from pipeline.robot.model import RobotModel
 from pipeline.robot.yaml_init import write_robot_yaml
 from pipeline.sim.truth import RealRobot
+
+HAVE_FIGAROH = importlib.util.find_spec("figaroh") is not None
+if HAVE_FIGAROH:  # optional peer (the bench extra, not installed by default): imported only when present
+    from figaroh.calibration.base_calibration import BaseCalibration
 
 
 class PerCandidateState(DesignState):
@@ -287,9 +292,8 @@ def _figaroh_fit(folder: Path, tag: str, train_rows: list[str], held_rows: list[
     """FIGAROH 1.0.2's ``BaseCalibration`` of the UR10 record's ``train_rows`` (full geometric
     parameters, unknown base frame (the camera's) and marker frame on wrist_3_link, 6-D marker, LM;
     the figaroh-examples ur10 layout) with ``held_rows`` as its validation file: (seconds of
-    initialise + solve, its validation metrics or None without held-out rows)."""
-    from figaroh.calibration.base_calibration import BaseCalibration
-
+    initialise + solve, its validation metrics, as its solve stores them, or None without held-out
+    rows)."""
     model = pin.buildModelFromUrdf(str(UR10 / "robot.urdf"))
     robot = SimpleNamespace(model=model, data=model.createData(), q0=pin.neutral(model))
     train = folder / f"figaroh_{tag}_train.csv"
@@ -310,18 +314,18 @@ def _figaroh_fit(folder: Path, tag: str, train_rows: list[str], held_rows: list[
         warnings.simplefilter("ignore")     # its default cost function's performance warning
         calib.initialize()
         calib.solve(method="lm", max_iterations=1, enable_logging=False, plotting=False, save_results=False)
-        metrics = calib._compute_validation_metrics() if held_rows else None
     seconds = time.perf_counter() - t0
-    if metrics is not None and metrics["validation_source"] != "validation_data":
-        raise RuntimeError(f"FIGAROH did not read its validation file ({metrics['validation_source']})")
+    metrics = calib.results_data.get("validation_metrics") if held_rows else None
+    if held_rows and (metrics is None or metrics["validation_source"] != "validation_data"):
+        raise RuntimeError(f"FIGAROH did not score its validation file ({metrics and metrics['validation_source']})")
     return seconds, metrics
 
 
-def figaroh_ur10_heldout(folder: Path, fold_of_pose: np.ndarray) -> tuple[float, float, float]:
+def figaroh_ur10_heldout(folder: Path, header: str, rows: list[str], fold_of_pose: np.ndarray
+                         ) -> tuple[float, float, float]:
     """FIGAROH's held-out RMS position (m) and orientation (rad) over every pose of the UR10 record
-    when each fold of ``fold_of_pose`` is predicted by the fit of the others, and the seconds of
-    all those fits."""
-    header, *rows = (UR10 / "calibration.csv").read_text().splitlines()
+    (``header``, ``rows``: its CSV lines) when each fold of ``fold_of_pose`` is predicted by the fit
+    of the others, and the seconds of all those fits."""
     sq_pos = sq_rot = seconds = 0.0
     for f in np.unique(fold_of_pose):
         held = set(np.flatnonzero(fold_of_pose == f).tolist())
@@ -359,14 +363,14 @@ def bench_ur10(folder: Path) -> None:
         fixed.validate()
         st.calibrate(robot, None, fixed, np.random.default_rng(0))
         ours_fixed = time.perf_counter() - t0
-    try:
-        one_fit, _ = _figaroh_fit(folder, "all", (UR10 / "calibration.csv").read_text().splitlines()[1:], [],
-                                  (UR10 / "calibration.csv").read_text().splitlines()[0])
-        f_pos, f_rot, f_s = figaroh_ur10_heldout(folder, folds)
-        l_pos, l_rot, l_s = figaroh_ur10_heldout(folder, np.arange(len(folds)))
-    except ImportError:
+    if not HAVE_FIGAROH:
         print(f"{head}; FIGAROH skipped (pip install 'pipeline[bench]')")
         return
+    header, *rows = (UR10 / "calibration.csv").read_text().splitlines()
+    try:
+        one_fit, _ = _figaroh_fit(folder, "all", rows, [], header)
+        f_pos, f_rot, f_s = figaroh_ur10_heldout(folder, header, rows, folds)
+        l_pos, l_rot, l_s = figaroh_ur10_heldout(folder, header, rows, np.arange(len(folds)))
     except Exception as exc:   # a peer's failure is a result to print, not a crash of the benchmark
         print(f"{head}; FIGAROH failed: {type(exc).__name__}: {exc}")
         return
@@ -398,10 +402,8 @@ def bench_recorded(n_poses: int = 1000, robot_name: str = "rx130l") -> None:
         bench_ur10(folder)
 
 if __name__ == "__main__":
+    exit_on_help(__doc__)
     args = sys.argv[1:]
-    if args and args[0] in ("-h", "--help"):
-        print(__doc__)
-        sys.exit(0)
     if args and args[0] == "_calibrate_file":
         calibrate_file(args[1], args[2])
         sys.exit(0)

@@ -28,6 +28,7 @@ from contextlib import contextmanager
 
 import numpy as np
 import pinocchio as pin
+from bench_help import exit_on_help
 
 from pipeline.control.config import ControlConfig
 from pipeline.control.simulate import ClosedLoopResult, simulate_joint_trajectory
@@ -217,8 +218,6 @@ def joint_scaling(joints: tuple[int, ...] = (2, 3, 4, 6, 7, 8), samples: int = 2
 
 
 if __name__ == "__main__":
-    from bench_help import exit_on_help
-
     exit_on_help(__doc__)
     main(sys.argv[1] if len(sys.argv) > 1 else "rx130l", float(sys.argv[2]) if len(sys.argv) > 2 else 1.0)
     joint_scaling()

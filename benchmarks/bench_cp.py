@@ -32,6 +32,7 @@ import sys
 import time
 
 import numpy as np
+from bench_help import exit_on_help
 
 from pipeline.core.errors import PipelineError
 from pipeline.robot.defaults import iso_cube
@@ -229,7 +230,5 @@ def main(*args: str) -> None:
 
 
 if __name__ == "__main__":
-    from bench_help import exit_on_help
-
     exit_on_help(__doc__)
     main(*sys.argv[1:])

@@ -49,6 +49,7 @@ from unittest import mock
 
 import numpy as np
 from bench_elastic_gap import load_run_models
+from bench_help import exit_on_help
 from scipy.signal import savgol_filter
 
 from pipeline.control import simulate
@@ -224,7 +225,5 @@ def main(run_dir: str = "data/runs/rx130l") -> None:
 
 
 if __name__ == "__main__":
-    from bench_help import exit_on_help
-
     exit_on_help(__doc__)
     main(*sys.argv[1:2])

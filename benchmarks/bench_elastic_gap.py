@@ -37,6 +37,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from bench_help import exit_on_help
 
 from pipeline.control.config import ControlConfig
 from pipeline.control.design import iso_reference
@@ -196,7 +197,5 @@ def main(run_dir: str = "data/runs/rx130l") -> None:
 
 
 if __name__ == "__main__":
-    from bench_help import exit_on_help
-
     exit_on_help(__doc__)
     main(*sys.argv[1:2])

@@ -19,6 +19,7 @@ import sys
 
 import numpy as np
 import pinocchio as pin
+from bench_help import exit_on_help
 
 from pipeline.control.config import ControlConfig
 from pipeline.control.simulate import simulate_joint_trajectory
@@ -104,7 +105,5 @@ def main(robot_name: str = "rx130l", seconds: float = 2.0) -> None:
 
 
 if __name__ == "__main__":
-    from bench_help import exit_on_help
-
     exit_on_help(__doc__)
     main(*(sys.argv[1:2] or ["rx130l"]), *(float(a) for a in sys.argv[2:3]))

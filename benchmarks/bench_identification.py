@@ -17,6 +17,7 @@ import time
 
 import numpy as np
 import pinocchio as pin
+from bench_help import exit_on_help
 
 from pipeline.core.blas import single_thread_blas
 from pipeline.identification import design as D
@@ -67,7 +68,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    from bench_help import exit_on_help
-
     exit_on_help(__doc__)
     main()

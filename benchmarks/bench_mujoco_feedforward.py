@@ -24,6 +24,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from bench_help import exit_on_help
 
 from pipeline.control.config import ControlConfig
 from pipeline.control.design import ServoGains
@@ -91,8 +92,6 @@ def main(run_dir: Path, seed: int) -> None:
 
 
 if __name__ == "__main__":
-    from bench_help import exit_on_help
-
     exit_on_help(__doc__)
     if len(sys.argv) < 2:
         raise SystemExit(__doc__)

@@ -18,6 +18,7 @@ import sys
 import time
 
 import numpy as np
+from bench_help import exit_on_help
 
 from pipeline.calibration import design as ds
 from pipeline.calibration import indices as ix
@@ -50,7 +51,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    from bench_help import exit_on_help
-
     exit_on_help(__doc__)
     main()

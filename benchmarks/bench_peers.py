@@ -40,6 +40,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pinocchio as pin
+from bench_help import exit_on_help
 from figaroh_config import figaroh_calibration_yaml
 
 from pipeline.calibration.elastostatic import measurement_model
@@ -247,7 +248,5 @@ def main(argv: list[str]) -> None:
 
 
 if __name__ == "__main__":
-    from bench_help import exit_on_help
-
     exit_on_help(__doc__)
     main(sys.argv[1:])

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import casadi as ca
 import numpy as np
+from bench_help import exit_on_help
 
 from pipeline.robot.model import RobotModel
 from pipeline.robot.symbolic import SymbolicRobot
@@ -77,7 +78,5 @@ def main(robot_name: str = "rx130l", flag: str = "-O1", n_intervals: int = 50) -
 
 
 if __name__ == "__main__":
-    from bench_help import exit_on_help
-
     exit_on_help(__doc__)
     main(*(sys.argv[1:2] or ["rx130l"]), *(sys.argv[2:3] or ["-O1"]), *(int(a) for a in sys.argv[3:4]))

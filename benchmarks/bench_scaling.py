@@ -24,6 +24,7 @@ import time
 from collections.abc import Callable, Sequence
 
 import numpy as np
+from bench_help import exit_on_help
 
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import design as ds
@@ -141,9 +142,6 @@ def control_curve(robot: RobotModel, quick: bool, progress: Progress) -> None:
 
 
 def main(argv: list[str]) -> None:
-    if any(a in ("-h", "--help") for a in argv):
-        print(__doc__)
-        return
     names = [a for a in argv if not a.startswith("--")]
     quick = "--quick" in argv
     robot = RobotModel.load(names[0] if names else "rx130l")
@@ -154,4 +152,5 @@ def main(argv: list[str]) -> None:
 
 
 if __name__ == "__main__":
+    exit_on_help(__doc__)
     main(sys.argv[1:])

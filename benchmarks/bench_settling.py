@@ -29,6 +29,7 @@ import time
 
 import numpy as np
 from bench_elastic_gap import with_stiffness, with_truth_friction
+from bench_help import exit_on_help
 
 from pipeline.control.config import ControlConfig
 from pipeline.robot import defaults
@@ -79,7 +80,5 @@ def main(robot_name: str = "rx130l", seeds: str = "1,2,3") -> None:
 
 
 if __name__ == "__main__":
-    from bench_help import exit_on_help
-
     exit_on_help(__doc__)
     main(*sys.argv[1:3])

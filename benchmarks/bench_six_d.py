@@ -37,6 +37,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from bench_help import exit_on_help
 
 from pipeline.calibration import validate as va
 from pipeline.calibration.elastostatic import measurement_model
@@ -104,7 +105,5 @@ def main(argv: list[str]) -> None:
 
 
 if __name__ == "__main__":
-    from bench_help import exit_on_help
-
     exit_on_help(__doc__)
     main(sys.argv[1:])

@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from bench_help import exit_on_help
 
 from pipeline.robot.model import RobotModel
 from pipeline.robot.symbolic import SymbolicRobot
@@ -64,7 +65,5 @@ def main(robot_name: str = "rx130l", n_map: int = 400) -> None:
 
 
 if __name__ == "__main__":
-    from bench_help import exit_on_help
-
     exit_on_help(__doc__)
     main(*(sys.argv[1:2] or ["rx130l"]), *(int(x) for x in sys.argv[2:3]))

@@ -45,6 +45,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from bench_help import exit_on_help
 
 from pipeline.core.errors import PipelineError
 from pipeline.robot.defaults import ptp_move_rad
@@ -335,8 +336,6 @@ def scaling(*_: str) -> None:
 
 
 if __name__ == "__main__":
-    from bench_help import exit_on_help
-
     exit_on_help(__doc__)
     if sys.argv[1:2] == ["moves"]:
         sys.exit(moves(*sys.argv[2:]))

@@ -179,22 +179,18 @@ def orientation_noise_rad(mm: MeasurementModel, est: Estimate, rec: Measurements
     give no more rows than the ``p`` parameters). REML removes the ``p`` fitted
     directions from these ``3 n`` rows as if they alone had fitted the parameters, where the fit
     also had the positions: ``tau`` is then on the large side, the prediction conservative.
-    ``rec``: the fitted rows (:func:`pipeline.calibration.measure.expand_orientation`: origins,
-    then the x and the y points, ``pose_index`` per row)."""
-    pose = rec.pose_index if rec.pose_index is not None else np.arange(len(rec))
-    n = int(pose.max()) + 1 if len(pose) else 0
-    bad = np.zeros(n, bool)
-    bad[pose[np.asarray(rejected_rows, int)]] = True
-    offsets = rec.offset_m if rec.offset_m is not None else np.zeros((len(rec), 3))
-    e = rec.Y - mm.predict(rec.Q, est.x, est.registration, None, offsets)
-    blocks = [np.flatnonzero(np.all(np.isclose(offsets, o[0]), axis=1)) for o in _marker_offsets(1, lever_m)]
-    if any(len(b) != n for b in blocks) or 3 * (n - int(bad.sum())) <= est.basis.shape[1]:
+    ``rec``: the fitted rows as :func:`pipeline.calibration.measure.expand_orientation` writes them
+    (the ``n`` origins, then the ``n`` x points, then the ``n`` y points)."""
+    n = len(rec) // 3
+    if rec.pose_index is None or not np.array_equal(rec.pose_index, np.tile(np.arange(n), 3)):
+        raise ValueError("orientation_noise_rad: rec is not a 6-D record expanded by measure.expand_orientation")
+    keep = np.ones(n, bool)
+    keep[rec.pose_index[np.asarray(rejected_rows, int)]] = False
+    if 3 * int(keep.sum()) <= est.basis.shape[1]:
         return stated_sigma_rad, 0.0    # no orientation rows beyond the fitted directions: nothing to estimate
-    order = [b[np.argsort(pose[b])] for b in blocks]     # rows of each point, pose by pose
-    keep = ~bad
-    Q = rec.Q[order[0]][keep]
-    R = _marker_rotation(mm, est, Q)
-    w = _orientation_rows(R, [e[o][keep][:, :, None] for o in order], lever_m)[:, :, 0]
+    e = (rec.Y - mm.predict(rec.Q, est.x, est.registration, None, rec.offset_m)).reshape(3, n, 3)[:, keep]
+    Q = rec.Q[:n][keep]
+    w = _orientation_rows(_marker_rotation(mm, est, Q), [e_k[:, :, None] for e_k in e], lever_m)[:, :, 0]
     Jw = orientation_jacobian(mm, est, Q, lever_m)
     tau, _ = nm.reml_remainder(w, Jw, np.full(len(Q), stated_sigma_rad))
     return math.sqrt(stated_sigma_rad ** 2 + tau ** 2), tau

@@ -196,7 +196,7 @@ def test_two_gross_readings_of_four_held_out_are_left_out_and_still_counted(reco
 
 def test_six_d_heldout_file_reports_orientation_and_every_reading_in_the_summary(record, tmp_path):
     """A held-out file of the record's own poses, 14 and 19 among them (the far-off pair the
-    outlier test may leave out): the summary holds the held-out orientation error (screened, and
+    outlier test leaves out): the summary holds the held-out orientation error (screened, and
     over every reading) and the position error over every reading, equal to the validation's own
     figures recomputed from the readings, so a comparison with a published figure needs no report
     parsing."""
@@ -229,11 +229,10 @@ def test_six_d_heldout_file_reports_orientation_and_every_reading_in_the_summary
     assert s["heldout_orientation_noise_sigma_rad"] > 2 * cfg.orientation_sigma_rad
     ratio = s["heldout_rms_orientation_error_after_rad"] / s["heldout_predicted_rms_orientation_error_rad"]
     assert 1 / 1.5 < ratio < 1.5
-    if v["n_rejected"]:
-        assert s["heldout_rms_position_error_all_poses_after_m"] > s["heldout_rms_position_error_after_m"]
-        assert "orientation RMS" in va.table_markdown(v)
-    else:
-        assert s["heldout_rms_position_error_all_poses_after_m"] == s["heldout_rms_position_error_after_m"]
+    # the far-off pair is left out of the screened figures and counted in the every-reading ones
+    assert v["n_rejected"] >= 1
+    assert s["heldout_rms_position_error_all_poses_after_m"] > s["heldout_rms_position_error_after_m"]
+    assert "orientation RMS" in va.table_markdown(v)
 
 
 def test_orientation_noise_needs_more_orientation_rows_than_parameters(record):
