@@ -337,14 +337,16 @@ def recorded_gross_rows(mm: MeasurementModel, est: Estimate, meas: Measurements,
     ``s_j = fit_norm_j^2`` (:class:`pipeline.calibration.robust.Rejection`), not over the held-out
     file: a median over a few held-out readings breaks down when half of them are gross (two of
     four) and hides them. At most ``max_rows`` (the caller's share of ``max_outlier_fraction`` of
-    the whole record): if more fail, none is left out (the model, not the readings, is off)."""
+    the whole record), and never every reading of the file: if more fail, or all of them (a
+    held-out file of one pose), none is left out (the model, not the readings, is off, or the file
+    holds nothing to tell them apart by), and the held-out figures count every reading."""
     cov, _ = predicted_covariance(mm, est, meas.Q, meas.sigma_m, gravity)
     e = meas.Y - mm.predict(meas.Q, est.x, est.registration)
     w = np.sqrt(np.einsum("ni,nij,nj->n", e, np.linalg.inv(cov), e))
     s = np.asarray(fit_norm, float) ** 2
     scale = max(1.0, float(np.sqrt(np.median(s) / chi2.ppf(0.5, 3)))) if s.size else 1.0
     bad = np.flatnonzero(w > np.sqrt(chi2.ppf(confidence, 3)) * scale)
-    return bad if len(bad) <= max(int(max_rows), 0) else np.zeros(0, int)
+    return bad if len(bad) <= max(int(max_rows), 0) and len(bad) < len(w) else np.zeros(0, int)
 
 
 def orientation_stats(mm: MeasurementModel, x: np.ndarray, R_tb: np.ndarray, Q: np.ndarray, rotvec: np.ndarray

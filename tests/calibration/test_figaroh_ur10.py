@@ -194,6 +194,24 @@ def test_two_gross_readings_of_four_held_out_are_left_out_and_still_counted(reco
     assert "Over every held-out reading" in va.table_markdown(v)
 
 
+def test_a_heldout_file_of_one_far_off_pose_is_scored_not_emptied(record, tmp_path):
+    """Leave-one-out through the stage: a held-out file of the far-off pose 19 alone. The screen
+    would leave it out (within the record's allowance), which leaves nothing to score; it leaves
+    out no reading of a file whose every reading fails, so the pose is scored as it is."""
+    robot, _ = record
+    src = _converter().convert(DATA / "calibration.csv", tmp_path / "ur10.csv", JOINTS).read_text().splitlines()
+    head, rows = src[0], src[1:]
+    (tmp_path / "train.csv").write_text("\n".join([head] + [r for i, r in enumerate(rows) if i != 19]) + "\n")
+    (tmp_path / "val.csv").write_text("\n".join([head, rows[19]]) + "\n")
+    cfg = st.Config(measurements_csv=str(tmp_path / "train.csv"), validation_csv=str(tmp_path / "val.csv"),
+                    parameters="geometric", figures=False)
+    cfg.validate()
+    v = st.calibrate(robot, None, cfg, np.random.default_rng(0)).validation
+    assert v["n_poses"] == 1 and v["n_rejected"] == 0
+    assert v["after_all_poses"]["rms"] == pytest.approx(v["after"]["rms"])
+    assert v["after"]["rms"] > 5e-3      # the pose is 6-9 mm off under every model of the record
+
+
 def test_six_d_heldout_file_reports_orientation_and_every_reading_in_the_summary(record, tmp_path):
     """A held-out file of the record's own poses, 14 and 19 among them (the far-off pair the
     outlier test leaves out): the summary holds the held-out orientation error (screened, and
