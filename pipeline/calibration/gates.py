@@ -1,5 +1,6 @@
 """The calibration's quality gates: the fit's chi²/dof under the noise model, actual/predicted on
-held-out or cross-validated poses, and the error after calibration against the nominal model's.
+held-out or cross-validated poses, and the error after calibration against the nominal model's
+(both less the stated reading noise, :func:`error_above_noise_ratio`).
 
 The gate on actual/predicted (:func:`check_gates`) is a one-sided test, not a comparison of the
 sample ratio with a fixed bound. The stacked held-out position errors ``e = (e_1, ..., e_N)`` of the
@@ -57,18 +58,58 @@ def ratio_test(moments: dict, max_ratio: float, confidence: float) -> dict:
             "threshold": float(max_ratio * math.sqrt(q_hi)), "lower_threshold": float(math.sqrt(q_lo) / max_ratio)}
 
 
+def stated_noise_rms_m(summary: dict) -> float:
+    """RMS length of a position reading's stated noise: ``sqrt(3 (s^2 + r^2))`` with ``s`` the
+    sensor's 1-sigma per axis and ``r`` the arm's repeatability as the noise model used it
+    (robot.yaml's when stated; 0 when the record's remainder took its place). The REML remainder is
+    not part of it: it holds whatever the model leaves, noise or inadequacy alike."""
+    sensor = float(summary.get("noise_sensor_sigma_m") or 0.0)
+    repeatability = float(summary.get("noise_repeatability_sigma_m") or 0.0)
+    return math.sqrt(3.0 * (sensor ** 2 + repeatability ** 2))
+
+
+def error_above_noise_ratio(after_m: float, before_m: float, noise_m: float) -> float | None:
+    """The calibrated model's RMS error over the nominal model's, each less the stated reading
+    noise ``noise_m`` (RMS length) in quadrature: ``sqrt(max(a^2 - n^2, 0) / (b^2 - n^2))``, the
+    share of the nominal model's systematic error the calibration leaves. A noise the sensor and
+    the arm are stated to add is no error of the model: without the subtraction a record whose
+    nominal error is a few times its noise could not halve its error however right the model.
+    None when the nominal error is within the noise (``b <= n``): nothing to judge."""
+    excess_before = before_m ** 2 - noise_m ** 2
+    if not excess_before > 0:
+        return None
+    return math.sqrt(max(after_m ** 2 - noise_m ** 2, 0.0) / excess_before)
+
+
 def gate_figures(summary: dict) -> tuple[str, float | None, float | None]:
     """The out-of-sample figures the gates judge: ``(source, actual/predicted, after/before)`` from
-    the held-out validation, else from the cross-validation, else ``("none", None, None)``."""
+    the held-out validation, else from the cross-validation, else ``("none", None, None)``.
+    After/before is :func:`error_above_noise_ratio` with the stated noise
+    (:func:`stated_noise_rms_m`)."""
+    noise = stated_noise_rms_m(summary)
     if summary.get("actual_over_predicted") is not None:
-        before = summary["heldout_rms_position_error_before_m"]
         return ("held-out", summary["actual_over_predicted"],
-                summary["heldout_rms_position_error_after_m"] / before if before else None)
+                error_above_noise_ratio(summary["heldout_rms_position_error_after_m"],
+                                        summary["heldout_rms_position_error_before_m"] or 0.0, noise))
     cv = summary.get("cross_validation") or {}
     if cv.get("actual_over_predicted") is not None:
-        before = cv.get("rms_position_error_before_m")
-        return "cross-validated", cv["actual_over_predicted"], cv["rms_position_error_m"] / before if before else None
+        return ("cross-validated", cv["actual_over_predicted"],
+                error_above_noise_ratio(cv["rms_position_error_m"], cv.get("rms_position_error_before_m") or 0.0,
+                                        noise))
     return "none", None, None
+
+
+def remainder_hint(summary: dict) -> str:
+    """What to state when the readings scatter well beyond their stated noise: the REML remainder
+    (1-sigma per axis) against the stated sensor and repeatability parts; "" when it is not above
+    twice them. The after/before gate cannot tell that scatter from an error of the model."""
+    remainder = float(summary.get("noise_remainder_sigma_m") or 0.0)
+    stated = stated_noise_rms_m(summary) / math.sqrt(3.0)
+    if remainder <= 2.0 * stated:
+        return ""
+    return (f"; the readings scatter {1e3 * remainder:.3g} mm per axis (REML remainder) beyond the stated "
+            f"{1e3 * stated:.3g} mm: if that is the sensor's or the arm's noise, state it in robot.yaml (the "
+            "tracker's noise_const_m, repeatability_m) and this gate judges the error above it")
 
 
 def ratio_bounds(summary: dict, source: str, max_ratio: float) -> tuple[float, float, str]:
@@ -90,9 +131,11 @@ def ratio_bounds(summary: dict, source: str, max_ratio: float) -> tuple[float, f
 def check_gates(gates: QualityGates, summary: dict, cfg) -> None:
     """The calibration's quality gates: chi²/dof of the fit under the full noise model (sensor,
     repeatability, remainder: :mod:`pipeline.calibration.noise_model`), actual/predicted on held-out
-    or cross-validated poses and the error after calibration against the nominal model's (gross
-    inadequacy). Held-out actual/predicted fails when the one-sided test of the module docstring
-    rejects "the true ratio is at most ``m``" (``max_actual_over_predicted``) at
+    or cross-validated poses and the error after calibration against the nominal model's, both less
+    the stated reading noise (gross inadequacy, :func:`error_above_noise_ratio`; a nominal model
+    already within that noise is a warning, not judged). Held-out actual/predicted fails when the
+    one-sided test of the module docstring rejects "the true ratio is at most ``m``"
+    (``max_actual_over_predicted``) at
     ``actual_over_predicted_confidence``: the gate's threshold on the ratio is ``m sqrt(q_a / trace C)``;
     below ``(1/m) sqrt(q_(1-a) / trace C)``, a pessimistic prediction, is a warning in the summary.
     The cross-validated ratio is compared with ``m`` and ``1/m`` (:func:`ratio_bounds`). A held-out
@@ -115,9 +158,15 @@ def check_gates(gates: QualityGates, summary: dict, cfg) -> None:
     if warning:
         summary.setdefault("warnings", []).append(warning)
     if after_before is not None:
+        noise_mm = 1e3 * stated_noise_rms_m(summary)
         gates.check("error_after_over_before", after_before, "<=", cfg.max_error_after_over_before,
-                    f"{source} RMS error of the calibrated model over the nominal model's: the error model does not "
-                    "explain the readings (calibration.parameters; a wrong tool, tracker or joint order?)")
+                    f"{source} RMS error of the calibrated model over the nominal model's, each less the stated "
+                    f"reading noise ({noise_mm:.3g} mm RMS): the error model does not explain the readings "
+                    f"(calibration.parameters; a wrong tool, tracker or joint order?){remainder_hint(summary)}")
+    elif source != "none":
+        summary.setdefault("warnings", []).append(
+            f"{source} RMS error of the nominal model is within the stated reading noise: the calibration's gain "
+            "over it is not judged (error_after_over_before)")
 
 
 def orientation_prediction_warning(summary: dict, m: float, confidence: float) -> str | None:

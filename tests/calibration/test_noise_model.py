@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import copy
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -148,6 +150,58 @@ def test_readings_the_model_cannot_explain_still_fail(gross_files, tmp_path):
         st.run(_Ctx(cfg, robot))
     failed = {c["name"] for c in info.value.result.summary["quality_gates"]["checks"] if not c["passed"]}
     assert failed & {"error_after_over_before", "actual_over_predicted"}
+
+
+@pytest.fixture(scope="module")
+def noisy_small_error_files(tmp_path_factory):
+    """RX130L readings whose nominal model is close (geometric errors of 1 mm and mrad scale) and
+    whose sensor adds 1 mm per axis: a record at its noise floor, which no calibration can halve."""
+    robot = RobotModel.load("rx130l")
+    mm = em.MeasurementModel(robot)
+    rng = np.random.default_rng(12)
+    _, basis = st.identify_parameter_set(robot, mm, st.Config(parameters="geometric"), rng)
+    x_true = basis @ (1e-3 * rng.standard_normal(basis.shape[1]))
+    T = robot.tracker.transform_tracker_to_base
+    d = tmp_path_factory.mktemp("noisy")
+    files = []
+    for name, n in (("fit", 200), ("val", 60)):
+        Q = cd.random_candidates(cd.chain_from_robot(robot), n, rng)[0]
+        Y = mm.predict(Q, x_true, T) + 1e-3 * rng.standard_normal((n, 3))
+        files.append(ms.write_csv(d / f"{name}.csv", ms.Measurements(Q, Y, np.full(n, 1e-3), name)))
+    return robot, *files
+
+
+def _with_sensor_noise(robot: RobotModel, sigma_m: float) -> RobotModel:
+    stated = copy.copy(robot)
+    stated.spec = replace(robot.spec, tracker=replace(robot.spec.tracker, noise_const_m=sigma_m, noise_per_m=0.0))
+    return stated
+
+
+def test_a_record_at_its_stated_noise_floor_passes_the_after_before_gate(noisy_small_error_files):
+    """With the sensor's 1 mm stated the after/before gate judges the error above it and passes; with
+    robot.yaml's laser-tracker noise (µm) the same readings fail it, and the message says that the
+    readings scatter beyond the stated noise and where to state it. The fit is the same."""
+    robot, fit, val = noisy_small_error_files
+    cfg = st.Config(measurements_csv=str(fit), validation_csv=str(val), parameters="geometric",
+                    identifiability_samples=60, figures=False)
+    stated = st.run(_Ctx(cfg, _with_sensor_noise(robot, 1e-3))).summary
+    s = stated
+    assert s["heldout_rms_position_error_after_m"] / s["heldout_rms_position_error_before_m"] > 0.5
+    checks = {c["name"]: c for c in s["quality_gates"]["checks"]}
+    assert checks["error_after_over_before"]["passed"] and checks["error_after_over_before"]["value"] < 0.5
+    with pytest.raises(QualityGateError) as info:
+        st.run(_Ctx(cfg, robot))
+    failed = {c["name"]: c for c in info.value.result.summary["quality_gates"]["checks"] if not c["passed"]}
+    assert set(failed) == {"error_after_over_before"}
+    assert "state it in robot.yaml" in failed["error_after_over_before"]["message"]
+
+
+def test_after_before_subtracts_the_stated_noise_and_skips_a_nominal_model_within_it():
+    s = {"actual_over_predicted": 1.0, "heldout_rms_position_error_before_m": 5e-3,
+         "heldout_rms_position_error_after_m": 4e-3, "noise_sensor_sigma_m": 2e-3 / np.sqrt(3)}
+    assert gate_figures(s)[2] == pytest.approx(np.sqrt((16 - 4) / (25 - 4)))
+    s["heldout_rms_position_error_before_m"] = 1.5e-3
+    assert gate_figures(s)[2] is None
 
 
 def test_clean_record_loses_no_more_than_the_confidence_implies():
