@@ -378,7 +378,8 @@ def bench_ur10(folder: Path) -> None:
           f"ours with the chosen set fixed ({sel.chosen.parameters}: one fit and a {sel.folds}-fold cross-validation) "
           f"{ours_fixed:.2f} s, / FIGAROH's one fit {ours_fixed / one_fit:.1f}")
     print(f"  held-out over all 23 poses, the same {sel.folds} spatial folds: ours {ours_pos * 1e3:.3f} mm / "
-          f"{np.degrees(ours_rot):.3f} deg (chose {sel.chosen.name}, nested), FIGAROH {f_pos * 1e3:.3f} mm / "
+          f"{np.degrees(ours_rot):.3f} deg (chose {sel.chosen.name} on all poses, orientation weight nested), "
+          f"FIGAROH {f_pos * 1e3:.3f} mm / "
           f"{np.degrees(f_rot):.3f} deg ({f_s:.1f} s); ours / FIGAROH {ours_pos / f_pos:.3f} position, "
           f"{ours_rot / f_rot:.3f} orientation")
     print(f"  FIGAROH leave-one-out (its protocol, 23 fits, {l_s:.1f} s): {l_pos * 1e3:.3f} mm / "

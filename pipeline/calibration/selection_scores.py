@@ -179,9 +179,12 @@ class ModelSelection:
                 over = f"; over every pose {1e3 * float(np.sqrt(np.mean(self.nested.position_error_m ** 2))):.3f} mm"
                 if self.nested.orientation_error_rad is not None:
                     over += f" / {np.degrees(np.sqrt(np.mean(self.nested.orientation_error_rad ** 2))):.3f}°"
-            lines.append(f"- the chosen model's held-out figures (cross_validation) are nested: each fold's fit has "
-                         f"the orientation weight chosen the same way by a cross-validation of its own training "
-                         f"poses (per fold: {per_fold}), so no held-out pose chose the weight it is scored with{over}")
+            lines.append(f"- the chosen model's held-out figures (cross_validation) are nested in the orientation "
+                         f"weight: each fold's fit has it chosen the same way by a cross-validation of its own "
+                         f"training poses (per fold: {per_fold}), so no held-out pose chose the weight it is scored "
+                         f"with{over}. They are not nested in the choice among the candidates above, made on every "
+                         "pose: they are the chosen model's figures, not those of choosing a model on fewer poses "
+                         "(a validation file measures that)")
         lines += [f"- {n}" for n in self.notes]
         return "\n".join(lines + [""])
 
