@@ -108,8 +108,9 @@ def remainder_hint(summary: dict) -> str:
     if remainder <= 2.0 * stated:
         return ""
     return (f"; the readings scatter {1e3 * remainder:.3g} mm per axis (REML remainder) beyond the stated "
-            f"{1e3 * stated:.3g} mm: if that is the sensor's or the arm's noise, state it in robot.yaml (the "
-            "tracker's noise_const_m, repeatability_m) and this gate judges the error above it")
+            f"{1e3 * stated:.3g} mm: if that is the sensor's or the arm's noise, state it "
+            "(calibration.position_sigma_m or robot.yaml's tracker noise_const_m; repeatability_m) and this gate "
+            "judges the error above it")
 
 
 def ratio_bounds(summary: dict, source: str, max_ratio: float) -> tuple[float, float, str]:

@@ -180,7 +180,7 @@ def _with_sensor_noise(robot: RobotModel, sigma_m: float) -> RobotModel:
 def test_a_record_at_its_stated_noise_floor_passes_the_after_before_gate(noisy_small_error_files):
     """With the sensor's 1 mm stated the after/before gate judges the error above it and passes; with
     robot.yaml's laser-tracker noise (µm) the same readings fail it, and the message says that the
-    readings scatter beyond the stated noise and where to state it. The fit is the same."""
+    readings scatter beyond the stated noise and where to state it."""
     robot, fit, val = noisy_small_error_files
     cfg = st.Config(measurements_csv=str(fit), validation_csv=str(val), parameters="geometric",
                     identifiability_samples=60, figures=False)
@@ -193,7 +193,7 @@ def test_a_record_at_its_stated_noise_floor_passes_the_after_before_gate(noisy_s
         st.run(_Ctx(cfg, robot))
     failed = {c["name"]: c for c in info.value.result.summary["quality_gates"]["checks"] if not c["passed"]}
     assert set(failed) == {"error_after_over_before"}
-    assert "state it in robot.yaml" in failed["error_after_over_before"]["message"]
+    assert "calibration.position_sigma_m" in failed["error_after_over_before"]["message"]
 
 
 def test_after_before_subtracts_the_stated_noise_and_skips_a_nominal_model_within_it():
