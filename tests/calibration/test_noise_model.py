@@ -17,9 +17,10 @@ from pipeline.calibration import noise_model as nm
 from pipeline.calibration import report
 from pipeline.calibration import robust as robust_module
 from pipeline.calibration import stage as st
-from pipeline.calibration.gates import gate_figures
+from pipeline.calibration.gates import check_gates, gate_figures
 from pipeline.calibration.robust import robust_estimate
 from pipeline.core.errors import QualityGateError
+from pipeline.quality import QualityGates
 from pipeline.robot import repeatability as rp
 from pipeline.robot.model import RobotModel
 from pipeline.sim.truth import RealRobot, TruthConfig
@@ -202,6 +203,11 @@ def test_after_before_subtracts_the_stated_noise_and_skips_a_nominal_model_withi
     assert gate_figures(s)[2] == pytest.approx(np.sqrt((16 - 4) / (25 - 4)))
     s["heldout_rms_position_error_before_m"] = 1.5e-3
     assert gate_figures(s)[2] is None
+    s["chi2_per_dof"] = 1.0
+    gates = QualityGates("calibration")
+    check_gates(gates, s, st.Config())
+    assert "error_after_over_before" not in {c.name for c in gates.checks}
+    assert any("within the stated reading noise" in w for w in s["warnings"])
 
 
 def test_clean_record_loses_no_more_than_the_confidence_implies():
