@@ -87,16 +87,23 @@ def gate_figures(summary: dict) -> tuple[str, float | None, float | None]:
     After/before is :func:`error_above_noise_ratio` with the stated noise
     (:func:`stated_noise_rms_m`)."""
     noise = stated_noise_rms_m(summary)
-    if summary.get("actual_over_predicted") is not None:
-        return ("held-out", summary["actual_over_predicted"],
-                error_above_noise_ratio(summary["heldout_rms_position_error_after_m"],
-                                        summary["heldout_rms_position_error_before_m"] or 0.0, noise))
     cv = summary.get("cross_validation") or {}
-    if cv.get("actual_over_predicted") is not None:
-        return ("cross-validated", cv["actual_over_predicted"],
-                error_above_noise_ratio(cv["rms_position_error_m"], cv.get("rms_position_error_before_m") or 0.0,
-                                        noise))
+    for source, ratio in (("held-out", summary.get("actual_over_predicted")),
+                          ("cross-validated", cv.get("actual_over_predicted"))):
+        if ratio is not None:
+            after, before = after_and_before_m(summary, source)
+            return source, ratio, error_above_noise_ratio(after, before, noise)
     return "none", None, None
+
+
+def after_and_before_m(summary: dict, source: str) -> tuple[float, float]:
+    """RMS position error (m) of the calibrated and of the nominal model on ``source``'s poses
+    ("held-out" or "cross-validated"); a missing nominal figure reads 0."""
+    if source == "held-out":
+        return (float(summary["heldout_rms_position_error_after_m"]),
+                float(summary.get("heldout_rms_position_error_before_m") or 0.0))
+    cv = summary.get("cross_validation") or {}
+    return float(cv["rms_position_error_m"]), float(cv.get("rms_position_error_before_m") or 0.0)
 
 
 def remainder_hint(summary: dict) -> str:
@@ -165,9 +172,11 @@ def check_gates(gates: QualityGates, summary: dict, cfg) -> None:
                     f"reading noise ({noise_mm:.3g} mm RMS): the error model does not explain the readings "
                     f"(calibration.parameters; a wrong tool, tracker or joint order?){remainder_hint(summary)}")
     elif source != "none":
+        after, before = after_and_before_m(summary, source)
         summary.setdefault("warnings", []).append(
-            f"{source} RMS error of the nominal model is within the stated reading noise: the calibration's gain "
-            "over it is not judged (error_after_over_before)")
+            f"{source} RMS error of the nominal model, {1e3 * before:.3g} mm, is within the stated reading noise "
+            f"({1e3 * stated_noise_rms_m(summary):.3g} mm RMS): the calibration's gain over it is not judged "
+            f"(error_after_over_before; calibrated {1e3 * after:.3g} mm)")
 
 
 def orientation_prediction_warning(summary: dict, m: float, confidence: float) -> str | None:
