@@ -156,7 +156,7 @@ def score_subset(mm: MeasurementModel, basis: np.ndarray, meas: ms.Measurements,
     rec = ms.expand_orientation(meas, orientation_sigma_rad) if six_d else meas
     pose = rec.pose_index if rec.pose_index is not None else np.arange(len(rec))
     fold_of_pose = np.asarray(fold_of_pose, int)
-    e_plain, var, before = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
+    e_plain, var, before, noise_var = (np.full(n, np.nan) for _ in range(4))
     e_rot = np.full(n, np.nan) if six_d else None
     maps: list[tuple[Estimate, np.ndarray, int, np.ndarray, np.ndarray]] = []
     warm: np.ndarray | None = None      # the previous fold's fit starts the next (warm start)
@@ -182,6 +182,7 @@ def score_subset(mm: MeasurementModel, basis: np.ndarray, meas: ms.Measurements,
         e, R_tb, ang = heldout_errors(mm, est, meas, test)
         e_plain[test] = np.linalg.norm(e, axis=1)
         sigma = replace(fold_noise, orientation_scale=1.0).total(meas.sigma_m[test])
+        noise_var[test] = sigma ** 2
         cov, _ = predicted_covariance(mm, est, meas.Q[test], sigma)
         var[test] = np.trace(cov, axis1=1, axis2=2)
         before[test] = np.linalg.norm(meas.Y[test] - mm.predict(meas.Q[test], np.zeros(mm.n), est.registration,
@@ -201,9 +202,9 @@ def score_subset(mm: MeasurementModel, basis: np.ndarray, meas: ms.Measurements,
         for est, train_poses, seed, test, e in maps:
             e_train, R_tb, _ = heldout_errors(mm, est, meas, train_poses)
             gp = fit_residual_map(meas.Q[train_poses], e_train @ R_tb.T, seed, noise_floor_m=floor)
-            mean, std = gp.predict(meas.Q[test])
-            e_map[test] = np.linalg.norm(e - mean @ R_tb, axis=1)
-            var_map[test] += 3.0 * std ** 2
+            e_map[test] = np.linalg.norm(e - gp.predict(meas.Q[test])[0] @ R_tb, axis=1)
+            # the map's reading variance in place of the fold's reading noise (validate.predicted_error)
+            var_map[test] += 3.0 * (gp.reading_std(meas.Q[test]) ** 2 - noise_var[test])
         return CandidateScore(Candidate("", True), p, fold_of_pose, e_map, e_rot, None, var_map, before)
 
     return plain, mapped
@@ -410,7 +411,7 @@ def stage_entries(notes: CalibrationNotes, parameters: str | list[str]) -> tuple
     if rmap is not None:
         arrays.update(rmap.to_arrays())
         _, std = rmap.predict(rmap.inputs_rad)
-        reading = float(np.sqrt(np.mean(std ** 2) + rmap.noise_std_m ** 2))
+        reading = float(np.sqrt(np.mean(rmap.reading_std(rmap.inputs_rad) ** 2)))
         summary["residual_map"] = {"signal_std_m": rmap.signal_std_m, "length_scale_rad": rmap.length_scale_rad,
                                    "noise_std_m": rmap.noise_std_m, "noise_floor_m": notes.residual_map_floor_m,
                                    "support_radius_rad": rmap.support_radius_rad, "n_poses": int(len(rmap.inputs_rad)),

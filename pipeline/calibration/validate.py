@@ -220,10 +220,11 @@ def _stacked_factors(mm: MeasurementModel, est: Estimate, Q: np.ndarray, gravity
 def heldout_error_moments(mm: MeasurementModel, est: Estimate, Q: np.ndarray, sigma_m: np.ndarray,
                           gravity: GravityCovariance | None = None, residual_map: ResidualMap | None = None) -> dict:
     """Spectrum of the covariance ``C`` of the stacked position errors of readings at ``Q`` (3N):
-    ``C = F G F^T + diag(d)`` (:func:`_stacked_factors`; ``d`` per axis ``sigma_k^2`` and, with the
-    ``residual_map``, its posterior variance ``s_map(q_k)^2``, taken independent between poses: the
-    map's predict gives no posterior covariance). Its diagonal blocks are :func:`predicted_covariance`
-    (``trace C = N E|e|^2`` of :func:`predicted_error`); the off-diagonal blocks hold the parameter
+    ``C = F G F^T + diag(d)`` (:func:`_stacked_factors`; ``d`` per axis ``sigma_k^2``, with the
+    ``residual_map`` its reading variance ``s_map(q_k)^2 + s_n^2`` instead (:func:`predicted_error`),
+    taken independent between poses: the map's predict gives no posterior covariance). Its diagonal
+    blocks are :func:`predicted_covariance` without the map (``trace C = N E|e|^2`` of
+    :func:`predicted_error`); the off-diagonal blocks hold the parameter
     error every pose shares. ``stacked_components`` = 3N, ``stacked_trace_m2 = trace C``,
     ``stacked_square_trace_m4 = trace C^2`` (from the factors, ``trace (G K)^2 + 2 sum d_i
     (F G F^T)_ii + sum d^2``, ``K = F^T F``) and, up to :data:`EXACT_QUANTILE_MAX_COMPONENTS`
@@ -231,7 +232,7 @@ def heldout_error_moments(mm: MeasurementModel, est: Estimate, Q: np.ndarray, si
     F, G = _stacked_factors(mm, est, Q, gravity)
     var_axis = np.asarray(sigma_m, float) ** 2
     if residual_map is not None:
-        var_axis = var_axis + residual_map.predict(Q)[1] ** 2
+        var_axis = residual_map.reading_std(Q) ** 2
     d = np.repeat(var_axis, 3)
     diag_model = np.einsum("ij,jk,ik->i", F, G, F)
     GK = G @ (F.T @ F)
@@ -248,12 +249,19 @@ def predicted_error(mm: MeasurementModel, est: Estimate, Q: np.ndarray, sigma_m:
                     gravity: GravityCovariance | None = None, residual_map: ResidualMap | None = None) -> dict:
     """Covariance-predicted tracker-measured position error at configurations ``Q`` (no measurement
     needed): ``E|e_k|^2 = trace(J_k C J_k^T) + 3 sigma_k^2`` (paper 000 eq. 16), with ``gravity``
-    the gravity-model term of the module docstring and, with the calibration's ``residual_map``
-    applied, its posterior variance ``3 s_map(q_k)^2`` (:mod:`pipeline.robot.residual_map`)."""
+    the gravity-model term of the module docstring. With the calibration's ``residual_map``
+    applied the reading's part is the map's (:meth:`pipeline.robot.residual_map.ResidualMap.reading_std`):
+    ``3 (s_map(q_k)^2 + s_n^2)``, its posterior variance and the noise it did not explain, in place
+    of ``3 sigma_k^2``, whose remainder held the smooth part the map explains."""
     cov, var_gravity = predicted_covariance(mm, est, Q, sigma_m, gravity)
-    var_map = 3.0 * residual_map.predict(Q)[1] ** 2 if residual_map is not None else np.zeros(len(Q))
-    var_total = np.trace(cov, axis1=1, axis2=2) + var_map
-    var_model = var_total - var_gravity - var_map - 3 * np.asarray(sigma_m, float) ** 2
+    var_noise = 3.0 * np.asarray(sigma_m, float) ** 2
+    var_map = np.zeros(len(Q))
+    var_reading = var_noise
+    if residual_map is not None:
+        var_map = 3.0 * residual_map.predict(Q)[1] ** 2
+        var_reading = 3.0 * residual_map.reading_std(Q) ** 2 - var_map
+    var_total = np.trace(cov, axis1=1, axis2=2) - var_noise + var_reading + var_map
+    var_model = var_total - var_gravity - var_map - var_reading
     return {"n_poses": int(len(Q)), "predicted_rms_m": float(np.sqrt(np.mean(var_total))),
             "predicted_residual_map_rms_m": float(np.sqrt(np.mean(var_map))),
             "predicted_model_rms_m": float(np.sqrt(max(np.mean(var_model), 0.0))),
