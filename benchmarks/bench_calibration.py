@@ -68,8 +68,9 @@ from pipeline.robot.yaml_init import write_robot_yaml
 from pipeline.sim.truth import RealRobot
 
 HAVE_FIGAROH = importlib.util.find_spec("figaroh") is not None
-if HAVE_FIGAROH:  # optional peer (the bench extra, not installed by default): imported only when present
-    from figaroh.calibration.base_calibration import BaseCalibration
+#: FIGAROH's calibration class, an optional peer (the bench extra, not installed by default); None without it
+BaseCalibration = (importlib.import_module("figaroh.calibration.base_calibration").BaseCalibration
+                   if HAVE_FIGAROH else None)
 
 
 class PerCandidateState(DesignState):

@@ -145,8 +145,8 @@ def cross_validate(mm: MeasurementModel, rec: ms.Measurements, basis: np.ndarray
             Qt = rec.Q[fit_rows]
             gp = fit_residual_map(Qt, (rec.Y[fit_rows] - mm.predict(Qt, est.x, est.registration)) @ R_tb.T, map_rng,
                                   noise_floor_m=map_noise_floor_m)
-            # the map's reading variance in place of the reading noise (validate.predicted_error)
-            r, var = r - gp.predict(Q)[0] @ R_tb, var + 3.0 * (gp.reading_std(Q) ** 2 - held.sigma_m ** 2)
+            mean, reading = gp.predict_reading(Q)    # its reading variance in place of the reading noise
+            r, var = r - mean @ R_tb, var + 3.0 * (reading ** 2 - held.sigma_m ** 2)
         before = np.linalg.norm(Y - mm.predict(Q, np.zeros(mm.n), est.registration), axis=1)
         parts.append((f, np.linalg.norm(r, axis=1), before, var, bad))
     return heldout_figures(parts, folds, max_fraction)

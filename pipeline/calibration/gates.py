@@ -106,12 +106,13 @@ def after_and_before_m(summary: dict, source: str) -> tuple[float, float]:
     return float(cv["rms_position_error_m"]), float(cv.get("rms_position_error_before_m") or 0.0)
 
 
-def remainder_hint(summary: dict) -> str:
-    """What to state when the readings scatter well beyond their stated noise: the REML remainder
-    (1-sigma per axis) against the stated sensor and repeatability parts; "" when it is not above
-    twice them. The after/before gate cannot tell that scatter from an error of the model."""
+def remainder_hint(summary: dict, noise_m: float) -> str:
+    """What to state when the readings scatter well beyond their stated noise ``noise_m``
+    (:func:`stated_noise_rms_m`): the REML remainder (1-sigma per axis) against the stated sensor
+    and repeatability parts; "" when it is not above twice them. The after/before gate cannot tell
+    that scatter from an error of the model."""
     remainder = float(summary.get("noise_remainder_sigma_m") or 0.0)
-    stated = stated_noise_rms_m(summary) / math.sqrt(3.0)
+    stated = noise_m / math.sqrt(3.0)
     if remainder <= 2.0 * stated:
         return ""
     return (f"; the readings scatter {1e3 * remainder:.3g} mm per axis (REML remainder) beyond the stated "
@@ -165,17 +166,18 @@ def check_gates(gates: QualityGates, summary: dict, cfg) -> None:
                                              cfg.actual_over_predicted_confidence)
     if warning:
         summary.setdefault("warnings", []).append(warning)
+    noise_m = stated_noise_rms_m(summary)
     if after_before is not None:
-        noise_mm = 1e3 * stated_noise_rms_m(summary)
         gates.check("error_after_over_before", after_before, "<=", cfg.max_error_after_over_before,
                     f"{source} RMS error of the calibrated model over the nominal model's, each less the stated "
-                    f"reading noise ({noise_mm:.3g} mm RMS): the error model does not explain the readings "
-                    f"(calibration.parameters; a wrong tool, tracker or joint order?){remainder_hint(summary)}")
+                    f"reading noise ({1e3 * noise_m:.3g} mm RMS): the error model does not explain the readings "
+                    f"(calibration.parameters; a wrong tool, tracker or joint order?)"
+                    f"{remainder_hint(summary, noise_m)}")
     elif source != "none":
         after, before = after_and_before_m(summary, source)
         summary.setdefault("warnings", []).append(
             f"{source} RMS error of the nominal model, {1e3 * before:.3g} mm, is within the stated reading noise "
-            f"({1e3 * stated_noise_rms_m(summary):.3g} mm RMS): the calibration's gain over it is not judged "
+            f"({1e3 * noise_m:.3g} mm RMS): the calibration's gain over it is not judged "
             f"(error_after_over_before; calibrated {1e3 * after:.3g} mm)")
 
 

@@ -202,9 +202,9 @@ def score_subset(mm: MeasurementModel, basis: np.ndarray, meas: ms.Measurements,
         for est, train_poses, seed, test, e in maps:
             e_train, R_tb, _ = heldout_errors(mm, est, meas, train_poses)
             gp = fit_residual_map(meas.Q[train_poses], e_train @ R_tb.T, seed, noise_floor_m=floor)
-            e_map[test] = np.linalg.norm(e - gp.predict(meas.Q[test])[0] @ R_tb, axis=1)
-            # the map's reading variance in place of the fold's reading noise (validate.predicted_error)
-            var_map[test] += 3.0 * (gp.reading_std(meas.Q[test]) ** 2 - noise_var[test])
+            mean, reading = gp.predict_reading(meas.Q[test])   # its reading variance in place of the noise
+            e_map[test] = np.linalg.norm(e - mean @ R_tb, axis=1)
+            var_map[test] += 3.0 * (reading ** 2 - noise_var[test])
         return CandidateScore(Candidate("", True), p, fold_of_pose, e_map, e_rot, None, var_map, before)
 
     return plain, mapped
@@ -411,7 +411,7 @@ def stage_entries(notes: CalibrationNotes, parameters: str | list[str]) -> tuple
     if rmap is not None:
         arrays.update(rmap.to_arrays())
         _, std = rmap.predict(rmap.inputs_rad)
-        reading = float(np.sqrt(np.mean(rmap.reading_std(rmap.inputs_rad) ** 2)))
+        reading = float(np.sqrt(np.mean(std ** 2) + rmap.noise_std_m ** 2))
         summary["residual_map"] = {"signal_std_m": rmap.signal_std_m, "length_scale_rad": rmap.length_scale_rad,
                                    "noise_std_m": rmap.noise_std_m, "noise_floor_m": notes.residual_map_floor_m,
                                    "support_radius_rad": rmap.support_radius_rad, "n_poses": int(len(rmap.inputs_rad)),

@@ -232,7 +232,7 @@ def heldout_error_moments(mm: MeasurementModel, est: Estimate, Q: np.ndarray, si
     F, G = _stacked_factors(mm, est, Q, gravity)
     var_axis = np.asarray(sigma_m, float) ** 2
     if residual_map is not None:
-        var_axis = residual_map.reading_std(Q) ** 2
+        var_axis = residual_map.predict_reading(Q)[1] ** 2
     d = np.repeat(var_axis, 3)
     diag_model = np.einsum("ij,jk,ik->i", F, G, F)
     GK = G @ (F.T @ F)
@@ -250,16 +250,15 @@ def predicted_error(mm: MeasurementModel, est: Estimate, Q: np.ndarray, sigma_m:
     """Covariance-predicted tracker-measured position error at configurations ``Q`` (no measurement
     needed): ``E|e_k|^2 = trace(J_k C J_k^T) + 3 sigma_k^2`` (paper 000 eq. 16), with ``gravity``
     the gravity-model term of the module docstring. With the calibration's ``residual_map``
-    applied the reading's part is the map's (:meth:`pipeline.robot.residual_map.ResidualMap.reading_std`):
+    applied the reading's part is the map's (:meth:`pipeline.robot.residual_map.ResidualMap.predict_reading`):
     ``3 (s_map(q_k)^2 + s_n^2)``, its posterior variance and the noise it did not explain, in place
     of ``3 sigma_k^2``, whose remainder held the smooth part the map explains."""
     cov, var_gravity = predicted_covariance(mm, est, Q, sigma_m, gravity)
     var_noise = 3.0 * np.asarray(sigma_m, float) ** 2
-    var_map = np.zeros(len(Q))
-    var_reading = var_noise
+    var_map, var_reading = np.zeros(len(Q)), var_noise
     if residual_map is not None:
         var_map = 3.0 * residual_map.predict(Q)[1] ** 2
-        var_reading = 3.0 * residual_map.reading_std(Q) ** 2 - var_map
+        var_reading = np.full(len(Q), 3.0 * residual_map.noise_std_m ** 2)
     var_total = np.trace(cov, axis1=1, axis2=2) - var_noise + var_reading + var_map
     var_model = var_total - var_gravity - var_map - var_reading
     return {"n_poses": int(len(Q)), "predicted_rms_m": float(np.sqrt(np.mean(var_total))),

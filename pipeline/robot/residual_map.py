@@ -107,14 +107,15 @@ class ResidualMap:
         w = self._taper(Q)[0]
         return w[:, None] * mean, np.sqrt(var + (1.0 - w) ** 2 * (s2 - var))
 
-    def reading_std(self, Q: np.ndarray) -> np.ndarray:
-        """``(N,)`` standard deviation per axis (m) of a new reading's residual once the map is
-        applied: ``sqrt(v(q) + s_n^2)``, the posterior (tapered) variance of :meth:`predict` and
-        the noise the map did not explain (Rasmussen & Williams 2006, §2.2: the predictive variance
-        of a noisy target adds ``s_n^2``). ``s_n`` takes the place of the reading noise the rigid
-        model's remainder stated: that remainder also held the smooth part the map now explains,
-        which counted twice with its posterior variance beside it."""
-        return np.sqrt(self.predict(Q)[1] ** 2 + self.noise_std_m ** 2)
+    def predict_reading(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`predict`'s mean ``(N, 3)`` and the standard deviation per axis ``(N,)`` (m) of a
+        new reading's residual once the map is applied: ``sqrt(v(q) + s_n^2)``, the posterior
+        (tapered) variance and the noise the map did not explain (Rasmussen & Williams 2006, §2.2:
+        the predictive variance of a noisy target adds ``s_n^2``). ``s_n`` takes the place of the
+        reading noise the rigid model's remainder stated: that remainder also held the smooth part
+        the map now explains, which would count twice beside the posterior variance."""
+        mean, std = self.predict(Q)
+        return mean, np.sqrt(std ** 2 + self.noise_std_m ** 2)
 
     def mean(self, q: np.ndarray) -> np.ndarray:
         """Posterior mean ``(3,)`` (m, base frame) at one configuration, tapered."""

@@ -119,7 +119,7 @@ def test_stacked_covariance_holds_the_per_pose_prediction(fitted):
         assert np.sum(mom["stacked_eigenvalues_m2"] ** 2) == pytest.approx(mom["stacked_square_trace_m4"], rel=1e-9)
         blocks, _ = va.predicted_covariance(mm, est, Qh, sigma)
         if residual_map is not None:    # the map's reading variance in place of the reading noise
-            blocks = blocks + (residual_map.reading_std(Qh) ** 2 - sigma ** 2)[:, None, None] * np.eye(3)
+            blocks = blocks + (residual_map.predict_reading(Qh)[1] ** 2 - sigma ** 2)[:, None, None] * np.eye(3)
         assert mom["stacked_square_trace_m4"] > 1.01 * np.sum(blocks * blocks)
 
 

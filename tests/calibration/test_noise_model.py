@@ -185,8 +185,7 @@ def test_a_record_at_its_stated_noise_floor_passes_the_after_before_gate(noisy_s
     robot, fit, val = noisy_small_error_files
     cfg = st.Config(measurements_csv=str(fit), validation_csv=str(val), parameters="geometric",
                     identifiability_samples=60, figures=False)
-    stated = st.run(_Ctx(cfg, _with_sensor_noise(robot, 1e-3))).summary
-    s = stated
+    s = st.run(_Ctx(cfg, _with_sensor_noise(robot, 1e-3))).summary
     assert s["heldout_rms_position_error_after_m"] / s["heldout_rms_position_error_before_m"] > 0.5
     checks = {c["name"]: c for c in s["quality_gates"]["checks"]}
     assert checks["error_after_over_before"]["passed"] and checks["error_after_over_before"]["value"] < 0.5
