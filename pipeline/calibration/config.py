@@ -99,7 +99,7 @@ class Config:
     joint_names: dict[str, str] = field(default_factory=dict)
     validation_csv: Annotated[str | None, FileInput] = None
     figures: bool = True
-    #: auto | all | geometric | joint_offsets | joint_offsets+compliance | [names]
+    #: auto | all | geometric | joint_axes | joint_offsets | joint_offsets+compliance | [names]
     #: (pipeline.calibration.subsets); auto: chosen by cross-validation for a measurement file
     #: (pipeline.calibration.model_selection), all in simulation
     parameters: str | list[str] = "auto"

@@ -1,9 +1,10 @@
 """``calibration.parameters: auto``: the error model of a measurement file chosen by k-fold
 cross-validation and the one-standard-error rule.
 
-Candidates (:data:`CANDIDATES`): the joint zero offsets, the geometric errors, geometric errors and
-joint compliances (the elastostatic model), each alone and with the non-geometric residual map
-(:mod:`pipeline.calibration.residual_map`, a Gaussian process over joint space fitted to the
+Candidates (:data:`CANDIDATES`): the joint zero offsets, the zero offsets and the joint axes'
+directions (the rotational errors of the joint placements, link lengths as stated), the geometric
+errors, geometric errors and joint compliances (the elastostatic model), each alone and with the
+non-geometric residual map (:mod:`pipeline.calibration.residual_map`, a Gaussian process over joint space fitted to the
 training folds' residuals). The measurement set-up (tracker pose, reflector or marker offset, and
 a 6-D marker's rotation) is estimated in every candidate.
 
@@ -86,7 +87,7 @@ from pipeline.robot.model import RobotModel
 from pipeline.robot.residual_map import ResidualMap
 
 #: the named parameter subsets compared (pipeline.calibration.subsets), simplest first
-SUBSETS = ("joint_offsets", "geometric", "all")
+SUBSETS = ("joint_offsets", "joint_axes", "geometric", "all")
 #: folds of the model selection when calibration.cross_validation_folds is 0
 DEFAULT_FOLDS = 5
 #: factors on the marker-point rows' 1-sigma tried by the orientation weight (module docstring)

@@ -180,3 +180,16 @@ def test_orientation_scale_weights_only_the_marker_point_rows():
     total = noise.total(sensor, groups)
     plain = NoiseModel(1e-5, (2e-3, 3e-3)).total(sensor, groups)
     assert np.allclose(total[:2], plain[:2]) and np.allclose(total[2:], 0.5 * plain[2:])
+
+
+def test_joint_axes_lies_between_the_offsets_and_the_geometric_set():
+    names = ["j2.dx", "j2.dz", "j2.rx", "j2.ry", "j2.rz", "j2.dq", "j3.da", "j3.dalpha", "j3.dtheta", "j3.beta",
+             "j3.dd", "j2.c", "tracker.dx", "reflector.dz", "tool.ry", "tool.dx"]
+    axes = {names[i] for i in subsets.select("joint_axes", names)}
+    assert axes == {"j2.rx", "j2.ry", "j2.rz", "j2.dq", "j3.dalpha", "j3.dtheta", "j3.beta",
+                    "tracker.dx", "reflector.dz", "tool.ry"}
+    offsets = {names[i] for i in subsets.select("joint_offsets", names)}
+    geometric = {names[i] for i in subsets.select("geometric", names)}
+    assert offsets < axes < geometric
+    assert not subsets.wants_compliance("joint_axes")
+    subsets.check_parameters("joint_axes")
