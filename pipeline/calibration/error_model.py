@@ -50,6 +50,9 @@ TRACKER_NAMES = [f"tracker.{c}" for c in KINEMATIC_COMPONENTS]
 REFLECTOR_NAMES = ["reflector.dx", "reflector.dy", "reflector.dz"]
 #: suffix of the joint compliance parameters ``j{i}.c`` (rad/(N m))
 COMPLIANCE_SUFFIX = ".c"
+#: the modified-DH + Hayati errors of a joint placement (:func:`mdh_basis`) that turn it: the
+#: twist about the previous x axis, the zero offset and Hayati's rotation about y
+MDH_ROTATIONS = ("dalpha", "dtheta", "beta")
 #: configuration sets whose static torques a measurement model remembers (a cross-validation fold's
 #: training and held-out readings, the chunks of a larger record)
 TORQUE_MEMO_SETS = 8
@@ -421,13 +424,13 @@ def mdh_basis(robot: RobotModel, names: list[str], parallel_tol_rad: float = 1e-
         e = np.eye(6)
         twists = {
             "dd": e[2],
-            "dtheta": e[5],
+            MDH_ROTATIONS[1]: e[5],
             "da": RzTz.inverse().toActionMatrix() @ e[0],
-            "dalpha": TxRzTz.inverse().toActionMatrix() @ e[3],
+            MDH_ROTATIONS[0]: TxRzTz.inverse().toActionMatrix() @ e[3],
         }
         if abs(np.sin(alpha)) < parallel_tol_rad:  # parallel to the previous axis: Hayati
             twists.pop("dd")
-            twists["beta"] = RzTz.inverse().toActionMatrix() @ e[4]
+            twists[MDH_ROTATIONS[2]] = RzTz.inverse().toActionMatrix() @ e[4]
         base = names.index(f"j{i}.dx")
         for k, tw in twists.items():
             col = np.zeros(n_full)

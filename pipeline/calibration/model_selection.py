@@ -4,8 +4,8 @@ cross-validation and the one-standard-error rule.
 Candidates (:data:`CANDIDATES`): the joint zero offsets, the zero offsets and the joint axes'
 directions (the rotational errors of the joint placements, link lengths as stated), the geometric
 errors, geometric errors and joint compliances (the elastostatic model), each alone and with the
-non-geometric residual map (:mod:`pipeline.calibration.residual_map`, a Gaussian process over joint space fitted to the
-training folds' residuals). The measurement set-up (tracker pose, reflector or marker offset, and
+non-geometric residual map (:mod:`pipeline.calibration.residual_map`, a Gaussian process over joint
+space fitted to the training folds' residuals). The measurement set-up (tracker pose, reflector or marker offset, and
 a 6-D marker's rotation) is estimated in every candidate.
 
 The poses are split into ``k`` folds grouped in joint space

@@ -24,12 +24,13 @@ selected parameters the identifiability analysis keeps the identifiable base set
 
 from __future__ import annotations
 
-from pipeline.calibration.error_model import is_compliance
+from pipeline.calibration.error_model import MDH_ROTATIONS, is_compliance
 from pipeline.core.errors import ConfigError
+from pipeline.robot.parameters import KINEMATIC_COMPONENTS
 
 NAMED_SUBSETS = ("auto", "all", "geometric", "joint_axes", "joint_offsets", "joint_offsets+compliance")
 #: the rotational components of a joint placement's error (SE(3) and modified-DH error models)
-AXIS_COMPONENTS = ("rx", "ry", "rz", "dalpha", "dtheta", "beta")
+AXIS_COMPONENTS = KINEMATIC_COMPONENTS[3:] + MDH_ROTATIONS
 
 
 def _setup(name: str) -> bool:

@@ -66,6 +66,13 @@ def test_identifiable_set_found_by_analysis(robot, mm):
     rep2, basis2 = st.identify_parameter_set(robot, mm, st.Config(error_model="mdh_hayati"),
                                              np.random.default_rng(0))
     assert rep2.rank == 27 and any(n.endswith(".beta") for n in rep2.identifiable_names)
+    # joint_axes in either error model: the placements' rotations and zero offsets, no length
+    for error_model in ("se3", "mdh_hayati"):
+        rep3, _ = st.identify_parameter_set(robot, mm, st.Config(error_model=error_model, parameters="joint_axes"),
+                                            np.random.default_rng(0))
+        kinematic = {n.split(".")[1] for n in rep3.identifiable_names if n.startswith("j")}
+        assert kinematic and kinematic <= {"rx", "ry", "rz", "dq", "dalpha", "dtheta", "beta"}
+        assert {"dq", "dalpha" if error_model == "mdh_hayati" else "rx"} <= kinematic
 
 
 def test_numpy_kinematics_and_jacobian_match_pinocchio_and_casadi(robot, mm):
