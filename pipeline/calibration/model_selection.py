@@ -24,10 +24,18 @@ all held-out poses; its standard error is the spread of the per-fold mean square
 Learning*, 2nd ed., Springer 2009, §7.10).
 
 One-standard-error rule (ibid. §7.10, Fig. 7.9): among the candidates whose position error is
-within one standard error of the smallest, and for 6-D readings whose orientation error is also
-within one standard error of the smallest among those, the simplest is chosen: fewest identifiable
-parameters, then without the map. A richer model must beat a simpler one by more than the noise of
-the cross-validation estimate itself.
+within one standard error of the smallest, the simplest is chosen: fewest identifiable parameters,
+then without the map. A richer model must beat a simpler one by more than the noise of the
+cross-validation estimate itself. A 6-D record scores two errors, and a candidate is near the best
+when it is within one standard error of the smallest on each: its excess ``z = max_e (MSE_e(c) -
+MSE_e(best_e)) / SE_e(best_e)`` over the position and the orientation error ``e``, each against
+the candidate that is best on it, is at most 1. When no candidate is near on both (the one best in
+position is far off in orientation, and the reverse), the band widens to the smallest excess any
+candidate reaches, ``z <= min_c z(c)``, and the simplest within it is chosen: the rule gives up no
+more on either error than the record forces. (Read lexicographically, position first, the rule
+would let a model whose orientation error is several standard errors above the best win on
+position alone.) For position-only records the excess is the position error's and the rule is
+the textbook one.
 
 Noise and weights. Each training fold is fitted with the readings' noise model
 (:func:`pipeline.calibration.noise_model.fit_with_noise_model`: sensor + repeatability + a REML
@@ -80,6 +88,7 @@ from pipeline.calibration.selection_scores import (  # noqa: F401 - re-exported 
     ModelSelection,
     gross_heldout_poses,
     one_standard_error,
+    standard_errors_above_best,
 )
 from pipeline.calibration.validate import predicted_covariance
 from pipeline.core.errors import PipelineError

@@ -185,6 +185,14 @@ class ModelSelection:
                          f"with{over}. They are not nested in the choice among the candidates above, made on every "
                          "pose: they are the chosen model's figures, not those of choosing a model on fewer poses "
                          "(a validation file measures that)")
+        excess = standard_errors_above_best(self.scores)
+        if excess:
+            band = max(1.0, min(excess.values()))
+            listed = ", ".join(f"{s.candidate.name} {excess[id(s)]:.2f}" for s in self.scores if id(s) in excess)
+            lines.append(f"- excess over the best in its standard errors (the larger of position and orientation for "
+                         f"6-D readings): {listed}; the simplest within {band:.2f} is chosen"
+                         + (" (no candidate within 1 on every error: the band widened to the smallest excess)"
+                            if band > 1.0 else ""))
         lines += [f"- {n}" for n in self.notes]
         return "\n".join(lines + [""])
 
@@ -194,21 +202,38 @@ def _rms(e: np.ndarray) -> float | None:
     return float(np.sqrt(np.mean(e ** 2))) if e.size else None
 
 
+def standard_errors_above_best(scores: list[CandidateScore]) -> dict[int, float]:
+    """Each valid candidate's excess over the best, in the best's standard errors (module docstring
+    of :mod:`pipeline.calibration.model_selection`), keyed by ``id(score)``: ``(MSE - MSE_best) /
+    SE_best`` of the position error, and for 6-D readings the larger of that and the orientation
+    error's, each against the best candidate of that error."""
+    valid = [s for s in scores if s.valid]
+    excess = dict.fromkeys(map(id, valid), 0.0)
+    errors = ["position_error_m"]
+    if valid and all(s.orientation_error_rad is not None for s in valid):
+        errors.append("orientation_error_rad")
+    for error in errors:
+        mse = {id(s): s.mse_and_se(getattr(s, error)) for s in valid}
+        best_mse, best_se = min(mse.values())
+        for s in valid:
+            over = mse[id(s)][0] - best_mse
+            z = over / best_se if best_se > 0 else (0.0 if over <= 0 else np.inf)
+            excess[id(s)] = max(excess[id(s)], z)
+    return excess
+
+
 def one_standard_error(scores: list[CandidateScore]) -> Candidate:
-    """The simplest candidate within one standard error of the best (module docstring)."""
+    """The simplest candidate within one standard error of the best on every error scored, the band
+    widened to the smallest excess a candidate reaches when none is within one on every error
+    (module docstring of :mod:`pipeline.calibration.model_selection`)."""
     valid = [s for s in scores if s.valid]
     if not valid:
         raise PipelineError(None, "calibration.parameters", "auto: no candidate model could be fitted on "
                             "every cross-validation fold; give calibration.parameters explicitly")
-    pos = {id(s): s.mse_and_se(s.position_error_m) for s in valid}
-    best = min(valid, key=lambda s: pos[id(s)][0])
-    near = [s for s in valid if pos[id(s)][0] <= pos[id(best)][0] + pos[id(best)][1]]
-    if all(s.orientation_error_rad is not None for s in near):
-        ori = {id(s): s.mse_and_se(s.orientation_error_rad) for s in near}  # type: ignore[arg-type]
-        best_r = min(near, key=lambda s: ori[id(s)][0])
-        near = [s for s in near if ori[id(s)][0] <= ori[id(best_r)][0] + ori[id(best_r)][1]]
+    excess = standard_errors_above_best(valid)
+    band = max(1.0, min(excess.values()))
+    near = [s for s in valid if excess[id(s)] <= band]
     return min(near, key=lambda s: (s.n_parameters, s.candidate.residual_map)).candidate
-
 
 
 def gross_heldout_poses(scores: list[CandidateScore], confidence: float) -> np.ndarray:

@@ -18,6 +18,7 @@ from pipeline.calibration.model_selection import (
     nested_orientation_weights,
     one_standard_error,
     orientation_weight,
+    standard_errors_above_best,
 )
 from pipeline.calibration.noise_model import NoiseModel
 from pipeline.calibration.residual_map import fit_residual_map
@@ -50,6 +51,22 @@ def test_one_standard_error_needs_orientation_too_for_six_d_readings():
     simple.orientation_error_rad = np.full(40, 0.02) * (1 + 0.1 * rng.standard_normal(40))
     rich.orientation_error_rad = np.full(40, 0.005) * (1 + 0.1 * rng.standard_normal(40))
     assert one_standard_error([simple, rich]).parameters == "geometric"
+
+
+def test_a_six_d_candidate_far_off_in_orientation_does_not_win_on_position_alone():
+    rng = np.random.default_rng(4)
+    simple = _score("joint_offsets", 10, 1.00e-3, rng)     # best in position, far off in orientation
+    axes = _score("joint_axes", 20, 1.25e-3, rng)          # a little beyond one SE in position, best in orientation
+    rich = _score("geometric", 30, 1.60e-3, rng)           # far off in position, as good in orientation
+    for score, rms in ((simple, 0.02), (axes, 0.005), (rich, 0.005)):
+        score.orientation_error_rad = rms * SPREAD * (1 + 0.02 * rng.standard_normal(40))
+    excess = standard_errors_above_best([simple, axes, rich])
+    assert 1.0 < excess[id(axes)] < min(excess[id(simple)], excess[id(rich)])
+    assert one_standard_error([simple, axes, rich]).parameters == "joint_axes"
+    # without the orientation errors the position error alone decides, and the simplest wins
+    for score in (simple, axes, rich):
+        score.orientation_error_rad = None
+    assert one_standard_error([simple, axes, rich]).parameters == "joint_offsets"
 
 
 def test_a_failed_fold_disqualifies_a_candidate():
