@@ -133,9 +133,11 @@ class ModelSelection:
         return out
 
     def as_dict(self) -> dict:
+        excess = standard_errors_above_best(self.scores)
         return {"folds": self.folds, "chosen": self.chosen.name, "rule": "one standard error",
                 "fold_grouping": "spatial (k-means in joint space)",
-                "candidates": [s.as_dict() for s in self.scores], "notes": self.notes,
+                "candidates": [s.as_dict() | {"standard_errors_above_best": _finite(excess.get(id(s)))}
+                               for s in self.scores], "notes": self.notes,
                 "orientation_weight_scale": self.orientation_scale,
                 "orientation_weight_scale_per_fold": self.fold_orientation_scales,
                 "orientation_scales_tried": [{"scale": k, "rms_position_error_m": p, "rms_orientation_error_rad": r}
@@ -189,12 +191,17 @@ class ModelSelection:
         if excess:
             band = max(1.0, min(excess.values()))
             listed = ", ".join(f"{s.candidate.name} {excess[id(s)]:.2f}" for s in self.scores if id(s) in excess)
-            lines.append(f"- excess over the best in its standard errors (the larger of position and orientation for "
-                         f"6-D readings): {listed}; the simplest within {band:.2f} is chosen"
+            which = "the larger of the position's and the orientation's" if six_d else "position"
+            lines.append(f"- excess over the best in the best's standard errors ({which}): {listed}; the simplest "
+                         f"within {band:.2f} is chosen"
                          + (" (no candidate within 1 on every error: the band widened to the smallest excess)"
                             if band > 1.0 else ""))
         lines += [f"- {n}" for n in self.notes]
         return "\n".join(lines + [""])
+
+
+def _finite(x: float | None) -> float | None:
+    return float(x) if x is not None and np.isfinite(x) else None
 
 
 def _rms(e: np.ndarray) -> float | None:

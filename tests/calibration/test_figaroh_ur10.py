@@ -144,6 +144,13 @@ def test_auto_meets_the_published_figures_over_all_poses(selection):
     # 23 poses cannot support joint compliances on top of the geometry
     assert selection.chosen.parameters != "all"
     assert "one-standard-error" in selection.markdown() and "(chosen)" in selection.markdown()
+    # the summary's excess of each candidate (position and orientation, in the best's standard
+    # errors): the chosen one within the band, every simpler one beyond it
+    rows = selection.as_dict()["candidates"]
+    band = max(1.0, min(r["standard_errors_above_best"] for r in rows))
+    chosen = next(r for r in rows if r["candidate"] == selection.chosen.name)
+    assert chosen["standard_errors_above_best"] <= band
+    assert all(r["standard_errors_above_best"] > band for r in rows if r["n_parameters"] < chosen["n_parameters"])
     # the factor on the marker-point rows' sigma minimises the relative CV score among those tried
     tried = {k: (p, r) for k, p, r in selection.orientation_scales_tried}
     assert 1.0 in tried and selection.orientation_scale in tried and len(tried) >= 3
