@@ -82,13 +82,22 @@ def gravity_linearisation_point(mm: MeasurementModel, est: Estimate) -> np.ndarr
     non-negative. The inertial error moves the arm through the true compliance; a well determined
     estimate (also a rigid joint's ~0) is kept, a poor one (a wrist compliance seen by 6-D
     readings, known to +-80 %) does not inflate the prediction. Compliances outside the
-    identified set stay as they are."""
+    identified set stay as they are. ``s_hat^2`` is the readings' share of the estimate's variance,
+    ``C - M M^T``: the inertial part ``M M^T`` is the compliance taking up the error of the nominal
+    masses (deflection ``c g``: a mass scale and a compliance scale act alike), which the factors
+    ``B_h - J_h M`` account for at the compliance ``M`` was taken at. Counted as doubt about
+    ``c_hat`` it would pull a well-measured compliance of a soft arm to the nominal rule and ``B_h``
+    away from ``J_h M`` (a UR5 five times softer than stated, 1000 readings: a held-out error
+    predicted at 2.3 times its actual value)."""
     x = np.asarray(est.x, float).copy()
     if not mm.compliance:
         return x
     B = np.asarray(est.basis, float)[mm.sl_compliance]
     in_set = np.any(B != 0, axis=1)
-    var_hat = np.maximum(np.einsum("ij,jk,ik->i", B, np.asarray(est.covariance, float), B), 0.0)
+    C = np.asarray(est.covariance, float)
+    if est.gravity_gain is not None:
+        C = C - est.gravity_gain @ est.gravity_gain.T
+    var_hat = np.maximum(np.einsum("ij,jk,ik->i", B, C, B), 0.0)
     c_nom = 1.0 / nominal_joint_stiffness_Nm_rad(mm.robot)
     var_nom = (MAX_COMPLIANCE_RELATIVE_STD * c_nom) ** 2
     c = x[mm.sl_compliance]

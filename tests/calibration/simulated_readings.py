@@ -1,17 +1,21 @@
-"""Simulated tracker readings of the RX130L for the calibration tests: the geometric parameter set and
+"""Simulated tracker readings for the calibration tests: the RX130L's geometric parameter set and
 readings at random configurations of the middle half of each joint range (a region a residual map
-can cover), exact nominal model plus an optional smooth field and the tracker noise."""
+can cover), exact nominal model plus an optional smooth field and the tracker noise; and a recorded
+pair of files of a soft hidden arm."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
+from pipeline.calibration import candidates as cd
 from pipeline.calibration import error_model as em
 from pipeline.calibration import measure as ms
 from pipeline.calibration import stage as st
 from pipeline.robot.model import RobotModel
+from pipeline.sim.truth import RealRobot, TruthConfig
 
 SIGMA_M = 10e-6
 
@@ -33,3 +37,23 @@ def rx130l_readings(n_poses: int, source: str, field_m: Callable[[np.ndarray], n
     if field_m is not None:
         Y = Y + field_m(Q) @ T.rotation
     return robot, mm, basis, ms.Measurements(Q, Y, np.full(len(Q), SIGMA_M), source), rng
+
+
+#: the soft hidden arm's joints, times the compliance its robot.yaml states
+SOFT_COMPLIANCE_SCALE = 5.0
+
+
+def soft_arm_record(robot_name: str, seed: int, folder: Path, transmission_error_rad: float
+                    ) -> tuple[RobotModel, st.Config, RealRobot]:
+    """``(robot, calibration settings, hidden arm)``: 300 recorded readings (``train.csv``) and 100
+    held-out ones (``test.csv``) at random feasible configurations of a hidden arm
+    :data:`SOFT_COMPLIANCE_SCALE` times as compliant as stated (the inertias 15 % / 20 mm off, a cyclic
+    transmission error of the given amplitude), the settings reading them with every parameter."""
+    robot = RobotModel.load(robot_name)
+    real = RealRobot.create(robot, seed, TruthConfig(joint_compliance_scale=SOFT_COMPLIANCE_SCALE,
+                                                     transmission_error_amplitude_rad=transmission_error_rad))
+    rng = np.random.default_rng(seed)
+    Q, _ = cd.random_candidates(cd.chain_from_robot(robot), 400, rng)
+    paths = [ms.write_csv(folder / name, ms.measure_simulated(real, Qs, rng))
+             for Qs, name in ((Q[:300], "train.csv"), (Q[300:], "test.csv"))]
+    return robot, st.Config(measurements_csv=str(paths[0]), validation_csv=str(paths[1]), parameters="all"), real
