@@ -14,6 +14,7 @@ from pipeline.calibration import candidates as cd
 from pipeline.calibration import error_model as em
 from pipeline.calibration import measure as ms
 from pipeline.calibration import stage as st
+from pipeline.calibration.outcome import Fit, ModelSetUp
 from pipeline.robot.model import RobotModel
 from pipeline.sim.truth import RealRobot, TruthConfig
 
@@ -57,3 +58,12 @@ def soft_arm_record(robot_name: str, seed: int, folder: Path, transmission_error
     paths = [ms.write_csv(folder / name, ms.measure_simulated(real, Qs, rng))
              for Qs, name in ((Q[:300], "train.csv"), (Q[300:], "test.csv"))]
     return robot, st.Config(measurements_csv=str(paths[0]), validation_csv=str(paths[1]), parameters="all"), real
+
+
+def fitted_record(robot: RobotModel, cfg: st.Config, seed: int) -> tuple[ModelSetUp, Fit, ms.Measurements]:
+    """The stage's model set-up and fit of the measurement file of ``cfg`` (before any validation),
+    and the readings fitted."""
+    rng = np.random.default_rng(seed)
+    records, notes = st.read_records(robot, cfg)
+    model = st.set_up_model(robot, cfg, records, rng, notes)
+    return model, st.fit_model(robot, model, records, records.measurements, rng, notes), records.measurements

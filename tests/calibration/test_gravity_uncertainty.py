@@ -16,7 +16,7 @@ from pipeline.calibration.robust import robust_estimate
 from pipeline.robot.model import RobotModel
 from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 from pipeline.sim.truth import RealRobot, TruthConfig
-from tests.calibration.simulated_readings import soft_arm_record
+from tests.calibration.simulated_readings import fitted_record, soft_arm_record
 
 PRIOR = GravityPrior(0.15, 0.02)
 
@@ -132,10 +132,8 @@ def test_a_well_measured_compliance_is_the_gravity_terms_linearisation_point(tmp
     """The compliances identified to a few per cent by the readings stay as fitted in the gravity
     term, however much of their covariance is the inertial gain ``M M^T``."""
     robot, cfg, _ = soft_arm_record("staubli_tx40", 4, tmp_path, 3e-5)
-    rng = np.random.default_rng(4)
-    records, notes = st.read_records(robot, cfg)
-    model = st.set_up_model(robot, cfg, records, rng, notes)
-    mm, est = model.mm, st.fit_model(robot, model, records, records.measurements, rng, notes).estimate
+    model, fit, _ = fitted_record(robot, cfg, 4)
+    mm, est = model.mm, fit.estimate
     sl = mm.sl_compliance
     B = est.basis[sl]
     var_readings = np.einsum("ij,jk,ik->i", B, est.covariance - est.gravity_gain @ est.gravity_gain.T, B)

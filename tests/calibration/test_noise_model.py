@@ -24,7 +24,7 @@ from pipeline.quality import QualityGates
 from pipeline.robot import repeatability as rp
 from pipeline.robot.model import RobotModel
 from pipeline.sim.truth import RealRobot, TruthConfig
-from tests.calibration.simulated_readings import soft_arm_record
+from tests.calibration.simulated_readings import fitted_record, soft_arm_record
 
 
 def test_repeatability_sigma_reproduces_iso9283_rp():
@@ -301,11 +301,8 @@ def test_the_remainder_of_a_soft_arm_is_taken_beside_what_the_fit_left_of_the_in
     readings' whole ``B_k`` it claims the part of the residuals the compliances have taken up, and
     the remainder comes out at 0.48 and 0.71 of the transmission error on these seeds."""
     robot, cfg, real = soft_arm_record("staubli_tx40", seed, tmp_path, 3e-4)
-    rng = np.random.default_rng(seed)
-    records, notes = st.read_records(robot, cfg)
-    model = st.set_up_model(robot, cfg, records, rng, notes)
-    fit = st.fit_model(robot, model, records, records.measurements, rng, notes)
-    Q = records.measurements.Q
+    _, fit, readings = fitted_record(robot, cfg, seed)
+    Q = readings.Q
     without = RealRobot.create(robot, seed, replace(real.config, transmission_error_amplitude_rad=0.0))
     same_noise = [ms.measure_simulated(r, Q, np.random.default_rng(0)).Y for r in (real, without)]
     transmission_rms_m = float(np.sqrt(np.mean((same_noise[0] - same_noise[1]) ** 2)))
