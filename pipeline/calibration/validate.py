@@ -11,7 +11,8 @@ the held-out error is ``e_h = (B_h - J_h M) z - J_h K n + n_h`` (the fit absorbs
 inertial error ``z``, ``M`` = ``Estimate.gravity_gain``), so
 ``E|e_h|^2 = trace(J_h (C - M M^T) J_h^T) + |B_h - J_h M|_F^2 + 3 sigma_h^2``; the second term
 is the gravity-model part, whose share of the predicted mean square is reported (``B_h`` at the
-compliances the calibrated robot hands on, :func:`gravity_linearisation_point`).
+fitted compliances, a poorly measured one combined with the nominal rule,
+:func:`gravity_linearisation_point`).
 
 Orientation (6-D readings fitted as marker points, :func:`pipeline.calibration.measure.
 expand_orientation`): the errors ``e_0, e_x, e_y`` of the marker origin and of the virtual points
