@@ -55,12 +55,8 @@ def write_records(robot: RobotModel, real: RealRobot, n_train: int, n_test: int,
     if len(inside) < n_train:
         raise SystemExit(f"only {len(inside)} of {len(Q)} feasible configurations lie in the middle {inner:g} of "
                          f"the ranges; lower --poses or raise --inner")
-    train, test = Q[inside[:n_train]], Q[rng.choice(len(Q), n_test, replace=False)]
-    paths = []
-    for Qs, name in ((train, "train.csv"), (test, "test.csv")):
-        m = ms.measure_simulated(real, Qs, rng)
-        paths.append(ms.write_csv(folder / name, ms.Measurements(m.Q, m.Y, m.sigma_m, "simulated laser record")))
-    return paths[0], paths[1]
+    return ms.write_simulated_record(real, Q[inside[:n_train]], Q[rng.choice(len(Q), n_test, replace=False)],
+                                     folder, rng)
 
 
 def bench_arm(name: str, amplitude_rad: float, seed: int, n_train: int, n_test: int, inner: float,

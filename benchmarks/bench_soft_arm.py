@@ -46,9 +46,8 @@ def calibrate_seed(robot: RobotModel, truth: TruthConfig, seed: int, n_train: in
     real = RealRobot.create(robot, seed, truth)
     rng = np.random.default_rng(seed)
     Q, _ = cd.random_candidates(cd.chain_from_robot(robot), n_train + n_test, rng)
-    paths = [ms.write_csv(folder / name, ms.measure_simulated(real, Qs, rng))
-             for Qs, name in ((Q[:n_train], "train.csv"), (Q[n_train:], "test.csv"))]
-    cfg = st.Config(measurements_csv=str(paths[0]), validation_csv=str(paths[1]), parameters="all")
+    fit, validation = ms.write_simulated_record(real, Q[:n_train], Q[n_train:], folder, rng)
+    cfg = st.Config(measurements_csv=str(fit), validation_csv=str(validation), parameters="all")
     return st.calibrate(robot, None, cfg, np.random.default_rng(seed)).validation
 
 

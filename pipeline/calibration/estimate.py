@@ -71,6 +71,13 @@ class Estimate:
     def std(self) -> np.ndarray:
         return np.sqrt(np.diag(self.covariance))
 
+    @property
+    def readings_covariance(self) -> np.ndarray:
+        """The readings' share of :attr:`covariance`: without the inertial error's part ``M M^T``
+        (``M`` = :attr:`gravity_gain`; the whole covariance without one)."""
+        C = np.asarray(self.covariance, float)
+        return C if self.gravity_gain is None else C - self.gravity_gain @ self.gravity_gain.T
+
 
 def levenberg_marquardt(mm: MeasurementModel, Q: np.ndarray, Y: np.ndarray, sigma: np.ndarray,
                         basis: np.ndarray, T0: pin.SE3, max_iterations: int = 50,

@@ -78,6 +78,16 @@ def measure_simulated(real, Q: np.ndarray, rng: np.random.Generator, payload: Pa
                         "simulated tracker", None, len(Q), Q[~vis], mounted)
 
 
+def write_simulated_record(real, Q_fit: np.ndarray, Q_validation: np.ndarray, folder: Path,
+                           rng: np.random.Generator) -> tuple[Path, Path]:
+    """The tracker's readings of the (hidden) arm ``real`` at ``Q_fit`` and ``Q_validation`` written as
+    a user records them (:func:`write_csv`): ``folder/fit.csv`` and ``folder/validation.csv``, for
+    ``calibration.measurements_csv`` and ``calibration.validation_csv``."""
+    folder = Path(folder)
+    fit, validation = (measure_simulated(real, Q, rng) for Q in (Q_fit, Q_validation))
+    return write_csv(folder / "fit.csv", fit), write_csv(folder / "validation.csv", validation)
+
+
 def concatenate(parts: list[Measurements], source: str) -> Measurements:
     """One record of several (payload flags filled with False where a part has none)."""
     mounted = None

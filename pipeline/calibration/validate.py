@@ -95,10 +95,7 @@ def gravity_linearisation_point(mm: MeasurementModel, est: Estimate) -> np.ndarr
         return x
     B = np.asarray(est.basis, float)[mm.sl_compliance]
     in_set = np.any(B != 0, axis=1)
-    C = np.asarray(est.covariance, float)
-    if est.gravity_gain is not None:
-        C = C - est.gravity_gain @ est.gravity_gain.T
-    var_hat = np.maximum(np.einsum("ij,jk,ik->i", B, C, B), 0.0)
+    var_hat = np.maximum(np.einsum("ij,jk,ik->i", B, est.readings_covariance, B), 0.0)
     c_nom = 1.0 / nominal_joint_stiffness_Nm_rad(mm.robot)
     var_nom = (MAX_COMPLIANCE_RELATIVE_STD * c_nom) ** 2
     c = x[mm.sl_compliance]
@@ -132,7 +129,7 @@ def _model_covariance(J: np.ndarray, est: Estimate, B: np.ndarray | None) -> tup
         return np.einsum("nip,pq,njq->nij", J, est.covariance, J), np.zeros(len(J))
     M = est.gravity_gain
     R = B - J @ M
-    cov = np.einsum("nir,njr->nij", R, R) + np.einsum("nip,pq,njq->nij", J, est.covariance - M @ M.T, J)
+    cov = np.einsum("nir,njr->nij", R, R) + np.einsum("nip,pq,njq->nij", J, est.readings_covariance, J)
     return cov, np.einsum("nir,nir->n", R, R)
 
 
@@ -222,7 +219,7 @@ def _stacked_factors(mm: MeasurementModel, est: Estimate, Q: np.ndarray, gravity
     R = (gravity.factors(Q, gravity_linearisation_point(mm, est), est.registration) - J @ M).reshape(n_rows, -1)
     p, r = G.shape[0], R.shape[1]
     G_full = np.zeros((p + r, p + r))
-    G_full[:p, :p] = G - M @ M.T
+    G_full[:p, :p] = est.readings_covariance
     G_full[p:, p:] = np.eye(r)
     return np.hstack([F, R]), G_full
 

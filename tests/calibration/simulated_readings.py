@@ -46,8 +46,8 @@ SOFT_COMPLIANCE_SCALE = 5.0
 
 def soft_arm_record(robot_name: str, seed: int, folder: Path, transmission_error_rad: float
                     ) -> tuple[RobotModel, st.Config, RealRobot]:
-    """``(robot, calibration settings, hidden arm)``: 300 recorded readings (``train.csv``) and 100
-    held-out ones (``test.csv``) at random feasible configurations of a hidden arm
+    """``(robot, calibration settings, hidden arm)``: 300 recorded readings and 100 held-out ones
+    (:func:`pipeline.calibration.measure.write_simulated_record`) at random feasible configurations of a hidden arm
     :data:`SOFT_COMPLIANCE_SCALE` times as compliant as stated (the inertias 15 % / 20 mm off, a cyclic
     transmission error of the given amplitude), the settings reading them with every parameter."""
     robot = RobotModel.load(robot_name)
@@ -55,9 +55,8 @@ def soft_arm_record(robot_name: str, seed: int, folder: Path, transmission_error
                                                      transmission_error_amplitude_rad=transmission_error_rad))
     rng = np.random.default_rng(seed)
     Q, _ = cd.random_candidates(cd.chain_from_robot(robot), 400, rng)
-    paths = [ms.write_csv(folder / name, ms.measure_simulated(real, Qs, rng))
-             for Qs, name in ((Q[:300], "train.csv"), (Q[300:], "test.csv"))]
-    return robot, st.Config(measurements_csv=str(paths[0]), validation_csv=str(paths[1]), parameters="all"), real
+    fit, validation = ms.write_simulated_record(real, Q[:300], Q[300:], folder, rng)
+    return robot, st.Config(measurements_csv=str(fit), validation_csv=str(validation), parameters="all"), real
 
 
 def fitted_record(robot: RobotModel, cfg: st.Config, seed: int) -> tuple[ModelSetUp, Fit, ms.Measurements]:

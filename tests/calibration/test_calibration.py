@@ -213,6 +213,19 @@ def test_csv_round_trip_gives_the_same_calibration(robot, tmp_path):
     assert np.allclose(e1.x, e2.x, atol=1e-8)
 
 
+def test_a_simulated_record_reads_back_as_measured(robot, tmp_path):
+    """The measurement and validation files of a simulated record hold the tracker's readings, in
+    order (fit first, from one random stream), as the stage reads them."""
+    real = RealRobot.create(robot, 5)
+    Q, _ = cd.random_candidates(cd.chain_from_robot(robot), 30, np.random.default_rng(5))
+    fit, validation = ms.write_simulated_record(real, Q[:20], Q[20:], tmp_path, np.random.default_rng(6))
+    rng = np.random.default_rng(6)
+    for path, Qs in ((fit, Q[:20]), (validation, Q[20:])):
+        measured, back = ms.measure_simulated(real, Qs, rng), ms.read_csv(path, robot, min_rows=1)
+        assert len(back) == len(measured) > 0
+        assert np.allclose(back.Q, measured.Q) and np.allclose(back.Y, measured.Y, atol=1e-12)
+
+
 # ------------------------------------------------------------------ end-to-end targets
 def test_csv_with_a_utf8_bom_reads_like_without(robot, tmp_path):
     """Excel's "CSV UTF-8" starts with a byte-order mark, invisible in a terminal."""
