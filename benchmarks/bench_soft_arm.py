@@ -14,7 +14,10 @@ parameter (``parameters: all``, elastostatic model) by the stage as a user's fil
 - the gravity model's share of the predicted mean square (``gravity_model_share``);
 - the *realised* inertial part of the held-out error, ``sqrt(actual^2 - actual_exact^2)`` with
   ``actual_exact`` the same seed's calibration when the hidden arm's inertias are the nominal ones
-  (same readings otherwise), against the predicted one, ``sqrt(share) predicted``.
+  (same readings otherwise), against the predicted one, ``sqrt(share) predicted``;
+- the size of the hidden arm's inertial error under the calibration's gravity-model prior,
+  ``z^T z`` with ``d pi = L z`` (:mod:`pipeline.calibration.gravity_uncertainty`; expected: its
+  number of components, for a draw the prior describes exactly).
 
 The prediction's gravity term is the inertial error the fit did not take up into the compliances,
 ``|B_h - J_h M|^2`` (:mod:`pipeline.calibration.validate`); over seeds the realised part scatters
@@ -29,11 +32,13 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 from bench_help import exit_on_help
 
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import measure as ms
 from pipeline.calibration import stage as st
+from pipeline.calibration.gravity_uncertainty import GravityPrior
 from pipeline.robot.model import RobotModel
 from pipeline.sim.truth import RealRobot, TruthConfig
 
@@ -49,6 +54,21 @@ def calibrate_seed(robot: RobotModel, truth: TruthConfig, seed: int, n_train: in
     fit, validation = ms.write_simulated_record(real, Q[:n_train], Q[n_train:], folder, rng)
     cfg = st.Config(measurements_csv=str(fit), validation_csv=str(validation), parameters="all")
     return st.calibrate(robot, None, cfg, np.random.default_rng(seed)).validation
+
+
+def inertial_draw_size(robot: RobotModel, real: RealRobot, prior: GravityPrior) -> tuple[float, int]:
+    """``(z^T z, r)``: the hidden arm's error of the gravity model's parameters ``d pi`` (masses and
+    first moments) whitened by the prior, ``d pi = L z`` (``L L^T = Sigma_pi``, its ``r`` non-zero
+    components)."""
+    S = prior.parameter_covariance(robot.model)
+    cols = np.flatnonzero(np.diag(S) > 0)
+    L = np.linalg.cholesky(S[np.ix_(cols, cols)])
+
+    def parameters(model: pin.Model) -> np.ndarray:
+        return np.concatenate([model.inertias[j].toDynamicParameters() for j in range(1, model.njoints)])
+
+    z = np.linalg.solve(L, (parameters(real.truth.model) - parameters(robot.model))[cols])
+    return float(z @ z), len(cols)
 
 
 def seeds_of(text: str) -> list[int]:
@@ -74,8 +94,10 @@ def main() -> None:
     lo, hi = EXPECTED_RATIO
     print(f"{args.robot}, {args.compliance:g} x the stated compliance, transmission error {args.transmission:g} rad; "
           f"{args.poses} readings fitted, {args.tests} held out; mm")
-    print("seed | actual / predicted = ratio | gravity share | inertial part realised / predicted")
-    ratios, realised, predicted = [], [], []
+    prior = st.Config().gravity_prior()
+    print("seed | actual / predicted = ratio | gravity share | inertial part realised / predicted | "
+          "inertial error z^T z / components")
+    ratios, realised, predicted, sizes = [], [], [], []
     with tempfile.TemporaryDirectory() as tmp:
         for seed in seeds_of(args.seeds):
             v = calibrate_seed(robot, truth, seed, args.poses, args.tests, Path(tmp))
@@ -83,16 +105,20 @@ def main() -> None:
             actual, pred, share = v["after"]["rms"], v["predicted_rms_m"], v["gravity_model_share"]
             real_g = float(np.sqrt(max(actual ** 2 - v0["after"]["rms"] ** 2, 0.0)))
             pred_g = float(np.sqrt(share) * pred)
+            size, n_components = inertial_draw_size(robot, RealRobot.create(robot, seed, truth), prior)
+            sizes.append(size)
             ratios.append(actual / pred)
             realised.append(real_g)
             predicted.append(pred_g)
             flag = "" if lo <= actual / pred <= hi else f"  outside [{lo}, {hi}]"
             print(f"{seed:>4} | {1e3 * actual:.4f} / {1e3 * pred:.4f} = {actual / pred:.3f} | {share:.2f} | "
-                  f"{1e3 * real_g:.4f} / {1e3 * pred_g:.4f}{flag}", flush=True)
+                  f"{1e3 * real_g:.4f} / {1e3 * pred_g:.4f} | {size:.1f} / {n_components}{flag}", flush=True)
     r = np.array(ratios)
     real_rms, pred_rms = (1e3 * float(np.sqrt(np.mean(np.square(v)))) for v in (realised, predicted))
     print(f"ratio: geometric mean {np.exp(np.mean(np.log(r))):.3f}, {int(np.sum((r < lo) | (r > hi)))} of {len(r)} "
-          f"outside [{lo}, {hi}]; inertial part, RMS over the seeds: realised {real_rms:.4f}, predicted {pred_rms:.4f}")
+          f"outside [{lo}, {hi}]; inertial part, RMS over the seeds: realised {real_rms:.4f}, "
+          f"predicted {pred_rms:.4f}; inertial error z^T z: mean {np.mean(sizes):.1f} "
+          f"against {n_components} components")
 
 
 if __name__ == "__main__":
