@@ -67,17 +67,17 @@ def value_digest(value: object) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def lookup(data: dict, dotted: str) -> Any:  # Any: whatever robot.yaml holds there
+def lookup(data: dict[str, Any], dotted: str) -> Any:  # Any: whatever robot.yaml holds there
     """The value at ``a.b.c`` in nested mappings, or ``_MISSING``."""
     return dotted_get(data, dotted, _MISSING)
 
 
-def assumed_entry(data: dict, dotted: str, rule: str) -> dict:
+def assumed_entry(data: dict[str, Any], dotted: str, rule: str) -> dict[str, str]:
     """The ``assumed`` entry of the value at ``dotted`` in ``data`` (as it is written)."""
     return {"rule": rule, "sha256": value_digest(lookup(data, dotted))}
 
 
-def assumed_in_force(path: Path, data: dict) -> dict[str, dict]:
+def assumed_in_force(path: Path, data: dict[str, Any]) -> dict[str, dict[str, str]]:
     """The entries of ``data['assumed']`` whose value is unchanged (checked: one line per problem)."""
     raw = data.get("assumed")
     if raw is None:
@@ -95,12 +95,12 @@ def assumed_in_force(path: Path, data: dict) -> dict[str, dict]:
     return kept
 
 
-def assumed_sentences(assumed: dict[str, dict]) -> list[str]:
+def assumed_sentences(assumed: dict[str, dict[str, str]]) -> list[str]:
     """One line per assumption still in force: ``path: rule (robot.yaml, unedited)``."""
     return [f"{dotted}: {entry['rule']} (ASSUMED in robot.yaml, not edited)" for dotted, entry in assumed.items()]
 
 
-def locked_joints(path: Path, data: dict) -> dict[str, float]:
+def locked_joints(path: Path, data: dict[str, Any]) -> dict[str, float]:
     """robot.yaml's ``locked_joints``: joint name -> position (rad or m) held off the arm chain."""
     raw = data.get("locked_joints") or {}
     if not isinstance(raw, dict) or not all(isinstance(v, int | float) and not isinstance(v, bool)

@@ -138,7 +138,7 @@ def check_chain_joints(urdf: Path, root: ET.Element, chain: list[str]) -> bool:
                                  "(its motion is not independent); choose another --tip or remove the mimic tag")
         limit = joint.find("limit")
         missing = [a for a in ("lower", "upper") if limit is None or limit.get(a) is None]
-        if missing:
+        if limit is None or missing:
             raise RobotFileError(urdf, f"joint {name}: <limit>", f"a revolute joint needs {', '.join(missing)}")
         for attribute in ("velocity", "effort"):       # missing: a placeholder (vendor_urdf), like 0
             if limit.get(attribute) is None:
@@ -146,7 +146,7 @@ def check_chain_joints(urdf: Path, root: ET.Element, chain: list[str]) -> bool:
                 changed = True
         for attribute in ("lower", "upper", "velocity", "effort"):
             try:
-                value = float(limit.get(attribute))
+                value = float(limit.get(attribute, ""))
             except ValueError:
                 value = None
             if value is None or not np.isfinite(value):
@@ -189,7 +189,7 @@ def validate_joint_limits(spec: RobotSpec, model: pin.Model, limits: JointLimits
             raise RobotFileError(urdf, f"joint {name}: limit.effort", "must be positive")
 
 
-def _raise_limit_order(spec: RobotSpec, urdf: Path, overrides: dict, joint: str, i: int, lower: float,
+def _raise_limit_order(spec: RobotSpec, urdf: Path, overrides: dict[str, np.ndarray], joint: str, i: int, lower: float,
                        upper: float) -> None:
     """Report ``lower >= upper`` against the file and field each of the two values came from."""
     relation = "is above" if lower > upper else "equals"
@@ -229,7 +229,11 @@ def load_robot_files(robot: str | Path, yaml_path: str | Path | None = None, *, 
     if urdf_alone and str(robot).endswith(".urdf"):
         yaml_file = None
     spec = load_robot_spec(yaml_file) if yaml_file is not None else None
-    urdf = Path(robot) if str(robot).endswith(".urdf") else spec.urdf
+    if str(robot).endswith(".urdf"):
+        urdf = Path(robot)
+    else:
+        assert spec is not None          # a robot that is not a URDF file was resolved to its robot.yaml
+        urdf = spec.urdf
     root = check_urdf_xml(urdf)
     flange = spec.flange_frame if spec is not None else tip
     if spec is not None:
@@ -264,6 +268,7 @@ def load_robot_files(robot: str | Path, yaml_path: str | Path | None = None, *, 
         spec.locked_joints = {n: v for n, v in locked.items() if v is not None}
         assumptions += assumed
     else:
+        assert yaml_file is not None     # spec was read from it above
         spec = load_robot_spec(yaml_file, nq=model.nq)
         spec.urdf = urdf
     text = ET.tostring(root, encoding="unicode") if turned or filled else urdf.read_text()

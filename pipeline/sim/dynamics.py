@@ -16,6 +16,7 @@ plus rotor inertia and friction" (DESIGN.md, Control).
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import casadi as ca
@@ -55,7 +56,8 @@ def chain_structure(model: pin.Model) -> ChainStructure:
         if name in _AXES:
             axes.append(_AXES[name])
         elif name == "JointModelRevoluteUnaligned":
-            axes.append(tuple(float(x) for x in model.joints[j].extract().axis))
+            a = model.joints[j].extract().axis
+            axes.append((float(a[0]), float(a[1]), float(a[2])))
         else:
             raise RobotFileError(model.name or "model", f"joint {model.names[j]}",
                                  f"joint type {name} not supported by the control plant (revolute only)")
@@ -80,7 +82,7 @@ def parameter_vector(robot: RobotModel) -> np.ndarray:
     return np.concatenate([*rows, np.asarray(m.gravity.linear), [float(act.coulomb_smoothing_rad_s)]])
 
 
-def _skew(x: ca.SX) -> ca.SX:
+def _skew(x: ca.SX | ca.DM) -> ca.SX:
     return ca.vertcat(ca.horzcat(0, -x[2], x[1]), ca.horzcat(x[2], 0, -x[0]), ca.horzcat(-x[1], x[0], 0))
 
 
@@ -106,7 +108,7 @@ def _inertia_matrix(pi: ca.SX) -> ca.SX:
     return ca.vertcat(ca.horzcat(m * ca.SX.eye(3), -H), ca.horzcat(H, Io))
 
 
-def _unpack(p: ca.SX, s: ChainStructure):
+def _unpack(p: ca.SX, s: ChainStructure) -> tuple[list[dict[str, ca.SX]], ca.SX, ca.SX]:
     n = PARAMS_PER_JOINT
     joints = []
     for i in range(s.nq):
@@ -132,7 +134,13 @@ def aba_sx(q: ca.SX, v: ca.SX, tau: ca.SX, p: ca.SX, s: ChainStructure) -> ca.SX
     """Joint accelerations of the rigid chain with rotor inertia for joint torques ``tau``."""
     joints, g, _ = _unpack(p, s)
     n = s.nq
-    R, t, S, vel, c, IA, pA = [], [], [], [], [], [], []
+    R: list[ca.SX] = []
+    t: list[ca.SX] = []
+    S: list[ca.DM] = []
+    vel: list[ca.SX] = []
+    c: list[ca.SX] = []
+    IA: list[ca.SX] = []
+    pA: list[ca.SX] = []
     for i in range(n):  # pass 1: kinematics, bias forces
         jt = joints[i]
         Ri = jt["R"] @ _rot_axis(s.axes[i], q[i])   # child -> parent rotation
@@ -160,7 +168,9 @@ def aba_sx(q: ca.SX, v: ca.SX, tau: ca.SX, p: ca.SX, s: ChainStructure) -> ca.SX
         h = Yi @ vel[i]
         # v x* h = [w x f ; w x n + v x f]
         pA.append(ca.vertcat(ca.cross(v_ang, h[:3]), ca.cross(v_ang, h[3:]) + ca.cross(v_lin, h[:3])))
-    U, D, u = [None] * n, [None] * n, [None] * n
+    U: list[ca.SX] = [ca.SX.zeros(6)] * n        # each set below before it is read
+    D: list[ca.SX] = [ca.SX.zeros(1)] * n
+    u: list[ca.SX] = [ca.SX.zeros(1)] * n
     for i in reversed(range(n)):  # pass 2: articulated inertias
         U[i] = IA[i] @ S[i]
         D[i] = ca.dot(S[i], U[i]) + joints[i]["armature"]
@@ -169,7 +179,12 @@ def aba_sx(q: ca.SX, v: ca.SX, tau: ca.SX, p: ca.SX, s: ChainStructure) -> ca.SX
         if par >= 0:
             inv_d = 1.0 / D[i]
             Ud = U[i] * inv_d
-            Ia = _sym(lambda r, c_, Ud=Ud, Ui=U[i], IAi=IA[i]: IAi[r, c_] - Ud[r] * Ui[c_])
+            Ui, IAi = U[i], IA[i]
+
+            def articulated(r: int, c_: int, Ud: ca.SX = Ud, Ui: ca.SX = Ui, IAi: ca.SX = IAi) -> ca.SX:
+                return IAi[r, c_] - Ud[r] * Ui[c_]
+
+            Ia = _sym(articulated)
             pa = pA[i] + Ia @ c[i] + Ud * u[i]
             IA[par] = IA[par] + _inertia_to_parent(Ia, R[i], t[i])
             pA[par] = pA[par] + _force_to_parent(R[i], t[i], pa)
@@ -188,7 +203,7 @@ def aba_sx(q: ca.SX, v: ca.SX, tau: ca.SX, p: ca.SX, s: ChainStructure) -> ca.SX
     return ca.vertcat(*qdd)
 
 
-def _sym(entry) -> ca.SX:
+def _sym(entry: Callable[[int, int], ca.SX]) -> ca.SX:
     """6x6 symmetric SX matrix from ``entry(r, c)`` evaluated for r <= c only."""
     M = ca.SX(6, 6)
     for r in range(6):

@@ -113,7 +113,7 @@ class MujocoPlant:
         """:meth:`pipeline.sim.plant.Plant.run_servo` on the MuJoCo arm (``engine``, ``chunk_samples`` and
         ``motor_offset0`` have no meaning here: one engine, no chunks, rigid joints).
 
-        ``extra["actuator_torque_Nm"]`` (N, nq): MuJoCo's actuator force in the first velocity sample of
+        ``actuator_torque_Nm`` (N, nq): MuJoCo's actuator force in the first velocity sample of
         each position sample (what the drive's current reads right after the encoder sample)."""
         n, N, nv = self.nq, len(q_d_fb), int(velocity_samples)
         Tv = sample_time_s / nv
@@ -158,5 +158,5 @@ class MujocoPlant:
         wall, cpu = time.perf_counter() - t0, time.thread_time() - c0
         tcp = self.measure_tcp(q_true, tcp_frame) if measure_tcp else None
         return ServoRecord(q_meas, v_est, tau_mean, ratio_out, tcp, wall, cpu,
-                           {"substeps_per_velocity_sample": n_sub, "actuator_torque_Nm": tau_act,
-                            "engine": "mujoco"}, q_true, None)
+                           {"substeps_per_velocity_sample": n_sub, "engine": "mujoco"}, q_true, None,
+                           actuator_torque_Nm=tau_act)

@@ -94,7 +94,9 @@ class MujocoRealRobot(RealRobot):
                                     s.measurement_delay_samples, s.alpha, inputs.q_d_fb, inputs.v_ff, inputs.tau_ff,
                                     inputs.q_d[0], rng, measure_tcp=False, v0=inputs.v0)
         grid = inputs.t_s
-        tau_true = rec.extra["actuator_torque_Nm"]
+        tau_true = rec.actuator_torque_Nm
+        if tau_true is None:
+            raise ValueError("the MuJoCo plant returned no actuator torques")
         on_grid = np.abs((t_s - grid[0]) / s.sample_time_s - np.round((t_s - grid[0]) / s.sample_time_s)) < 1e-6
         if np.all(on_grid):
             idx = np.clip(np.round((t_s - grid[0]) / s.sample_time_s).astype(int), 0, len(grid) - 1)

@@ -37,6 +37,7 @@ import pinocchio as pin
 from scipy.stats import qmc
 
 from pipeline.core.errors import ConfigError
+from pipeline.robot.model import RobotModel
 from pipeline.sim import dynamics, loop
 from pipeline.sim.transmission import Transmission, link_inertia_kgm2
 
@@ -89,16 +90,20 @@ class ServoRecord:
     tcp_position_m: np.ndarray | None
     wall_time_s: float
     cpu_time_s: float = 0.0
-    extra: dict = field(default_factory=dict)
+    extra: dict[str, int | str] = field(default_factory=dict)   # the engine's facts (substeps, name)
     q_link: np.ndarray | None = None     # (N, nq) true link positions (tests, TCP)
     q_motor: np.ndarray | None = None    # (N, nq) true motor positions (joint side; elastic plant)
+    #: (N, nq) the actuator's force right after each encoder sample (MuJoCo; None: the own loop, whose
+    #: torque rows are means over the sample)
+    actuator_torque_Nm: np.ndarray | None = None
 
 
 class Plant:
     """Hidden-robot dynamics + encoders. ``model`` is a RobotModel (the truth, when built by RealRobot)."""
 
-    def __init__(self, model, encoder_noise_rad: float = 2e-6, encoder_resolution_rad: float = 2 * np.pi / 2**26,
-                 integration_rate_hz: float = 10000.0, transmission: Transmission | None = None) -> None:
+    def __init__(self, model: RobotModel, encoder_noise_rad: float = 2e-6,
+                 encoder_resolution_rad: float = 2 * np.pi / 2**26, integration_rate_hz: float = 10000.0,
+                 transmission: Transmission | None = None) -> None:
         if encoder_resolution_rad <= 0 or encoder_noise_rad < 0:
             raise ConfigError(None, "plant.encoder", "resolution must be > 0 and noise >= 0")
         if integration_rate_hz < 10000.0:
@@ -181,20 +186,26 @@ class Plant:
                              / tr.smoothing_rad_s / jm + tr.viscous_Nms_rad / jm)
             n_stab = max(n_stab, int(np.ceil(velocity_sample_time_s * slope_s / DAMPING_STEP)))
         if self.elastic:
+            tr_e = self._elastic_transmission()
             jl = 0.5 * link_inertia_kgm2(self._model)
-            w_max = np.max(np.sqrt(tr.stiffness_Nm_rad * (1 / tr.motor_inertia_kgm2 + 1 / jl)))
+            w_max = np.max(np.sqrt(tr_e.stiffness_Nm_rad * (1 / tr_e.motor_inertia_kgm2 + 1 / jl)))
             w_coupled, c_coupled = self.coupled_rates()
             n_stab = max(n_stab, int(np.ceil(velocity_sample_time_s * max(w_max, w_coupled) / MODE_STEP)),
                          int(np.ceil(velocity_sample_time_s * c_coupled / DAMPING_STEP)))
         return max(n_rate, n_stab, 1)
 
+    def _elastic_transmission(self) -> Transmission:
+        """The transmission of an elastic plant's joints (:class:`ConfigError` on rigid joints)."""
+        if not self.elastic or self.transmission is None:
+            raise ConfigError(None, "plant.transmission", "the plant's joints are rigid")
+        return self.transmission
+
     def coupled_rates(self) -> tuple[float, float]:
         """The fastest spring and damper rates of the elastic joints (:func:`deflection_rates`) over
         :func:`workspace_poses` of the link chain (computed once): ``(omega_max rad/s, c_max 1/s)``."""
-        if not self.elastic or self.transmission is None:
-            raise ConfigError(None, "plant.coupled_rates", "the plant's joints are rigid")
+        transmission = self._elastic_transmission()
         if self._coupled_rates is None:
-            rates = np.array([deflection_rates(self._link_model, q, self.transmission)
+            rates = np.array([deflection_rates(self._link_model, q, transmission)
                               for q in workspace_poses(self._link_model)])
             self._coupled_rates = (float(rates[:, 0].max()), float(rates[:, 1].max()))
         return self._coupled_rates
@@ -218,7 +229,7 @@ class Plant:
         n, N = self.nq, len(q_d_fb)
         ls = loop.LoopStructure(self._chain, velocity_samples, self.substeps_for(sample_time_s / velocity_samples),
                                 measurement_delay_samples, chunk_samples, self.elastic, self.stribeck)
-        tr_vec = self.transmission.loop_vector() if ls.transmission else None
+        tr_vec = self.transmission.loop_vector() if ls.transmission and self.transmission is not None else None
         P = loop.loop_parameters(self._p, gains["kp"], gains["kv"], gains["ki"], velocity_filter_alpha,
                                  self.encoder_resolution_rad, sample_time_s, tr_vec)
         noise = self.encoder_noise_rad * rng.standard_normal((N, velocity_samples * n))
@@ -226,7 +237,8 @@ class Plant:
         v0 = np.zeros(n) if v0 is None else np.asarray(v0, float)
         th0 = q0
         if self.elastic:
-            off = (self._model.gravity_torque(q0) / self.transmission.stiffness_Nm_rad if motor_offset0 is None
+            stiffness_Nm_rad = self._elastic_transmission().stiffness_Nm_rad
+            off = (self._model.gravity_torque(q0) / stiffness_Nm_rad if motor_offset0 is None
                    else np.asarray(motor_offset0, float))
             th0 = q0 + off
         res = self.encoder_resolution_rad

@@ -99,8 +99,8 @@ def play(motion: SampledMotion, real: RealRobot, robot: RobotModel, rng: np.rand
                                s.velocity_samples, s.measurement_delay_samples, s.alpha, inputs.q_d_fb, inputs.v_ff,
                                inputs.tau_ff, inputs.q_d[0], rng, measure_tcp=False, v0=inputs.v0)
     effort = robot.limits.effort_Nm
-    if "actuator_torque_Nm" in rec.extra:      # MuJoCo: the force right after the encoder sample
-        tau = rec.extra["actuator_torque_Nm"]
+    if rec.actuator_torque_Nm is not None:      # MuJoCo: the force right after the encoder sample
+        tau = rec.actuator_torque_Nm
     else:
         # the own loop's torque row k is the mean over [t_k, t_k + T), its encoder row the reading at t_k:
         # logged with it is the mean over the sample centred on t_k (a half-sample offset, 0.2 ms at

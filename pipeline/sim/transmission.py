@@ -80,7 +80,7 @@ def link_inertia_kgm2(robot: RobotModel, q: np.ndarray | None = None) -> np.ndar
     return np.diag(pin.crba(model, model.createData(), q)).copy()
 
 
-def create_transmission(truth, seed: int, stiffness_Nm_rad: np.ndarray, damping_ratio: float,
+def create_transmission(truth: RobotModel, seed: int, stiffness_Nm_rad: np.ndarray, damping_ratio: float,
                         stribeck_excess_relative: float, stribeck_velocity_rad_s: float,
                         coulomb_load_coefficient: float, relative_sigma: float) -> Transmission:
     """The hidden robot's transmission: Stribeck numbers spread log-normally by ``relative_sigma`` per
