@@ -324,21 +324,31 @@ def _figaroh_fit(folder: Path, tag: str, train_rows: list[str], held_rows: list[
     return seconds, metrics
 
 
-def figaroh_ur10_heldout(folder: Path, header: str, rows: list[str], fold_of_pose: np.ndarray
-                         ) -> tuple[float, float, float]:
-    """FIGAROH's held-out RMS position (m) and orientation (rad) over every pose of the UR10 record
-    (``header``, ``rows``: its CSV lines) when each fold of ``fold_of_pose`` is predicted by the fit
-    of the others, and the seconds of all those fits."""
-    sq_pos = sq_rot = seconds = 0.0
+def figaroh_ur10_folds(folder: Path, header: str, rows: list[str], fold_of_pose: np.ndarray
+                       ) -> list[tuple[int, float, float, float]]:
+    """Per fold of ``fold_of_pose`` (in the order of ``np.unique``), FIGAROH's fit of the other poses
+    of the UR10 record (``header``, ``rows``: its CSV lines) predicting the fold: ``(poses held out,
+    RMS position error m, RMS orientation error rad, seconds of the fit)``."""
+    out = []
     for f in np.unique(fold_of_pose):
         held = set(np.flatnonzero(fold_of_pose == f).tolist())
         s, m = _figaroh_fit(folder, f"fold{f}", [r for i, r in enumerate(rows) if i not in held],
                             [rows[i] for i in sorted(held)], header)
         assert m is not None
-        seconds += s
-        sq_pos += len(held) * (m["pos_rmse_calibrated_mm"] * 1e-3) ** 2
-        sq_rot += len(held) * np.radians(m["orient_rmse_calibrated_deg"]) ** 2
-    return float(np.sqrt(sq_pos / len(rows))), float(np.sqrt(sq_rot / len(rows))), seconds
+        rot_rad = float(np.radians(m["orient_rmse_calibrated_deg"]))
+        out.append((len(held), m["pos_rmse_calibrated_mm"] * 1e-3, rot_rad, s))
+    return out
+
+
+def figaroh_ur10_heldout(folder: Path, header: str, rows: list[str], fold_of_pose: np.ndarray
+                         ) -> tuple[float, float, float]:
+    """FIGAROH's held-out RMS position (m) and orientation (rad) over every pose of the UR10 record
+    when each fold of ``fold_of_pose`` is predicted by the fit of the others
+    (:func:`figaroh_ur10_folds`), and the seconds of all those fits."""
+    folds = figaroh_ur10_folds(folder, header, rows, fold_of_pose)
+    n = sum(k for k, *_ in folds)
+    return (float(np.sqrt(sum(k * p ** 2 for k, p, _, _ in folds) / n)),
+            float(np.sqrt(sum(k * r ** 2 for k, _, r, _ in folds) / n)), float(sum(s for *_, s in folds)))
 
 
 def bench_ur10(folder: Path) -> None:

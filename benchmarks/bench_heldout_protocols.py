@@ -13,9 +13,10 @@ poses (the order of the file); ``interleaved`` every ``--folds``-th pose; ``spat
 groups in joint space of the model selection (:func:`pipeline.calibration.crossval.spatial_folds`).
 Printed per split: the runs and their exit codes, the models chosen, the RMS position (and
 orientation) error over every held-out pose (each run's ``heldout_rms_*_all_poses_after_*``, the
-readings the held-out screen left out included) and the largest actual/predicted against its
-bound. On the UR10 record FIGAROH 1.0.2's fits of the same splits (the ``bench`` extra) are printed
-beside, measured in the same run, with the ratios.
+readings the held-out screen left out included) and the run of the largest actual/predicted
+against its bound (its split and RMS error). On the UR10 record FIGAROH 1.0.2's fits of the same
+splits (the ``bench`` extra) are printed beside, measured in the same run, with the ratios and
+FIGAROH's errors on the poses of that run.
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from bench_calibration import HAVE_FIGAROH, figaroh_ur10_heldout, ur10_robot
+from bench_calibration import HAVE_FIGAROH, figaroh_ur10_folds, ur10_robot
 from bench_help import exit_on_help
 
 from pipeline.calibration import measure as ms
@@ -116,26 +117,37 @@ def bench_protocol(protocol: str, robot_dir: Path, header: str, rows: list[str],
     return split, runs
 
 
-def report(protocol: str, runs: list[HeldOutRun], peer: tuple[float, float, float] | None) -> None:
+def report(protocol: str, runs: list[HeldOutRun], peer: list[tuple[int, float, float, float]] | None) -> None:
+    """One line per split: exit codes, models chosen, pooled held-out RMS, the run of the largest
+    actual/predicted relative to its bound; with ``peer`` (FIGAROH per split, the runs' order) its
+    pooled figures and its errors on that run's poses."""
     codes = collections.Counter(r.code for r in runs)
     chosen = collections.Counter(r.parameters for r in runs)
     weights = [r.n_poses for r in runs]
     pos = pooled_rms([r.rms_position_m for r in runs], weights)
     rot = pooled_rms([r.rms_orientation_rad for r in runs], weights)
-    worst = max((r for r in runs if r.ratio is not None), key=lambda r: r.ratio / (r.ratio_bound or 1), default=None)
+    scored = [(r.ratio / (r.ratio_bound or 1.0), i) for i, r in enumerate(runs) if r.ratio is not None]
+    worst = max(scored)[1] if scored else None
     line = (f"{protocol}: {len(runs)} runs, exit codes {dict(sorted(codes.items()))}, chose "
             f"{dict(chosen.most_common())}; over all {sum(weights)} held-out poses: position "
             f"{'n/a' if pos is None else f'{pos * 1e3:.3f} mm'}")
     if rot is not None:
         line += f", orientation {np.degrees(rot):.3f} deg"
-    if worst is not None and worst.ratio is not None:
-        line += f"; largest actual/predicted {worst.ratio:.2f} (its bound {worst.ratio_bound or float('nan'):.2f})"
+    if worst is not None:
+        w = runs[worst]
+        line += (f"; largest actual/predicted {w.ratio:.2f} (its bound {w.ratio_bound or float('nan'):.2f}, "
+                 f"split {worst}: {1e3 * (w.rms_position_m or float('nan')):.3f} mm)")
     print(line)
     if peer is not None and pos is not None:
-        f_pos, f_rot, seconds = peer
+        f_pos = pooled_rms([p for _, p, _, _ in peer], [k for k, *_ in peer])
+        f_rot = pooled_rms([r for _, _, r, _ in peer], [k for k, *_ in peer])
+        assert f_pos is not None and f_rot is not None
         ratio_rot = f", orientation {rot / f_rot:.3f}" if rot is not None else ""
-        print(f"  FIGAROH 1.0.2, the same splits ({seconds:.1f} s): {f_pos * 1e3:.3f} mm / "
+        print(f"  FIGAROH 1.0.2, the same splits ({sum(s for *_, s in peer):.1f} s): {f_pos * 1e3:.3f} mm / "
               f"{np.degrees(f_rot):.3f} deg; ours / FIGAROH position {pos / f_pos:.3f}{ratio_rot}")
+        if worst is not None:
+            _, p_w, r_w, _ = peer[worst]
+            print(f"  FIGAROH on split {worst}'s poses: {1e3 * p_w:.3f} mm / {np.degrees(r_w):.3f} deg")
 
 
 def main() -> None:
@@ -169,7 +181,7 @@ def main() -> None:
             peer = None
             if ur10 and HAVE_FIGAROH:
                 try:
-                    peer = figaroh_ur10_heldout(work, figaroh_header, figaroh_rows, split)
+                    peer = figaroh_ur10_folds(work, figaroh_header, figaroh_rows, split)
                 except Exception as exc:   # a peer's failure is a result to print, not a crash
                     print(f"  FIGAROH failed: {type(exc).__name__}: {exc}")
             report(protocol, runs, peer)
