@@ -40,15 +40,15 @@ from pipeline.calibration import measure as ms
 from pipeline.calibration import stage as st
 from pipeline.calibration.gravity_uncertainty import GravityPrior
 from pipeline.robot.model import RobotModel
+from pipeline.run.sweep import parse_seeds
 from pipeline.sim.truth import RealRobot, TruthConfig
 
 EXPECTED_RATIO = (0.67, 1.5)
 
 
-def calibrate_seed(robot: RobotModel, truth: TruthConfig, seed: int, n_train: int, n_test: int,
+def calibrate_seed(robot: RobotModel, real: RealRobot, seed: int, n_train: int, n_test: int,
                    folder: Path) -> dict:
-    """The stage's held-out validation of the hidden arm ``truth`` of ``seed`` (module docstring)."""
-    real = RealRobot.create(robot, seed, truth)
+    """The stage's held-out validation of the hidden arm ``real`` of ``seed`` (module docstring)."""
     rng = np.random.default_rng(seed)
     Q, _ = cd.random_candidates(cd.chain_from_robot(robot), n_train + n_test, rng)
     fit, validation = ms.write_simulated_record(real, Q[:n_train], Q[n_train:], folder, rng)
@@ -60,22 +60,15 @@ def inertial_draw_size(robot: RobotModel, real: RealRobot, prior: GravityPrior) 
     """``(z^T z, r)``: the hidden arm's error of the gravity model's parameters ``d pi`` (masses and
     first moments) whitened by the prior, ``d pi = L z`` (``L L^T = Sigma_pi``, its ``r`` non-zero
     components)."""
-    S = prior.parameter_covariance(robot.model)
-    cols = np.flatnonzero(np.diag(S) > 0)
-    L = np.linalg.cholesky(S[np.ix_(cols, cols)])
+    cols, L = prior.factor(robot.model)
+    if L is None:
+        return 0.0, 0
 
     def parameters(model: pin.Model) -> np.ndarray:
         return np.concatenate([model.inertias[j].toDynamicParameters() for j in range(1, model.njoints)])
 
     z = np.linalg.solve(L, (parameters(real.truth.model) - parameters(robot.model))[cols])
     return float(z @ z), len(cols)
-
-
-def seeds_of(text: str) -> list[int]:
-    if "-" in text:
-        lo, hi = (int(v) for v in text.split("-"))
-        return list(range(lo, hi + 1))
-    return [int(v) for v in text.split(",")]
 
 
 def main() -> None:
@@ -99,13 +92,14 @@ def main() -> None:
           "inertial error z^T z / components")
     ratios, realised, predicted, sizes = [], [], [], []
     with tempfile.TemporaryDirectory() as tmp:
-        for seed in seeds_of(args.seeds):
-            v = calibrate_seed(robot, truth, seed, args.poses, args.tests, Path(tmp))
-            v0 = calibrate_seed(robot, exact, seed, args.poses, args.tests, Path(tmp))
+        for seed in parse_seeds(args.seeds):
+            real = RealRobot.create(robot, seed, truth)
+            v = calibrate_seed(robot, real, seed, args.poses, args.tests, Path(tmp))
+            v0 = calibrate_seed(robot, RealRobot.create(robot, seed, exact), seed, args.poses, args.tests, Path(tmp))
             actual, pred, share = v["after"]["rms"], v["predicted_rms_m"], v["gravity_model_share"]
             real_g = float(np.sqrt(max(actual ** 2 - v0["after"]["rms"] ** 2, 0.0)))
             pred_g = float(np.sqrt(share) * pred)
-            size, n_components = inertial_draw_size(robot, RealRobot.create(robot, seed, truth), prior)
+            size, n_components = inertial_draw_size(robot, real, prior)
             sizes.append(size)
             ratios.append(actual / pred)
             realised.append(real_g)

@@ -70,6 +70,16 @@ class GravityPrior:
             S[10 * j : 10 * j + 4, 10 * j : 10 * j + 4] = block
         return S
 
+    def factor(self, model: pin.Model) -> tuple[np.ndarray, np.ndarray | None]:
+        """``(cols, L)``: the columns of Pinocchio's dynamic parameters the prior covers (masses and
+        first moments with a non-zero variance) and ``L`` with ``L L^T`` their covariance, so that an
+        error of those parameters is ``d pi[cols] = L z`` with ``z ~ N(0, I)``; ``L`` None when the
+        prior covers none."""
+        S = self.parameter_covariance(model)
+        cols = np.flatnonzero(np.diag(S) > 0)
+        L = np.linalg.cholesky(S[np.ix_(cols, cols)] + 1e-300 * np.eye(len(cols))) if len(cols) else None
+        return cols, L
+
 
 def gravity_regressor(model: pin.Model, Q: np.ndarray) -> np.ndarray:
     """``(N, nv, 10 nb)`` regressor with ``g(q) = Y_g(q) pi`` (``computeJointTorqueRegressor``,
@@ -86,10 +96,7 @@ class GravityCovariance:
     def __init__(self, mm: MeasurementModel, prior: GravityPrior) -> None:
         self.mm = mm
         self.prior = prior
-        S = prior.parameter_covariance(mm.gravity_model)
-        cols = np.flatnonzero(np.diag(S) > 0)
-        self._cols = cols
-        self._L = np.linalg.cholesky(S[np.ix_(cols, cols)] + 1e-300 * np.eye(len(cols))) if len(cols) else None
+        self._cols, self._L = prior.factor(mm.gravity_model)
 
     @property
     def active(self) -> bool:

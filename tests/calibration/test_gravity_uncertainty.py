@@ -136,7 +136,7 @@ def test_a_well_measured_compliance_is_the_gravity_terms_linearisation_point(tmp
     mm, est = model.mm, fit.estimate
     sl = mm.sl_compliance
     B = est.basis[sl]
-    var_readings = np.einsum("ij,jk,ik->i", B, est.covariance - est.gravity_gain @ est.gravity_gain.T, B)
+    var_readings = np.einsum("ij,jk,ik->i", B, est.readings_covariance, B)
     var_total = np.einsum("ij,jk,ik->i", B, est.covariance, B)
     c_hat, c_lin = est.x[sl], va.gravity_linearisation_point(mm, est)[sl]
     well = (np.any(B != 0, axis=1) & (c_hat > 0) & (np.sqrt(np.maximum(var_readings, 0)) < 0.05 * c_hat))
