@@ -3,7 +3,9 @@ public corpus, its training poses inside the middle of every joint range and its
 the whole range, each run through the runner with the defaults as a user makes it.
 
 Run: ``.venv/bin/python benchmarks/bench_off_region.py [--arms xarm7,ur10] [--amplitudes 0,3e-4,1e-3]
-[--seed 1] [--poses 215] [--tests 20] [--inner 0.8]`` (about 20 s per run).
+[--seed 1] [--poses 215] [--tests 20] [--inner 0.8]`` (about 20 s per run). An arm is a corpus name
+(:mod:`pipeline.robot.public_arms`) or the path of a URDF of one's own (its meshes found beside it
+or through ``ROS_PACKAGE_PATH``).
 
 Per arm (``robot init`` on its URDF, no options) and per amplitude of the hidden arm's cyclic gear
 transmission error (rad, joint side; the joints 5 times as compliant as stated when it is not 0,
@@ -62,11 +64,18 @@ def write_records(robot: RobotModel, real: RealRobot, n_train: int, n_test: int,
 def bench_arm(name: str, amplitude_rad: float, seed: int, n_train: int, n_test: int, inner: float,
               work: Path) -> str:
     """One arm and amplitude through the runner; its printed line."""
+    given = Path(name)
+    if given.suffix in (".urdf", ".xml"):           # an arm of one's own, not in the corpus
+        if not given.is_file():
+            return f"{name}: no such file"
+        source: Path | None = given
+        name = given.stem
+    else:
+        source = arm_file(corpus_arm(name))
+        if source is None:
+            return f"{name}: its package is not installed"
     robot_dir = work / f"{name}_{amplitude_rad:g}"
     robot_dir.mkdir()
-    source = arm_file(corpus_arm(name))
-    if source is None:
-        return f"{name}: its package is not installed"
     shutil.copy(source, robot_dir / "robot.urdf")
     write_robot_yaml(robot_dir / "robot.urdf")
     robot = RobotModel.load(robot_dir)

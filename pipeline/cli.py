@@ -1,4 +1,4 @@
-"""Command line: ``python -m pipeline run | check | view | study | sweep | robot init``.
+"""Command line: ``python -m pipeline run | check | view | study | sweep | robot init | arm play | export``.
 
 * ``run [--config FILE] [--set key=value ...] [--stages a,b] [--out DIR] [--force] [--accept-poor]``
 * ``check`` (same options as ``run``): validate what ``run`` would validate, try a quick sample of
@@ -68,7 +68,7 @@ def _add_run_options(r: argparse.ArgumentParser) -> None:
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m pipeline", description=__doc__.split("\n\n")[0])
     p.add_argument("--version", action="version", version=f"pipeline {pipeline.__version__}")
-    sub = p.add_subparsers(dest="command", required=True, metavar="{run,check,view,study,sweep,robot}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="{run,check,view,study,sweep,robot,arm,export}")
 
     stages_robots = (f"stages (in order): {', '.join(config_mod.stage_names())}; "
                      f"built-in robots: {', '.join(_built_in_robots()) or 'none'}")

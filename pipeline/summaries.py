@@ -197,6 +197,10 @@ class TrajectorySummary(SummaryRecord):
     cp_segment: str | None = None
     cp_duration_s: float | None = None
     cp_toppra_duration_s: float | None = None
+    #: whose profile the CP is (``ours``, or ``toppra`` when toppra's is shorter and keeps every limit on
+    #: the fine grid, :func:`pipeline.trajectory.solve.shortest_verified_cp`), and our solver's duration
+    cp_source: str | None = None
+    cp_ours_duration_s: float | None = None
     #: the CP the elastic arm executes (``time_optimal`` or a remedy, :mod:`pipeline.trajectory.executable`)
     cp_executed: str | None = None
     cp_executed_duration_s: float | None = None

@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import xml.etree.ElementTree as ET
 
-#: words that mark a joint as part of a gripper or end effector, not the arm
-GRIPPER_WORDS = ("finger", "gripper", "hand", "knuckle", "robotiq", "jaw", "claw", "thumb", "palm")
+#: words that mark a joint as part of a gripper or end effector, not the arm. Not "palm": a hand's
+#: palm is fixed to the arm, and a joint that turns it is the arm's last axis (a Barrett WAM's
+#: seventh joint is ``palm_yaw_joint``)
+GRIPPER_WORDS = ("finger", "gripper", "hand", "knuckle", "robotiq", "jaw", "claw", "thumb")
 
 
 def _link(joint: ET.Element, tag: str) -> str:

@@ -22,7 +22,12 @@ from pipeline.robot.mjcf_import import cached_urdf_of_mjcf, is_mjcf
 from pipeline.robot.spec import RobotSpec, load_robot_spec
 from pipeline.robot.urdf_checks import check_urdf_values
 from pipeline.robot.urdf_import import arm_chain, assumed_spec, build_arm_model, reach_m
-from pipeline.robot.vendor_urdf import placeholder_inertias, placeholder_limits, repair_inertias
+from pipeline.robot.vendor_urdf import (
+    placeholder_inertias,
+    placeholder_limits,
+    repair_inertias,
+    typo_inertia_placeholders,
+)
 
 ROBOTS_DIR = Path(__file__).resolve().parents[2] / "robots"
 _JOINT_TYPES = {"revolute", "continuous", "prismatic", "fixed", "floating", "planar"}
@@ -249,9 +254,10 @@ def load_robot_files(robot: str | Path, yaml_path: str | Path | None = None, *, 
     reach = reach_m(model, tip_link)
     keep = {k for k in ("velocity", "effort") if spec is not None
             and f"{k}_{'rad_s' if k == 'velocity' else 'Nm'}" in spec.limit_overrides}
-    inertials = placeholder_inertias(model, root, model.frames[model.getFrameId(tip_link)].placement.translation,
-                                     reach, urdf)
-    assumptions: list[str] = [*inertials, *repair_inertias(model, root),
+    flange_local = model.frames[model.getFrameId(tip_link)].placement.translation
+    inertials = placeholder_inertias(model, root, flange_local, reach, urdf)
+    typos = typo_inertia_placeholders(model, root, flange_local, reach)
+    assumptions: list[str] = [*inertials, *typos, *repair_inertias(model, root),
                               *placeholder_limits(model, root, reach, keep, masses_stated=not inertials)]
     validate_inertials(urdf, model)
     if turned:

@@ -31,7 +31,11 @@ like a catalogue arm of the same reach, and every placeholder is listed as an as
 An inertia that is not physically consistent (principal moments not positive or violating the
 triangle inequality ``I1 + I2 >= I3``, Traversaro et al., IROS 2016) is repaired by the smallest
 change: zero (or rounding-negative) moments raised to ``MOMENT_FLOOR_KGM2``, then the smallest
-moment raised to ``I3 - I2``. A clearly negative moment (a sign typo) stays an error.
+moment raised to ``I3 - I2``. A clearly negative principal moment is no rounding but a typo in the
+file (a product of inertia copied from a moment, a lost sign): no small change finds the link's
+inertia, so it becomes a placeholder, the stated mass and centre of mass kept: the stated moments
+about the link's axes with the products dropped when those alone are consistent, else the solid
+cylinder of the stated mass. It is listed as ``PLACEHOLDER inertials``, like a missing inertial.
 """
 
 from __future__ import annotations
@@ -126,6 +130,41 @@ def placeholder_inertias(model: pin.Model, root: ET.Element, flange_local: np.nd
             "cylinder from its joint to the next: replace them by the real inertials (URDF) or identify them"]
 
 
+def _consistent(inertia_kgm2: np.ndarray) -> bool:
+    """Positive principal moments that satisfy the triangle inequality ``I1 + I2 >= I3``."""
+    a, b, c = np.sort(np.linalg.eigvalsh(0.5 * (inertia_kgm2 + inertia_kgm2.T)))
+    return bool(a > 0 and a + b >= c)
+
+
+def typo_inertia_placeholders(model: pin.Model, root: ET.Element, flange_local: np.ndarray,
+                              reach_m: float) -> list[str]:
+    """Replace every rotational inertia with a clearly negative principal moment (in place; module
+    docstring): the stated diagonal when it alone is consistent, else the solid cylinder of the stated
+    mass; the stated mass and centre of mass kept. The sentence stating it (none when no link has one)."""
+    links = child_links(root)
+    segments = _segments(model, flange_local)
+    replaced = []
+    for j in range(1, model.njoints):
+        body = model.inertias[j]
+        moments = np.linalg.eigvalsh(0.5 * (body.inertia + body.inertia.T))
+        if not body.mass > 0 or moments.min() >= -SIGN_ERROR_SHARE * np.abs(moments).max():
+            continue
+        diagonal = np.diag(np.diag(body.inertia))
+        if _consistent(diagonal):
+            inertia, how = diagonal, "the stated moments about the link axes, products dropped"
+        else:
+            inertia = _cylinder_inertia(body.mass, segments[j - 1], reach_m).inertia
+            how = "a solid cylinder of the stated mass from its joint to the next"
+        model.inertias[j] = pin.Inertia(body.mass, body.lever, inertia)
+        link = links.get(str(model.names[j]), str(model.names[j]))
+        replaced.append(f"{link} (principal moments {np.round(moments, 6).tolist()} kg m²: {how})")
+    if not replaced:
+        return []
+    return [f"PLACEHOLDER inertials (a physically impossible inertia in the URDF, a negative principal moment: "
+            f"a typo no small change repairs): {'; '.join(replaced)}; the stated masses and centres of mass "
+            "kept: replace them by the real inertias (URDF) or identify them"]
+
+
 def repair_inertias(model: pin.Model, root: ET.Element) -> list[str]:
     """Make every body's rotational inertia physically consistent by the smallest change (in place)."""
     links = child_links(root)
@@ -136,7 +175,7 @@ def repair_inertias(model: pin.Model, root: ET.Element) -> list[str]:
             continue
         moments, axes = np.linalg.eigh(0.5 * (body.inertia + body.inertia.T))
         if moments.min() < -SIGN_ERROR_SHARE * np.abs(moments).max():
-            continue              # clearly negative: a sign typo, reported by the loader's check
+            continue              # clearly negative: a typo, a placeholder (typo_inertia_placeholders)
         fixed = np.maximum(moments, MOMENT_FLOOR_KGM2)
         order = np.argsort(fixed)
         a, b, c = fixed[order]

@@ -11,7 +11,7 @@ from __future__ import annotations
 import functools
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -43,6 +43,7 @@ from pipeline.trajectory.trajectories import (
     JointTrajectory,
     TorqueCheck,
     check_trajectory,
+    within_limits,
 )
 
 
@@ -103,6 +104,8 @@ class CPPlan:
             "cp_convex_duration_s": None if self.convex is None else self.convex.duration_s,
             "cp_method": self.optimal.info.get("method"),
             "cp_solver_status": self.optimal.info.get("solver_status"),
+            "cp_source": self.optimal.info.get("source", "ours"),
+            "cp_ours_duration_s": self.optimal.info.get("ours_duration_s", self.optimal.duration_s),
             "cp_fine_max_acceleration_ratio": self.checks["cp"].max_acceleration_ratio,
             "cp_acceleration_limits": bool(self.optimal.info.get("acceleration_limits")),
             "cp_fine_violation": self.checks["cp"].violation,
@@ -162,6 +165,23 @@ def verified_cp(pm: PlanningModel, path: JointPath, opt: CPProfile, cfg: Traject
     return opt, rounds
 
 
+def shortest_verified_cp(pm: PlanningModel, path: JointPath, ours: CPProfile, toppra: CPProfile,
+                         cfg: TrajectoryConfig) -> CPProfile:
+    """The CP handed on, never slower than toppra: toppra's profile when it is shorter than ours and
+    keeps every limit on the fine time grid with the full friction model (the check ours passed,
+    :func:`~pipeline.trajectory.trajectories.within_limits`), else ours. Ours enforces the limits at
+    each interval's midpoint as well as its ends and toppra at the grid points alone, so toppra's can be
+    a few per mille shorter where the path's curvature keeps it feasible in between. ``info["source"]``
+    says which (``ours`` or ``toppra``), ``info["ours_duration_s"]`` keeps ours."""
+    if toppra.duration_s >= ours.duration_s:
+        return ours
+    check = check_trajectory(pm, toppra.sample(path, cfg.fine_dt_s))
+    if not within_limits(check, cfg.violation_tolerance, bool(cfg.acceleration_limits)):
+        return ours
+    return replace(toppra, name="cp", info={**ours.info, "source": "toppra", "ours_duration_s": ours.duration_s},
+                   multipliers=None, nlp=None)
+
+
 def plan_cp(pm: PlanningModel, path: JointPath, cfg: TrajectoryConfig) -> CPPlan:
     """Time-optimal CP on ``path``: toppra baseline, our convex problem with toppra's
     constraints (equal-constraints comparison), convex + midpoints, friction refinement,
@@ -191,6 +211,7 @@ def plan_cp(pm: PlanningModel, path: JointPath, cfg: TrajectoryConfig) -> CPPlan
     opt = solve(None, None, cv)
     tim["cp_first_solve"], tim["cp_first_solve_cpu"] = time.perf_counter() - t0, time.process_time() - c0
     opt, tim["cp_tightening_rounds"] = verified_cp(pm, path, opt, cfg, solve)
+    opt = shortest_verified_cp(pm, path, opt, tp, cfg)
     tim["cp_verified_cpu"] = time.process_time() - c0
     tim["cp_refined"] = time.perf_counter() - t0
     sm = None

@@ -42,3 +42,15 @@ def test_a_two_finger_gripper_is_locked_and_the_arm_ends_at_the_flange(tmp_path,
     robot = RobotModel.load(urdf)
     assert robot.nq == 6 and robot.spec.flange_frame == "tool0"
     assert left not in list(robot.model.names) and any(left in a and right in a for a in robot.assumptions)
+
+
+def test_a_last_axis_named_after_the_palm_it_turns_is_the_arms(tmp_path):
+    """A Barrett WAM's seventh joint is ``palm_yaw_joint``: an arm axis, not a gripper's."""
+    urdf = example_arm_urdf("ur5")
+    if urdf is None:
+        pytest.skip("example-robot-data not installed")
+    target = tmp_path / "arm.urdf"
+    target.write_text(urdf.read_text().replace('"wrist_3_joint"', '"palm_yaw_joint"'))
+    assert gripper_joints(ET.parse(target).getroot()) == set()
+    robot = RobotModel.load(target)
+    assert robot.nq == 6 and list(robot.model.names)[-1] == "palm_yaw_joint"

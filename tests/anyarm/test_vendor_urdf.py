@@ -18,7 +18,7 @@ from pipeline.core.errors import RobotFileError
 from pipeline.robot.assumed_values import value_digest
 from pipeline.robot.example_robots import example_arm_urdf
 from pipeline.robot.model import RobotModel
-from pipeline.robot.plausibility import robot_warnings
+from pipeline.robot.plausibility import placeholder_warnings, robot_warnings
 from pipeline.robot.reflector_check import capsules_holding
 from pipeline.robot.urdf_import import absolute_mesh_paths, missing_collision_meshes
 from pipeline.robot.vendor_urdf import BASE_MASS_SHARE, datasheet_mass_kg
@@ -132,6 +132,30 @@ def test_inertia_violating_the_triangle_inequality_is_repaired_by_the_smallest_c
     moments = np.sort(np.linalg.eigvalsh(body.inertia))
     # the smallest moment raised exactly to the bound 0.5 - 0.002, the other two unchanged
     assert moments == pytest.approx((0.002, 0.498, 0.5), rel=1e-9)
+
+
+def test_a_product_of_inertia_copied_from_a_moment_becomes_a_labelled_placeholder(tmp_path):
+    """A public WAM URDF states ixz = iyy on one link (a copied number): a negative principal moment.
+    The link keeps its stated mass, centre of mass and moments; the products are dropped and the
+    placeholder is listed for the stages that rest on inertials."""
+    text = _source()
+    start = text.index('<link name="forearm_link">')
+    block = re.search(r"<inertia [^>]*/>", text[start:])
+    bad = '<inertia ixx="0.00005" ixy="0.0000002" ixz="0.000076" iyy="0.000076" iyz="-0.0000036" izz="0.000063"/>'
+    text = text[:start + block.start()] + bad + text[start + block.end():]
+    urdf = _write(tmp_path, text)
+    robot = RobotModel.load(urdf)
+    stated = next(a for a in robot.assumptions if a.startswith("PLACEHOLDER inertials"))
+    assert "forearm_link" in stated and "products dropped" in stated
+    body = robot.model.inertias[robot.model.getJointId("elbow_joint")]
+    assert np.diag(body.inertia) == pytest.approx((0.00005, 0.000076, 0.000063), rel=1e-12)
+    assert np.count_nonzero(body.inertia - np.diag(np.diag(body.inertia))) == 0
+    nominal = RobotModel.load(_write(tmp_path / "stated", _source()))
+    elbow = nominal.model.getJointId("elbow_joint")
+    assert body.mass == nominal.model.inertias[elbow].mass
+    assert np.array_equal(body.lever, nominal.model.inertias[elbow].lever)
+    assert any(w.startswith("placeholder inertials") for w in placeholder_warnings(robot, ["identification"]))
+    assert main(["robot", "init", str(urdf)]) == 0
 
 
 def test_reflector_goes_on_tool0_outside_every_capsule(tmp_path):

@@ -100,6 +100,13 @@ def test_an_executed_remedy_of_the_cp_is_the_duration_judged(tmp_path):
     assert row.value == "0.480 s" and row.ratio == hl.ratio(0.48 / 0.50) and row.verdict == hl.PASS
 
 
+def test_a_cp_that_is_toppras_profile_says_so_and_shows_ours(tmp_path):
+    peer = {**SUMMARIES["trajectory"], "cp_duration_s": 0.50, "cp_source": "toppra", "cp_ours_duration_s": 0.5023}
+    headline = hl.read_headline(_write_run(tmp_path, {"trajectory": peer}), ["trajectory"])
+    (row,) = _rows(headline, "trajectory", "CP duration")
+    assert row.figure == "CP duration (line path), toppra's profile (ours 0.502 s)" and row.verdict == hl.PASS
+
+
 def test_missing_stages_and_figures_leave_rows_out(tmp_path):
     run = _write_run(tmp_path, {"model": {"name": "x"}, "control": {"tcp_error_max_m": {"none": 1e-3}}})
     headline = hl.read_headline(run, ["model", "calibration", "control"])
@@ -203,3 +210,8 @@ def test_the_pessimistic_warning_takes_the_held_out_tests_lower_bound():
     assert verdict(0.35, None) == hl.WARN            # below 1 / 2.4
     assert verdict(0.35, 0.316) == hl.PASS           # within the test's spread
     assert verdict(0.30, 0.316) == hl.WARN
+
+
+def test_a_ratio_a_verdict_turns_on_shows_the_digit_it_turns_on():
+    assert hl.ratio(1.0045) == "×1.004" and hl.ratio(0.9952) == "×0.9952"
+    assert hl.ratio(32.31) == "×32.3" and hl.ratio(0.888) == "×0.888"

@@ -13,8 +13,8 @@ from pipeline.trajectory.baselines import toppra_cp
 from pipeline.trajectory.cp import solve_cp_convex, solve_cp_refined
 from pipeline.trajectory.cp_smooth import solve_cp_smooth
 from pipeline.trajectory.design import JointPath
-from pipeline.trajectory.solve import cp_joint_path, plan_cp
-from pipeline.trajectory.trajectories import check_trajectory
+from pipeline.trajectory.solve import cp_joint_path, plan_cp, shortest_verified_cp
+from pipeline.trajectory.trajectories import check_trajectory, within_limits
 
 
 def test_convex_with_toppra_constraints_matches_toppra(pm, line_path):
@@ -36,6 +36,7 @@ def test_refined_respects_full_friction_where_toppra_does_not(pm, line_path, qui
     assert plan.checks["cp"].violation <= tol
     assert plan.checks["cp_toppra"].violation > tol          # viscous friction is not in toppra
     assert plan.optimal.duration_s >= plan.equal.duration_s   # more torque demand -> not faster
+    assert plan.summary()["cp_source"] == "ours"               # toppra's shorter profile breaks a limit
     tr = plan.trajectories["cp"]
     # the sampled trajectory follows the path from its start to its end, at rest at both ends
     assert np.allclose(tr.q[0], line_path(0.0), atol=1e-9) and np.allclose(tr.q[-1], line_path(1.0), atol=1e-6)
@@ -44,6 +45,25 @@ def test_refined_respects_full_friction_where_toppra_does_not(pm, line_path, qui
     # every grid point a constraint of an adjacent interval is active (necessary condition)
     assert plan.activity["active_fraction"] > 0.5
     assert plan.activity["grid_min_activity"] >= 0.999
+
+
+def _scaled(profile, factor: float, name: str):
+    """``profile`` run ``factor`` times as fast along the same path (speeds x factor)."""
+    return dataclasses.replace(profile, name=name, sdot=factor * profile.sdot, sddot=factor**2 * profile.sddot,
+                               duration_s=profile.duration_s / factor)
+
+
+def test_the_cp_handed_on_is_toppras_only_when_shorter_and_within_every_limit(pm, line_path, quick_traj_config):
+    tp = toppra_cp(pm, line_path, 80, acceleration_limits=True)
+    ours, slower_peer = _scaled(tp, 0.5, "cp"), _scaled(tp, 0.8, "cp_toppra")
+    chosen = shortest_verified_cp(pm, line_path, ours, slower_peer, quick_traj_config)
+    assert within_limits(check_trajectory(pm, slower_peer.sample(line_path, quick_traj_config.fine_dt_s)),
+                         quick_traj_config.violation_tolerance, True)
+    assert chosen.info["source"] == "toppra" and chosen.name == "cp"
+    assert chosen.duration_s == slower_peer.duration_s and chosen.info["ours_duration_s"] == ours.duration_s
+    too_fast = _scaled(tp, 1.5, "cp_toppra")                   # beyond the speed limits: not taken
+    assert shortest_verified_cp(pm, line_path, ours, too_fast, quick_traj_config) is ours
+    assert shortest_verified_cp(pm, line_path, slower_peer, ours, quick_traj_config) is slower_peer
 
 
 #: session fixtures that take seconds and serve several tests: their tests run on one pytest-xdist
