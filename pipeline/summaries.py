@@ -201,6 +201,14 @@ class TrajectorySummary(SummaryRecord):
     #: the fine grid, :func:`pipeline.trajectory.solve.shortest_verified_cp`), and our solver's duration
     cp_source: str | None = None
     cp_ours_duration_s: float | None = None
+    #: toppra's profile keeps every limit on the fine grid (full friction); else the duration of the
+    #: same profile slowed uniformly to them (None: no slow-down does); its worst joint acceleration
+    #: and speed there over their limits
+    cp_toppra_within_limits: bool | None = None
+    cp_toppra_feasible_duration_s: float | None = None
+    cp_toppra_fine_violation_full_friction: float | None = None
+    cp_toppra_fine_max_acceleration_ratio: float | None = None
+    cp_toppra_fine_max_velocity_ratio: float | None = None
     #: the CP the elastic arm executes (``time_optimal`` or a remedy, :mod:`pipeline.trajectory.executable`)
     cp_executed: str | None = None
     cp_executed_duration_s: float | None = None

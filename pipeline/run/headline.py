@@ -240,20 +240,29 @@ def _duration_row(figure: str, a: float | None, b: float | None, name: str) -> R
 
 
 def _cp_row(s: TrajectorySummary) -> Row | None:
-    """The CP's duration against toppra's; when a remedy of the time-optimal plan is executed (its
-    servo run over the gate on the elastic arm), the executed plan's duration is the one judged."""
+    """The CP's duration against toppra's, or, when toppra's profile is over a limit on the fine grid
+    (it enforces them at its grid points alone), against that profile slowed uniformly to the limits;
+    when a remedy of the time-optimal plan is executed (its servo run over the gate on the elastic
+    arm), the executed plan's duration is the one judged."""
     figure = f"CP duration ({s.cp_segment or 'ISO'} path)"
     if s.cp_source == "toppra" and s.cp_ours_duration_s is not None:
         figure += f", toppra's profile (ours {s.cp_ours_duration_s:.3f} s)"
-    executed = s.cp_executed_duration_s
-    if s.cp_executed in (None, "time_optimal") or executed is None or s.cp_duration_s is None:
-        return _duration_row(figure, s.cp_duration_s, s.cp_toppra_duration_s, "toppra")
-    toppra = s.cp_toppra_duration_s
-    if toppra is None or toppra <= 0:
+    toppra, feasible = s.cp_toppra_duration_s, s.cp_toppra_feasible_duration_s
+    if toppra is None or toppra <= 0 or s.cp_duration_s is None:
         return None
+    peer, against = toppra, f"toppra {toppra:.3f} s"
+    if s.cp_toppra_within_limits is False:
+        if feasible is None:
+            return Row("trajectory", figure, f"{s.cp_duration_s:.3f} s", f"{against}, over a limit on the fine "
+                       "grid at any speed", "", SERVO_SIMULATION, ratio(s.cp_duration_s / toppra))
+        peer, against = feasible, f"toppra slowed to its limits {feasible:.3f} s (its own {toppra:.3f} s is over one)"
+    executed = s.cp_executed_duration_s
+    if s.cp_executed in (None, "time_optimal") or executed is None:
+        return Row("trajectory", figure, f"{s.cp_duration_s:.3f} s", against,
+                   _anchor_verdict(s.cp_duration_s / peer, True), SERVO_SIMULATION, ratio(s.cp_duration_s / peer))
     return Row("trajectory", figure, f"time-optimal {s.cp_duration_s:.3f} s, executed ({s.cp_executed}) "
-               f"{executed:.3f} s", f"toppra {toppra:.3f} s", _anchor_verdict(executed / toppra, True),
-               SERVO_SIMULATION, ratio(executed / toppra))
+               f"{executed:.3f} s", against, _anchor_verdict(executed / peer, True),
+               SERVO_SIMULATION, ratio(executed / peer))
 
 
 def _settle_row(s: TrajectorySummary, elastic_feedforward: bool, label: str) -> Row | None:

@@ -28,7 +28,7 @@ from pipeline.core.errors import InfeasibleError, SolverError
 from pipeline.trajectory.cp import CPProfile
 from pipeline.trajectory.design import JointPath
 from pipeline.trajectory.dynamics import PlanningModel
-from pipeline.trajectory.trajectories import JointTrajectory, check_trajectory
+from pipeline.trajectory.trajectories import JointTrajectory, check_trajectory, within_limits
 
 
 def _toppra_path(path: JointPath):
@@ -48,6 +48,34 @@ def _toppra_path(path: JointPath):
             return np.array([0.0, 1.0])
 
     return _Path()
+
+
+#: the most uniform slow-downs tried to bring toppra's profile within the limits on the fine grid
+MAX_SLOWDOWN_STEPS = 40
+
+
+def toppra_within_limits(pm: PlanningModel, path: JointPath, profile: CPProfile, fine_dt_s: float,
+                         tolerance: float, acceleration_limits: bool) -> CPProfile | None:
+    """toppra's profile, or the same profile slowed uniformly (``time_scale`` > 1) until it keeps every
+    limit on the fine time grid with the full friction model: the peer a CP's duration is judged by.
+    toppra enforces its constraints at the grid points alone (collocation), so between them a joint
+    acceleration or torque may exceed its limit. The first scale is ``max(speed ratio, sqrt(acceleration
+    ratio))``, then it grows by the remaining excess; None when no scale up to
+    :data:`MAX_SLOWDOWN_STEPS` steps succeeds (gravity alone over a torque limit)."""
+    check = check_trajectory(pm, profile.sample(path, fine_dt_s))
+    if within_limits(check, tolerance, acceleration_limits):
+        return profile
+    factor = max(1.0, check.max_velocity_ratio,
+                 float(np.sqrt(check.max_acceleration_ratio)) if acceleration_limits else 1.0)
+    for _ in range(MAX_SLOWDOWN_STEPS):
+        slowed = profile.time_scaled(factor, f"{profile.name}_slowed")
+        check = check_trajectory(pm, slowed.sample(path, fine_dt_s))
+        if within_limits(check, tolerance, acceleration_limits):
+            return slowed
+        excess = max(check.violation, check.max_velocity_ratio - 1.0,
+                     check.max_acceleration_ratio - 1.0 if acceleration_limits else 0.0)
+        factor *= 1.0 + max(excess, 1e-3)
+    return None
 
 
 def toppra_cp(pm: PlanningModel, path: JointPath, n_grid: int = 400, coulomb: bool = True,

@@ -85,6 +85,12 @@ class CPProfile:
         a = ddq * (sd**2)[:, None] + dq * sdd[:, None]
         return JointTrajectory(self.name, t, q, v, a, info={"profile": self.name})
 
+    def time_scaled(self, factor: float, name: str | None = None) -> CPProfile:
+        """The same path ``factor`` times slower: ``sdot / factor``, ``sddot / factor²``, duration x factor
+        (``info["time_scale"]``)."""
+        return CPProfile(name or self.name, self.s.copy(), self.sdot / factor, self.sddot / factor**2,
+                         self.duration_s * factor, self.solve_time_s, {**self.info, "time_scale": float(factor)})
+
 
 def check_solver(solver: ca.Function, what: str) -> dict:
     """The solver's statistics after a successful solve; else :class:`InfeasibleError` (IPOPT finds the limits

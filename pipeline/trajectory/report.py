@@ -146,6 +146,8 @@ def report_markdown(cfg: TrajectoryConfig, summary: dict[str, Any], servo: Servo
         ("CP profile handed on (ours, or toppra's when shorter and within every limit on the fine grid) / "
          "our solver's duration [s]", f"{summary['cp_source']} / {summary['cp_ours_duration_s']:.6g}"),
         ("CP toppra duration [s] (rigid body + Coulomb)", summary["cp_toppra_duration_s"]),
+        ("CP toppra slowed uniformly to every limit on the fine grid [s] (the peer judged)",
+         "within them as it is" if summary["cp_toppra_within_limits"] else summary["cp_toppra_feasible_duration_s"]),
         ("CP ours with toppra's constraints / toppra", summary["cp_equal_vs_toppra_ratio"]),
         ("CP fine-grid torque violation [% over the planning limit], ours / toppra (full friction; "
          "summary.json: fractions)",

@@ -22,7 +22,13 @@ from pipeline.robot.iso9283 import iso9283_path, tool_rotation
 from pipeline.robot.model import RobotModel
 from pipeline.robot.paths import SplinePath
 from pipeline.robot.symbolic import SymbolicRobot
-from pipeline.trajectory.baselines import RuckigResult, ruckig_resampled, ruckig_torque_feasible, toppra_cp
+from pipeline.trajectory.baselines import (
+    RuckigResult,
+    ruckig_resampled,
+    ruckig_torque_feasible,
+    toppra_cp,
+    toppra_within_limits,
+)
 from pipeline.trajectory.config import TrajectoryConfig
 from pipeline.trajectory.cp import (
     CP_ACTIVE_LEVEL,
@@ -89,6 +95,10 @@ class CPPlan:
     checks: dict[str, TorqueCheck] = field(default_factory=dict)
     activity: dict = field(default_factory=dict)
     timings_s: dict = field(default_factory=dict)
+    #: toppra's profile, or the same slowed uniformly until it keeps every limit on the fine grid with
+    #: the full friction model (:func:`~pipeline.trajectory.baselines.toppra_within_limits`; None: no
+    #: slow-down does): the peer the CP's duration is judged by
+    toppra_feasible: CPProfile | None = None
 
     def _per_toppra(self, key: str) -> float | None:
         """A CPU time of ours / toppra's single solve, measured in the same run."""
@@ -112,6 +122,10 @@ class CPPlan:
             "cp_fine_max_velocity_ratio": self.checks["cp"].max_velocity_ratio,
             "cp_toppra_fine_violation_full_friction": self.checks["cp_toppra"].violation,
             "cp_toppra_fine_violation_rigid_coulomb": self.checks["cp_toppra_rigid"].violation,
+            "cp_toppra_fine_max_acceleration_ratio": self.checks["cp_toppra"].max_acceleration_ratio,
+            "cp_toppra_fine_max_velocity_ratio": self.checks["cp_toppra"].max_velocity_ratio,
+            "cp_toppra_within_limits": self.toppra_feasible is self.toppra,
+            "cp_toppra_feasible_duration_s": None if self.toppra_feasible is None else self.toppra_feasible.duration_s,
             "cp_active_fraction": self.activity.get("active_fraction"),
             "cp_grid_min_activity": self.activity.get("grid_min_activity"),
             "cp_grid_active_fraction": self.activity.get("grid_active_fraction"),
@@ -167,12 +181,13 @@ def verified_cp(pm: PlanningModel, path: JointPath, opt: CPProfile, cfg: Traject
 
 def shortest_verified_cp(pm: PlanningModel, path: JointPath, ours: CPProfile, toppra: CPProfile,
                          cfg: TrajectoryConfig) -> CPProfile:
-    """The CP handed on, never slower than toppra: toppra's profile when it is shorter than ours and
-    keeps every limit on the fine time grid with the full friction model (the check ours passed,
-    :func:`~pipeline.trajectory.trajectories.within_limits`), else ours. Ours enforces the limits at
-    each interval's midpoint as well as its ends and toppra at the grid points alone, so toppra's can be
-    a few per mille shorter where the path's curvature keeps it feasible in between. ``info["source"]``
-    says which (``ours`` or ``toppra``), ``info["ours_duration_s"]`` keeps ours."""
+    """The CP handed on, never slower than toppra: ``toppra``'s profile (as it is, or slowed uniformly
+    to the limits, :func:`~pipeline.trajectory.baselines.toppra_within_limits`) when it is shorter
+    than ours and keeps every limit on the fine time grid with the full friction model (the check ours
+    passed, :func:`~pipeline.trajectory.trajectories.within_limits`), else ours. Ours enforces the
+    limits at each interval's midpoint as well as its ends and toppra at the grid points alone, so
+    toppra's can be a few per mille shorter where the path's curvature keeps it feasible in between.
+    ``info["source"]`` says which (``ours`` or ``toppra``), ``info["ours_duration_s"]`` keeps ours."""
     if toppra.duration_s >= ours.duration_s:
         return ours
     check = check_trajectory(pm, toppra.sample(path, cfg.fine_dt_s))
@@ -211,7 +226,9 @@ def plan_cp(pm: PlanningModel, path: JointPath, cfg: TrajectoryConfig) -> CPPlan
     opt = solve(None, None, cv)
     tim["cp_first_solve"], tim["cp_first_solve_cpu"] = time.perf_counter() - t0, time.process_time() - c0
     opt, tim["cp_tightening_rounds"] = verified_cp(pm, path, opt, cfg, solve)
-    opt = shortest_verified_cp(pm, path, opt, tp, cfg)
+    peer = toppra_within_limits(pm, path, tp, cfg.fine_dt_s, cfg.violation_tolerance, acc)
+    if peer is not None:
+        opt = shortest_verified_cp(pm, path, opt, peer, cfg)
     tim["cp_verified_cpu"] = time.process_time() - c0
     tim["cp_refined"] = time.perf_counter() - t0
     sm = None
@@ -241,7 +258,7 @@ def plan_cp(pm: PlanningModel, path: JointPath, cfg: TrajectoryConfig) -> CPPlan
     act["grid_min_activity"] = float(act["grid_activity"].min())
     # share of grid points with some limit at >= 98 % (paper 004 Fig. 8: always one active)
     act["grid_active_fraction"] = float(np.mean(act["grid_activity"] >= CP_ACTIVE_LEVEL))
-    return CPPlan(path, tp, eq, cv, opt, sm, trajs, checks, act, tim)
+    return CPPlan(path, tp, eq, cv, opt, sm, trajs, checks, act, tim, peer)
 
 
 @dataclass
