@@ -201,11 +201,15 @@ class TrajectorySummary(SummaryRecord):
     #: the fine grid, :func:`pipeline.trajectory.solve.shortest_verified_cp`), and our solver's duration
     cp_source: str | None = None
     cp_ours_duration_s: float | None = None
-    #: toppra's profile keeps every limit on the fine grid (full friction); else the duration of the
-    #: same profile slowed uniformly to them (None: no slow-down does); its worst joint acceleration
-    #: and speed there over their limits
+    #: toppra's profile keeps every limit on the fine grid (full friction); else the peer that does
+    #: (:func:`pipeline.trajectory.baselines.toppra_within_limits`): toppra on ``cp_toppra_feasible_n_grid``
+    #: intervals (the CP's own: ``cp_n_grid``), slowed by ``cp_toppra_feasible_time_scale``, and its
+    #: duration (None: none does); toppra's worst joint acceleration and speed there over their limits
     cp_toppra_within_limits: bool | None = None
     cp_toppra_feasible_duration_s: float | None = None
+    cp_toppra_feasible_n_grid: int | None = None
+    cp_toppra_feasible_time_scale: float | None = None
+    cp_n_grid: int | None = None
     cp_toppra_fine_violation_full_friction: float | None = None
     cp_toppra_fine_max_acceleration_ratio: float | None = None
     cp_toppra_fine_max_velocity_ratio: float | None = None

@@ -239,6 +239,16 @@ def _duration_row(figure: str, a: float | None, b: float | None, name: str) -> R
                SERVO_SIMULATION, ratio(a / b))
 
 
+def _feasible_toppra(s: TrajectorySummary) -> str:
+    """How toppra's peer was made to keep its limits: a denser grid, a uniform slow-down, or both."""
+    how = []
+    if s.cp_toppra_feasible_n_grid is not None and s.cp_n_grid and s.cp_toppra_feasible_n_grid != s.cp_n_grid:
+        how.append(f"on {s.cp_toppra_feasible_n_grid} intervals")
+    if s.cp_toppra_feasible_time_scale is not None and s.cp_toppra_feasible_time_scale > 1.0:
+        how.append(f"slowed ×{s.cp_toppra_feasible_time_scale:.4g}")
+    return f"toppra {', '.join(how)}" if how else "toppra within its limits"
+
+
 def _cp_row(s: TrajectorySummary) -> Row | None:
     """The CP's duration against toppra's, or, when toppra's profile is over a limit on the fine grid
     (it enforces them at its grid points alone), against that profile slowed uniformly to the limits;
@@ -255,7 +265,7 @@ def _cp_row(s: TrajectorySummary) -> Row | None:
         if feasible is None:
             return Row("trajectory", figure, f"{s.cp_duration_s:.3f} s", f"{against}, over a limit on the fine "
                        "grid at any speed", "", SERVO_SIMULATION, ratio(s.cp_duration_s / toppra))
-        peer, against = feasible, f"toppra slowed to its limits {feasible:.3f} s (its own {toppra:.3f} s is over one)"
+        peer, against = feasible, f"{_feasible_toppra(s)} {feasible:.3f} s (as planned {toppra:.3f} s, over a limit)"
     executed = s.cp_executed_duration_s
     if s.cp_executed in (None, "time_optimal") or executed is None:
         return Row("trajectory", figure, f"{s.cp_duration_s:.3f} s", against,

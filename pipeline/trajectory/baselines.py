@@ -52,29 +52,38 @@ def _toppra_path(path: JointPath):
 
 #: the most uniform slow-downs tried to bring toppra's profile within the limits on the fine grid
 MAX_SLOWDOWN_STEPS = 40
+#: toppra's grid refined by these factors, densest last, before its profile is slowed uniformly
+TOPPRA_GRID_REFINEMENTS = (2, 4, 8)
 
 
 def toppra_within_limits(pm: PlanningModel, path: JointPath, profile: CPProfile, fine_dt_s: float,
                          tolerance: float, acceleration_limits: bool) -> CPProfile | None:
-    """toppra's profile, or the same profile slowed uniformly (``time_scale`` > 1) until it keeps every
-    limit on the fine time grid with the full friction model: the peer a CP's duration is judged by.
-    toppra enforces its constraints at the grid points alone (collocation), so between them a joint
-    acceleration or torque may exceed its limit. The first scale is ``max(speed ratio, sqrt(acceleration
-    ratio))``, then it grows by the remaining excess; None when no scale up to
-    :data:`MAX_SLOWDOWN_STEPS` steps succeeds (gravity alone over a torque limit)."""
+    """The peer a CP's duration is judged by: toppra's profile when it keeps every limit on the fine
+    time grid with the full friction model; else toppra on a grid :data:`TOPPRA_GRID_REFINEMENTS` times
+    as dense, the first that does; else the densest one slowed uniformly (``time_scale`` > 1) until
+    it does. toppra enforces its constraints at the grid points alone (collocation), so between them
+    a joint acceleration or torque may exceed its limit, less on a denser grid. The first scale is
+    ``max(speed ratio, sqrt(acceleration ratio))``, then it grows by the remaining excess; None when
+    no scale up to :data:`MAX_SLOWDOWN_STEPS` steps succeeds (gravity alone over a torque limit)."""
+    n_grid = len(profile.s) - 1
     check = check_trajectory(pm, profile.sample(path, fine_dt_s))
+    for factor in TOPPRA_GRID_REFINEMENTS:
+        if within_limits(check, tolerance, acceleration_limits):
+            return profile
+        profile = toppra_cp(pm, path, factor * n_grid, name=profile.name, acceleration_limits=acceleration_limits)
+        check = check_trajectory(pm, profile.sample(path, fine_dt_s))
     if within_limits(check, tolerance, acceleration_limits):
         return profile
-    factor = max(1.0, check.max_velocity_ratio,
-                 float(np.sqrt(check.max_acceleration_ratio)) if acceleration_limits else 1.0)
+    scale = max(1.0, check.max_velocity_ratio,
+                float(np.sqrt(check.max_acceleration_ratio)) if acceleration_limits else 1.0)
     for _ in range(MAX_SLOWDOWN_STEPS):
-        slowed = profile.time_scaled(factor, f"{profile.name}_slowed")
+        slowed = profile.time_scaled(scale, f"{profile.name}_slowed")
         check = check_trajectory(pm, slowed.sample(path, fine_dt_s))
         if within_limits(check, tolerance, acceleration_limits):
             return slowed
         excess = max(check.violation, check.max_velocity_ratio - 1.0,
                      check.max_acceleration_ratio - 1.0 if acceleration_limits else 0.0)
-        factor *= 1.0 + max(excess, 1e-3)
+        scale *= 1.0 + max(excess, 1e-3)
     return None
 
 

@@ -146,8 +146,11 @@ def report_markdown(cfg: TrajectoryConfig, summary: dict[str, Any], servo: Servo
         ("CP profile handed on (ours, or toppra's when shorter and within every limit on the fine grid) / "
          "our solver's duration [s]", f"{summary['cp_source']} / {summary['cp_ours_duration_s']:.6g}"),
         ("CP toppra duration [s] (rigid body + Coulomb)", summary["cp_toppra_duration_s"]),
-        ("CP toppra slowed uniformly to every limit on the fine grid [s] (the peer judged)",
-         "within them as it is" if summary["cp_toppra_within_limits"] else summary["cp_toppra_feasible_duration_s"]),
+        ("CP toppra made to keep every limit on the fine grid (the peer judged): duration [s], intervals, "
+         "uniform slow-down", "within them as planned" if summary["cp_toppra_within_limits"] else
+         "none keeps them" if summary["cp_toppra_feasible_duration_s"] is None else
+         f"{summary['cp_toppra_feasible_duration_s']:.6g} s, {summary['cp_toppra_feasible_n_grid']}, "
+         f"×{summary['cp_toppra_feasible_time_scale']:.6g}"),
         ("CP ours with toppra's constraints / toppra", summary["cp_equal_vs_toppra_ratio"]),
         ("CP fine-grid torque violation [% over the planning limit], ours / toppra (full friction; "
          "summary.json: fractions)",

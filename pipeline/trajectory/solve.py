@@ -95,9 +95,9 @@ class CPPlan:
     checks: dict[str, TorqueCheck] = field(default_factory=dict)
     activity: dict = field(default_factory=dict)
     timings_s: dict = field(default_factory=dict)
-    #: toppra's profile, or the same slowed uniformly until it keeps every limit on the fine grid with
-    #: the full friction model (:func:`~pipeline.trajectory.baselines.toppra_within_limits`; None: no
-    #: slow-down does): the peer the CP's duration is judged by
+    #: toppra's profile, or toppra on a denser grid, or that slowed uniformly, the first that keeps every
+    #: limit on the fine grid with the full friction model
+    #: (:func:`~pipeline.trajectory.baselines.toppra_within_limits`; None: none does): the CP's peer
     toppra_feasible: CPProfile | None = None
 
     def _per_toppra(self, key: str) -> float | None:
@@ -126,6 +126,10 @@ class CPPlan:
             "cp_toppra_fine_max_velocity_ratio": self.checks["cp_toppra"].max_velocity_ratio,
             "cp_toppra_within_limits": self.toppra_feasible is self.toppra,
             "cp_toppra_feasible_duration_s": None if self.toppra_feasible is None else self.toppra_feasible.duration_s,
+            "cp_toppra_feasible_n_grid": None if self.toppra_feasible is None else len(self.toppra_feasible.s) - 1,
+            "cp_toppra_feasible_time_scale": (None if self.toppra_feasible is None
+                                              else float(self.toppra_feasible.info.get("time_scale", 1.0))),
+            "cp_n_grid": len(self.toppra.s) - 1,
             "cp_active_fraction": self.activity.get("active_fraction"),
             "cp_grid_min_activity": self.activity.get("grid_min_activity"),
             "cp_grid_active_fraction": self.activity.get("grid_active_fraction"),

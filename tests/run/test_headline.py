@@ -217,12 +217,13 @@ def test_a_ratio_a_verdict_turns_on_shows_the_digit_it_turns_on():
     assert hl.ratio(32.31) == "×32.3" and hl.ratio(0.888) == "×0.888"
 
 
-def test_a_toppra_profile_over_a_limit_is_judged_slowed_to_its_limits(tmp_path):
+def test_a_toppra_profile_over_a_limit_is_judged_as_made_to_keep_its_limits(tmp_path):
     over = {**SUMMARIES["trajectory"], "cp_duration_s": 0.538, "cp_toppra_duration_s": 0.535,
-            "cp_toppra_within_limits": False, "cp_toppra_feasible_duration_s": 0.542}
+            "cp_toppra_within_limits": False, "cp_toppra_feasible_duration_s": 0.542, "cp_n_grid": 150,
+            "cp_toppra_feasible_n_grid": 1200, "cp_toppra_feasible_time_scale": 1.0127}
     headline = hl.read_headline(_write_run(tmp_path, {"trajectory": over}), ["trajectory"])
     (row,) = _rows(headline, "trajectory", "CP duration")
-    assert row.against == "toppra slowed to its limits 0.542 s (its own 0.535 s is over one)"
+    assert row.against == "toppra on 1200 intervals, slowed ×1.013 0.542 s (as planned 0.535 s, over a limit)"
     assert row.ratio == hl.ratio(0.538 / 0.542) and row.verdict == hl.PASS
     never = {**over, "cp_toppra_feasible_duration_s": None}
     headline = hl.read_headline(_write_run(tmp_path / "b", {"trajectory": never}), ["trajectory"])

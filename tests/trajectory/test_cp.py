@@ -9,6 +9,7 @@ import pinocchio as pin
 import pytest
 
 from pipeline.core.errors import ConfigError, InfeasibleError
+from pipeline.trajectory import baselines
 from pipeline.trajectory.baselines import toppra_cp, toppra_within_limits
 from pipeline.trajectory.cp import solve_cp_convex, solve_cp_refined
 from pipeline.trajectory.cp_smooth import solve_cp_smooth
@@ -66,18 +67,23 @@ def test_the_cp_handed_on_is_toppras_only_when_shorter_and_within_every_limit(pm
     assert shortest_verified_cp(pm, line_path, slower_peer, ours, quick_traj_config) is slower_peer
 
 
-def test_toppra_over_a_limit_between_its_grid_points_is_slowed_uniformly_to_the_limits(pm, line_path,
-                                                                                    quick_traj_config):
+def test_toppra_over_a_limit_between_its_grid_points_is_refined_then_slowed_to_the_limits(
+        pm, line_path, quick_traj_config, monkeypatch):
     tol, dt = quick_traj_config.violation_tolerance, quick_traj_config.fine_dt_s
-    tp = toppra_cp(pm, line_path, 80, acceleration_limits=True)
+    tp = toppra_cp(pm, line_path, 150, acceleration_limits=True)
     own = check_trajectory(pm, tp.sample(line_path, dt))
     assert not within_limits(own, tol, True)            # collocation: a joint acceleration over between points
     peer = toppra_within_limits(pm, line_path, tp, dt, tol, True)
     assert peer is not None and peer is not tp
     assert within_limits(check_trajectory(pm, peer.sample(line_path, dt)), tol, True)
-    scale = peer.info["time_scale"]
+    assert peer.info["n_grid"] in (300, 600, 1200) and "time_scale" not in peer.info   # a denser grid suffices
+    monkeypatch.setattr(baselines, "TOPPRA_GRID_REFINEMENTS", ())                  # no refinement: slowed
+    slowed = toppra_within_limits(pm, line_path, tp, dt, tol, True)
+    assert slowed is not None and within_limits(check_trajectory(pm, slowed.sample(line_path, dt)), tol, True)
+    scale = slowed.info["time_scale"]
     assert 1.0 < scale <= np.sqrt(own.max_acceleration_ratio) * (1 + 2 * tol)
-    assert peer.duration_s == pytest.approx(scale * tp.duration_s, rel=1e-12)
+    assert slowed.duration_s == pytest.approx(scale * tp.duration_s, rel=1e-12)
+    assert slowed.duration_s > peer.duration_s         # the denser grid is the stronger peer
     fine = _scaled(tp, 0.5, "slow")                     # within the limits as it is: returned unchanged
     assert toppra_within_limits(pm, line_path, fine, dt, tol, True) is fine
 
