@@ -198,7 +198,7 @@ class TrajectorySummary(SummaryRecord):
     cp_duration_s: float | None = None
     cp_toppra_duration_s: float | None = None
     #: whose profile the CP is (``ours``, or ``toppra`` when toppra's is shorter and keeps every limit on
-    #: the fine grid, :func:`pipeline.trajectory.solve.shortest_verified_cp`), and our solver's duration
+    #: the fine grid, :func:`pipeline.trajectory.solve.shorter_cp`), and our solver's duration
     cp_source: str | None = None
     cp_ours_duration_s: float | None = None
     #: toppra's profile keeps every limit on the fine grid (full friction); else the peer that does

@@ -251,7 +251,8 @@ def _feasible_toppra(s: TrajectorySummary) -> str:
 
 def _cp_row(s: TrajectorySummary) -> Row | None:
     """The CP's duration against toppra's, or, when toppra's profile is over a limit on the fine grid
-    (it enforces them at its grid points alone), against that profile slowed uniformly to the limits;
+    (it enforces them at its grid points alone), against toppra made to keep them (a denser grid, a
+    uniform slow-down: :func:`_feasible_toppra`);
     when a remedy of the time-optimal plan is executed (its servo run over the gate on the elastic
     arm), the executed plan's duration is the one judged."""
     figure = f"CP duration ({s.cp_segment or 'ISO'} path)"

@@ -66,14 +66,12 @@ def toppra_within_limits(pm: PlanningModel, path: JointPath, profile: CPProfile,
     ``max(speed ratio, sqrt(acceleration ratio))``, then it grows by the remaining excess; None when
     no scale up to :data:`MAX_SLOWDOWN_STEPS` steps succeeds (gravity alone over a torque limit)."""
     n_grid = len(profile.s) - 1
-    check = check_trajectory(pm, profile.sample(path, fine_dt_s))
-    for factor in TOPPRA_GRID_REFINEMENTS:
+    for factor in (1, *TOPPRA_GRID_REFINEMENTS):
+        if factor > 1:
+            profile = toppra_cp(pm, path, factor * n_grid, name=profile.name, acceleration_limits=acceleration_limits)
+        check = check_trajectory(pm, profile.sample(path, fine_dt_s))
         if within_limits(check, tolerance, acceleration_limits):
             return profile
-        profile = toppra_cp(pm, path, factor * n_grid, name=profile.name, acceleration_limits=acceleration_limits)
-        check = check_trajectory(pm, profile.sample(path, fine_dt_s))
-    if within_limits(check, tolerance, acceleration_limits):
-        return profile
     scale = max(1.0, check.max_velocity_ratio,
                 float(np.sqrt(check.max_acceleration_ratio)) if acceleration_limits else 1.0)
     for _ in range(MAX_SLOWDOWN_STEPS):

@@ -14,7 +14,7 @@ from pipeline.trajectory.baselines import toppra_cp, toppra_within_limits
 from pipeline.trajectory.cp import solve_cp_convex, solve_cp_refined
 from pipeline.trajectory.cp_smooth import solve_cp_smooth
 from pipeline.trajectory.design import JointPath
-from pipeline.trajectory.solve import cp_joint_path, plan_cp, shortest_verified_cp
+from pipeline.trajectory.solve import cp_joint_path, plan_cp, shorter_cp
 from pipeline.trajectory.trajectories import check_trajectory, within_limits
 
 
@@ -54,17 +54,19 @@ def _scaled(profile, factor: float, name: str):
                                duration_s=profile.duration_s / factor)
 
 
-def test_the_cp_handed_on_is_toppras_only_when_shorter_and_within_every_limit(pm, line_path, quick_traj_config):
+def test_the_cp_handed_on_is_toppras_feasible_profile_only_when_shorter(pm, line_path, quick_traj_config):
+    tol, dt = quick_traj_config.violation_tolerance, quick_traj_config.fine_dt_s
     tp = toppra_cp(pm, line_path, 80, acceleration_limits=True)
-    ours, slower_peer = _scaled(tp, 0.5, "cp"), _scaled(tp, 0.8, "cp_toppra")
-    chosen = shortest_verified_cp(pm, line_path, ours, slower_peer, quick_traj_config)
-    assert within_limits(check_trajectory(pm, slower_peer.sample(line_path, quick_traj_config.fine_dt_s)),
-                         quick_traj_config.violation_tolerance, True)
+    peer = toppra_within_limits(pm, line_path, tp, dt, tol, True)
+    slow_ours = _scaled(tp, 0.5, "cp")
+    chosen = shorter_cp(slow_ours, peer)
     assert chosen.info["source"] == "toppra" and chosen.name == "cp"
-    assert chosen.duration_s == slower_peer.duration_s and chosen.info["ours_duration_s"] == ours.duration_s
-    too_fast = _scaled(tp, 1.5, "cp_toppra")                   # beyond the speed limits: not taken
-    assert shortest_verified_cp(pm, line_path, ours, too_fast, quick_traj_config) is ours
-    assert shortest_verified_cp(pm, line_path, slower_peer, ours, quick_traj_config) is slower_peer
+    assert chosen.duration_s == peer.duration_s and chosen.info["ours_duration_s"] == slow_ours.duration_s
+    fast_ours = _scaled(peer, 1.001, "cp")
+    assert shorter_cp(fast_ours, peer) is fast_ours and shorter_cp(slow_ours, None) is slow_ours
+    plan = plan_cp(pm, line_path, dataclasses.replace(quick_traj_config, cp_smooth=False))
+    assert plan.optimal.duration_s <= plan.toppra_feasible.duration_s          # never slower than the peer
+    assert within_limits(plan.checks["cp"], tol, True)
 
 
 def test_toppra_over_a_limit_between_its_grid_points_is_refined_then_slowed_to_the_limits(
