@@ -253,14 +253,22 @@ def _cp_row(s: TrajectorySummary) -> Row | None:
     """The CP's duration against toppra's, or, when toppra's profile is over a limit on the fine grid
     (it enforces them at its grid points alone), against toppra made to keep them (a denser grid, a
     uniform slow-down: :func:`_feasible_toppra`);
+    when toppra's profile is the CP handed on (it was shorter), our solver's duration is the one judged
+    (the CP handed on against its own source would pass by construction);
     when a remedy of the time-optimal plan is executed (its servo run over the gate on the elastic
     arm), the executed plan's duration is the one judged."""
     figure = f"CP duration ({s.cp_segment or 'ISO'} path)"
-    if s.cp_source == "toppra" and s.cp_ours_duration_s is not None:
-        figure += f", toppra's profile (ours {s.cp_ours_duration_s:.3f} s)"
     toppra, feasible = s.cp_toppra_duration_s, s.cp_toppra_feasible_duration_s
     if toppra is None or toppra <= 0 or s.cp_duration_s is None:
         return None
+    if s.cp_source == "toppra" and s.cp_ours_duration_s is not None:
+        made_feasible = s.cp_toppra_within_limits is False and feasible is not None
+        peer = feasible if made_feasible and feasible is not None else toppra
+        ours = s.cp_ours_duration_s
+        against = (f"{_feasible_toppra(s)} {peer:.3f} s (as planned {toppra:.3f} s, over a limit)"
+                   if made_feasible else f"toppra {toppra:.3f} s")
+        return Row("trajectory", figure + ", our solver", f"{ours:.3f} s (toppra's {s.cp_duration_s:.3f} s handed "
+                   "on, shorter)", against, _anchor_verdict(ours / peer, True), SERVO_SIMULATION, ratio(ours / peer))
     peer, against = toppra, f"toppra {toppra:.3f} s"
     if s.cp_toppra_within_limits is False:
         if feasible is None:

@@ -100,11 +100,20 @@ def test_an_executed_remedy_of_the_cp_is_the_duration_judged(tmp_path):
     assert row.value == "0.480 s" and row.ratio == hl.ratio(0.48 / 0.50) and row.verdict == hl.PASS
 
 
-def test_a_cp_that_is_toppras_profile_says_so_and_shows_ours(tmp_path):
-    peer = {**SUMMARIES["trajectory"], "cp_duration_s": 0.50, "cp_source": "toppra", "cp_ours_duration_s": 0.5023}
+def test_a_cp_that_is_toppras_profile_judges_our_solver_against_it(tmp_path):
+    """toppra's profile handed on: the row judges our solver's duration, which is longer (a warning)."""
+    peer = {**SUMMARIES["trajectory"], "cp_duration_s": 0.50, "cp_toppra_duration_s": 0.50,
+            "cp_source": "toppra", "cp_ours_duration_s": 0.5023}
     headline = hl.read_headline(_write_run(tmp_path, {"trajectory": peer}), ["trajectory"])
     (row,) = _rows(headline, "trajectory", "CP duration")
-    assert row.figure == "CP duration (line path), toppra's profile (ours 0.502 s)" and row.verdict == hl.PASS
+    assert row.figure == "CP duration (line path), our solver" and row.value.startswith("0.502 s (toppra's 0.500 s")
+    assert row.ratio == hl.ratio(0.5023 / 0.50) and row.verdict == hl.WARN
+    refined = {**peer, "cp_toppra_within_limits": False, "cp_toppra_feasible_duration_s": 0.503,
+               "cp_duration_s": 0.503, "cp_n_grid": 150, "cp_toppra_feasible_n_grid": 1200}
+    headline = hl.read_headline(_write_run(tmp_path / "b", {"trajectory": refined}), ["trajectory"])
+    (row,) = _rows(headline, "trajectory", "CP duration")
+    assert row.against == "toppra on 1200 intervals 0.503 s (as planned 0.500 s, over a limit)"
+    assert row.ratio == hl.ratio(0.5023 / 0.503) and row.verdict == hl.PASS
 
 
 def test_missing_stages_and_figures_leave_rows_out(tmp_path):
