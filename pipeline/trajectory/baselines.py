@@ -81,7 +81,7 @@ def toppra_within_limits(pm: PlanningModel, path: JointPath, profile: CPProfile,
             return slowed
         excess = max(check.violation, check.max_velocity_ratio - 1.0,
                      check.max_acceleration_ratio - 1.0 if acceleration_limits else 0.0)
-        scale *= 1.0 + max(excess, 1e-3)
+        scale *= 1.0 + max(excess, tolerance, 1e-6)
     return None
 
 

@@ -18,6 +18,7 @@ from pipeline.trajectory.config import TrajectoryConfig
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.ptp import PtpProblem, PtpResult
 from pipeline.trajectory.trajectories import (
+    FINE_GRID_ROUNDOFF,
     JointTrajectory,
     TorqueCheck,
     check_trajectory,
@@ -72,11 +73,6 @@ def solve_ptp_verified(pm: PlanningModel, problem: PtpProblem, q0: np.ndarray, q
                      "first_solve_time_s": first, "cpu_time_s": cpu})
     res.solve_time_s, res.iterations = total, iters
     return res
-
-
-#: fine-grid limit ratios above 1 by less than this are round-off; the PtP plan handed on is slowed
-#: into its limits to this accuracy (the gates accept ``violation_tolerance``)
-FINE_GRID_ROUNDOFF = 1e-4
 
 
 def _ruckig_nodes(problem: PtpProblem, ruckig_fine: JointTrajectory) -> np.ndarray:

@@ -46,6 +46,7 @@ from pipeline.trajectory.ptp import PtpProblem, PtpResult, energy_weights
 from pipeline.trajectory.ptp_verified import best_ptp_candidate, solve_ptp_verified
 from pipeline.trajectory.reachability import solve_cp_reachability
 from pipeline.trajectory.trajectories import (
+    FINE_GRID_ROUNDOFF,
     JointTrajectory,
     TorqueCheck,
     check_trajectory,
@@ -184,7 +185,8 @@ def verified_cp(pm: PlanningModel, path: JointPath, opt: CPProfile, cfg: Traject
 
 def shorter_cp(ours: CPProfile, peer: CPProfile | None) -> CPProfile:
     """The CP handed on, never slower than toppra: ``peer`` (toppra's profile made to keep every limit
-    on the fine time grid with the full friction model, the check ours passed,
+    on the fine time grid with the full friction model to the round-off
+    :data:`~pipeline.trajectory.trajectories.FINE_GRID_ROUNDOFF`, not to the gates' slack,
     :func:`~pipeline.trajectory.baselines.toppra_within_limits`) when it is shorter than ours, else
     ours. Ours enforces the limits at each interval's midpoint as well as its ends and toppra at its
     grid points alone; on a denser grid toppra's can be a few per mille shorter. ``info["source"]``
@@ -227,7 +229,7 @@ def plan_cp(pm: PlanningModel, path: JointPath, cfg: TrajectoryConfig) -> CPPlan
     tim["cp_verified_cpu"] = time.process_time() - c0
     tim["cp_refined"] = time.perf_counter() - t0
     # the peer's refinements and checks are the baseline's work, not counted in our solve times
-    peer = toppra_within_limits(pm, path, tp, cfg.fine_dt_s, cfg.violation_tolerance, acc)
+    peer = toppra_within_limits(pm, path, tp, cfg.fine_dt_s, FINE_GRID_ROUNDOFF, acc)
     opt = shorter_cp(opt, peer)
     sm = None
     if cfg.cp_smooth:

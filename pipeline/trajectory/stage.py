@@ -37,9 +37,9 @@ from pipeline.trajectory import report
 from pipeline.trajectory.config import TrajectoryConfig
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.measure import ServoVerification, verify_in_servo
-from pipeline.trajectory.ptp_verified import FINE_GRID_ROUNDOFF
 from pipeline.trajectory.settling import add_smooth_ptp, slowed_into_limits
 from pipeline.trajectory.solve import CPPlan, PTPPlan, cp_joint_path, plan_cp, plan_ptp, ptp_problem
+from pipeline.trajectory.trajectories import FINE_GRID_ROUNDOFF
 from pipeline.trajectory.validate import quality_gates
 
 NAME = "trajectory"

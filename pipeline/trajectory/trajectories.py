@@ -66,6 +66,12 @@ def time_scaled(traj: JointTrajectory, factor: float, name: str | None = None) -
                            traj.v / factor, traj.a / factor**2, info)
 
 
+#: fine-grid limit ratios above 1 by less than this are round-off; a plan handed on in place of our
+#: solvers' (the PtP slowed into its limits, ruckig's or toppra's profile) keeps its limits to this
+#: accuracy, while the gates accept ``violation_tolerance``, the slack of our solvers' grids
+FINE_GRID_ROUNDOFF = 1e-4
+
+
 def within_limits(check: TorqueCheck, tolerance: float, acceleration_limits: bool) -> bool:
     return bool(check.violation <= tolerance and check.max_velocity_ratio <= 1.0 + tolerance
                 and (not acceleration_limits or check.max_acceleration_ratio <= 1.0 + tolerance))

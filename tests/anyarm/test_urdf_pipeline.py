@@ -5,7 +5,8 @@ beyond UR5 and Z1 in the quick profile they are the `study` set, run with `pytes
 Figures (the acceptance of any-arm support): calibration held-out RMS <= 3 x tracker sigma;
 identification validation RMS <= 1.3 x the torque noise per joint; on the elastic hidden robot the
 full (elastic-joint) feedforward cuts the max ISO 9283 path error >= 5x against no feedforward; CP and
-PtP plans keep every torque, velocity and acceleration limit on the fine grid.
+PtP plans keep every torque, velocity and acceleration limit on the fine grid (the toppra and ruckig
+baselines as they planned are reported, not judged: toppra keeps its limits at its grid points alone).
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ def _check_run(run: Path) -> None:
     for key, value in traj.items():
         if "fine_violation" in key and "toppra" not in key and "ruckig" not in key:
             assert value <= LIMIT_TOLERANCE, key
-        if "fine_max_" in key and key.endswith("_ratio") and "ruckig" not in key:
+        if "fine_max_" in key and key.endswith("_ratio") and "toppra" not in key and "ruckig" not in key:
             assert value <= 1.0 + LIMIT_TOLERANCE, key
 
 

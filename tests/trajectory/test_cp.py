@@ -15,7 +15,7 @@ from pipeline.trajectory.cp import solve_cp_convex, solve_cp_refined
 from pipeline.trajectory.cp_smooth import solve_cp_smooth
 from pipeline.trajectory.design import JointPath
 from pipeline.trajectory.solve import cp_joint_path, plan_cp, shorter_cp
-from pipeline.trajectory.trajectories import check_trajectory, within_limits
+from pipeline.trajectory.trajectories import FINE_GRID_ROUNDOFF, check_trajectory, within_limits
 
 
 def test_convex_with_toppra_constraints_matches_toppra(pm, line_path):
@@ -67,6 +67,11 @@ def test_the_cp_handed_on_is_toppras_feasible_profile_only_when_shorter(pm, line
     plan = plan_cp(pm, line_path, dataclasses.replace(quick_traj_config, cp_smooth=False))
     assert plan.optimal.duration_s <= plan.toppra_feasible.duration_s          # never slower than the peer
     assert within_limits(plan.checks["cp"], tol, True)
+    # the peer that may replace ours keeps the limits to round-off, not to the gates' slack
+    peer_check = check_trajectory(pm, plan.toppra_feasible.sample(line_path, dt))
+    assert within_limits(peer_check, FINE_GRID_ROUNDOFF, True)
+    assert not within_limits(check_trajectory(pm, _scaled(plan.toppra_feasible, 1.002, "fast").sample(line_path, dt)),
+                             FINE_GRID_ROUNDOFF, True)          # and is not slowed further than that needs
 
 
 def test_toppra_over_a_limit_between_its_grid_points_is_refined_then_slowed_to_the_limits(

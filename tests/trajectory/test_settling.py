@@ -10,7 +10,7 @@ from pipeline.robot.stiffness import nominal_joint_stiffness_Nm_rad
 from pipeline.sim.truth import RealRobot, TruthConfig
 from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.ptp import energy_weights
-from pipeline.trajectory.ptp_verified import FINE_GRID_ROUNDOFF, solve_ptp_verified
+from pipeline.trajectory.ptp_verified import solve_ptp_verified
 from pipeline.trajectory.settling import (
     add_smooth_ptp,
     lowest_mode_hz,
@@ -20,7 +20,7 @@ from pipeline.trajectory.settling import (
     smooth_trajectory,
     time_scaled,
 )
-from pipeline.trajectory.trajectories import JointTrajectory, check_trajectory
+from pipeline.trajectory.trajectories import FINE_GRID_ROUNDOFF, JointTrajectory, check_trajectory
 
 
 def _bang_bang(dt: float = 1e-3, T: float = 0.4, n: int = 6) -> JointTrajectory:
