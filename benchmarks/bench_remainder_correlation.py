@@ -13,8 +13,9 @@ remainder ``r`` with covariance ``V`` has
 
     E|e*|^2 = trace V** + trace(J* A V A^T J*^T) - 2 trace(J* A V_*)
 
-* **independent** (``V = s^2 I``, ``s^2`` the REML estimate ``r^T (I - J A) r / (3N - p)``): the
-  stage's prediction, ``trace(J* C J*^T) + 3 s^2``;
+* **independent** (``V = s^2 I``, ``s^2 = sigma^2 + tau^2``: the readings' stated 1-sigma and the
+  stage's REML remainder, :func:`pipeline.calibration.noise_model.reml_remainder`): the stage's
+  prediction, ``trace(J* C J*^T) + 3 s^2``;
 * **correlated** (``V = s_n^2 I + tau^2 k(x, x') I_3``, ``k = exp(-|x - x'|^2 / (2 l^2))``, ``s_n``,
   ``tau``, ``l`` by REML on the training residuals, best of four starts of ``l``): ``x`` the marker's
   nominal position (m) or the joint angles (rad). Far from every training pose ``V_* -> 0`` and the
@@ -42,6 +43,7 @@ from pipeline.calibration.config import Config
 from pipeline.calibration.design import identify_parameter_set
 from pipeline.calibration.elastostatic import measurement_model
 from pipeline.calibration.estimate import estimate
+from pipeline.calibration.noise_model import reml_remainder
 from pipeline.robot.model import RobotModel
 
 #: starting length scales of the REML search, per metric (m for the marker position, rad for joints)
@@ -120,14 +122,15 @@ def main() -> None:
     nearest = {m: np.zeros(N) for m in metrics}
     for k in range(N):
         train = np.arange(N) != k
-        est = estimate(mm, Q[train], Y[train], meas.sigma_m[train], basis, max_iterations=cfg.max_lm_iterations)
+        sigma_m = np.full(int(train.sum()), float(np.sqrt(np.mean(meas.sigma_m[train] ** 2))))   # equal weights
+        est = estimate(mm, Q[train], Y[train], sigma_m, basis, max_iterations=cfg.max_lm_iterations)
         pred, J_blocks = mm.jacobian(Q[train], est.x, est.registration, est.basis)
         pred_k, J_k = mm.jacobian(Q[k:k + 1], est.x, est.registration, est.basis)
         r, J, Jk = (Y[train] - pred).ravel(), J_blocks.reshape(-1, J_blocks.shape[2]), J_k[0]
         errors[k] = np.linalg.norm(Y[k] - pred_k[0])
         G = np.linalg.inv(J.T @ J)
         A = G @ J.T
-        s2 = float(r @ r - r @ J @ (A @ r)) / (len(r) - J.shape[1])
+        s2 = sigma_m[0] ** 2 + reml_remainder(Y[train] - pred, J_blocks, sigma_m)[0] ** 2
         iid[k] = np.sqrt(s2 * (np.trace(Jk @ G @ Jk.T) + 3.0))
         for name, X in metrics.items():
             c = fit_correlated(r, J, X[train], np.sqrt(s2), LENGTH_STARTS[name])
