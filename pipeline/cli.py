@@ -158,8 +158,8 @@ def _add_arm_parser(sub: argparse._SubParsersAction) -> None:
     ap = asub.add_parser("play", help="play an exported motion on the stand-in arm and record its logging",
                          description="Play a JointTrajectory bag or motion CSV on the hidden robot under its drives "
                                      "(400 µs cascade) and write what the arm logs: JointState at the logging rate "
-                                     "(a bag, or CSV when RECORD ends in .csv) and, at the motion's dwells, tracker "
-                                     "readings (RECORD_tracker bag).")
+                                     "and, at the motion's dwells, tracker readings: one bag, or CSV when RECORD ends "
+                                     "in .csv with the tracker readings in a bag RECORD_tracker beside it.")
     ap.add_argument("motion", metavar="MOTION_BAG_OR_CSV")
     ap.add_argument("--engine", choices=("mujoco", "pipeline"), default="mujoco")
     ap.add_argument("--out", required=True, metavar="RECORD")

@@ -89,13 +89,17 @@ class Config:
     #: (PointStamped / PoseStamped / TransformStamped); a bag is read in its stationary windows
     #: (pipeline.exchange.stationary); taken as measurements_csv
     measurements_file: str | None = None
+    #: the tracker readings of a recording whose measurements_file holds joint states only (a
+    #: joint-state CSV t_s,q_<joint>_rad,..., or a bag without a tracker topic): a ROS 2 bag of one
+    #: tracker topic, stamped on the recording's clock
+    tracker_file: Annotated[str | None, FileInput] = None
     #: a bag's stationary windows: every joint slower than this, for at least stationary_min_s,
     #: the first stationary_settle_s skipped, at least stationary_min_readings tracker readings
     stationary_speed_rad_s: float = 2e-3
     stationary_min_s: float = 0.5
     stationary_settle_s: float = 0.1
     stationary_min_readings: int = 1
-    #: a bag's joints renamed to the model's: {name in the recording: name in the model}
+    #: a recording's joints renamed to the model's: {name in the recording: name in the model}
     joint_names: dict[str, str] = field(default_factory=dict)
     validation_csv: Annotated[str | None, FileInput] = None
     figures: bool = True
@@ -217,6 +221,9 @@ class Config:
         if self.measurements_file and self.measurements_csv != self.measurements_file:
             raise bad("measurements_file", f"{self.measurements_file!r} and measurements_csv "
                       f"{self.measurements_csv!r} name two files; give one of them")
+        if self.tracker_file and not self.measurements_csv:
+            raise bad("tracker_file", "names the tracker readings of a recording: set measurements_file "
+                      "(its joint states) too")
         for key in ("stationary_speed_rad_s", "stationary_min_s"):
             if not (math.isfinite(getattr(self, key)) and getattr(self, key) > 0):
                 raise bad(key, f"must be > 0, got {getattr(self, key)!r}")

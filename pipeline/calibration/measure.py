@@ -1,4 +1,4 @@
-"""Measurements: the simulated laser tracker on the hidden robot, a CSV file or a ROS 2 bag (:func:`read_bag`).
+"""Measurements: the simulated laser tracker on the hidden robot, a CSV file or a recording (:func:`read_recording`).
 
 CSV format (one row per configuration, comma separated, header recommended)::
 
@@ -34,6 +34,9 @@ from pipeline.calibration.config import Config
 from pipeline.calibration.estimate import Estimate
 from pipeline.core.errors import DataFileError, InfeasibleError
 from pipeline.exchange import ros2_bag
+from pipeline.exchange.joint_names import match_joint_names
+from pipeline.exchange.motion import JointStates
+from pipeline.exchange.motion_csv import is_joint_state_csv, read_joint_states_csv
 from pipeline.exchange.ros2_bag import is_bag
 from pipeline.exchange.stationary import stationary_windows
 from pipeline.robot.model import RobotModel
@@ -169,20 +172,44 @@ def reflector_reach_m(robot: RobotModel) -> float:
 
 
 def read_measurements(path: str | Path, robot: RobotModel, cfg: Config, min_rows: int = 1) -> Measurements:
-    """A measurement CSV (:func:`read_csv`) or a ROS 2 bag (:func:`read_bag`)."""
-    return read_bag(path, robot, cfg, min_rows) if is_bag(path) else read_csv(path, robot, min_rows=min_rows)
+    """A measurement CSV of poses (:func:`read_csv`), or a recording read in its stationary windows
+    (:func:`read_recording`): a ROS 2 bag, or a joint-state CSV with ``calibration.tracker_file``."""
+    if is_bag(path) or is_joint_state_csv(path) or cfg.tracker_file:
+        return read_recording(path, robot, cfg, min_rows)
+    return read_csv(path, robot, min_rows=min_rows)
 
 
-def read_bag(path: str | Path, robot: RobotModel, cfg: Config, min_rows: int = 1) -> Measurements:
-    """A ROS 2 bag of ``sensor_msgs/JointState`` and a tracker topic (``PointStamped``, ``PoseStamped``
-    or ``TransformStamped``, positions in m in the tracker frame): one row per stationary window
+def _recorded_joint_states(path: str | Path, robot: RobotModel, cfg: Config) -> tuple[JointStates, float]:
+    """The model's joints of a recording (a bag's ``JointState`` or a joint-state CSV), times from the
+    first sample, and that sample's time on the recording's clock (s)."""
+    names = [str(n) for n in robot.model.names[1:]]
+    if is_bag(path):
+        t0 = ros2_bag.first_stamp_s(path)
+        return ros2_bag.read_joint_states(path, names, cfg.joint_names or None, field="calibration.joint_names",
+                                          t0_s=t0), t0
+    logged = read_joint_states_csv(path)
+    mapping = match_joint_names(logged.joint_names, names, cfg.joint_names or None, source=str(path),
+                                field="calibration.joint_names")
+    picked = logged.select([mapping[name] for name in names])
+    t0 = float(picked.t_s[0]) if picked.n_samples else 0.0
+    return JointStates(tuple(names), picked.t_s - t0, picked.q_rad, picked.qd_rad_s, picked.effort_Nm), t0
+
+
+def read_recording(path: str | Path, robot: RobotModel, cfg: Config, min_rows: int = 1) -> Measurements:
+    """A recording of ``sensor_msgs/JointState`` (a ROS 2 bag, or the joint-state CSV ``t_s, q_<joint>_rad,
+    ...``) and a tracker topic (``PointStamped``, ``PoseStamped`` or ``TransformStamped``, positions in m
+    in the tracker frame) in the same bag or in ``calibration.tracker_file`` (a bag stamped on the
+    recording's clock): one row per stationary window
     (:func:`pipeline.exchange.stationary.stationary_windows`, the ``calibration.stationary_*`` settings),
     the joint positions and the readings averaged over the window, their scatter kept."""
-    names = [str(n) for n in robot.model.names[1:]]
-    t0 = ros2_bag.first_stamp_s(path)
-    states = ros2_bag.read_joint_states(path, names, cfg.joint_names or None, field="calibration.joint_names",
-                                        t0_s=t0)
-    points = ros2_bag.read_points(path, t0_s=t0)
+    tracker = cfg.tracker_file or path
+    if not is_bag(tracker):
+        raise DataFileError(path, "calibration.tracker_file",
+                            "a joint-state CSV holds no tracker readings: name the ROS 2 bag of the tracker topic "
+                            "(arm play writes it beside the CSV as <name>_tracker)" if tracker == path else
+                            f"{tracker} is not a ROS 2 bag (a folder with metadata.yaml, a .db3 or a .mcap)")
+    states, t0 = _recorded_joint_states(path, robot, cfg)
+    points = ros2_bag.read_points(tracker, t0_s=t0)
     windows = stationary_windows(states, points, cfg.stationary_speed_rad_s, cfg.stationary_min_s,
                                  cfg.stationary_settle_s, cfg.stationary_min_readings, str(path))
     if windows.n_used < min_rows:

@@ -66,6 +66,21 @@ def _read(path: str | Path, groups: Sequence[tuple[str, str]]) -> tuple[list[str
     return names, table[:, 0], blocks
 
 
+def is_joint_state_csv(path: str | Path) -> bool:
+    """A ``.csv`` file whose header starts with ``t_s,q_``: the joint-state (or motion) layout, not a table
+    of poses."""
+    source = Path(path)
+    if source.suffix.lower() != ".csv" or not source.is_file():
+        return False
+    try:
+        with source.open(encoding="utf-8-sig") as handle:
+            first = handle.readline()
+    except (OSError, UnicodeDecodeError):
+        return False
+    cells = [c.strip() for c in first.split(",")]
+    return len(cells) > 1 and cells[0] == "t_s" and cells[1].startswith(STATE_GROUPS[0][0])
+
+
 def write_motion_csv(path: str | Path, motion: SampledMotion) -> Path:
     """``motion`` as CSV (header ``t_s,q_<j>_rad,...,qd_<j>_rad_s,...,qdd_<j>_rad_s2,...,tau_ff_<j>_Nm``)."""
     return _write(path, motion_columns(motion.joint_names), motion.t_s,

@@ -7,7 +7,9 @@ positions and motor torques are recorded. Two sources:
   trajectory; encoder and motor-torque noise added by the hidden robot's sensors);
 * **files**: a ROS 2 bag of ``sensor_msgs/JointState`` (:func:`load_joint_bag`) or CSV with a
   header; columns ``t`` (s, optional if ``sample_time_s`` is given), joint
-  positions ``q1..qn`` and torques ``tau1..taun``. Motor-side columns (``side="motor"``) are
+  positions ``q1..qn`` and torques ``tau1..taun``; or the joint-state CSV of
+  :mod:`pipeline.exchange.motion_csv` (``t_s, q_<joint>_rad..., qd_<joint>_rad_s..., effort_<joint>_Nm...``,
+  as ``arm play`` logs it), its joints matched by name like a bag's. Motor-side columns (``side="motor"``) are
   converted with the gear matrix ``K`` of ``robot.yaml``: ``q = K^-1 q_motor``,
   ``tau = K^T tau_motor``.
 
@@ -24,6 +26,8 @@ from typing import Any
 import numpy as np
 
 from pipeline.core.errors import DataFileError
+from pipeline.exchange.joint_names import match_joint_names
+from pipeline.exchange.motion_csv import STATE_GROUPS
 from pipeline.exchange.ros2_bag import read_joint_states
 from pipeline.identification import signals
 from pipeline.identification.fourier import FourierTrajectory
@@ -165,22 +169,30 @@ def load_joint_csv(
     sample_time_s: float | None = None,
     q_offset_rad: np.ndarray | None = None,
     min_samples: int = 10,
+    name_map: dict[str, str] | None = None,
 ) -> JointRecord:
     """Read a CSV record (see the module docstring); ``side`` = "joint" or "motor".
 
-    Errors name the file, the column (``q3``) and the file line (header = line 1)."""
+    The time column is ``t`` or ``t_s``. A header with ``t_s`` and no ``q1`` is the joint-state layout:
+    the model's joints are found among its ``q_<joint>_rad`` columns by name (``name_map`` =
+    {recorded: model}, ``identification.joint_names``), their torques in ``effort_<joint>_Nm``. Errors
+    name the file, the column (``q3``) and the file line (header = line 1)."""
     path = Path(path)
     nq = robot.nq
     if side not in ("joint", "motor"):
         raise DataFileError(path, "side", f"must be 'joint' or 'motor', got {side!r}")
     header, data, line_numbers = read_csv_table(path)
     col = {h: i for i, h in enumerate(header)}
-    q_names = [f"q{i + 1}" for i in range(nq)]
-    tau_names = [f"tau{i + 1}" for i in range(nq)]
+    time_name = "t_s" if "t_s" in col and "t" not in col else "t"
+    if time_name == "t_s" and "q1" not in col:
+        q_names, tau_names = joint_state_columns(header, robot, name_map, path)
+    else:
+        q_names = [f"q{i + 1}" for i in range(nq)]
+        tau_names = [f"tau{i + 1}" for i in range(nq)]
     missing = [n for n in q_names + tau_names if n not in col]
     if missing:
         raise DataFileError(path, "header", f"missing columns {missing} (found {header})")
-    used = (["t"] if "t" in col else []) + q_names + tau_names
+    used = ([time_name] if time_name in col else []) + q_names + tau_names
     for name in used:
         bad = np.flatnonzero(~np.isfinite(data[:, col[name]]))
         if bad.size:
@@ -190,11 +202,12 @@ def load_joint_csv(
         raise DataFileError(path, "samples", f"{len(data)} data rows, need at least {min_samples}")
     q = data[:, [col[n] for n in q_names]]
     tau = data[:, [col[n] for n in tau_names]]
-    if "t" in col:
-        t = data[:, col["t"]]
+    if time_name in col:
+        t = data[:, col[time_name]]
         bad = np.flatnonzero(np.diff(t) <= 0)
         if bad.size:
-            raise DataFileError(path, "t", f"time stamps must increase strictly (line {line_numbers[bad[0] + 1]})")
+            raise DataFileError(path, time_name,
+                                f"time stamps must increase strictly (line {line_numbers[bad[0] + 1]})")
     elif sample_time_s is not None:
         t = np.arange(len(data)) * sample_time_s
     else:
@@ -204,6 +217,25 @@ def load_joint_csv(
     if q_offset_rad is not None:
         q = q + np.asarray(q_offset_rad, float)
     return _uniform_record(t, q, tau, str(path), line_numbers, nq, min_samples)
+
+
+#: the joint-state CSV's position and effort columns, ``(prefix, suffix)`` around the joint name
+JOINT_STATE_POSITION, JOINT_STATE_EFFORT = STATE_GROUPS[0], STATE_GROUPS[2]
+
+
+def joint_state_columns(header: list[str], robot: RobotModel, name_map: dict[str, str] | None,
+                        path: Path) -> tuple[list[str], list[str]]:
+    """The position and torque columns of the model's joints in a joint-state CSV header, in model order."""
+    prefix, suffix = JOINT_STATE_POSITION
+    recorded = [h[len(prefix):len(h) - len(suffix)] for h in header
+                if h.startswith(prefix) and h.endswith(suffix) and len(h) > len(prefix) + len(suffix)]
+    if not recorded:
+        raise DataFileError(path, "header", f"a t_s column but no {prefix}<joint>{suffix} columns (found {header})")
+    model = [str(n) for n in robot.model.names[1:]]
+    mapping = match_joint_names(recorded, model, name_map, source=str(path), field="identification.joint_names")
+    effort_prefix, effort_suffix = JOINT_STATE_EFFORT
+    return ([f"{prefix}{mapping[n]}{suffix}" for n in model],
+            [f"{effort_prefix}{mapping[n]}{effort_suffix}" for n in model])
 
 
 #: a record resampled onto more than this many uniform steps per logged sample is mostly gaps: refused

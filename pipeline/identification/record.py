@@ -23,7 +23,7 @@ def load_user_record(cfg: Config, robot: RobotModel) -> meas_mod.JointRecord:
     if is_bag(file):
         rec = meas_mod.load_joint_bag(file, robot, cfg.data_side, cfg.joint_names or None)
     else:
-        rec = meas_mod.load_joint_csv(file, robot, cfg.data_side)
+        rec = meas_mod.load_joint_csv(file, robot, cfg.data_side, name_map=cfg.joint_names or None)
     check_record_limits(rec, robot, file)
     check_record_signals(rec, cfg, file)
     dt = rec.sample_time_s

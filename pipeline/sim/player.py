@@ -12,9 +12,10 @@ The record is what the arm's logging would write:
   centred on the encoder reading) plus the torque sensor's noise;
 - at every dwell of the motion (all joints at rest for at least ``dwell_min_s``, as the calibration
   tour stops at each pose), one laser-tracker reading of the reflector in the tracker frame, taken at
-  the end of the dwell (after the arm has settled), as a ``geometry_msgs/PointStamped`` bag beside the
-  record (``<RECORD>_tracker``); readings the tracker cannot see (incidence, a link in the beam) are
-  not written.
+  the end of the dwell (after the arm has settled), as ``geometry_msgs/PointStamped`` on
+  ``/tracker/reflector``: in the same bag as the joint states (as ``ros2 bag record /joint_states
+  /tracker/reflector`` writes it), or beside a CSV record as a bag ``<RECORD>_tracker``; readings the
+  tracker cannot see (incidence, a link in the beam) are not written.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from pipeline.core.errors import DataFileError
 from pipeline.exchange.joint_names import match_joint_names
 from pipeline.exchange.motion import JointStates, SampledMotion, TrackerPoints
 from pipeline.exchange.motion_csv import read_motion_csv, write_joint_states_csv
-from pipeline.exchange.ros2_bag import is_bag, read_joint_trajectory, write_joint_states, write_points
+from pipeline.exchange.ros2_bag import is_bag, read_joint_trajectory, write_joint_states, write_points, write_recording
 from pipeline.robot.example_robots import EXAMPLE_ARMS, example_arm_urdf
 from pipeline.robot.loading import ROBOTS_DIR
 from pipeline.robot.model import RobotModel
@@ -131,17 +132,20 @@ def load_robot(robot: str | Path) -> RobotModel:
     return RobotModel.load(example if example is not None and not (ROBOTS_DIR / str(robot)).is_dir() else robot)
 
 
+def is_csv_record(record: Path) -> bool:
+    return record.suffix.lower() == ".csv"
+
+
 def tracker_path(record: Path) -> Path:
-    """Where the tracker readings of a record go: ``<record>_tracker`` (a bag folder) beside it."""
-    stem = record.name[:-4] if record.suffix.lower() == ".csv" else record.name
-    return record.with_name(f"{stem}_tracker")
+    """Where the tracker readings of a CSV record go: ``<record stem>_tracker`` (a bag folder) beside it."""
+    return record.with_name(f"{record.stem}_tracker")
 
 
 def play_file(motion_path: str | Path, out: str | Path, robot: str | Path = "rx130l", engine: str = "mujoco",
               seed: int = 1, log_rate_hz: float | None = None, truth: TruthConfig | None = None) -> PlayRecord:
     """``arm play``: read the motion, play it on the hidden robot of ``seed`` with ``engine``, write the record."""
     out = Path(out)
-    targets = [out, tracker_path(out)]
+    targets = [out, tracker_path(out)] if is_csv_record(out) else [out]
     for target in targets:
         if target.exists():
             raise DataFileError(target, None, "exists already; the record is written only to a new path")
@@ -153,10 +157,13 @@ def play_file(motion_path: str | Path, out: str | Path, robot: str | Path = "rx1
     config.engine = engine
     real = create_hidden_robot(nominal, seed, config)
     states, points = play(motion, real, nominal, np.random.default_rng([int(seed), 0x706C6179]), log_rate_hz)
-    if out.suffix.lower() == ".csv":
-        write_joint_states_csv(out, states)
-    else:
-        write_joint_states(out, states)
+    if not is_csv_record(out):
+        if points.n_samples:
+            write_recording(out, states, points, TRACKER_TOPIC)
+        else:
+            write_joint_states(out, states)
+        return PlayRecord(states, points, [out], engine)
+    write_joint_states_csv(out, states)
     written = [out]
     if points.n_samples:
         written.append(write_points(tracker_path(out), points, TRACKER_TOPIC))

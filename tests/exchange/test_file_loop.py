@@ -1,6 +1,6 @@
 """The loop through files only, at small sizes: a stage's design exported, played on the simulated arm by
 a player that reads nothing but the exported bag (``pipeline.sim.player``, the project's own plant),
-logged as ROS 2 bags, read back by the stage's own reader as a user's recording
+logged as ROS 2 bags (and a joint-state CSV), read back by the stage's own reader as a user's recording
 (``identification.data_file`` / ``calibration.measurements_file``) and fitted; the fit recovers the hidden
 robot within the uncertainty it states.
 
@@ -17,15 +17,17 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from pipeline.calibration import candidates, task_space
 from pipeline.calibration import stage as calibration_stage
 from pipeline.calibration.config import Config as CalibrationConfig
 from pipeline.calibration.elastostatic import measurement_model
+from pipeline.calibration.measure import read_measurements
 from pipeline.calibration.outcome import CalibrationNotes, UserRecords
 from pipeline.calibration.validate import predicted_covariance
+from pipeline.core.errors import DataFileError
 from pipeline.exchange.joint_limits import JointLimitTable
-from pipeline.exchange.ros2_bag import first_stamp_s, read_joint_states, read_points, write_recording
 from pipeline.identification import estimate as est_mod
 from pipeline.identification.experiment import excite_and_measure, regressors
 from pipeline.robot.defaults import ready_pose_rad
@@ -33,7 +35,7 @@ from pipeline.robot.model import RobotModel
 from pipeline.run.export import excitation_motion
 from pipeline.run.export_motions import ExportContext
 from pipeline.run.export_tour import calibration_files
-from pipeline.sim.player import TRACKER_TOPIC, play_file, tracker_path
+from pipeline.sim.player import play_file
 from pipeline.sim.truth import RealRobot, TruthConfig
 from pipeline.stage_api import StageOutput
 
@@ -111,10 +113,8 @@ def test_calibration_from_the_played_tour_recovers_the_truth(tmp_path, rx130l):
     assert header == ",".join([f"q{i + 1}" for i in range(rx130l.nq)] + ["x", "y", "z"])
     record = play_file(tmp_path / "export" / "calibration_tour", tmp_path / "tour", robot="rx130l",
                        engine="pipeline", seed=SEED, log_rate_hz=50.0, truth=OFFSETS_ONLY)
-    t0 = first_stamp_s(record.paths[0])          # the player's two bags on one clock, merged into one recording
-    bag = write_recording(tmp_path / "tour_recording", read_joint_states(record.paths[0], t0_s=t0),
-                          read_points(tracker_path(record.paths[0]), t0_s=t0), TRACKER_TOPIC)
-    cfg = CalibrationConfig(**SMALL_CALIBRATION, measurements_file=str(bag))
+    assert record.paths == [tmp_path / "tour"]     # one bag: joint states and the tracker topic
+    cfg = CalibrationConfig(**SMALL_CALIBRATION, measurements_file=str(record.paths[0]))
     cfg.validate(None)
     out = calibration_stage.calibrate(rx130l, None, cfg, np.random.default_rng(SEED + 1))
     measured = out.measurements
@@ -138,3 +138,14 @@ def test_calibration_from_the_played_tour_recovers_the_truth(tmp_path, rx130l):
 
     assert mean_d2(est.x) < 2.0, f"calibrated: mean squared Mahalanobis distance per axis {mean_d2(est.x):.2f}"
     assert mean_d2(np.zeros_like(est.x)) > 50.0        # the nominal model is far outside it: the check can fail
+    # the same tour logged as a joint-state CSV with the tracker bag beside it reads as the same measurements
+    csv_record = play_file(tmp_path / "export" / "calibration_tour", tmp_path / "tour.csv", robot="rx130l",
+                           engine="pipeline", seed=SEED, log_rate_hz=50.0, truth=OFFSETS_ONLY)
+    assert [p.name for p in csv_record.paths] == ["tour.csv", "tour_tracker"]
+    with pytest.raises(DataFileError, match="calibration.tracker_file"):
+        read_measurements(csv_record.paths[0], rx130l, CalibrationConfig(measurements_file=str(csv_record.paths[0])))
+    from_csv = read_measurements(csv_record.paths[0], rx130l, CalibrationConfig(
+        measurements_file=str(csv_record.paths[0]), tracker_file=str(csv_record.paths[1])))
+    assert from_csv.windows_found == measured.windows_found
+    np.testing.assert_allclose(from_csv.Q, measured.Q, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(from_csv.Y, measured.Y, rtol=0, atol=1e-12)

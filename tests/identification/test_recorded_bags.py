@@ -1,4 +1,5 @@
-"""A ROS 2 bag as identification.data_file, and the filter settings that follow from any log rate."""
+"""A ROS 2 bag or a joint-state CSV as identification.data_file, and the filter settings that follow from any
+log rate."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ import pytest
 
 from pipeline.core.errors import DataFileError
 from pipeline.exchange.motion import JointStates
+from pipeline.exchange.motion_csv import write_joint_states_csv
 from pipeline.exchange.ros2_bag import write_joint_states
 from pipeline.identification.config import Config
 from pipeline.identification.record import load_user_record
@@ -50,6 +52,42 @@ def test_joints_by_name_in_any_order_extra_joints_ignored_bare_db3(tmp_path, rx1
     np.testing.assert_array_equal(rec.tau_Nm, states.effort_Nm[:, order])
 
 
+def test_a_joint_state_csv_reads_as_the_same_record_as_the_bag(tmp_path, rx130l):
+    """The CSV ``arm play`` logs (``t_s, q_<joint>_rad, qd_<joint>_rad_s, effort_<joint>_Nm``): joints by
+    name in any order, extra joints ignored, the same record as the bag of the same states; uneven
+    stamps resampled."""
+    model = [str(n) for n in rx130l.model.names[1:]]
+    recorded = ["gripper_finger", *reversed(model)]
+    states = _states(rx130l, 125.0, 30.0, recorded)
+    from_bag = load_user_record(Config(data_file=str(write_joint_states(tmp_path / "log", states))), rx130l)
+    from_csv = load_user_record(Config(data_file=str(write_joint_states_csv(tmp_path / "log.csv", states))), rx130l)
+    order = [recorded.index(name) for name in model]
+    np.testing.assert_array_equal(from_csv.q_rad, states.q_rad[:, order])
+    np.testing.assert_array_equal(from_csv.tau_Nm, states.effort_Nm[:, order])
+    np.testing.assert_array_equal(from_csv.q_rad, from_bag.q_rad)
+    np.testing.assert_allclose(from_csv.t_s, from_bag.t_s, rtol=0, atol=1e-9)    # the bag's stamps are in ns
+    jitter = 1e-3 * np.sin(np.arange(states.n_samples))              # a logger's uneven stamps
+    uneven = JointStates(states.joint_names, states.t_s + jitter, states.q_rad, states.qd_rad_s, states.effort_Nm)
+    rec = load_user_record(Config(data_file=str(write_joint_states_csv(tmp_path / "uneven.csv", uneven))), rx130l)
+    assert rec.max_gap_s is not None and np.ptp(np.diff(rec.t_s)) < 1e-9
+    j = recorded.index(model[2])
+    np.testing.assert_allclose(rec.q_rad[:, 2], np.interp(rec.t_s, uneven.t_s, uneven.q_rad[:, j]), atol=1e-3)
+
+
+def test_a_joint_state_csv_with_renamed_joints_needs_the_stated_mapping(tmp_path, rx130l):
+    model = [str(n) for n in rx130l.model.names[1:]]
+    renamed = [f"axis_{chr(ord('a') + k)}" for k in range(len(model))]
+    csv = write_joint_states_csv(tmp_path / "log.csv", _states(rx130l, 100.0, 30.0, renamed))
+    with pytest.raises(DataFileError, match="identification.joint_names"):
+        load_user_record(Config(data_file=str(csv)), rx130l)
+    rec = load_user_record(Config(data_file=str(csv), joint_names=dict(zip(renamed, model, strict=True))), rx130l)
+    assert rec.q_rad.shape == (3000, rx130l.nq)
+    header = csv.read_text().splitlines()[0].replace("effort_axis_c_Nm", "torque_axis_c_Nm")
+    csv.write_text("\n".join([header, *csv.read_text().splitlines()[1:]]) + "\n")
+    with pytest.raises(DataFileError, match="effort_axis_c_Nm"):
+        load_user_record(Config(data_file=str(csv), joint_names=dict(zip(renamed, model, strict=True))), rx130l)
+
+
 def test_renamed_joints_need_the_stated_mapping(tmp_path, rx130l):
     model = [str(n) for n in rx130l.model.names[1:]]
     renamed = [f"axis_{chr(ord('a') + k)}" for k in range(len(model))]
@@ -72,3 +110,14 @@ def test_a_file_that_is_no_bag_is_named(tmp_path: Path, rx130l):
     junk.write_bytes(b"\xde" * 100)
     with pytest.raises(DataFileError, match="log.db3"):
         load_user_record(Config(data_file=str(junk)), rx130l)
+
+
+def test_the_numbered_csv_layout_takes_t_s_as_its_time_column(tmp_path, rx130l):
+    states = _states(rx130l, 100.0, 30.0, [str(n) for n in rx130l.model.names[1:]])
+    n = rx130l.nq
+    header = ",".join(["t_s", *(f"q{i + 1}" for i in range(n)), *(f"tau{i + 1}" for i in range(n))])
+    table = np.column_stack([states.t_s, states.q_rad, states.effort_Nm])
+    np.savetxt(tmp_path / "log.csv", table, delimiter=",", header=header, comments="", fmt="%.17g")
+    rec = load_user_record(Config(data_file=str(tmp_path / "log.csv")), rx130l)
+    np.testing.assert_array_equal(rec.q_rad, states.q_rad)
+    assert rec.sample_time_s == pytest.approx(0.01)
