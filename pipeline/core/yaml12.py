@@ -33,6 +33,7 @@ from __future__ import annotations
 import copy
 import functools
 import io
+import json
 import re
 from pathlib import Path
 from typing import Any
@@ -51,7 +52,8 @@ from ruamel.yaml.scanner import Scanner
 from pipeline.core.errors import ConfigError, PipelineError
 
 __all__ = ["MAX_DEPTH", "MAX_NODES", "PARSED_TEXTS", "TEXT_KEYS", "AliasExpansionError", "DuplicateKeyError",
-           "NestingTooDeepError", "YAMLError", "dump_yaml", "load_yaml", "read_yaml_file", "yaml_problem"]
+           "NestingTooDeepError", "YAMLError", "dump_yaml", "load_yaml", "read_yaml_file", "yaml_key",
+           "yaml_problem"]
 
 #: deepest nesting of collections a file may hold (a robot.yaml holds 4 levels)
 MAX_DEPTH = 64
@@ -278,6 +280,21 @@ def dump_yaml(value: Any, *, flow: bool | None = False, width: int = 80, sort_ke
     yaml.dump(value, stream)
     text = stream.getvalue()
     return text[:-4] if text.endswith("\n...\n") else text
+
+
+#: a plain key every YAML reader takes as this text: an identifier that is no YAML 1.1 or 1.2 literal
+_PLAIN_KEY = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+_YAML11_LITERALS = frozenset(("y", "n", "yes", "no", "on", "off", "true", "false", "null"))
+
+
+def yaml_key(text: str) -> str:
+    """``text`` as a mapping key for a file written line by line that every reader takes back as this
+    string (ruamel and yaml-cpp at YAML 1.2, PyYAML at 1.1, where ``yes``/``on``/``1:30`` are no strings):
+    plain when it is an identifier and no literal of either version, else JSON's double-quoted string
+    (valid YAML 1.1 and 1.2)."""
+    if _PLAIN_KEY.fullmatch(text) and text.lower() not in _YAML11_LITERALS:
+        return text
+    return json.dumps(text)
 
 
 def yaml_problem(exc: YAMLError) -> tuple[str | None, str]:

@@ -31,7 +31,7 @@ import numpy as np
 
 from pipeline.core.artefacts import write_text
 from pipeline.core.errors import DataFileError
-from pipeline.core.yaml12 import read_yaml_file
+from pipeline.core.yaml12 import read_yaml_file, yaml_key
 from pipeline.robot.model import RobotModel
 from pipeline.robot.urdf_export import export_urdf
 from pipeline.robot.urdf_import import absolute_mesh_paths
@@ -57,13 +57,14 @@ class JointLimitTable:
 
 
 def joint_limits_yaml(table: JointLimitTable, note: str = "") -> str:
-    """The text of a MoveIt ``joint_limits.yaml`` for ``table`` (17 significant digits)."""
+    """The text of a MoveIt ``joint_limits.yaml`` for ``table`` (17 significant digits; a joint name that a
+    YAML reader would take for another type, or that is no identifier, double-quoted: :func:`yaml_key`)."""
     lines = ["# joint limits (rad, rad/s, rad/s^2, N m) the exported motions were verified against"]
     if note:
         lines += [f"# {line}" for line in note.splitlines()]
     lines += ["default_velocity_scaling_factor: 1.0", "default_acceleration_scaling_factor: 1.0", "joint_limits:"]
     for k, name in enumerate(table.joint_names):
-        lines += [f"  {name}:",
+        lines += [f"  {yaml_key(name)}:",
                   "    has_position_limits: true",
                   f"    min_position: {float(table.lower_rad[k]):.17g}",
                   f"    max_position: {float(table.upper_rad[k]):.17g}",

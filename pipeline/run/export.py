@@ -27,7 +27,7 @@ import numpy as np
 
 from pipeline.core.artefacts import write_text
 from pipeline.core.errors import ArtefactWriteError, PipelineError
-from pipeline.core.yaml12 import read_yaml_file
+from pipeline.core.yaml12 import read_yaml_file, yaml_key
 from pipeline.exchange.joint_limits import JointLimitTable, handed_on_urdf, write_joint_limits_yaml
 from pipeline.exchange.motion import SampledMotion
 from pipeline.exchange.ros2_bag import BagFormat, joint_trajectory_topic
@@ -114,7 +114,7 @@ def servo_gains_yaml(control: StageOutput, joint_names: Sequence[str]) -> str:
              f"feedforward_advanced: {str(bool(s.get('feedforward_advanced', False))).lower()}",
              "axes:"]
     for j, name in enumerate(joint_names):
-        lines += [f"  {name}:",
+        lines += [f"  {yaml_key(name)}:",
                   f"    kp_1_s: {float(a['servo_kp_1_s'][j]):.17g}",
                   f"    kv_Nms_rad: {float(a['servo_kv_Nms_rad'][j]):.17g}",
                   f"    ki_Nm_rad: {float(a['servo_ki_Nm_rad'][j]):.17g}"]

@@ -1,5 +1,6 @@
 """``python -m pipeline export``: a bad run directory ends in one line, exit 2, nothing written; a motion
-that leaves a limit is refused; the samples of moves and re-sampled plans keep the limits."""
+that leaves a limit is refused; the samples of moves and re-sampled plans keep the limits; servo_gains.yaml
+reads back exactly, whatever the joints are called."""
 
 from __future__ import annotations
 
@@ -10,10 +11,13 @@ import pytest
 
 from pipeline.cli import main
 from pipeline.core.errors import InfeasibleError
+from pipeline.core.yaml12 import load_yaml
 from pipeline.exchange.joint_limits import JointLimitTable
 from pipeline.exchange.motion import SampledMotion
 from pipeline.robot.defaults import ready_pose_rad
 from pipeline.run import export_motions as em
+from pipeline.run.export import servo_gains_yaml
+from pipeline.stage_api import StageOutput
 
 
 @pytest.mark.parametrize("make", ["missing", "empty", "not_a_run"])
@@ -69,3 +73,18 @@ def test_a_plan_at_its_acceleration_limit_stays_within_it_when_resampled() -> No
     q = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])[:, None]
     _, _, _, ar = em.resample_plan(t, q, 1000.0)
     assert np.max(np.abs(ar)) <= 2.0 + 1e-9
+
+
+def test_servo_gains_yaml_reads_back_exactly_with_any_joint_names(tmp_path: Path) -> None:
+    names = ["1", "yes", "a: b", "joint 4"]
+    rng = np.random.default_rng(0)
+    arrays = {key: rng.uniform(1.0, 1e4, len(names)) for key in ("servo_kp_1_s", "servo_kv_Nms_rad", "servo_ki_Nm_rad")}
+    summary = {"sample_time_s": 4e-4, "velocity_sample_time_s": 4e-4,
+               "delay_samples": {"setpoint": 2, "measurement": 1}, "feedforward_advanced": True}
+    back = load_yaml(servo_gains_yaml(StageOutput(summary, arrays, {}, None, tmp_path), names))
+    assert list(back["axes"]) == names
+    assert back["sample_time_s"] == 4e-4 and back["setpoint_delay_samples"] == 2
+    assert back["feedforward_advanced"] is True
+    for key in ("kp_1_s", "kv_Nms_rad", "ki_Nm_rad"):
+        column = f"servo_{key}"
+        assert [back["axes"][name][key] for name in names] == arrays[column].tolist()

@@ -30,6 +30,26 @@ def test_joint_limits_yaml_round_trip(tmp_path: Path, rx130l: RobotModel) -> Non
     np.testing.assert_array_equal(reordered.effort_Nm, table.effort_Nm[::-1])
 
 
+#: joint names a URDF may hold that a line-by-line YAML writer gets wrong: numbers, booleans of YAML 1.1 or
+#: 1.2, null, indicators, separators, quotes, spaces, non-ASCII
+ODD_JOINT_NAMES = ("1", "010", "1e3", "0x10", "1:30", "yes", "On", "Y", "true", "null", "~", "a: b", "#x", "-j",
+                   "[j]", "j,k", "'q'", '"q"', "joint 1", "é")
+
+
+def test_joint_limits_yaml_reads_back_any_joint_name(tmp_path: Path) -> None:
+    """Read back by the project's YAML 1.2 reader and by PyYAML (YAML 1.1, as ROS 2 launch files load a
+    MoveIt config): every name a string, the same names in the same order."""
+    n = len(ODD_JOINT_NAMES)
+    table = JointLimitTable(ODD_JOINT_NAMES, -0.1 * np.arange(1, n + 1), 0.1 * np.arange(1, n + 1), np.full(n, 2.0),
+                            np.full(n, 5.0), np.full(n, 10.0))
+    path = write_joint_limits_yaml(tmp_path / "joint_limits.yaml", table)
+    back = read_joint_limits_yaml(path)
+    assert back.joint_names == ODD_JOINT_NAMES
+    np.testing.assert_array_equal(back.upper_rad, table.upper_rad)
+    yaml = pytest.importorskip("yaml")
+    assert tuple(yaml.safe_load(path.read_text())["joint_limits"]) == ODD_JOINT_NAMES
+
+
 def test_continuous_joints_stay_continuous_and_yourdfpy_loads_the_urdf(tmp_path: Path) -> None:
     source = example_arm_urdf("kinova_description/robots/kinova.urdf")
     if source is None:
