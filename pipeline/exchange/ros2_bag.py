@@ -6,8 +6,9 @@ messages used here are the same in Humble), and an offered QoS profile per topic
 keep last 10). The folder is written beside its target and renamed into place: no half-written bag.
 
 Readers take a bag folder with ``metadata.yaml``, a bare ``.db3`` without one (as many repositories
-ship them) or a ``.mcap``. Times are the message header stamps when they increase, else the times the
-messages were logged, in seconds from the first sample.
+ship them), a folder of a recording's split storage files without it (``<name>_0.db3``, ``<name>_1.db3``,
+...: their messages merged in log order) or a ``.mcap``. Times are the message header stamps when they
+increase, else the times the messages were logged, in seconds from the first sample.
 
 Messages: ``trajectory_msgs/msg/JointTrajectory`` (one message, ``effort`` = feedforward torque),
 ``sensor_msgs/msg/JointState``, ``geometry_msgs/msg/PointStamped``, ``PoseStamped``, ``TransformStamped``.
@@ -194,23 +195,34 @@ def _point_messages(path: str | Path, points: TrackerPoints, msgtype: str,
 
 # --- reading -------------------------------------------------------------------------------------------
 
+#: storage files of a bag folder: SQLite3, MCAP, and either compressed as a whole (``--compression-mode file``)
+_STORAGE_SUFFIXES = (".db3", ".mcap", ".db3.zstd", ".mcap.zstd")
+
+
 def is_bag(path: str | Path) -> bool:
-    """A bag folder (``metadata.yaml`` or a ``.db3``/``.mcap`` inside), a ``.db3`` or a ``.mcap`` file."""
+    """A bag folder (``metadata.yaml`` or a storage file inside), a ``.db3`` or a ``.mcap`` file."""
     p = Path(path)
     if p.is_dir():
-        return (p / "metadata.yaml").exists() or any(p.glob("*.db3")) or any(p.glob("*.mcap"))
+        return (p / "metadata.yaml").exists() or any(any(p.glob(f"*{suffix}")) for suffix in _STORAGE_SUFFIXES)
     return p.suffix in (".db3", ".mcap")
 
 
-def _reader_path(path: Path) -> Path:
-    """What ``rosbags`` opens: the folder when it has metadata.yaml, else its one storage file."""
+def _reader_paths(path: Path) -> list[Path]:
+    """What ``rosbags`` opens: the folder when it has metadata.yaml, else its storage files (the splits of
+    one recording, ``<name>_0.db3``, ``<name>_1.db3``, ...; the readers merge their messages in log order)."""
     if path.is_dir() and not (path / "metadata.yaml").exists():
         files = sorted([*path.glob("*.db3"), *path.glob("*.mcap")])
-        if len(files) != 1:
-            raise DataFileError(path, None, f"a bag folder without metadata.yaml holds {len(files)} storage "
-                                            "files (.db3/.mcap); name one of them")
-        return files[0]
-    return path
+        if not files:
+            compressed = sorted(f.name for f in path.iterdir() if f.name.endswith(_STORAGE_SUFFIXES[2:]))
+            hint = (f" ({', '.join(compressed)} compressed as a whole: decompress with `zstd -d` or keep the "
+                    "bag's metadata.yaml)") if compressed else ""
+            raise DataFileError(path, None, f"a bag folder without metadata.yaml holds no storage file "
+                                            f"(.db3/.mcap){hint}")
+        if len({f.suffix for f in files}) > 1:
+            raise DataFileError(path, None, "a bag folder without metadata.yaml holds both .db3 and .mcap files; "
+                                            "name one of them")
+        return files
+    return [path]
 
 
 def _raw_messages(path: str | Path, msgtypes: Sequence[str], topic: str | None,
@@ -224,22 +236,31 @@ def _raw_messages(path: str | Path, msgtypes: Sequence[str], topic: str | None,
     if not source.exists():
         raise DataFileError(source, None, "not found")
     try:
-        with Reader(_reader_path(source)) as reader:
-            typed = {c.topic: c.msgtype for c in reader.connections if c.msgtype in msgtypes}
-            if topic is not None:
-                if topic not in typed:
-                    raise DataFileError(source, "topic", f"{topic!r} with a message of {list(msgtypes)} is not "
-                                                         f"in the bag (topics: {sorted(reader.topics)})")
-                chosen = topic
-            elif preferred_topic in typed:
-                chosen = preferred_topic
-            elif len(typed) == 1:
-                chosen = next(iter(typed))
-            else:
-                raise DataFileError(source, "topic", f"{len(typed)} topics hold {' / '.join(msgtypes)} "
-                                                     f"({sorted(typed)}); name one")
-            connections = [c for c in reader.connections if c.topic == chosen]
-            out = [(int(t), c.msgtype, bytes(data)) for c, t, data in reader.messages(connections=connections)]
+        parts = _reader_paths(source)
+        typed: dict[str, str] = {}
+        all_topics: set[str] = set()
+        for part in parts:
+            with Reader(part) as reader:
+                typed.update({c.topic: c.msgtype for c in reader.connections if c.msgtype in msgtypes})
+                all_topics.update(reader.topics)
+        if topic is not None:
+            if topic not in typed:
+                raise DataFileError(source, "topic", f"{topic!r} with a message of {list(msgtypes)} is not "
+                                                     f"in the bag (topics: {sorted(all_topics)})")
+            chosen = topic
+        elif preferred_topic in typed:
+            chosen = preferred_topic
+        elif len(typed) == 1:
+            chosen = next(iter(typed))
+        else:
+            raise DataFileError(source, "topic", f"{len(typed)} topics hold {' / '.join(msgtypes)} "
+                                                 f"({sorted(typed)}); name one")
+        out: list[tuple[int, str, bytes]] = []
+        for part in parts:
+            with Reader(part) as reader:
+                connections = [c for c in reader.connections if c.topic == chosen]
+                if connections:
+                    out += [(int(t), c.msgtype, bytes(data)) for c, t, data in reader.messages(connections=connections)]
     except DataFileError:
         raise
     except Exception as exc:   # rosbags / sqlite3 / mcap errors: one message naming the file
@@ -396,9 +417,14 @@ def first_stamp_s(path: str | Path, msgtypes: Sequence[str] = (JOINT_STATE,), to
 def topics(path: str | Path) -> Iterator[tuple[str, str, int]]:
     """``(topic, message type, message count)`` of every topic of a bag."""
     source = Path(path)
+    counts: dict[tuple[str, str], int] = {}
     try:
-        with Reader(_reader_path(source)) as reader:
-            listing = [(c.topic, c.msgtype, c.msgcount) for c in reader.connections]
+        for part in _reader_paths(source):
+            with Reader(part) as reader:
+                for c in reader.connections:
+                    counts[(c.topic, c.msgtype)] = counts.get((c.topic, c.msgtype), 0) + c.msgcount
+    except DataFileError:
+        raise
     except Exception as exc:
         raise DataFileError(source, None, f"cannot read as a ROS 2 bag: {exc}") from exc
-    yield from listing
+    yield from ((topic, msgtype, count) for (topic, msgtype), count in counts.items())

@@ -62,6 +62,37 @@ def test_joint_states_bare_storage_file_and_name_matching(tmp_path: Path, bag_fo
 
 
 @pytest.mark.parametrize("bag_format", ["sqlite3", "mcap"])
+def test_split_storage_files_without_metadata_read_as_one_recording(tmp_path: Path,
+                                                                    bag_format: ros2_bag.BagFormat) -> None:
+    """A recording split by ``ros2 bag record --max-bag-duration`` (``rec_0``, ``rec_1``, ..., ``rec_10``)
+    whose metadata.yaml is gone: its storage files read in their split order as one recording."""
+    rng = np.random.default_rng(5)
+    n, parts = 60, 12
+    states = JointStates(NAMES, 0.01 * np.arange(n), rng.normal(size=(n, 3)), rng.normal(size=(n, 3)),
+                         rng.normal(size=(n, 3)))
+    points = TrackerPoints(np.array([0.105, 0.355]), rng.normal(size=(2, 3)), "tracker")
+    folder = tmp_path / "rec"
+    folder.mkdir()
+    for k, chunk in enumerate(np.array_split(np.arange(n), parts)):
+        part = JointStates(NAMES, states.t_s[chunk], states.q_rad[chunk], states.qd_rad_s[chunk],
+                           states.effort_Nm[chunk])
+        seen = (points.t_s >= part.t_s[0]) & (points.t_s <= part.t_s[-1] + 0.005)
+        if seen.any():
+            bag = ros2_bag.write_recording(tmp_path / f"part{k}", part, TrackerPoints(
+                points.t_s[seen], points.xyz_m[seen], "tracker"), "/tracker", bag_format=bag_format)
+        else:
+            bag = ros2_bag.write_joint_states(tmp_path / f"part{k}", part, bag_format=bag_format)
+        storage = next(p for p in bag.iterdir() if p.suffix in (".db3", ".mcap"))
+        shutil.copy(storage, folder / f"rec_{k}{storage.suffix}")
+    back = ros2_bag.read_joint_states(folder)
+    np.testing.assert_array_equal(back.q_rad, states.q_rad)
+    np.testing.assert_allclose(back.t_s, states.t_s, atol=1e-9)
+    t0 = ros2_bag.first_stamp_s(folder)
+    np.testing.assert_array_equal(ros2_bag.read_points(folder, t0_s=t0).xyz_m, points.xyz_m)
+    assert dict(((t, c) for t, _, c in ros2_bag.topics(folder))) == {"/joint_states": n, "/tracker": 2}
+
+
+@pytest.mark.parametrize("bag_format", ["sqlite3", "mcap"])
 def test_first_stamp_is_the_first_time_the_readers_count(tmp_path: Path, bag_format: ros2_bag.BagFormat) -> None:
     """From the header stamps read off the CDR bytes when they increase, else from the log times."""
     states = JointStates(NAMES, 1.7e9 + 0.01 * np.arange(1, 6), np.zeros((5, 3)), np.zeros((5, 3)), np.zeros((5, 3)))
@@ -98,6 +129,12 @@ def test_bad_inputs_name_the_file(tmp_path: Path) -> None:
         ros2_bag.read_joint_states(bag)
     with pytest.raises(DataFileError, match="exists"):
         ros2_bag.write_joint_trajectory(bag, _motion(3), "/a/joint_trajectory")
+    compressed = tmp_path / "compressed"          # --compression-mode file, metadata.yaml lost
+    compressed.mkdir()
+    (compressed / "rec_0.db3.zstd").write_bytes(b"\x28\xb5\x2f\xfd")
+    assert ros2_bag.is_bag(compressed)
+    with pytest.raises(DataFileError, match="zstd -d"):
+        ros2_bag.read_joint_states(compressed)
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
 
 
