@@ -17,7 +17,8 @@
 The values are the limits the plans were verified against (for a continuous joint: the one-turn
 position limits the stages used, the URDF keeps it continuous). The URDF: the model's placements,
 inertials and limits written into its source URDF (:func:`pipeline.robot.urdf_export.export_urdf`),
-with every joint that the source URDF declares ``continuous`` continuous again (no position limits).
+each arm joint's viscous and Coulomb friction in ``<dynamics damping friction>``, with every joint that
+the source URDF declares ``continuous`` continuous again (no position limits).
 """
 
 from __future__ import annotations
@@ -136,9 +137,30 @@ def restore_joint_types(urdf_text: str, types: dict[str, str]) -> str:
     return ET.tostring(root, encoding="unicode")
 
 
+def with_joint_friction(urdf_text: str, joint_names: Sequence[str], viscous_Nms_rad: np.ndarray,
+                        coulomb_Nm: np.ndarray) -> str:
+    """``urdf_text`` with ``<dynamics damping="viscous" friction="Coulomb"/>`` on each named joint (joint side,
+    N m s/rad and N m: what Gazebo, MuJoCo's and Drake's URDF import read as viscous damping and dry friction)."""
+    root = ET.fromstring(urdf_text)
+    index = {name: k for k, name in enumerate(joint_names)}
+    for joint in root.findall("joint"):
+        k = index.get(str(joint.get("name")))
+        if k is None:
+            continue
+        dynamics = joint.find("dynamics")
+        if dynamics is None:
+            dynamics = ET.SubElement(joint, "dynamics")
+        dynamics.set("damping", f"{float(viscous_Nms_rad[k]):.17g}")
+        dynamics.set("friction", f"{float(coulomb_Nm[k]):.17g}")
+    return ET.tostring(root, encoding="unicode")
+
+
 def handed_on_urdf(robot: RobotModel, source_urdf: str | Path | None = None) -> str:
-    """The model as URDF text with the joint types of its source URDF (``robot.urdf_path`` by default)."""
-    text = export_urdf(robot.model, robot.urdf_text)
+    """The model as URDF text with the joint types of its source URDF (``robot.urdf_path`` by default) and
+    each arm joint's viscous and Coulomb friction in ``<dynamics>`` (:func:`with_joint_friction`)."""
+    act = robot.spec.actuation
+    text = with_joint_friction(export_urdf(robot.model, robot.urdf_text), [str(n) for n in robot.model.names[1:]],
+                               act.viscous_Nms_rad, act.coulomb_Nm)
     source = Path(source_urdf) if source_urdf is not None else robot.urdf_path
     if source is not None and Path(source).is_file():
         text = restore_joint_types(text, source_joint_types(source))

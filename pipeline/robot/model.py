@@ -434,12 +434,13 @@ class RobotModel:
         out.residual_map = self.residual_map
         return out
 
-    def save(self, folder: str | Path) -> Path:
+    def save(self, folder: str | Path, urdf_text: str | None = None) -> Path:
         """Write ``<folder>/<name>.urdf`` and ``robot.yaml`` that :meth:`load` reads back.
 
         Joint placements, link inertials (as Pinocchio holds them, including identified or
         calibrated values), limits, armature and friction are written; visuals are kept from
-        the source URDF. Files are written atomically.
+        the source URDF. ``urdf_text``: the URDF to write instead of the model's own export (the
+        same model in another form, e.g. with its source's joint types). Files are written atomically.
         """
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
@@ -449,9 +450,10 @@ class RobotModel:
         # tool frames as the model holds them (load() rebuilds them from these three facts)
         spec.tool.transform_tcp_to_flange, spec.tool.reflector_offset_m, spec.tool.reflector_axis = self.tool_facts()
         spec.limit_overrides = {}
-        urdf_text = export_urdf(self.model, self.urdf_text)
-        if self.urdf_path is not None and Path(self.urdf_path).is_file():
-            urdf_text = absolute_mesh_paths(urdf_text, Path(self.urdf_path))   # meshes still found from folder
+        if urdf_text is None:
+            urdf_text = export_urdf(self.model, self.urdf_text)
+            if self.urdf_path is not None and Path(self.urdf_path).is_file():
+                urdf_text = absolute_mesh_paths(urdf_text, Path(self.urdf_path))   # meshes still found from folder
         write_text(folder / urdf_name, urdf_text)
         write_text(folder / "robot.yaml", dump_yaml(robot_spec_to_yaml(spec, urdf_name)))
         return folder

@@ -121,14 +121,15 @@ def servo_gains_yaml(control: StageOutput, joint_names: Sequence[str]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _robot_files(ctx: ExportContext) -> None:
+def robot_files(ctx: ExportContext) -> None:
+    """``robot/``: the handed-on model as a robot folder (URDF with the source's joint types and the joint
+    friction, robot.yaml: ``--set robot=export/robot`` loads it back) and MoveIt's joint_limits.yaml."""
     folder = ctx.staging / "robot"
-    folder.mkdir()
-    write_text(folder / f"{ctx.handed_on.name}.urdf", handed_on_urdf(ctx.handed_on, ctx.nominal.urdf_path))
+    ctx.handed_on.save(folder, handed_on_urdf(ctx.handed_on, ctx.nominal.urdf_path))
     write_joint_limits_yaml(folder / "joint_limits.yaml", ctx.limits,
                             f"robot {ctx.handed_on.name}; continuous joints keep the limits the plans were verified "
                             "against")
-    ctx.written += [f"robot/{ctx.handed_on.name}.urdf", "robot/joint_limits.yaml"]
+    ctx.written += [f"robot/{ctx.handed_on.name}.urdf", "robot/robot.yaml", "robot/joint_limits.yaml"]
 
 
 def export_run(run_dir: str | Path, to: str | Path | None = None, rate_hz: float = 1000.0,
@@ -157,7 +158,7 @@ def export_run(run_dir: str | Path, to: str | Path | None = None, rate_hz: float
                             _parse_start(start, nominal), float(rate_hz), bag_format,
                             joint_trajectory_topic(nominal.name))
         _export_stages(ctx, stages, config)
-        _robot_files(ctx)
+        robot_files(ctx)
         _replace(staging, target)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)

@@ -1,13 +1,15 @@
 """``python -m pipeline export``: a bad run directory ends in one line, exit 2, nothing written; a motion
 that leaves a limit is refused; the samples of moves and re-sampled plans keep the limits; servo_gains.yaml
-reads back exactly, whatever the joints are called."""
+reads back exactly, whatever the joints are called; the exported robot folder loads back as the model handed on."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 import pytest
+import yourdfpy
 
 from pipeline.cli import main
 from pipeline.core.errors import InfeasibleError
@@ -15,8 +17,11 @@ from pipeline.core.yaml12 import load_yaml
 from pipeline.exchange.joint_limits import JointLimitTable
 from pipeline.exchange.motion import SampledMotion
 from pipeline.robot.defaults import ready_pose_rad
+from pipeline.robot.example_robots import example_arm_urdf
+from pipeline.robot.model import RobotModel
 from pipeline.run import export_motions as em
-from pipeline.run.export import servo_gains_yaml
+from pipeline.run.export import robot_files, servo_gains_yaml
+from pipeline.run.export_motions import ExportContext
 from pipeline.stage_api import StageOutput
 
 
@@ -88,3 +93,51 @@ def test_servo_gains_yaml_reads_back_exactly_with_any_joint_names(tmp_path: Path
     for key in ("kp_1_s", "kv_Nms_rad", "ki_Nm_rad"):
         column = f"servo_{key}"
         assert [back["axes"][name][key] for name in names] == arrays[column].tolist()
+
+
+def _handed_on(robot: RobotModel) -> RobotModel:
+    """``robot`` as a stage hands it on: placements calibrated, inertias and friction identified."""
+    rng = np.random.default_rng(7)
+    model = robot.model.copy()
+    for j in range(1, model.njoints):
+        model.jointPlacements[j] = model.jointPlacements[j] * pin.exp6(1e-3 * rng.normal(size=6))
+        inertia = model.inertias[j]
+        model.inertias[j] = pin.Inertia(1.1 * inertia.mass, inertia.lever + 1e-3, 1.2 * inertia.inertia)
+    handed = robot.with_model(model)
+    act = handed.spec.actuation
+    act.viscous_Nms_rad = act.viscous_Nms_rad * 1.3 + 0.01
+    act.coulomb_Nm = act.coulomb_Nm * 0.7 + 0.02
+    handed.model.armature = np.asarray(handed.model.armature) * 1.1 + 1e-4
+    return handed
+
+
+@pytest.mark.parametrize("arm", ["rx130l", "kinova"])
+def test_the_exported_robot_folder_loads_back_as_the_model_handed_on(tmp_path: Path, rx130l, arm: str) -> None:
+    """``export/robot`` read by ``RobotModel.load``: placements, inertias, rotor inertia, friction, limits
+    as handed on (continuous joints of the source continuous again, the same one-turn limits on loading);
+    the URDF's ``<dynamics>`` hold the friction for simulators that read URDF."""
+    if arm == "kinova":
+        source = example_arm_urdf("kinova_description/robots/kinova.urdf")
+        if source is None:
+            pytest.skip("example-robot-data is not installed")
+        nominal = RobotModel.load(source)
+    else:
+        nominal = rx130l
+    handed = _handed_on(nominal)
+    ctx = ExportContext(tmp_path, tmp_path, nominal, handed, JointLimitTable.of_model(nominal),
+                        ready_pose_rad(nominal), 100.0, "sqlite3", "/arm/joint_trajectory")
+    robot_files(ctx)
+    back = RobotModel.load(tmp_path / "robot")
+    for j in range(1, handed.model.njoints):
+        assert back.model.jointPlacements[j].isApprox(handed.model.jointPlacements[j], 1e-12)
+        assert back.model.inertias[j].isApprox(handed.model.inertias[j], 1e-12)
+    np.testing.assert_allclose(back.model.armature, handed.model.armature, rtol=1e-15)
+    for field in ("viscous_Nms_rad", "coulomb_Nm", "gear_ratio"):
+        np.testing.assert_array_equal(getattr(back.spec.actuation, field), getattr(handed.spec.actuation, field))
+    for field in ("lower_rad", "upper_rad", "velocity_rad_s", "effort_Nm"):
+        np.testing.assert_allclose(getattr(back.limits, field), getattr(handed.limits, field), rtol=1e-15)
+    urdf = yourdfpy.URDF.load(str(tmp_path / "robot" / f"{handed.name}.urdf"), build_scene_graph=False,
+                              load_meshes=False)
+    for k, name in enumerate(handed.model.names[1:]):
+        assert float(urdf.joint_map[name].dynamics.damping) == handed.spec.actuation.viscous_Nms_rad[k]
+        assert float(urdf.joint_map[name].dynamics.friction) == handed.spec.actuation.coulomb_Nm[k]

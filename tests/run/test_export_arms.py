@@ -51,7 +51,7 @@ def check_export(run: Path, out: Path, robot_arg: str) -> None:
     robot_dir = out / "robot"
     urdf_files = list(robot_dir.glob("*.urdf"))
     expected = ["calibration_poses.csv", "calibration_measurements_template.csv", "servo_gains.yaml",
-                "robot/joint_limits.yaml"] + [f"{m}.csv" for m in (*MOTIONS, *plans)]
+                "robot/joint_limits.yaml", "robot/robot.yaml"] + [f"{m}.csv" for m in (*MOTIONS, *plans)]
     missing = [f for f in expected if not (out / f).is_file()]
     missing += [f"{m}/" for m in (*MOTIONS, *plans) if not (out / m / "metadata.yaml").is_file()]
     assert not missing and len(urdf_files) == 1, f"missing {missing}, URDFs {urdf_files}"
@@ -80,3 +80,6 @@ def check_export(run: Path, out: Path, robot_arg: str) -> None:
         if source_types[joint] != "continuous":
             assert exported.joint_map[joint].limit.lower == pytest.approx(limits.lower_rad[k])
             assert exported.joint_map[joint].limit.upper == pytest.approx(limits.upper_rad[k])
+    back = RobotModel.load(robot_dir)                   # the robot folder loads as the model handed on
+    np.testing.assert_allclose(back.limits.upper_rad, limits.upper_rad, rtol=1e-12)
+    np.testing.assert_array_equal(back.spec.actuation.viscous_Nms_rad, torque_robot.spec.actuation.viscous_Nms_rad)
