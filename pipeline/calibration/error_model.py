@@ -62,6 +62,21 @@ def is_compliance(name: str) -> bool:
     return name.startswith("j") and name.endswith(COMPLIANCE_SUFFIX)
 
 
+#: the unit of each parameter component (the part of a name after its last dot)
+_COMPONENT_UNITS = {"dx": "m", "dy": "m", "dz": "m", "da": "m", "dd": "m", "rx": "rad", "ry": "rad", "rz": "rad",
+                    "dq": "rad", MDH_ROTATIONS[0]: "rad", MDH_ROTATIONS[1]: "rad", MDH_ROTATIONS[2]: "rad",
+                    COMPLIANCE_SUFFIX[1:]: "rad/(N m)"}
+
+
+def parameter_unit(name: str) -> str:
+    """The unit of error parameter ``name`` (module docstring): m for offsets, rad for rotations and
+    zero offsets, rad/(N m) for compliances."""
+    component = name.rsplit(".", 1)[-1]
+    if component not in _COMPONENT_UNITS:
+        raise ValueError(f"parameter {name!r}: unknown component {component!r}")
+    return _COMPONENT_UNITS[component]
+
+
 def se3_to_vector(T: pin.SE3) -> np.ndarray:
     """12-vector ``[R (row-major 9), p (3)]`` fed to the CasADi measurement functions."""
     return np.concatenate([np.asarray(T.rotation).reshape(-1), np.asarray(T.translation).reshape(-1)])

@@ -336,6 +336,15 @@ def _scalars(d: dict | None) -> dict | None:
     return None if d is None else {k: v for k, v in d.items() if not isinstance(v, np.ndarray)}
 
 
+def identified_parameters(data: dict) -> list[tuple[str, float, float]]:
+    """``(name, value, std)`` of every identified parameter of a saved ``data.json`` (:func:`stage_data`),
+    in the order of the fit; empty when it holds none."""
+    identified = data.get("identified")
+    if not isinstance(identified, dict):
+        return []
+    return [(str(name), float(pair[0]), float(pair[1])) for name, pair in identified.items()]
+
+
 def stage_data(out: CalibrationOutcome) -> dict:
     """``data.json``: the identifiability report, the identified values with their std, the
     scalar parts of validation, fit and prediction, the design's records."""

@@ -5,11 +5,13 @@ For each stage the run holds (files and columns: ``docs/exchange.md``):
 - calibration: ``calibration_poses.csv`` (the designed poses in the tour's order, the TCP and
   reflector positions the nominal model predicts, the tracker's line of sight),
   ``calibration_measurements_template.csv`` (``q1..qn,x,y,z`` as ``calibration.measurements_csv``
-  reads it, x, y, z left to fill) and the motion ``calibration_tour``;
+  reads it, x, y, z left to fill) and the motion ``calibration_tour`` (a designed experiment);
+  ``calibration_parameters.csv`` (the identified error parameters, their standard deviations and units);
 - identification: the motion ``excitation`` (approach, the designed periods, return; nominal torque);
 - trajectory: the motions ``trajectory_<plan>`` (q, q̇, q̈, feedforward from the identified model);
 - control: ``servo_gains.yaml``;
-- always ``robot/``: the handed-on URDF (joint types of its source) and ``joint_limits.yaml``.
+- always ``robot/``: the handed-on model as a robot folder (URDF with the joint types of its source and
+  the joint friction, ``robot.yaml``) and ``joint_limits.yaml``.
 
 Every motion is written as ``<name>.csv`` and as the rosbag2 folder ``<name>/`` (JointTrajectory on
 ``/<robot>/joint_trajectory``), after the check of every sample against the joint limits. All files
@@ -25,11 +27,14 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.calibration.error_model import TRACKER_NAMES, parameter_unit
+from pipeline.calibration.report import identified_parameters
 from pipeline.core.artefacts import write_text
 from pipeline.core.errors import ArtefactWriteError, PipelineError
 from pipeline.core.yaml12 import read_yaml_file, yaml_key
 from pipeline.exchange.joint_limits import JointLimitTable, handed_on_urdf, write_joint_limits_yaml
 from pipeline.exchange.motion import SampledMotion
+from pipeline.exchange.parameter_table import ParameterTable, write_parameter_table_csv
 from pipeline.exchange.ros2_bag import BagFormat, joint_trajectory_topic
 from pipeline.identification.config import Config as IdentificationConfig
 from pipeline.identification.fourier import FourierTrajectory
@@ -41,6 +46,8 @@ from pipeline.run.export_tour import calibration_files
 from pipeline.run.stage_io import load_run
 from pipeline.stage_api import StageOutput
 
+#: the prefix of the tracker pose's parameters (``tracker.dx`` ...)
+TRACKER_PREFIX = TRACKER_NAMES[0].split(".")[0] + "."
 #: the stages whose robot is handed on, last first
 HANDED_ON_ORDER = ("trajectory", "control", "identification", "calibration", "model")
 
@@ -179,6 +186,8 @@ def _export_stages(ctx: ExportContext, stages: dict[str, StageOutput], config: d
     if "calibration" in stages and "configurations_selected" in stages["calibration"].arrays \
             and not str(stages["calibration"].summary.get("selection_method", "")).startswith("user"):
         calibration_files(ctx, stages["calibration"])
+    if "calibration" in stages:
+        calibration_parameters(ctx, stages["calibration"])
     if "identification" in stages:
         raw = config.get("identification")
         section: dict = raw if isinstance(raw, dict) else {}
@@ -194,6 +203,22 @@ def _export_stages(ctx: ExportContext, stages: dict[str, StageOutput], config: d
         write_text(ctx.staging / "servo_gains.yaml",
                    servo_gains_yaml(stages["control"], [str(n) for n in ctx.nominal.model.names[1:]]))
         ctx.written.append("servo_gains.yaml")
+
+
+def calibration_parameters(ctx: ExportContext, calibration: StageOutput) -> None:
+    """``calibration_parameters.csv``: every identified error parameter of the arm and its reflector
+    (deviation from the nominal model, :mod:`pipeline.calibration.error_model`: joint placement offsets,
+    joint zero offsets ``j{i}.dq``, compliances, the reflector offset) with its standard deviation and
+    unit. The tracker's pose is a parameter of the set-up, estimated about its registration, not of the
+    arm: left out."""
+    identified = [p for p in identified_parameters(calibration.data) if not p[0].startswith(TRACKER_PREFIX)]
+    if not identified:
+        return
+    names = tuple(name for name, _, _ in identified)
+    table = ParameterTable(names, np.array([v for _, v, _ in identified]), np.array([s for _, _, s in identified]),
+                           tuple(parameter_unit(name) for name in names))
+    write_parameter_table_csv(ctx.staging / "calibration_parameters.csv", table)
+    ctx.written.append("calibration_parameters.csv")
 
 
 def _replace(staging: Path, target: Path) -> None:

@@ -16,11 +16,12 @@ from pipeline.core.errors import InfeasibleError
 from pipeline.core.yaml12 import load_yaml
 from pipeline.exchange.joint_limits import JointLimitTable
 from pipeline.exchange.motion import SampledMotion
+from pipeline.exchange.parameter_table import read_parameter_table_csv
 from pipeline.robot.defaults import ready_pose_rad
 from pipeline.robot.example_robots import example_arm_urdf
 from pipeline.robot.model import RobotModel
 from pipeline.run import export_motions as em
-from pipeline.run.export import robot_files, servo_gains_yaml
+from pipeline.run.export import calibration_parameters, robot_files, servo_gains_yaml
 from pipeline.run.export_motions import ExportContext
 from pipeline.stage_api import StageOutput
 
@@ -141,3 +142,16 @@ def test_the_exported_robot_folder_loads_back_as_the_model_handed_on(tmp_path: P
     for k, name in enumerate(handed.model.names[1:]):
         assert float(urdf.joint_map[name].dynamics.damping) == handed.spec.actuation.viscous_Nms_rad[k]
         assert float(urdf.joint_map[name].dynamics.friction) == handed.spec.actuation.coulomb_Nm[k]
+
+
+def test_calibration_parameters_are_the_arms_identified_ones_with_units(tmp_path: Path, rx130l) -> None:
+    identified = {"j2.dq": [1.5e-3, 2e-6], "tracker.dx": [-3e-4, 7e-6], "j2.c": [1.3e-7, 1.5e-8],
+                  "reflector.dz": [5.2e-4, 5.7e-6]}
+    ctx = ExportContext(tmp_path, tmp_path, rx130l, rx130l, JointLimitTable.of_model(rx130l), ready_pose_rad(rx130l),
+                        100.0, "sqlite3", "/arm/joint_trajectory")
+    calibration_parameters(ctx, StageOutput({}, {}, {"identified": identified}, None, tmp_path))
+    table = read_parameter_table_csv(tmp_path / "calibration_parameters.csv")
+    assert table.names == ("j2.dq", "j2.c", "reflector.dz")             # the tracker's pose is the set-up's
+    assert table.units == ("rad", "rad/(N m)", "m")
+    assert table.values.tolist() == [1.5e-3, 1.3e-7, 5.2e-4] and table.stds.tolist() == [2e-6, 1.5e-8, 5.7e-6]
+    assert ctx.written == ["calibration_parameters.csv"]

@@ -51,7 +51,8 @@ def check_export(run: Path, out: Path, robot_arg: str) -> None:
     robot_dir = out / "robot"
     urdf_files = list(robot_dir.glob("*.urdf"))
     expected = ["calibration_poses.csv", "calibration_measurements_template.csv", "servo_gains.yaml",
-                "robot/joint_limits.yaml", "robot/robot.yaml"] + [f"{m}.csv" for m in (*MOTIONS, *plans)]
+                "robot/joint_limits.yaml", "robot/robot.yaml", "calibration_parameters.csv"]
+    expected += [f"{m}.csv" for m in (*MOTIONS, *plans)]
     missing = [f for f in expected if not (out / f).is_file()]
     missing += [f"{m}/" for m in (*MOTIONS, *plans) if not (out / m / "metadata.yaml").is_file()]
     assert not missing and len(urdf_files) == 1, f"missing {missing}, URDFs {urdf_files}"
