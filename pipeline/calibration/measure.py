@@ -208,6 +208,10 @@ def read_recording(path: str | Path, robot: RobotModel, cfg: Config, min_rows: i
                             "a joint-state CSV holds no tracker readings: name the ROS 2 bag of the tracker topic "
                             "(arm play writes it beside the CSV as <name>_tracker)" if tracker == path else
                             f"{tracker} is not a ROS 2 bag (a folder with metadata.yaml, a .db3 or a .mcap)")
+    if not cfg.tracker_file and not any(msgtype in ros2_bag.TRACKER_TYPES for _, msgtype, _ in ros2_bag.topics(path)):
+        raise DataFileError(path, "calibration.tracker_file",
+                            f"the bag holds no tracker topic ({' / '.join(ros2_bag.TRACKER_TYPES)}): record it in the "
+                            "same bag or name the bag that holds it")
     states, t0 = _recorded_joint_states(path, robot, cfg)
     points = ros2_bag.read_points(tracker, t0_s=t0)
     windows = stationary_windows(states, points, cfg.stationary_speed_rad_s, cfg.stationary_min_s,

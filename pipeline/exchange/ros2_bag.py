@@ -252,6 +252,9 @@ def _raw_messages(path: str | Path, msgtypes: Sequence[str], topic: str | None,
             chosen = preferred_topic
         elif len(typed) == 1:
             chosen = next(iter(typed))
+        elif not typed:
+            raise DataFileError(source, "topic", f"no topic holds {' / '.join(msgtypes)} (topics: "
+                                                 f"{sorted(all_topics)})")
         else:
             raise DataFileError(source, "topic", f"{len(typed)} topics hold {' / '.join(msgtypes)} "
                                                  f"({sorted(typed)}); name one")

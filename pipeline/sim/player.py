@@ -133,6 +133,7 @@ def load_robot(robot: str | Path) -> RobotModel:
 
 
 def is_csv_record(record: Path) -> bool:
+    """The record is written as CSV (``RECORD`` ends in ``.csv``), else as a bag."""
     return record.suffix.lower() == ".csv"
 
 

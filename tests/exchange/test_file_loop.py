@@ -28,6 +28,7 @@ from pipeline.calibration.outcome import CalibrationNotes, UserRecords
 from pipeline.calibration.validate import predicted_covariance
 from pipeline.core.errors import DataFileError
 from pipeline.exchange.joint_limits import JointLimitTable
+from pipeline.exchange.ros2_bag import write_joint_states
 from pipeline.identification import estimate as est_mod
 from pipeline.identification.experiment import excite_and_measure, regressors
 from pipeline.robot.defaults import ready_pose_rad
@@ -149,3 +150,10 @@ def test_calibration_from_the_played_tour_recovers_the_truth(tmp_path, rx130l):
     assert from_csv.windows_found == measured.windows_found
     np.testing.assert_allclose(from_csv.Q, measured.Q, rtol=0, atol=1e-12)
     np.testing.assert_allclose(from_csv.Y, measured.Y, rtol=0, atol=1e-12)
+    # joint states in one bag, the tracker in another on the same clock
+    joints_only = write_joint_states(tmp_path / "joints_only", record.states)
+    with pytest.raises(DataFileError, match="calibration.tracker_file"):
+        read_measurements(joints_only, rx130l, CalibrationConfig(measurements_file=str(joints_only)))
+    from_two = read_measurements(joints_only, rx130l, CalibrationConfig(measurements_file=str(joints_only),
+                                                                         tracker_file=str(record.paths[0])))
+    np.testing.assert_allclose(from_two.Y, measured.Y, rtol=0, atol=1e-12)
