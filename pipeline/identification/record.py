@@ -29,7 +29,9 @@ def load_user_record(cfg: Config, robot: RobotModel) -> meas_mod.JointRecord:
     dt = rec.sample_time_s
     fs = 1.0 / dt
     if dt > MAX_SAMPLE_TIME_S:
-        hint = " (the values look like milliseconds)" if dt / 1000 <= MAX_SAMPLE_TIME_S else ""
+        unit = next((name for name, scale in (("milliseconds", 1e3), ("microseconds", 1e6), ("nanoseconds", 1e9))
+                     if dt / scale <= MAX_SAMPLE_TIME_S), None)
+        hint = f" (the values look like {unit})" if unit else ""
         raise DataFileError(file, "t", f"column t implies a sample interval of {dt:g} s ({fs:g} Hz sample rate), "
                             f"implausible for a torque record (at most {MAX_SAMPLE_TIME_S:g} s, typically "
                             f"0.1-10 ms): the t column must be in seconds{hint}")

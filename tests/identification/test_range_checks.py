@@ -119,6 +119,13 @@ def test_time_in_milliseconds_blames_column_t(robot, tmp_path):
     assert "data_cutoff_hz" not in message
 
 
+@pytest.mark.parametrize(("scale", "unit"), [(1e6, "microseconds"), (1e9, "nanoseconds")])
+def test_time_in_micro_or_nanoseconds_is_named(robot, tmp_path, scale, unit):
+    path = _record(tmp_path, 0.004, scale_t=scale)
+    with pytest.raises(DataFileError, match=f"look like {unit}"):
+        stage.check(stage.Config(data_file=str(path), run_tx40=False), robot)
+
+
 def test_slow_sampling_below_the_cutoff_mentions_column_t(robot, tmp_path):
     path = _record(tmp_path, 0.04)   # 25 Hz: Nyquist 12.5 Hz < a 20 Hz cut-off set by hand
     with pytest.raises(ConfigError) as info:
