@@ -14,8 +14,10 @@ API (SI units everywhere; arrays (N,) and (N, n) in the order of ``joint_names``
   ``write_points(path, points, topic, msgtype=PointStamped|PoseStamped|TransformStamped)`` /
   ``read_points(path, topic=None)``. Readers take a bag folder, a bare ``.db3`` or a ``.mcap``.
 - :mod:`~pipeline.exchange.motion_csv`: ``write_motion_csv`` / ``read_motion_csv``,
-  ``write_joint_states_csv`` / ``read_joint_states_csv`` (one header line, units in column names).
+  ``write_joint_states_csv`` / ``read_joint_states_csv`` (one header line, units in column names),
+  ``is_joint_state_csv``.
 - :mod:`~pipeline.exchange.joint_limits`: MoveIt ``joint_limits.yaml`` and the URDF with the source's
-  joint types.
+  joint types and the joint friction.
+- :mod:`~pipeline.exchange.parameter_table`: identified parameters as CSV (``parameter,value,std,unit``).
 - :mod:`~pipeline.exchange.joint_names`: a recording's joints matched to the model's by name.
 """
