@@ -198,8 +198,9 @@ def _recorded_joint_states(path: str | Path, robot: RobotModel, cfg: Config) -> 
 def read_recording(path: str | Path, robot: RobotModel, cfg: Config, min_rows: int = 1) -> Measurements:
     """A recording of ``sensor_msgs/JointState`` (a ROS 2 bag, or the joint-state CSV ``t_s, q_<joint>_rad,
     ...``) and a tracker topic (``PointStamped``, ``PoseStamped`` or ``TransformStamped``, positions in m
-    in the tracker frame) in the same bag or in ``calibration.tracker_file`` (a bag stamped on the
-    recording's clock): one row per stationary window
+    in the tracker frame; a pose's or transform's orientation too, when not all the identity: 6-D
+    readings) in the same bag or in ``calibration.tracker_file`` (a bag stamped on the recording's
+    clock): one row per stationary window
     (:func:`pipeline.exchange.stationary.stationary_windows`, the ``calibration.stationary_*`` settings),
     the joint positions and the readings averaged over the window, their scatter kept."""
     tracker = cfg.tracker_file or path
@@ -223,8 +224,9 @@ def read_recording(path: str | Path, robot: RobotModel, cfg: Config, min_rows: i
     lines = np.arange(1, windows.n_used + 1)
     _check_joint_angles(Path(path), Q, robot, lines)
     _check_tracker_positions(Path(path), Y, robot, lines, True)
-    return Measurements(Q, Y, noise_model_sigma(robot, Y), str(path), None, len(Q), np.zeros((0, robot.nq)),
-                        None, lines, windows_found=windows.n_found, scatter_m=windows.scatter_m)
+    return Measurements(Q, Y, noise_model_sigma(robot, Y), str(path), windows.rotvec_rad, len(Q),
+                        np.zeros((0, robot.nq)), None, lines, windows_found=windows.n_found,
+                        scatter_m=windows.scatter_m)
 
 
 def read_csv(path: str | Path, robot: RobotModel, min_rows: int = 1, min_rows_field: str | None = None) -> Measurements:

@@ -104,16 +104,21 @@ class JointStates:
 
 @dataclass(frozen=True)
 class TrackerPoints:
-    """Positions read by a tracker: ``t_s`` (N,) s, ``xyz_m`` (N, 3) m in the frame ``frame_id``."""
+    """Positions read by a tracker: ``t_s`` (N,) s, ``xyz_m`` (N, 3) m in the frame ``frame_id``; for 6-D
+    readings (motion capture, a 6-DOF probe) ``rotvec_rad`` (N, 3), the rotation vector (axis x angle) of
+    the marker frame in that frame, else None."""
 
     t_s: np.ndarray
     xyz_m: np.ndarray
     frame_id: str = ""
+    rotvec_rad: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         times = _as_times(self.t_s)
         object.__setattr__(self, "t_s", times)
         object.__setattr__(self, "xyz_m", _as_matrix("xyz_m", self.xyz_m, times.size, 3))
+        if self.rotvec_rad is not None:
+            object.__setattr__(self, "rotvec_rad", _as_matrix("rotvec_rad", self.rotvec_rad, times.size, 3))
 
     @property
     def n_samples(self) -> int:

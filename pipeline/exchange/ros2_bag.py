@@ -28,6 +28,7 @@ import numpy as np
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
+from scipy.spatial.transform import Rotation
 
 from pipeline.core.errors import DataFileError
 from pipeline.exchange.joint_names import match_joint_names
@@ -174,20 +175,24 @@ def _point_messages(path: str | Path, points: TrackerPoints, msgtype: str,
     types = TYPESTORE.types
     if msgtype not in TRACKER_TYPES:
         raise DataFileError(path, "msgtype", f"{msgtype!r} is not one of {list(TRACKER_TYPES)}")
+    if points.rotvec_rad is not None and msgtype == POINT_STAMPED:
+        raise DataFileError(path, "msgtype", "a PointStamped carries no orientation: write 6-D readings as "
+                                             "PoseStamped or TransformStamped")
+    quaternions = (Rotation.from_rotvec(points.rotvec_rad).as_quat() if points.rotvec_rad is not None
+                   else np.tile([0.0, 0.0, 0.0, 1.0], (points.n_samples, 1)))
     messages = []
-    for t, (x, y, z) in zip(points.t_s, points.xyz_m, strict=True):
+    for t, (x, y, z), (qx, qy, qz, qw) in zip(points.t_s, points.xyz_m, quaternions, strict=True):
         header = _header(t, points.frame_id)
+        orientation = types["geometry_msgs/msg/Quaternion"](x=qx, y=qy, z=qz, w=qw)
         if msgtype == POINT_STAMPED:
             message = types[msgtype](header=header, point=types["geometry_msgs/msg/Point"](x=x, y=y, z=z))
         elif msgtype == POSE_STAMPED:
             pose = types["geometry_msgs/msg/Pose"](position=types["geometry_msgs/msg/Point"](x=x, y=y, z=z),
-                                                   orientation=types["geometry_msgs/msg/Quaternion"](
-                                                       x=0.0, y=0.0, z=0.0, w=1.0))
+                                                   orientation=orientation)
             message = types[msgtype](header=header, pose=pose)
         else:
             transform = types["geometry_msgs/msg/Transform"](
-                translation=types["geometry_msgs/msg/Vector3"](x=x, y=y, z=z),
-                rotation=types["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0))
+                translation=types["geometry_msgs/msg/Vector3"](x=x, y=y, z=z), rotation=orientation)
             message = types[msgtype](header=header, child_frame_id=child_frame_id, transform=transform)
         messages.append((float(t), message))
     return messages
@@ -387,8 +392,33 @@ def _point_of(message: Any) -> tuple[float, float, float]:
     return float(p.x), float(p.y), float(p.z)
 
 
+def _quaternion_of(message: Any) -> tuple[float, float, float, float]:
+    """The orientation ``(x, y, z, w)`` of a pose or transform message; the identity for a point."""
+    if hasattr(message, "pose"):
+        o = message.pose.orientation
+    elif hasattr(message, "transform"):
+        o = message.transform.rotation
+    else:
+        return 0.0, 0.0, 0.0, 1.0
+    return float(o.x), float(o.y), float(o.z), float(o.w)
+
+
+def _orientations(path: str | Path, quaternions: np.ndarray) -> np.ndarray | None:
+    """Rotation vectors of the readings' orientations, or None when every one is the identity (a 3-D
+    instrument publishing a pose: its orientation is a placeholder, not a measurement)."""
+    identity = np.all(np.abs(quaternions[:, :3]) <= 1e-12, axis=1) & (np.abs(np.abs(quaternions[:, 3]) - 1) <= 1e-12)
+    if quaternions.size == 0 or np.all(identity):
+        return None
+    norms = np.linalg.norm(quaternions, axis=1)
+    if np.any(~np.isfinite(norms) | (np.abs(norms - 1.0) > 1e-3)):
+        k = int(np.argmax(~np.isfinite(norms) | (np.abs(norms - 1.0) > 1e-3)))
+        raise DataFileError(path, "orientation", f"reading {k + 1}: quaternion of norm {norms[k]:.6g}, not a rotation")
+    return np.asarray(Rotation.from_quat(quaternions).as_rotvec(), float)
+
+
 def read_points(path: str | Path, topic: str | None = None, t0_s: float | None = None) -> TrackerPoints:
-    """Tracker positions from ``PointStamped`` / ``PoseStamped`` / ``TransformStamped`` (the one such topic).
+    """Tracker readings from ``PointStamped`` / ``PoseStamped`` / ``TransformStamped`` (the one such topic):
+    positions, and orientations when a pose's or transform's are not all the identity (6-D readings).
 
     Times in seconds from ``t0_s`` (an absolute time, e.g. the joint states' first stamp from
     :func:`first_stamp_s`) or from the first reading.
@@ -399,8 +429,10 @@ def read_points(path: str | Path, topic: str | None = None, t0_s: float | None =
     t_abs = _times([t for t, _ in messages], [m for _, m in messages])
     keep = _increasing(t_abs)
     xyz = np.array([_point_of(messages[k][1]) for k in keep]).reshape(len(keep), 3)
+    quaternions = np.array([_quaternion_of(messages[k][1]) for k in keep]).reshape(len(keep), 4)
     origin = float(t_abs[keep[0]]) if t0_s is None else float(t0_s)
-    return TrackerPoints(t_abs[keep] - origin, xyz, str(messages[keep[0]][1].header.frame_id))
+    return TrackerPoints(t_abs[keep] - origin, xyz, str(messages[keep[0]][1].header.frame_id),
+                         _orientations(path, quaternions))
 
 
 def first_stamp_s(path: str | Path, msgtypes: Sequence[str] = (JOINT_STATE,), topic: str | None = None,

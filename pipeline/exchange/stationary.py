@@ -7,9 +7,11 @@ velocity estimate is noisy at rest, and a few logged samples of it average to fa
 encoder's noise over the window, ``sqrt(2) sigma_enc / w``). A window is a run of stationary
 samples lasting at least ``min_duration_s``; its first ``settle_s`` are skipped (the arm settling),
 and the tracker readings inside the rest are averaged, their scatter (RMS distance from the mean)
-kept (NaN for a single reading). Readings up to half a joint-state interval plus half the speed
-window after the window's last sample count (a reading taken as the dwell ends). A window with
-fewer than ``min_readings`` readings is found but not used.
+kept (NaN for a single reading); 6-D readings' orientations are averaged too (the chordal L2 mean of
+the rotations, scipy's ``Rotation.mean``: Markley, Cheng, Crassidis & Oshman 2007, "Averaging
+quaternions", J. Guidance, Control, and Dynamics 30(4)). Readings up to half a joint-state interval
+plus half the speed window after the window's last sample count (a reading taken as the dwell ends).
+A window with fewer than ``min_readings`` readings is found but not used.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from pipeline.core.errors import DataFileError
 from pipeline.exchange.motion import JointStates, TrackerPoints
@@ -24,7 +27,8 @@ from pipeline.exchange.motion import JointStates, TrackerPoints
 
 @dataclass(frozen=True)
 class StationaryWindows:
-    """The used windows: mean joint positions (W, n) rad, mean reading (W, 3) m, scatter (W,) m."""
+    """The used windows: mean joint positions (W, n) rad, mean reading (W, 3) m, scatter (W,) m; for 6-D
+    readings the mean orientation (W, 3), a rotation vector, else None."""
 
     q_rad: np.ndarray
     xyz_m: np.ndarray
@@ -33,6 +37,7 @@ class StationaryWindows:
     t_start_s: np.ndarray
     t_end_s: np.ndarray
     n_found: int
+    rotvec_rad: np.ndarray | None = None
 
     @property
     def n_used(self) -> int:
@@ -66,6 +71,7 @@ def stationary_windows(states: JointStates, points: TrackerPoints, speed_rad_s: 
     runs = [(a, b) for a, b in zip(starts, ends, strict=True)
             if states.t_s[b] - states.t_s[a] >= min_duration_s]
     rows: list[tuple[np.ndarray, np.ndarray, float, int, float, float]] = []
+    orientations: list[np.ndarray] = []
     half_interval = 0.5 * float(np.median(np.diff(states.t_s))) if states.n_samples > 1 else 0.0
     # the speed over the window ends a window up to half its width before the arm moves again
     late = half_interval + 0.5 * SPEED_WINDOW_S
@@ -79,6 +85,8 @@ def stationary_windows(states: JointStates, points: TrackerPoints, speed_rad_s: 
         mean = xyz.mean(axis=0)
         scatter = float(np.sqrt(np.mean(np.sum((xyz - mean) ** 2, axis=1)))) if len(xyz) > 1 else float("nan")
         rows.append((q_in.mean(axis=0), mean, scatter, int(inside.sum()), float(t0), float(t1)))
+        if points.rotvec_rad is not None:
+            orientations.append(Rotation.from_rotvec(points.rotvec_rad[inside]).mean().as_rotvec())
     if not rows:
         raise DataFileError(source, "stationary windows",
                             f"{len(runs)} windows of at least {min_duration_s:g} s with every joint slower than "
@@ -86,4 +94,5 @@ def stationary_windows(states: JointStates, points: TrackerPoints, speed_rad_s: 
                             f"{settle_s:g} s of settling")
     columns = [np.array(c) for c in zip(*rows, strict=True)]
     return StationaryWindows(columns[0].reshape(len(rows), -1), columns[1].reshape(len(rows), 3), columns[2],
-                             columns[3], columns[4], columns[5], len(runs))
+                             columns[3], columns[4], columns[5], len(runs),
+                             np.array(orientations).reshape(len(rows), 3) if points.rotvec_rad is not None else None)

@@ -68,6 +68,47 @@ def test_conversion_keeps_every_value(record):
     assert np.allclose(Rotation.from_rotvec(meas.rotvec).as_matrix(), R, atol=1e-12)
 
 
+def test_the_record_as_a_ros2_recording_reads_as_the_csv(record, tmp_path):
+    """The 23 poses as a mocap setup logs them: JointState at 100 Hz (1 s quintic moves, 1.5 s dwells) and
+    the marker's PoseStamped at 50 Hz during each dwell, the first 0.1 s of it 1 cm and 0.1 rad off (the arm
+    settling). Read in its stationary windows: the CSV's joint angles, positions and orientations."""
+    from pipeline.calibration.config import Config
+    from pipeline.exchange.motion import JointStates, TrackerPoints
+    from pipeline.exchange.ros2_bag import POSE_STAMPED, write_recording
+
+    robot, meas = record
+    names = tuple(str(n) for n in robot.model.names[1:])
+    t, q, tp, xyz, rv = [], [], [], [], []
+    clock, previous = 0.0, meas.Q[-1]
+    for k in range(len(meas)):
+        for s in np.arange(0.0, 1.0, 0.01):                 # the move from the previous pose
+            x = s / 1.0
+            t.append(clock + s)
+            q.append(previous + (10 * x**3 - 15 * x**4 + 6 * x**5) * (meas.Q[k] - previous))
+        clock += 1.0
+        for s in np.arange(0.0, 1.5, 0.01):                 # the dwell
+            t.append(clock + s)
+            q.append(meas.Q[k])
+        for s in np.arange(0.005, 1.4, 0.02):
+            off = s < 0.1
+            tp.append(clock + s)
+            xyz.append(meas.Y[k] + (0.01 if off else 0.0))
+            rv.append((Rotation.from_rotvec([0.1, 0, 0]) * Rotation.from_rotvec(meas.rotvec[k])).as_rotvec()
+                      if off else meas.rotvec[k])
+        clock += 1.5
+        previous = meas.Q[k]
+    t = np.array(t)
+    states = JointStates(names, t, np.array(q), np.full((len(t), len(names)), np.nan), np.zeros((len(t), len(names))))
+    bag = write_recording(tmp_path / "mocap", states, TrackerPoints(np.array(tp), np.array(xyz), "mocap", np.array(rv)),
+                          "/mocap/marker/pose", msgtype=POSE_STAMPED)
+    read = ms.read_measurements(bag, robot, Config(measurements_file=str(bag)))
+    assert read.windows_found == len(read) == len(meas)
+    np.testing.assert_allclose(read.Q, meas.Q, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(read.Y, meas.Y, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(Rotation.from_rotvec(read.rotvec).as_matrix(),
+                               Rotation.from_rotvec(meas.rotvec).as_matrix(), rtol=0, atol=1e-12)
+
+
 def test_marker_rotation_on_the_flange_is_found_in_closed_form(record):
     """The marker is turned about 30 deg on the flange (README); after the alignment the readings
     agree with the nominal reflector frame to the nominal arm's own errors (a few degrees)."""

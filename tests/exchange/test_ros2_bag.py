@@ -115,6 +115,19 @@ def test_tracker_points_round_trip(tmp_path: Path, msgtype: str) -> None:
     back = ros2_bag.read_points(bag)
     assert back.frame_id == "tracker"
     np.testing.assert_array_equal(back.xyz_m, points.xyz_m)
+    assert back.rotvec_rad is None                   # identity orientations: a 3-D instrument's placeholder
+    if msgtype == ros2_bag.POINT_STAMPED:
+        with pytest.raises(DataFileError, match="no orientation"):
+            ros2_bag.write_points(tmp_path / "pts6", TrackerPoints(points.t_s, points.xyz_m, "tracker",
+                                                                   rng.normal(size=(12, 3))), "/t", msgtype)
+        return
+    rotvec = rng.normal(size=(12, 3))
+    rotvec *= np.minimum(1.0, 3.0 / np.linalg.norm(rotvec, axis=1))[:, None]   # angles below pi
+    six_d = ros2_bag.write_points(tmp_path / "pts6", TrackerPoints(points.t_s, points.xyz_m, "tracker", rotvec),
+                                  "/mocap/marker", msgtype)
+    back = ros2_bag.read_points(six_d)
+    assert back.rotvec_rad is not None
+    np.testing.assert_allclose(back.rotvec_rad, rotvec, rtol=0, atol=1e-12)
 
 
 def test_bad_inputs_name_the_file(tmp_path: Path) -> None:

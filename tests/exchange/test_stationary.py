@@ -54,3 +54,23 @@ def test_windows_without_enough_readings_are_found_not_used():
     assert (few.n_found, few.n_used) == (windows.n_found, 1)
     with pytest.raises(DataFileError, match="3 windows"):
         stationary_windows(states, sparse, 1e-3, 0.5, 0.0, min_readings=10)
+
+
+def test_6d_readings_get_the_mean_orientation_of_each_window():
+    """Orientations scattered by 1 mrad about a pose-dependent rotation near pi (where a naive mean of
+    rotation vectors flips sign) average to that rotation within the scatter's standard error."""
+    from scipy.spatial.transform import Rotation
+
+    poses, states, points = _recording()
+    rng = np.random.default_rng(1)
+    nominal = [Rotation.from_rotvec([0.0, 0.0, np.pi - 0.02 + 0.02 * k]) for k in range(3)]
+    pose_of = np.clip(np.searchsorted(np.array([0.0, 1.25, 2.75]), points.t_s) - 1, 0, 2)   # each reading's dwell
+    scatter = Rotation.from_rotvec(1e-3 * rng.normal(size=(points.n_samples, 3)))
+    rotvec = np.array([(scatter[i] * nominal[pose_of[i]]).as_rotvec() for i in range(points.n_samples)])
+    six_d = TrackerPoints(points.t_s, points.xyz_m, "mocap", rotvec)
+    windows = stationary_windows(states, six_d, speed_rad_s=1e-3, min_duration_s=0.5, settle_s=0.1)
+    assert windows.rotvec_rad is not None and windows.rotvec_rad.shape == (3, 3)
+    for k in range(3):
+        error = (Rotation.from_rotvec(windows.rotvec_rad[k]) * nominal[k].inv()).magnitude()
+        assert error < 5 * 1e-3 * np.sqrt(3 / windows.n_readings[k]), (k, error)
+    assert stationary_windows(states, points, 1e-3, 0.5, 0.1).rotvec_rad is None
