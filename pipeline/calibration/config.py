@@ -101,6 +101,7 @@ class Config:
     stationary_min_readings: int = 1
     #: a recording's joints renamed to the model's: {name in the recording: name in the model}
     joint_names: dict[str, str] = field(default_factory=dict)
+    #: held-out poses: a CSV of poses as measurements_csv, or a recording of both topics in one bag
     validation_csv: Annotated[str | None, FileInput] = None
     figures: bool = True
     #: auto | all | geometric | joint_axes | joint_offsets | joint_offsets+compliance | [names]

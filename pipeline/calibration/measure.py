@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import csv
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -177,6 +177,14 @@ def read_measurements(path: str | Path, robot: RobotModel, cfg: Config, min_rows
     if is_bag(path) or is_joint_state_csv(path) or cfg.tracker_file:
         return read_recording(path, robot, cfg, min_rows)
     return read_csv(path, robot, min_rows=min_rows)
+
+
+def read_validation(path: str | Path, robot: RobotModel, cfg: Config) -> Measurements:
+    """The held-out poses (``calibration.validation_csv``): a CSV of poses, or a recording of both topics in
+    one bag (:func:`read_recording`; ``calibration.tracker_file`` belongs to the measurements file)."""
+    if is_bag(path):
+        return read_recording(path, robot, replace(cfg, tracker_file=None))
+    return read_csv(path, robot, min_rows=1)
 
 
 def _recorded_joint_states(path: str | Path, robot: RobotModel, cfg: Config) -> tuple[JointStates, float]:

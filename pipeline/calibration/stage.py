@@ -113,7 +113,7 @@ def check(config: Config, robot: RobotModel) -> None:
     if user is not None:
         ms.check_rows(cfg.use_orientation, user, p, robot)
     if cfg.validation_csv:
-        ms.read_csv(cfg.validation_csv, robot, min_rows=1)
+        ms.read_validation(cfg.validation_csv, robot, cfg)
 
 
 def run(ctx: StageContext[Config]) -> StageResult:
@@ -187,7 +187,7 @@ def read_records(robot: RobotModel, cfg: Config) -> tuple[UserRecords, Calibrati
     for 6-D readings the marker's rotation on the flange in closed form first
     (:func:`pipeline.calibration.marker_frame.align_records`), kept in the returned notes."""
     user = ms.read_measurements(cfg.measurements_csv, robot, cfg) if cfg.measurements_csv else None
-    val_user = ms.read_csv(cfg.validation_csv, robot, min_rows=1) if cfg.validation_csv else None
+    val_user = ms.read_validation(cfg.validation_csv, robot, cfg) if cfg.validation_csv else None
     if cfg.position_sigma_m is not None:
         for m in (user, val_user):
             if m is not None:

@@ -23,7 +23,7 @@ from pipeline.calibration import candidates, task_space
 from pipeline.calibration import stage as calibration_stage
 from pipeline.calibration.config import Config as CalibrationConfig
 from pipeline.calibration.elastostatic import measurement_model
-from pipeline.calibration.measure import read_measurements
+from pipeline.calibration.measure import read_measurements, read_validation
 from pipeline.calibration.outcome import CalibrationNotes, UserRecords
 from pipeline.calibration.validate import predicted_covariance
 from pipeline.core.errors import DataFileError
@@ -157,3 +157,7 @@ def test_calibration_from_the_played_tour_recovers_the_truth(tmp_path, rx130l):
     from_two = read_measurements(joints_only, rx130l, CalibrationConfig(measurements_file=str(joints_only),
                                                                          tracker_file=str(record.paths[0])))
     np.testing.assert_allclose(from_two.Y, measured.Y, rtol=0, atol=1e-12)
+    # a recorded tour as the held-out poses (calibration.validation_csv)
+    held_out = read_validation(record.paths[0], rx130l, CalibrationConfig(measurements_file=str(joints_only),
+                                                                          tracker_file=str(csv_record.paths[1])))
+    np.testing.assert_allclose(held_out.Q, measured.Q, rtol=0, atol=1e-12)
