@@ -127,9 +127,10 @@ def _add_export_parser(sub: argparse._SubParsersAction) -> None:
     """``export RUN_DIR [--to DIR] [--rate-hz R] [--start q1,...] [--bag-format sqlite3|mcap]``."""
     e = sub.add_parser("export", help="write a run's designed poses, excitation and plans as files for an arm",
                        description="Write, for each stage the run holds, the files a controller needs "
-                                   "(docs/exchange.md): calibration poses, template and tour, the excitation, "
-                                   "the planned trajectories (CSV and ROS 2 bag, q, velocity, acceleration, "
-                                   "feedforward torque), servo gains, the URDF and joint_limits.yaml.")
+                                   "(docs/exchange.md): calibration poses, template, tour and identified parameters, "
+                                   "the excitation, the planned trajectories (CSV and ROS 2 bag, q, velocity, "
+                                   "acceleration, feedforward torque), servo gains, and the handed-on robot "
+                                   "(URDF with the joint friction, robot.yaml, joint_limits.yaml).")
     e.add_argument("run_dir", metavar="RUN_DIR")
     e.add_argument("--to", metavar="DIR", help="folder to write (default RUN_DIR/export; replaced as a whole)")
     e.add_argument("--rate-hz", type=float, default=1000.0, help="sample rate of every motion (default 1000)")
