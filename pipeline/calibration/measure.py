@@ -174,8 +174,12 @@ def reflector_reach_m(robot: RobotModel) -> float:
 def read_measurements(path: str | Path, robot: RobotModel, cfg: Config, min_rows: int = 1) -> Measurements:
     """A measurement CSV of poses (:func:`read_csv`), or a recording read in its stationary windows
     (:func:`read_recording`): a ROS 2 bag, or a joint-state CSV with ``calibration.tracker_file``."""
-    if is_bag(path) or is_joint_state_csv(path) or cfg.tracker_file:
+    if is_bag(path) or is_joint_state_csv(path):
         return read_recording(path, robot, cfg, min_rows)
+    if cfg.tracker_file:
+        raise DataFileError(path, "calibration.tracker_file", "names the tracker readings of a recording of joint "
+                            "states (a bag, or the joint-state CSV t_s,q_<joint>_rad,...); this file is a CSV of "
+                            "poses, which holds its own readings")
     return read_csv(path, robot, min_rows=min_rows)
 
 

@@ -157,6 +157,10 @@ def test_calibration_from_the_played_tour_recovers_the_truth(tmp_path, rx130l):
     from_two = read_measurements(joints_only, rx130l, CalibrationConfig(measurements_file=str(joints_only),
                                                                          tracker_file=str(record.paths[0])))
     np.testing.assert_allclose(from_two.Y, measured.Y, rtol=0, atol=1e-12)
+    with pytest.raises(DataFileError, match="CSV of poses"):
+        read_measurements(tmp_path / "export" / "calibration_measurements_template.csv", rx130l, CalibrationConfig(
+            measurements_file=str(tmp_path / "export" / "calibration_measurements_template.csv"),
+            tracker_file=str(record.paths[0])))
     # a recorded tour as the held-out poses (calibration.validation_csv)
     held_out = read_validation(record.paths[0], rx130l, CalibrationConfig(measurements_file=str(joints_only),
                                                                           tracker_file=str(csv_record.paths[1])))
