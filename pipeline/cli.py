@@ -1,4 +1,4 @@
-"""Command line: ``python -m pipeline run | check | view | study | sweep | robot init | arm play | export``.
+"""Command line: ``python -m pipeline run | check | view | study | sweep | robot init | arm play|verify | export``.
 
 * ``run [--config FILE] [--set key=value ...] [--stages a,b] [--out DIR] [--force] [--accept-poor]``
 * ``check`` (same options as ``run``): validate what ``run`` would validate, try a quick sample of
@@ -10,6 +10,9 @@
   [--force]``: a commented robot.yaml
 * ``export RUN_DIR [--to DIR] [--rate-hz R] [--start q1,...] [--bag-format sqlite3|mcap]``: the run's
   designed poses, excitation and plans as files for an arm (:mod:`pipeline.run.export`)
+* ``arm play MOTION --out RECORD`` (the stand-in arm, :mod:`pipeline.sim.player`); ``arm verify MOTION RECORD``:
+  a recorded execution of an exported motion judged (:mod:`pipeline.run.verify`; exit 3 when a recorded
+  effort exceeds its limit)
 * ``sweep [--seeds 0-19] [--robots A,B] [--config FILE] [--set k=v] [--vary k=[a,b]] [--scheduler ADDR]``
 
 ``run`` ends with the headline table (:mod:`pipeline.run.headline`) and the path of ``report.md``.
@@ -43,7 +46,8 @@ from pipeline.run.preflight import preflight
 from pipeline.run.run_check import check_run
 from pipeline.run.runner import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_QUALITY_GATE, run_pipeline
 from pipeline.run.stage_plan import stages_line
-from pipeline.sim.player import play_file
+from pipeline.run.verify import verify_files
+from pipeline.sim.player import load_robot, play_file
 from pipeline.view.run_view import view_run
 
 
@@ -155,7 +159,7 @@ def _cmd_export(ns: argparse.Namespace) -> int:
 def _add_arm_parser(sub: argparse._SubParsersAction) -> None:
     """``arm play MOTION --engine mujoco|pipeline --out RECORD``: the stand-in arm behind files."""
     arm = sub.add_parser("arm", help="the stand-in arm behind files: `arm play MOTION --out RECORD`")
-    asub = arm.add_subparsers(dest="arm_command", required=True, metavar="{play}")
+    asub = arm.add_subparsers(dest="arm_command", required=True, metavar="{play,verify}")
     ap = asub.add_parser("play", help="play an exported motion on the stand-in arm and record its logging",
                          description="Play a JointTrajectory bag or motion CSV on the hidden robot under its drives "
                                      "(400 µs cascade) and write what the arm logs: JointState at the logging rate "
@@ -167,10 +171,29 @@ def _add_arm_parser(sub: argparse._SubParsersAction) -> None:
     ap.add_argument("--robot", default="rx130l", help="built-in robot, folder, URDF or example arm (panda)")
     ap.add_argument("--seed", type=int, default=1, help="seed of the hidden robot (the run's seed)")
     ap.add_argument("--log-rate-hz", type=float, default=None, help="logging rate (default: every 400 µs sample)")
+    ap.add_argument("--hold-s", type=float, default=0.0, help="hold the last pose this long after the motion (s)")
+    vp = asub.add_parser("verify", help="judge a recorded execution of an exported motion",
+                         description="Compare what the arm logged (JointState bag or joint-state CSV) with the motion "
+                                     "it was sent (JointTrajectory bag or motion CSV): time offset, joint tracking "
+                                     "error, TCP deviation, effort against the limits and the feedforward, settling. "
+                                     "Exit 3 when a recorded effort exceeds its limit.")
+    vp.add_argument("motion", metavar="MOTION_BAG_OR_CSV")
+    vp.add_argument("record", metavar="RECORD")
+    vp.add_argument("--robot", default="rx130l",
+                    help="built-in robot, folder (an export's robot/), URDF or example arm")
 
 
 def _cmd_arm(ns: argparse.Namespace) -> int:
-    record = play_file(ns.motion, ns.out, robot=ns.robot, engine=ns.engine, seed=ns.seed, log_rate_hz=ns.log_rate_hz)
+    if ns.arm_command == "verify":
+        result = verify_files(ns.motion, ns.record, load_robot(ns.robot))
+        for line in result.lines():
+            print(line)
+        if not result.limits_kept:
+            print(f"verify failed: {result.lines()[0]}", file=sys.stderr)
+            return EXIT_QUALITY_GATE
+        return 0
+    record = play_file(ns.motion, ns.out, robot=ns.robot, engine=ns.engine, seed=ns.seed, log_rate_hz=ns.log_rate_hz,
+                       hold_s=ns.hold_s)
     print(f"wrote {', '.join(str(p) for p in record.paths)} ({record.states.n_samples} joint states, "
           f"{record.tracker.n_samples} tracker readings, engine {record.engine})")
     return 0

@@ -34,9 +34,7 @@ from pipeline.calibration.config import Config
 from pipeline.calibration.estimate import Estimate
 from pipeline.core.errors import DataFileError, InfeasibleError
 from pipeline.exchange import ros2_bag
-from pipeline.exchange.joint_names import match_joint_names
-from pipeline.exchange.motion import JointStates
-from pipeline.exchange.motion_csv import is_joint_state_csv, read_joint_states_csv
+from pipeline.exchange.recording import is_recording, read_recorded_joint_states
 from pipeline.exchange.ros2_bag import is_bag
 from pipeline.exchange.stationary import stationary_windows
 from pipeline.robot.model import RobotModel
@@ -174,7 +172,7 @@ def reflector_reach_m(robot: RobotModel) -> float:
 def read_measurements(path: str | Path, robot: RobotModel, cfg: Config, min_rows: int = 1) -> Measurements:
     """A measurement CSV of poses (:func:`read_csv`), or a recording read in its stationary windows
     (:func:`read_recording`): a ROS 2 bag, or a joint-state CSV with ``calibration.tracker_file``."""
-    if is_bag(path) or is_joint_state_csv(path):
+    if is_recording(path):
         return read_recording(path, robot, cfg, min_rows)
     if cfg.tracker_file:
         raise DataFileError(path, "calibration.tracker_file", "names the tracker readings of a recording of joint "
@@ -189,22 +187,6 @@ def read_validation(path: str | Path, robot: RobotModel, cfg: Config) -> Measure
     if is_bag(path):
         return read_recording(path, robot, replace(cfg, tracker_file=None))
     return read_csv(path, robot, min_rows=1)
-
-
-def _recorded_joint_states(path: str | Path, robot: RobotModel, cfg: Config) -> tuple[JointStates, float]:
-    """The model's joints of a recording (a bag's ``JointState`` or a joint-state CSV), times from the
-    first sample, and that sample's time on the recording's clock (s)."""
-    names = [str(n) for n in robot.model.names[1:]]
-    if is_bag(path):
-        t0 = ros2_bag.first_stamp_s(path)
-        return ros2_bag.read_joint_states(path, names, cfg.joint_names or None, field="calibration.joint_names",
-                                          t0_s=t0), t0
-    logged = read_joint_states_csv(path)
-    mapping = match_joint_names(logged.joint_names, names, cfg.joint_names or None, source=str(path),
-                                field="calibration.joint_names")
-    picked = logged.select([mapping[name] for name in names])
-    t0 = float(picked.t_s[0]) if picked.n_samples else 0.0
-    return JointStates(tuple(names), picked.t_s - t0, picked.q_rad, picked.qd_rad_s, picked.effort_Nm), t0
 
 
 def read_recording(path: str | Path, robot: RobotModel, cfg: Config, min_rows: int = 1) -> Measurements:
@@ -225,7 +207,8 @@ def read_recording(path: str | Path, robot: RobotModel, cfg: Config, min_rows: i
         raise DataFileError(path, "calibration.tracker_file",
                             f"the bag holds no tracker topic ({' / '.join(ros2_bag.TRACKER_TYPES)}): record it in the "
                             "same bag or name the bag that holds it")
-    states, t0 = _recorded_joint_states(path, robot, cfg)
+    states, t0 = read_recorded_joint_states(path, [str(n) for n in robot.model.names[1:]], cfg.joint_names or None,
+                                            field="calibration.joint_names")
     points = ros2_bag.read_points(tracker, t0_s=t0)
     windows = stationary_windows(states, points, cfg.stationary_speed_rad_s, cfg.stationary_min_s,
                                  cfg.stationary_settle_s, cfg.stationary_min_readings, str(path))

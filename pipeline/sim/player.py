@@ -63,7 +63,9 @@ def read_motion(path: str | Path) -> SampledMotion:
     raise DataFileError(path, None, "neither a ROS 2 bag nor a motion CSV (.csv)")
 
 
-def _in_model_order(motion: SampledMotion, robot: RobotModel, source: str) -> SampledMotion:
+def in_model_order(motion: SampledMotion, robot: RobotModel, source: str) -> SampledMotion:
+    """``motion`` with the robot's joints (matched by name) in the model's order; positions, velocities and
+    feedforward must be given."""
     names = list(robot.model.names[1:])
     mapping = match_joint_names(motion.joint_names, names, source=source)
     idx = [motion.joint_names.index(mapping[n]) for n in names]
@@ -142,9 +144,29 @@ def tracker_path(record: Path) -> Path:
     return record.with_name(f"{record.stem}_tracker")
 
 
+def held(motion: SampledMotion, hold_s: float) -> SampledMotion:
+    """``motion`` followed by ``hold_s`` of its last pose at rest (the controller holding its last set-point, with
+    the last feedforward torque), at the motion's median sample interval."""
+    if hold_s <= 0.0 or motion.n_samples < 2:
+        return motion
+    dt = float(np.median(np.diff(motion.t_s)))
+    extra = np.arange(1, int(np.ceil(hold_s / dt)) + 1)
+    n = motion.q_rad.shape[1]
+
+    def tail(x: np.ndarray) -> np.ndarray:
+        return np.vstack([x, np.tile(x[-1], (extra.size, 1))])
+
+    zeros = np.zeros((extra.size, n))
+    return SampledMotion(motion.joint_names, np.concatenate([motion.t_s, motion.t_s[-1] + dt * extra]),
+                         tail(motion.q_rad), np.vstack([motion.qd_rad_s, zeros]), np.vstack([motion.qdd_rad_s2, zeros]),
+                         tail(motion.tau_ff_Nm))
+
+
 def play_file(motion_path: str | Path, out: str | Path, robot: str | Path = "rx130l", engine: str = "mujoco",
-              seed: int = 1, log_rate_hz: float | None = None, truth: TruthConfig | None = None) -> PlayRecord:
-    """``arm play``: read the motion, play it on the hidden robot of ``seed`` with ``engine``, write the record."""
+              seed: int = 1, log_rate_hz: float | None = None, truth: TruthConfig | None = None,
+              hold_s: float = 0.0) -> PlayRecord:
+    """``arm play``: read the motion, play it on the hidden robot of ``seed`` with ``engine`` (then hold its
+    last pose for ``hold_s``, :func:`held`), write the record."""
     out = Path(out)
     targets = [out, tracker_path(out)] if is_csv_record(out) else [out]
     for target in targets:
@@ -152,8 +174,10 @@ def play_file(motion_path: str | Path, out: str | Path, robot: str | Path = "rx1
             raise DataFileError(target, None, "exists already; the record is written only to a new path")
     if log_rate_hz is not None and not (np.isfinite(log_rate_hz) and log_rate_hz > 0):
         raise DataFileError(None, "--log-rate-hz", f"must be a positive number, got {log_rate_hz!r}")
+    if not (np.isfinite(hold_s) and hold_s >= 0):
+        raise DataFileError(None, "--hold-s", f"must be a number >= 0, got {hold_s!r}")
     nominal = load_robot(robot)
-    motion = _in_model_order(read_motion(motion_path), nominal, str(motion_path))
+    motion = held(in_model_order(read_motion(motion_path), nominal, str(motion_path)), hold_s)
     config = truth if truth is not None else TruthConfig()
     config.engine = engine
     real = create_hidden_robot(nominal, seed, config)

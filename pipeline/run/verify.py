@@ -1,0 +1,160 @@
+"""``python -m pipeline arm verify MOTION RECORD``: a recorded execution of an exported motion, judged.
+
+The motion (a ``JointTrajectory`` bag or motion CSV, :mod:`pipeline.exchange`) is what the controller was
+sent; the record (a ``JointState`` bag or joint-state CSV) what the arm logged while it ran it. Both are
+read with the model's joints matched by name.
+
+1. **Time offset.** The record's clock is not the motion's: the offset ``tau`` is found from the onset of
+   motion (the first sample ``ONSET_RAD`` away from the start pose, in each), then refined on a grid of
+   ``REFINE_STEP_S`` within ``REFINE_HALF_WIDTH_S`` by the least RMS of ``q_rec(t + tau) - q_plan(t)``
+   over the motion (the record linearly interpolated).
+2. **Tracking.** Over the motion's duration: per joint the largest and the RMS joint error, and the
+   largest TCP deviation (the model's kinematics at the recorded and the planned angles; encoder side:
+   a link deflection the encoders do not see is not in it).
+3. **Torque.** The largest recorded effort against each joint's effort limit (a ratio above 1 fails the
+   check), and the recorded effort against the motion's feedforward torque (RMS per joint; the
+   feedforward is the model's torque along the plan, so the difference is what the servo had to add:
+   model error, friction the model lacks, and the tracking corrections).
+4. **Settling**, as the trajectory stage counts it (:mod:`pipeline.trajectory.settling`): after the
+   motion's end, the time from which the TCP (the model's kinematics at the recorded angles) stays within
+   50 µm of the pose it comes to rest at, the mean of the record's last ``REST_WINDOW_S``
+   (:func:`pipeline.control.validate.settling_time`; inf: not within the record); that rest pose's
+   distance from the planned end is the static offset.
+
+The check fails (exit 3) when a recorded effort exceeds its limit; bad files end with exit 2.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.control.validate import SETTLING_POSITION_TOLERANCE_M, settling_time
+from pipeline.core.errors import DataFileError
+from pipeline.exchange.motion import JointStates, SampledMotion
+from pipeline.exchange.recording import read_recorded_joint_states
+from pipeline.robot.model import RobotModel
+from pipeline.sim.player import in_model_order, read_motion
+
+#: a joint this far from the start pose (rad) has begun to move
+ONSET_RAD = 1e-3
+#: the refinement of the time offset: half width of the search (s) and its step (s)
+REFINE_HALF_WIDTH_S = 0.1
+REFINE_STEP_S = 2.5e-4
+#: the end of the record whose mean TCP position is the rest pose (s)
+REST_WINDOW_S = 0.05
+#: the record may start or end this many of its sample intervals inside the motion (a logger's last sample)
+COVER_INTERVALS = 2
+
+
+@dataclass(frozen=True)
+class Verification:
+    """The recorded execution against the motion (module docstring); per-joint arrays in model order."""
+
+    joint_names: tuple[str, ...]
+    time_offset_s: float
+    duration_s: float
+    tracking_max_rad: np.ndarray
+    tracking_rms_rad: np.ndarray
+    tcp_deviation_max_m: float
+    effort_ratio_max: np.ndarray
+    effort_ratio_time_s: np.ndarray
+    effort_minus_feedforward_rms_Nm: np.ndarray
+    #: after the motion's end (inf: not settled within the record; None: the record ends with the motion)
+    settle_time_s: float | None
+    static_offset_m: float | None
+
+    @property
+    def limits_kept(self) -> bool:
+        return bool(np.all(self.effort_ratio_max <= 1.0))
+
+    def lines(self) -> list[str]:
+        """The headline first, then one line per joint."""
+        worst = int(np.argmax(self.effort_ratio_max))
+        band = f"{1e6 * SETTLING_POSITION_TOLERANCE_M:.0f} µm"
+        settle = ("the record ends with the motion" if self.settle_time_s is None or self.static_offset_m is None
+                  else f"not settled within {band} in the record" if not np.isfinite(self.settle_time_s)
+                  else f"settled within {band} {self.settle_time_s:.3f} s after the end, "
+                       f"{1e6 * self.static_offset_m:.1f} µm from the planned end")
+        out = [f"{'limits kept' if self.limits_kept else 'EFFORT LIMIT EXCEEDED'}: largest effort "
+               f"{self.effort_ratio_max[worst]:.3f} of the limit ({self.joint_names[worst]} at "
+               f"t = {self.effort_ratio_time_s[worst]:.3f} s); TCP deviation max "
+               f"{1e3 * self.tcp_deviation_max_m:.3f} mm; {settle}",
+               f"record clock = motion clock + {self.time_offset_s:.4f} s; motion {self.duration_s:.3f} s",
+               f"{'joint':<24}{'tracking max mrad':>18}{'rms mrad':>10}{'effort/limit':>14}{'effort-ff rms N m':>19}"]
+        for k, name in enumerate(self.joint_names):
+            out.append(f"{name:<24}{1e3 * self.tracking_max_rad[k]:>18.3f}{1e3 * self.tracking_rms_rad[k]:>10.3f}"
+                       f"{self.effort_ratio_max[k]:>14.3f}{self.effort_minus_feedforward_rms_Nm[k]:>19.3f}")
+        return out
+
+
+def _onset_s(t_s: np.ndarray, q: np.ndarray, start: np.ndarray) -> float | None:
+    moving = np.flatnonzero(np.max(np.abs(q - start), axis=1) > ONSET_RAD)
+    return float(t_s[moving[0]]) if moving.size else None
+
+
+def _at(t_s: np.ndarray, values: np.ndarray, t_query: np.ndarray) -> np.ndarray:
+    """``values`` (N, n) linearly interpolated at ``t_query``."""
+    return np.column_stack([np.interp(t_query, t_s, values[:, j]) for j in range(values.shape[1])])
+
+
+def time_offset_s(motion: SampledMotion, record: JointStates, source: str) -> float:
+    """The offset ``tau`` with ``t_record = t_motion + tau`` (module docstring, step 1)."""
+    t_plan = motion.t_s - motion.t_s[0]
+    onset_plan = _onset_s(t_plan, motion.q_rad, motion.q_rad[0])
+    onset_rec = _onset_s(record.t_s, record.q_rad, motion.q_rad[0])
+    if onset_plan is None:
+        raise DataFileError(None, "motion", "the motion never leaves its start pose: nothing to align")
+    if onset_rec is None:
+        raise DataFileError(source, "position", f"the arm never leaves the motion's start pose by {ONSET_RAD:g} rad: "
+                            "the record is not of this motion")
+    guess = onset_rec - onset_plan
+    offsets = guess + np.arange(-REFINE_HALF_WIDTH_S, REFINE_HALF_WIDTH_S + 0.5 * REFINE_STEP_S, REFINE_STEP_S)
+    costs = [float(np.mean((_at(record.t_s, record.q_rad, t_plan + tau) - motion.q_rad) ** 2)) for tau in offsets]
+    return float(offsets[int(np.argmin(costs))])
+
+
+def verify(motion: SampledMotion, record: JointStates, robot: RobotModel, source: str = "record") -> Verification:
+    """``record`` (the model's joints, model order) of an execution of ``motion`` (model order) on ``robot``."""
+    if not np.all(np.isfinite(record.effort_Nm)):
+        raise DataFileError(source, "effort", "the record holds no effort for every joint and sample")
+    tau = time_offset_s(motion, record, source)
+    t_all = motion.t_s - motion.t_s[0]
+    slack = COVER_INTERVALS * float(np.median(np.diff(record.t_s)))
+    if t_all[0] + tau < record.t_s[0] - slack or t_all[-1] + tau > record.t_s[-1] + slack:
+        raise DataFileError(source, "t", f"the record ({record.t_s[-1] - record.t_s[0]:.3f} s) does not cover the "
+                            f"motion ({t_all[-1]:.3f} s from {tau:.3f} s on its clock)")
+    covered = (t_all + tau >= record.t_s[0]) & (t_all + tau <= record.t_s[-1])
+    t_plan = t_all[covered]
+    motion = SampledMotion(motion.joint_names, motion.t_s[covered], motion.q_rad[covered], motion.qd_rad_s[covered],
+                           motion.qdd_rad_s2[covered], motion.tau_ff_Nm[covered])
+    q_rec = _at(record.t_s, record.q_rad, t_plan + tau)
+    error = q_rec - motion.q_rad
+    tcp = np.linalg.norm(robot.positions(q_rec) - robot.positions(motion.q_rad), axis=1)
+    during = (record.t_s >= tau) & (record.t_s <= t_all[-1] + tau)
+    ratio = np.abs(record.effort_Nm[during]) / np.asarray(robot.limits.effort_Nm, float)
+    worst = np.argmax(ratio, axis=0)
+    effort_at_plan = _at(record.t_s, record.effort_Nm, t_plan + tau)
+    settle: float | None = None
+    offset: float | None = None
+    t_end = t_all[-1] + tau
+    if np.any(record.t_s > t_end):
+        tail = record.t_s >= min(t_end, record.t_s[-1])
+        tcp_tail = robot.positions(record.q_rad[tail])
+        rest = np.mean(tcp_tail[record.t_s[tail] >= record.t_s[-1] - REST_WINDOW_S], axis=0)
+        settle = settling_time(record.t_s[tail], tcp_tail, rest, t_end)
+        offset = float(np.linalg.norm(rest - robot.positions(motion.q_rad[-1:])[0]))
+    return Verification(motion.joint_names, tau, float(t_all[-1]), np.max(np.abs(error), axis=0),
+                        np.sqrt(np.mean(error ** 2, axis=0)), float(np.max(tcp)), np.max(ratio, axis=0),
+                        record.t_s[during][worst] - tau, np.sqrt(np.mean((effort_at_plan - motion.tau_ff_Nm) ** 2,
+                                                                         axis=0)), settle, offset)
+
+
+def verify_files(motion_path: str | Path, record_path: str | Path, robot: RobotModel,
+                 name_map: dict[str, str] | None = None) -> Verification:
+    """:func:`verify` on a motion file and a record file (module docstring)."""
+    motion = in_model_order(read_motion(motion_path), robot, str(motion_path))
+    record, _ = read_recorded_joint_states(record_path, list(motion.joint_names), name_map, field="--joint-names")
+    return verify(motion, record, robot, str(record_path))

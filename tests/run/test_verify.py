@@ -1,0 +1,88 @@
+"""``arm verify``: a recorded execution of a motion judged against it (the stand-in arm plays it first)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.cli import main as cli_main
+from pipeline.exchange.motion import JointStates, SampledMotion
+from pipeline.exchange.motion_csv import write_joint_states_csv, write_motion_csv
+from pipeline.exchange.ros2_bag import read_joint_states
+from pipeline.robot.model import RobotModel
+from pipeline.run.verify import verify, verify_files
+from pipeline.sim.player import play_file
+from pipeline.sim.truth import TruthConfig
+
+
+def _move(robot: RobotModel, q0: np.ndarray, q1: np.ndarray, duration_s: float = 0.6,
+          dt: float = 2e-3) -> SampledMotion:
+    """A quintic rest-to-rest move with the model's torque as feedforward."""
+    t = np.arange(int(round(duration_s / dt)) + 1) * dt
+    x = t / duration_s
+    shape = 10 * x**3 - 15 * x**4 + 6 * x**5
+    rate = (30 * x**2 - 60 * x**3 + 30 * x**4) / duration_s
+    curv = (60 * x - 180 * x**2 + 120 * x**3) / duration_s**2
+    d = q1 - q0
+    q, v, a = q0 + shape[:, None] * d, rate[:, None] * d, curv[:, None] * d
+    tau = np.array([robot.inverse_dynamics(*s) for s in zip(q, v, a, strict=True)])
+    return SampledMotion(tuple(str(n) for n in robot.model.names[1:]), t, q, v, a, tau)
+
+
+@pytest.fixture(scope="module")
+def played(tmp_path_factory, rx130l: RobotModel) -> tuple[Path, Path, SampledMotion]:
+    folder = tmp_path_factory.mktemp("verify")
+    q0 = np.array([0.1, -0.3, 1.2, 0.0, 0.5, 0.0])
+    motion = _move(rx130l, q0, q0 + np.array([0.4, 0.3, -0.3, 0.5, -0.4, 0.6]))
+    motion_csv = write_motion_csv(folder / "move.csv", motion)
+    record = play_file(motion_csv, folder / "rec", robot="rx130l", engine="pipeline", seed=3, log_rate_hz=500.0,
+                       truth=TruthConfig.ideal(), hold_s=0.4)
+    return motion_csv, record.paths[0], motion
+
+
+def test_the_played_motion_is_found_on_any_clock_and_tracked_closely(played, tmp_path, rx130l) -> None:
+    motion_csv, record, _ = played
+    result = verify_files(motion_csv, record, rx130l)
+    assert result.limits_kept and abs(result.time_offset_s) < 2e-3 and result.effort_ratio_max.max() > 0.1
+    assert np.all(result.tracking_max_rad < 5e-3) and result.tcp_deviation_max_m < 5e-3
+    assert result.settle_time_s is not None and result.settle_time_s < 0.4
+    assert np.all(result.effort_ratio_max > 0.0) and np.all(np.isfinite(result.effort_minus_feedforward_rms_Nm))
+    # the same record on a logger's clock 12.3456 s later, as a joint-state CSV
+    states = read_joint_states(record)
+    shifted = write_joint_states_csv(tmp_path / "later.csv", JointStates(states.joint_names, states.t_s + 12.3456,
+                                                                         states.q_rad, states.qd_rad_s,
+                                                                         states.effort_Nm))
+    later = verify_files(motion_csv, shifted, rx130l)
+    assert later.time_offset_s - result.time_offset_s == pytest.approx(0.0, abs=1e-9)
+    np.testing.assert_allclose(later.tracking_max_rad, result.tracking_max_rad, rtol=1e-6)
+
+
+def test_a_record_of_another_motion_or_over_the_limits_fails(played, tmp_path, rx130l) -> None:
+    motion_csv, record, motion = played
+    states = read_joint_states(record, list(motion.joint_names))
+    q_half = states.q_rad.copy()
+    q_half[states.t_s > 0.3] = motion.q_rad[0] + 0.5 * (motion.q_rad[-1] - motion.q_rad[0])   # stopped half-way
+    halfway = JointStates(states.joint_names, states.t_s, q_half, states.qd_rad_s, states.effort_Nm)
+    assert np.max(verify(motion, halfway, rx130l).tracking_max_rad) > 0.1
+    assert not verify(motion, states, _weak(rx130l)).limits_kept
+
+
+def _weak(robot: RobotModel) -> RobotModel:
+    """``robot`` with a tenth of its effort limits."""
+    model = robot.model.copy()
+    model.effortLimit = 0.1 * np.asarray(model.effortLimit)
+    return robot.with_model(model)
+
+
+def test_the_cli_exits_3_over_a_limit_and_2_on_a_file_that_is_no_record(played, tmp_path, capsys) -> None:
+    motion_csv, record, _ = played
+    assert cli_main(["arm", "verify", str(motion_csv), str(record), "--robot", "rx130l"]) == 0
+    assert "limits kept" in capsys.readouterr().out
+    weak = _weak(RobotModel.load("rx130l")).save(tmp_path / "weak")
+    assert cli_main(["arm", "verify", str(motion_csv), str(record), "--robot", str(weak)]) == 3
+    assert "EFFORT LIMIT EXCEEDED" in capsys.readouterr().err
+    (tmp_path / "notes.txt").write_text("no record\n")
+    assert cli_main(["arm", "verify", str(motion_csv), str(tmp_path / "notes.txt"), "--robot", "rx130l"]) == 2
+    assert "notes.txt" in capsys.readouterr().err
