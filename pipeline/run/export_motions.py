@@ -4,7 +4,9 @@
   acceleration at both ends; rest to rest its peak speed is ``15/8 d/T`` and peak acceleration
   ``10/sqrt(3) d/T^2`` (d the joint's distance), so the duration starts at the smallest ``T``
   meeting ``MOVE_LIMIT_FRACTION`` of every velocity and acceleration limit and grows by 25 % until
-  the samples keep that fraction, the position limits and the torque limits;
+  the samples keep that fraction, the position limits, and the same fraction of the torque that
+  gravity leaves to each joint, ``|tau| <= |g| + f (tau_max - |g|)`` (the arm's torques differ from the
+  model's: a move near a limit on the model saturates the drive of an arm a little heavier);
 - **plans** (``t, q`` as the stages store them): q̇ and q̈ by finite differences on their own samples,
   all three interpolated linearly at the export rate (:func:`resample_plan`); a plan stored a hair
   over a velocity or acceleration limit is slowed uniformly by the factor that keeps both
@@ -30,7 +32,8 @@ from pipeline.exchange.motion_csv import write_motion_csv
 from pipeline.exchange.ros2_bag import BagFormat, write_joint_trajectory
 from pipeline.robot.model import RobotModel
 
-#: joint-space moves of an export keep this fraction of every velocity and acceleration limit
+#: joint-space moves of an export keep this fraction of every velocity and acceleration limit, and of the
+#: torque that gravity leaves to each joint
 MOVE_LIMIT_FRACTION = 0.5
 #: durations tried for a move, each 25 % longer than the one before
 MOVE_TRIES = 12
@@ -86,13 +89,15 @@ def move(robot: RobotModel, limits: JointLimitTable, start: Sequence[np.ndarray]
         q, v, a = quintic(start, end, T, t)
         if (np.all(np.abs(v) <= f * limits.velocity_rad_s + 1e-12)
                 and np.all(np.abs(a) <= f * limits.acceleration_rad_s2 + 1e-12)
-                and np.all(q >= limits.lower_rad) and np.all(q <= limits.upper_rad)
-                and np.all(np.abs(model_torques(robot, q, v, a)) <= limits.effort_Nm)):
-            return t, q, v, a
+                and np.all(q >= limits.lower_rad) and np.all(q <= limits.upper_rad)):
+            gravity = np.abs(model_torques(robot, q, np.zeros_like(v), np.zeros_like(a)))
+            if np.all(np.abs(model_torques(robot, q, v, a)) <= gravity + f * (limits.effort_Nm - gravity)):
+                return t, q, v, a
         T *= 1.25
-    raise InfeasibleError(None, name, f"no move within {f:g} of the velocity and acceleration limits, the "
-                          f"position and torque limits found up to {T / 1.25:.3g} s (the states at its ends are "
-                          "too fast or outside the limits, or gravity alone exceeds a torque limit)")
+    raise InfeasibleError(None, name, f"no move within {f:g} of the velocity and acceleration limits and of the "
+                          f"torque gravity leaves, and within the position limits, found up to {T / 1.25:.3g} s "
+                          "(the states at its ends are too fast or outside the limits, or gravity alone exceeds a "
+                          "torque limit)")
 
 
 def resample_plan(t_s: np.ndarray, q: np.ndarray, rate_hz: float) -> tuple[np.ndarray, ...]:

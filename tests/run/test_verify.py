@@ -67,6 +67,18 @@ def test_a_record_of_another_motion_or_over_the_limits_fails(played, tmp_path, r
     halfway = JointStates(states.joint_names, states.t_s, q_half, states.qd_rad_s, states.effort_Nm)
     assert np.max(verify(motion, halfway, rx130l).tracking_max_rad) > 0.1
     assert not verify(motion, states, _weak(rx130l)).limits_kept
+    # a drive at its limit logs the limit plus its sensor's noise: within the noise the limit is kept
+    rng = np.random.default_rng(4)
+    limit = float(rx130l.limits.effort_Nm[1])
+    sigma = 0.01 * limit
+    for excess_sigmas, kept in ((0.0, True), (10.0, False)):
+        effort = states.effort_Nm.copy()
+        effort[:, 1] += sigma * rng.normal(size=len(effort))
+        window = (states.t_s > 0.2) & (states.t_s < 0.3)
+        effort[window, 1] = limit + excess_sigmas * sigma + sigma * rng.normal(size=int(window.sum()))
+        at_limit = JointStates(states.joint_names, states.t_s, states.q_rad, states.qd_rad_s, effort)
+        result = verify(motion, at_limit, rx130l)
+        assert result.effort_ratio_max[1] > 1.0 and result.limits_kept is kept, (excess_sigmas, result.lines()[0])
 
 
 def _weak(robot: RobotModel) -> RobotModel:

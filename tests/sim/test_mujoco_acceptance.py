@@ -12,7 +12,7 @@ Slow: whole runs. The default profile on the RX130L and the example-robot-data P
   samples, as the stage gates it) and its executed duration within 1 % of the plan's.
 
 The file-only loop (quick profile): design -> export -> arm play -> record -> identify -> plan ->
-export -> arm play, every command exiting 0.
+export -> arm play -> arm verify (every recorded effort within its limit), every command exiting 0.
 """
 
 from __future__ import annotations
@@ -91,6 +91,8 @@ def test_the_loop_to_the_arm_runs_through_files_alone(name: str, tmp_path: Path)
     _cli("export", str(tmp_path / "plan" / name), "--to", str(tmp_path / "export2"))               # export
     motions = sorted(p for p in (tmp_path / "export2").glob("trajectory_*") if p.is_dir())
     assert motions
-    for motion in motions:                                                                         # play
+    for motion in motions:                                                                         # play, verify
         _cli("arm", "play", str(motion), "--engine", "mujoco", "--out", str(tmp_path / f"{motion.name}_record"),
-             "--robot", robot)
+             "--robot", robot, "--hold-s", "0.5")
+        _cli("arm", "verify", str(motion), str(tmp_path / f"{motion.name}_record"), "--robot",
+             str(tmp_path / "export2" / "robot"))
