@@ -5,9 +5,10 @@ sent; the record (a ``JointState`` bag or joint-state CSV) what the arm logged w
 read with the model's joints matched by name.
 
 1. **Time offset.** The record's clock is not the motion's: the offset ``tau`` is found from the onset of
-   motion (the first sample ``ONSET_RAD`` away from the start pose, in each), then refined on a grid of
-   ``REFINE_STEP_S`` within ``REFINE_HALF_WIDTH_S`` by the least RMS of ``q_rec(t + tau) - q_plan(t)``
-   over the motion (the record linearly interpolated).
+   motion (in each, the first sample ``ONSET_RAD`` away from the start pose after one at it), then
+   refined on a grid of ``REFINE_STEP_S`` within ``REFINE_HALF_WIDTH_S`` by the least RMS of
+   ``q_rec(t + tau) - q_plan(t)`` over the motion (the record linearly interpolated; its times from
+   its first sample).
 2. **Tracking.** Over the motion's duration: per joint the largest and the RMS joint error, and the
    largest TCP deviation (the model's kinematics at the recorded and the planned angles; encoder side:
    a link deflection the encoders do not see is not in it).
@@ -95,7 +96,8 @@ class Verification:
                f"t = {self.effort_ratio_time_s[worst]:.3f} s, the record's noise {NOISE_SIGMAS:g} sigma = "
                f"{NOISE_SIGMAS * self.effort_noise_Nm[worst]:.3g} N m); TCP deviation max "
                f"{1e3 * self.tcp_deviation_max_m:.3f} mm; {settle}",
-               f"record clock = motion clock + {self.time_offset_s:.4f} s; motion {self.duration_s:.3f} s",
+               f"the motion ({self.duration_s:.3f} s) starts {self.time_offset_s:.4f} s after the record's first "
+               "sample",
                f"{'joint':<24}{'tracking max mrad':>18}{'rms mrad':>10}{'effort/limit':>14}{'effort-ff rms N m':>19}"]
         for k, name in enumerate(self.joint_names):
             out.append(f"{name:<24}{1e3 * self.tracking_max_rad[k]:>18.3f}{1e3 * self.tracking_rms_rad[k]:>10.3f}"
@@ -104,8 +106,14 @@ class Verification:
 
 
 def _onset_s(t_s: np.ndarray, q: np.ndarray, start: np.ndarray) -> float | None:
-    moving = np.flatnonzero(np.max(np.abs(q - start), axis=1) > ONSET_RAD)
-    return float(t_s[moving[0]]) if moving.size else None
+    """The first time ``q`` leaves ``start`` by ``ONSET_RAD`` after it has been there (a record may begin
+    with the arm on its way to the start pose); None when it never is there or never leaves."""
+    away = np.max(np.abs(q - start), axis=1) > ONSET_RAD
+    there = np.flatnonzero(~away)
+    if not there.size:
+        return None
+    moving = np.flatnonzero(away[there[0]:])
+    return float(t_s[there[0] + moving[0]]) if moving.size else None
 
 
 def _at(t_s: np.ndarray, values: np.ndarray, t_query: np.ndarray) -> np.ndarray:
@@ -114,15 +122,16 @@ def _at(t_s: np.ndarray, values: np.ndarray, t_query: np.ndarray) -> np.ndarray:
 
 
 def time_offset_s(motion: SampledMotion, record: JointStates, source: str) -> float:
-    """The offset ``tau`` with ``t_record = t_motion + tau`` (module docstring, step 1)."""
+    """The offset ``tau`` with ``t_record = t_motion + tau``, record times from its first sample (module
+    docstring, step 1)."""
     t_plan = motion.t_s - motion.t_s[0]
     onset_plan = _onset_s(t_plan, motion.q_rad, motion.q_rad[0])
     onset_rec = _onset_s(record.t_s, record.q_rad, motion.q_rad[0])
     if onset_plan is None:
         raise DataFileError(None, "motion", "the motion never leaves its start pose: nothing to align")
     if onset_rec is None:
-        raise DataFileError(source, "position", f"the arm never leaves the motion's start pose by {ONSET_RAD:g} rad: "
-                            "the record is not of this motion")
+        raise DataFileError(source, "position", f"the arm is never at the motion's start pose, or never leaves it, by "
+                            f"{ONSET_RAD:g} rad: the record is not of this motion")
     guess = onset_rec - onset_plan
     offsets = guess + np.arange(-REFINE_HALF_WIDTH_S, REFINE_HALF_WIDTH_S + 0.5 * REFINE_STEP_S, REFINE_STEP_S)
     every = slice(None, None, max(1, t_plan.size // OFFSET_SAMPLES))

@@ -13,8 +13,12 @@ from pipeline.exchange.motion_csv import write_joint_states_csv, write_motion_cs
 from pipeline.exchange.ros2_bag import read_joint_states
 from pipeline.robot.model import RobotModel
 from pipeline.run.verify import verify, verify_files
-from pipeline.sim.player import play_file
+from pipeline.sim.player import in_model_order, play_file, read_motion
 from pipeline.sim.truth import TruthConfig
+
+
+def read_motion_in_order(path: Path, robot: RobotModel) -> SampledMotion:
+    return in_model_order(read_motion(path), robot, str(path))
 
 
 def _move(robot: RobotModel, q0: np.ndarray, q1: np.ndarray, duration_s: float = 0.6,
@@ -55,8 +59,16 @@ def test_the_played_motion_is_found_on_any_clock_and_tracked_closely(played, tmp
                                                                          states.q_rad, states.qd_rad_s,
                                                                          states.effort_Nm))
     later = verify_files(motion_csv, shifted, rx130l)
-    assert later.time_offset_s - result.time_offset_s == pytest.approx(0.0, abs=1e-9)
+    assert later.time_offset_s == pytest.approx(result.time_offset_s, abs=1e-9)   # from the record's first sample
     np.testing.assert_allclose(later.tracking_max_rad, result.tracking_max_rad, rtol=1e-6)
+    # a record that begins with the arm on its way to the start pose
+    t_before = np.arange(-1.0, 0.0, states.t_s[1])
+    q_before = states.q_rad[0] + np.outer(-t_before, np.full(states.q_rad.shape[1], 0.05))
+    approach = JointStates(states.joint_names, np.concatenate([t_before, states.t_s]),
+                           np.vstack([q_before, states.q_rad]), np.vstack([np.zeros_like(q_before), states.qd_rad_s]),
+                           np.vstack([np.zeros_like(q_before) + states.effort_Nm[0], states.effort_Nm]))
+    from_approach = verify(read_motion_in_order(motion_csv, rx130l), approach, rx130l)
+    assert from_approach.time_offset_s == pytest.approx(result.time_offset_s, abs=1e-9)
 
 
 def test_a_record_of_another_motion_or_over_the_limits_fails(played, tmp_path, rx130l) -> None:
