@@ -26,7 +26,9 @@ read with the model's joints matched by name.
    (:func:`pipeline.control.validate.settling_time`; inf: not within the record); that rest pose's
    distance from the planned end is the static offset.
 
-The check fails (exit 3) when a recorded effort exceeds its limit so; bad files end with exit 2.
+The check fails (exit 3) when a recorded effort exceeds its limit so; bad files end with exit 2. A record
+without efforts (positions only, as some drivers log) is judged on its tracking and settling, and says
+that its torques were not judged.
 """
 
 from __future__ import annotations
@@ -79,22 +81,29 @@ class Verification:
     static_offset_m: float | None
 
     @property
+    def effort_recorded(self) -> bool:
+        return bool(np.all(np.isfinite(self.effort_ratio_max)))
+
+    @property
     def limits_kept(self) -> bool:
+        """No recorded effort over its limit beyond the noise (True when the record holds no effort)."""
         excess = (self.effort_ratio_max - 1.0) * self.effort_limit_Nm
-        return bool(np.all(excess <= NOISE_SIGMAS * self.effort_noise_Nm))
+        return not self.effort_recorded or bool(np.all(excess <= NOISE_SIGMAS * self.effort_noise_Nm))
 
     def lines(self) -> list[str]:
         """The headline first, then one line per joint."""
-        worst = int(np.argmax(self.effort_ratio_max))
+        worst = int(np.argmax(self.effort_ratio_max)) if self.effort_recorded else 0
         band = f"{1e6 * SETTLING_POSITION_TOLERANCE_M:.0f} µm"
         settle = ("the record ends with the motion" if self.settle_time_s is None or self.static_offset_m is None
                   else f"not settled within {band} in the record" if not np.isfinite(self.settle_time_s)
                   else f"settled within {band} {self.settle_time_s:.3f} s after the end, "
                        f"{1e6 * self.static_offset_m:.1f} µm from the planned end")
-        out = [f"{'limits kept' if self.limits_kept else 'EFFORT LIMIT EXCEEDED'}: largest effort "
-               f"{self.effort_ratio_max[worst]:.3f} of the limit ({self.joint_names[worst]} at "
-               f"t = {self.effort_ratio_time_s[worst]:.3f} s, the record's noise {NOISE_SIGMAS:g} sigma = "
-               f"{NOISE_SIGMAS * self.effort_noise_Nm[worst]:.3g} N m); TCP deviation max "
+        effort = (f"{'limits kept' if self.limits_kept else 'EFFORT LIMIT EXCEEDED'}: largest effort "
+                  f"{self.effort_ratio_max[worst]:.3f} of the limit ({self.joint_names[worst]} at "
+                  f"t = {self.effort_ratio_time_s[worst]:.3f} s, the record's noise {NOISE_SIGMAS:g} sigma = "
+                  f"{NOISE_SIGMAS * self.effort_noise_Nm[worst]:.3g} N m)" if self.effort_recorded else
+                  "torques not judged: the record holds no effort for every joint and sample")
+        out = [f"{effort}; TCP deviation max "
                f"{1e3 * self.tcp_deviation_max_m:.3f} mm; {settle}",
                f"the motion ({self.duration_s:.3f} s) starts {self.time_offset_s:.4f} s after the record's first "
                "sample",
@@ -142,8 +151,6 @@ def time_offset_s(motion: SampledMotion, record: JointStates, source: str) -> fl
 
 def verify(motion: SampledMotion, record: JointStates, robot: RobotModel, source: str = "record") -> Verification:
     """``record`` (the model's joints, model order) of an execution of ``motion`` (model order) on ``robot``."""
-    if not np.all(np.isfinite(record.effort_Nm)):
-        raise DataFileError(source, "effort", "the record holds no effort for every joint and sample")
     tau = time_offset_s(motion, record, source)
     t_all = motion.t_s - motion.t_s[0]
     slack = COVER_INTERVALS * float(np.median(np.diff(record.t_s)))
@@ -158,9 +165,10 @@ def verify(motion: SampledMotion, record: JointStates, robot: RobotModel, source
     error = q_rec - motion.q_rad
     tcp = np.linalg.norm(robot.positions(q_rec) - robot.positions(motion.q_rad), axis=1)
     during = (record.t_s >= tau) & (record.t_s <= t_all[-1] + tau)
-    ratio = np.abs(record.effort_Nm[during]) / np.asarray(robot.limits.effort_Nm, float)
-    worst = np.argmax(ratio, axis=0)
-    effort_at_plan = _at(record.t_s, record.effort_Nm, t_plan + tau)
+    effort = record.effort_Nm if np.all(np.isfinite(record.effort_Nm)) else np.full_like(record.effort_Nm, np.nan)
+    ratio = np.abs(effort[during]) / np.asarray(robot.limits.effort_Nm, float)
+    worst = np.argmax(np.nan_to_num(ratio, nan=0.0), axis=0)
+    effort_at_plan = _at(record.t_s, effort, t_plan + tau)
     settle: float | None = None
     offset: float | None = None
     t_end = t_all[-1] + tau
@@ -170,7 +178,7 @@ def verify(motion: SampledMotion, record: JointStates, robot: RobotModel, source
         rest = np.mean(tcp_tail[record.t_s[tail] >= record.t_s[-1] - REST_WINDOW_S], axis=0)
         settle = settling_time(record.t_s[tail], tcp_tail, rest, t_end)
         offset = float(np.linalg.norm(rest - robot.positions(motion.q_rad[-1:])[0]))
-    steps = np.diff(record.effort_Nm, axis=0)
+    steps = np.diff(effort, axis=0)
     noise = 1.4826 * np.median(np.abs(steps - np.median(steps, axis=0)), axis=0) / np.sqrt(2.0)
     feedforward_rms = np.sqrt(np.mean((effort_at_plan - motion.tau_ff_Nm) ** 2, axis=0))
     return Verification(motion.joint_names, tau, float(t_all[-1]), np.max(np.abs(error), axis=0),

@@ -93,6 +93,18 @@ def test_a_record_of_another_motion_or_over_the_limits_fails(played, tmp_path, r
         assert result.effort_ratio_max[1] > 1.0 and result.limits_kept is kept, (excess_sigmas, result.lines()[0])
 
 
+def test_a_record_without_efforts_is_judged_on_its_tracking(played, rx130l) -> None:
+    _, record, motion = played
+    states = read_joint_states(record, list(motion.joint_names))
+    positions_only = JointStates(states.joint_names, states.t_s, states.q_rad, states.qd_rad_s,
+                                 np.full_like(states.effort_Nm, np.nan))
+    result = verify(motion, positions_only, _weak(rx130l))
+    full = verify(motion, states, rx130l)
+    assert not result.effort_recorded and result.limits_kept
+    assert result.lines()[0].startswith("torques not judged")
+    np.testing.assert_array_equal(result.tracking_max_rad, full.tracking_max_rad)
+
+
 def _weak(robot: RobotModel) -> RobotModel:
     """``robot`` with a tenth of its effort limits."""
     model = robot.model.copy()
