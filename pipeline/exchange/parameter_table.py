@@ -35,9 +35,6 @@ class ParameterTable:
             raise ValueError(f"{n} names, {np.shape(self.values)} values, {np.shape(self.stds)} stds, "
                              f"{len(self.units)} units")
 
-    def value_of(self, name: str) -> float:
-        return float(self.values[self.names.index(name)])
-
 
 def write_parameter_table_csv(path: str | Path, table: ParameterTable) -> Path:
     """``table`` as CSV (module docstring)."""

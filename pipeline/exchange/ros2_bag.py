@@ -392,7 +392,7 @@ def _point_of(message: Any) -> tuple[float, float, float]:
     return float(p.x), float(p.y), float(p.z)
 
 
-def _quaternion_of(message: Any) -> tuple[float, float, float, float]:
+def _quaternion_of(message: Any) -> tuple[float, float, float, float]:   # Any: a generated message class
     """The orientation ``(x, y, z, w)`` of a pose or transform message; the identity for a point."""
     if hasattr(message, "pose"):
         o = message.pose.orientation

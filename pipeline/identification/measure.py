@@ -5,11 +5,12 @@ positions and motor torques are recorded. Two sources:
 
 * **simulation**: ``real.execute_joint_trajectory`` (ideal tracking of the commanded Fourier
   trajectory; encoder and motor-torque noise added by the hidden robot's sensors);
-* **files**: a ROS 2 bag of ``sensor_msgs/JointState`` (:func:`load_joint_bag`) or CSV with a
-  header; columns ``t`` (s, optional if ``sample_time_s`` is given), joint
-  positions ``q1..qn`` and torques ``tau1..taun``; or the joint-state CSV of
-  :mod:`pipeline.exchange.motion_csv` (``t_s, q_<joint>_rad..., qd_<joint>_rad_s..., effort_<joint>_Nm...``,
-  as ``arm play`` logs it), its joints matched by name like a bag's. Motor-side columns (``side="motor"``) are
+* **files**: a recording of joint states (:func:`load_joint_recording`): a ROS 2 bag of
+  ``sensor_msgs/JointState`` or the joint-state CSV of :mod:`pipeline.exchange.motion_csv`
+  (``t_s, q_<joint>_rad..., qd_<joint>_rad_s..., effort_<joint>_Nm...``, as ``arm play`` logs it), joints
+  matched by name; or a numbered CSV with a header (:func:`load_joint_csv`): columns ``t`` or ``t_s``
+  (s, optional if ``sample_time_s`` is given), joint positions ``q1..qn`` and torques ``tau1..taun``.
+  Motor-side columns (``side="motor"``) are
   converted with the gear matrix ``K`` of ``robot.yaml``: ``q = K^-1 q_motor``,
   ``tau = K^T tau_motor``.
 
@@ -26,9 +27,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.core.errors import DataFileError
-from pipeline.exchange.joint_names import match_joint_names
-from pipeline.exchange.motion_csv import STATE_GROUPS
-from pipeline.exchange.ros2_bag import read_joint_states
+from pipeline.exchange.recording import read_recorded_joint_states
 from pipeline.identification import signals
 from pipeline.identification.fourier import FourierTrajectory
 from pipeline.identification.joints import unmeasured_torque_columns
@@ -169,14 +168,10 @@ def load_joint_csv(
     sample_time_s: float | None = None,
     q_offset_rad: np.ndarray | None = None,
     min_samples: int = 10,
-    name_map: dict[str, str] | None = None,
 ) -> JointRecord:
-    """Read a CSV record (see the module docstring); ``side`` = "joint" or "motor".
-
-    The time column is ``t`` or ``t_s``. A header with ``t_s`` and no ``q1`` is the joint-state layout:
-    the model's joints are found among its ``q_<joint>_rad`` columns by name (``name_map`` =
-    {recorded: model}, ``identification.joint_names``), their torques in ``effort_<joint>_Nm``. Errors
-    name the file, the column (``q3``) and the file line (header = line 1)."""
+    """Read a numbered CSV record (``q1..qn``, ``tau1..taun``; the module docstring); ``side`` = "joint" or
+    "motor". The time column is ``t`` or ``t_s``. Errors name the file, the column (``q3``) and the file
+    line (header = line 1)."""
     path = Path(path)
     nq = robot.nq
     if side not in ("joint", "motor"):
@@ -184,11 +179,8 @@ def load_joint_csv(
     header, data, line_numbers = read_csv_table(path)
     col = {h: i for i, h in enumerate(header)}
     time_name = "t_s" if "t_s" in col and "t" not in col else "t"
-    if time_name == "t_s" and "q1" not in col:
-        q_names, tau_names = joint_state_columns(header, robot, name_map, path)
-    else:
-        q_names = [f"q{i + 1}" for i in range(nq)]
-        tau_names = [f"tau{i + 1}" for i in range(nq)]
+    q_names = [f"q{i + 1}" for i in range(nq)]
+    tau_names = [f"tau{i + 1}" for i in range(nq)]
     missing = [n for n in q_names + tau_names if n not in col]
     if missing:
         raise DataFileError(path, "header", f"missing columns {missing} (found {header})")
@@ -217,25 +209,6 @@ def load_joint_csv(
     if q_offset_rad is not None:
         q = q + np.asarray(q_offset_rad, float)
     return _uniform_record(t, q, tau, str(path), line_numbers, nq, min_samples)
-
-
-#: the joint-state CSV's position and effort columns, ``(prefix, suffix)`` around the joint name
-JOINT_STATE_POSITION, JOINT_STATE_EFFORT = STATE_GROUPS[0], STATE_GROUPS[2]
-
-
-def joint_state_columns(header: list[str], robot: RobotModel, name_map: dict[str, str] | None,
-                        path: Path) -> tuple[list[str], list[str]]:
-    """The position and torque columns of the model's joints in a joint-state CSV header, in model order."""
-    prefix, suffix = JOINT_STATE_POSITION
-    recorded = [h[len(prefix):len(h) - len(suffix)] for h in header
-                if h.startswith(prefix) and h.endswith(suffix) and len(h) > len(prefix) + len(suffix)]
-    if not recorded:
-        raise DataFileError(path, "header", f"a t_s column but no {prefix}<joint>{suffix} columns (found {header})")
-    model = [str(n) for n in robot.model.names[1:]]
-    mapping = match_joint_names(recorded, model, name_map, source=str(path), field="identification.joint_names")
-    effort_prefix, effort_suffix = JOINT_STATE_EFFORT
-    return ([f"{prefix}{mapping[n]}{suffix}" for n in model],
-            [f"{effort_prefix}{mapping[n]}{effort_suffix}" for n in model])
 
 
 #: a record resampled onto more than this many uniform steps per logged sample is mostly gaps: refused
@@ -271,25 +244,26 @@ def _uniform_record(t: np.ndarray, q: np.ndarray, tau: np.ndarray, source: str, 
     return rec
 
 
-def load_joint_bag(
+def load_joint_recording(
     path: str | Path,
     robot: RobotModel,
     side: str = "joint",
     name_map: dict[str, str] | None = None,
     min_samples: int = 10,
 ) -> JointRecord:
-    """A ROS 2 bag's ``sensor_msgs/JointState`` (``/joint_states`` or the one topic of that type) as a
-    record: positions and efforts of the model's joints, matched by name in any order
-    (:func:`pipeline.exchange.joint_names.match_joint_names`; ``name_map`` = {recorded: model},
-    ``identification.joint_names``); other joints ignored. ``side="motor"`` converts through the gear matrix."""
+    """A recording of joint states (a ROS 2 bag's ``sensor_msgs/JointState``, ``/joint_states`` or the one
+    topic of that type, or the joint-state CSV; :func:`pipeline.exchange.recording.read_recorded_joint_states`)
+    as a record: positions and efforts of the model's joints, matched by name in any order (``name_map`` =
+    {recorded: model}, ``identification.joint_names``); other joints ignored. ``side="motor"`` converts
+    through the gear matrix."""
     names = [str(n) for n in robot.model.names[1:]]
-    states = read_joint_states(path, names, name_map, field="identification.joint_names")
+    states, _ = read_recorded_joint_states(path, names, name_map, field="identification.joint_names")
     for label, x in (("position", states.q_rad), ("effort", states.effort_Nm)):
         if not np.all(np.isfinite(x)):
             k, j = (int(i) for i in np.argwhere(~np.isfinite(x))[0])
-            raise DataFileError(path, label, f"joint {names[j]}: empty or NaN in message {k + 1}")
+            raise DataFileError(path, label, f"joint {names[j]}: empty or NaN in sample {k + 1}")
     if states.n_samples < min_samples:
-        raise DataFileError(path, "samples", f"{states.n_samples} JointState messages, need at least {min_samples}")
+        raise DataFileError(path, "samples", f"{states.n_samples} joint states, need at least {min_samples}")
     q, tau = states.q_rad, states.effort_Nm
     if side == "motor":
         q, tau = motor_to_joint(q, tau, robot.actuation.gear_matrix)

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.core.errors import ConfigError, DataFileError
-from pipeline.exchange.ros2_bag import is_bag
+from pipeline.exchange.recording import is_recording
 from pipeline.identification import measure as meas_mod
 from pipeline.identification.config import DATA_BORDER_SAMPLES, MAX_SAMPLE_TIME_S, Config
 from pipeline.identification.signals import record_filter_settings
@@ -20,10 +20,10 @@ def load_user_record(cfg: Config, robot: RobotModel) -> meas_mod.JointRecord:
     longer than half the period of the position filter's cut-off), joint limits, enough samples for
     the held-out fit, and a position cut-off below the Nyquist frequency."""
     file = cfg.data_file
-    if is_bag(file):
-        rec = meas_mod.load_joint_bag(file, robot, cfg.data_side, cfg.joint_names or None)
+    if is_recording(file):
+        rec = meas_mod.load_joint_recording(file, robot, cfg.data_side, cfg.joint_names or None)
     else:
-        rec = meas_mod.load_joint_csv(file, robot, cfg.data_side, name_map=cfg.joint_names or None)
+        rec = meas_mod.load_joint_csv(file, robot, cfg.data_side)
     check_record_limits(rec, robot, file)
     check_record_signals(rec, cfg, file)
     dt = rec.sample_time_s

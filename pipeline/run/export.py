@@ -46,8 +46,6 @@ from pipeline.run.export_tour import calibration_files
 from pipeline.run.stage_io import load_run
 from pipeline.stage_api import StageOutput
 
-#: the prefix of the tracker pose's parameters (``tracker.dx`` ...)
-TRACKER_PREFIX = TRACKER_NAMES[0].split(".")[0] + "."
 #: the stages whose robot is handed on, last first
 HANDED_ON_ORDER = ("trajectory", "control", "identification", "calibration", "model")
 
@@ -211,7 +209,7 @@ def calibration_parameters(ctx: ExportContext, calibration: StageOutput) -> None
     joint zero offsets ``j{i}.dq``, compliances, the reflector offset) with its standard deviation and
     unit. The tracker's pose is a parameter of the set-up, estimated about its registration, not of the
     arm: left out."""
-    identified = [p for p in identified_parameters(calibration.data) if not p[0].startswith(TRACKER_PREFIX)]
+    identified = [p for p in identified_parameters(calibration.data) if p[0] not in TRACKER_NAMES]
     if not identified:
         return
     names = tuple(name for name, _, _ in identified)

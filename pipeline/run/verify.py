@@ -43,7 +43,7 @@ from pipeline.core.errors import DataFileError
 from pipeline.exchange.motion import JointStates, SampledMotion
 from pipeline.exchange.recording import read_recorded_joint_states
 from pipeline.robot.model import RobotModel
-from pipeline.sim.player import in_model_order, read_motion
+from pipeline.sim.player import read_motion_for
 
 #: a joint this far from the start pose (rad) has begun to move
 ONSET_RAD = 1e-3
@@ -190,6 +190,6 @@ def verify(motion: SampledMotion, record: JointStates, robot: RobotModel, source
 def verify_files(motion_path: str | Path, record_path: str | Path, robot: RobotModel,
                  name_map: dict[str, str] | None = None) -> Verification:
     """:func:`verify` on a motion file and a record file (module docstring)."""
-    motion = in_model_order(read_motion(motion_path), robot, str(motion_path))
+    motion = read_motion_for(robot, motion_path)
     record, _ = read_recorded_joint_states(record_path, list(motion.joint_names), name_map, field="--joint-names")
     return verify(motion, record, robot, str(record_path))

@@ -63,7 +63,12 @@ def read_motion(path: str | Path) -> SampledMotion:
     raise DataFileError(path, None, "neither a ROS 2 bag nor a motion CSV (.csv)")
 
 
-def in_model_order(motion: SampledMotion, robot: RobotModel, source: str) -> SampledMotion:
+def read_motion_for(robot: RobotModel, path: str | Path) -> SampledMotion:
+    """The motion of ``path`` (:func:`read_motion`) in the model's joint order (:func:`_in_model_order`)."""
+    return _in_model_order(read_motion(path), robot, str(path))
+
+
+def _in_model_order(motion: SampledMotion, robot: RobotModel, source: str) -> SampledMotion:
     """``motion`` with the robot's joints (matched by name) in the model's order; positions, velocities and
     feedforward must be given."""
     names = list(robot.model.names[1:])
@@ -177,7 +182,7 @@ def play_file(motion_path: str | Path, out: str | Path, robot: str | Path = "rx1
     if not (np.isfinite(hold_s) and hold_s >= 0):
         raise DataFileError(None, "--hold-s", f"must be a number >= 0, got {hold_s!r}")
     nominal = load_robot(robot)
-    motion = held(in_model_order(read_motion(motion_path), nominal, str(motion_path)), hold_s)
+    motion = held(read_motion_for(nominal, motion_path), hold_s)
     config = truth if truth is not None else TruthConfig()
     config.engine = engine
     real = create_hidden_robot(nominal, seed, config)

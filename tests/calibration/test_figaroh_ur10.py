@@ -17,7 +17,10 @@ from pipeline.calibration import measure as ms
 from pipeline.calibration import model_selection as msel
 from pipeline.calibration import stage as st
 from pipeline.calibration import validate as va
+from pipeline.calibration.config import Config
 from pipeline.calibration.estimate import estimate, register_points
+from pipeline.exchange.motion import JointStates, TrackerPoints
+from pipeline.exchange.ros2_bag import POSE_STAMPED, write_recording
 from pipeline.robot.model import RobotModel
 from pipeline.robot.yaml_init import write_robot_yaml
 
@@ -72,10 +75,6 @@ def test_the_record_as_a_ros2_recording_reads_as_the_csv(record, tmp_path):
     """The 23 poses as a mocap setup logs them: JointState at 100 Hz (1 s quintic moves, 1.5 s dwells) and
     the marker's PoseStamped at 50 Hz during each dwell, the first 0.1 s of it 1 cm and 0.1 rad off (the arm
     settling). Read in its stationary windows: the CSV's joint angles, positions and orientations."""
-    from pipeline.calibration.config import Config
-    from pipeline.exchange.motion import JointStates, TrackerPoints
-    from pipeline.exchange.ros2_bag import POSE_STAMPED, write_recording
-
     robot, meas = record
     names = tuple(str(n) for n in robot.model.names[1:])
     t, q, tp, xyz, rv = [], [], [], [], []

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from pipeline.core.errors import DataFileError
 from pipeline.exchange.motion import JointStates, TrackerPoints
@@ -59,8 +60,6 @@ def test_windows_without_enough_readings_are_found_not_used():
 def test_6d_readings_get_the_mean_orientation_of_each_window():
     """Orientations scattered by 1 mrad about a pose-dependent rotation near pi (where a naive mean of
     rotation vectors flips sign) average to that rotation within the scatter's standard error."""
-    from scipy.spatial.transform import Rotation
-
     poses, states, points = _recording()
     rng = np.random.default_rng(1)
     nominal = [Rotation.from_rotvec([0.0, 0.0, np.pi - 0.02 + 0.02 * k]) for k in range(3)]

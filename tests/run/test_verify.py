@@ -13,12 +13,8 @@ from pipeline.exchange.motion_csv import write_joint_states_csv, write_motion_cs
 from pipeline.exchange.ros2_bag import read_joint_states
 from pipeline.robot.model import RobotModel
 from pipeline.run.verify import verify, verify_files
-from pipeline.sim.player import in_model_order, play_file, read_motion
+from pipeline.sim.player import play_file, read_motion_for
 from pipeline.sim.truth import TruthConfig
-
-
-def read_motion_in_order(path: Path, robot: RobotModel) -> SampledMotion:
-    return in_model_order(read_motion(path), robot, str(path))
 
 
 def _move(robot: RobotModel, q0: np.ndarray, q1: np.ndarray, duration_s: float = 0.6,
@@ -67,7 +63,7 @@ def test_the_played_motion_is_found_on_any_clock_and_tracked_closely(played, tmp
     approach = JointStates(states.joint_names, np.concatenate([t_before, states.t_s]),
                            np.vstack([q_before, states.q_rad]), np.vstack([np.zeros_like(q_before), states.qd_rad_s]),
                            np.vstack([np.zeros_like(q_before) + states.effort_Nm[0], states.effort_Nm]))
-    from_approach = verify(read_motion_in_order(motion_csv, rx130l), approach, rx130l)
+    from_approach = verify(read_motion_for(rx130l, motion_csv), approach, rx130l)
     assert from_approach.time_offset_s == pytest.approx(result.time_offset_s, abs=1e-9)
 
 
