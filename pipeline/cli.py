@@ -156,6 +156,14 @@ def _cmd_export(ns: argparse.Namespace) -> int:
     return 0
 
 
+def _floats(text: str) -> list[float]:
+    """``K1,K2,...`` as numbers (argparse type: a bad one is a usage error, exit 2)."""
+    try:
+        return [float(x) for x in text.split(",")]
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(f"not a comma-separated list of numbers: {text!r}") from err
+
+
 def _add_arm_parser(sub: argparse._SubParsersAction) -> None:
     """``arm play MOTION --engine mujoco|pipeline --out RECORD``: the stand-in arm behind files."""
     arm = sub.add_parser("arm", help="the stand-in arm behind files: `arm play MOTION --out RECORD`")
@@ -181,11 +189,13 @@ def _add_arm_parser(sub: argparse._SubParsersAction) -> None:
     vp.add_argument("record", metavar="RECORD")
     vp.add_argument("--robot", default="rx130l",
                     help="built-in robot, folder (an export's robot/), URDF or example arm")
+    vp.add_argument("--effort-scale", type=_floats, default=None, metavar="K1,K2,...",
+                    help="joint-side N·m per logged effort unit, per joint (motor currents: k_t x gear ratio)")
 
 
 def _cmd_arm(ns: argparse.Namespace) -> int:
     if ns.arm_command == "verify":
-        result = verify_files(ns.motion, ns.record, load_robot(ns.robot))
+        result = verify_files(ns.motion, ns.record, load_robot(ns.robot), effort_scale=ns.effort_scale)
         for line in result.lines():
             print(line)
         if not result.limits_kept:

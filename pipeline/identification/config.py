@@ -97,6 +97,11 @@ class Config:
     #: CSV record or ROS 2 bag (folder, .db3, .mcap) instead of the simulated experiment
     data_file: Annotated[str, FileInput] = ""
     data_side: Literal["joint", "motor"] = "joint"  # columns of data_file
+    # a data_file's efforts: "auto" = read against the nominal model's torques, converted (and stated) when
+    # they are not joint torques in N·m (motor currents, motor-side torques); a list = joint-side N·m per
+    # logged unit per joint (k_t x gear ratio for currents in A); "none" = taken as joint torques unchecked
+    # (effort_unit.read_effort_unit)
+    effort_scale: Literal["auto", "none"] | list[float] = "auto"
     # position low-pass and decimation of a (non-periodic) data_file; null: from its sample rate,
     # min(20 Hz, rate / 4) and rate / (5 x cut-off) (signals.record_filter_settings)
     data_cutoff_hz: float | None = None
@@ -194,6 +199,11 @@ class Config:
                 for part in fld.split("."):
                     value = getattr(value, part)
                 raise ConfigError(source, p + fld, f"{problem}, got {value!r}")
+        if isinstance(self.effort_scale, list) and not all(
+                isinstance(k, int | float) and fin(k) and k > 0 for k in self.effort_scale):
+            raise ConfigError(source, p + "effort_scale",
+                              "must be auto, none or a list of numbers > 0 (joint-side N·m per logged effort unit, "
+                              f"per joint), got {self.effort_scale!r}")
         for name in ("max_tcp_speed_m_s", "max_tcp_acceleration_m_s2"):
             v = getattr(ex, name)
             if v is not None and not (isinstance(v, int | float) and fin(v) and v > 0):

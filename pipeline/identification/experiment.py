@@ -5,9 +5,10 @@ torques are fitted to and the data they come from (paper ``004_abbe750b8bbcc3aa.
   calibration), the joints whose torques the fit uses (:mod:`.joints`) and the structural base
   set, decided on the nominal robot and kept for the current one (:mod:`.base_set`);
 * :func:`excite_and_measure`: the user's record processed (:func:`.measure.process_record`; no
-  excitation, nothing simulated), or the optimal Fourier excitation (:mod:`.design`) run on the
-  hidden robot for ``periods`` periods and processed (period averaging, zero-phase filtering,
-  differentiation, block decimation: :func:`.measure.process_periodic`);
+  excitation, nothing simulated; its efforts read against the nominal model and converted to joint
+  torques when they are in another unit: :mod:`.effort_unit`), or the optimal Fourier excitation
+  (:mod:`.design`) run on the hidden robot for ``periods`` periods and processed (period averaging,
+  zero-phase filtering, differentiation, block decimation: :func:`.measure.process_periodic`);
 * :func:`take_off_record_terms`: a record's friction and actuation terms beyond viscous + Coulomb
   friction, taken off its torques before the fits (:mod:`.friction_terms`).
 """
@@ -30,11 +31,13 @@ from pipeline.identification.base_set import (
     without_columns,
 )
 from pipeline.identification.config import DATA_BORDER_SAMPLES, Config
+from pipeline.identification.effort_unit import EffortUnit, read_effort_unit, scaled
 from pipeline.identification.friction_terms import FrictionTerms, record_terms
 from pipeline.identification.joints import select_joints
 from pipeline.identification.outcome import Measured, Regressors
 from pipeline.identification.record import load_user_record
-from pipeline.identification.regressor import RegressorModel
+from pipeline.identification.regressor import RegressorModel, standard_parameters
+from pipeline.robot.assumed_values import predicted_drive_values
 from pipeline.robot.model import RobotModel
 from pipeline.robot.symbolic import SymbolicRobot
 from pipeline.stage_api import StageContext
@@ -81,8 +84,9 @@ def excite_and_measure(ctx: StageContext, cfg: Config, regs: Regressors, timings
     if regs.record is not None:  # the user's record: no excitation to design, nothing simulated
         data = meas_mod.process_record(regs.record, regs.reg, cfg.data_cutoff_hz, cfg.data_decimation,
                                        DATA_BORDER_SAMPLES)
+        unit = record_effort_unit(ctx.robot, cfg, regs, data)
         timings["data_s"] = time.perf_counter() - t1
-        return Measured(data, str(cfg.data_file))
+        return Measured(scaled(data, unit.scale_Nm_per_unit), str(cfg.data_file), effort_unit=unit)
     robot, ex = ctx.robot, cfg.excitation
     limits = fourier.ExcitationLimits.from_robot(
         robot, ex.position_margin, ex.velocity_margin, ex.acceleration_margin, ex.torque_margin,
@@ -114,6 +118,19 @@ def excite_and_measure(ctx: StageContext, cfg: Config, regs: Regressors, timings
         data, stiction = meas_mod.without_stiction_band(data, regs.reg.coulomb_width_rad_s)
     timings["data_s"] = time.perf_counter() - t1
     return Measured(data, "simulation (ideal tracking of the hidden robot)", exc, limits, traj, stiction)
+
+
+def record_effort_unit(robot: RobotModel, cfg: Config, regs: Regressors, data: meas_mod.ProcessedData) -> EffortUnit:
+    """What the record's efforts are, against the nominal model's rigid-body torques (URDF inertias and the
+    stated rotor inertia; :mod:`.effort_unit`), and the scale to joint torques, on the measured joints."""
+    drive = predicted_drive_values(robot.actuation, robot.spec.assumed)
+    zeros = np.zeros(robot.nq)
+    p_rigid = standard_parameters(robot.model, drive["rotor_inertia_kgm2"], zeros, zeros)
+    setting = cfg.effort_scale
+    if isinstance(setting, list):
+        setting = [float(setting[j]) for j in regs.used]
+    return read_effort_unit(data, p_rigid, regs.reg.n_parameters - 4 * robot.nq, robot.nq, setting,
+                            np.asarray(robot.actuation.gear_ratio, float)[regs.used])
 
 
 def shrink_base_set(regs: Regressors, exc: design_mod.ExcitationResult, cfg: Config) -> bool:

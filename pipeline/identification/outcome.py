@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.identification.design import ExcitationResult
+from pipeline.identification.effort_unit import EffortUnit
 from pipeline.identification.estimate import HacCovariance, LeastSquaresEstimate, PhysicalEstimate
 from pipeline.identification.fourier import ExcitationLimits, FourierTrajectory
 from pipeline.identification.friction import LoadFit, LoadFriction, StribeckFit
@@ -67,6 +68,8 @@ class Measured:
     trajectory: FourierTrajectory | None = None
     #: an arm whose dry friction sticks: the samples in the stiction band left out of the fits (None: none)
     stiction: StictionExclusion | None = None
+    #: a user's record: what its efforts were read as and the scale applied (None: simulated)
+    effort_unit: EffortUnit | None = None
 
 
 @dataclass

@@ -11,6 +11,7 @@ from matplotlib.figure import Figure
 
 from pipeline.identification import design as design_mod
 from pipeline.identification.config import Config
+from pipeline.identification.effort_unit import EffortUnit
 from pipeline.identification.fit import unmeasured_joints_note
 from pipeline.identification.friction_terms import not_handed_on_note, report_lines
 from pipeline.identification.measure import StictionExclusion
@@ -234,6 +235,7 @@ def summary(cfg: Config, o: Outcome) -> dict[str, Any]:
         "actuator_coupling": "gear matrix" if o.regs.coupled else "diagonal (joint side)",
         "n_samples_fit": o.measured.data.n_samples,
         **stiction_summary(o.measured.stiction, pj),
+        **({} if o.measured.effort_unit is None else effort_unit_summary(o.measured.effort_unit, pj)),
         "friction_model": cfg.friction_model,
         **o.friction,
         "runtime_s": o.timings["total_s"],
@@ -252,6 +254,18 @@ def stiction_summary(ex: StictionExclusion | None, pj: Callable[[np.ndarray], li
             "fit_samples_in_stiction_band_per_joint": pj(ex.in_band_per_joint),
             "fit_samples_left_out_stiction": ex.n_left_out,
             "fit_samples_before_stiction_exclusion": ex.n_total}
+
+
+def effort_unit_summary(unit: EffortUnit, pj: Callable[[np.ndarray], list[float | None]]) -> dict[str, Any]:
+    """The summary entries of what a record's efforts were read as (:mod:`.effort_unit`), per joint."""
+    def finite(x: np.ndarray) -> list[float | None]:
+        return [v if v is None or np.isfinite(v) else None for v in pj(x)]
+
+    return {"effort_unit_status": unit.status,
+            "effort_scale_Nm_per_unit": finite(unit.scale_Nm_per_unit),
+            "effort_nominal_ratio": finite(unit.nominal_ratio),
+            "effort_nominal_partial_r2": finite(unit.partial_r2),
+            "effort_nominal_ratio_median": unit.median_ratio}
 
 
 def arrays(cfg: Config, o: Outcome) -> dict[str, np.ndarray]:
@@ -367,6 +381,9 @@ def stage_result(cfg: Config, o: Outcome, robot: RobotModel) -> StageResult:
             f"{len(o.regs.dropped)} base parameter(s) the excitation cannot bring under identification."
             "max_cond_base_regressor_data are left out of the design and the fits (combined into the others; "
             "report.md names them)")]
+    unit_note = None if o.measured.effort_unit is None else o.measured.effort_unit.note(o.regs.used + 1)
+    if unit_note:
+        s["warnings"] = [*s.get("warnings", []), unit_note]
     terms_note = not_handed_on_note(s)
     if terms_note:
         s["warnings"] = [*s.get("warnings", []), terms_note]

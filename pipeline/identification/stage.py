@@ -83,6 +83,10 @@ def check(config: Config, robot: RobotModel) -> None:
                           f"{cfg.base_samples} random samples give {cfg.base_samples * nq} regressor rows for the "
                           f"{n_params} standard parameters of {robot.name}; need at least {-(-n_params // nq)} "
                           "(default 300)")
+    if isinstance(cfg.effort_scale, list) and len(cfg.effort_scale) != robot.nq:
+        raise ConfigError(None, "identification.effort_scale",
+                          f"{len(cfg.effort_scale)} values for the {robot.nq} joints of {robot.name} (joint-side N·m "
+                          "per logged effort unit, one per joint in the model's order)")
     rec = load_user_record(cfg, robot) if cfg.data_file else None
     select_joints(cfg.joints, [str(n) for n in robot.model.names[1:]], {} if rec is None else rec.unmeasured)
     if rec is None:

@@ -20,6 +20,12 @@ read with the model's joints matched by name.
    a little above it. The limit counts as exceeded when the largest effort passes it by more than
    ``NOISE_SIGMAS`` times the record's own noise, ``sigma = 1.4826 MAD(diff(effort)) / sqrt(2)`` per joint
    (the median absolute deviation of the sample-to-sample differences: robust to the torque's steps).
+   Before that, the record's efforts must be joint torques in N·m: per joint the effort is regressed on the
+   feedforward with an offset, viscous and Coulomb columns free, and the median ratio of the joints where
+   the feedforward explains enough of it must read as torques
+   (:func:`pipeline.identification.effort_unit.ratio_to_model`, the identification's check against its
+   nominal model). Motor currents (a UR driver's ``effort``) or motor-side torques are not judged against
+   torque limits; ``--effort-scale`` states joint-side N·m per logged unit.
 4. **Settling**, as the trajectory stage counts it (:mod:`pipeline.trajectory.settling`): after the
    motion's end, the time from which the TCP (the model's kinematics at the recorded angles) stays within
    50 µm of the pose it comes to rest at, the mean of the record's last ``REST_WINDOW_S``
@@ -27,8 +33,8 @@ read with the model's joints matched by name.
    distance from the planned end is the static offset.
 
 The check fails (exit 3) when a recorded effort exceeds its limit so; bad files end with exit 2. A record
-without efforts (positions only, as some drivers log) is judged on its tracking and settling, and says
-that its torques were not judged.
+without efforts (positions only, as some drivers log), or with efforts in another unit, is judged on its
+tracking and settling, and says that its torques were not judged and why.
 """
 
 from __future__ import annotations
@@ -42,6 +48,7 @@ from pipeline.control.validate import SETTLING_POSITION_TOLERANCE_M, settling_ti
 from pipeline.core.errors import DataFileError
 from pipeline.exchange.motion import JointStates, SampledMotion
 from pipeline.exchange.recording import read_recorded_joint_states
+from pipeline.identification.effort_unit import median_ratio, ratio_to_model, within_band
 from pipeline.robot.model import RobotModel
 from pipeline.sim.player import read_motion_for
 
@@ -58,6 +65,8 @@ OFFSET_SAMPLES = 2000
 REST_WINDOW_S = 0.05
 #: the record may start or end this many of its sample intervals inside the motion (a logger's last sample)
 COVER_INTERVALS = 2
+#: the Coulomb column's smoothing width of the effort-unit check (rad/s)
+COULOMB_WIDTH_RAD_S = 0.01
 
 
 @dataclass(frozen=True)
@@ -79,10 +88,19 @@ class Verification:
     #: after the motion's end (inf: not settled within the record; None: the record ends with the motion)
     settle_time_s: float | None
     static_offset_m: float | None
+    #: (n,) the recorded effort per unit of feedforward (NaN: no effort) and the median that counts (None: none)
+    effort_per_feedforward: np.ndarray
+    effort_per_feedforward_median: float | None
+
+    @property
+    def effort_logged(self) -> bool:
+        return bool(np.all(np.isfinite(self.effort_ratio_max)))
 
     @property
     def effort_recorded(self) -> bool:
-        return bool(np.all(np.isfinite(self.effort_ratio_max)))
+        """Efforts logged, and in N·m as far as the feedforward tells (module docstring, step 3)."""
+        median = self.effort_per_feedforward_median
+        return self.effort_logged and (median is None or within_band(median))
 
     @property
     def limits_kept(self) -> bool:
@@ -102,7 +120,10 @@ class Verification:
                   f"{self.effort_ratio_max[worst]:.3f} of the limit ({self.joint_names[worst]} at "
                   f"t = {self.effort_ratio_time_s[worst]:.3f} s, the record's noise {NOISE_SIGMAS:g} sigma = "
                   f"{NOISE_SIGMAS * self.effort_noise_Nm[worst]:.3g} N m)" if self.effort_recorded else
-                  "torques not judged: the record holds no effort for every joint and sample")
+                  "torques not judged: the record holds no effort for every joint and sample" if not self.effort_logged
+                  else f"torques not judged: the record's efforts are {self.effort_per_feedforward_median:.3g}x the "
+                       "motion's feedforward (median), not joint torques in N·m (motor currents or motor-side "
+                       "torques?); --effort-scale states joint-side N·m per logged unit")
         out = [f"{effort}; TCP deviation max "
                f"{1e3 * self.tcp_deviation_max_m:.3f} mm; {settle}",
                f"the motion ({self.duration_s:.3f} s) starts {self.time_offset_s:.4f} s after the record's first "
@@ -181,15 +202,38 @@ def verify(motion: SampledMotion, record: JointStates, robot: RobotModel, source
     steps = np.diff(effort, axis=0)
     noise = 1.4826 * np.median(np.abs(steps - np.median(steps, axis=0)), axis=0) / np.sqrt(2.0)
     feedforward_rms = np.sqrt(np.mean((effort_at_plan - motion.tau_ff_Nm) ** 2, axis=0))
+    per_ff, median = effort_per_feedforward(effort_at_plan, motion)
     return Verification(motion.joint_names, tau, float(t_all[-1]), np.max(np.abs(error), axis=0),
                         np.sqrt(np.mean(error ** 2, axis=0)), float(np.max(tcp)), np.max(ratio, axis=0),
                         record.t_s[during][worst] - tau, noise, np.asarray(robot.limits.effort_Nm, float),
-                        feedforward_rms, settle, offset)
+                        feedforward_rms, settle, offset, per_ff, median)
+
+
+def effort_per_feedforward(effort: np.ndarray, motion: SampledMotion) -> tuple[np.ndarray, float | None]:
+    """Per joint the recorded effort ``effort`` (at the motion's samples) per unit of the feedforward, with
+    an offset, viscous and Coulomb columns free, and the median over the joints where it counts (module
+    docstring, step 3); NaN and None without efforts."""
+    n = effort.shape[1]
+    if not np.all(np.isfinite(effort)):
+        return np.full(n, np.nan), None
+    v = motion.qd_rad_s
+    pairs = [ratio_to_model(effort[:, j], motion.tau_ff_Nm[:, j],
+                            np.column_stack([np.ones(len(v)), v[:, j], np.tanh(v[:, j] / COULOMB_WIDTH_RAD_S)]))
+             for j in range(n)]
+    c, r2 = np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
+    return c, median_ratio(c, r2)[1]
 
 
 def verify_files(motion_path: str | Path, record_path: str | Path, robot: RobotModel,
-                 name_map: dict[str, str] | None = None) -> Verification:
-    """:func:`verify` on a motion file and a record file (module docstring)."""
+                 name_map: dict[str, str] | None = None, effort_scale: list[float] | None = None) -> Verification:
+    """:func:`verify` on a motion file and a record file (module docstring); ``effort_scale``: joint-side N·m
+    per logged effort unit, per joint in the model's order (motor currents: ``k_t x gear ratio``)."""
     motion = read_motion_for(robot, motion_path)
     record, _ = read_recorded_joint_states(record_path, list(motion.joint_names), name_map, field="--joint-names")
+    if effort_scale is not None:
+        if len(effort_scale) != robot.nq or not all(np.isfinite(k) and k > 0 for k in effort_scale):
+            raise DataFileError(None, "--effort-scale", f"needs {robot.nq} numbers > 0 (joint-side N·m per logged "
+                                f"unit, one per joint of {robot.name}), got {effort_scale}")
+        record = JointStates(record.joint_names, record.t_s, record.q_rad, record.qd_rad_s,
+                             record.effort_Nm * np.asarray(effort_scale, float)[None, :])
     return verify(motion, record, robot, str(record_path))

@@ -101,6 +101,33 @@ def test_a_record_without_efforts_is_judged_on_its_tracking(played, rx130l) -> N
     np.testing.assert_array_equal(result.tracking_max_rad, full.tracking_max_rad)
 
 
+def test_efforts_in_amperes_are_not_judged_against_torque_limits_unless_scaled(played, tmp_path, rx130l,
+                                                                              capsys) -> None:
+    """Motor currents (k_t x gear ratio N·m per A) over a tenth of the limits would pass as torques: they are
+    named and not judged; stated with --effort-scale they are judged, and fail the tenth of the limits."""
+    motion_csv, record, motion = played
+    states = read_joint_states(record, list(motion.joint_names))
+    nm_per_a = np.array([40.0, 40.0, 25.0, 8.0, 8.0, 5.0])
+    currents = write_joint_states_csv(tmp_path / "currents.csv", JointStates(
+        states.joint_names, states.t_s, states.q_rad, states.qd_rad_s, states.effort_Nm / nm_per_a))
+    weak = _weak(rx130l)
+    as_logged = verify_files(motion_csv, currents, weak)
+    assert not as_logged.effort_recorded and as_logged.limits_kept
+    assert as_logged.effort_per_feedforward_median is not None and as_logged.effort_per_feedforward_median < 0.1
+    assert "not joint torques in N·m" in as_logged.lines()[0]
+    assert verify_files(motion_csv, record, rx130l).effort_recorded       # the N·m record reads as torques
+    scaled = verify_files(motion_csv, currents, weak, effort_scale=list(nm_per_a))
+    assert scaled.effort_recorded and not scaled.limits_kept
+    weak_dir = weak.save(tmp_path / "weak")
+    scale = ",".join(f"{k:g}" for k in nm_per_a)
+    assert cli_main(["arm", "verify", str(motion_csv), str(currents), "--robot", str(weak_dir),
+                     "--effort-scale", scale]) == 3
+    capsys.readouterr()
+    assert cli_main(["arm", "verify", str(motion_csv), str(currents), "--robot", str(weak_dir),
+                     "--effort-scale", "1,2"]) == 2
+    assert "--effort-scale" in capsys.readouterr().err
+
+
 def _weak(robot: RobotModel) -> RobotModel:
     """``robot`` with a tenth of its effort limits."""
     model = robot.model.copy()
