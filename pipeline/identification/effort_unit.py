@@ -17,8 +17,8 @@ joint's friction columns of that regressor (viscous, Coulomb, offset: not known 
 columns leave of ``e_j`` (partial R², ``1 - RSS_full / RSS_friction``); a wrist joint whose torque is
 mostly friction does not determine it. The record reads as joint torques when the median ratio of the
 determined joints lies within ``[1 / MAX_NOMINAL_FACTOR, MAX_NOMINAL_FACTOR]``: a URDF's masses are off
-by tens of per cent, a current's torque constant times the gear ratio (about 3 to 100 N·m/A) or a gear
-ratio by far more. One median for the record: one log has one unit.
+by tens of per cent, a current's torque constant times the gear ratio (about 5 to 100 N·m/A on arms
+that log currents) or a gear ratio by far more. One median for the record: one log has one unit.
 
 **Conversion** (``identification.effort_scale``):
 
@@ -44,7 +44,7 @@ from pipeline.identification.measure import ProcessedData
 #: the nominal model's torque must explain at least this share of what friction leaves of a joint's effort
 MIN_PARTIAL_R2 = 0.3
 #: a joint-torque record's median ratio to the nominal model lies within [1 / this, this]
-MAX_NOMINAL_FACTOR = 2.5
+MAX_NOMINAL_FACTOR = 3.0
 #: ratio c_j x gear ratio within [1 / this, this] on every determined joint: motor-side torques
 GEAR_HINT_FACTOR = 2.0
 
