@@ -26,7 +26,9 @@ that log currents) or a gear ratio by far more. One median for the record: one l
   converted with the nominal model's scale, ``s_j = 1 / c_j`` N·m per logged unit on the determined
   joints and the geometric mean of theirs on the others. The assumption is stated: the URDF's masses
   set the torque scale of every joint. The record-term ``effort_gain`` (:mod:`.friction_terms`) then
-  corrects each joint's constant against the others, within its bound.
+  corrects each joint's constant against the others, within its bound. When the URDF's inertials are
+  ``robot init``'s placeholders the ratios are reported and the efforts used as logged, with a warning
+  when they do not read as torques: masses estimated from the arm's size cannot set a unit.
 * a list, joint-side N·m per logged unit per joint (``k_t x gear ratio`` for motor currents): stated;
   the ratios are still computed, and a median outside the band is warned of.
 * ``none``: the efforts are taken as joint torques, unchecked; the report says so.
@@ -62,6 +64,8 @@ class EffortUnit:
     determined: np.ndarray              # (n_rows,) bool: c_j determined (partial R² >= MIN_PARTIAL_R2)
     median_ratio: float | None          # over the determined joints (None: none determined)
     motor_side_hint: bool = False       # c_j ~ 1 / gear ratio on every determined joint
+    #: the URDF's inertials are placeholders: the ratios are reported, never acted on
+    placeholder_masses: bool = False
 
     @property
     def within_band(self) -> bool:
@@ -72,6 +76,13 @@ class EffortUnit:
         1-based numbers of the measured joints)."""
         ratios = ", ".join(f"{c:.3g}" if d else f"({c:.3g})"
                            for c, d in zip(self.nominal_ratio, self.determined, strict=True))
+        if self.status == "unchecked" and self.placeholder_masses:
+            if self.within_band or self.median_ratio is None:
+                return None
+            return (f"the record's efforts are {self.median_ratio:.3g}x the nominal model's torques (median; per "
+                    f"joint {ratios}), but its link masses are placeholders, which cannot tell the efforts' unit: "
+                    "they are taken as joint torques in N·m; if they are motor currents, state the drives' constants "
+                    "as identification.effort_scale (k_t x gear ratio per joint)")
         if self.status == "unchecked":
             return ("the record's efforts are taken as joint torques in N·m unchecked (identification.effort_scale: "
                     "none)" if not np.any(np.isfinite(self.nominal_ratio)) else
@@ -137,9 +148,12 @@ def nominal_ratios(data: ProcessedData, p_rigid: np.ndarray, n_link: int, nq: in
 
 
 def read_effort_unit(data: ProcessedData, p_rigid: np.ndarray, n_link: int, nq: int,
-                     setting: Literal["auto", "none"] | list[float], gear_ratio: np.ndarray) -> EffortUnit:
+                     setting: Literal["auto", "none"] | list[float], gear_ratio: np.ndarray,
+                     placeholder_masses: bool = False) -> EffortUnit:
     """What the record's efforts are and the scale to apply (module doc). ``setting`` is
-    ``identification.effort_scale`` restricted to the measured joints; ``gear_ratio`` the measured joints'."""
+    ``identification.effort_scale`` restricted to the measured joints; ``gear_ratio`` the measured joints'.
+    With ``placeholder_masses`` (the URDF's inertials are robot init's placeholders) ``auto`` reports the
+    ratios and takes the efforts as logged: masses estimated from a reach class cannot set a unit."""
     m = data.tau.shape[1]
     if setting == "none":
         nan = np.full(m, np.nan)
@@ -153,8 +167,8 @@ def read_effort_unit(data: ProcessedData, p_rigid: np.ndarray, n_link: int, nq: 
     if stated is not None:
         return EffortUnit("stated", stated, c, r2, determined, median, hint)
     unit = EffortUnit("joint torques", np.ones(m), c, r2, determined, median, hint)
-    if median is None:
-        return EffortUnit("unchecked", np.ones(m), c, r2, determined, None)
+    if median is None or placeholder_masses:
+        return EffortUnit("unchecked", np.ones(m), c, r2, determined, median, hint, placeholder_masses)
     if unit.within_band:
         return unit
     scale = np.full(m, float(np.exp(np.mean(np.log(1.0 / c[determined])))))

@@ -39,6 +39,7 @@ from pipeline.identification.record import load_user_record
 from pipeline.identification.regressor import RegressorModel, standard_parameters
 from pipeline.robot.assumed_values import predicted_drive_values
 from pipeline.robot.model import RobotModel
+from pipeline.robot.plausibility import placeholder_kind
 from pipeline.robot.symbolic import SymbolicRobot
 from pipeline.stage_api import StageContext
 
@@ -129,8 +130,9 @@ def record_effort_unit(robot: RobotModel, cfg: Config, regs: Regressors, data: m
     setting = cfg.effort_scale
     if isinstance(setting, list):
         setting = [float(setting[j]) for j in regs.used]
+    placeholder_masses = any(placeholder_kind(line) == "inertials" for line in robot.assumptions)
     return read_effort_unit(data, p_rigid, regs.reg.n_parameters - 4 * robot.nq, robot.nq, setting,
-                            np.asarray(robot.actuation.gear_ratio, float)[regs.used])
+                            np.asarray(robot.actuation.gear_ratio, float)[regs.used], placeholder_masses)
 
 
 def shrink_base_set(regs: Regressors, exc: design_mod.ExcitationResult, cfg: Config) -> bool:

@@ -70,6 +70,12 @@ def test_joint_torques_are_used_as_logged_and_currents_are_converted(hidden_reco
     np.testing.assert_allclose(stated.nominal_ratio[d], ratio, rtol=1e-6)
     wrong = read_effort_unit(currents, p_rigid, n_link, robot.nq, [1.0] * 6, gear)
     assert wrong.status == "stated" and "check the scale" in (wrong.note(np.arange(1, 7)) or "")
+    # placeholder masses (robot init's, from the arm's size) cannot set a unit: reported, not acted on
+    placeholder = read_effort_unit(currents, p_rigid, n_link, robot.nq, "auto", gear, placeholder_masses=True)
+    assert placeholder.status == "unchecked" and np.all(placeholder.scale_Nm_per_unit == 1.0)
+    assert "placeholders" in (placeholder.note(np.arange(1, 7)) or "")
+    assert read_effort_unit(data, p_rigid, n_link, robot.nq, "auto", gear,
+                            placeholder_masses=True).note(np.arange(1, 7)) is None
     unchecked = read_effort_unit(currents, p_rigid, n_link, robot.nq, "none", gear)
     assert unchecked.status == "unchecked" and "unchecked" in (unchecked.note(np.arange(1, 7)) or "")
 
