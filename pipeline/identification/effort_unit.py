@@ -32,6 +32,11 @@ that log currents) or a gear ratio by far more. One median for the record: one l
 * a list, joint-side N·m per logged unit per joint (``k_t x gear ratio`` for motor currents): stated;
   the ratios are still computed, and a median outside the band is warned of.
 * ``none``: the efforts are taken as joint torques, unchecked; the report says so.
+
+**Sign.** A determined joint whose ratio is negative logs its effort with the opposite sign of the
+model's joint torque (a driver's direction convention): under ``auto`` it is negated, stated as an
+assumption, whatever the unit; a stated scale carries its own sign, and a reversed joint under it is
+warned of.
 """
 
 from __future__ import annotations
@@ -58,27 +63,45 @@ class EffortUnit:
     """What the record's efforts were read as, and the scale applied (joint-side N·m per logged unit)."""
 
     status: EffortStatus
-    scale_Nm_per_unit: np.ndarray       # (n_rows,) per measured joint; 1 when used as logged
+    scale_Nm_per_unit: np.ndarray       # (n_rows,) per measured joint; 1 when used as logged, -1 when negated
     nominal_ratio: np.ndarray           # (n_rows,) c_j of the logged efforts (NaN: not computed)
     partial_r2: np.ndarray              # (n_rows,) share of the residual the nominal torque explains
     determined: np.ndarray              # (n_rows,) bool: c_j determined (partial R² >= MIN_PARTIAL_R2)
-    median_ratio: float | None          # over the determined joints (None: none determined)
-    motor_side_hint: bool = False       # c_j ~ 1 / gear ratio on every determined joint
-    #: the URDF's inertials are placeholders: the ratios are reported, never acted on
+    median_ratio: float | None          # median |c_j| over the determined joints (None: none determined)
+    motor_side_hint: bool = False       # |c_j| ~ 1 / gear ratio on every determined joint
+    #: the URDF's inertials are placeholders: the ratios are reported, the unit never acted on
     placeholder_masses: bool = False
 
     @property
     def within_band(self) -> bool:
         return within_band(self.median_ratio)
 
+    @property
+    def reversed(self) -> np.ndarray:
+        """(n_rows,) bool: determined joints whose effort has the opposite sign of the model's torque."""
+        return self.determined & (self.nominal_ratio < 0)
+
     def note(self, joints: np.ndarray) -> str | None:
         """One warning line for a record not used as logged or not checked, else None (``joints``: the
         1-based numbers of the measured joints)."""
         ratios = ", ".join(f"{c:.3g}" if d else f"({c:.3g})"
                            for c, d in zip(self.nominal_ratio, self.determined, strict=True))
+        flipped = [str(int(j)) for j in np.asarray(joints)[self.reversed]]
+        if self.status == "stated":
+            if self.within_band and not flipped:
+                return None
+            sign = f"; joint(s) {', '.join(flipped)} opposite in sign" if flipped else ""
+            return (f"with the stated identification.effort_scale the efforts are {self.median_ratio:.3g}x the "
+                    f"nominal model's torques (median; per joint {ratios}{sign}): check the scale")
+        negated = (f"ASSUMED: joint(s) {', '.join(flipped)} log their effort with the opposite sign of the model's "
+                   f"joint torque (ratios {ratios}): negated" if flipped else "")
+        unit = self._unit_note(joints, ratios)
+        return "; ".join(x for x in (unit, negated) if x) or None
+
+    def _unit_note(self, joints: np.ndarray, ratios: str) -> str:
         if self.status == "unchecked" and self.placeholder_masses:
             if self.within_band or self.median_ratio is None:
-                return None
+                return ""
             return (f"the record's efforts are {self.median_ratio:.3g}x the nominal model's torques (median; per "
                     f"joint {ratios}), but its link masses are placeholders, which cannot tell the efforts' unit: "
                     "they are taken as joint torques in N·m; if they are motor currents, state the drives' constants "
@@ -89,20 +112,15 @@ class EffortUnit:
                     "the record's efforts could not be checked against the nominal model: on no joint does its "
                     f"torque explain {MIN_PARTIAL_R2:.0%} of what friction leaves (ratios {ratios}); they are taken "
                     "as joint torques in N·m")
-        if self.status == "stated":
-            if self.within_band:
-                return None
-            return (f"with the stated identification.effort_scale the efforts are {self.median_ratio:.3g}x the "
-                    f"nominal model's torques (median; per joint {ratios}): check the scale")
         if self.status == "joint torques":
-            return None
+            return ""
         scales = ", ".join(f"{s:.3g}" if d else f"{s:.3g}*"
                            for s, d in zip(self.scale_Nm_per_unit, self.determined, strict=True))
         what = ("they look like motor-side torques (ratios near 1 / gear ratio; identification.data_side: motor "
                 "converts them through the gear matrix)" if self.motor_side_hint else
                 "motor currents in A or another unit")
         return (f"the record's efforts are not joint torques in N·m: they are {self.median_ratio:.3g}x the nominal "
-                f"model's torques (median over the determined joints; per joint {ratios}, brackets: not "
+                f"model's torques (median of |ratio| over the determined joints; per joint {ratios}, brackets: not "
                 f"determined), {what}. ASSUMED: converted with the nominal model's scale, joint-side N·m per "
                 f"logged unit {scales} for joints {', '.join(str(int(j)) for j in joints)} (*: the geometric mean "
                 "of the determined joints'), so the URDF's masses set the torque scale; state the drives' "
@@ -123,10 +141,10 @@ def ratio_to_model(effort: np.ndarray, model: np.ndarray, nuisance: np.ndarray) 
 
 
 def median_ratio(c: np.ndarray, partial_r2: np.ndarray) -> tuple[np.ndarray, float | None]:
-    """The joints whose ratio counts (partial R² >= :data:`MIN_PARTIAL_R2`, a positive ratio) and the median
-    of their ratios (None: no joint counts)."""
-    determined = (partial_r2 >= MIN_PARTIAL_R2) & np.isfinite(c) & (c > 0)
-    return determined, (float(np.median(c[determined])) if np.any(determined) else None)
+    """The joints whose ratio counts (partial R² >= :data:`MIN_PARTIAL_R2`, a non-zero ratio) and the median
+    of their ratios' magnitudes (None: no joint counts; a negative ratio is an effort of reversed sign)."""
+    determined = (partial_r2 >= MIN_PARTIAL_R2) & np.isfinite(c) & (c != 0)
+    return determined, (float(np.median(np.abs(c[determined]))) if np.any(determined) else None)
 
 
 def within_band(median: float | None) -> bool:
@@ -166,14 +184,14 @@ def read_effort_unit(data: ProcessedData, p_rigid: np.ndarray, n_link: int, nq: 
                                               <= np.log(GEAR_HINT_FACTOR)))
     if stated is not None:
         return EffortUnit("stated", stated, c, r2, determined, median, hint)
-    unit = EffortUnit("joint torques", np.ones(m), c, r2, determined, median, hint)
+    sign = np.where(determined & (c < 0), -1.0, 1.0)       # a reversed effort is negated in any case
     if median is None or placeholder_masses:
-        return EffortUnit("unchecked", np.ones(m), c, r2, determined, median, hint, placeholder_masses)
-    if unit.within_band:
-        return unit
-    scale = np.full(m, float(np.exp(np.mean(np.log(1.0 / c[determined])))))
-    scale[determined] = 1.0 / c[determined]
-    return EffortUnit("converted", scale, c, r2, determined, median, hint)
+        return EffortUnit("unchecked", sign, c, r2, determined, median, hint, placeholder_masses)
+    if within_band(median):
+        return EffortUnit("joint torques", sign, c, r2, determined, median, hint)
+    scale = np.full(m, float(np.exp(np.mean(np.log(1.0 / np.abs(c[determined]))))))
+    scale[determined] = 1.0 / np.abs(c[determined])
+    return EffortUnit("converted", sign * scale, c, r2, determined, median, hint)
 
 
 def scaled(data: ProcessedData, scale_Nm_per_unit: np.ndarray) -> ProcessedData:

@@ -80,6 +80,20 @@ def test_joint_torques_are_used_as_logged_and_currents_are_converted(hidden_reco
     assert unchecked.status == "unchecked" and "unchecked" in (unchecked.note(np.arange(1, 7)) or "")
 
 
+def test_an_effort_of_reversed_sign_is_negated_as_stated(hidden_record):
+    ctx, t, q, tau = hidden_record
+    robot = ctx.robot
+    gear = np.asarray(robot.actuation.gear_ratio, float)
+    flipped = tau.copy()
+    flipped[:, 1] *= -1.0                                        # the shoulder's driver logs the other sign
+    for factor, status in ((1.0, "joint torques"), (1.0 / CURRENT_SCALE_NM_A, "converted")):
+        data, p_rigid, n_link = _processed(robot, t, q, flipped * factor)
+        unit = read_effort_unit(data, p_rigid, n_link, robot.nq, "auto", gear)
+        assert unit.status == status and unit.reversed.tolist() == [False, True, False, False, False, False]
+        assert unit.scale_Nm_per_unit[1] < 0 and np.all(unit.scale_Nm_per_unit[[0, 2, 3, 4, 5]] > 0)
+        assert "joint(s) 2 log their effort with the opposite sign" in (unit.note(np.arange(1, 7)) or "")
+
+
 def test_motor_side_torques_are_named_as_such(hidden_record):
     ctx, t, q, tau = hidden_record
     robot = ctx.robot
