@@ -4,6 +4,8 @@ CSV format (one row per configuration, comma separated, header recommended)::
 
     q1,q2,q3,q4,q5,q6,x,y,z[,rx,ry,rz]
 
+(with a header: columns in any order, joints by the model's names too, units stated in the names and
+converted, ``;`` or tab delimited: :mod:`pipeline.exchange.csv_header`).
 ``q*`` joint angles in rad (Pinocchio order), ``x, y, z`` the reflector (marker) position in the
 tracker frame in m, optional ``rx, ry, rz`` the rotation vector (axis * angle, rad; ``R = exp(r^)``,
 scipy ``Rotation.from_rotvec``) of the marker frame in the tracker frame: ``R`` maps marker-frame
@@ -22,6 +24,7 @@ Without a file the simulated tracker measures the designed configurations
 from __future__ import annotations
 
 import csv
+import io
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -34,11 +37,16 @@ from pipeline.calibration.config import Config
 from pipeline.calibration.estimate import Estimate
 from pipeline.core.errors import DataFileError, InfeasibleError
 from pipeline.exchange import ros2_bag
+from pipeline.exchange.csv_header import number, parse_header, sniff_delimiter
 from pipeline.exchange.recording import is_recording, read_recorded_joint_states
 from pipeline.exchange.ros2_bag import is_bag
 from pipeline.exchange.stationary import stationary_windows
 from pipeline.robot.model import RobotModel
 from pipeline.robot.payload import Payload
+
+#: the columns of a pose CSV besides the joints, by kind (units in the header convert: x_mm, rx [deg])
+POSE_FIELDS = {"x": "length", "y": "length", "z": "length", "rx": "angle", "ry": "angle", "rz": "angle"}
+ORIENTATION_FIELDS = ("rx", "ry", "rz")
 
 
 @dataclass
@@ -238,28 +246,29 @@ def read_csv(path: str | Path, robot: RobotModel, min_rows: int = 1, min_rows_fi
         raise DataFileError(path, "file", "does not exist" if not path.exists() else "is not a file")
     rows: list[tuple[int, list[str]]] = []   # (file line, cells), blank lines skipped
     try:
-        with path.open(newline="", encoding="utf-8-sig") as fh:
-            reader = csv.reader(fh)
-            first = 1
-            for r in reader:
-                if r and any(c.strip() for c in r):
-                    rows.append((first, r))
-                first = reader.line_num + 1
+        text = path.read_text(encoding="utf-8-sig")
+        delimiter = sniff_delimiter(next((ln for ln in text.splitlines() if ln.strip()), ""))
+        reader = csv.reader(io.StringIO(text, newline=""), delimiter=delimiter)
+        first = 1
+        for r in reader:
+            if r and any(c.strip() for c in r):
+                rows.append((first, r))
+            first = reader.line_num + 1
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise DataFileError(path, "file", f"cannot be read as CSV ({exc})") from None
     if not rows:
         raise DataFileError(path, "rows", "the file is empty")
     header_line, header_cells = rows[0]
-    header = [c.strip().lower() for c in header_cells]
-    has_header = any(not _is_number(c) for c in header)
+    has_header = any(not _is_number(c, delimiter) for c in header_cells)
     if has_header:
-        allowed = (names, names + ["rx", "ry", "rz"])
-        if header not in allowed:
-            raise DataFileError(path, f"line {header_line}", f"expected columns {','.join(names)}[,rx,ry,rz], "
-                                f"got {','.join(header)}")
-        ncol = len(header)
+        layout = parse_header(path, header_line, header_cells, [str(n) for n in robot.model.names[1:]],
+                              POSE_FIELDS, optional=(ORIENTATION_FIELDS,))
+        ncol = layout.n_columns
         data_rows = rows[1:]
-        columns = header
+        columns = [c.strip() for c in header_cells]
+        rotation = [f for f in ORIENTATION_FIELDS if f in layout.fields]
+        order = [*layout.joints, *(layout.fields[f] for f in (*names[nq:], *rotation))]
+        factors = np.array([*layout.joint_factors, *(layout.field_factors[f] for f in (*names[nq:], *rotation))])
     else:
         ncol = len(header_cells)
         if ncol not in (nq + 3, nq + 6):
@@ -267,19 +276,22 @@ def read_csv(path: str | Path, robot: RobotModel, min_rows: int = 1, min_rows_fi
                                 f"({','.join(names)}[,rx,ry,rz]), got {ncol}")
         data_rows = rows
         columns = (names + ["rx", "ry", "rz"])[:ncol]
-    values = np.empty((len(data_rows), ncol))
+        order, factors = list(range(ncol)), np.ones(ncol)
+    raw = np.empty((len(data_rows), ncol))
     lines = np.array([ln for ln, _ in data_rows], dtype=int)
     for k, (line, r) in enumerate(data_rows):
         if len(r) != ncol:
             raise DataFileError(path, f"line {line}", f"expected {ncol} columns, got {len(r)}")
         for j, c in enumerate(r):
             try:
-                v = float(c)
+                v = number(c, delimiter)
             except ValueError:
                 raise DataFileError(path, f"line {line}, {columns[j]}", f"not a number: {c.strip()!r}") from None
             if not np.isfinite(v):
                 raise DataFileError(path, f"line {line}, {columns[j]}", f"NaN or infinite value {c.strip()!r}")
-            values[k, j] = v
+            raw[k, j] = v
+    values = raw[:, order] * factors[None, :]
+    ncol = len(order)
     if len(values) < min_rows:
         who = f" ({min_rows_field})" if min_rows_field else ""
         raise DataFileError(path, "rows", f"{len(values)} measurement rows, need at least {min_rows}{who}")
@@ -366,9 +378,9 @@ def write_csv(path: str | Path, meas: Measurements) -> Path:
     return path
 
 
-def _is_number(s: str) -> bool:
+def _is_number(s: str, delimiter: str = ",") -> bool:
     try:
-        float(s)
+        number(s, delimiter)
     except ValueError:
         return False
     return True

@@ -1,0 +1,88 @@
+"""A pose CSV as trackers and spreadsheets export it: columns in any order, joints by name, units in the
+header, ``;`` or tab as delimiter with decimal commas; each reads as the plain file, and a bad header is
+named."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from pipeline.calibration import candidates as cd
+from pipeline.calibration import measure as ms
+from pipeline.core.errors import DataFileError
+from pipeline.exchange.csv_header import header_column, sniff_delimiter
+from pipeline.robot.model import RobotModel
+from pipeline.sim.truth import RealRobot
+
+
+@pytest.fixture(scope="module")
+def poses(rx130l: RobotModel):
+    rng = np.random.default_rng(5)
+    Q, _ = cd.random_candidates(cd.chain_from_robot(rx130l), 12, rng)
+    meas = ms.measure_simulated(RealRobot.create(rx130l, 5), Q, rng)
+    rotvec = 0.3 * rng.normal(size=(len(meas.Q), 3))
+    return meas.Q, meas.Y, rotvec
+
+
+def _write(path, header: list[str], columns: list[np.ndarray], delimiter: str = ",", decimal: str = ".") -> None:
+    rows = [delimiter.join(header)]
+    for row in np.column_stack(columns):
+        rows.append(delimiter.join(repr(float(v)).replace(".", decimal) for v in row))
+    path.write_text("\n".join(rows) + "\n")
+
+
+def test_header_cells_give_name_and_unit():
+    assert header_column("x") == header_column("X ") and header_column("x").unit is None
+    assert [header_column(c).unit for c in ("x_mm", "x [mm]", "x (mm)", "X[MM]", "x_m", "q1_deg", "q1 [rad]")] == \
+        ["mm", "mm", "mm", "mm", "m", "deg", "rad"]
+    assert header_column("wrist_1_joint [deg]").name == "wrist_1_joint"
+    assert header_column("arm_m", known=["arm_m"]).unit is None          # a joint named like a unit
+    assert [sniff_delimiter(s) for s in ("q1,q2", "q1;q2", "q1\tq2", "q1")] == [",", ";", "\t", ","]
+
+
+def test_every_layout_reads_as_the_plain_file(tmp_path, rx130l: RobotModel, poses):
+    Q, Y, rotvec = poses
+    names = [str(n) for n in rx130l.model.names[1:]]
+    plain = tmp_path / "plain.csv"
+    _write(plain, [f"q{i}" for i in range(1, 7)] + ["x", "y", "z", "rx", "ry", "rz"], [Q, Y, rotvec])
+    reference = ms.read_csv(plain, rx130l)
+    deg, mm = 180.0 / math.pi, 1000.0
+    layouts = {
+        # tracker columns first, joints by name in reversed order, millimetres and degrees stated
+        "names_units.csv": ([f"{a} [mm]" for a in "xyz"] + [f"{n} [deg]" for n in reversed(names)]
+                            + ["rx_deg", "ry_deg", "rz_deg"], [Y * mm, Q[:, ::-1] * deg, rotvec * deg], ",", "."),
+        "semicolon.csv": ([f"q{i}" for i in range(1, 7)] + ["X_mm", "Y_mm", "Z_mm", "rx", "ry", "rz"],
+                          [Q, Y * mm, rotvec], ";", ","),
+        "tab.csv": (["x", "y", "z", "rx", "ry", "rz"] + [f"q{i}" for i in range(1, 7)], [Y, rotvec, Q], "\t", "."),
+    }
+    for name, (header, columns, delimiter, decimal) in layouts.items():
+        _write(tmp_path / name, header, columns, delimiter, decimal)
+        back = ms.read_csv(tmp_path / name, rx130l)
+        np.testing.assert_allclose(back.Q, reference.Q, rtol=1e-12, atol=1e-12, err_msg=name)
+        np.testing.assert_allclose(back.Y, reference.Y, rtol=1e-12, atol=1e-12, err_msg=name)
+        assert back.rotvec is not None and reference.rotvec is not None
+        np.testing.assert_allclose(back.rotvec, reference.rotvec, rtol=1e-12, atol=1e-12, err_msg=name)
+        np.testing.assert_array_equal(back.lines, reference.lines)
+    # what the project writes it reads back exactly
+    written = ms.read_csv(ms.write_csv(tmp_path / "written.csv", reference), rx130l)
+    np.testing.assert_array_equal(written.Q, reference.Q)
+    np.testing.assert_array_equal(written.Y, reference.Y)
+
+
+@pytest.mark.parametrize(("header", "problem"), [
+    (["q1", "q2", "q3", "q4", "q5", "q6", "x", "y", "z", "note"], "unknown column(s) ['note']"),
+    (["q1", "q2", "q3", "q4", "q5", "q6", "x", "y", "x"], "repeats column 7"),
+    (["q1", "q2", "q3", "q4", "q5", "q6", "x", "y", "z", "rx", "ry"], "missing column(s) ['rz']"),
+    (["q1", "q2", "q3", "q4", "q5", "q6", "x [deg]", "y", "z"], "unit 'deg' is not one of a length's"),
+    (["q1", "q2", "q3", "q4", "q5", "q7", "x", "y", "z"], "unknown column(s) ['q7']"),
+])
+def test_a_bad_header_is_named(tmp_path, rx130l: RobotModel, poses, header, problem):
+    Q, Y, rotvec = poses
+    columns = np.column_stack([Q, Y, rotvec])[:, :len(header)]
+    path = tmp_path / "bad.csv"
+    _write(path, header, [columns])
+    with pytest.raises(DataFileError) as info:
+        ms.read_csv(path, rx130l)
+    assert str(path) in str(info.value) and problem in str(info.value), str(info.value)
