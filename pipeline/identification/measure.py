@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.core.errors import DataFileError
+from pipeline.exchange.csv_header import number, sniff_delimiter
 from pipeline.exchange.recording import read_recorded_joint_states
 from pipeline.identification import signals
 from pipeline.identification.fourier import FourierTrajectory
@@ -107,6 +108,8 @@ def simulate_excitation(
 def read_csv_table(path: str | Path) -> tuple[list[str], np.ndarray, np.ndarray]:
     """Read a numeric CSV file with a header line: ``(names, data (N, n_columns), line_numbers)``.
 
+    The delimiter is that of the header line (``,``, ``;`` with decimal commas, or tab:
+    :func:`pipeline.exchange.csv_header.sniff_delimiter`).
     ``line_numbers[k]`` is the file line of data row ``k`` (the header is line 1); blank lines are
     skipped. Every problem raises :class:`DataFileError` naming the file, the line and the column:
     a missing header, no data rows, a row with too few or too many values, a value that is not a
@@ -123,7 +126,8 @@ def read_csv_table(path: str | Path) -> tuple[list[str], np.ndarray, np.ndarray]
     if not numbered:
         raise DataFileError(path, None, "empty file (expected a header line and data rows)")
     header_line, header_text = numbered[0]
-    header = [h.strip() for h in header_text.split(",")]
+    delimiter = sniff_delimiter(header_text)
+    header = [h.strip() for h in header_text.split(delimiter)]
     if any(not h for h in header):
         raise DataFileError(path, f"line {header_line}", "empty column name in the header")
     dup = sorted({h for h in header if header.count(h) > 1})
@@ -141,19 +145,20 @@ def read_csv_table(path: str | Path) -> tuple[list[str], np.ndarray, np.ndarray]
     n_col = len(header)
     cells = []
     for line_no, text in rows:
-        parts = text.split(",")
+        parts = text.split(delimiter)
         if len(parts) != n_col:
             raise DataFileError(path, f"line {line_no}",
                                 f"{len(parts)} values, expected {n_col} (one per header column)")
         cells.append(parts)
     line_numbers = np.array([ln for ln, _ in rows], dtype=int)
     try:
-        data = np.array(cells, dtype=float)
+        data = np.array(cells if delimiter != ";" else [[number(c, delimiter) for c in parts] for parts in cells],
+                        dtype=float)
     except ValueError:
         for (line_no, _), parts in zip(rows, cells, strict=True):
             for name, cell in zip(header, parts, strict=True):
                 try:
-                    float(cell)
+                    number(cell, delimiter)
                 except ValueError:
                     raise DataFileError(path, f"line {line_no}",
                                         f"column {name}: {cell.strip()!r} is not a number") from None

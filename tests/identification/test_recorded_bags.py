@@ -115,3 +115,21 @@ def test_the_numbered_csv_layout_takes_t_s_as_its_time_column(tmp_path, rx130l):
     rec = load_user_record(Config(data_file=str(tmp_path / "log.csv")), rx130l)
     np.testing.assert_array_equal(rec.q_rad, states.q_rad)
     assert rec.sample_time_s == pytest.approx(0.01)
+
+
+@pytest.mark.parametrize(("delimiter", "decimal"), [(";", ","), ("\t", ".")])
+def test_the_numbered_csv_reads_with_a_spreadsheet_delimiter(tmp_path, rx130l, delimiter, decimal):
+    """A record exported with ``;`` and decimal commas, or tab-separated, reads as the comma file."""
+    t = np.arange(3000) * 0.004
+    q = 0.3 * np.sin(np.outer(t, np.arange(1, 7)))
+    tau = np.cos(np.outer(t, np.arange(1, 7)))
+    header = ["t", *(f"q{i}" for i in range(1, 7)), *(f"tau{i}" for i in range(1, 7))]
+    table = np.column_stack([t, q, tau])
+    plain, exported = tmp_path / "plain.csv", tmp_path / "exported.csv"
+    plain.write_text("\n".join([",".join(header)] + [",".join(repr(float(v)) for v in row) for row in table]) + "\n")
+    exported.write_text("\n".join([delimiter.join(header)] + [
+        delimiter.join(repr(float(v)).replace(".", decimal) for v in row) for row in table]) + "\n")
+    a = load_user_record(Config(data_file=str(plain)), rx130l)
+    b = load_user_record(Config(data_file=str(exported)), rx130l)
+    np.testing.assert_array_equal(a.q_rad, b.q_rad)
+    np.testing.assert_array_equal(a.tau_Nm, b.tau_Nm)
