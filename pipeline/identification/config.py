@@ -99,8 +99,8 @@ class Config:
     data_side: Literal["joint", "motor"] = "joint"  # columns of data_file
     # a data_file's efforts: "auto" = read against the nominal model's torques, converted (and stated) when
     # they are not joint torques in N·m (motor currents, motor-side torques); a list = joint-side N·m per
-    # logged unit per joint (k_t x gear ratio for currents in A); "none" = taken as joint torques unchecked
-    # (effort_unit.read_effort_unit)
+    # logged unit per joint (k_t x gear ratio for currents in A; with data_side: motor, applied after the gear
+    # matrix, so k_t alone); "none" = taken as joint torques unchecked (effort_unit.read_effort_unit)
     effort_scale: Literal["auto", "none"] | list[float] = "auto"
     # position low-pass and decimation of a (non-periodic) data_file; null: from its sample rate,
     # min(20 Hz, rate / 4) and rate / (5 x cut-off) (signals.record_filter_settings)
