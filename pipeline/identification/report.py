@@ -137,6 +137,8 @@ def report_markdown(summary: dict, tx: Tx40Result | None) -> str:
         gap_ms = summary["record_max_gap_s"] * 1e3
         lines += ["", f"The record's time stamps are not uniform (largest gap {gap_ms:.3g} ms): resampled, "
                   f"{summary['record_resampling']}."]
+    if summary.get("effort_unit_status"):
+        lines += ["", effort_unit_line(summary)]
     if summary.get("base_covariance"):
         lines += ["", f"Base-parameter sigmas: {summary['base_covariance']}; median "
                   f"{summary['base_sigma_hac_over_white_median']:.2f} x the white-residual WLS sigma."]
@@ -172,6 +174,22 @@ def report_markdown(summary: dict, tx: Tx40Result | None) -> str:
             f"| physically consistent | {tx.physically_consistent} | no (negative rotor inertia axis 6) |",
         ]
     return "\n".join(lines)
+
+
+def effort_unit_line(summary: dict) -> str:
+    """One paragraph: what the record's efforts were read as, against the nominal model (:mod:`.effort_unit`)."""
+    status, median = summary["effort_unit_status"], summary.get("effort_nominal_ratio_median")
+    ratios = _numbers(summary.get("effort_nominal_ratio") or [])
+    against = ("" if median is None else
+               f" (against the nominal model's torques: median ratio {median:.3g}; per joint {ratios})")
+    scale = _numbers(summary.get("effort_scale_Nm_per_unit") or [])
+    return {"joint torques": f"The record's efforts read as joint torques in N·m{against}.",
+            "converted": f"The record's efforts are not joint torques in N·m{against}: ASSUMED converted with the "
+                         f"nominal model's scale, {scale} N·m per logged unit.",
+            "stated": f"The record's efforts are scaled by the stated `identification.effort_scale`, {scale} N·m per "
+                      f"logged unit{against}.",
+            "unchecked": f"The record's efforts are taken as joint torques in N·m, their unit unchecked{against}.",
+            }[status]
 
 
 def replay(t: np.ndarray, q: np.ndarray, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:

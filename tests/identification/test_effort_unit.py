@@ -128,6 +128,7 @@ def test_the_stage_converts_a_current_log_and_hands_on_gravity_torques_near_the_
         s = res.summary
         assert s["effort_unit_status"] == ("joint torques" if name == "torque" else "converted")
         assert any("ASSUMED" in w for w in s.get("warnings", [])) == (name == "current")
+        assert ("read as joint torques in N·m" if name == "torque" else "ASSUMED converted") in res.report_md
         assert res.robot is not None
         gravity[name] = _gravity_Nm(res.robot, poses)
     rms = {k: np.sqrt(np.mean(g[:, 1:3] ** 2, axis=0)) for k, g in gravity.items()}   # shoulder and elbow
