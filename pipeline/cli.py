@@ -35,6 +35,7 @@ from pipeline.core import config as config_mod
 from pipeline.core.config import load_config
 from pipeline.core.errors import PipelineError, QualityGateError
 from pipeline.core.interrupts import handle_termination
+from pipeline.exchange.robot_program import PROGRAM_FORMATS, ProgramFormat
 from pipeline.papers import registry as studies
 from pipeline.robot.model import RobotModel
 from pipeline.robot.plausibility import placeholder_warnings, robot_warnings
@@ -140,6 +141,8 @@ def _add_export_parser(sub: argparse._SubParsersAction) -> None:
     e.add_argument("--rate-hz", type=float, default=1000.0, help="sample rate of every motion (default 1000)")
     e.add_argument("--start", metavar="Q1,...", help="start configuration, rad (default: the robot's ready pose)")
     e.add_argument("--bag-format", choices=("sqlite3", "mcap"), default="sqlite3", help="rosbag2 storage")
+    e.add_argument("--program", type=_program_formats, default=(), metavar="FORMAT,...",
+                   help="also the calibration tour as a controller program: urscript, krl, rapid (6 axes)")
 
 
 def _cmd_export(ns: argparse.Namespace) -> int:
@@ -149,11 +152,22 @@ def _cmd_export(ns: argparse.Namespace) -> int:
             start = [float(x) for x in ns.start.split(",")]
         except ValueError:
             raise PipelineError(None, "--start", f"{ns.start!r} is not comma-separated numbers (rad)") from None
-    folder, written, notes = export_run(ns.run_dir, ns.to, ns.rate_hz, start, ns.bag_format)
+    folder, written, notes = export_run(ns.run_dir, ns.to, ns.rate_hz, start, ns.bag_format, ns.program)
     print(f"wrote {folder}: {', '.join(written)}")
     for note in notes:
         print(f"note: {note}")
     return 0
+
+
+def _program_formats(text: str) -> tuple[ProgramFormat, ...]:
+    """``urscript,krl,...`` as program formats (argparse type: an unknown one is a usage error, exit 2)."""
+    chosen = [x.strip() for x in text.split(",") if x.strip()]
+    formats = tuple(f for f in PROGRAM_FORMATS if f in chosen)
+    unknown = [x for x in chosen if x not in PROGRAM_FORMATS]
+    if unknown:
+        raise argparse.ArgumentTypeError(f"unknown program format(s) {unknown}: choose from "
+                                         f"{', '.join(PROGRAM_FORMATS)}")
+    return formats
 
 
 def _floats(text: str) -> list[float]:

@@ -5,7 +5,9 @@ For each stage the run holds (files and columns: ``docs/exchange.md``):
 - calibration: ``calibration_poses.csv`` (the designed poses in the tour's order, the TCP and
   reflector positions the nominal model predicts, the tracker's line of sight),
   ``calibration_measurements_template.csv`` (``q1..qn,x,y,z`` as ``calibration.measurements_csv``
-  reads it, x, y, z left to fill) and the motion ``calibration_tour`` (a designed experiment);
+  reads it, x, y, z left to fill) and the motion ``calibration_tour`` (a designed experiment), with
+  ``--program`` also as controller programs of its joint waypoints (URScript, KRL, RAPID:
+  :mod:`pipeline.exchange.robot_program`);
   ``calibration_parameters.csv`` (the identified error parameters, their standard deviations and units);
 - identification: the motion ``excitation`` (approach, the designed periods, return; nominal torque);
 - trajectory: the motions ``trajectory_<plan>`` (q, q̇, q̈, feedforward from the identified model);
@@ -35,6 +37,7 @@ from pipeline.core.yaml12 import read_yaml_file, yaml_key
 from pipeline.exchange.joint_limits import JointLimitTable, handed_on_urdf, write_joint_limits_yaml
 from pipeline.exchange.motion import SampledMotion
 from pipeline.exchange.parameter_table import ParameterTable, write_parameter_table_csv
+from pipeline.exchange.robot_program import AXES, ProgramFormat
 from pipeline.exchange.ros2_bag import BagFormat, joint_trajectory_topic
 from pipeline.identification.config import Config as IdentificationConfig
 from pipeline.identification.fourier import FourierTrajectory
@@ -139,7 +142,8 @@ def robot_files(ctx: ExportContext) -> None:
 
 def export_run(run_dir: str | Path, to: str | Path | None = None, rate_hz: float = 1000.0,
                start: Sequence[float] | None = None,
-               bag_format: BagFormat = "sqlite3") -> tuple[Path, list[str], list[str]]:
+               bag_format: BagFormat = "sqlite3",
+               programs: Sequence[ProgramFormat] = ()) -> tuple[Path, list[str], list[str]]:
     """Export a finished run (module docstring); returns the folder, the files written and the notes."""
     run = Path(run_dir)
     if not run.is_dir():
@@ -149,6 +153,9 @@ def export_run(run_dir: str | Path, to: str | Path | None = None, rate_hz: float
     if bag_format not in ("sqlite3", "mcap"):
         raise PipelineError(None, "--bag-format", f"must be sqlite3 or mcap, got {bag_format!r}")
     nominal, config = _nominal_robot(run)
+    if programs and nominal.nq != AXES:
+        raise PipelineError(None, "--program", f"{', '.join(programs)} drive {AXES} axes; {nominal.name} has "
+                            f"{nominal.nq} joints")
     stages = load_run(run)
     if not stages:
         raise PipelineError(run, None, "no finished stage to export")
@@ -161,7 +168,7 @@ def export_run(run_dir: str | Path, to: str | Path | None = None, rate_hz: float
     try:
         ctx = ExportContext(run, staging, nominal, handed, JointLimitTable.of_model(nominal),
                             _parse_start(start, nominal), float(rate_hz), bag_format,
-                            joint_trajectory_topic(nominal.name))
+                            joint_trajectory_topic(nominal.name), tuple(programs))
         _export_stages(ctx, stages, config)
         robot_files(ctx)
         _replace(staging, target)

@@ -29,6 +29,7 @@ from pipeline.core.errors import InfeasibleError
 from pipeline.exchange.joint_limits import JointLimitTable
 from pipeline.exchange.motion import SampledMotion
 from pipeline.exchange.motion_csv import write_motion_csv
+from pipeline.exchange.robot_program import ProgramFormat
 from pipeline.exchange.ros2_bag import BagFormat, write_joint_trajectory
 from pipeline.robot.model import RobotModel
 
@@ -195,6 +196,8 @@ class ExportContext:
     rate_hz: float
     bag_format: BagFormat
     topic: str
+    #: controller program formats of the calibration tour (:mod:`pipeline.exchange.robot_program`)
+    programs: tuple[ProgramFormat, ...] = ()
     written: list[str] = field(default_factory=list)
     #: what the export changed or assumed, printed after the list of files
     notes: list[str] = field(default_factory=list)

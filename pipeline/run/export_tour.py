@@ -16,11 +16,13 @@ tracker frame), ``range_m`` and ``incidence_deg`` (beam against the reflector's 
 from __future__ import annotations
 
 import io
+from dataclasses import dataclass
 
 import numpy as np
 
 from pipeline.core.artefacts import write_text
 from pipeline.core.errors import InfeasibleError
+from pipeline.exchange.robot_program import SUFFIX, PoseProgram, write_program
 from pipeline.robot.instruments import tracker_visibility
 from pipeline.run import export_motions as em
 from pipeline.run.export_motions import ExportContext
@@ -42,13 +44,27 @@ def _rest(q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return (q, np.zeros_like(q), np.zeros_like(q))
 
 
-def tour(ctx: ExportContext, poses: np.ndarray) -> tuple[list[int], list[tuple[np.ndarray, ...]], list[float]]:
-    """(order of the poses, pieces (t, q, q̇, q̈) of the motion, arrival time at each pose in order)."""
+@dataclass(frozen=True)
+class Tour:
+    """The tour through the poses: their order, the pieces (t, q, q̇, q̈) of its motion, the arrival time at
+    each pose in order, and its joint waypoints (start, poses, any return through the start, start) with
+    the dwell at each (s)."""
+
+    order: list[int]
+    pieces: list[tuple[np.ndarray, ...]]
+    arrivals: list[float]
+    waypoints: np.ndarray
+    dwell_s: np.ndarray
+
+
+def tour(ctx: ExportContext, poses: np.ndarray) -> Tour:
+    """The tour through ``poses`` (module docstring)."""
     limits = ctx.limits
     left = list(range(len(poses)))
     order: list[int] = []
     pieces: list[tuple[np.ndarray, ...]] = []
     arrivals: list[float] = []
+    waypoints: list[tuple[np.ndarray, float]] = [(ctx.start_rad, 0.0)]
     clock = 0.0
     here = ctx.start_rad
     def add(piece: tuple[np.ndarray, ...]) -> None:
@@ -69,6 +85,7 @@ def tour(ctx: ExportContext, poses: np.ndarray) -> tuple[list[int], list[tuple[n
                                       f"configuration to any of the poses {left}; give another --start")
             add(em.move(ctx.nominal, limits, _rest(here), _rest(ctx.start_rad), ctx.rate_hz, "calibration_tour"))
             here = ctx.start_rad
+            waypoints.append((here, 0.0))
             continue
         i, piece = chosen
         add(piece)
@@ -79,12 +96,14 @@ def tour(ctx: ExportContext, poses: np.ndarray) -> tuple[list[int], list[tuple[n
         order.append(i)
         left.remove(i)
         here = poses[i]
+        waypoints.append((here, DWELL_S))
     back = em.move(ctx.nominal, limits, _rest(here), _rest(ctx.start_rad), ctx.rate_hz, "calibration_tour")
     if not _clear(ctx, back[1]):
         raise InfeasibleError(None, "calibration_tour", "the move from the last pose back to the start "
                               "configuration collides; give another --start")
     add(back)
-    return order, pieces, arrivals
+    waypoints.append((ctx.start_rad, 0.0))
+    return Tour(order, pieces, arrivals, np.array([w for w, _ in waypoints]), np.array([d for _, d in waypoints]))
 
 
 def _table(columns: list[str], rows: np.ndarray, formats: list[str]) -> str:
@@ -126,10 +145,28 @@ def template_table(Q: np.ndarray) -> str:
 def calibration_files(ctx: ExportContext, calibration: StageOutput) -> None:
     """The poses table, the template and the tour motion of the calibration's designed poses."""
     Q = np.atleast_2d(np.asarray(calibration.arrays["configurations_selected"], float))
-    order, pieces, arrivals = tour(ctx, Q)
-    ordered = Q[order]
-    write_text(ctx.staging / "calibration_poses.csv", pose_table(ctx, ordered, arrivals))
+    path = tour(ctx, Q)
+    ordered = Q[path.order]
+    write_text(ctx.staging / "calibration_poses.csv", pose_table(ctx, ordered, path.arrivals))
     write_text(ctx.staging / "calibration_measurements_template.csv", template_table(ordered))
     ctx.written += ["calibration_poses.csv", "calibration_measurements_template.csv"]
-    ctx.write_motion("calibration_tour", em.joined(ctx.nominal, pieces, ctx.nominal))
+    ctx.write_motion("calibration_tour", em.joined(ctx.nominal, path.pieces, ctx.nominal))
+    program = tour_program(ctx, path)
+    for fmt in ctx.programs:
+        name = f"calibration_tour{SUFFIX[fmt]}"
+        write_program(ctx.staging / name, program, fmt, [
+            f"robot {ctx.nominal.name}; the poses of calibration_poses.csv in its order, a dwell of {DWELL_S:g} s at "
+            "each for the tracker; the same joint waypoints as calibration_tour.csv",
+            f"speeds: {em.MOVE_LIMIT_FRACTION:g} of the model's joint velocity and acceleration limits"])
+        ctx.written.append(name)
+
+
+def tour_program(ctx: ExportContext, path: Tour) -> PoseProgram:
+    """The tour's waypoints as a point-to-point program (:mod:`pipeline.exchange.robot_program`): the joints'
+    speed and acceleration ``MOVE_LIMIT_FRACTION`` of the slowest joint's limit (URScript's and RAPID's leading
+    axis), and that fraction in per cent of each axis's own (KRL)."""
+    f = em.MOVE_LIMIT_FRACTION
+    return PoseProgram("calibration_tour", tuple(str(n) for n in ctx.nominal.model.names[1:]), path.waypoints,
+                       path.dwell_s, float(f * np.min(ctx.limits.velocity_rad_s)),
+                       float(f * np.min(ctx.limits.acceleration_rad_s2)), 100.0 * f, 100.0 * f)
 
