@@ -5,7 +5,9 @@ CSV format (one row per configuration, comma separated, header recommended)::
     q1,q2,q3,q4,q5,q6,x,y,z[,rx,ry,rz]
 
 (with a header: columns in any order, joints by the model's names too, units stated in the names and
-converted, ``;`` or tab delimited: :mod:`pipeline.exchange.csv_header`).
+converted, ``;`` or tab delimited: :mod:`pipeline.exchange.csv_header`; the orientation may be
+``roll,pitch,yaw`` instead, ``R = Rz(yaw) Ry(pitch) Rx(roll)``, and FIGAROH's calibration CSV reads as it
+is: ``x1,y1,z1`` the position, ``phix1,phiy1,phiz1`` roll, pitch, yaw, joints by name).
 ``q*`` joint angles in rad (Pinocchio order), ``x, y, z`` the reflector (marker) position in the
 tracker frame in m, optional ``rx, ry, rz`` the rotation vector (axis * angle, rad; ``R = exp(r^)``,
 scipy ``Rotation.from_rotvec``) of the marker frame in the tracker frame: ``R`` maps marker-frame
@@ -44,9 +46,14 @@ from pipeline.exchange.stationary import stationary_windows
 from pipeline.robot.model import RobotModel
 from pipeline.robot.payload import Payload
 
-#: the columns of a pose CSV besides the joints, by kind (units in the header convert: x_mm, rx [deg])
-POSE_FIELDS = {"x": "length", "y": "length", "z": "length", "rx": "angle", "ry": "angle", "rz": "angle"}
+#: the columns of a pose CSV besides the joints, by kind (units in the header convert: x_mm, rx [deg]); the
+#: orientation as a rotation vector or as roll, pitch, yaw (R = Rz(yaw) Ry(pitch) Rx(roll))
+POSE_FIELDS = {"x": "length", "y": "length", "z": "length", "rx": "angle", "ry": "angle", "rz": "angle",
+               "roll": "angle", "pitch": "angle", "yaw": "angle"}
 ORIENTATION_FIELDS = ("rx", "ry", "rz")
+RPY_FIELDS = ("roll", "pitch", "yaw")
+#: FIGAROH's calibration CSV: the marker's position x1, y1, z1 and roll-pitch-yaw phix1, phiy1, phiz1
+POSE_ALIASES = {"x1": "x", "y1": "y", "z1": "z", "phix1": "roll", "phiy1": "pitch", "phiz1": "yaw"}
 
 
 @dataclass
@@ -262,11 +269,15 @@ def read_csv(path: str | Path, robot: RobotModel, min_rows: int = 1, min_rows_fi
     has_header = any(not _is_number(c, delimiter) for c in header_cells)
     if has_header:
         layout = parse_header(path, header_line, header_cells, [str(n) for n in robot.model.names[1:]],
-                              POSE_FIELDS, optional=(ORIENTATION_FIELDS,))
+                              POSE_FIELDS, optional=(ORIENTATION_FIELDS, RPY_FIELDS), aliases=POSE_ALIASES)
         ncol = layout.n_columns
         data_rows = rows[1:]
         columns = [c.strip() for c in header_cells]
-        rotation = [f for f in ORIENTATION_FIELDS if f in layout.fields]
+        rotation = [f for f in (*ORIENTATION_FIELDS, *RPY_FIELDS) if f in layout.fields]
+        if len(rotation) > 3:
+            raise DataFileError(path, f"line {header_line}", "two orientations, rx,ry,rz and roll,pitch,yaw: "
+                                "give one")
+        rpy = rotation == list(RPY_FIELDS)
         order = [*layout.joints, *(layout.fields[f] for f in (*names[nq:], *rotation))]
         factors = np.array([*layout.joint_factors, *(layout.field_factors[f] for f in (*names[nq:], *rotation))])
     else:
@@ -277,6 +288,7 @@ def read_csv(path: str | Path, robot: RobotModel, min_rows: int = 1, min_rows_fi
         data_rows = rows
         columns = (names + ["rx", "ry", "rz"])[:ncol]
         order, factors = list(range(ncol)), np.ones(ncol)
+        rpy = False
     raw = np.empty((len(data_rows), ncol))
     lines = np.array([ln for ln, _ in data_rows], dtype=int)
     for k, (line, r) in enumerate(data_rows):
@@ -292,6 +304,8 @@ def read_csv(path: str | Path, robot: RobotModel, min_rows: int = 1, min_rows_fi
             raw[k, j] = v
     values = raw[:, order] * factors[None, :]
     ncol = len(order)
+    if rpy:   # roll, pitch, yaw: extrinsic x, y, z (R = Rz Ry Rx) as the rotation vector of the same R
+        values[:, nq + 3:] = Rotation.from_euler("xyz", values[:, nq + 3:]).as_rotvec()
     if len(values) < min_rows:
         who = f" ({min_rows_field})" if min_rows_field else ""
         raise DataFileError(path, "rows", f"{len(values)} measurement rows, need at least {min_rows}{who}")

@@ -84,14 +84,16 @@ def header_column(cell: str, known: Sequence[str] = ()) -> HeaderColumn:
 
 
 def parse_header(path: str | Path, line: int, cells: Sequence[str], joint_names: Sequence[str],
-                 fields: dict[str, str], optional: Sequence[tuple[str, ...]] = ()) -> CsvLayout:
+                 fields: dict[str, str], optional: Sequence[tuple[str, ...]] = (),
+                 aliases: dict[str, str] | None = None) -> CsvLayout:
     """The layout of a header row (module doc). ``joint_names``: the model's joints (angle columns, ``q1..qn``
     or these names); ``fields``: the other columns' names and kinds (``{"x": "length", ...}``); ``optional``:
-    groups of fields that may be absent together (``("rx", "ry", "rz")``). Errors name ``path`` and the
-    header's file ``line``."""
+    groups of fields that may be absent together (``("rx", "ry", "rz")``); ``aliases``: other names of fields
+    (``{"x1": "x"}``). Errors name ``path`` and the header's file ``line``."""
     where = f"line {line}"
     model = [str(n).lower() for n in joint_names]
     columns = [header_column(c, model) for c in cells]
+    columns = [HeaderColumn((aliases or {}).get(c.name, c.name), c.unit) for c in columns]
     numbered = [f"q{i}" for i in range(1, len(model) + 1)]
     expected = ",".join(numbered + list(fields))
     seen: dict[str, int] = {}

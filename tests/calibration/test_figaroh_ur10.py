@@ -71,6 +71,16 @@ def test_conversion_keeps_every_value(record):
     assert np.allclose(Rotation.from_rotvec(meas.rotvec).as_matrix(), R, atol=1e-12)
 
 
+def test_figarohs_own_csv_reads_as_it_is_shipped(record):
+    """FIGAROH's layout (x1,y1,z1, roll-pitch-yaw phix1..phiz1, joints by name) is read without the converter."""
+    robot, meas = record
+    direct = ms.read_csv(DATA / "calibration.csv", robot)
+    np.testing.assert_array_equal(direct.Q, meas.Q)
+    np.testing.assert_array_equal(direct.Y, meas.Y)
+    assert direct.rotvec is not None and meas.rotvec is not None
+    np.testing.assert_allclose(direct.rotvec, meas.rotvec, rtol=0, atol=1e-15)
+
+
 def test_the_record_as_a_ros2_recording_reads_as_the_csv(record, tmp_path):
     """The 23 poses as a mocap setup logs them: JointState at 100 Hz (1 s quintic moves, 1.5 s dwells) and
     the marker's PoseStamped at 50 Hz during each dwell, the first 0.1 s of it 1 cm and 0.1 rad off (the arm

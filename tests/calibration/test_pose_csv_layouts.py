@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from pipeline.calibration import candidates as cd
 from pipeline.calibration import measure as ms
@@ -65,6 +66,13 @@ def test_every_layout_reads_as_the_plain_file(tmp_path, rx130l: RobotModel, pose
         assert back.rotvec is not None and reference.rotvec is not None
         np.testing.assert_allclose(back.rotvec, reference.rotvec, rtol=1e-12, atol=1e-12, err_msg=name)
         np.testing.assert_array_equal(back.lines, reference.lines)
+    # roll, pitch, yaw (R = Rz Ry Rx) in degrees instead of the rotation vector
+    rpy = Rotation.from_rotvec(rotvec).as_euler("xyz")
+    _write(tmp_path / "rpy.csv", [f"q{i}" for i in range(1, 7)] + ["x", "y", "z", "roll_deg", "pitch_deg", "yaw_deg"],
+           [Q, Y, rpy * deg])
+    from_rpy = ms.read_csv(tmp_path / "rpy.csv", rx130l)
+    assert from_rpy.rotvec is not None and reference.rotvec is not None
+    np.testing.assert_allclose(from_rpy.rotvec, reference.rotvec, atol=1e-12)
     # what the project writes it reads back exactly
     written = ms.read_csv(ms.write_csv(tmp_path / "written.csv", reference), rx130l)
     np.testing.assert_array_equal(written.Q, reference.Q)
@@ -75,6 +83,8 @@ def test_every_layout_reads_as_the_plain_file(tmp_path, rx130l: RobotModel, pose
     (["q1", "q2", "q3", "q4", "q5", "q6", "x", "y", "z", "note"], "unknown column(s) ['note']"),
     (["q1", "q2", "q3", "q4", "q5", "q6", "x", "y", "x"], "repeats column 7"),
     (["q1", "q2", "q3", "q4", "q5", "q6", "x", "y", "z", "rx", "ry"], "missing column(s) ['rz']"),
+    (["q1", "q2", "q3", "q4", "q5", "q6", "x", "y", "z", "rx", "ry", "rz", "roll", "pitch", "yaw"],
+     "two orientations"),
     (["q1", "q2", "q3", "q4", "q5", "q6", "x [deg]", "y", "z"], "unit 'deg' is not one of a length's"),
     (["q1", "q2", "q3", "q4", "q5", "q7", "x", "y", "z"], "unknown column(s) ['q7']"),
 ])
