@@ -39,7 +39,7 @@ from pipeline.calibration.config import Config
 from pipeline.calibration.estimate import Estimate
 from pipeline.core.errors import DataFileError, InfeasibleError
 from pipeline.exchange import ros2_bag
-from pipeline.exchange.csv_header import number, parse_header, sniff_delimiter
+from pipeline.exchange.csv_header import is_number, number, parse_header, sniff_delimiter
 from pipeline.exchange.recording import is_recording, read_recorded_joint_states
 from pipeline.exchange.ros2_bag import is_bag
 from pipeline.exchange.stationary import stationary_windows
@@ -266,7 +266,7 @@ def read_csv(path: str | Path, robot: RobotModel, min_rows: int = 1, min_rows_fi
     if not rows:
         raise DataFileError(path, "rows", "the file is empty")
     header_line, header_cells = rows[0]
-    has_header = any(not _is_number(c, delimiter) for c in header_cells)
+    has_header = any(not is_number(c, delimiter) for c in header_cells)
     if has_header:
         layout = parse_header(path, header_line, header_cells, [str(n) for n in robot.model.names[1:]],
                               POSE_FIELDS, optional=(ORIENTATION_FIELDS, RPY_FIELDS), aliases=POSE_ALIASES)
@@ -390,14 +390,6 @@ def write_csv(path: str | Path, meas: Measurements) -> Path:
         for row in data:
             w.writerow([repr(float(v)) for v in row])
     return path
-
-
-def _is_number(s: str, delimiter: str = ",") -> bool:
-    try:
-        number(s, delimiter)
-    except ValueError:
-        return False
-    return True
 
 
 def min_configurations(n_identifiable: int) -> int:

@@ -70,6 +70,15 @@ def number(cell: str, delimiter: str) -> float:
     return float(text)
 
 
+def is_number(cell: str, delimiter: str = ",") -> bool:
+    """``cell`` reads as a number (:func:`number`)."""
+    try:
+        number(cell, delimiter)
+    except ValueError:
+        return False
+    return True
+
+
 def header_column(cell: str, known: Sequence[str] = ()) -> HeaderColumn:
     """``cell`` as a name and unit (module doc); a cell equal to one of the ``known`` names (joint names
     that end like a unit) is that name without a unit."""

@@ -133,3 +133,38 @@ def test_the_numbered_csv_reads_with_a_spreadsheet_delimiter(tmp_path, rx130l, d
     b = load_user_record(Config(data_file=str(exported)), rx130l)
     np.testing.assert_array_equal(a.q_rad, b.q_rad)
     np.testing.assert_array_equal(a.tau_Nm, b.tau_Nm)
+
+
+def _rtde_csv(path: Path, states: JointStates, effort_output: str, delimiter: str) -> Path:
+    """An RTDE recording as UR's client (space) or ur_rtde (comma) writes it, with the controller's commanded
+    torques beside the measured effort (never to be read)."""
+    n = states.q_rad.shape[1]
+    header = (["timestamp"] + [f"target_moment_{j}" for j in range(n)] + [f"actual_q_{j}" for j in range(n)]
+              + [f"actual_qd_{j}" for j in range(n)] + [f"{effort_output}_{j}" for j in range(n)] + ["robot_mode"])
+    table = np.column_stack([1234.5 + states.t_s, 99.0 * np.ones_like(states.q_rad), states.q_rad,
+                             np.gradient(states.q_rad, states.t_s, axis=0), states.effort_Nm,
+                             np.full(states.n_samples, 7.0)])
+    path.write_text("\n".join([delimiter.join(header)] + [delimiter.join(repr(float(v)) for v in row)
+                                                           for row in table]) + "\n")
+    return path
+
+
+@pytest.mark.parametrize(("effort_output", "delimiter"), [("actual_current", " "), ("actual_current_as_torque", ",")])
+def test_a_ur_rtde_recording_reads_as_the_joint_state_csv(tmp_path, rx130l, effort_output, delimiter):
+    """UR's RTDE client logs (space-delimited) and ur_rtde's (comma): joints by index, the measured effort,
+    never the controller's commanded torque; times from the first sample."""
+    model = [str(n) for n in rx130l.model.names[1:]]
+    states = _states(rx130l, 125.0, 30.0, model)
+    reference = load_user_record(Config(data_file=str(write_joint_states_csv(tmp_path / "log.csv", states))), rx130l)
+    rtde = _rtde_csv(tmp_path / "rtde_log.csv", states, effort_output, delimiter)
+    rec = load_user_record(Config(data_file=str(rtde)), rx130l)
+    np.testing.assert_array_equal(rec.q_rad, reference.q_rad)
+    np.testing.assert_array_equal(rec.tau_Nm, reference.tau_Nm)
+    np.testing.assert_allclose(rec.t_s, reference.t_s, atol=1e-9)
+
+
+def test_an_rtde_recording_of_another_number_of_joints_is_named(tmp_path, rx130l):
+    states = _states(rx130l, 125.0, 30.0, [f"j{k}" for k in range(7)])
+    with pytest.raises(DataFileError, match="7 actual_q_<i> columns for a model of 6 joints"):
+        load_user_record(Config(data_file=str(_rtde_csv(tmp_path / "rtde.csv", states, "actual_current", " "))),
+                         rx130l)
