@@ -29,17 +29,19 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 import pipeline
 from pipeline.core import config as config_mod
 from pipeline.core.config import load_config
 from pipeline.core.errors import PipelineError, QualityGateError
 from pipeline.core.interrupts import handle_termination
+from pipeline.exchange.joint_limits import read_joint_limits_yaml
 from pipeline.exchange.robot_program import PROGRAM_FORMATS, ProgramFormat
 from pipeline.papers import registry as studies
 from pipeline.robot.model import RobotModel
 from pipeline.robot.plausibility import placeholder_warnings, robot_warnings
-from pipeline.robot.yaml_init import parse_locks, write_robot_yaml
+from pipeline.robot.yaml_init import StatedJointLimits, parse_locks, write_robot_yaml
 from pipeline.run import sweep
 from pipeline.run.export import export_run
 from pipeline.run.headline import print_headline, read_headline
@@ -122,6 +124,8 @@ def _parser() -> argparse.ArgumentParser:
     ri.add_argument("--torque-side", choices=("link", "motor"), default=None,
                     help="where your torque log is measured: link (joint torque sensors, e.g. Franka, iiwa) or "
                          "motor (motor currents); default: detected from the URDF, else motor")
+    ri.add_argument("--joint-limits", metavar="joint_limits.yaml",
+                    help="a MoveIt joint_limits.yaml: its accelerations (and velocity/effort limits the URDF lacks)")
     ri.add_argument("--force", action="store_true", help="replace an existing robot.yaml")
     _add_arm_parser(sub)
     _add_export_parser(sub)
@@ -257,8 +261,14 @@ def _cmd_check(ns: argparse.Namespace) -> int:
 
 
 def _cmd_robot(ns: argparse.Namespace) -> int:
+    stated = None
+    if ns.joint_limits:
+        table = read_joint_limits_yaml(ns.joint_limits)
+        stated = StatedJointLimits(Path(ns.joint_limits).name, *(
+            dict(zip(table.joint_names, map(float, values), strict=True))
+            for values in (table.velocity_rad_s, table.acceleration_rad_s2, table.effort_Nm)))
     written = write_robot_yaml(ns.urdf, ns.out, base=ns.base, tip=ns.tip, lock=parse_locks(ns.lock), force=ns.force,
-                               torque_side=ns.torque_side)
+                               torque_side=ns.torque_side, joint_limits=stated)
     print(f"wrote {written}: edit the values marked as assumed, then run with --set robot={written.parent}")
     line = stages_line(RobotModel.load(written.parent, yaml_path=written))
     if line:

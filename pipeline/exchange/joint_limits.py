@@ -23,6 +23,8 @@ the source URDF declares ``continuous`` continuous again (no position limits).
 
 from __future__ import annotations
 
+import math
+import re
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -32,7 +34,7 @@ import numpy as np
 
 from pipeline.core.artefacts import write_text
 from pipeline.core.errors import DataFileError
-from pipeline.core.yaml12 import read_yaml_file, yaml_key
+from pipeline.core.yaml12 import YAMLError, load_yaml, yaml_key, yaml_problem
 from pipeline.robot.model import RobotModel
 from pipeline.robot.urdf_export import export_urdf
 from pipeline.robot.urdf_import import absolute_mesh_paths
@@ -83,12 +85,27 @@ def write_joint_limits_yaml(path: str | Path, table: JointLimitTable, note: str 
     return write_text(path, joint_limits_yaml(table, note))
 
 
-def read_joint_limits_yaml(path: str | Path, joint_names: Sequence[str] | None = None) -> JointLimitTable:
-    """A MoveIt ``joint_limits.yaml``; a limit flagged absent (``has_*: false``) reads as ±inf.
+#: a value tagged ``!degrees`` (ur_description's joint_limits.yaml writes ``max_position: !degrees 360.0``)
+_DEGREES = re.compile(r"!degrees\s+([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)")
 
-    ``joint_names`` picks and orders the joints (default: the file's order).
+
+def read_joint_limits_yaml(path: str | Path, joint_names: Sequence[str] | None = None,
+                           missing_ok: bool = False) -> JointLimitTable:
+    """A MoveIt ``joint_limits.yaml``; a limit flagged absent (``has_*: false``) reads as ±inf, a value tagged
+    ``!degrees`` (ur_description's files) is converted to rad.
+
+    ``joint_names`` picks and orders the joints (default: the file's order); with ``missing_ok`` a joint the
+    file does not list has every limit absent.
     """
-    data = read_yaml_file(path, DataFileError)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DataFileError(path, None, f"cannot read: {exc}") from None
+    try:
+        data = load_yaml(_DEGREES.sub(lambda m: repr(math.radians(float(m.group(1)))), text))
+    except YAMLError as exc:
+        field, problem = yaml_problem(exc)
+        raise DataFileError(path, field, problem) from None
     if not isinstance(data, dict) or not isinstance(data.get("joint_limits"), dict):
         raise DataFileError(path, "joint_limits", "missing or not a mapping of joints")
     entries = data["joint_limits"]
@@ -96,6 +113,8 @@ def read_joint_limits_yaml(path: str | Path, joint_names: Sequence[str] | None =
 
     def value(name: str, flag: str, key: str, default: float) -> float:
         entry = entries.get(name)
+        if entry is None and missing_ok:
+            return default
         if not isinstance(entry, dict):
             raise DataFileError(path, f"joint_limits.{name}", "missing or not a mapping")
         if not entry.get(flag, key in entry):

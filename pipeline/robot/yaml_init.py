@@ -24,7 +24,10 @@ from __future__ import annotations
 
 import re
 import xml.etree.ElementTree as ET
+from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from pipeline.core.artefacts import write_text
 from pipeline.core.errors import RobotFileError
@@ -33,6 +36,7 @@ from pipeline.robot.assumed_values import assumed_entry
 from pipeline.robot.mjcf_import import is_mjcf, write_urdf_of_mjcf
 from pipeline.robot.model import RobotModel
 from pipeline.robot.repeatability import repeatability_rule
+from pipeline.robot.spec import RobotSpec
 from pipeline.robot.spec_yaml import robot_spec_to_yaml
 from pipeline.robot.urdf_import import (
     ACCELERATION_PER_VELOCITY_1_S,
@@ -130,6 +134,50 @@ def _commented(key: str, value: object, rules: dict[str, str]) -> str:
     return "\n".join(lines)
 
 
+@dataclass(frozen=True)
+class StatedJointLimits:
+    """Limits a file states per joint name (rad/s, rad/s², N·m; inf or NaN: not stated) and the file's name."""
+
+    source: str
+    velocity_rad_s: dict[str, float]
+    acceleration_rad_s2: dict[str, float]
+    effort_Nm: dict[str, float]
+
+
+def stated_limits(robot: RobotModel, spec: RobotSpec, stated: StatedJointLimits,
+                  placeholders: set[str]) -> dict[str, str | None]:
+    """Take limits a file states into ``spec``: every joint's acceleration, and the velocity and effort limits
+    the URDF left as placeholders (``placeholders``), where the file gives a number > 0 for the joint (a limit
+    flagged absent, a 0 or a joint it does not list: not stated). Returns, per robot.yaml key it touched, the
+    rule that remains assumed (None: stated for every joint)."""
+    names = [str(n) for n in robot.model.names[1:]]
+    out: dict[str, str | None] = {}
+    velocity = np.asarray(robot.limits.velocity_rad_s, float)
+    for key, wanted in (("velocity_rad_s", "velocity" in placeholders), ("effort_Nm", "effort" in placeholders),
+                        ("acceleration_rad_s2", True)):
+        given = np.array([getattr(stated, key).get(n, np.nan) for n in names], float)
+        ok = np.isfinite(given) & (given > 0)
+        if key == "acceleration_rad_s2":   # the rule's value follows a velocity the file replaced
+            rule_values = ACCELERATION_PER_VELOCITY_1_S * velocity
+            if ok.any() or "limits.velocity_rad_s" in out:
+                spec.acceleration_rad_s2 = np.where(ok, given, rule_values)
+            if not ok.any():
+                continue
+        elif not wanted or not ok.any():
+            continue
+        else:
+            spec.limit_overrides[key] = np.where(ok, given, getattr(robot.limits, key))
+            if key == "velocity_rad_s":
+                velocity = spec.limit_overrides[key]
+        missing = [n for n, k in zip(names, ok, strict=True) if not k]
+        out[f"limits.{key}"] = None if not missing else (
+            f"{ACCELERATION_PER_VELOCITY_1_S:g}/s x velocity limit on {missing} ({stated.source} states the others)"
+            if key == "acceleration_rad_s2" else
+            f"PLACEHOLDER: the URDF's {key.split('_')[0]} limit is 0 or missing on {missing} ({stated.source} "
+            "states the others)")
+    return out
+
+
 def parse_locks(items: list[str]) -> dict[str, float]:
     """``["track=0.5", ...]`` (``--lock JOINT=VALUE``) -> ``{"track": 0.5}``."""
     locks = {}
@@ -144,11 +192,14 @@ def parse_locks(items: list[str]) -> dict[str, float]:
 
 def write_robot_yaml(urdf: str | Path, out: str | Path | None = None, *, base: str | None = None,
                      tip: str | None = None, lock: dict[str, float] | None = None, force: bool = False,
-                     torque_side: str | None = None) -> Path:
+                     torque_side: str | None = None, joint_limits: StatedJointLimits | None = None) -> Path:
     """Write the commented robot.yaml of ``urdf`` (beside it unless ``out``) and return its path. An
     MJCF model (``model.xml``) is converted first: ``model.urdf`` beside the robot.yaml
     (:mod:`pipeline.robot.mjcf_import`).
-    ``torque_side``: link | motor (None: :func:`detect_torque_side`, marked ASSUMED)."""
+    ``torque_side``: link | motor (None: :func:`detect_torque_side`, marked ASSUMED).
+    ``joint_limits``: the limits of a MoveIt ``joint_limits.yaml`` (the arm's moveit_config or description
+    package): its accelerations are taken as stated, and its velocity and effort limits where the URDF has
+    none (:func:`stated_limits`)."""
     urdf = Path(urdf)
     target = Path(out) if out is not None else urdf.parent / "robot.yaml"
     if target.exists() and not force:
@@ -163,6 +214,7 @@ def write_robot_yaml(urdf: str | Path, out: str | Path | None = None, *, base: s
     spec.limit_overrides.update({"velocity_rad_s": robot.limits.velocity_rad_s} if "velocity" in placeholders
                                 else {})
     spec.limit_overrides.update({"effort_Nm": robot.limits.effort_Nm} if "effort" in placeholders else {})
+    stated = {} if joint_limits is None else stated_limits(robot, spec, joint_limits, placeholders)
     side, how = (torque_side, "") if torque_side is not None else detect_torque_side(
         urdf, [str(robot.model.names[j]) for j in range(1, robot.model.njoints)])
     spec.actuation.torque_side = side
@@ -170,6 +222,11 @@ def write_robot_yaml(urdf: str | Path, out: str | Path | None = None, *, base: s
                               else urdf.name)
     data.pop("assumptions", None)
     rules = _rules(robot, tip_given=tip is not None, lock=lock or {}, placeholders=placeholders)
+    for key, rule in stated.items():
+        if rule is None:
+            rules.pop(key, None)
+        else:
+            rules[key] = rule
     if how:
         rules["actuation.torque_side"] = how
     data["assumed"] = {dotted: assumed_entry(data, dotted, rule) for dotted, rule in rules.items()}
