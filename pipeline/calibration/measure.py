@@ -265,6 +265,9 @@ def read_csv(path: str | Path, robot: RobotModel, min_rows: int = 1, min_rows_fi
         raise DataFileError(path, "file", f"cannot be read as CSV ({exc})") from None
     if not rows:
         raise DataFileError(path, "rows", "the file is empty")
+    # a spreadsheet's trailing delimiter: an empty last column in the header and every row, dropped
+    while rows[0][1] and not rows[0][1][-1].strip() and all(r and not r[-1].strip() for _, r in rows):
+        rows = [(ln, r[:-1]) for ln, r in rows]
     header_line, header_cells = rows[0]
     has_header = any(not is_number(c, delimiter) for c in header_cells)
     if has_header:
@@ -302,10 +305,19 @@ def read_csv(path: str | Path, robot: RobotModel, min_rows: int = 1, min_rows_fi
             if not np.isfinite(v):
                 raise DataFileError(path, f"line {line}, {columns[j]}", f"NaN or infinite value {c.strip()!r}")
             raw[k, j] = v
+    if not len(raw):
+        raise DataFileError(path, "rows", "no measurement rows")
     values = raw[:, order] * factors[None, :]
     ncol = len(order)
+    _check_stated_units(path, values, factors, robot)
     if rpy:   # roll, pitch, yaw: extrinsic x, y, z (R = Rz Ry Rx) as the rotation vector of the same R
-        values[:, nq + 3:] = Rotation.from_euler("xyz", values[:, nq + 3:]).as_rotvec()
+        angles = values[:, nq + 3:]
+        if np.abs(angles).max() > np.pi + 1e-6:
+            k = int(np.argmax(np.abs(angles).max(axis=1)))
+            raise DataFileError(path, f"line {lines[k]}, roll,pitch,yaw", f"an angle of {np.abs(angles[k]).max():.4g} "
+                                "> pi: roll, pitch and yaw must be in rad (or state the unit: roll_deg)"
+                                + (" (the values look like degrees)" if np.abs(angles).max() <= 180 + 1e-6 else ""))
+        values[:, nq + 3:] = Rotation.from_euler("xyz", angles).as_rotvec()
     if len(values) < min_rows:
         who = f" ({min_rows_field})" if min_rows_field else ""
         raise DataFileError(path, "rows", f"{len(values)} measurement rows, need at least {min_rows}{who}")
@@ -324,6 +336,30 @@ def read_csv(path: str | Path, robot: RobotModel, min_rows: int = 1, min_rows_fi
                                 "must be in rad" + (" (the values look like degrees)" if norm.max() <= 180 + 1e-6
                                                     else ""))
     return Measurements(Q, Y, noise_model_sigma(robot, Y), str(path), rot, len(Q), np.zeros((0, nq)), None, lines)
+
+
+#: readings spread over less than this fraction of the reach, or joints spanning less than this angle (rad; angles
+#: in rad read as deg span at most 2 pi deg = 0.11 rad),
+#: under a header that states mm or deg: the values are in m or rad (the unit stated by mistake)
+MIN_SPREAD_OVER_REACH = 0.01
+MIN_JOINT_SPAN_RAD = 0.2
+
+
+def _check_stated_units(path: Path, values: np.ndarray, factors: np.ndarray, robot: RobotModel) -> None:
+    """A unit the header states that shrinks the values (mm, deg) must leave a spread a calibration can use:
+    values already in m or rad under such a header shrink to a few mm or a few degrees."""
+    nq = robot.nq
+    if np.any(factors[nq:nq + 3] < 1.0):
+        Y = values[:, nq:nq + 3]
+        spread = float(np.max(np.linalg.norm(Y - Y.mean(axis=0), axis=1))) if len(Y) > 1 else np.inf
+        if spread < MIN_SPREAD_OVER_REACH * reflector_reach_m(robot):
+            raise DataFileError(path, "x,y,z", f"the readings spread over {1e3 * spread:.3g} mm only, under a header "
+                                "stating mm: the values look like metres (drop the unit from the header)")
+    if np.any(factors[:nq] < 1.0):
+        span = float(np.max(np.ptp(values[:, :nq], axis=0))) if len(values) > 1 else np.inf
+        if span < MIN_JOINT_SPAN_RAD:
+            raise DataFileError(path, "joints", f"no joint spans more than {np.degrees(span):.3g} deg, under a header "
+                                "stating deg: the values look like radians (drop the unit from the header)")
 
 
 def _check_joint_angles(path: Path, Q: np.ndarray, robot: RobotModel, lines: np.ndarray) -> None:

@@ -111,12 +111,8 @@ def parse_header(path: str | Path, line: int, cells: Sequence[str], joint_names:
             raise DataFileError(path, f"{where}, column {k + 1}", f"{cells[k].strip()!r} repeats column "
                                 f"{seen[col.name] + 1} ({cells[seen[col.name]].strip()!r})")
         seen[col.name] = k
-    unknown = [cells[k].strip() for k, c in enumerate(columns)
-               if c.name not in fields and c.name not in numbered and c.name not in model]
-    if unknown:
-        raise DataFileError(path, where, f"unknown column(s) {unknown}: expected columns {expected} (joints as q1..q"
-                            f"{len(model)} or by the model's joint names {list(joint_names)}), units as x_mm or "
-                            "q1 [deg]")
+    hint = (f"expected columns {expected} (joints as q1..q{len(model)} or by the model's joint names "
+            f"{list(joint_names)}), units as x_mm or q1 [deg]")
     absent = [f for f in fields if f not in seen and not any(f in group for group in optional)]
     for group in optional:
         there = [f for f in group if f in seen]
@@ -125,10 +121,23 @@ def parse_header(path: str | Path, line: int, cells: Sequence[str], joint_names:
     if absent:
         raise DataFileError(path, where, f"missing column(s) {absent}: expected columns {expected}")
     joint_cells = [c.name for c in columns if c.name not in fields]
-    if all(name in numbered for name in joint_cells) and sorted(joint_cells) == sorted(numbered):
+    if sorted(n for n in joint_cells if n in numbered) == sorted(numbered):
         by_model = dict(zip(model, numbered, strict=True))
     else:
-        by_model = match_joint_names(joint_cells, model, source=str(path), field=f"{where} (joint columns)")
+        try:   # by name, as a bag's joints (a common prefix, e.g. robot_joint_1 for joint_1)
+            by_model = match_joint_names([n for n in joint_cells if n not in numbered], model, source=str(path),
+                                         field=f"{where} (joint columns)")
+        except DataFileError:
+            unknown = [cells[k].strip() for k, c in enumerate(columns)
+                       if c.name not in fields and c.name not in numbered and c.name not in model]
+            problem = (f"unknown column(s) {unknown}: {hint}" if unknown else
+                       f"the joints are neither q1..q{len(model)} nor the model's joint names: {hint}")
+            raise DataFileError(path, where, problem) from None
+    extra = [cells[k].strip() for k, c in enumerate(columns)
+             if c.name not in fields and c.name not in by_model.values()]
+    if extra:
+        raise DataFileError(path, where, f"unknown column(s) {extra} (the joints are given by "
+                            f"{'q<i>' if by_model[model[0]] in numbered else 'name'}): {hint}")
     joints = tuple(seen[by_model[name]] for name in model)
     for k in (*joints, *(seen[f] for f in fields if f in seen)):
         col = columns[k]

@@ -66,17 +66,19 @@ def joint_limits_yaml(table: JointLimitTable, note: str = "") -> str:
     if note:
         lines += [f"# {line}" for line in note.splitlines()]
     lines += ["default_velocity_scaling_factor: 1.0", "default_acceleration_scaling_factor: 1.0", "joint_limits:"]
+    def limit(flag: str, pairs: list[tuple[str, float]]) -> list[str]:
+        """``has_<flag>_limits`` and its values; false (no values) when one is not finite."""
+        if not all(math.isfinite(v) for _, v in pairs):
+            return [f"    has_{flag}_limits: false"]
+        return [f"    has_{flag}_limits: true", *(f"    {key}: {v:.17g}" for key, v in pairs)]
+
     for k, name in enumerate(table.joint_names):
         lines += [f"  {yaml_key(name)}:",
-                  "    has_position_limits: true",
-                  f"    min_position: {float(table.lower_rad[k]):.17g}",
-                  f"    max_position: {float(table.upper_rad[k]):.17g}",
-                  "    has_velocity_limits: true",
-                  f"    max_velocity: {float(table.velocity_rad_s[k]):.17g}",
-                  "    has_acceleration_limits: true",
-                  f"    max_acceleration: {float(table.acceleration_rad_s2[k]):.17g}",
-                  "    has_effort_limits: true",
-                  f"    max_effort: {float(table.effort_Nm[k]):.17g}"]
+                  *limit("position", [("min_position", float(table.lower_rad[k])),
+                                      ("max_position", float(table.upper_rad[k]))]),
+                  *limit("velocity", [("max_velocity", float(table.velocity_rad_s[k]))]),
+                  *limit("acceleration", [("max_acceleration", float(table.acceleration_rad_s2[k]))]),
+                  *limit("effort", [("max_effort", float(table.effort_Nm[k]))])]
     return "\n".join(lines) + "\n"
 
 
@@ -86,6 +88,8 @@ def write_joint_limits_yaml(path: str | Path, table: JointLimitTable, note: str 
 
 
 #: a value tagged ``!degrees`` (ur_description's joint_limits.yaml writes ``max_position: !degrees 360.0``)
+#: YAML 1.1 booleans (yaml-cpp, which MoveIt reads the file with, takes ``no`` and ``off`` for false)
+YAML11_BOOLEANS = {"true": True, "yes": True, "on": True, "false": False, "no": False, "off": False}
 _DEGREES = re.compile(r"!degrees\s+([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)")
 
 
@@ -108,7 +112,7 @@ def read_joint_limits_yaml(path: str | Path, joint_names: Sequence[str] | None =
         raise DataFileError(path, field, problem) from None
     if not isinstance(data, dict) or not isinstance(data.get("joint_limits"), dict):
         raise DataFileError(path, "joint_limits", "missing or not a mapping of joints")
-    entries = data["joint_limits"]
+    entries = {str(k): v for k, v in data["joint_limits"].items()}   # an unquoted 1: is the joint "1"
     names = list(entries) if joint_names is None else list(joint_names)
 
     def value(name: str, flag: str, key: str, default: float) -> float:
@@ -117,18 +121,29 @@ def read_joint_limits_yaml(path: str | Path, joint_names: Sequence[str] | None =
             return default
         if not isinstance(entry, dict):
             raise DataFileError(path, f"joint_limits.{name}", "missing or not a mapping")
-        if not entry.get(flag, key in entry):
+        stated = entry.get(flag, key in entry)
+        if isinstance(stated, str) and stated.strip().lower() in YAML11_BOOLEANS:   # yaml-cpp's, as MoveIt reads
+            stated = YAML11_BOOLEANS[stated.strip().lower()]
+        if not isinstance(stated, bool):
+            raise DataFileError(path, f"joint_limits.{name}.{flag}", f"{stated!r} is not true or false")
+        if not stated:
             return default
         number = entry.get(key)
-        if not isinstance(number, int | float) or isinstance(number, bool):
-            raise DataFileError(path, f"joint_limits.{name}.{key}", f"{number!r} is not a number")
+        if not isinstance(number, int | float) or isinstance(number, bool) or not math.isfinite(number):
+            raise DataFileError(path, f"joint_limits.{name}.{key}", f"{number!r} is not a finite number")
+        if key.startswith("max_") and key != "max_position" and number < 0:
+            raise DataFileError(path, f"joint_limits.{name}.{key}", f"{number!r} is negative")
         return float(number)
 
     def column(flag: str, key: str, default: float) -> np.ndarray:
         return np.array([value(name, flag, key, default) for name in names])
 
-    return JointLimitTable(tuple(names), column("has_position_limits", "min_position", -np.inf),
-                           column("has_position_limits", "max_position", np.inf),
+    lower, upper = column("has_position_limits", "min_position", -np.inf), column("has_position_limits",
+                                                                                  "max_position", np.inf)
+    crossed = np.flatnonzero(lower > upper)
+    if crossed.size:
+        raise DataFileError(path, f"joint_limits.{names[int(crossed[0])]}", "min_position above max_position")
+    return JointLimitTable(tuple(names), lower, upper,
                            column("has_velocity_limits", "max_velocity", np.inf),
                            column("has_acceleration_limits", "max_acceleration", np.inf),
                            column("has_effort_limits", "max_effort", np.inf))

@@ -82,6 +82,18 @@ def program_text(program: PoseProgram, fmt: ProgramFormat, notes: list[str] | No
     if q.ndim != 2 or q.shape[1] != AXES:
         raise DataFileError(None, "--program", f"{fmt} drives {AXES} axes; the motion has "
                             f"{q.shape[1] if q.ndim == 2 else 0} joints")
+    problems = [("name", not re.fullmatch(r"[A-Za-z_]\w*", program.name), f"{program.name!r} is no identifier"),
+                ("joint_names", any("," in n or "\n" in n for n in program.joint_names) or
+                 len(program.joint_names) != AXES, f"{AXES} names without commas needed, got {program.joint_names}"),
+                ("q_rad", not np.all(np.isfinite(q)), "a joint target is not finite"),
+                ("dwell_s", dwell.shape != (len(q),) or not np.all(np.isfinite(dwell) & (dwell >= 0)),
+                 f"one finite dwell >= 0 per target needed ({len(q)} targets)"),
+                ("speeds", not all(np.isfinite(x) and x > 0 for x in (
+                    program.velocity_rad_s, program.acceleration_rad_s2, program.velocity_percent,
+                    program.acceleration_percent)), "speeds and accelerations must be finite and > 0")]
+    for field, bad, problem in problems:
+        if bad:
+            raise DataFileError(None, f"program.{field}", problem)
     extra = notes or []
     if fmt == "urscript":
         body = [*_header(program, "#", extra), f"def {program.name}():"]
@@ -138,9 +150,19 @@ def read_program(path: str | Path) -> PoseProgram:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise DataFileError(path, "file", f"cannot be read ({exc})") from None
-    names = re.search(r"joints: (\S+)", text)
+    names = re.search(r"joints: ([^\r\n]+)", text)
     if names is None:
         raise DataFileError(path, "header", "no 'joints:' comment line")
+    comment = {"urscript": "#", "krl": ";", "rapid": "!"}[fmt]
+    code = "\n".join(line.split(comment, 1)[0] for line in text.splitlines())   # comments are not read
+    try:
+        return _parse(path, fmt, code, tuple(n.strip() for n in names.group(1).split(",")))
+    except (ValueError, KeyError, IndexError) as exc:
+        raise DataFileError(path, "program", f"not a {fmt} program this tool reads back ({exc!r})") from None
+
+
+def _parse(path: Path, fmt: ProgramFormat, text: str, joint_names: tuple[str, ...]) -> PoseProgram:
+    """The targets, waits and speeds of a program's code (comments removed)."""
     targets: list[list[float]] = []
     dwell: list[float] = []
 
@@ -187,5 +209,11 @@ def read_program(path: str | Path) -> PoseProgram:
         acc = percent = acc_percent = math.nan
     if name is None or not targets or any(len(t) != AXES for t in targets):
         raise DataFileError(path, "program", f"no {fmt} program of {AXES}-axis joint targets")
-    return PoseProgram(name.group(1), tuple(names.group(1).split(",")), np.array(targets), np.array(dwell),
-                       speed, acc, percent, acc_percent)
+    statement = {"urscript": "movej(", "krl": "PTP ", "rapid": "MoveAbsJ "}[fmt]
+    if text.count(statement) != len(targets):
+        raise DataFileError(path, "program", f"{text.count(statement)} {statement.strip()} statements, "
+                            f"{len(targets)} read as joint targets (blended or computed targets are not read back)")
+    if not np.all(np.isfinite(np.array(targets))):
+        raise DataFileError(path, "program", "a joint target is not finite")
+    return PoseProgram(name.group(1), joint_names, np.array(targets), np.array(dwell), speed, acc, percent,
+                       acc_percent)

@@ -73,6 +73,9 @@ def read_rtde_csv(path: str | Path, n_joints: int) -> tuple[JointStates, str | N
     header = _header(source)
     if header is None or TIME_OUTPUT not in header:
         raise DataFileError(source, "header", f"no {TIME_OUTPUT!r} column: not an RTDE recording")
+    repeated = sorted({h for h in header if header.count(h) > 1})
+    if repeated:
+        raise DataFileError(source, "header", f"column(s) {repeated} more than once")
     q_cols = _vector(header, POSITION_OUTPUT)
     if len(q_cols) != n_joints:
         raise DataFileError(source, "header", f"{len(q_cols)} {POSITION_OUTPUT}_<i> columns for a model of "
@@ -92,6 +95,11 @@ def read_rtde_csv(path: str | Path, n_joints: int) -> tuple[JointStates, str | N
     if len(table) < 2:
         raise DataFileError(source, "rows", f"{len(table)} samples: too few for a recording")
     t = table[:, header.index(TIME_OUTPUT)]
+    wrong = (np.flatnonzero(~np.isfinite(t[1:]) | ~(np.diff(t) > 0)) if np.all(np.isfinite(t[:1]))
+             else np.array([-1]))
+    if wrong.size:
+        line = rows[int(wrong[0]) + 1][0]
+        raise DataFileError(source, f"line {line}, {TIME_OUTPUT}", "time stamps must be finite and increase strictly")
     qd_cols = _vector(header, VELOCITY_OUTPUT)
     nan = np.full((len(table), n_joints), np.nan)
     qd = table[:, qd_cols] if len(qd_cols) == n_joints else nan

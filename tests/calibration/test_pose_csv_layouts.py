@@ -5,6 +5,7 @@ named."""
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -96,3 +97,35 @@ def test_a_bad_header_is_named(tmp_path, rx130l: RobotModel, poses, header, prob
     with pytest.raises(DataFileError) as info:
         ms.read_csv(path, rx130l)
     assert str(path) in str(info.value) and problem in str(info.value), str(info.value)
+
+
+def test_units_the_values_contradict_and_spreadsheet_quirks(tmp_path, rx130l: RobotModel, poses):
+    Q, Y, rotvec = poses
+    names = [str(n) for n in rx130l.model.names[1:]]
+    q_cols = [f"q{i}" for i in range(1, 7)]
+    cases = {   # a unit that the values contradict: refused, naming the unit to drop
+        "mm_of_metres.csv": (q_cols + ["x_mm", "y_mm", "z_mm"], [Q, Y], "look like metres"),
+        "deg_of_rad.csv": ([f"q{i}_deg" for i in range(1, 7)] + ["x", "y", "z"], [Q, Y], "look like radians"),
+        "rpy_of_deg.csv": (q_cols + ["x", "y", "z", "roll", "pitch", "yaw"],
+                           [Q, Y, np.degrees(Rotation.from_rotvec(rotvec).as_euler("xyz"))], "look like degrees"),
+        "q_and_names.csv": (names + ["q1", "x", "y", "z"], [Q, Q[:, :1], Y], "unknown column(s) ['q1']"),
+    }
+    for name, (header, columns, problem) in cases.items():
+        _write(tmp_path / name, header, columns)
+        with pytest.raises(DataFileError, match=re.escape(problem)):
+            ms.read_csv(tmp_path / name, rx130l)
+    # a trailing delimiter on every line, and joints named with a common prefix, read as the plain file
+    reference = ms.read_csv(_plain(tmp_path, Q, Y), rx130l)
+    _write(tmp_path / "prefixed.csv", [f"robot_{n}" for n in names] + ["x", "y", "z", ""],
+           [Q, Y, np.zeros((len(Q), 0))])
+    text = (tmp_path / "prefixed.csv").read_text().splitlines()
+    (tmp_path / "prefixed.csv").write_text("\n".join([text[0]] + [ln + "," for ln in text[1:]]) + "\n")
+    back = ms.read_csv(tmp_path / "prefixed.csv", rx130l)
+    np.testing.assert_array_equal(back.Q, reference.Q)
+    np.testing.assert_array_equal(back.Y, reference.Y)
+
+
+def _plain(tmp_path, Q, Y):
+    path = tmp_path / "plain_q.csv"
+    _write(path, [f"q{i}" for i in range(1, 7)] + ["x", "y", "z"], [Q, Y])
+    return path

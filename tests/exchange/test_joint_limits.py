@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import yourdfpy
 
+from pipeline.core.errors import DataFileError
 from pipeline.exchange.joint_limits import (
     JointLimitTable,
     handed_on_urdf,
@@ -67,3 +68,22 @@ def test_continuous_joints_stay_continuous_and_yourdfpy_loads_the_urdf(tmp_path:
     for joint in revolute:
         k = list(robot.model.names[1:]).index(joint)
         assert urdf.joint_map[joint].limit.lower == pytest.approx(robot.limits.lower_rad[k])
+
+
+def test_an_absent_limit_round_trips_and_bad_values_are_named(tmp_path: Path) -> None:
+    inf = np.inf
+    table = JointLimitTable(("a", "1"), np.array([-1.0, -inf]), np.array([1.0, inf]), np.array([2.0, inf]),
+                            np.array([5.0, 3.0]), np.array([10.0, inf]))
+    back = read_joint_limits_yaml(write_joint_limits_yaml(tmp_path / "limits.yaml", table))
+    for field in ("lower_rad", "upper_rad", "velocity_rad_s", "acceleration_rad_s2", "effort_Nm"):
+        np.testing.assert_array_equal(getattr(back, field), getattr(table, field))
+    path = tmp_path / "moveit.yaml"
+    path.write_text("joint_limits:\n  1:\n    has_velocity_limits: no\n    max_velocity: 2.0\n")
+    assert np.isinf(read_joint_limits_yaml(path, ["1"]).velocity_rad_s[0])     # yaml-cpp's "no", an int key
+    for text, problem in (("has_velocity_limits: true\n    max_velocity: -2.0", "negative"),
+                          ("has_velocity_limits: true\n    max_velocity: .nan", "not a finite number"),
+                          ("has_position_limits: true\n    min_position: 2.0\n    max_position: 1.0", "above"),
+                          ("has_velocity_limits: maybe\n    max_velocity: 1.0", "not true or false")):
+        path.write_text(f"joint_limits:\n  a:\n    {text}\n")
+        with pytest.raises(DataFileError, match=problem):
+            read_joint_limits_yaml(path)

@@ -90,3 +90,25 @@ def test_the_exported_programs_follow_the_tour(tmp_path: Path, rx130l: RobotMode
                 visited.append(motion.q_rad[k])
         np.testing.assert_allclose(np.array(visited), program.q_rad, atol=1e-10)
         assert program.velocity_rad_s <= 0.5 * float(np.min(ctx.limits.velocity_rad_s)) + 1e-12 or fmt == "krl"
+
+
+def test_comments_are_not_read_and_a_program_it_cannot_read_back_is_named(tmp_path: Path) -> None:
+    program = _program()
+    notes = ["movej([0, 0, 0, 0, 0, 0], a=1, v=1)  PTP {A1 0} sleep(1.0) MoveAbsJ [[0]] WaitTime 1;"]
+    for fmt in PROGRAM_FORMATS:
+        back = read_program(write_program(tmp_path / f"tour{SUFFIX[fmt]}", program, fmt, notes))
+        assert len(back.q_rad) == len(program.q_rad), fmt                  # the note's text is a comment
+    blended = (tmp_path / "tour.script").read_text().replace("v=0.6)  # target 2", "v=0.6, r=0.01)  # target 2")
+    (tmp_path / "blended.script").write_text(blended)
+    with pytest.raises(DataFileError, match="blended"):
+        read_program(tmp_path / "blended.script")
+    krl = (tmp_path / "tour.src").read_text().replace(", A6 ", ", A7 ", 1)
+    (tmp_path / "axis.src").write_text(krl)
+    with pytest.raises(DataFileError, match="axis.src"):
+        read_program(tmp_path / "axis.src")
+    bad = PoseProgram("tour-1", program.joint_names, program.q_rad, program.dwell_s, 0.6, 1.2, 50.0, 50.0)
+    with pytest.raises(DataFileError, match="no identifier"):
+        program_text(bad, "krl")
+    nan = PoseProgram("tour", program.joint_names, np.full((2, 6), np.nan), np.zeros(2), 0.6, 1.2, 50.0, 50.0)
+    with pytest.raises(DataFileError, match="not finite"):
+        program_text(nan, "rapid")

@@ -168,3 +168,19 @@ def test_an_rtde_recording_of_another_number_of_joints_is_named(tmp_path, rx130l
     with pytest.raises(DataFileError, match="7 actual_q_<i> columns for a model of 6 joints"):
         load_user_record(Config(data_file=str(_rtde_csv(tmp_path / "rtde.csv", states, "actual_current", " "))),
                          rx130l)
+
+
+def test_an_rtde_recording_with_a_repeated_column_or_a_bad_time_stamp_is_named(tmp_path, rx130l):
+    states = _states(rx130l, 125.0, 30.0, [str(n) for n in rx130l.model.names[1:]])
+    good = _rtde_csv(tmp_path / "rtde.csv", states, "actual_current", " ")
+    lines = good.read_text().splitlines()
+    repeated = tmp_path / "repeated.csv"
+    repeated.write_text("\n".join([lines[0] + " actual_q_0"] + [ln + " 0.0" for ln in lines[1:]]) + "\n")
+    with pytest.raises(DataFileError, match="more than once"):
+        load_user_record(Config(data_file=str(repeated)), rx130l)
+    stamps = tmp_path / "stamps.csv"
+    cells = lines[10].split(" ")
+    cells[0] = lines[9].split(" ")[0]                                   # a repeated time stamp on line 11
+    stamps.write_text("\n".join([*lines[:10], " ".join(cells), *lines[11:]]) + "\n")
+    with pytest.raises(DataFileError, match="line 11, timestamp"):
+        load_user_record(Config(data_file=str(stamps)), rx130l)
