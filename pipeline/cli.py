@@ -143,20 +143,15 @@ def _add_export_parser(sub: argparse._SubParsersAction) -> None:
     e.add_argument("run_dir", metavar="RUN_DIR")
     e.add_argument("--to", metavar="DIR", help="folder to write (default RUN_DIR/export; replaced as a whole)")
     e.add_argument("--rate-hz", type=float, default=1000.0, help="sample rate of every motion (default 1000)")
-    e.add_argument("--start", metavar="Q1,...", help="start configuration, rad (default: the robot's ready pose)")
+    e.add_argument("--start", type=_floats, default=None, metavar="Q1,...",
+                   help="start configuration, rad (default: the robot's ready pose)")
     e.add_argument("--bag-format", choices=("sqlite3", "mcap"), default="sqlite3", help="rosbag2 storage")
     e.add_argument("--program", type=_program_formats, default=(), metavar="FORMAT,...",
                    help="also the calibration tour as a controller program: urscript, krl, rapid (6 axes)")
 
 
 def _cmd_export(ns: argparse.Namespace) -> int:
-    start = None
-    if ns.start:
-        try:
-            start = [float(x) for x in ns.start.split(",")]
-        except ValueError:
-            raise PipelineError(None, "--start", f"{ns.start!r} is not comma-separated numbers (rad)") from None
-    folder, written, notes = export_run(ns.run_dir, ns.to, ns.rate_hz, start, ns.bag_format, ns.program)
+    folder, written, notes = export_run(ns.run_dir, ns.to, ns.rate_hz, ns.start, ns.bag_format, ns.program)
     print(f"wrote {folder}: {', '.join(written)}")
     for note in notes:
         print(f"note: {note}")

@@ -82,16 +82,21 @@ def read_rtde_csv(path: str | Path, n_joints: int) -> tuple[JointStates, str | N
                             f"{n_joints} joints (RTDE's joint i is read as the model's joint i)")
     effort_name = next((n for n in EFFORT_OUTPUTS if len(_vector(header, n)) == n_joints), None)
     lines = source.read_text(encoding="utf-8-sig").splitlines()
-    rows = [(k + 1, _cells(ln)) for k, ln in enumerate(lines[1:], start=1) if ln.strip()]
-    table = np.empty((len(rows), len(header)))
-    for r, (line, cells) in enumerate(rows):
-        if len(cells) != len(header):
-            raise DataFileError(source, f"line {line}", f"{len(cells)} values, the header names {len(header)}")
-        try:
-            table[r] = [float(c) for c in cells]
-        except ValueError:
-            bad = next(c for c in cells if not is_number(c))
-            raise DataFileError(source, f"line {line}", f"not a number: {bad!r}") from None
+    rows = [(k + 1, ln) for k, ln in enumerate(lines[1:], start=1) if ln.strip()]
+    try:   # one numpy parse of the whole table; a bad line is looked for only when it fails
+        table = np.loadtxt([ln for _, ln in rows], delimiter="," if "," in lines[0] else None,
+                           ndmin=2).reshape(len(rows), -1)
+    except ValueError:
+        table = np.empty((0, len(header)))
+    if table.shape != (len(rows), len(header)):
+        for line, text in rows:
+            cells = _cells(text)
+            if len(cells) != len(header):
+                raise DataFileError(source, f"line {line}", f"{len(cells)} values, the header names {len(header)}")
+            bad = next((c for c in cells if not is_number(c)), None)
+            if bad is not None:
+                raise DataFileError(source, f"line {line}", f"not a number: {bad!r}")
+        raise DataFileError(source, "rows", "cannot be read as a table of numbers")
     if len(table) < 2:
         raise DataFileError(source, "rows", f"{len(table)} samples: too few for a recording")
     t = table[:, header.index(TIME_OUTPUT)]

@@ -178,6 +178,10 @@ def test_an_rtde_recording_with_a_repeated_column_or_a_bad_time_stamp_is_named(t
     repeated.write_text("\n".join([lines[0] + " actual_q_0"] + [ln + " 0.0" for ln in lines[1:]]) + "\n")
     with pytest.raises(DataFileError, match="more than once"):
         load_user_record(Config(data_file=str(repeated)), rx130l)
+    word = tmp_path / "word.csv"
+    word.write_text("\n".join([*lines[:5], lines[5].replace(lines[5].split(" ")[3], "n/a", 1), *lines[6:]]) + "\n")
+    with pytest.raises(DataFileError, match="line 6: not a number: 'n/a'"):
+        load_user_record(Config(data_file=str(word)), rx130l)
     stamps = tmp_path / "stamps.csv"
     cells = lines[10].split(" ")
     cells[0] = lines[9].split(" ")[0]                                   # a repeated time stamp on line 11
