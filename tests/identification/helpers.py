@@ -6,17 +6,22 @@ calibration stage would hand on); tests may read the truth, stage code may not.
 
 from __future__ import annotations
 
+import json
+import shutil
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pytest
 
+from pipeline import cli
 from pipeline.core.config import CONFIGS_DIR, load_config, to_plain
 from pipeline.core.progress import Progress
 from pipeline.core.typed_config import build_dataclass
 from pipeline.identification import stage
 from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import apply_kinematic_errors
+from pipeline.robot.public_arms import arm_file, corpus_arm
 from pipeline.sim.truth import RealRobot, TruthConfig
 from pipeline.stage_api import StageContext, stage_rng
 
@@ -57,3 +62,23 @@ def quick_context(tmp_path: Path, seed: int = 1, robot: str = "rx130l", override
 
 def true_base(real: RealRobot, E: np.ndarray) -> np.ndarray:
     return E.T @ np.asarray(real.dynamic_parameters, float)
+
+
+def identify_recorded_bag(tmp_path: Path, arm: str, bag: Path) -> tuple[Path, dict[str, Any]]:
+    """A recorded bag through the CLI as a user would: the corpus arm's URDF through ``robot init``
+    (no options), then ``run --stages identification`` with ``bag`` as ``identification.data_file`` and
+    every other setting at its default. Asserts exit 0; returns (the run's folder, the identification
+    summary). Skips when the arm's package is not installed."""
+    urdf = arm_file(corpus_arm(arm))
+    if urdf is None:
+        pytest.skip(f"the package of the {arm} URDF is not installed")
+    folder = tmp_path / arm
+    folder.mkdir()
+    shutil.copy(urdf, folder / f"{arm}.urdf")
+    assert cli.main(["robot", "init", str(folder / f"{arm}.urdf")]) == 0
+    out = tmp_path / "runs"
+    code = cli.main(["run", "--set", f"robot={folder}", "--stages", "identification",
+                     "--set", f"identification.data_file={bag}", "--out", str(out)])
+    assert code == 0
+    run = out / arm
+    return run, json.loads((run / "identification" / "summary.json").read_text())

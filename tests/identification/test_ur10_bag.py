@@ -9,37 +9,24 @@ leaves structure there, not pass them silently."""
 
 from __future__ import annotations
 
-import json
-import shutil
-
 import numpy as np
 import pytest
 
-from pipeline import cli
 from pipeline.core.config import REPO_ROOT
-from pipeline.robot.public_arms import arm_file, corpus_arm
+
+from .helpers import identify_recorded_bag
 
 BAG = REPO_ROOT / "data" / "unisa_ur10_bag" / "ur10_exciting_trajectory.db3"
-#: Petrone, Ferrentino & Chiacchio 2025 (IEEE TII) on the same held-out 30 %, N·m (data/unisa_ur10_bag/README.md)
+#: Petrone, Ferrentino & Chiacchio 2025 (IEEE TII) on the same held-out 30 %, N·m: data/unisa_ur10_bag/README.md,
+#: computed by tools/unisa_ur10_reference.py from the authors' code
 PETRONE_2025_HELD_OUT_RMS_NM = np.array([4.093, 3.165, 1.743, 0.485, 0.632, 1.006])
 #: joints (1-based) on which the stage's defaults are at or below the authors' model (README)
 JOINTS_AT_OR_BELOW = (1, 2, 5)
 
 
 @pytest.mark.slow
-def test_the_bag_as_shipped_against_the_published_model(tmp_path, capsys):
-    urdf = arm_file(corpus_arm("ur10"))
-    if urdf is None:
-        pytest.skip("example-robot-data is not installed")
-    arm = tmp_path / "ur10"
-    arm.mkdir()
-    shutil.copy(urdf, arm / "ur10.urdf")
-    assert cli.main(["robot", "init", str(arm / "ur10.urdf")]) == 0
-    out = tmp_path / "runs"
-    code = cli.main(["run", "--set", f"robot={arm}", "--stages", "identification",
-                     "--set", f"identification.data_file={BAG}", "--out", str(out)])
-    assert code == 0, capsys.readouterr().err
-    summary = json.loads((out / "ur10" / "identification" / "summary.json").read_text())
+def test_the_bag_as_shipped_against_the_published_model(tmp_path):
+    _run, summary = identify_recorded_bag(tmp_path, "ur10", BAG)
     rms = np.asarray(summary["validation_torque_rms_Nm"])
     assert rms.shape == (6,)
     assert np.sqrt(np.mean(rms ** 2)) <= np.sqrt(np.mean(PETRONE_2025_HELD_OUT_RMS_NM ** 2)), rms
