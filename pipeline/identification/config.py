@@ -106,6 +106,9 @@ class Config:
     # min(20 Hz, rate / 4) and rate / (5 x cut-off) (signals.record_filter_settings)
     data_cutoff_hz: float | None = None
     data_decimation: int | None = None
+    # a data_file's Coulomb smoothing width tanh(v / w): "auto" = chosen per joint on the training part
+    # (coulomb_width.choose_widths), "robot" = robot.yaml's actuation.coulomb_smoothing_rad_s
+    coulomb_width: Literal["auto", "robot"] = "auto"
     # a data_file's joints renamed to the model's: {name in the record: name in the model} (bags)
     joint_names: dict[str, str] = field(default_factory=dict)
     # actuator columns: "gear" = motor-side rotor/friction through the gear matrix (coupled axes,

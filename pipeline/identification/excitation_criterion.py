@@ -34,7 +34,7 @@ def regressor_casadi(sym: SymbolicRobot, reg: RegressorModel, base: BaseParamete
     kd = np.abs(np.diag(K))
     vm = ca.mtimes(ca.DM(K), v)
     am = ca.mtimes(ca.DM(K), a)
-    w = reg.coulomb_width_rad_s
+    w = reg.joint_coulomb_width_rad_s
     cols = []
     for group in range(4):
         for j in range(nq):
@@ -44,7 +44,7 @@ def regressor_casadi(sym: SymbolicRobot, reg: RegressorModel, base: BaseParamete
             elif group == 1:
                 cols.append(kj * vm[j] / kd[j] ** 2)
             elif group == 2:
-                s = ca.tanh(vm[j] / (kd[j] * w)) if w > 0 else ca.sign(vm[j])
+                s = ca.tanh(vm[j] / (kd[j] * w[j])) if w[j] > 0 else ca.sign(vm[j])
                 cols.append(kj * s / kd[j])
             else:
                 e = np.zeros((nq, 1))

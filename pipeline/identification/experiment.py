@@ -9,6 +9,8 @@ torques are fitted to and the data they come from (paper ``004_abbe750b8bbcc3aa.
   torques when they are in another unit: :mod:`.effort_unit`), or the optimal Fourier excitation
   (:mod:`.design`) run on the hidden robot for ``periods`` periods and processed (period averaging,
   zero-phase filtering, differentiation, block decimation: :func:`.measure.process_periodic`);
+* :func:`choose_record_coulomb_widths`: a record's Coulomb smoothing width per joint, chosen on its
+  training part (:mod:`.coulomb_width`);
 * :func:`take_off_record_terms`: a record's friction and actuation terms beyond viscous + Coulomb
   friction, taken off its torques before the fits (:mod:`.friction_terms`).
 """
@@ -31,7 +33,9 @@ from pipeline.identification.base_set import (
     without_columns,
 )
 from pipeline.identification.config import DATA_BORDER_SAMPLES, Config
+from pipeline.identification.coulomb_width import choose_widths, with_widths
 from pipeline.identification.effort_unit import EffortUnit, read_effort_unit, scaled
+from pipeline.identification.fit import offset_mask
 from pipeline.identification.friction_terms import FrictionTerms, record_terms
 from pipeline.identification.joints import select_joints
 from pipeline.identification.outcome import Measured, Regressors
@@ -116,7 +120,7 @@ def excite_and_measure(ctx: StageContext, cfg: Config, regs: Regressors, timings
     data = meas_mod.process_periodic(sim, regs.reg, n_per, cutoff, cfg.decimation)
     stiction = None
     if ctx.real is not None and ctx.real.dry_friction_sticks:   # held joints: out of the fits (without_stiction_band)
-        data, stiction = meas_mod.without_stiction_band(data, regs.reg.coulomb_width_rad_s)
+        data, stiction = meas_mod.without_stiction_band(data, float(regs.reg.coulomb_width_rad_s))
     timings["data_s"] = time.perf_counter() - t1
     return Measured(data, "simulation (ideal tracking of the hidden robot)", exc, limits, traj, stiction)
 
@@ -157,6 +161,24 @@ def shrink_base_set(regs: Regressors, exc: design_mod.ExcitationResult, cfg: Con
     return True
 
 
+def choose_record_coulomb_widths(cfg: Config, regs: Regressors, measured: Measured, timings: dict[str, float]) -> None:
+    """A user's record with ``coulomb_width: auto``: the Coulomb smoothing width of every joint chosen on its
+    first ``data_train_fraction`` (:func:`.coulomb_width.choose_widths`), set on ``regs.reg`` and in
+    ``measured.data``'s regressor, and kept as ``measured.coulomb_widths``; timed
+    (``timings["coulomb_width_s"]``). Nothing for a simulated experiment or ``coulomb_width: robot``."""
+    if regs.record is None or cfg.coulomb_width != "auto":
+        return
+    t1 = time.perf_counter()
+    data, K = measured.data, regs.reg.gear_matrix
+    diagonal = np.allclose(K, np.diag(np.diag(K)))      # the load-dependent candidate's condition (.fit)
+    widths = choose_widths(data, regs.reg, regs.base.base_regressor, int(cfg.data_train_fraction * data.n_samples),
+                           offset_mask(regs, regs.reg.nv) if diagonal else None)
+    regs.reg.coulomb_width_rad_s = widths.chosen_rad_s
+    measured.data = with_widths(data, regs.reg, widths.chosen_rad_s)
+    measured.coulomb_widths = widths
+    timings["coulomb_width_s"] = time.perf_counter() - t1
+
+
 def take_off_record_terms(robot: RobotModel, cfg: Config, regs: Regressors, measured: Measured,
                           timings: dict[str, float]) -> FrictionTerms | None:
     """A user's record: the friction and actuation terms beyond viscous + Coulomb friction chosen on its
@@ -166,6 +188,6 @@ def take_off_record_terms(robot: RobotModel, cfg: Config, regs: Regressors, meas
         return None
     t1 = time.perf_counter()
     measured.data, terms = record_terms(measured.data, regs.base.base_regressor, cfg.data_train_fraction,
-                                        regs.reg.coulomb_width_rad_s, robot.limits.effort_Nm[regs.used])
+                                        regs.reg.row_coulomb_width_rad_s, robot.limits.effort_Nm[regs.used])
     timings["friction_terms_s"] = time.perf_counter() - t1
     return terms

@@ -24,6 +24,7 @@ from pipeline.identification.config import Config
 from pipeline.identification.friction import (
     MAX_EXCESS_OVER_LIMIT,
     LoadFriction,
+    StribeckFit,
     expand_to_joints,
     fit_load_friction,
     fit_stribeck,
@@ -51,7 +52,7 @@ def fit_models(robot: RobotModel, cfg: Config, regs: Regressors, measured: Measu
     cond_data_structural = float(np.linalg.cond(regs.base_design.base_regressor(data.Y)))  # design criterion's set
     wls_vc = est_mod.wls(Wb, y, nm)
     max_excess = MAX_EXCESS_OVER_LIMIT * robot.limits.effort_Nm[regs.used]
-    fit = (fit_stribeck(Wb, y, data.v_blocks, wls_vc.beta, wls_vc.joint_sigma_Nm, regs.reg.coulomb_width_rad_s,
+    fit = (fit_stribeck(Wb, y, data.v_blocks, wls_vc.beta, wls_vc.joint_sigma_Nm, regs.reg.row_coulomb_width_rad_s,
                         max_excess_Nm=max_excess) if cfg.friction_model == "stribeck" else None)
     timings["stribeck_fit_s"] = time.perf_counter() - t1
     y_fit = y if fit is None else y - fit.stribeck_torque(data.v_blocks).ravel()
@@ -75,26 +76,40 @@ def fit_models(robot: RobotModel, cfg: Config, regs: Regressors, measured: Measu
 def fit_load_candidate(cfg: Config, regs: Regressors, data: meas_mod.ProcessedData, fits: Fits, nq: int,
                        timings: dict[str, float]) -> None:
     """The candidate with load-dependent Coulomb friction (:func:`.friction.fit_load_friction`), nested in
-    the configured model's fit, and its WLS and physically consistent fits (``fits.load_candidate``);
-    on joint-side (diagonal) actuator columns only, else ``fits.load_note`` says why not."""
+    the configured model's fit, and its WLS and physically consistent fits (``fits.load_candidate``); for a
+    record fitted with the Stribeck term also nested in the viscous + Coulomb fit (``fits.load_candidate_vc``:
+    a Stribeck fit that extrapolates badly on one joint must not keep the load term from the others); on
+    joint-side (diagonal) actuator columns only, else ``fits.load_note`` says why not."""
     K = regs.reg.gear_matrix
     if not np.allclose(K, np.diag(np.diag(K))):
         fits.load_note = "not fitted: coupled axes (a motor's load is not one joint's torque)"
         return
     t1 = time.perf_counter()
-    Wb, y, fit, nm = fits.Wb, fits.y, fits.stribeck, regs.n_used
     try:
-        lf = fit_load_friction(Wb, y, data.v_blocks, fits.wls_vc.beta if fit is None else fit.beta, fit,
-                               fits.wls_vc.joint_sigma_Nm, regs.reg.coulomb_width_rad_s, offset_mask(regs, nq),
-                               fits.max_excess_Nm)
-        y_l = y - lf.torque(Wb, data.v_blocks).ravel()
-        wls_l = est_mod.wls(Wb, y_l, nm)
-        phys_l = est_mod.physical_fit(data.Y, y_l, nq, fits.p_nom, wls_l.joint_sigma_Nm, cfg.regularization,
-                                      cfg.physical_max_iter, n_rows=nm)
-        fits.load_candidate = LoadCandidate(lf, y_l, wls_l, phys_l)
+        fits.load_candidate = _load_candidate(cfg, regs, data, fits, nq, fits.stribeck)
     except SolverError as exc:   # a candidate only: the others stand
         fits.load_note = f"not fitted: {exc}"
+    if fits.stribeck is not None and regs.record is not None:
+        try:
+            fits.load_candidate_vc = _load_candidate(cfg, regs, data, fits, nq, None)
+        except SolverError:      # a candidate only
+            fits.load_candidate_vc = None
     timings["load_friction_fit_s"] = time.perf_counter() - t1
+
+
+def _load_candidate(cfg: Config, regs: Regressors, data: meas_mod.ProcessedData, fits: Fits, nq: int,
+                    stribeck: StribeckFit | None) -> LoadCandidate:
+    """The load-dependent candidate nested in the fit with the Stribeck term ``stribeck`` (None: viscous +
+    Coulomb) and its WLS and physically consistent fits; raises :class:`SolverError`."""
+    Wb, y, nm = fits.Wb, fits.y, regs.n_used
+    lf = fit_load_friction(Wb, y, data.v_blocks, fits.wls_vc.beta if stribeck is None else stribeck.beta, stribeck,
+                           fits.wls_vc.joint_sigma_Nm, regs.reg.row_coulomb_width_rad_s, offset_mask(regs, nq),
+                           fits.max_excess_Nm)
+    y_l = y - lf.torque(Wb, data.v_blocks).ravel()
+    wls_l = est_mod.wls(Wb, y_l, nm)
+    phys_l = est_mod.physical_fit(data.Y, y_l, nq, fits.p_nom, wls_l.joint_sigma_Nm, cfg.regularization,
+                                  cfg.physical_max_iter, n_rows=nm)
+    return LoadCandidate(lf, y_l, wls_l, phys_l)
 
 
 def offset_mask(regs: Regressors, nq: int) -> np.ndarray:

@@ -66,6 +66,7 @@ from pipeline.identification import estimate as est_mod
 from pipeline.identification.measure import ProcessedData
 from pipeline.identification.regressor import BaseParameters
 from pipeline.identification.tx40 import heldout_validation
+from pipeline.robot.friction import smooth_sign
 from pipeline.robot.friction import stribeck_excess_torque as stribeck_torque
 
 #: bounds of the Stribeck velocity [rad/s] (joint side)
@@ -89,7 +90,7 @@ class StribeckFit:
     beta: np.ndarray
     static_excess_Nm: np.ndarray  # fs per joint
     stribeck_velocity_rad_s: np.ndarray  # vs per joint
-    coulomb_width_rad_s: float
+    coulomb_width_rad_s: float | np.ndarray
     status: str
     iterations: int
     #: per joint likelihood-ratio statistic of the Stribeck term (:func:`stribeck_chi2_gain`)
@@ -108,8 +109,7 @@ class StribeckFit:
         v3 = np.asarray(v, float)
         v3 = v3[:, None, :] if v3.ndim == 2 else v3
         n, _, nq = v3.shape
-        w = self.coulomb_width_rad_s
-        sgn = np.tanh(v3 / w) if w > 0 else np.sign(v3)
+        sgn = smooth_sign(v3, self.coulomb_width_rad_s)
         u2 = (v3 / self.stribeck_velocity_rad_s) ** 2
         shape = (np.exp(-u2) * sgn).mean(axis=1)                      # d/d fs
         dlog = (self.static_excess_Nm * 2 * u2 * np.exp(-u2) * sgn).mean(axis=1)   # d/d log vs
@@ -127,7 +127,7 @@ class StribeckFit:
 
 def fit_stribeck(
     Wb: np.ndarray, y: np.ndarray, v: np.ndarray, beta0: np.ndarray, joint_sigma_Nm: np.ndarray,
-    coulomb_width_rad_s: float, max_iter: int = 200, min_chi2_gain: float = MIN_CHI2_GAIN,
+    coulomb_width_rad_s: float | np.ndarray, max_iter: int = 200, min_chi2_gain: float = MIN_CHI2_GAIN,
     max_excess_Nm: np.ndarray | None = None,
 ) -> StribeckFit:
     """Joint weighted least squares of ``beta``, ``fs``, ``vs`` (module doc); raises
@@ -151,7 +151,7 @@ def fit_stribeck(
     beta = ca.MX.sym("beta", nb)
     fs = ca.MX.sym("fs", nq)
     log_vs = ca.MX.sym("log_vs", nq)
-    sgn = np.tanh(v3 / coulomb_width_rad_s) if coulomb_width_rad_s > 0 else np.sign(v3)
+    sgn = smooth_sign(v3, coulomb_width_rad_s)
     mean = ca.DM(np.full((k, 1), 1.0 / k))
     columns = []
     for j in range(nq):   # (n, k) per joint, averaged over the block: (n, 1)
@@ -164,11 +164,11 @@ def fit_stribeck(
     solver = ca.nlpsol("stribeck_fit", "ipopt", {"x": x, "f": 0.5 * ca.sumsqr(r)},
                        {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
                         "ipopt.max_iter": max_iter, "ipopt.tol": 1e-8})
-    vs_min = max(VS_MIN_RAD_S, float(coulomb_width_rad_s))
+    vs_min = np.broadcast_to(np.maximum(VS_MIN_RAD_S, np.asarray(coulomb_width_rad_s, float)), (nq,))
     fs_max = np.full(nq, np.inf) if max_excess_Nm is None else np.asarray(max_excess_Nm, float)
-    lbx = np.concatenate([np.full(nb, -np.inf), np.zeros(nq), np.full(nq, np.log(vs_min))])
+    lbx = np.concatenate([np.full(nb, -np.inf), np.zeros(nq), np.log(vs_min)])
     ubx = np.concatenate([np.full(nb, np.inf), fs_max, np.full(nq, np.log(VS_MAX_RAD_S))])
-    x0 = np.concatenate([np.asarray(beta0, float), np.zeros(nq), np.full(nq, np.log(max(VS_START_RAD_S, vs_min)))])
+    x0 = np.concatenate([np.asarray(beta0, float), np.zeros(nq), np.log(np.maximum(VS_START_RAD_S, vs_min))])
     sol = solver(x0=x0, lbx=lbx, ubx=ubx)
     stats = solver.stats()
     status = str(stats["return_status"])
@@ -178,7 +178,7 @@ def fit_stribeck(
     xs = np.asarray(sol["x"]).ravel()
     fs, vs = np.clip(xs[nb : nb + nq], 0.0, fs_max), np.exp(xs[nb + nq :])
     fit = StribeckFit(beta=xs[:nb], static_excess_Nm=fs, stribeck_velocity_rad_s=vs,
-                      coulomb_width_rad_s=float(coulomb_width_rad_s), status=status,
+                      coulomb_width_rad_s=coulomb_width_rad_s, status=status,
                       iterations=int(stats["iter_count"]))
     sigma = np.asarray(joint_sigma_Nm, float)
     gain = stribeck_chi2_gain(Wb, y, fit.stribeck_torque(v3), sigma)
@@ -218,7 +218,8 @@ def stribeck_chi2_gain(Wb: np.ndarray, y: np.ndarray, st: np.ndarray, joint_sigm
 
 
 def stribeck_heldout(data: ProcessedData, base: BaseParameters, p_nominal: np.ndarray, nq: int,
-                     train_fraction: float, regularization: float, max_iter: int, coulomb_width_rad_s: float,
+                     train_fraction: float, regularization: float, max_iter: int,
+                     coulomb_width_rad_s: float | np.ndarray,
                      field_name: str = "train_fraction", max_excess_Nm: np.ndarray | None = None,
                      ) -> dict[str, np.ndarray]:
     """Held-out predictions of the Stribeck model on a (non-periodic) record: Stribeck term fitted
@@ -253,16 +254,17 @@ def _heldout_less(data: ProcessedData, friction_Nm: np.ndarray, base: BaseParame
     return {k: pred + friction_Nm[ho.n_train:] for k, pred in ho.pred.items()}
 
 
-def load_column_values(load_Nm: np.ndarray, v: np.ndarray, coulomb_width_rad_s: float) -> np.ndarray:
+def load_column_values(load_Nm: np.ndarray, v: np.ndarray, coulomb_width_rad_s: float | np.ndarray) -> np.ndarray:
     """(N, nr) ``|tau_load| tanh(v / w)`` per sample and joint (``sign`` for ``w = 0``); for ``v`` of
     shape (N, k, nr) (:attr:`ProcessedData.v_blocks`) the block mean of ``tanh`` times the block's load."""
     v3 = np.asarray(v, float)
     v3 = v3[:, None, :] if v3.ndim == 2 else v3
-    sgn = np.tanh(v3 / coulomb_width_rad_s) if coulomb_width_rad_s > 0 else np.sign(v3)
+    sgn = smooth_sign(v3, coulomb_width_rad_s)
     return np.abs(np.asarray(load_Nm, float)) * sgn.mean(axis=1)
 
 
-def load_columns(load_Nm: np.ndarray, v: np.ndarray, coulomb_width_rad_s: float, joints: np.ndarray) -> np.ndarray:
+def load_columns(load_Nm: np.ndarray, v: np.ndarray, coulomb_width_rad_s: float | np.ndarray,
+                 joints: np.ndarray) -> np.ndarray:
     """(N*nr, len(joints)) regressor columns of ``fl_j`` for the ``joints`` (column indices of the
     torques), rows sample-major like the base regressor (module doc)."""
     vals = load_column_values(load_Nm, v, coulomb_width_rad_s)
@@ -279,7 +281,7 @@ class LoadFriction:
     no term on that joint."""
 
     coefficient: np.ndarray
-    coulomb_width_rad_s: float
+    coulomb_width_rad_s: float | np.ndarray
     #: per joint likelihood-ratio statistic of the term (chi-squared, 1 degree of freedom)
     chi2_gain: np.ndarray | None = None
 
@@ -326,7 +328,8 @@ def _linear_fit(A: np.ndarray, y: np.ndarray, sigma: np.ndarray) -> np.ndarray:
 
 
 def fit_load_friction(Wb: np.ndarray, y: np.ndarray, v: np.ndarray, beta0: np.ndarray,
-                      stribeck0: StribeckFit | None, joint_sigma_Nm: np.ndarray, coulomb_width_rad_s: float,
+                      stribeck0: StribeckFit | None, joint_sigma_Nm: np.ndarray,
+                      coulomb_width_rad_s: float | np.ndarray,
                       offsets: np.ndarray, max_excess_Nm: np.ndarray | None = None) -> LoadFit:
     """Weighted least squares of ``beta`` and ``fl`` (module doc), nested in the fit ``beta0`` (with its
     Stribeck term ``stribeck0``, refitted jointly by :func:`fit_stribeck`; None: viscous + Coulomb).
@@ -358,7 +361,7 @@ def fit_load_friction(Wb: np.ndarray, y: np.ndarray, v: np.ndarray, beta0: np.nd
     for _ in range(LOAD_REFITS):
         load = load_free_torque(Wb, beta, offsets, nr, fit, v)
         beta, fl, fit = solve(load, joints)
-    term = LoadFriction(fl, float(coulomb_width_rad_s))
+    term = LoadFriction(fl, coulomb_width_rad_s)
     st = 0.0 if fit is None else fit.stribeck_torque(v)
     gain = stribeck_chi2_gain(Wb, np.asarray(y, float) - np.ravel(np.broadcast_to(st, load.shape)),
                               term.torque(load, v), sigma)
@@ -366,11 +369,11 @@ def fit_load_friction(Wb: np.ndarray, y: np.ndarray, v: np.ndarray, beta0: np.nd
     while not np.all(keep | (fl == 0)):     # drop and refit until every kept term is in its bounds
         beta, fl, fit = solve(load, np.flatnonzero(keep))
         keep &= (fl > 0) & (fl <= MAX_LOAD_COEFFICIENT)
-    return LoadFit(beta, fit, LoadFriction(fl, float(coulomb_width_rad_s), np.where(keep, gain, 0.0)), load)
+    return LoadFit(beta, fit, LoadFriction(fl, coulomb_width_rad_s, np.where(keep, gain, 0.0)), load)
 
 
 def load_heldout(data: ProcessedData, base: BaseParameters, p_nominal: np.ndarray, nq: int, train_fraction: float,
-                 regularization: float, max_iter: int, coulomb_width_rad_s: float, offsets: np.ndarray,
+                 regularization: float, max_iter: int, coulomb_width_rad_s: float | np.ndarray, offsets: np.ndarray,
                  with_stribeck: bool, field_name: str = "train_fraction",
                  max_excess_Nm: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Held-out predictions of the load-dependent model on a (non-periodic) record, like

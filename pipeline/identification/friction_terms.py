@@ -136,7 +136,7 @@ class FrictionTerms:
     """The terms chosen on a record (:func:`select_terms`) and the scores that chose them."""
 
     terms: list[JointTerm]
-    coulomb_width_rad_s: float
+    coulomb_width_rad_s: float | np.ndarray
     #: per joint cross-validated RMS (training part) of the model without and with the chosen terms (N·m)
     cv_rms_before_Nm: np.ndarray
     cv_rms_after_Nm: np.ndarray
@@ -173,15 +173,16 @@ def _joint_q(data: ProcessedData) -> np.ndarray:
 
 
 def columns(terms: list[JointTerm], data: ProcessedData, Wb: np.ndarray, beta: np.ndarray | None,
-            coulomb_width_rad_s: float) -> tuple[np.ndarray, np.ndarray]:
+            coulomb_width_rad_s: float | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(N*nr, m) regressor columns of ``terms`` (rows sample-major like ``Wb``) and their coefficients."""
     nr = data.tau.shape[1]
     n = data.n_samples
     q, vb = _joint_q(data), data.v_blocks
     model = None if beta is None else (Wb @ beta).reshape(n, nr)
     blocks, coef = [], []
+    widths = row_widths(coulomb_width_rad_s, nr)
     for t in terms:
-        vals = t.values(q[:, t.joint], vb[:, :, t.joint], coulomb_width_rad_s,
+        vals = t.values(q[:, t.joint], vb[:, :, t.joint], float(widths[t.joint]),
                         None if model is None else model[:, t.joint])
         c = np.zeros((n, nr, vals.shape[1]))
         c[:, t.joint, :] = vals
@@ -190,6 +191,11 @@ def columns(terms: list[JointTerm], data: ProcessedData, Wb: np.ndarray, beta: n
     if not blocks:
         return np.zeros((n * nr, 0)), np.zeros(0)
     return np.hstack(blocks), np.concatenate(coef)
+
+
+def row_widths(coulomb_width_rad_s: float | np.ndarray, n_rows: int) -> np.ndarray:
+    """(n_rows,) the Coulomb smoothing width of each torque row (one width for all, or one per row)."""
+    return np.broadcast_to(np.asarray(coulomb_width_rad_s, float), (n_rows,))
 
 
 def _wls(A: np.ndarray, y: np.ndarray, sigma: np.ndarray) -> np.ndarray:
@@ -209,7 +215,7 @@ def _head(data: ProcessedData, n: int) -> ProcessedData:
 
 
 def fit_terms(terms: list[JointTerm], data: ProcessedData, Wb: np.ndarray, sigma: np.ndarray,
-              coulomb_width_rad_s: float) -> tuple[list[JointTerm], np.ndarray]:
+              coulomb_width_rad_s: float | np.ndarray) -> tuple[list[JointTerm], np.ndarray]:
     """WLS of the base parameters with the ``terms``' coefficients on ``data`` (``Wb`` its base
     regressor); effort-gain columns at the fit without them. Returns the fitted terms and ``beta``."""
     y = data.y
@@ -289,7 +295,7 @@ def _sigmoid_shape(data: ProcessedData, Q: np.ndarray, r: np.ndarray, w: np.ndar
     return best
 
 
-def select_terms(data: ProcessedData, base_regressor: Callable, n_train: int, coulomb_width_rad_s: float,
+def select_terms(data: ProcessedData, base_regressor: Callable, n_train: int, coulomb_width_rad_s: float | np.ndarray,
                  limit_Nm: np.ndarray, classes: tuple[str, ...] = TERM_CLASSES,
                  min_relative_gain: float = MIN_RELATIVE_GAIN, n_folds: int = N_FOLDS) -> FrictionTerms:
     """Per joint forward selection of the term classes on the first ``n_train`` samples, scored by
@@ -322,7 +328,7 @@ def select_terms(data: ProcessedData, base_regressor: Callable, n_train: int, co
                     if Q is None:
                         Q, _ = np.linalg.qr(np.hstack([cv.Ww, base_cols * w[:, None]]))
                         r = cv.yw - Q @ (Q.T @ cv.yw)
-                    term = _sigmoid_shape(whole, Q, r, w, j, coulomb_width_rad_s)
+                    term = _sigmoid_shape(whole, Q, r, w, j, float(row_widths(coulomb_width_rad_s, nr)[j]))
                 else:
                     term = JointTerm(kind, j)
                 if term is None:
@@ -357,8 +363,8 @@ def take_off(data: ProcessedData, terms: FrictionTerms, base_regressor: Callable
     return replace(data, tau=data.tau - terms.torque_Nm)
 
 
-def record_terms(data: ProcessedData, base_regressor: Callable, train_fraction: float, coulomb_width_rad_s: float,
-                 limit_Nm: np.ndarray) -> tuple[ProcessedData, FrictionTerms]:
+def record_terms(data: ProcessedData, base_regressor: Callable, train_fraction: float,
+                 coulomb_width_rad_s: float | np.ndarray, limit_Nm: np.ndarray) -> tuple[ProcessedData, FrictionTerms]:
     """A record's terms (:func:`select_terms` on its first ``train_fraction``) and the record with
     their torque taken off (:func:`take_off`)."""
     terms = select_terms(data, base_regressor, int(train_fraction * data.n_samples), coulomb_width_rad_s, limit_Nm)
@@ -368,7 +374,8 @@ def record_terms(data: ProcessedData, base_regressor: Callable, train_fraction: 
 def add_back(val: Validation, terms_Nm: np.ndarray) -> None:
     """Measured and predicted torques of a validation (:class:`~pipeline.identification.outcome.Validation`)
     with the terms' torque ``terms_Nm`` (n_test, nr) of its samples added back (the errors stay)."""
-    for name in ("tau_Nm", "pred_phys", "pred_wls", "pred_vc", "pred_load", "pred_load_wls"):
+    for name in ("tau_Nm", "pred_phys", "pred_wls", "pred_vc", "pred_load", "pred_load_wls", "pred_load_vc",
+                 "pred_load_vc_wls"):
         x = getattr(val, name, None)
         if x is not None:
             setattr(val, name, x + terms_Nm)

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.identification.coulomb_width import CoulombWidths
 from pipeline.identification.design import ExcitationResult
 from pipeline.identification.effort_unit import EffortUnit
 from pipeline.identification.estimate import HacCovariance, LeastSquaresEstimate, PhysicalEstimate
@@ -70,6 +71,8 @@ class Measured:
     stiction: StictionExclusion | None = None
     #: a user's record: what its efforts were read as and the scale applied (None: simulated)
     effort_unit: EffortUnit | None = None
+    #: a user's record: the Coulomb smoothing widths chosen on its training part (None: robot.yaml's)
+    coulomb_widths: CoulombWidths | None = None
 
 
 @dataclass
@@ -104,6 +107,9 @@ class Fits:
     phys_vc: PhysicalEstimate
     #: the candidate with load-dependent Coulomb friction (None: not fitted, coupled axes)
     load_candidate: LoadCandidate | None = None
+    #: a record fitted with the Stribeck term: the load-dependent candidate nested in the viscous + Coulomb
+    #: fit as well (None: not fitted)
+    load_candidate_vc: LoadCandidate | None = None
     #: its fit when it is the handed-on model, else None
     load: LoadFit | None = None
     #: why the candidate was not fitted or not scored ("": it was)
@@ -145,6 +151,9 @@ class Validation:
     #: predictions of the load-dependent candidate (physical, WLS), None when it was not fitted
     pred_load: np.ndarray | None = None
     pred_load_wls: np.ndarray | None = None
+    #: the same of the candidate nested in the viscous + Coulomb fit (:attr:`Fits.load_candidate_vc`)
+    pred_load_vc: np.ndarray | None = None
+    pred_load_vc_wls: np.ndarray | None = None
     #: (N, n_used) bool: the samples the RMS counts, outside the stiction band ``|v| >= min_speed_rad_s``
     #: of an arm whose dry friction sticks (None: every sample; :mod:`pipeline.identification.validate`)
     scored: np.ndarray | None = None

@@ -39,6 +39,7 @@ import scipy.linalg
 
 from pipeline.core.blas import single_thread_blas
 from pipeline.core.errors import DataFileError
+from pipeline.robot.friction import smooth_sign
 
 LINK_PARAMETER_NAMES: tuple[str, ...] = (
     "m",
@@ -99,11 +100,13 @@ class RegressorModel:
     """Everything the numeric regressor needs: Pinocchio model, gear matrix, Coulomb width.
 
     ``model.armature`` is ignored here: rotor inertia is a column of the regressor.
+    ``coulomb_width_rad_s``: the smoothing width ``w`` of the Coulomb columns ``tanh(v_m / (k w))``,
+    one for all joints or one per joint (motor ``j``'s velocity ``v_m``, gear ratio ``k``).
     """
 
     model: pin.Model
     gear_matrix: np.ndarray
-    coulomb_width_rad_s: float = 0.0
+    coulomb_width_rad_s: float | np.ndarray = 0.0
     #: joints whose torque rows :meth:`stacked` keeps (measured torques); None: every joint
     rows: np.ndarray | None = None
 
@@ -121,6 +124,17 @@ class RegressorModel:
     @property
     def nv(self) -> int:
         return self.model.nv
+
+    @property
+    def joint_coulomb_width_rad_s(self) -> np.ndarray:
+        """(nv,) the Coulomb smoothing width of every joint."""
+        return np.broadcast_to(np.asarray(self.coulomb_width_rad_s, float), (self.nv,)).copy()
+
+    @property
+    def row_coulomb_width_rad_s(self) -> np.ndarray:
+        """(n_rows,) the Coulomb smoothing width of the joints of the torque rows (:attr:`rows`)."""
+        w = self.joint_coulomb_width_rad_s
+        return w if self.rows is None else w[self.rows]
 
     @property
     def n_rows(self) -> int:
@@ -143,13 +157,12 @@ class RegressorModel:
         out = np.zeros((nv, 4 * nv))
         vm = K @ v
         am = K @ a
-        w = self.coulomb_width_rad_s
+        s = smooth_sign(vm, kd * self.joint_coulomb_width_rad_s)
         for j in range(nv):
             kj = K[j]
             out[:, j] = kj * am[j] / kd[j] ** 2
             out[:, nv + j] = kj * vm[j] / kd[j] ** 2
-            s = np.tanh(vm[j] / (kd[j] * w)) if w > 0 else np.sign(vm[j])
-            out[:, 2 * nv + j] = kj * s / kd[j]
+            out[:, 2 * nv + j] = kj * s[j] / kd[j]
         out[:, 3 * nv :] = np.eye(nv)
         return out
 
@@ -173,16 +186,29 @@ class RegressorModel:
         K = self.gear_matrix
         kd = np.abs(np.diag(K))
         vm, am = V @ K.T, A @ K.T  # (n, nv) motor side
-        w = self.coulomb_width_rad_s
-        s = np.tanh(vm / (kd * w)) if w > 0 else np.sign(vm)
         # column j of group g on joint i: K[j, i] * f_g(sample, j)
         out[:, :, n_link : n_link + nv] = (am / kd**2)[:, None, :] * K.T[None]
         out[:, :, n_link + nv : n_link + 2 * nv] = (vm / kd**2)[:, None, :] * K.T[None]
-        out[:, :, n_link + 2 * nv : n_link + 3 * nv] = (s / kd)[:, None, :] * K.T[None]
+        out[:, :, n_link + 2 * nv : n_link + 3 * nv] = self.coulomb_block(V, self.joint_coulomb_width_rad_s)
         out[:, :, n_link + 3 * nv :] = np.eye(nv)[None]
         if self.rows is not None:
             out = out[:, self.rows]
         return out.reshape(n * self.n_rows, self.n_parameters)
+
+    @property
+    def coulomb_columns(self) -> slice:
+        """The Coulomb columns of the standard regressor (one per joint, :meth:`coulomb_block`)."""
+        n_link = self.n_parameters - 4 * self.nv
+        return slice(n_link + 2 * self.nv, n_link + 3 * self.nv)
+
+    def coulomb_block(self, V: np.ndarray, width_rad_s: np.ndarray) -> np.ndarray:
+        """(n, nv, nv) the Coulomb columns at joint velocities ``V`` (n, nv) with the per-joint smoothing
+        widths ``width_rad_s`` (nv,): on joint ``i``, column ``j`` is ``K[j, i] tanh(v_m,j / (k_j w_j)) / k_j``
+        (all rows, before :attr:`rows`)."""
+        K = self.gear_matrix
+        kd = np.abs(np.diag(K))
+        s = smooth_sign(np.atleast_2d(V) @ K.T, kd * np.asarray(width_rad_s, float))
+        return (s / kd)[:, None, :] * K.T[None]
 
     def torques(self, Q: np.ndarray, V: np.ndarray, A: np.ndarray, p: np.ndarray) -> np.ndarray:
         """(N, n_rows) joint torques ``Y p`` (the joints of :attr:`rows`)."""

@@ -254,6 +254,7 @@ def summary(cfg: Config, o: Outcome) -> dict[str, Any]:
         "n_samples_fit": o.measured.data.n_samples,
         **stiction_summary(o.measured.stiction, pj),
         **({} if o.measured.effort_unit is None else effort_unit_summary(o.measured.effort_unit, pj)),
+        **({} if o.measured.coulomb_widths is None else o.measured.coulomb_widths.summary(pj)),
         "friction_model": cfg.friction_model,
         **o.friction,
         "runtime_s": o.timings["total_s"],
@@ -402,6 +403,9 @@ def stage_result(cfg: Config, o: Outcome, robot: RobotModel) -> StageResult:
     unit_note = None if o.measured.effort_unit is None else o.measured.effort_unit.note(o.regs.used + 1)
     if unit_note:
         s["warnings"] = [*s.get("warnings", []), unit_note]
+    width_note = None if o.measured.coulomb_widths is None else o.measured.coulomb_widths.note()
+    if width_note:
+        s["warnings"] = [*s.get("warnings", []), width_note]
     terms_note = not_handed_on_note(s)
     if terms_note:
         s["warnings"] = [*s.get("warnings", []), terms_note]

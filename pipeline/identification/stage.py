@@ -15,6 +15,8 @@ and the real Stäubli TX40 record (paper ``004_abbe750b8bbcc3aa.txt`` §4).
    base regressor stays above the condition-number bound leaves the base parameters over it out of
    the design, which then optimises the rest (:func:`.experiment.shrink_base_set`; named in the
    report). Period averaging, zero-phase filtering, differentiation, block decimation (:mod:`.measure`);
+   a record's Coulomb smoothing width per joint, chosen on its training part (:mod:`.coulomb_width`),
+   and its friction and actuation terms beyond viscous + Coulomb (:mod:`.friction_terms`);
 3. fits (:func:`.fit.fit_models`): the data must excite the model (:mod:`.gates`); OLS, Gautier's
    WLS and the physically consistent fit (log-Cholesky, IPOPT); with ``friction_model: stribeck``
    a Stribeck term first (:mod:`.friction`); the candidate with load-dependent Coulomb friction;
@@ -40,7 +42,12 @@ from pipeline.core.blas import single_thread_blas
 from pipeline.core.errors import ConfigError, PipelineError
 from pipeline.identification import report
 from pipeline.identification.config import Config, ExcitationConfig
-from pipeline.identification.experiment import excite_and_measure, regressors, take_off_record_terms
+from pipeline.identification.experiment import (
+    choose_record_coulomb_widths,
+    excite_and_measure,
+    regressors,
+    take_off_record_terms,
+)
 from pipeline.identification.fit import base_covariance, fit_models, handed_on_robot
 from pipeline.identification.gates import add_result_gates
 from pipeline.identification.joints import select_joints
@@ -118,6 +125,7 @@ def _run(ctx: StageContext) -> StageResult:
     regs = regressors(ctx, cfg)
     timings["base_parameters_s"] = time.perf_counter() - t0
     measured = excite_and_measure(ctx, cfg, regs, timings)
+    choose_record_coulomb_widths(cfg, regs, measured, timings)
     terms = take_off_record_terms(ctx.robot, cfg, regs, measured, timings)
     fits = fit_models(ctx.robot, cfg, regs, measured, timings)
     t1 = time.perf_counter()

@@ -248,24 +248,34 @@ def validate_on_record(robot: RobotModel, cfg: Config, regs: Regressors, measure
     tau_v, pred_phys, pred_wls, pred_vc = ho.tau_Nm, ho.pred["physical"], ho.pred["wls"], ho.pred["physical"]
     if fits.stribeck is not None:   # the Stribeck model: its own fit on the first part, scored on the rest
         pred_s = stribeck_heldout(data, regs.base, fits.p_nom, nq, cfg.data_train_fraction, cfg.regularization,
-                                  cfg.physical_max_iter, regs.reg.coulomb_width_rad_s,
+                                  cfg.physical_max_iter, regs.reg.row_coulomb_width_rad_s,
                                   "identification.data_train_fraction", fits.max_excess_Nm)
         pred_phys, pred_wls = pred_s["physical"], pred_s["wls"]
     pred_l = None
     if fits.load_candidate is not None:
         try:
             pred_l = load_heldout(data, regs.base, fits.p_nom, nq, cfg.data_train_fraction, cfg.regularization,
-                                  cfg.physical_max_iter, regs.reg.coulomb_width_rad_s, offset_mask(regs, nq),
+                                  cfg.physical_max_iter, regs.reg.row_coulomb_width_rad_s, offset_mask(regs, nq),
                                   fits.stribeck is not None, "identification.data_train_fraction", fits.max_excess_Nm)
         except SolverError as exc:   # not scored: not handed on
             fits.load_note = f"not scored on the held-out tail: {exc}"
+    pred_lv = None
+    if fits.load_candidate_vc is not None:
+        try:
+            pred_lv = load_heldout(data, regs.base, fits.p_nom, nq, cfg.data_train_fraction, cfg.regularization,
+                                   cfg.physical_max_iter, regs.reg.row_coulomb_width_rad_s, offset_mask(regs, nq),
+                                   False, "identification.data_train_fraction", fits.max_excess_Nm)
+        except SolverError:          # not scored: not handed on
+            fits.load_candidate_vc = None
     rms_phys, rel_phys = torque_rms(tau_v, pred_phys)
     rms_wls, rel_wls = torque_rms(tau_v, pred_wls)
     # residual sigma per joint of the WLS fit on all samples (processed torques, like the RMS)
     return Validation(vt, tau_v, pred_phys, pred_wls, pred_vc, rms_phys, rel_phys, rms_wls, rel_wls,
                       np.asarray(fits.wls.joint_sigma_Nm, float), "residuals of the WLS fit (processed torques)",
                       heldout=ho, pred_load=None if pred_l is None else pred_l["physical"],
-                      pred_load_wls=None if pred_l is None else pred_l["wls"])
+                      pred_load_wls=None if pred_l is None else pred_l["wls"],
+                      pred_load_vc=None if pred_lv is None else pred_lv["physical"],
+                      pred_load_vc_wls=None if pred_lv is None else pred_lv["wls"])
 
 
 def validate_on_path(ctx: StageContext, cfg: Config, regs: Regressors, measured: Measured, fits: Fits) -> Validation:
@@ -291,9 +301,9 @@ def validate_on_path(ctx: StageContext, cfg: Config, regs: Regressors, measured:
         noise_source = "spread between two runs of the validation path (the drives' torques in closed loop)"
     scored, v_s = None, 0.0
     if real.dry_friction_sticks:
-        v_s = stiction_band_speed(regs.reg.coulomb_width_rad_s)
+        v_s = stiction_band_speed(float(np.max(regs.reg.row_coulomb_width_rad_s)))
         scored = outside_stiction_band(vt.t_s, vt.v[:, regs.used], meas_v.q_rad[:, regs.used],
-                                       regs.reg.coulomb_width_rad_s)
+                                       float(np.max(regs.reg.row_coulomb_width_rad_s)))
     Yv = regs.reg.stacked(vt.q, vt.v, vt.a)
     st_v = 0.0 if fits.stribeck is None else fits.stribeck.stribeck_torque(vt.v[:, regs.used])
     pred_phys = (Yv @ fits.phys.p).reshape(-1, nm) + st_v
@@ -346,13 +356,20 @@ def choose_friction_model(robot: RobotModel, regs: Regressors, fits: Fits, val: 
         friction |= load_summary(c.fit.load, c.phys.status, regs.selection.per_joint)
         if is_success(c.phys.status):   # not scored unless IPOPT succeeded
             scored[with_load] = torque_rms(val.tau_Nm, val.pred_load, mask)[0]
+    c_vc = fits.load_candidate_vc
+    if c_vc is not None and val.pred_load_vc is not None and is_success(c_vc.phys.status):
+        scored["viscous_coulomb_load"] = torque_rms(val.tau_Nm, val.pred_load_vc, mask)[0]
     best = best_friction_model(scored, val.noise_sigma)     # the held-out data select the handed-on model
     reported = fits.stribeck
     if best == "viscous_coulomb" and fits.stribeck is not None:
         fits.stribeck, fits.phys, val.pred_phys = None, fits.phys_vc, val.pred_vc
         val.rms_phys, val.rel_phys = torque_rms(val.tau_Nm, val.pred_phys, mask)
     elif best == with_load and c is not None:
-        hand_on_load_candidate(regs, fits, val, c)
+        hand_on_load_candidate(regs, fits, val, c, val.pred_load, val.pred_load_wls)
+        reported = fits.stribeck
+    elif best == "viscous_coulomb_load" and c_vc is not None:
+        friction |= load_summary(c_vc.fit.load, c_vc.phys.status, regs.selection.per_joint)
+        hand_on_load_candidate(regs, fits, val, c_vc, val.pred_load_vc, val.pred_load_vc_wls)
         reported = fits.stribeck
     friction = friction_summary(scored, val.noise_sigma, reported, regs.selection.per_joint,
                                 robot.limits.effort_Nm[regs.used]) | friction
@@ -363,12 +380,14 @@ def choose_friction_model(robot: RobotModel, regs: Regressors, fits: Fits, val: 
     return friction | score_stiction_band(val, fits, regs)
 
 
-def hand_on_load_candidate(regs: Regressors, fits: Fits, val: Validation, c: LoadCandidate) -> None:
-    """Switch ``fits`` and ``val`` to the load-dependent candidate (its Stribeck term, if any, refitted with it)."""
+def hand_on_load_candidate(regs: Regressors, fits: Fits, val: Validation, c: LoadCandidate,
+                           pred_phys: np.ndarray | None, pred_wls: np.ndarray | None) -> None:
+    """Switch ``fits`` and ``val`` to the load-dependent candidate ``c`` (its Stribeck term, if any, refitted
+    with it) and its held-out predictions ``pred_phys``, ``pred_wls`` (physical and WLS fits)."""
     fits.stribeck, fits.load, fits.phys, fits.wls, fits.y_fit = c.fit.stribeck, c.fit, c.phys, c.wls, c.y_fit
     fits.ols = est_mod.ols(fits.Wb, fits.y_fit, regs.n_used)
-    if val.pred_load is not None and val.pred_load_wls is not None:
-        val.pred_phys, val.pred_wls = val.pred_load, val.pred_load_wls
+    if pred_phys is not None and pred_wls is not None:
+        val.pred_phys, val.pred_wls = pred_phys, pred_wls
         mask = val.scored
         val.rms_phys, val.rel_phys = torque_rms(val.tau_Nm, val.pred_phys, mask)
         val.rms_wls, val.rel_wls = torque_rms(val.tau_Nm, val.pred_wls, mask)

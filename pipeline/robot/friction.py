@@ -29,10 +29,21 @@ import numpy as np
 from pipeline.robot.spec import ActuationSpec
 
 
-def stribeck_excess_torque(v: np.ndarray, fs: np.ndarray, vs: np.ndarray, width_rad_s: float) -> np.ndarray:
-    """``fs exp(-(v / vs)^2) tanh(v / width)`` (``sign`` for ``width = 0``), per joint (last axis)."""
+def smooth_sign(v: np.ndarray, width_rad_s: float | np.ndarray) -> np.ndarray:
+    """``tanh(v / w)``, the Coulomb friction's smoothed sign, elementwise; ``w`` one width or one per
+    joint (the last axis of ``v``); ``sign(v)`` where ``w = 0``."""
     v = np.asarray(v, float)
-    s = np.tanh(v / width_rad_s) if width_rad_s > 0 else np.sign(v)
+    w = np.broadcast_to(np.asarray(width_rad_s, float), v.shape[-1:])
+    safe = np.where(w > 0, w, 1.0)
+    return np.where(w > 0, np.tanh(v / safe), np.sign(v))
+
+
+def stribeck_excess_torque(v: np.ndarray, fs: np.ndarray, vs: np.ndarray, width_rad_s: float | np.ndarray
+                          ) -> np.ndarray:
+    """``fs exp(-(v / vs)^2) tanh(v / width)`` (``sign`` for ``width = 0``; one width or one per
+    joint), per joint (last axis)."""
+    v = np.asarray(v, float)
+    s = smooth_sign(v, width_rad_s)
     return np.asarray(fs, float) * np.exp(-((v / np.asarray(vs, float)) ** 2)) * s
 
 
