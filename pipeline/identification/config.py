@@ -109,6 +109,9 @@ class Config:
     # a data_file's Coulomb smoothing width tanh(v / w): "auto" = chosen per joint on the training part
     # (coulomb_width.choose_widths), "robot" = robot.yaml's actuation.coulomb_smoothing_rad_s
     coulomb_width: Literal["auto", "robot"] = "auto"
+    # a data_file's joints at rest while others move (held by their static friction): their rows left out of
+    # the fits, scored in the validation (dwell.py); true: fitted like every other row
+    fit_dwells: bool = False
     # a data_file's joints renamed to the model's: {name in the record: name in the model} (bags)
     joint_names: dict[str, str] = field(default_factory=dict)
     # actuator columns: "gear" = motor-side rotor/friction through the gear matrix (coupled axes,

@@ -75,12 +75,14 @@ def _check_system(W: np.ndarray, y: np.ndarray, nv: int) -> None:
 
 
 def _joint_sigmas(W: np.ndarray, res: np.ndarray, nv: int) -> np.ndarray:
-    n = W.shape[0] // nv
+    """Gautier's per-joint sigma ``||rho_j||^2 / (r_j - c_j)``: ``r_j`` the joint's rows that carry an
+    equation (a row whose regressor is zero has none: :mod:`.dwell`), ``c_j`` the columns they reach."""
     sig = np.empty(nv)
     for j in range(nv):
         rows = W[j::nv]
         c_j = int(np.sum(np.linalg.norm(rows, axis=0) > 0))
-        dof = max(n - c_j, 1)
+        r_j = int(np.sum(np.any(rows != 0, axis=1)))
+        dof = max(r_j - c_j, 1)
         sig[j] = np.sqrt(np.sum(res[:, j] ** 2) / dof)
     return np.maximum(sig, 1e-12)
 

@@ -11,6 +11,8 @@ torques are fitted to and the data they come from (paper ``004_abbe750b8bbcc3aa.
   zero-phase filtering, differentiation, block decimation: :func:`.measure.process_periodic`);
 * :func:`choose_record_coulomb_widths`: a record's Coulomb smoothing width per joint, chosen on its
   training part (:mod:`.coulomb_width`);
+* :func:`leave_out_dwells`: the rows at which a record's joint is at rest, left out of the fits
+  (:mod:`.dwell`);
 * :func:`take_off_record_terms`: a record's friction and actuation terms beyond viscous + Coulomb
   friction, taken off its torques before the fits (:mod:`.friction_terms`).
 """
@@ -34,6 +36,7 @@ from pipeline.identification.base_set import (
 )
 from pipeline.identification.config import DATA_BORDER_SAMPLES, Config
 from pipeline.identification.coulomb_width import choose_widths, with_widths
+from pipeline.identification.dwell import Dwells
 from pipeline.identification.effort_unit import EffortUnit, read_effort_unit, scaled
 from pipeline.identification.fit import offset_mask
 from pipeline.identification.friction_terms import FrictionTerms, record_terms
@@ -177,6 +180,15 @@ def choose_record_coulomb_widths(cfg: Config, regs: Regressors, measured: Measur
     measured.data = with_widths(data, regs.reg, widths.chosen_rad_s)
     measured.coulomb_widths = widths
     timings["coulomb_width_s"] = time.perf_counter() - t1
+
+
+def leave_out_dwells(cfg: Config, regs: Regressors, measured: Measured) -> None:
+    """A user's record without ``fit_dwells``: the rows at which a joint dwells (:mod:`.dwell`), left out of
+    the fits (``measured.dwells``; None when there are none). Nothing for a simulated experiment."""
+    if regs.record is None or cfg.fit_dwells:
+        return
+    dwells = Dwells.of(measured.data)
+    measured.dwells = dwells if dwells.rows.any() else None
 
 
 def take_off_record_terms(robot: RobotModel, cfg: Config, regs: Regressors, measured: Measured,

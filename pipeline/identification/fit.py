@@ -44,7 +44,7 @@ def fit_models(robot: RobotModel, cfg: Config, regs: Regressors, measured: Measu
     :func:`pipeline.identification.validate.choose_friction_model`). The data must excite the model
     (:func:`.gates.check_data_excites`)."""
     t1 = time.perf_counter()
-    data, base, nm = measured.data, regs.base, regs.n_used
+    data, base, nm = measured.fit_data, regs.base, regs.n_used
     Wb, y = base.base_regressor(data.Y), data.y
     cond_data = check_data_excites(data.q[:, regs.used], Wb, [f"q{j + 1}" for j in regs.used],
                                    cfg.min_joint_motion_rad, cfg.max_cond_base_regressor_data,
@@ -131,7 +131,7 @@ def base_covariance(regs: Regressors, measured: Measured, fits: Fits) -> tuple[e
     set on ``fits.wls``. Returns it and the white-residual WLS sigmas it replaced."""
     wls = fits.wls
     white_sigma = wls.sigma
-    vb = measured.data.v_blocks
+    vb = measured.fit_data.v_blocks
     J = np.hstack([fits.Wb, *([] if fits.stribeck is None else [fits.stribeck.jacobian(vb)]),
                    *([] if fits.load is None else [fits.load.load.jacobian(fits.load.load_Nm, vb)])])
     hac = est_mod.hac_covariance(J, fits.y_fit - fits.Wb @ wls.beta, wls.joint_sigma_Nm, wls.covariance)

@@ -16,6 +16,7 @@ import numpy as np
 
 from pipeline.identification.coulomb_width import CoulombWidths
 from pipeline.identification.design import ExcitationResult
+from pipeline.identification.dwell import Dwells
 from pipeline.identification.effort_unit import EffortUnit
 from pipeline.identification.estimate import HacCovariance, LeastSquaresEstimate, PhysicalEstimate
 from pipeline.identification.fourier import ExcitationLimits, FourierTrajectory
@@ -73,6 +74,20 @@ class Measured:
     effort_unit: EffortUnit | None = None
     #: a user's record: the Coulomb smoothing widths chosen on its training part (None: robot.yaml's)
     coulomb_widths: CoulombWidths | None = None
+    #: a user's record: the rows at which a joint dwells, left out of the fits (None: none left out)
+    dwells: Dwells | None = None
+
+    @property
+    def fit_data(self) -> ProcessedData:
+        """The samples the fits on all samples use: a record's dwell rows without an equation (:mod:`.dwell`)."""
+        return self.data if self.dwells is None else self.dwells.without_equations(self.data)
+
+    def validation_data(self, train_fraction: float) -> ProcessedData:
+        """The samples of a held-out validation: the dwell rows of the training part (the first
+        ``train_fraction``) without an equation, every sample of the held-out tail as measured."""
+        if self.dwells is None:
+            return self.data
+        return self.dwells.without_equations(self.data, int(train_fraction * self.data.n_samples))
 
 
 @dataclass

@@ -255,6 +255,7 @@ def summary(cfg: Config, o: Outcome) -> dict[str, Any]:
         **stiction_summary(o.measured.stiction, pj),
         **({} if o.measured.effort_unit is None else effort_unit_summary(o.measured.effort_unit, pj)),
         **({} if o.measured.coulomb_widths is None else o.measured.coulomb_widths.summary(pj)),
+        **({} if o.measured.dwells is None else o.measured.dwells.summary(pj)),
         "friction_model": cfg.friction_model,
         **o.friction,
         "runtime_s": o.timings["total_s"],

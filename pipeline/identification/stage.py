@@ -16,7 +16,8 @@ and the real Stäubli TX40 record (paper ``004_abbe750b8bbcc3aa.txt`` §4).
    the design, which then optimises the rest (:func:`.experiment.shrink_base_set`; named in the
    report). Period averaging, zero-phase filtering, differentiation, block decimation (:mod:`.measure`);
    a record's Coulomb smoothing width per joint, chosen on its training part (:mod:`.coulomb_width`),
-   and its friction and actuation terms beyond viscous + Coulomb (:mod:`.friction_terms`);
+   its friction and actuation terms beyond viscous + Coulomb (:mod:`.friction_terms`), and the rows
+   at which a joint is at rest, left out of the fits (:mod:`.dwell`);
 3. fits (:func:`.fit.fit_models`): the data must excite the model (:mod:`.gates`); OLS, Gautier's
    WLS and the physically consistent fit (log-Cholesky, IPOPT); with ``friction_model: stribeck``
    a Stribeck term first (:mod:`.friction`); the candidate with load-dependent Coulomb friction;
@@ -45,6 +46,7 @@ from pipeline.identification.config import Config, ExcitationConfig
 from pipeline.identification.experiment import (
     choose_record_coulomb_widths,
     excite_and_measure,
+    leave_out_dwells,
     regressors,
     take_off_record_terms,
 )
@@ -127,6 +129,7 @@ def _run(ctx: StageContext) -> StageResult:
     measured = excite_and_measure(ctx, cfg, regs, timings)
     choose_record_coulomb_widths(cfg, regs, measured, timings)
     terms = take_off_record_terms(ctx.robot, cfg, regs, measured, timings)
+    leave_out_dwells(cfg, regs, measured)
     fits = fit_models(ctx.robot, cfg, regs, measured, timings)
     t1 = time.perf_counter()
     val = (validate_on_record(ctx.robot, cfg, regs, measured, fits) if regs.record is not None

@@ -238,7 +238,7 @@ def truth_scores(real: Any,  # Any: the simulated hidden robot (its true paramet
 def validate_on_record(robot: RobotModel, cfg: Config, regs: Regressors, measured: Measured, fits: Fits) -> Validation:
     """The held-out tail of the user's record: a separate fit on the first part (tx40 route); the
     noise sigma from the residuals of the WLS fit on all samples."""
-    data, nq, nm = measured.data, robot.nq, regs.n_used
+    data, nq, nm = measured.validation_data(cfg.data_train_fraction), robot.nq, regs.n_used
     ho = heldout_validation(data, regs.base, fits.p_nom, nq, cfg.data_train_fraction, cfg.regularization,
                             cfg.physical_max_iter, "identification.data_train_fraction", n_rows=nm)
     pct = round(100 * (1 - cfg.data_train_fraction))
