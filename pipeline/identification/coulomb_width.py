@@ -134,29 +134,42 @@ def choose_widths(data: ProcessedData, reg: RegressorModel, base_regressor: Call
         load_block = load_grid[current[rows], :, np.arange(nr)].T.copy()
         Wb = np.hstack([Wb, load_block])
 
-    def score(wb: np.ndarray) -> float:
-        return float(np.sum((_weighted_fit_residual(wb, y, weight, nr) * weight) ** 2))
-
-    best = score(Wb)
+    w_rows = np.tile(weight, n_train)
+    yw = y * w_rows
+    best = float(np.sum((_weighted_fit_residual(Wb, y, weight, nr) * weight) ** 2))
     min_drop = 2 * MIN_RELATIVE_GAIN / nr
     for _ in range(MAX_SWEEPS):
         moved = False
         for j in range(nv):
+            # the columns a width of joint j reaches: its Coulomb column's base columns and its row's load column
+            in_base = np.flatnonzero(base_of_column[j] != 0)
+            load_col = [nb + row_of_joint[j]] if j in row_of_joint else []
+            reached = np.concatenate([in_base, load_col]).astype(int)
+            rest = np.setdiff1d(np.arange(Wb.shape[1]), reached)
+            # Frisch-Waugh-Lovell: the fit's weighted residual is that of y and the reached columns after
+            # projecting out the others (one QR per joint, not one least-squares fit per width)
+            Q = np.linalg.qr(Wb[:, rest] * w_rows[:, None])[0]
+            y_perp = yw - Q @ (Q.T @ yw)
             col_now = candidates[current[j], :, :, j].ravel()
             trials = []
             for g in range(len(grid)):
                 if g == current[j]:
                     continue
-                trial = Wb.copy()
-                trial[:, :nb] += np.outer(candidates[g, :, :, j].ravel() - col_now, base_of_column[j])
-                if offsets is not None and j in row_of_joint:
-                    trial[:, nb + row_of_joint[j]] = load_grid[g, :, row_of_joint[j]]
-                trials.append((score(trial), g, trial))
+                cols = Wb[:, reached].copy()
+                delta = candidates[g, :, :, j].ravel() - col_now
+                cols[:, : len(in_base)] += np.outer(delta, base_of_column[j][in_base])
+                if load_col:
+                    cols[:, -1] = load_grid[g, :, row_of_joint[j]]
+                C = cols * w_rows[:, None]
+                C_perp = C - Q @ (Q.T @ C)
+                coef = np.linalg.lstsq(C_perp, y_perp, rcond=None)[0]
+                trials.append((float(np.sum((y_perp - C_perp @ coef) ** 2)), g, cols))
             if not trials:
                 continue
-            s_new, g_new, trial = min(trials, key=lambda t: t[0])
+            s_new, g_new, cols = min(trials, key=lambda t: t[0])
             if s_new < best * (1 - min_drop):
-                Wb, best, current[j], moved = trial, s_new, g_new, True
+                Wb[:, reached] = cols
+                best, current[j], moved = s_new, g_new, True
         if not moved:
             break
     chosen = grid[current]
