@@ -13,9 +13,12 @@ The width is a shape parameter of the friction law, one per joint: chosen on the
 joints), each joint's the one whose Gautier WLS fit of the base parameters on the first
 ``train_fraction`` of the samples leaves the smallest weighted residual sum of squares
 ``sum_i ||r_i||^2 / sigma_i^2`` over all rows (``sigma_i``: the rows' residual RMS at the stated
-widths, held fixed so the scores compare; every row, so coupled axes count). The held-out tail never
-enters. A joint keeps the stated width unless another lowers that sum by at least the share of one
-row's residual RMS falling by :data:`MIN_RELATIVE_GAIN`, ``2 g / n_rows`` of it.
+widths, held fixed so the scores compare; every row, so coupled axes count; a row without an
+equation, a joint at rest of :mod:`.dwell`, counts in neither). The weighted residual of each trial is
+that of the torques and the columns the joint's width reaches after projecting out the others
+(Frisch-Waugh-Lovell: one QR per joint and sweep). The held-out tail never enters. A joint keeps the
+stated width unless another lowers that sum by at least the share of one row's residual RMS falling
+by :data:`MIN_RELATIVE_GAIN`, ``2 g / n_rows`` of it.
 """
 
 from __future__ import annotations
@@ -86,6 +89,11 @@ def with_widths(data: ProcessedData, reg: RegressorModel, widths_rad_s: np.ndarr
     return replace(data, Y=Y.reshape(n * nr, -1))
 
 
+def _row_rms(residual: np.ndarray, has_equation: np.ndarray) -> np.ndarray:
+    """(n_rows,) the RMS of each torque row's ``residual`` (n, n_rows) over the samples where it has an equation."""
+    return np.sqrt(np.sum(residual**2, axis=0) / np.maximum(np.sum(has_equation, axis=0), 1))
+
+
 def _weighted_fit(Wb: np.ndarray, y: np.ndarray, weight: np.ndarray, n_rows: int) -> np.ndarray:
     """The weighted least-squares solution of ``Wb beta = y`` (weight ``weight[i]`` on torque row ``i``)."""
     w = np.tile(weight, Wb.shape[0] // n_rows)
@@ -121,7 +129,8 @@ def choose_widths(data: ProcessedData, reg: RegressorModel, base_regressor: Call
     nb = Wb.shape[1]
     row_of_joint: dict[int, int] = {}
     r0 = _weighted_fit_residual(Wb, y, np.ones(nr), nr)
-    sigma = np.maximum(np.sqrt(np.mean(r0**2, axis=0)), 1e-12)
+    has_equation = np.any(train.Y.reshape(n_train, nr, -1) != 0, axis=2)     # (n_train, nr): :mod:`.dwell`
+    sigma = np.maximum(_row_rms(r0, has_equation), 1e-12)
     weight = 1.0 / sigma
     rows = np.arange(nv) if data.rows is None else np.asarray(data.rows)
     v_rows = (train.v[:, None, :] if train.v_full is None else train.v_full)[..., rows]
@@ -176,5 +185,4 @@ def choose_widths(data: ProcessedData, reg: RegressorModel, base_regressor: Call
     r_chosen = _weighted_fit_residual(Wb, y, weight, nr)
     stated_cols = [] if offsets is None else [load_block]
     r_stated = _weighted_fit_residual(np.hstack([base_regressor(train.Y), *stated_cols]), y, weight, nr)
-    return CoulombWidths(stated, chosen, np.sqrt(np.mean(r_stated**2, axis=0)),
-                         np.sqrt(np.mean(r_chosen**2, axis=0)), n_train)
+    return CoulombWidths(stated, chosen, _row_rms(r_stated, has_equation), _row_rms(r_chosen, has_equation), n_train)

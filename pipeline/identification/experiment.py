@@ -9,10 +9,10 @@ torques are fitted to and the data they come from (paper ``004_abbe750b8bbcc3aa.
   torques when they are in another unit: :mod:`.effort_unit`), or the optimal Fourier excitation
   (:mod:`.design`) run on the hidden robot for ``periods`` periods and processed (period averaging,
   zero-phase filtering, differentiation, block decimation: :func:`.measure.process_periodic`);
-* :func:`choose_record_coulomb_widths`: a record's Coulomb smoothing width per joint, chosen on its
-  training part (:mod:`.coulomb_width`);
 * :func:`leave_out_dwells`: the rows at which a record's joint is at rest, left out of the fits
   (:mod:`.dwell`);
+* :func:`choose_record_coulomb_widths`: a record's Coulomb smoothing width per joint, chosen on its
+  training part without those rows (:mod:`.coulomb_width`);
 * :func:`take_off_record_terms`: a record's friction and actuation terms beyond viscous + Coulomb
   friction, taken off its torques before the fits (:mod:`.friction_terms`).
 """
@@ -172,12 +172,13 @@ def choose_record_coulomb_widths(cfg: Config, regs: Regressors, measured: Measur
     if regs.record is None or cfg.coulomb_width != "auto":
         return
     t1 = time.perf_counter()
-    data, K = measured.data, regs.reg.gear_matrix
+    K = regs.reg.gear_matrix
     diagonal = np.allclose(K, np.diag(np.diag(K)))      # the load-dependent candidate's condition (.fit)
-    widths = choose_widths(data, regs.reg, regs.base.base_regressor, int(cfg.data_train_fraction * data.n_samples),
+    widths = choose_widths(measured.fit_data, regs.reg, regs.base.base_regressor,   # dwell rows left out
+                           int(cfg.data_train_fraction * measured.data.n_samples),
                            offset_mask(regs, regs.reg.nv) if diagonal else None)
     regs.reg.coulomb_width_rad_s = widths.chosen_rad_s
-    measured.data = with_widths(data, regs.reg, widths.chosen_rad_s)
+    measured.data = with_widths(measured.data, regs.reg, widths.chosen_rad_s)
     measured.coulomb_widths = widths
     timings["coulomb_width_s"] = time.perf_counter() - t1
 

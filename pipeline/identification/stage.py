@@ -15,9 +15,9 @@ and the real Stäubli TX40 record (paper ``004_abbe750b8bbcc3aa.txt`` §4).
    base regressor stays above the condition-number bound leaves the base parameters over it out of
    the design, which then optimises the rest (:func:`.experiment.shrink_base_set`; named in the
    report). Period averaging, zero-phase filtering, differentiation, block decimation (:mod:`.measure`);
-   a record's Coulomb smoothing width per joint, chosen on its training part (:mod:`.coulomb_width`),
-   its friction and actuation terms beyond viscous + Coulomb (:mod:`.friction_terms`), and the rows
-   at which a joint is at rest, left out of the fits (:mod:`.dwell`);
+   a record's rows at which a joint is at rest, left out of the fits (:mod:`.dwell`), its Coulomb
+   smoothing width per joint, chosen on its training part (:mod:`.coulomb_width`), and its friction
+   and actuation terms beyond viscous + Coulomb (:mod:`.friction_terms`);
 3. fits (:func:`.fit.fit_models`): the data must excite the model (:mod:`.gates`); OLS, Gautier's
    WLS and the physically consistent fit (log-Cholesky, IPOPT); with ``friction_model: stribeck``
    a Stribeck term first (:mod:`.friction`); the candidate with load-dependent Coulomb friction;
@@ -127,9 +127,9 @@ def _run(ctx: StageContext) -> StageResult:
     regs = regressors(ctx, cfg)
     timings["base_parameters_s"] = time.perf_counter() - t0
     measured = excite_and_measure(ctx, cfg, regs, timings)
+    leave_out_dwells(cfg, regs, measured)
     choose_record_coulomb_widths(cfg, regs, measured, timings)
     terms = take_off_record_terms(ctx.robot, cfg, regs, measured, timings)
-    leave_out_dwells(cfg, regs, measured)
     fits = fit_models(ctx.robot, cfg, regs, measured, timings)
     t1 = time.perf_counter()
     val = (validate_on_record(ctx.robot, cfg, regs, measured, fits) if regs.record is not None
