@@ -139,6 +139,15 @@ def report_markdown(summary: dict, tx: Tx40Result | None) -> str:
                   f"{summary['record_resampling']}."]
     if summary.get("effort_unit_status"):
         lines += ["", effort_unit_line(summary)]
+    if summary.get("coulomb_width_rad_s") is not None:
+        lines += ["", f"Coulomb smoothing width per joint {_numbers(summary['coulomb_width_rad_s'])} rad/s "
+                  "(robot.yaml: "
+                  f"{_numbers(summary['coulomb_width_stated_rad_s'])}), {summary['coulomb_width_selection']}; training "
+                  f"residual RMS {_numbers(summary['coulomb_width_train_rms_stated_Nm'])} N m at robot.yaml's widths, "
+                  f"{_numbers(summary['coulomb_width_train_rms_chosen_Nm'])} N m at these."]
+    if summary.get("dwell_rows_left_out_of_fits") is not None:
+        lines += ["", f"Rows at which a joint is at rest ({summary['dwell_rule']}) left out of the fits, per joint: "
+                  f"{_numbers(summary['dwell_rows_left_out_of_fits'])}; the held-out tail is scored on every sample."]
     if summary.get("base_covariance"):
         lines += ["", f"Base-parameter sigmas: {summary['base_covariance']}; median "
                   f"{summary['base_sigma_hac_over_white_median']:.2f} x the white-residual WLS sigma."]

@@ -23,7 +23,7 @@ PETRONE_2025_HELD_OUT_RMS_NM = np.array([4.093, 3.165, 1.743, 0.485, 0.632, 1.00
 
 @pytest.mark.slow
 def test_the_bag_as_shipped_against_the_published_model(tmp_path):
-    _run, summary = identify_recorded_bag(tmp_path, "ur10", BAG)
+    run, summary = identify_recorded_bag(tmp_path, "ur10", BAG)
     rms = np.asarray(summary["validation_torque_rms_Nm"])
     assert rms.shape == (6,)
     assert np.all(rms <= PETRONE_2025_HELD_OUT_RMS_NM), rms
@@ -31,3 +31,5 @@ def test_the_bag_as_shipped_against_the_published_model(tmp_path):
     widths = np.asarray(summary["coulomb_width_rad_s"])
     assert np.any(widths > np.asarray(summary["coulomb_width_stated_rad_s"])), widths
     assert summary["dwell_rows_left_out_of_fits"][5] > 0
+    report = (run / "identification" / "report.md").read_text()
+    assert "Coulomb smoothing width per joint" in report and "at rest" in report
