@@ -87,5 +87,6 @@ class Dwells:
     def summary(self, per_joint: Callable[[np.ndarray], list]) -> dict:
         """Summary entries: the dwell rows per joint left out of the fits (``per_joint``: a value per torque
         column to all joints) and the rule."""
-        return {"dwell_rows_left_out_of_fits": per_joint(self.per_joint),
+        counts = per_joint(self.per_joint)
+        return {"dwell_rows_left_out_of_fits": [None if c is None else int(c) for c in counts],
                 "dwell_rule": f"|v| < {DWELL_SPEED_RAD_S} rad/s for at least {MIN_DWELL_S} s"}
