@@ -7,7 +7,7 @@ Petrone, Ferrentino & Chiacchio 2025 (IEEE TII, doi 10.1109/TII.2025.3534415) as
 ``InverseDynamicsSolverUR10::getTorques``: ``tau = K (i_rb(q, v, a) + i_f(v))`` with the generated
 ``getCurrents`` (compiled here from the checkout, not vendored), the drive gains ``K1..K6`` of its header and
 the sigmoid friction currents ``i_f = f_v v + f_o + f_c / (1 + exp(-alpha (v + ni)))`` whose constants are
-read from its source. Evaluated on messages ``HELD_OUT`` of the bag (the last 30 % as the identification
+read from its source. Evaluated on the bag's messages :func:`held_out_messages` (the last 30 % as the identification
 stage splits the record, 20 samples dropped at each end): positions and velocities as logged,
 accelerations the central difference of the logged velocities after a zero-phase 10 Hz low-pass.
 Prints the held-out torque RMS per joint and over all joints (N·m).
@@ -26,11 +26,18 @@ import numpy as np
 
 from pipeline.core.config import REPO_ROOT
 from pipeline.exchange.ros2_bag import read_joint_states
+from pipeline.identification.config import DATA_BORDER_SAMPLES, Config
 from pipeline.identification.signals import differentiate, lowpass
 
 BAG = REPO_ROOT / "data" / "unisa_ur10_bag" / "ur10_exciting_trajectory.db3"
 PACKAGE = "ur10_inverse_dynamics_solver"
-HELD_OUT = slice(2400, 3421)
+
+def held_out_messages(n_messages: int) -> slice:
+    """The bag's messages of the identification stage's held-out tail: after ``DATA_BORDER_SAMPLES`` dropped
+    at each end (no decimation at 125 Hz), the samples from ``int(data_train_fraction x N)`` on."""
+    n = n_messages - 2 * DATA_BORDER_SAMPLES
+    return slice(DATA_BORDER_SAMPLES + int(Config().data_train_fraction * n), n_messages - DATA_BORDER_SAMPLES)
+
 ACCELERATION_CUTOFF_HZ = 10.0
 WRAPPER = """#include "ur10_inverse_dynamics_solver/getCurrents.h"
 extern "C" void get_currents(const double* q, const double* v, const double* a, double* out) {
@@ -79,12 +86,13 @@ def main() -> None:
     states = read_joint_states(BAG)
     dt = float(np.median(np.diff(states.t_s)))
     a = lowpass(differentiate(states.qd_rad_s, dt), ACCELERATION_CUTOFF_HZ, 1.0 / dt)
+    held_out = held_out_messages(len(states.t_s))
     with tempfile.TemporaryDirectory() as folder:
         lib = compiled_currents(checkout, Path(folder))
-        tau = torques(lib, constants(checkout), states.q_rad[HELD_OUT], states.qd_rad_s[HELD_OUT], a[HELD_OUT])
-    error = tau - states.effort_Nm[HELD_OUT]
+        tau = torques(lib, constants(checkout), states.q_rad[held_out], states.qd_rad_s[held_out], a[held_out])
+    error = tau - states.effort_Nm[held_out]
     per_joint = np.sqrt(np.mean(error ** 2, axis=0))
-    print(f"held-out messages {HELD_OUT.start}-{HELD_OUT.stop - 1} of {len(states.t_s)}")
+    print(f"held-out messages {held_out.start}-{held_out.stop - 1} of {len(states.t_s)}")
     print("torque RMS per joint (N m): " + " ".join(f"{x:.3f}" for x in per_joint))
     print(f"over all joints (N m): {np.sqrt(np.mean(error ** 2)):.3f}")
 

@@ -33,6 +33,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from pipeline.identification.estimate import weighted_solution
 from pipeline.identification.friction import load_columns, load_free_torque
 from pipeline.identification.measure import ProcessedData
 from pipeline.identification.regressor import RegressorModel
@@ -69,7 +70,8 @@ class CoulombWidths:
                 "coulomb_width_train_rms_stated_Nm": per_joint(self.train_rms_stated_Nm),
                 "coulomb_width_train_rms_chosen_Nm": per_joint(self.train_rms_chosen_Nm),
                 "coulomb_width_selection": f"grid {list(COULOMB_WIDTHS_RAD_S)} rad/s, WLS on the first "
-                                           f"{self.n_train} samples (the held-out tail not used)"}
+                                           f"{self.n_train} samples, a forward check inside them "
+                                           "(the held-out tail not used)"}
 
     def note(self) -> str | None:
         """The warning that the widths stay in this stage (None: all as stated)."""
@@ -102,15 +104,9 @@ def _row_rms(residual: np.ndarray, has_equation: np.ndarray) -> np.ndarray:
     return np.sqrt(np.sum(residual**2, axis=0) / np.maximum(np.sum(has_equation, axis=0), 1))
 
 
-def _weighted_fit(Wb: np.ndarray, y: np.ndarray, weight: np.ndarray, n_rows: int) -> np.ndarray:
-    """The weighted least-squares solution of ``Wb beta = y`` (weight ``weight[i]`` on torque row ``i``)."""
-    w = np.tile(weight, Wb.shape[0] // n_rows)
-    return np.linalg.lstsq(Wb * w[:, None], y * w, rcond=None)[0]
-
-
-def _weighted_fit_residual(Wb: np.ndarray, y: np.ndarray, weight: np.ndarray, n_rows: int) -> np.ndarray:
-    """(n, n_rows) the residual of :func:`_weighted_fit`."""
-    return (y - Wb @ _weighted_fit(Wb, y, weight, n_rows)).reshape(-1, n_rows)
+def _fit_residual(Wb: np.ndarray, y: np.ndarray, joint_sigma: np.ndarray) -> np.ndarray:
+    """(n, n_rows) the residual of :func:`.estimate.weighted_solution`."""
+    return (y - Wb @ weighted_solution(Wb, y, joint_sigma)).reshape(-1, len(joint_sigma))
 
 
 def choose_widths(data: ProcessedData, reg: RegressorModel, base_regressor: Callable[[np.ndarray], np.ndarray],
@@ -132,60 +128,62 @@ def choose_widths(data: ProcessedData, reg: RegressorModel, base_regressor: Call
     grid = np.unique(np.concatenate([COULOMB_WIDTHS_RAD_S, stated]))
     # the Coulomb columns of every joint at every width of the grid: (n_grid, n_train, nr, nv)
     candidates = np.stack([coulomb_rows(train, reg, np.full(nv, g)) for g in grid])
-    current = np.array([int(np.argmin(np.abs(grid - s))) for s in stated])
+    stated_idx = np.array([int(np.argmin(np.abs(grid - s))) for s in stated])
+    current = stated_idx.copy()
     Wb = base_regressor(train.Y)                            # the stated widths: the record's regressor
     nb = Wb.shape[1]
     row_of_joint: dict[int, int] = {}
-    r0 = _weighted_fit_residual(Wb, y, np.ones(nr), nr)
     has_equation = np.any(train.Y.reshape(n_train, nr, -1) != 0, axis=2)     # (n_train, nr): :mod:`.dwell`
-    sigma = np.maximum(_row_rms(r0, has_equation), 1e-12)
-    weight = 1.0 / sigma
+    sigma = np.maximum(_row_rms(_fit_residual(Wb, y, np.ones(nr)), has_equation), 1e-12)
     rows = np.arange(nv) if data.rows is None else np.asarray(data.rows)
     v_rows = (train.v[:, None, :] if train.v_full is None else train.v_full)[..., rows]
     load_block = np.zeros((n_train * nr, 0))
     if offsets is not None:     # the load columns of every row at every width: (n_grid, n_train * nr, nr)
-        beta0 = _weighted_fit(Wb, y, weight, nr)
+        beta0 = weighted_solution(Wb, y, sigma)
         load_Nm = load_free_torque(Wb, beta0, offsets, nr, None, v_rows)
         load_grid = np.stack([load_columns(load_Nm, v_rows, g, np.arange(nr)) for g in grid])
         row_of_joint = {int(j): i for i, j in enumerate(rows)}
         load_block = load_grid[current[rows], :, np.arange(nr)].T.copy()
         Wb = np.hstack([Wb, load_block])
 
-    w_rows = np.tile(weight, n_train)
+    w_rows = np.tile(1.0 / sigma, n_train)
     yw = y * w_rows
-    best = float(np.sum((_weighted_fit_residual(Wb, y, weight, nr) * weight) ** 2))
+
+    def reached(j: int) -> tuple[np.ndarray, np.ndarray]:
+        """The columns of ``Wb`` a width of joint ``j`` reaches (its Coulomb column's base columns, then its
+        row's load column) and the base columns alone."""
+        in_base = np.flatnonzero(base_of_column[j] != 0)
+        return np.concatenate([in_base, [nb + row_of_joint[j]] if j in row_of_joint else []]).astype(int), in_base
+
+    def columns_at(j: int, g: int) -> np.ndarray:
+        """Those columns with joint ``j``'s width at grid index ``g`` (now at ``current[j]``)."""
+        cols_j, in_base = reached(j)
+        cols = Wb[:, cols_j].copy()
+        delta = candidates[g, :, :, j].ravel() - candidates[current[j], :, :, j].ravel()
+        cols[:, : len(in_base)] += np.outer(delta, base_of_column[j][in_base])
+        if j in row_of_joint:
+            cols[:, -1] = load_grid[g, :, row_of_joint[j]]
+        return cols
+
+    best = float(np.sum((_fit_residual(Wb, y, sigma) / sigma) ** 2))
     min_drop = 2 * MIN_RELATIVE_GAIN / nr
     for _ in range(MAX_SWEEPS):
         moved = False
         for j in range(nv):
-            # the columns a width of joint j reaches: its Coulomb column's base columns and its row's load column
-            in_base = np.flatnonzero(base_of_column[j] != 0)
-            load_col = [nb + row_of_joint[j]] if j in row_of_joint else []
-            reached = np.concatenate([in_base, load_col]).astype(int)
-            rest = np.setdiff1d(np.arange(Wb.shape[1]), reached)
+            cols_j = reached(j)[0]
             # Frisch-Waugh-Lovell: the fit's weighted residual is that of y and the reached columns after
             # projecting out the others (one QR per joint, not one least-squares fit per width)
-            Q = np.linalg.qr(Wb[:, rest] * w_rows[:, None])[0]
+            Q = np.linalg.qr(Wb[:, np.setdiff1d(np.arange(Wb.shape[1]), cols_j)] * w_rows[:, None])[0]
             y_perp = yw - Q @ (Q.T @ yw)
-            col_now = candidates[current[j], :, :, j].ravel()
             trials = []
-            for g in range(len(grid)):
-                if g == current[j]:
-                    continue
-                cols = Wb[:, reached].copy()
-                delta = candidates[g, :, :, j].ravel() - col_now
-                cols[:, : len(in_base)] += np.outer(delta, base_of_column[j][in_base])
-                if load_col:
-                    cols[:, -1] = load_grid[g, :, row_of_joint[j]]
-                C = cols * w_rows[:, None]
+            for g in (g for g in range(len(grid)) if g != current[j]):
+                C = columns_at(j, g) * w_rows[:, None]
                 C_perp = C - Q @ (Q.T @ C)
                 coef = np.linalg.lstsq(C_perp, y_perp, rcond=None)[0]
-                trials.append((float(np.sum((y_perp - C_perp @ coef) ** 2)), g, cols))
-            if not trials:
-                continue
-            s_new, g_new, cols = min(trials, key=lambda t: t[0])
+                trials.append((float(np.sum((y_perp - C_perp @ coef) ** 2)), g))
+            s_new, g_new = min(trials)
             if s_new < best * (1 - min_drop):
-                Wb[:, reached] = cols
+                Wb[:, cols_j] = columns_at(j, g_new)
                 best, current[j], moved = s_new, g_new, True
         if not moved:
             break
@@ -193,24 +191,17 @@ def choose_widths(data: ProcessedData, reg: RegressorModel, base_regressor: Call
     # FORWARD_FIT_FRACTION of the training samples predicts the rest of them better with it than with the stated
     # width, by the same margin
     m = int(FORWARD_FIT_FRACTION * n_train)
-    fit_rows, score_rows = slice(0, m * nr), slice(m * nr, None)
 
     def forward(W: np.ndarray) -> float:
-        beta = np.linalg.lstsq(W[fit_rows] * w_rows[fit_rows, None], y[fit_rows] * w_rows[fit_rows], rcond=None)[0]
-        return float(np.sum(((y[score_rows] - W[score_rows] @ beta) * w_rows[score_rows]) ** 2))
+        beta = weighted_solution(W[: m * nr], y[: m * nr], sigma)
+        return float(np.sum(((y[m * nr:] - W[m * nr:] @ beta) * w_rows[m * nr:]) ** 2))
 
-    stated_idx = np.array([int(np.argmin(np.abs(grid - s))) for s in stated])
     for j in map(int, np.flatnonzero(current != stated_idx)):
-        in_base = np.flatnonzero(base_of_column[j] != 0)
         W = Wb.copy()
-        delta = candidates[stated_idx[j], :, :, j].ravel() - candidates[current[j], :, :, j].ravel()
-        W[:, in_base] += np.outer(delta, base_of_column[j][in_base])
-        if j in row_of_joint:
-            W[:, nb + row_of_joint[j]] = load_grid[stated_idx[j], :, row_of_joint[j]]
+        W[:, reached(j)[0]] = columns_at(j, int(stated_idx[j]))
         if not forward(Wb) < forward(W) * (1 - min_drop):
             Wb, current[j] = W, stated_idx[j]
     chosen = grid[current]
-    r_chosen = _weighted_fit_residual(Wb, y, weight, nr)
-    stated_cols = [] if offsets is None else [load_block]
-    r_stated = _weighted_fit_residual(np.hstack([base_regressor(train.Y), *stated_cols]), y, weight, nr)
+    r_chosen = _fit_residual(Wb, y, sigma)
+    r_stated = _fit_residual(np.hstack([base_regressor(train.Y), load_block]), y, sigma)
     return CoulombWidths(stated, chosen, _row_rms(r_stated, has_equation), _row_rms(r_chosen, has_equation), n_train)

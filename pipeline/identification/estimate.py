@@ -103,6 +103,14 @@ def _ols(W: np.ndarray, y: np.ndarray, nv: int) -> LeastSquaresEstimate:
     return LeastSquaresEstimate(beta, cov, _joint_sigmas(W, res, nv), res, "ols")
 
 
+def weighted_solution(W: np.ndarray, y: np.ndarray, joint_sigma: np.ndarray) -> np.ndarray:
+    """``argmin sum_k sum_i (y_ki - W_ki beta)^2 / sigma_i^2``: the least-squares solution with torque row ``i``
+    of every sample (rows sample-major) weighted by ``1 / sigma_i`` (no covariance; :func:`wls` for that)."""
+    sigma = np.asarray(joint_sigma, float)
+    w = np.tile(1.0 / sigma, W.shape[0] // len(sigma))
+    return np.linalg.lstsq(W * w[:, None], np.asarray(y, float) * w, rcond=None)[0]
+
+
 def wls(W: np.ndarray, y: np.ndarray, nv: int, iterations: int = 1) -> LeastSquaresEstimate:
     """Gautier's weighted least squares (per-joint residual sigma from the previous fit)."""
     with single_thread_blas():

@@ -322,11 +322,6 @@ def load_free_torque(Wb: np.ndarray, beta: np.ndarray, offsets: np.ndarray, nr: 
     return torque if stribeck is None else torque + stribeck.stribeck_torque(v)
 
 
-def _linear_fit(A: np.ndarray, y: np.ndarray, sigma: np.ndarray) -> np.ndarray:
-    w = np.tile(1.0 / sigma, A.shape[0] // len(sigma))
-    return np.linalg.lstsq(A * w[:, None], np.asarray(y, float) * w, rcond=None)[0]
-
-
 def fit_load_friction(Wb: np.ndarray, y: np.ndarray, v: np.ndarray, beta0: np.ndarray,
                       stribeck0: StribeckFit | None, joint_sigma_Nm: np.ndarray,
                       coulomb_width_rad_s: float | np.ndarray,
@@ -350,7 +345,7 @@ def fit_load_friction(Wb: np.ndarray, y: np.ndarray, v: np.ndarray, beta0: np.nd
         A = np.hstack([Wb, load_columns(load, v, coulomb_width_rad_s, joints)])
         x0 = np.concatenate([beta, fl[joints]])
         if stribeck0 is None:
-            x, out = _linear_fit(A, y, sigma), None
+            x, out = est_mod.weighted_solution(A, y, sigma), None
         else:
             out = fit_stribeck(A, y, v, x0, sigma, coulomb_width_rad_s, max_excess_Nm=max_excess_Nm)
             x = out.beta

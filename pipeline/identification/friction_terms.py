@@ -49,6 +49,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from pipeline.identification.estimate import weighted_solution
 from pipeline.identification.gates import band_noise_sigma, model_class_structure
 from pipeline.identification.measure import ProcessedData
 from pipeline.identification.outcome import Validation
@@ -198,11 +199,6 @@ def row_widths(coulomb_width_rad_s: float | np.ndarray, n_rows: int) -> np.ndarr
     return np.broadcast_to(np.asarray(coulomb_width_rad_s, float), (n_rows,))
 
 
-def _wls(A: np.ndarray, y: np.ndarray, sigma: np.ndarray) -> np.ndarray:
-    w = np.tile(1.0 / sigma, A.shape[0] // len(sigma))
-    return np.linalg.lstsq(A * w[:, None], y * w, rcond=None)[0]
-
-
 def _joint_sigma(res: np.ndarray) -> np.ndarray:
     return np.maximum(np.sqrt(np.mean(res**2, axis=0)), 1e-12)
 
@@ -219,9 +215,9 @@ def fit_terms(terms: list[JointTerm], data: ProcessedData, Wb: np.ndarray, sigma
     """WLS of the base parameters with the ``terms``' coefficients on ``data`` (``Wb`` its base
     regressor); effort-gain columns at the fit without them. Returns the fitted terms and ``beta``."""
     y = data.y
-    beta0 = _wls(Wb, y, sigma)
+    beta0 = weighted_solution(Wb, y, sigma)
     cols, _ = columns(terms, data, Wb, beta0, coulomb_width_rad_s)
-    x = _wls(np.hstack([Wb, cols]), y, sigma)
+    x = weighted_solution(np.hstack([Wb, cols]), y, sigma)
     out, k = [], Wb.shape[1]
     for t in terms:
         out.append(replace(t, coefficients=x[k: k + t.n_columns]))
@@ -303,9 +299,9 @@ def select_terms(data: ProcessedData, base_regressor: Callable, n_train: int, co
     nr = data.tau.shape[1]
     whole = _head(data, n_train)
     W, y = base_regressor(whole.Y), whole.y
-    beta0 = _wls(W, y, np.ones(nr))
+    beta0 = weighted_solution(W, y, np.ones(nr))
     sigma = _joint_sigma(whole.tau - (W @ beta0).reshape(-1, nr))
-    beta0 = _wls(W, y, sigma)
+    beta0 = weighted_solution(W, y, sigma)
     cv = BlockedFolds(W, y, sigma, n_folds)
     w = cv.w
     chosen: list[JointTerm] = []

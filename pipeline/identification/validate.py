@@ -301,9 +301,9 @@ def validate_on_path(ctx: StageContext, cfg: Config, regs: Regressors, measured:
         noise_source = "spread between two runs of the validation path (the drives' torques in closed loop)"
     scored, v_s = None, 0.0
     if real.dry_friction_sticks:
-        v_s = stiction_band_speed(float(np.max(regs.reg.row_coulomb_width_rad_s)))
-        scored = outside_stiction_band(vt.t_s, vt.v[:, regs.used], meas_v.q_rad[:, regs.used],
-                                       float(np.max(regs.reg.row_coulomb_width_rad_s)))
+        width = float(np.max(regs.reg.row_coulomb_width_rad_s))   # a simulated experiment: robot.yaml's one width
+        v_s = stiction_band_speed(width)
+        scored = outside_stiction_band(vt.t_s, vt.v[:, regs.used], meas_v.q_rad[:, regs.used], width)
     Yv = regs.reg.stacked(vt.q, vt.v, vt.a)
     st_v = 0.0 if fits.stribeck is None else fits.stribeck.stribeck_torque(vt.v[:, regs.used])
     pred_phys = (Yv @ fits.phys.p).reshape(-1, nm) + st_v
