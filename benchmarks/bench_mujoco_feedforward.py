@@ -61,7 +61,8 @@ def main(run_dir: Path, seed: int) -> None:
     no_stribeck.spec.actuation.static_friction_excess_Nm = None
     no_stribeck.spec.actuation.stribeck_velocity_rad_s = None
     steps = FRICTION_TIMECONST_STEPS
-    model_width = replace(cc, sticking_friction_width_rad_s=identified.spec.actuation.coulomb_smoothing_rad_s)
+    widths = identified.spec.actuation.coulomb_smoothing_rad_s
+    model_width = replace(cc, sticking_friction_width_rad_s=float(np.max(widths)))
     cases = [("none", identified, "none", steps, cc), ("identified", identified, "full_friction", steps, cc),
              ("identified, model's width", identified, "full_friction", steps, model_width),
              ("identified, no Stribeck", no_stribeck, "full_friction", steps, cc),
@@ -72,7 +73,7 @@ def main(run_dir: Path, seed: int) -> None:
              ("none, MuJoCo's 0.02 s", identified, "none", MUJOCO_DEFAULT_TIMECONST_STEPS, cc),
              ("identified, MuJoCo's 0.02 s", identified, "full_friction", MUJOCO_DEFAULT_TIMECONST_STEPS, cc)]
     print(f"{run_dir}: ISO path {t[-1]:.2f} s, noise seed {seed}, feedforward switching width "
-          f"{min(cc.sticking_friction_width_rad_s, identified.spec.actuation.coulomb_smoothing_rad_s):g} rad/s")
+          f"{np.min(np.minimum(cc.sticking_friction_width_rad_s, widths)):g} rad/s")
     largest: dict[str, float] = {}
     for name, model, variant, timeconst_steps, case_cfg in cases:
         real.plant.friction_timeconst_steps = timeconst_steps

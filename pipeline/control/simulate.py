@@ -44,7 +44,7 @@ from scipy.interpolate import CubicHermiteSpline
 from pipeline.control.config import FEEDFORWARD_VARIANTS, ControlConfig
 from pipeline.control.design import ServoGains, design_gains, filter_alpha, reflected_inertia, stick_slip_gains
 from pipeline.control.elastic_feedforward import ELASTIC_VARIANTS, elastic_feedforward
-from pipeline.core.errors import ConfigError, InfeasibleError
+from pipeline.core.errors import ConfigError, InfeasibleError, SolverError
 from pipeline.robot.friction import has_stribeck, joint_friction_torque, load_friction_torque, stribeck_slope_Nms_rad
 from pipeline.robot.model import RobotModel
 
@@ -70,18 +70,18 @@ class ClosedLoopResult:
     realtime_factor_cpu: float = 0.0           # simulated time / CPU time of the loop thread
 
 
-def feedforward_coulomb_width(real, model: RobotModel, config: ControlConfig) -> float | None:
-    """The Coulomb switching width (rad/s) of the friction feedforward on ``real``: on an arm whose dry
-    friction sticks (``real.dry_friction_sticks``) ``min(config.sticking_friction_width_rad_s, w)``, ``w``
-    the model's smoothing width; None (the model's own law) on an arm with smooth Coulomb friction
+def feedforward_coulomb_width(real, model: RobotModel, config: ControlConfig) -> np.ndarray | None:
+    """The Coulomb switching width (rad/s, per joint) of the friction feedforward on ``real``: on an arm whose
+    dry friction sticks (``real.dry_friction_sticks``) ``min(config.sticking_friction_width_rad_s, w)``, ``w``
+    the model's smoothing width of the joint; None (the model's own law) on an arm with smooth Coulomb friction
     (module docstring)."""
     if not getattr(real, "dry_friction_sticks", False):
         return None
-    return min(float(config.sticking_friction_width_rad_s), float(model.spec.actuation.coulomb_smoothing_rad_s))
+    return np.minimum(float(config.sticking_friction_width_rad_s), model.spec.actuation.coulomb_smoothing_rad_s)
 
 
 def feedforward_torque(model, q_d: np.ndarray, v_d: np.ndarray, a_d: np.ndarray, variant: str,
-                       coulomb_width_rad_s: float | None = None) -> np.ndarray:
+                       coulomb_width_rad_s: np.ndarray | None = None) -> np.ndarray:
     """Feedforward torques (N, nq) of a variant from ``model`` (RobotModel); the friction's smooth sign
     ``tanh(v_d / w)`` with ``w = coulomb_width_rad_s`` (None: the model's width,
     :func:`feedforward_coulomb_width`)."""
@@ -103,7 +103,8 @@ def feedforward_torque(model, q_d: np.ndarray, v_d: np.ndarray, a_d: np.ndarray,
             out += model.friction_torque(v_d)
             out += model.load_friction_torque(out, v_d)   # load: the model's torque without that term
         else:
-            act = replace(model.spec.actuation, coulomb_smoothing_rad_s=float(coulomb_width_rad_s))
+            act = replace(model.spec.actuation, coulomb_smoothing_rad_s=np.broadcast_to(
+                np.asarray(coulomb_width_rad_s, float), (n,)).copy())
             out += joint_friction_torque(act, v_d)
             out += load_friction_torque(act, out, v_d)
     return out
@@ -218,6 +219,7 @@ def simulate_joint_trajectory(real, model, t_s, q_d, v_d, a_d, config: ControlCo
     rec = plant.run_servo(gains.as_dict(), dt, nv, d_m, alpha,
                           q_fb, v_ff, tau_drive, Q[0], rng, engine=config.engine,
                           chunk_samples=config.chunk_samples, tcp_frame=tcp_frame, v0=V[0])
+    check_finite(dt * (np.arange(len(Q)) - n_settle), rec.q_meas, model, np.mean(q_d, axis=0))
     s = slice(n_settle, None)
     q_meas = rec.q_meas[s]
     ratio = rec.torque_ratio[s]
@@ -232,6 +234,24 @@ def simulate_joint_trajectory(real, model, t_s, q_d, v_d, a_d, config: ControlCo
         q_set=Q_set[s])
     check_saturation(result, config)
     return result
+
+
+def check_finite(t_s: np.ndarray, q_meas: np.ndarray, model: RobotModel, q_mean: np.ndarray) -> None:
+    """Raise SolverError when the closed loop's measured positions ``q_meas`` (N, nq) at times ``t_s`` are not
+    all finite (the loop diverged): the first time, the joints not finite there and the joint of least
+    inertia in the model at ``q_mean``, which the servo gains come from (:func:`servo_gains`); a model with
+    next to no inertia on a joint (rotor inertia fitted to its bound on a record) gives gains no drive runs."""
+    bad = ~np.isfinite(q_meas)
+    if not bad.any():
+        return
+    k = int(np.argwhere(bad.any(axis=1))[0, 0])
+    joints = ", ".join(str(j + 1) for j in np.flatnonzero(bad[k]))
+    inertia = np.diag(model.mass_matrix(q_mean))
+    j = int(np.argmin(inertia))
+    raise SolverError(None, "control", f"the closed loop diverged at t = {t_s[k]:.4f} s (joint(s) {joints} not "
+                      f"finite); the servo gains come from the model's inertia, least on joint {j + 1}: "
+                      f"{inertia[j]:.3g} kg m² (rotor inertia {float(model.model.armature[j]):.3g} kg m²): check "
+                      "the robot's rotor and link inertias (robot.yaml)")
 
 
 def first_saturation(result: ClosedLoopResult, ratio_limit: float = 1.0) -> dict | None:

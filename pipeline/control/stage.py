@@ -78,7 +78,7 @@ def run(ctx: StageContext[ControlConfig]) -> StageResult:
     out = outputs(cfg, models, iso, servo, measured, stiffness, speed, rms_nominal_kin, registered)
     width = feedforward_coulomb_width(ctx.real, models.robot, cfg)
     if width is not None:      # the arm's dry friction sticks: the feedforward's sign switching (.simulate)
-        out.summary["feedforward_coulomb_width_rad_s"] = width
+        out.summary["feedforward_coulomb_width_rad_s"] = width.tolist()
     return out
 
 

@@ -1,7 +1,7 @@
 """The Coulomb friction's smoothing width per joint, chosen on a record's training part.
 
-robot.yaml states one width ``w`` of the smoothed sign ``tanh(v / w)`` for every joint, often an
-assumed numerical smoothing (0.01 rad/s). On a recorded arm the logged effort changes sign over a
+robot.yaml states the width ``w`` of the smoothed sign ``tanh(v / w)``, often one assumed numerical
+smoothing (0.01 rad/s) for every joint. On a recorded arm the logged effort changes sign over a
 band of velocities that the drive sets: presliding displacement of the gear (Armstrong-Hélouvry,
 Dupont & Canudas de Wit 1994, Automatica 30(7)), the current loop and the driver's filtering of the
 current it logs. A model whose Coulomb term switches at 0.01 rad/s where the effort takes 0.1 rad/s
@@ -23,7 +23,9 @@ confirms it by the same margin: fitted on its first :data:`FORWARD_FIT_FRACTION`
 chosen width predicts the rest of it better than with the stated one (else that joint keeps the stated
 width). A width is a prior stated in robot.yaml; only clear evidence moves it. On the Stäubli TX40's
 motor-torque record, widths that lowered the training residual by 4-8 % predicted its held-out tail
-worse; on the UR10's current log the gains are 18-67 % and hold on its tail.
+worse; on the UR10's current log the gains are 18-67 % and hold on its tail. The chosen widths are the
+friction law of the identified robot handed on (``actuation.coulomb_smoothing_rad_s`` per joint), so the
+control and trajectory stages switch each joint's Coulomb friction as the fits did.
 """
 
 from __future__ import annotations
@@ -74,13 +76,13 @@ class CoulombWidths:
                                            "(the held-out tail not used)"}
 
     def note(self) -> str | None:
-        """The warning that the widths stay in this stage (None: all as stated)."""
+        """The warning that the widths differ from robot.yaml's (None: all as stated)."""
         if not self.changed.size:
             return None
         which = ", ".join(f"joint {j + 1} {self.chosen_rad_s[j]:g} rad/s" for j in self.changed)
         return (f"the record's efforts change sign over wider velocity bands than robot.yaml's Coulomb smoothing "
                 f"({', '.join(f'{w:g}' for w in np.unique(self.stated_rad_s))} rad/s): this stage's fits and "
-                f"validation use {which}; the robot handed on keeps robot.yaml's width")
+                f"validation use {which}, and the robot handed on carries them")
 
 
 def coulomb_rows(data: ProcessedData, reg: RegressorModel, widths_rad_s: np.ndarray) -> np.ndarray:

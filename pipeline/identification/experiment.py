@@ -123,7 +123,7 @@ def excite_and_measure(ctx: StageContext, cfg: Config, regs: Regressors, timings
     data = meas_mod.process_periodic(sim, regs.reg, n_per, cutoff, cfg.decimation)
     stiction = None
     if ctx.real is not None and ctx.real.dry_friction_sticks:   # held joints: out of the fits (without_stiction_band)
-        data, stiction = meas_mod.without_stiction_band(data, float(regs.reg.coulomb_width_rad_s))
+        data, stiction = meas_mod.without_stiction_band(data, float(np.max(regs.reg.joint_coulomb_width_rad_s)))
     timings["data_s"] = time.perf_counter() - t1
     return Measured(data, "simulation (ideal tracking of the hidden robot)", exc, limits, traj, stiction)
 

@@ -141,12 +141,14 @@ def base_covariance(regs: Regressors, measured: Measured, fits: Fits) -> tuple[e
 
 def handed_on_robot(robot: RobotModel, regs: Regressors, fits: Fits) -> RobotModel:
     """``robot`` with the handed-on fit's standard parameters and friction terms (Stribeck,
-    load-dependent Coulomb) on all joints (:func:`.outcome.identified_robot`); the joints left out
-    keep ``robot``'s values (:func:`with_unmeasured_joints_kept`)."""
+    load-dependent Coulomb) on all joints and the Coulomb smoothing widths the fits used (a record's, chosen
+    per joint by :mod:`.coulomb_width`) (:func:`.outcome.identified_robot`); the joints left out keep
+    ``robot``'s values (:func:`with_unmeasured_joints_kept`)."""
     nq = robot.nq
     return identified_robot(robot, with_unmeasured_joints_kept(robot, regs.selection, fits.phys.p),
                             None if fits.stribeck is None else expand_to_joints(fits.stribeck, regs.used, nq),
-                            None if fits.load is None else load_to_joints(fits.load.load, regs.used, nq))
+                            None if fits.load is None else load_to_joints(fits.load.load, regs.used, nq),
+                            regs.reg.joint_coulomb_width_rad_s)
 
 
 def with_unmeasured_joints_kept(robot: RobotModel, selection: JointSelection, p: np.ndarray) -> np.ndarray:

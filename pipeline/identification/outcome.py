@@ -213,15 +213,18 @@ def identified_friction(p: np.ndarray, nq: int, stribeck: StribeckFit | None = N
 
 
 def identified_robot(robot: RobotModel, p: np.ndarray, stribeck: StribeckFit | None = None,
-                     load: LoadFriction | None = None) -> RobotModel:
+                     load: LoadFriction | None = None, coulomb_width_rad_s: np.ndarray | None = None) -> RobotModel:
     """Copy of ``robot`` with the standard parameters ``p`` (inertias, rotor inertia, viscous and
     Coulomb friction; torque offsets are not part of a RobotModel) and, with a Stribeck fit, its
     static excess and Stribeck velocity (``friction_model: stribeck``; else none), with a
-    load-dependent term its coefficient (all joints, 0 where none)."""
+    load-dependent term its coefficient (all joints, 0 where none); ``coulomb_width_rad_s`` (nq,): the
+    Coulomb smoothing widths the fits used (None: ``robot``'s)."""
     nq = robot.nq
     model = set_dynamic_parameters(robot.model, p)
     spec = copy.deepcopy(robot.spec)
     off = 10 * (robot.model.njoints - 1)
     spec.actuation.rotor_inertia_kgm2 = p[off : off + nq].copy()
     identified_friction(p, nq, stribeck, load).apply_to(spec.actuation)
+    if coulomb_width_rad_s is not None:
+        spec.actuation.coulomb_smoothing_rad_s = np.asarray(coulomb_width_rad_s, float).copy()
     return robot.with_model(model, spec)

@@ -301,7 +301,7 @@ def validate_on_path(ctx: StageContext, cfg: Config, regs: Regressors, measured:
         noise_source = "spread between two runs of the validation path (the drives' torques in closed loop)"
     scored, v_s = None, 0.0
     if real.dry_friction_sticks:
-        width = float(np.max(regs.reg.row_coulomb_width_rad_s))   # a simulated experiment: robot.yaml's one width
+        width = float(np.max(regs.reg.row_coulomb_width_rad_s))   # a simulated experiment: robot.yaml's widest
         v_s = stiction_band_speed(width)
         scored = outside_stiction_band(vt.t_s, vt.v[:, regs.used], meas_v.q_rad[:, regs.used], width)
     Yv = regs.reg.stacked(vt.q, vt.v, vt.a)

@@ -49,7 +49,8 @@ class ActuationSpec:
     rotor_inertia_kgm2: np.ndarray
     viscous_Nms_rad: np.ndarray
     coulomb_Nm: np.ndarray
-    coulomb_smoothing_rad_s: float
+    #: (nv,) width ``w`` of the smoothed sign ``tanh(v / w)`` of the Coulomb friction, per joint (rad/s)
+    coulomb_smoothing_rad_s: np.ndarray
     #: torsional joint stiffness (joint side, N m/rad); None: derived (pipeline.robot.stiffness)
     joint_stiffness_Nm_rad: np.ndarray | None = None
     #: Stribeck friction (identified, ``friction_model: stribeck``): static excess over Coulomb
@@ -210,6 +211,12 @@ class _Reader:
             raise self.error(key, f"must not be negative, got {value}")
         return float(value)
 
+    def number_or_vector(self, key: str, length: int, *, positive: bool = False, default: float) -> np.ndarray:
+        """(length,) values: one number for every entry or a list of ``length`` numbers."""
+        if isinstance(self.data.get(key), list):
+            return self.vector(key, length, positive=positive)
+        return np.full(length, self.number(key, positive=positive, default=default))
+
     def integer(self, key: str, *, minimum: int | None = None, maximum: int | None = None,
                 default: int | None = None) -> int:
         if key not in self.data:
@@ -321,7 +328,7 @@ def load_robot_spec(path: Path, nq: int | None = None) -> RobotSpec:
         rotor_inertia_kgm2=act.vector("rotor_inertia_kgm2", n, nonnegative=True),
         viscous_Nms_rad=act.vector("viscous_Nms_rad", n, nonnegative=True),
         coulomb_Nm=act.vector("coulomb_Nm", n, nonnegative=True),
-        coulomb_smoothing_rad_s=act.number("coulomb_smoothing_rad_s", positive=True, default=0.01),
+        coulomb_smoothing_rad_s=act.number_or_vector("coulomb_smoothing_rad_s", n, positive=True, default=0.01),
         joint_stiffness_Nm_rad=(act.vector("joint_stiffness_Nm_rad", n, positive=True)
                                 if "joint_stiffness_Nm_rad" in act.data else None),
         torque_side=act.text("torque_side", default="motor"),

@@ -21,6 +21,11 @@ def _optical_yaml(o: OpticalTrackerSpec) -> dict[str, object]:
             "noise_per_m": float(o.noise_per_m)}
 
 
+def _one_or_each(values: np.ndarray) -> float | list[float]:
+    """One number when every joint's value is the same, else the list (read back by ``number_or_vector``)."""
+    return float(values[0]) if np.all(values == values[0]) else [float(v) for v in values]
+
+
 def _se3_yaml(transform: pin.SE3) -> dict[str, list[float]]:
     return {"xyz": [float(v) for v in transform.translation],
             "rpy": [float(v) for v in pin.rpy.matrixToRpy(transform.rotation)]}
@@ -48,7 +53,7 @@ def robot_spec_to_yaml(spec: RobotSpec, urdf_name: str) -> dict[str, object]:
             "rotor_inertia_kgm2": [float(v) for v in act.rotor_inertia_kgm2],
             "viscous_Nms_rad": [float(v) for v in act.viscous_Nms_rad],
             "coulomb_Nm": [float(v) for v in act.coulomb_Nm],
-            "coulomb_smoothing_rad_s": float(act.coulomb_smoothing_rad_s),
+            "coulomb_smoothing_rad_s": _one_or_each(act.coulomb_smoothing_rad_s),
             "torque_side": act.torque_side,
         } | ({} if act.joint_stiffness_Nm_rad is None
              else {"joint_stiffness_Nm_rad": [float(v) for v in act.joint_stiffness_Nm_rad]})

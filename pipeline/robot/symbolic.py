@@ -86,7 +86,7 @@ class SymbolicRobot:
         *,
         flange_frame: str | None = None,
         tool_frames: Sequence[str] | None = None,
-        coulomb_smoothing_rad_s: float | None = None,
+        coulomb_smoothing_rad_s: float | npt.ArrayLike | None = None,
         viscous_Nms_rad: npt.ArrayLike | None = None,
         coulomb_Nm: npt.ArrayLike | None = None,
         jit: bool = False,
@@ -125,13 +125,15 @@ class SymbolicRobot:
         viscous = (getattr(actuation, "viscous_Nms_rad", np.zeros(self.nq)) if viscous_Nms_rad is None
                    else viscous_Nms_rad)
         coulomb = getattr(actuation, "coulomb_Nm", np.zeros(self.nq)) if coulomb_Nm is None else coulomb_Nm
-        if not coulomb_smoothing_rad_s > 0:
+        width = np.broadcast_to(np.asarray(coulomb_smoothing_rad_s, float), (self.nq,)).copy()
+        if not np.all(width > 0):
             raise PipelineError(
                 None, "coulomb_smoothing_rad_s", f"must be positive, got {coulomb_smoothing_rad_s}"
             )
         self.flange_frame = flange_frame
         self.tool_frames = tuple(tool_frames)
-        self.coulomb_smoothing_rad_s = float(coulomb_smoothing_rad_s)
+        #: (nq,) the Coulomb smoothing width per joint (rad/s)
+        self.coulomb_smoothing_rad_s = width
         self._viscous = _check_vector(viscous, self.nq, "viscous_Nms_rad")
         self._coulomb = _check_vector(coulomb, self.nq, "coulomb_Nm")
         self._flange_id = _frame_id(model, flange_frame) if self.tool_frames else None
@@ -343,7 +345,7 @@ class SymbolicRobot:
     def friction_expression(self, v: SymbolicArg, p_dyn: SymbolicArg) -> SymbolicArg:
         """``fv v + fc tanh(v / width)`` (smooth Coulomb, width ``coulomb_smoothing_rad_s``)."""
         return p_dyn[self.dyn.viscous] * v + p_dyn[self.dyn.coulomb] * ca.tanh(
-            v / self.coulomb_smoothing_rad_s
+            v / ca.DM(self.coulomb_smoothing_rad_s)
         )
 
     def inverse_dynamics_expression(self, q: SymbolicArg, v: SymbolicArg, a: SymbolicArg, p_dyn: SymbolicArg,

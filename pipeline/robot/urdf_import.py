@@ -435,7 +435,8 @@ def assumed_spec(urdf: Path, root: ET.Element, model: pin.Model, tip_link: str) 
         path=urdf, name=root.get("name") or urdf.stem, urdf=urdf, flange_frame=tip_link, payload_kg=0.0,
         tool=ToolSpec(pin.SE3.Identity(), reflector_m, reflector_axis),
         actuation=ActuationSpec(gear, np.diag(gear), ROTOR_INERTIA_PER_EFFORT_S2 * effort,
-                                VISCOUS_FRACTION * effort / velocity, COULOMB_FRACTION * effort, 0.01),
+                                VISCOUS_FRACTION * effort / velocity, COULOMB_FRACTION * effort,
+                                np.full(nq, 0.01)),
         acceleration_rad_s2=ACCELERATION_PER_VELOCITY_1_S * velocity, limit_overrides={}, tracker=tracker,
         collision=CollisionSpec(0.0, _floor_check_from_joint(model, capsules)), capsules=capsules,
         repeatability_m=assumed_repeatability_m(reach))

@@ -42,7 +42,7 @@ class ChainStructure:
 
     @property
     def n_params(self) -> int:
-        return self.nq * PARAMS_PER_JOINT + 4  # + gravity (3) + coulomb smoothing width
+        return self.nq * PARAMS_PER_JOINT + 3 + self.nq  # + gravity (3) + coulomb smoothing width per joint
 
 
 _AXES = {"JointModelRX": (1.0, 0.0, 0.0), "JointModelRY": (0.0, 1.0, 0.0), "JointModelRZ": (0.0, 0.0, 1.0)}
@@ -79,7 +79,8 @@ def parameter_vector(robot: RobotModel) -> np.ndarray:
             m.inertias[j].toDynamicParameters(),
             [m.armature[i], act.viscous_Nms_rad[i], act.coulomb_Nm[i], robot.limits.effort_Nm[i]],
         ]))
-    return np.concatenate([*rows, np.asarray(m.gravity.linear), [float(act.coulomb_smoothing_rad_s)]])
+    return np.concatenate([*rows, np.asarray(m.gravity.linear),
+                           np.broadcast_to(np.asarray(act.coulomb_smoothing_rad_s, float), (m.nv,))])
 
 
 def _skew(x: ca.SX | ca.DM) -> ca.SX:
@@ -116,13 +117,13 @@ def _unpack(p: ca.SX, s: ChainStructure) -> tuple[list[dict[str, ca.SX]], ca.SX,
         joints.append(dict(R=ca.reshape(b[0:9], 3, 3).T, t=b[9:12], pi=b[12:22], armature=b[22],
                            viscous=b[23], coulomb=b[24], effort=b[25]))
     g = p[s.nq * n:s.nq * n + 3]
-    width = p[s.nq * n + 3]
+    width = p[s.nq * n + 3:s.nq * n + 3 + s.nq]
     return joints, g, width
 
 
 def friction_sx(v: ca.SX, p: ca.SX, s: ChainStructure) -> ca.SX:
     joints, _, width = _unpack(p, s)
-    return ca.vertcat(*[j["viscous"] * v[i] + j["coulomb"] * ca.tanh(v[i] / width) for i, j in enumerate(joints)])
+    return ca.vertcat(*[j["viscous"] * v[i] + j["coulomb"] * ca.tanh(v[i] / width[i]) for i, j in enumerate(joints)])
 
 
 def effort_sx(p: ca.SX, s: ChainStructure) -> ca.SX:

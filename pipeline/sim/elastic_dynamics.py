@@ -38,7 +38,7 @@ def stribeck_friction_sx(w: ca.SX, load: ca.SX, p: ca.SX, ptr: ca.SX, s: ChainSt
         grow = 1.0 + tr["mu"] * ca.fabs(load[i]) / jt["effort"]
         fc = jt["coulomb"] * grow
         static = tr["fs_excess"] * grow * ca.exp(-(w[i] / tr["ws"]) ** 2)
-        out.append(jt["viscous"] * w[i] + (fc + static) * ca.tanh(w[i] / width))
+        out.append(jt["viscous"] * w[i] + (fc + static) * ca.tanh(w[i] / width[i]))
     return ca.vertcat(*out)
 
 

@@ -48,7 +48,7 @@ class Transmission:
     stribeck_velocity_rad_s: np.ndarray
     coulomb_load_coefficient: np.ndarray  # mu: F_c grows by mu * coulomb * |tau_load| / tau_max
     effort_Nm: np.ndarray
-    smoothing_rad_s: float
+    smoothing_rad_s: np.ndarray           # (nq,) Coulomb smoothing width
 
     @property
     def elastic(self) -> bool:
@@ -102,4 +102,4 @@ def create_transmission(truth: RobotModel, seed: int, stiffness_Nm_rad: np.ndarr
         stribeck_velocity_rad_s=stribeck_velocity_rad_s * spread[1] if stribeck_velocity_rad_s > 0 else np.ones(nq),
         coulomb_load_coefficient=coulomb_load_coefficient * spread[2],
         effort_Nm=np.asarray(truth.limits.effort_Nm, float).copy(),
-        smoothing_rad_s=float(act.coulomb_smoothing_rad_s))
+        smoothing_rad_s=np.asarray(act.coulomb_smoothing_rad_s, float).copy())

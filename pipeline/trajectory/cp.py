@@ -219,7 +219,7 @@ def _fric_sx(pm: PlanningModel, dq: np.ndarray, x: ca.SX) -> ca.SX:
     qd = dq * X
     n = dq.shape[0]
     return (np.tile(pm.viscous_Nms_rad, (n, 1)) * qd
-            + np.tile(pm.coulomb_Nm, (n, 1)) * ca.tanh(qd / pm.coulomb_smoothing_rad_s))
+            + np.tile(pm.coulomb_Nm, (n, 1)) * ca.tanh(qd / np.tile(pm.coulomb_smoothing_rad_s, (n, 1))))
 
 
 @dataclass

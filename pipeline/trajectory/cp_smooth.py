@@ -109,7 +109,7 @@ def solve_cp_smooth(pm: PlanningModel, path: JointPath, warm: CPProfile, n_inter
     def torque(x: ca.SX) -> ca.SX:
         s = x[0]
         qd = f_dq(s) * x[1]
-        fr = pm.viscous_Nms_rad * qd + pm.coulomb_Nm * ca.tanh(qd / pm.coulomb_smoothing_rad_s)
+        fr = pm.viscous_Nms_rad * qd + pm.coulomb_Nm * ca.tanh(qd / ca.DM(pm.coulomb_smoothing_rad_s))
         return (f_m(s) * x[2] + f_c(s) * x[1] ** 2 + f_g(s) + fr) / tau_max
 
     for k in range(K + 1):

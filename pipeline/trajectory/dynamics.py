@@ -43,7 +43,7 @@ class PlanningModel:
     effort_Nm: np.ndarray
     viscous_Nms_rad: np.ndarray
     coulomb_Nm: np.ndarray
-    coulomb_smoothing_rad_s: float
+    coulomb_smoothing_rad_s: np.ndarray  # (nq,) rad/s
     acceleration_rad_s2: np.ndarray
     robot: RobotModel = None  # the RobotModel it was made from (IK, FK, symbolic bridge), if any
     _pool: pin.ModelPool | None = field(default=None, init=False, repr=False, compare=False)
@@ -73,7 +73,7 @@ class PlanningModel:
             effort_Nm=np.asarray(lim.effort_Nm, float) * (1.0 - torque_reserve),
             viscous_Nms_rad=np.asarray(act.viscous_Nms_rad, float),
             coulomb_Nm=np.asarray(act.coulomb_Nm, float),
-            coulomb_smoothing_rad_s=float(act.coulomb_smoothing_rad_s),
+            coulomb_smoothing_rad_s=np.asarray(act.coulomb_smoothing_rad_s, float).copy(),
             acceleration_rad_s2=np.asarray(lim.acceleration_rad_s2, float),
             robot=robot,
         )

@@ -210,7 +210,7 @@ class PtpProblem:
         Vn = ca.MX.sym("V", nq, N + 1)
         An = ca.MX.sym("A", nq, N + 1)
         coulomb = ca.MX.sym("coulomb", nq)
-        inv_width = ca.MX.sym("inv_width")
+        inv_width = ca.MX.sym("inv_width", nq)
         inv_tau_max = ca.MX.sym("inv_tau_max", nq)
         inv_v_max = ca.MX.sym("inv_v_max", nq)
         w = ca.MX.sym("w", nq)
@@ -234,7 +234,8 @@ class PtpProblem:
         arm = ca.MX.sym("arm", self.model_parameters.size if self.parametric else 0)
         rnea = _rnea_function(sym, self.model_parameters, self.parametric).map(M)
         qa, va, aa = ca.horzcat(Q, q_mid), ca.horzcat(V, v_mid), ca.horzcat(A, a_mid)
-        tau = rnea(qa, va, aa, *([arm] if self.parametric else [])) + ca.repmat(coulomb, 1, M) * ca.tanh(va * inv_width)
+        tau = (rnea(qa, va, aa, *([arm] if self.parametric else []))
+               + ca.repmat(coulomb, 1, M) * ca.tanh(va * ca.repmat(inv_width, 1, M)))
         tau_n = tau * ca.repmat(inv_tau_max, 1, M)
         wt = ca.sum1(tau**2 * ca.repmat(w, 1, M))
         e_n, e_m = wt[:N + 1], wt[N + 1:]
@@ -371,8 +372,9 @@ class PtpProblem:
         coulomb = pd[self.coulomb_slice].copy()
         pd[self.coulomb_slice] = 0.0
         w = np.ones(nq) if weights is None else np.asarray(weights, float)
-        w_model = float(self.sym.coulomb_smoothing_rad_s)
-        widths = tuple(float(x) for x in (coulomb_widths_rad_s or ()) if x > w_model) + (w_model,)
+        w_model = np.asarray(self.sym.coulomb_smoothing_rad_s, float)
+        # each continuation width on every joint the model smooths less, then the model's widths
+        widths = [np.maximum(w_model, float(x)) for x in (coulomb_widths_rad_s or ()) if x > w_model.min()] + [w_model]
         # bounds
         lbT, ubT = (duration_s, duration_s) if duration_s is not None else (1e-3, max_duration_s)
         lbQ = np.tile(lo, (N + 1, 1))
@@ -402,7 +404,7 @@ class PtpProblem:
         what = f"ptp move {np.round(np.degrees(q0), 1).tolist()} -> {np.round(np.degrees(q1), 1).tolist()} deg"
         solve_time, cpu_time, iters = 0.0, 0.0, 0
         for width in widths:
-            p = np.concatenate([coulomb, [1.0 / width], 1.0 / tmax, 1.0 / vmax, w, [k1, k2],
+            p = np.concatenate([coulomb, 1.0 / width, 1.0 / tmax, 1.0 / vmax, w, [k1, k2],
                                 self.model_parameters if self.parametric else []])
             solver, duals = self.solver, {}
             if multipliers is not None and len(widths) == 1:
@@ -430,7 +432,7 @@ class PtpProblem:
                          info={"x": xs, "multipliers": (np.asarray(sol["lam_x"]).ravel(),
                                                         np.asarray(sol["lam_g"]).ravel()),
                                "jit": self.jit, "fixed_duration": duration_s is not None,
-                               "cpu_time_s": cpu_time, "coulomb_widths_rad_s": list(widths),
+                               "cpu_time_s": cpu_time, "coulomb_widths_rad_s": [x.tolist() for x in widths],
                                "solver_status": status,
                                "acceleration_limits": acceleration_rad_s2 is not None})
 

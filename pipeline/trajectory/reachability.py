@@ -105,7 +105,7 @@ def _rows(pm: PlanningModel, path: JointPath, s: np.ndarray, tau_max: np.ndarray
 _W = {0: (1.0, 0.0), 1: (0.5, 0.5), 2: (0.0, 1.0)}   # b_P = w0 b_k + w1 b_{k+1}
 
 
-def _friction(row: dict, x: np.ndarray, width: float) -> np.ndarray:
+def _friction(row: dict, x: np.ndarray, width: np.ndarray) -> np.ndarray:
     """Normalised friction of the torque rows (the first ``nq`` columns; acceleration rows have none)."""
     nq = row["nq"]
     v = row["D"][:, :nq] * x[:, None]

@@ -7,8 +7,8 @@ import pinocchio as pin
 import pytest
 
 from pipeline.control.config import ControlConfig
-from pipeline.control.simulate import simulate_joint_trajectory
-from pipeline.core.errors import InfeasibleError
+from pipeline.control.simulate import check_finite, simulate_joint_trajectory
+from pipeline.core.errors import InfeasibleError, SolverError
 from pipeline.robot.iso9283 import iso9283_path
 from pipeline.robot.paths import CirclePath, LinePath, start_configuration
 from pipeline.robot.reference import cartesian_reference
@@ -137,3 +137,17 @@ def test_trajectory_starting_in_motion(real, joint_traj):
                                     np.random.default_rng(0))
     assert len(res.t_s) == len(t[k])
     assert np.abs(res.lag_error_rad).max() < 1e-3  # no jump from a rest start
+
+
+def test_a_diverged_loop_is_named_with_the_least_inertia_not_passed_on(rx130l):
+    """A closed loop whose measured positions turn non-finite stops with the time, the joints and the joint
+    of least inertia in the model (the servo gains' source), not with NaNs in the metrics."""
+    n, nq = 5, rx130l.nq
+    q = np.zeros((n, nq))
+    q[3:, 4] = np.nan
+    t = 4e-4 * np.arange(n)
+    inertia = np.diag(rx130l.mass_matrix(np.zeros(nq)))
+    least = int(np.argmin(inertia)) + 1
+    with pytest.raises(SolverError, match=rf"diverged at t = 0\.0012 s \(joint\(s\) 5 not finite\).* joint {least}:"):
+        check_finite(t, q, rx130l, np.zeros(nq))
+    check_finite(t, np.zeros((n, nq)), rx130l, np.zeros(nq))

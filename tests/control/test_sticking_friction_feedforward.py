@@ -30,8 +30,10 @@ def test_width_is_the_models_on_smooth_friction_and_the_narrow_one_where_frictio
     cfg = ControlConfig()
     w = tx40.spec.actuation.coulomb_smoothing_rad_s
     assert feedforward_coulomb_width(RealRobot.create(tx40, 5), tx40, cfg) is None     # the model's own law
-    assert feedforward_coulomb_width(mj, tx40, cfg) == cfg.sticking_friction_width_rad_s < w
-    assert feedforward_coulomb_width(mj, tx40, replace(cfg, sticking_friction_width_rad_s=1.0)) == w  # never wider
+    assert np.all(cfg.sticking_friction_width_rad_s < w)
+    assert np.all(feedforward_coulomb_width(mj, tx40, cfg) == cfg.sticking_friction_width_rad_s)
+    wide = replace(cfg, sticking_friction_width_rad_s=1.0)
+    assert np.array_equal(feedforward_coulomb_width(mj, tx40, wide), w)   # never wider
     with pytest.raises(ConfigError, match="sticking_friction_width_rad_s"):
         ControlConfig(sticking_friction_width_rad_s=0.0)
 
@@ -69,7 +71,7 @@ def test_a_creeping_joint_of_an_arm_whose_friction_sticks_follows_with_the_narro
     q = Q0 + np.concatenate([np.zeros((1, tx40.nq)), np.cumsum(0.5 * (v[1:] + v[:-1]) * dt, axis=0)])
     lag = {}
     for name, width in (("narrow", cfg.sticking_friction_width_rad_s),
-                        ("smooth", tx40.spec.actuation.coulomb_smoothing_rad_s)):
+                        ("smooth", float(tx40.spec.actuation.coulomb_smoothing_rad_s[JOINT]))):
         res = simulate_joint_trajectory(mj, mj.truth, t, q, v, a, replace(cfg, sticking_friction_width_rad_s=width),
                                         rng=np.random.default_rng(3))
         lag[name] = float(np.abs(res.lag_error_rad[t > 2 * ramp, JOINT]).max())

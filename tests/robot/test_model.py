@@ -134,6 +134,25 @@ def test_save_and_load_round_trip(tmp_path: Path, rx130l: RobotModel) -> None:
     _assert_same_arm(RobotModel.load(changed.save(tmp_path / "saved")), changed)
 
 
+def test_coulomb_smoothing_per_joint_round_trips_and_one_width_stays_one_number(tmp_path: Path,
+                                                                                rx130l: RobotModel) -> None:
+    """robot.yaml states the Coulomb smoothing width as one number or one per joint (an identified record's):
+    either is read back exactly, and the friction of each joint switches with its own width."""
+    widths = np.array([0.15, 0.05, 0.07, 0.007, 0.01, 0.3])
+    changed = rx130l.copy()
+    changed.spec.actuation.coulomb_smoothing_rad_s = widths.copy()
+    loaded = RobotModel.load(changed.save(tmp_path / "per_joint"))
+    assert np.array_equal(loaded.actuation.coulomb_smoothing_rad_s, widths)
+    assert yaml.safe_load((tmp_path / "per_joint" / "robot.yaml").read_text())["actuation"][
+        "coulomb_smoothing_rad_s"] == widths.tolist()
+    v = np.full(rx130l.nq, 0.01)
+    expected = rx130l.actuation.viscous_Nms_rad * v + rx130l.actuation.coulomb_Nm * np.tanh(v / widths)
+    assert np.allclose(loaded.friction_torque(v), expected, rtol=1e-12)
+    rx130l.save(tmp_path / "one")
+    assert yaml.safe_load((tmp_path / "one" / "robot.yaml").read_text())["actuation"]["coulomb_smoothing_rad_s"] == 0.01
+    assert np.array_equal(RobotModel.load(tmp_path / "one").actuation.coulomb_smoothing_rad_s, np.full(rx130l.nq, 0.01))
+
+
 def test_tool_facts_are_saved_in_the_stated_flange_frame_when_the_urdf_has_a_flange_of_its_own(
         tmp_path: Path) -> None:
     """FIGAROH's UR10 URDF has a ``flange`` link turned against ``tool0`` (x forward, REP 199), and

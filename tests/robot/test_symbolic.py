@@ -398,7 +398,7 @@ def test_agrees_with_robot_model_dynamics(case):
     """With a RobotModel, the nominal symbolic dynamics are the RobotModel's (friction included)."""
     sym = case
     robot = sym.robot
-    assert sym.coulomb_smoothing_rad_s == robot.actuation.coulomb_smoothing_rad_s
+    assert np.array_equal(sym.coulomb_smoothing_rad_s, robot.actuation.coulomb_smoothing_rad_s)
     rng = np.random.default_rng(21)
     p = sym.nominal_dynamic_parameters()
     err = 0.0
@@ -408,3 +408,15 @@ def test_agrees_with_robot_model_dynamics(case):
                   np.abs(_np(sym.fk("tcp")(q, np.zeros(sym.n_kin))[0]).ravel()
                          - robot.fk(q, "tcp").translation).max())
     assert err <= TOL
+
+
+def test_coulomb_columns_switch_with_each_joints_width(rx130l: RobotModel) -> None:
+    """Coulomb smoothing stated per joint (an identified record's): each joint's Coulomb column of the
+    symbolic regressor is ``tanh(v_j / w_j)`` with its own width."""
+    robot = rx130l.copy()
+    widths = np.array([0.2, 0.05, 0.01, 0.1, 0.002, 0.03])
+    robot.spec.actuation.coulomb_smoothing_rad_s = widths
+    sym = SymbolicRobot(robot)
+    v = np.linspace(-0.05, 0.05, robot.nq)
+    y = _np(sym.regressor(np.zeros(robot.nq), v, np.zeros(robot.nq)))
+    np.testing.assert_allclose(y[:, sym.dyn.coulomb], np.diag(np.tanh(v / widths)), rtol=1e-12, atol=1e-15)

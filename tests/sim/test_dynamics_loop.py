@@ -30,6 +30,25 @@ def test_sx_aba_matches_pinocchio_with_friction_and_saturation(truth):
         np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-9)
 
 
+def test_compiled_plant_switches_each_joints_coulomb_friction_with_its_own_width(truth):
+    """A robot whose Coulomb smoothing differs per joint (an identified record's): the compiled ABA's
+    friction is the model's, joint by joint, at speeds where the widths matter."""
+    robot = truth.copy()
+    robot.spec.actuation.coulomb_smoothing_rad_s = np.array([0.2, 0.05, 0.01, 0.1, 0.002, 0.03])
+    fd = dynamics.forward_dynamics_function(dynamics.chain_structure(robot.model))
+    p = dynamics.parameter_vector(robot)
+    rng = np.random.default_rng(1)
+    for _ in range(10):
+        q = rng.uniform(robot.limits.lower_rad, robot.limits.upper_rad)
+        v = rng.uniform(-0.1, 0.1, 6)
+        tau = rng.uniform(-0.3, 0.3, 6) * robot.limits.effort_Nm
+        np.testing.assert_allclose(np.asarray(fd(q, v, tau, p)).ravel(), robot.forward_dynamics(q, v, tau),
+                                   rtol=1e-9, atol=1e-9)
+    same = truth.copy()
+    same.spec.actuation.coulomb_smoothing_rad_s = np.full(6, 0.01)
+    assert not np.allclose(np.asarray(fd(q, v, tau, p)).ravel(), same.forward_dynamics(q, v, tau), atol=1e-6)
+
+
 def _servo_inputs(truth, N: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """Start pose and loop inputs (N x 42): a sine set point, its velocity, gravity feedforward, noise."""
     q0 = np.array([0.1, 0.3, 1.5, 0.2, 1.0, -0.3])

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import casadi as ca
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -11,9 +12,10 @@ import pytest
 from pipeline.core.errors import ConfigError, InfeasibleError
 from pipeline.trajectory import baselines
 from pipeline.trajectory.baselines import toppra_cp, toppra_within_limits
-from pipeline.trajectory.cp import solve_cp_convex, solve_cp_refined
+from pipeline.trajectory.cp import _fric_sx, solve_cp_convex, solve_cp_refined
 from pipeline.trajectory.cp_smooth import solve_cp_smooth
 from pipeline.trajectory.design import JointPath
+from pipeline.trajectory.dynamics import PlanningModel
 from pipeline.trajectory.solve import cp_joint_path, plan_cp, shorter_cp
 from pipeline.trajectory.trajectories import FINE_GRID_ROUNDOFF, check_trajectory, within_limits
 
@@ -172,3 +174,16 @@ def test_bad_spline_points_are_named(rx130l, quick_traj_config, points, field):
     cfg = dataclasses.replace(quick_traj_config, cp_segment="spline", cp_points_m=points)
     with pytest.raises(ConfigError, match=field):
         cp_joint_path(rx130l, cfg)
+
+
+def test_path_friction_switches_each_joint_with_its_own_width(rx130l) -> None:
+    """The continuous-path NLP's friction along the path (``fv q' s' + fc tanh(q' s' / w_j)``) equals the
+    planning model's, joint by joint, when the Coulomb smoothing differs per joint."""
+    robot = rx130l.copy()
+    robot.spec.actuation.coulomb_smoothing_rad_s = np.array([0.2, 0.05, 0.01, 0.1, 0.002, 0.03])
+    pm = PlanningModel.from_robot(robot)
+    dq = np.random.default_rng(4).normal(size=(5, robot.nq))
+    sdot = np.array([0.001, 0.01, 0.02, 0.05, 0.1])
+    x = ca.SX.sym("x", len(sdot))
+    friction = ca.Function("friction", [x], [_fric_sx(pm, dq, x)])
+    np.testing.assert_allclose(np.asarray(friction(sdot)), pm.friction(dq * sdot[:, None]), rtol=1e-12, atol=1e-12)
