@@ -99,7 +99,8 @@ def test_on_the_rx130l_the_true_smooth_model_fits_mujocos_torques_to_the_noise_o
     every = np.sqrt(np.mean(err**2, axis=0)) / sigma
     outside = torque_rms(runs[0], runs[0] - err, moving)[0] / sigma
     with capsys.disabled():
-        print(f"\nRX130L ISO path in MuJoCo, true model, v_s = {v_s:g} rad/s: noise sigma (two runs) "
+        print(f"\nRX130L ISO path in MuJoCo, true model, v_s = {np.round(v_s, 4).tolist()} rad/s: noise sigma "
+              f"(two runs) "
               f"{np.round(sigma, 3).tolist()} N·m; RMS / sigma, every sample {np.round(every, 2).tolist()}, "
               f"|v| >= v_s {np.round(outside, 2).tolist()}, fraction scored {np.round(moving.mean(0), 3).tolist()}")
     scored = np.isfinite(outside)
