@@ -188,6 +188,9 @@ def _edit_yaml(folder: Path, edit) -> None:  # noqa: ANN001
     [
         (lambda d: d.update(unknown_key=1), "unknown_key"),
         (lambda d: d["actuation"].update(viscous_Nms_rad=[1.0, 2.0]), "actuation.viscous_Nms_rad"),
+        (lambda d: d["actuation"].update(coulomb_smoothing_rad_s=[0.01, 0.02]), "actuation.coulomb_smoothing_rad_s"),
+        (lambda d: d["actuation"].update(coulomb_smoothing_rad_s=[0.01] * 5 + [0.0]),
+         "actuation.coulomb_smoothing_rad_s"),
         (lambda d: d["actuation"].update(rotor_inertia_kgm2=[-1.0, 1, 1, 1, 1, 1]), "actuation.rotor_inertia_kgm2"),
         (lambda d: d.update(flange_frame="no_such_frame"), "flange_frame"),
         (lambda d: d["capsules"][0].update(frame="nowhere"), "capsules[0].frame"),
