@@ -69,7 +69,7 @@ def load_friction_torque(act: ActuationSpec, load_Nm: np.ndarray, v: np.ndarray)
     v = np.asarray(v, float)
     if act.coulomb_load_coefficient is None:
         return np.zeros(np.broadcast_shapes(np.shape(load_Nm), v.shape))
-    return act.coulomb_load_coefficient * np.abs(load_Nm) * np.tanh(v / act.coulomb_smoothing_rad_s)
+    return act.coulomb_load_coefficient * np.abs(load_Nm) * smooth_sign(v, act.coulomb_smoothing_rad_s)
 
 
 def load_free_from_applied(act: ActuationSpec, tau_Nm: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -78,7 +78,7 @@ def load_free_from_applied(act: ActuationSpec, tau_Nm: np.ndarray, v: np.ndarray
     tau = np.asarray(tau_Nm, float)
     if act.coulomb_load_coefficient is None:
         return tau
-    c = act.coulomb_load_coefficient * np.tanh(np.asarray(v, float) / act.coulomb_smoothing_rad_s)
+    c = act.coulomb_load_coefficient * smooth_sign(v, act.coulomb_smoothing_rad_s)
     return tau / (1.0 + c * np.sign(tau))
 
 
@@ -86,7 +86,7 @@ def joint_friction_torque(act: ActuationSpec, v: np.ndarray) -> np.ndarray:
     """Friction torque at joint velocities ``v`` (..., nq) of the model's actuation (module doc), without
     the load-dependent term (:func:`load_friction_torque`, which needs the load torque)."""
     v = np.asarray(v, float)
-    tau = act.viscous_Nms_rad * v + act.coulomb_Nm * np.tanh(v / act.coulomb_smoothing_rad_s)
+    tau = act.viscous_Nms_rad * v + act.coulomb_Nm * smooth_sign(v, act.coulomb_smoothing_rad_s)
     if act.static_friction_excess_Nm is not None and act.stribeck_velocity_rad_s is not None:  # has_stribeck
         tau = tau + stribeck_excess_torque(v, act.static_friction_excess_Nm, act.stribeck_velocity_rad_s,
                                            act.coulomb_smoothing_rad_s)

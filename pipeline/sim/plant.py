@@ -37,6 +37,7 @@ import pinocchio as pin
 from scipy.stats import qmc
 
 from pipeline.core.errors import ConfigError
+from pipeline.robot.friction import smooth_sign
 from pipeline.robot.model import RobotModel
 from pipeline.sim import dynamics, loop
 from pipeline.sim.transmission import Transmission, link_inertia_kgm2
@@ -136,7 +137,7 @@ class Plant:
         if self.transmission is not None:
             return self.transmission.friction_torque(v, load_Nm)
         a = self._model.actuation
-        return a.viscous_Nms_rad * v + a.coulomb_Nm * np.tanh(v / a.coulomb_smoothing_rad_s)
+        return a.viscous_Nms_rad * v + a.coulomb_Nm * smooth_sign(v, a.coulomb_smoothing_rad_s)
 
     def integrate(self, q: np.ndarray, v: np.ndarray, tau_cmd: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """Hold ``tau_cmd`` (saturated) for ``dt`` seconds; semi-implicit Euler at >= the integration rate.

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from pipeline.robot.friction import smooth_sign
 from pipeline.robot.model import RobotModel
 
 #: fixed salt of the transmission's random stream (independent of the truth's main stream)
@@ -60,7 +61,7 @@ class Transmission:
 
     def friction_torque(self, w: np.ndarray, load_Nm: np.ndarray | float = 0.0) -> np.ndarray:
         """Friction torque at motor speed ``w`` (joint side) under transmitted torque ``load_Nm``."""
-        sgn = np.tanh(w / self.smoothing_rad_s)
+        sgn = smooth_sign(w, self.smoothing_rad_s)
         grow = 1.0 + self.coulomb_load_coefficient * np.abs(load_Nm) / self.effort_Nm
         static = self.static_excess_Nm * grow * np.exp(-(w / self.stribeck_velocity_rad_s) ** 2)
         return self.viscous_Nms_rad * w + (self.coulomb_Nm * grow + static) * sgn

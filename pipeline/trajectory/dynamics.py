@@ -26,6 +26,7 @@ import numpy as np
 import pinocchio as pin
 
 from pipeline.core.errors import ConfigError
+from pipeline.robot.friction import smooth_sign
 from pipeline.robot.model import RobotModel
 
 #: joint path derivatives smaller than this are treated as "joint does not move" (Coulomb sign).
@@ -81,7 +82,7 @@ class PlanningModel:
     def friction(self, v: np.ndarray) -> np.ndarray:
         """Viscous plus smooth Coulomb friction, ``v`` of shape (..., nq)."""
         v = np.asarray(v, float)
-        return self.viscous_Nms_rad * v + self.coulomb_Nm * np.tanh(v / self.coulomb_smoothing_rad_s)
+        return self.viscous_Nms_rad * v + self.coulomb_Nm * smooth_sign(v, self.coulomb_smoothing_rad_s)
 
     def rigid_torques(self, Q: np.ndarray, V: np.ndarray, A: np.ndarray) -> np.ndarray:
         """Rigid-body (incl. rotor inertia) torques for rows of Q, V, A: (N, nq)."""
