@@ -8,7 +8,8 @@
   it; the candidate with load-dependent Coulomb friction (:func:`fit_load_candidate`). The
   validation torques choose among them (:func:`pipeline.identification.validate.choose_friction_model`).
 * :func:`base_covariance`: the HAC sandwich of the handed-on fit (:func:`.estimate.hac_covariance`).
-* :func:`handed_on_robot`: the robot with the handed-on standard parameters and friction terms.
+* :func:`handed_on_robot`: the robot with the handed-on standard parameters and friction terms, and
+  robot.yaml's rotor inertia where the record shows none (:func:`unseen_rotor_inertia_joints`).
 """
 
 from __future__ import annotations
@@ -143,12 +144,58 @@ def handed_on_robot(robot: RobotModel, regs: Regressors, fits: Fits) -> RobotMod
     """``robot`` with the handed-on fit's standard parameters and friction terms (Stribeck,
     load-dependent Coulomb) on all joints and the Coulomb smoothing widths the fits used (a record's, chosen
     per joint by :mod:`.coulomb_width`) (:func:`.outcome.identified_robot`); the joints left out keep
-    ``robot``'s values (:func:`with_unmeasured_joints_kept`)."""
+    ``robot``'s values (:func:`with_unmeasured_joints_kept`), the joints ``fits.stated_rotor_joints``
+    ``robot``'s rotor inertia (:func:`unseen_rotor_inertia_joints`)."""
     nq = robot.nq
-    return identified_robot(robot, with_unmeasured_joints_kept(robot, regs.selection, fits.phys.p),
+    p = with_stated_rotor_inertia(robot, with_unmeasured_joints_kept(robot, regs.selection, fits.phys.p),
+                                  fits.stated_rotor_joints)
+    return identified_robot(robot, p,
                             None if fits.stribeck is None else expand_to_joints(fits.stribeck, regs.used, nq),
                             None if fits.load is None else load_to_joints(fits.load.load, regs.used, nq),
                             regs.reg.joint_coulomb_width_rad_s)
+
+
+#: a fitted rotor inertia below this multiple of its lower bound (:data:`.estimate.POSITIVE_LOWER_BOUND`)
+#: sits on the bound (IPOPT's interior point ends a hair inside or outside it)
+ON_BOUND_FACTOR = 2.0
+
+
+def unseen_rotor_inertia_joints(regs: Regressors, p: np.ndarray) -> np.ndarray:
+    """0-based measured joints whose torques show no inertia of the rotor: the physically consistent
+    fit ``p`` put the joint's rotor inertia ``I_a,j`` on its lower bound (``<`` :data:`ON_BOUND_FACTOR` x
+    :data:`.estimate.POSITIVE_LOWER_BOUND`).
+
+    The rotor of a geared drive has an inertia ``I_m r^2`` well above the links' on the wrist; torques
+    that carry no ``I_a,j qdd_j`` (a drive that logs its effort without the rotor's) leave it unidentified,
+    not 0, and a model handed on with 1e-6 kg m^2 there gives the elastic plant's motor side nothing to
+    move and a servo loop nothing to act on. A rotor inertia grouped with a link's (``I_a,1 + ZZ_1`` of a
+    first vertical axis) sits on its bound only when the sum is below what the link's own inertia
+    (pulled towards the nominal one) takes up: the torques show no rotor there either."""
+    ia = p[10 * (regs.reg.model.njoints - 1) + regs.used]
+    return np.asarray(regs.used, int)[ia < ON_BOUND_FACTOR * est_mod.POSITIVE_LOWER_BOUND]
+
+
+def with_stated_rotor_inertia(robot: RobotModel, p: np.ndarray, joints: np.ndarray) -> np.ndarray:
+    """Standard parameters ``p`` with ``robot``'s rotor inertia on the 0-based ``joints`` (a copy)."""
+    out = np.array(p, float)
+    out[10 * (robot.model.njoints - 1) + np.asarray(joints, int)] = np.asarray(
+        robot.actuation.rotor_inertia_kgm2, float)[np.asarray(joints, int)]
+    return out
+
+
+def unseen_rotor_note(robot: RobotModel, joints: np.ndarray) -> str:
+    """One line for the summary's warnings: the joints whose rotor inertia the handed-on model takes from
+    robot.yaml, with its values and whether they are ``robot init``'s assumption ("" when none)."""
+    if not len(joints):
+        return ""
+    ia = np.asarray(robot.actuation.rotor_inertia_kgm2, float)
+    assumed = "actuation.rotor_inertia_kgm2" in robot.spec.assumed
+    which = ", ".join(f"joint {j + 1} {ia[j]:.3g} kg m²" for j in joints)
+    return (f"the torques show no rotor inertia on joint(s) {', '.join(str(j + 1) for j in joints)} "
+            f"(the physically consistent fit puts it on its bound {est_mod.POSITIVE_LOWER_BOUND:g} kg m²): the robot "
+            f"handed on keeps robot.yaml's {which}"
+            f"{' (ASSUMED by robot init)' if assumed else ''}, which no torque validated "
+            "(identification.unseen_rotor_inertia: fitted hands on the fit's)")
 
 
 def with_unmeasured_joints_kept(robot: RobotModel, selection: JointSelection, p: np.ndarray) -> np.ndarray:

@@ -12,7 +12,7 @@ from matplotlib.figure import Figure
 from pipeline.identification import design as design_mod
 from pipeline.identification.config import Config
 from pipeline.identification.effort_unit import EffortUnit
-from pipeline.identification.fit import unmeasured_joints_note
+from pipeline.identification.fit import unmeasured_joints_note, unseen_rotor_note
 from pipeline.identification.friction_terms import not_handed_on_note, report_lines
 from pipeline.identification.measure import StictionExclusion
 from pipeline.identification.outcome import Outcome, ValidationTrajectory
@@ -257,6 +257,8 @@ def summary(cfg: Config, o: Outcome) -> dict[str, Any]:
         "base_sigma_hac_over_white_median": float(np.median(wls.sigma / np.maximum(o.white_sigma, 1e-300))),
         "fraction_within_3sigma": None if truth is None else truth["fraction_within_3sigma"],
         "physically_consistent": bool(f.phys.consistent),
+        # 1-based joints on which the robot handed on keeps robot.yaml's rotor inertia (no torque showed it)
+        "rotor_inertia_stated_joints": [int(j) + 1 for j in f.stated_rotor_joints],
         "fit_rms_Nm_wls": wls.rms_Nm,
         "data_source": o.measured.source,
         "actuator_coupling": "gear matrix" if o.regs.coupled else "diagonal (joint side)",
@@ -405,6 +407,8 @@ def stage_result(cfg: Config, o: Outcome, robot: RobotModel) -> StageResult:
     s = summary(cfg, o)
     if unmeasured_joints_note(o.regs.selection):
         s["warnings"] = [*s.get("warnings", []), unmeasured_joints_note(o.regs.selection)]
+    if unseen_rotor_note(robot, o.fits.stated_rotor_joints):
+        s["warnings"] = [*s.get("warnings", []), unseen_rotor_note(robot, o.fits.stated_rotor_joints)]
     if o.regs.dropped:
         s["warnings"] = [*s.get("warnings", []), (
             f"{len(o.regs.dropped)} base parameter(s) the excitation cannot bring under identification."

@@ -50,7 +50,7 @@ from pipeline.identification.experiment import (
     regressors,
     take_off_record_terms,
 )
-from pipeline.identification.fit import base_covariance, fit_models, handed_on_robot
+from pipeline.identification.fit import base_covariance, fit_models, handed_on_robot, unseen_rotor_inertia_joints
 from pipeline.identification.gates import add_result_gates
 from pipeline.identification.joints import select_joints
 from pipeline.identification.outcome import Fits, Measured, Outcome, Regressors, Validation, identified_robot
@@ -137,6 +137,8 @@ def _run(ctx: StageContext) -> StageResult:
     friction = choose_friction_model(ctx.robot, regs, fits, val) | record_term_scores(cfg, regs, measured, fits,
                                                                                       val, terms)
     hac, white_sigma = base_covariance(regs, measured, fits)
+    if cfg.unseen_rotor_inertia == "stated":
+        fits.stated_rotor_joints = unseen_rotor_inertia_joints(regs, fits.phys.p)
     new_robot = handed_on_robot(ctx.robot, regs, fits)
     timings["validation_s"] = time.perf_counter() - t1
     truth = scored_against_truth(ctx, cfg, regs, fits)

@@ -64,9 +64,10 @@ def true_base(real: RealRobot, E: np.ndarray) -> np.ndarray:
     return E.T @ np.asarray(real.dynamic_parameters, float)
 
 
-def identify_recorded_bag(tmp_path: Path, arm: str, bag: Path) -> tuple[Path, dict[str, Any]]:
+def identify_recorded_bag(tmp_path: Path, arm: str, bag: Path,
+                          stages: str = "identification") -> tuple[Path, dict[str, Any]]:
     """A recorded bag through the CLI as a user would: the corpus arm's URDF through ``robot init``
-    (no options), then ``run --stages identification`` with ``bag`` as ``identification.data_file`` and
+    (no options), then ``run --stages <stages>`` with ``bag`` as ``identification.data_file`` and
     every other setting at its default. Asserts exit 0; returns (the run's folder, the identification
     summary). Skips when the arm's package is not installed."""
     urdf = arm_file(corpus_arm(arm))
@@ -77,7 +78,7 @@ def identify_recorded_bag(tmp_path: Path, arm: str, bag: Path) -> tuple[Path, di
     shutil.copy(urdf, folder / f"{arm}.urdf")
     assert cli.main(["robot", "init", str(folder / f"{arm}.urdf")]) == 0
     out = tmp_path / "runs"
-    code = cli.main(["run", "--set", f"robot={folder}", "--stages", "identification",
+    code = cli.main(["run", "--set", f"robot={folder}", "--stages", stages,
                      "--set", f"identification.data_file={bag}", "--out", str(out)])
     assert code == 0
     run = out / arm

@@ -1,0 +1,58 @@
+"""A rotor inertia the torques do not show (the physically consistent fit puts it on its bound): the model
+handed on keeps robot.yaml's value there and says so; every other joint is handed on as fitted."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.identification import estimate as est_mod
+from pipeline.identification.experiment import regressors
+from pipeline.identification.fit import unseen_rotor_inertia_joints, unseen_rotor_note, with_stated_rotor_inertia
+from pipeline.identification.joints import select_joints
+from pipeline.identification.outcome import identified_robot
+from pipeline.identification.regressor import standard_parameters
+
+from .helpers import quick_context
+
+
+def test_rotor_inertias_on_their_bound_are_listed_and_named_with_robot_yaml_values(tmp_path):
+    ctx, _ = quick_context(tmp_path, overrides={"run_tx40": False})
+    regs = regressors(ctx, ctx.config)
+    robot, nq = ctx.robot, ctx.robot.nq
+    off = 10 * (robot.model.njoints - 1)
+    act = robot.actuation
+    p = standard_parameters(robot.model, act.rotor_inertia_kgm2, act.viscous_Nms_rad, act.coulomb_Nm)
+    assert np.all(p[off : off + nq] > 1e-3)
+    assert len(unseen_rotor_inertia_joints(regs, p)) == 0       # every rotor inertia away from its bound
+
+    on_bound = p.copy()
+    on_bound[off + np.array([0, 3, 5])] = 0.99 * est_mod.POSITIVE_LOWER_BOUND   # IPOPT ends a hair outside
+    on_bound[off + 4] = 3.0 * est_mod.POSITIVE_LOWER_BOUND                      # small, off the bound
+    listed = unseen_rotor_inertia_joints(regs, on_bound)
+    assert listed.tolist() == [0, 3, 5]
+
+    names = [str(n) for n in robot.model.names[1:]]
+    regs.selection = select_joints(names[1:4], names, {})                      # joints 2-4 measured
+    assert unseen_rotor_inertia_joints(regs, on_bound).tolist() == [3]
+
+    note = unseen_rotor_note(robot, listed)
+    assert all(f"joint {j + 1} {act.rotor_inertia_kgm2[j]:.3g} kg m²" in note for j in listed)
+    assert "joint 5" not in note and "ASSUMED" not in note                   # the RX130L states its values
+    assert unseen_rotor_note(robot, np.zeros(0, int)) == ""
+
+
+def test_the_robot_handed_on_keeps_robot_yaml_rotor_inertia_only_on_the_listed_joints(tmp_path):
+    ctx, _ = quick_context(tmp_path, overrides={"run_tx40": False})
+    robot, nq = ctx.robot, ctx.robot.nq
+    act = robot.actuation
+    p = standard_parameters(robot.model, act.rotor_inertia_kgm2, act.viscous_Nms_rad, act.coulomb_Nm) * 1.3
+    off = 10 * (robot.model.njoints - 1)
+    p[off : off + nq] = 0.99 * est_mod.POSITIVE_LOWER_BOUND
+    kept = np.array([1, 4])
+    p_out = with_stated_rotor_inertia(robot, p, kept)
+    assert p[off + 1] < 1e-5                                             # the input is left as it was
+    handed = identified_robot(robot, p_out).actuation.rotor_inertia_kgm2
+    for j in range(nq):
+        assert handed[j] == (act.rotor_inertia_kgm2[j] if j in kept else p[off + j]), j
+    np.testing.assert_array_equal(np.delete(p_out, off + kept), np.delete(p, off + kept))
+    np.testing.assert_array_equal(with_stated_rotor_inertia(robot, p, np.zeros(0, int)), p)
