@@ -169,10 +169,18 @@ def unseen_rotor_inertia_joints(regs: Regressors, p: np.ndarray) -> np.ndarray:
     that carry no ``I_a,j qdd_j`` (a drive that logs its effort without the rotor's) leave it unidentified,
     not 0, and a model handed on with 1e-6 kg m^2 there gives the elastic plant's motor side nothing to
     move and a servo loop nothing to act on. A rotor inertia grouped with a link's (``I_a,1 + ZZ_1`` of a
-    first vertical axis) sits on its bound only when the sum is below what the link's own inertia
-    (pulled towards the nominal one) takes up: the torques show no rotor there either."""
+    first vertical axis) sits on its bound only when the torques leave the sum no more than the link's
+    own inertia, which the fit pulls towards the nominal one: they show no rotor there either."""
     ia = p[10 * (regs.reg.model.njoints - 1) + regs.used]
     return np.asarray(regs.used, int)[ia < ON_BOUND_FACTOR * est_mod.POSITIVE_LOWER_BOUND]
+
+
+def keep_unseen_rotor_inertia(cfg: Config, regs: Regressors, fits: Fits) -> None:
+    """With ``unseen_rotor_inertia: stated`` (default) set ``fits.stated_rotor_joints`` to the joints of
+    :func:`unseen_rotor_inertia_joints` on the handed-on fit, so the robot handed on keeps robot.yaml's
+    rotor inertia there (:func:`handed_on_robot`); with ``fitted`` none."""
+    fits.stated_rotor_joints = (unseen_rotor_inertia_joints(regs, fits.phys.p) if cfg.unseen_rotor_inertia == "stated"
+                                else np.zeros(0, int))
 
 
 def with_stated_rotor_inertia(robot: RobotModel, p: np.ndarray, joints: np.ndarray) -> np.ndarray:

@@ -26,7 +26,8 @@ and the real Stäubli TX40 record (paper ``004_abbe750b8bbcc3aa.txt`` §4).
    record's held-out tail (fit on its first ``data_train_fraction``, noise sigma from the WLS
    residuals); the friction model that predicts them best is handed on
    (:func:`.validate.choose_friction_model`); base-parameter sigmas from the HAC sandwich
-   (:func:`.fit.base_covariance`);
+   (:func:`.fit.base_covariance`); the robot handed on keeps robot.yaml's rotor inertia on the joints whose
+   torques show none (:func:`.fit.keep_unseen_rotor_inertia`);
 5. the TX40 record, only for the TX40 or when asked (:func:`.tx40.tx40_record`);
 6. outputs (:mod:`.report`) and quality gates (:func:`.gates.add_result_gates`): condition number
    vs design, validation RMS vs noise, predicted torques vs limits ->
@@ -50,7 +51,7 @@ from pipeline.identification.experiment import (
     regressors,
     take_off_record_terms,
 )
-from pipeline.identification.fit import base_covariance, fit_models, handed_on_robot, unseen_rotor_inertia_joints
+from pipeline.identification.fit import base_covariance, fit_models, handed_on_robot, keep_unseen_rotor_inertia
 from pipeline.identification.gates import add_result_gates
 from pipeline.identification.joints import select_joints
 from pipeline.identification.outcome import Fits, Measured, Outcome, Regressors, Validation, identified_robot
@@ -137,8 +138,7 @@ def _run(ctx: StageContext) -> StageResult:
     friction = choose_friction_model(ctx.robot, regs, fits, val) | record_term_scores(cfg, regs, measured, fits,
                                                                                       val, terms)
     hac, white_sigma = base_covariance(regs, measured, fits)
-    if cfg.unseen_rotor_inertia == "stated":
-        fits.stated_rotor_joints = unseen_rotor_inertia_joints(regs, fits.phys.p)
+    keep_unseen_rotor_inertia(cfg, regs, fits)
     new_robot = handed_on_robot(ctx.robot, regs, fits)
     timings["validation_s"] = time.perf_counter() - t1
     truth = scored_against_truth(ctx, cfg, regs, fits)

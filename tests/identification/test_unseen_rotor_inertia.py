@@ -3,11 +3,19 @@ handed on keeps robot.yaml's value there and says so; every other joint is hande
 
 from __future__ import annotations
 
+from dataclasses import replace
+from types import SimpleNamespace
+
 import numpy as np
 
 from pipeline.identification import estimate as est_mod
 from pipeline.identification.experiment import regressors
-from pipeline.identification.fit import unseen_rotor_inertia_joints, unseen_rotor_note, with_stated_rotor_inertia
+from pipeline.identification.fit import (
+    keep_unseen_rotor_inertia,
+    unseen_rotor_inertia_joints,
+    unseen_rotor_note,
+    with_stated_rotor_inertia,
+)
 from pipeline.identification.joints import select_joints
 from pipeline.identification.outcome import identified_robot
 from pipeline.identification.regressor import standard_parameters
@@ -39,6 +47,12 @@ def test_rotor_inertias_on_their_bound_are_listed_and_named_with_robot_yaml_valu
     assert all(f"joint {j + 1} {act.rotor_inertia_kgm2[j]:.3g} kg m²" in note for j in listed)
     assert "joint 5" not in note and "ASSUMED" not in note                   # the RX130L states its values
     assert unseen_rotor_note(robot, np.zeros(0, int)) == ""
+
+    fits = SimpleNamespace(phys=SimpleNamespace(p=on_bound), stated_rotor_joints=None)   # the fields it reads
+    keep_unseen_rotor_inertia(ctx.config, regs, fits)
+    assert fits.stated_rotor_joints.tolist() == [3]
+    keep_unseen_rotor_inertia(replace(ctx.config, unseen_rotor_inertia="fitted"), regs, fits)
+    assert fits.stated_rotor_joints.tolist() == []
 
 
 def test_the_robot_handed_on_keeps_robot_yaml_rotor_inertia_only_on_the_listed_joints(tmp_path):
