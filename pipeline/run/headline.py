@@ -360,6 +360,16 @@ def stage_rows(stage: str, summary: Mapping[str, Any], stale: bool = False) -> l
 SIMULATED_ON_THE_MODEL = ("control", "trajectory")
 
 
+def recorded_model_on_simulated_arm(stages: Sequence[str], model_data: str) -> str:
+    """The input line of the stages simulated on the model a record identified: their arm is the run's
+    hidden robot, drawn around robot.yaml's model, not the arm recorded (unless the record was made on
+    that simulated arm, ``arm play``)."""
+    return (f"{', '.join(stages)}: the simulated arm is the run's hidden robot, drawn around robot.yaml's model, "
+            f"and the feedforward is the model from {model_data}; unless that record was made on this simulated "
+            "arm (`arm play`), the two differ by what robot.yaml assumes, and these figures grade the recorded "
+            "model on a robot.yaml arm")
+
+
 def _read_summary(stage_dir: Path) -> dict:
     try:
         data = artefacts.read_json(stage_dir / stage_io.SUMMARY)
@@ -397,6 +407,7 @@ def read_headline(run_dir: Path, stages: Sequence[str], stale: Iterable[str] = (
     stale = set(stale)
     headline = Headline(run_dir.name)
     model_data = SIMULATED
+    on_recorded_model: list[str] = []
     for stage in stages:
         summary = _read_summary(run_dir / stage)
         if not summary:
@@ -413,6 +424,8 @@ def read_headline(run_dir: Path, stages: Sequence[str], stale: Iterable[str] = (
         headline.rows += rows
         if record is not None:
             headline.inputs.append(f"{stage}: {record.sentence()}")
+            if stage in SIMULATED_ON_THE_MODEL and model_data != SIMULATED and record.simulated:
+                on_recorded_model.append(stage)
         if stage == "calibration":
             second = _second_pass_row(run_dir, stages)
             headline.rows += [] if second is None else [second]
@@ -421,6 +434,8 @@ def read_headline(run_dir: Path, stages: Sequence[str], stale: Iterable[str] = (
             headline.assumptions = [a for a in model.assumptions if isinstance(a, str)]
             headline.warnings += [w for w in model.plausibility_warnings if isinstance(w, str)]
         headline.warnings += [f"{stage}: {w}" for w in common.warnings if isinstance(w, str)]
+    if on_recorded_model:
+        headline.inputs.append(recorded_model_on_simulated_arm(on_recorded_model, model_data))
     arms = _arms_combined(run_dir)
     if arms:
         headline.warnings.insert(0, arms)

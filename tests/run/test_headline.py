@@ -12,7 +12,7 @@ from pipeline import cli
 from pipeline.run import headline as hl
 from pipeline.run import stages as stage_registry
 from pipeline.run.report import write_report
-from pipeline.stage_api import StageResult
+from pipeline.stage_api import Provenance, StageResult
 
 GATES_PASS = {"passed": True, "checks": [
     {"name": "validation_rms_over_noise", "passed": True, "value": 1.03, "op": "<=", "threshold": 2.0},
@@ -238,3 +238,17 @@ def test_a_toppra_profile_over_a_limit_is_judged_as_made_to_keep_its_limits(tmp_
     headline = hl.read_headline(_write_run(tmp_path / "b", {"trajectory": never}), ["trajectory"])
     (row,) = _rows(headline, "trajectory", "CP duration")
     assert "over a limit on the fine grid at any speed" in row.against and row.verdict == ""
+
+
+def test_a_stage_simulated_on_a_recorded_model_says_its_arm_is_robot_yamls(tmp_path):
+    recorded = Provenance("recorded", "/data/my_arm_record.csv").to_dict()
+    simulated = Provenance("simulated", "servo loop on the hidden robot", ("identification",)).to_dict()
+    summaries = {**SUMMARIES, "identification": {**SUMMARIES["identification"], "provenance": recorded},
+                 "control": {**SUMMARIES["control"], "provenance": simulated}}
+    headline = hl.read_headline(_write_run(tmp_path, summaries), list(summaries))
+    (line,) = [x for x in headline.inputs if "robot.yaml arm" in x]
+    assert line.startswith("control:") and "recorded (my_arm_record.csv)" in line
+    summaries["identification"] = {**summaries["identification"], "provenance": Provenance(
+        "simulated", "joint torques of the hidden robot").to_dict()}
+    headline = hl.read_headline(_write_run(tmp_path / "sim", summaries), list(summaries))
+    assert not [x for x in headline.inputs if "robot.yaml arm" in x]   # the model and the arm are the run's
