@@ -34,7 +34,7 @@ from pipeline.identification.gates import check_data_excites
 from pipeline.identification.joints import JointSelection
 from pipeline.identification.outcome import Fits, LoadCandidate, Measured, Regressors, identified_robot
 from pipeline.identification.regressor import standard_parameters
-from pipeline.robot.assumed_values import predicted_drive_values
+from pipeline.robot.assumed_values import predicted_drive_values, value_digest
 from pipeline.robot.model import RobotModel
 
 
@@ -149,12 +149,16 @@ def handed_on_robot(robot: RobotModel, regs: Regressors, fits: Fits) -> RobotMod
     nq = robot.nq
     p = with_stated_rotor_inertia(robot, with_unmeasured_joints_kept(robot, regs.selection, fits.phys.p),
                                   fits.stated_rotor_joints)
-    return identified_robot(robot, p,
-                            None if fits.stribeck is None else expand_to_joints(fits.stribeck, regs.used, nq),
-                            None if fits.load is None else load_to_joints(fits.load.load, regs.used, nq),
-                            regs.reg.joint_coulomb_width_rad_s)
+    handed = identified_robot(robot, p,
+                              None if fits.stribeck is None else expand_to_joints(fits.stribeck, regs.used, nq),
+                              None if fits.load is None else load_to_joints(fits.load.load, regs.used, nq),
+                              regs.reg.joint_coulomb_width_rad_s)
+    label_assumed_rotor_inertia(robot, handed, fits.stated_rotor_joints)
+    return handed
 
 
+#: robot.yaml's rotor inertia (its ``assumed`` key)
+ROTOR_INERTIA_KEY = "actuation.rotor_inertia_kgm2"
 #: a fitted rotor inertia below this multiple of its lower bound (:data:`.estimate.POSITIVE_LOWER_BOUND`)
 #: sits on the bound (IPOPT's interior point ends a hair inside or outside it)
 ON_BOUND_FACTOR = 2.0
@@ -191,13 +195,29 @@ def with_stated_rotor_inertia(robot: RobotModel, p: np.ndarray, joints: np.ndarr
     return out
 
 
+def label_assumed_rotor_inertia(robot: RobotModel, handed: RobotModel, joints: np.ndarray) -> None:
+    """Where ``robot``'s rotor inertia is ``robot init``'s assumption and ``handed`` keeps it on ``joints``
+    (0-based), the assumption stays in force on ``handed``'s robot.yaml: its ``assumed`` entry gets the
+    digest of the values handed on and a rule naming those joints, so a placeholder read back is still a
+    placeholder (:mod:`pipeline.robot.assumed_values`; the whole vector is then assumed, the fitted
+    joints' values included, and a later fit is not pulled towards any of them)."""
+    entry = robot.spec.assumed.get(ROTOR_INERTIA_KEY)
+    if entry is None or not len(joints):
+        return
+    values = [float(v) for v in handed.actuation.rotor_inertia_kgm2]
+    which = ", ".join(str(int(j) + 1) for j in joints)
+    handed.spec.assumed[ROTOR_INERTIA_KEY] = {
+        "rule": f"{entry['rule']} on joint(s) {which}, whose torques showed no rotor inertia; the others identified",
+        "sha256": value_digest(values)}
+
+
 def unseen_rotor_note(robot: RobotModel, joints: np.ndarray) -> str:
     """One line for the summary's warnings: the joints whose rotor inertia the handed-on model takes from
     robot.yaml, with its values and whether they are ``robot init``'s assumption ("" when none)."""
     if not len(joints):
         return ""
     ia = np.asarray(robot.actuation.rotor_inertia_kgm2, float)
-    assumed = "actuation.rotor_inertia_kgm2" in robot.spec.assumed
+    assumed = ROTOR_INERTIA_KEY in robot.spec.assumed
     which = ", ".join(f"joint {j + 1} {ia[j]:.3g} kg m²" for j in joints)
     return (f"the torques show no rotor inertia on joint(s) {', '.join(str(j + 1) for j in joints)} "
             f"(the physically consistent fit puts it on its bound {est_mod.POSITIVE_LOWER_BOUND:g} kg m²): the robot "

@@ -11,7 +11,9 @@ import numpy as np
 from pipeline.identification import estimate as est_mod
 from pipeline.identification.experiment import regressors
 from pipeline.identification.fit import (
+    ROTOR_INERTIA_KEY,
     keep_unseen_rotor_inertia,
+    label_assumed_rotor_inertia,
     unseen_rotor_inertia_joints,
     unseen_rotor_note,
     with_stated_rotor_inertia,
@@ -19,6 +21,8 @@ from pipeline.identification.fit import (
 from pipeline.identification.joints import select_joints
 from pipeline.identification.outcome import identified_robot
 from pipeline.identification.regressor import standard_parameters
+from pipeline.robot.assumed_values import value_digest
+from pipeline.robot.model import RobotModel
 
 from .helpers import quick_context
 
@@ -70,3 +74,25 @@ def test_the_robot_handed_on_keeps_robot_yaml_rotor_inertia_only_on_the_listed_j
         assert handed[j] == (act.rotor_inertia_kgm2[j] if j in kept else p[off + j]), j
     np.testing.assert_array_equal(np.delete(p_out, off + kept), np.delete(p, off + kept))
     np.testing.assert_array_equal(with_stated_rotor_inertia(robot, p, np.zeros(0, int)), p)
+
+
+def test_an_assumed_rotor_inertia_kept_on_some_joints_reads_back_as_assumed(tmp_path):
+    ctx, _ = quick_context(tmp_path, overrides={"run_tx40": False})
+    robot = ctx.robot
+    act = robot.actuation
+    robot.spec.assumed[ROTOR_INERTIA_KEY] = {"rule": "0.005 s² x effort limit",     # as robot init writes it
+                                             "sha256": value_digest([float(v) for v in act.rotor_inertia_kgm2])}
+    p = standard_parameters(robot.model, act.rotor_inertia_kgm2, act.viscous_Nms_rad, act.coulomb_Nm)
+    off = 10 * (robot.model.njoints - 1)
+    p[off : off + robot.nq] *= 0.5                                       # identified on every joint ...
+    kept = np.array([2, 5])
+    handed = identified_robot(robot, with_stated_rotor_inertia(robot, p, kept))   # ... but joints 3 and 6
+    label_assumed_rotor_inertia(robot, handed, kept)
+    back = RobotModel.load(handed.save(tmp_path / "handed"))
+    entry = back.spec.assumed[ROTOR_INERTIA_KEY]                             # in force on reading back
+    assert "joint(s) 3, 6" in entry["rule"] and entry["rule"].startswith("0.005 s² x effort limit")
+    np.testing.assert_array_equal(back.actuation.rotor_inertia_kgm2[kept], act.rotor_inertia_kgm2[kept])
+
+    fitted = identified_robot(robot, p)                                  # every joint identified: a fact
+    label_assumed_rotor_inertia(robot, fitted, np.zeros(0, int))
+    assert ROTOR_INERTIA_KEY not in RobotModel.load(fitted.save(tmp_path / "fitted")).spec.assumed
