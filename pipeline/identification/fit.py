@@ -153,7 +153,8 @@ def handed_on_robot(robot: RobotModel, regs: Regressors, fits: Fits) -> RobotMod
                               None if fits.stribeck is None else expand_to_joints(fits.stribeck, regs.used, nq),
                               None if fits.load is None else load_to_joints(fits.load.load, regs.used, nq),
                               regs.reg.joint_coulomb_width_rad_s)
-    label_assumed_rotor_inertia(robot, handed, fits.stated_rotor_joints)
+    kept = np.union1d(fits.stated_rotor_joints, np.array(sorted(regs.selection.left_out), int)).astype(int)
+    label_assumed_rotor_inertia(robot, handed, kept)
     return handed
 
 
@@ -197,17 +198,18 @@ def with_stated_rotor_inertia(robot: RobotModel, p: np.ndarray, joints: np.ndarr
 
 def label_assumed_rotor_inertia(robot: RobotModel, handed: RobotModel, joints: np.ndarray) -> None:
     """Where ``robot``'s rotor inertia is ``robot init``'s assumption and ``handed`` keeps it on ``joints``
-    (0-based), the assumption stays in force on ``handed``'s robot.yaml: its ``assumed`` entry gets the
-    digest of the values handed on and a rule naming those joints, so a placeholder read back is still a
-    placeholder (:mod:`pipeline.robot.assumed_values`; the whole vector is then assumed, the fitted
-    joints' values included, and a later fit is not pulled towards any of them)."""
+    (0-based: torques that show none, joints left out of the fit), the assumption stays in force on
+    ``handed``'s robot.yaml: its ``assumed`` entry gets the digest of the values handed on and a rule naming
+    those joints, so a placeholder read back is still a placeholder (:mod:`pipeline.robot.assumed_values`;
+    the whole vector is then assumed, the fitted joints' values included, and a later fit is not pulled
+    towards any of them)."""
     entry = robot.spec.assumed.get(ROTOR_INERTIA_KEY)
     if entry is None or not len(joints):
         return
     values = [float(v) for v in handed.actuation.rotor_inertia_kgm2]
     which = ", ".join(str(int(j) + 1) for j in joints)
     handed.spec.assumed[ROTOR_INERTIA_KEY] = {
-        "rule": f"{entry['rule']} on joint(s) {which}, whose torques showed no rotor inertia; the others identified",
+        "rule": f"{entry['rule']} on joint(s) {which}, which no torque identified; the others identified",
         "sha256": value_digest(values)}
 
 
