@@ -110,7 +110,7 @@ class Config:
     # (coulomb_width.choose_widths), "robot" = robot.yaml's actuation.coulomb_smoothing_rad_s
     coulomb_width: Literal["auto", "robot"] = "auto"
     # a joint whose torques show no rotor inertia (the physically consistent fit puts it on its bound;
-    # fit.unseen_rotor_inertia_joints): "stated" = the robot handed on keeps robot.yaml's
+    # handed_on.unseen_rotor_inertia_joints): "stated" = the robot handed on keeps robot.yaml's
     # actuation.rotor_inertia_kgm2 there (a warning names it), "fitted" = the fit's bound value
     unseen_rotor_inertia: Literal["stated", "fitted"] = "stated"
     # a data_file's joints at rest while others move (held by their static friction): their rows left out of

@@ -12,7 +12,7 @@ A logged torque column carries no signal when it is
 indices). Joints left out contribute no rows to the fit: they carry no weight, no gate reads
 them and the headline does not show them; the report and ``summary.json`` name them with the
 reason. Their link's inertial parameters and their drive-train parameters stay at the previous
-model's values in the handed-on robot (:func:`pipeline.identification.fit.with_unmeasured_joints_kept`).
+model's values in the handed-on robot (:func:`pipeline.identification.handed_on.with_unmeasured_joints_kept`).
 """
 
 from __future__ import annotations

@@ -130,7 +130,7 @@ class Fits:
     #: why the candidate was not fitted or not scored ("": it was)
     load_note: str = ""
     #: 0-based joints on which the robot handed on keeps robot.yaml's rotor inertia
-    #: (:func:`pipeline.identification.fit.unseen_rotor_inertia_joints`)
+    #: (:func:`pipeline.identification.handed_on.unseen_rotor_inertia_joints`)
     stated_rotor_joints: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
 
 

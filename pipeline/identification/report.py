@@ -12,8 +12,8 @@ from matplotlib.figure import Figure
 from pipeline.identification import design as design_mod
 from pipeline.identification.config import Config
 from pipeline.identification.effort_unit import EffortUnit
-from pipeline.identification.fit import unmeasured_joints_note, unseen_rotor_note
 from pipeline.identification.friction_terms import not_handed_on_note, report_lines
+from pipeline.identification.handed_on import unmeasured_joints_note, unseen_rotor_note
 from pipeline.identification.measure import StictionExclusion
 from pipeline.identification.outcome import Outcome, ValidationTrajectory
 from pipeline.identification.regressor import BaseParameters

@@ -27,7 +27,7 @@ and the real Stäubli TX40 record (paper ``004_abbe750b8bbcc3aa.txt`` §4).
    residuals); the friction model that predicts them best is handed on
    (:func:`.validate.choose_friction_model`); base-parameter sigmas from the HAC sandwich
    (:func:`.fit.base_covariance`); the robot handed on keeps robot.yaml's rotor inertia on the joints whose
-   torques show none (:func:`.fit.keep_unseen_rotor_inertia`);
+   torques show none (:func:`.handed_on.keep_unseen_rotor_inertia`);
 5. the TX40 record, only for the TX40 or when asked (:func:`.tx40.tx40_record`);
 6. outputs (:mod:`.report`) and quality gates (:func:`.gates.add_result_gates`): condition number
    vs design, validation RMS vs noise, predicted torques vs limits ->
@@ -51,8 +51,9 @@ from pipeline.identification.experiment import (
     regressors,
     take_off_record_terms,
 )
-from pipeline.identification.fit import base_covariance, fit_models, handed_on_robot, keep_unseen_rotor_inertia
+from pipeline.identification.fit import base_covariance, fit_models
 from pipeline.identification.gates import add_result_gates
+from pipeline.identification.handed_on import handed_on_robot, keep_unseen_rotor_inertia
 from pipeline.identification.joints import select_joints
 from pipeline.identification.outcome import Fits, Measured, Outcome, Regressors, Validation, identified_robot
 from pipeline.identification.record import load_user_record

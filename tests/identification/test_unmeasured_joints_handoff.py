@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from pipeline.identification import stage
-from pipeline.identification.fit import unmeasured_joints_note, with_unmeasured_joints_kept
+from pipeline.identification.handed_on import unmeasured_joints_note, with_unmeasured_joints_kept
 from pipeline.identification.joints import select_joints
 from pipeline.identification.outcome import identified_robot
 from pipeline.identification.regressor import standard_parameters

@@ -10,7 +10,7 @@ import numpy as np
 
 from pipeline.identification import estimate as est_mod
 from pipeline.identification.experiment import regressors
-from pipeline.identification.fit import (
+from pipeline.identification.handed_on import (
     ROTOR_INERTIA_KEY,
     keep_unseen_rotor_inertia,
     label_assumed_rotor_inertia,
