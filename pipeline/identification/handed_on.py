@@ -4,7 +4,8 @@ previous model (robot.yaml or the calibrated one), each stated in the summary's 
 
 * the link inertias and drive values of the joints left out of the fit (:func:`with_unmeasured_joints_kept`);
 * the rotor inertia of the joints whose torques show none (:func:`unseen_rotor_inertia_joints`), still
-  labelled as ``robot init``'s assumption when it was one (:func:`label_assumed_rotor_inertia`).
+  labelled as ``robot init``'s assumption when it was one (:func:`label_kept_assumptions`, as are the
+  drive values kept for the joints left out).
 """
 
 from __future__ import annotations
@@ -41,8 +42,10 @@ def handed_on_robot(robot: RobotModel, regs: Regressors, fits: Fits) -> RobotMod
                               None if fits.stribeck is None else expand_to_joints(fits.stribeck, regs.used, nq),
                               None if fits.load is None else load_to_joints(fits.load.load, regs.used, nq),
                               regs.reg.joint_coulomb_width_rad_s)
-    kept = np.union1d(fits.stated_rotor_joints, np.array(sorted(regs.selection.left_out), int)).astype(int)
-    label_assumed_rotor_inertia(robot, handed, kept)
+    left_out = np.array(sorted(regs.selection.left_out), int)
+    label_kept_assumptions(robot, handed, {
+        "rotor_inertia_kgm2": np.union1d(fits.stated_rotor_joints, left_out).astype(int),
+        "viscous_Nms_rad": left_out, "coulomb_Nm": left_out})
     return handed
 
 
@@ -84,21 +87,23 @@ def with_stated_rotor_inertia(robot: RobotModel, p: np.ndarray, joints: np.ndarr
     return out
 
 
-def label_assumed_rotor_inertia(robot: RobotModel, handed: RobotModel, joints: np.ndarray) -> None:
-    """Where ``robot``'s rotor inertia is ``robot init``'s assumption and ``handed`` keeps it on ``joints``
-    (0-based: torques that show none, joints left out of the fit), the assumption stays in force on
-    ``handed``'s robot.yaml: its ``assumed`` entry gets the digest of the values handed on and a rule naming
-    those joints, so a placeholder read back is still a placeholder (:mod:`pipeline.robot.assumed_values`;
-    the whole vector is then assumed, the fitted joints' values included, and a later fit is not pulled
-    towards any of them)."""
-    entry = robot.spec.assumed.get(ROTOR_INERTIA_KEY)
-    if entry is None or not len(joints):
-        return
-    values = [float(v) for v in handed.actuation.rotor_inertia_kgm2]
-    which = ", ".join(str(int(j) + 1) for j in joints)
-    handed.spec.assumed[ROTOR_INERTIA_KEY] = {
-        "rule": f"{entry['rule']} on joint(s) {which}, which no torque identified; the others identified",
-        "sha256": value_digest(values)}
+def label_kept_assumptions(robot: RobotModel, handed: RobotModel, kept: dict[str, np.ndarray]) -> None:
+    """For each drive value ``name`` of ``kept`` (``rotor_inertia_kgm2``, ``viscous_Nms_rad``,
+    ``coulomb_Nm``) that is ``robot init``'s assumption on ``robot`` and that ``handed`` keeps on the
+    0-based joints ``kept[name]`` (torques that show no rotor inertia, joints left out of the fit), the
+    assumption stays in force on ``handed``'s robot.yaml: its ``assumed`` entry gets the digest of the
+    values handed on and a rule naming those joints, so a placeholder read back is still a placeholder
+    (:mod:`pipeline.robot.assumed_values`; the whole vector is then assumed, the fitted joints' values
+    included, and a later fit is not pulled towards any of them)."""
+    for name, joints in kept.items():
+        key = f"actuation.{name}"
+        entry = robot.spec.assumed.get(key)
+        if entry is None or not len(joints):
+            continue
+        which = ", ".join(str(int(j) + 1) for j in joints)
+        handed.spec.assumed[key] = {
+            "rule": f"{entry['rule']} on joint(s) {which}, which no torque identified; the others identified",
+            "sha256": value_digest([float(v) for v in getattr(handed.actuation, name)])}
 
 
 def unseen_rotor_note(robot: RobotModel, joints: np.ndarray) -> str:

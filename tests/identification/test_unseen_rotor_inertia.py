@@ -13,7 +13,7 @@ from pipeline.identification.experiment import regressors
 from pipeline.identification.handed_on import (
     ROTOR_INERTIA_KEY,
     keep_unseen_rotor_inertia,
-    label_assumed_rotor_inertia,
+    label_kept_assumptions,
     unseen_rotor_inertia_joints,
     unseen_rotor_note,
     with_stated_rotor_inertia,
@@ -87,12 +87,13 @@ def test_an_assumed_rotor_inertia_kept_on_some_joints_reads_back_as_assumed(tmp_
     p[off : off + robot.nq] *= 0.5                                       # identified on every joint ...
     kept = np.array([2, 5])
     handed = identified_robot(robot, with_stated_rotor_inertia(robot, p, kept))   # ... but joints 3 and 6
-    label_assumed_rotor_inertia(robot, handed, kept)
+    label_kept_assumptions(robot, handed, {"rotor_inertia_kgm2": kept, "viscous_Nms_rad": kept})
     back = RobotModel.load(handed.save(tmp_path / "handed"))
     entry = back.spec.assumed[ROTOR_INERTIA_KEY]                             # in force on reading back
     assert "joint(s) 3, 6" in entry["rule"] and entry["rule"].startswith("0.005 s² x effort limit")
     np.testing.assert_array_equal(back.actuation.rotor_inertia_kgm2[kept], act.rotor_inertia_kgm2[kept])
+    assert "actuation.viscous_Nms_rad" not in back.spec.assumed              # robot.yaml stated it: a fact
 
     fitted = identified_robot(robot, p)                                  # every joint identified: a fact
-    label_assumed_rotor_inertia(robot, fitted, np.zeros(0, int))
+    label_kept_assumptions(robot, fitted, {"rotor_inertia_kgm2": np.zeros(0, int)})
     assert ROTOR_INERTIA_KEY not in RobotModel.load(fitted.save(tmp_path / "fitted")).spec.assumed
