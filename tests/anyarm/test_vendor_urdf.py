@@ -116,22 +116,42 @@ def test_rail_under_the_arm_is_locked_at_a_stated_value(tmp_path):
     assert np.allclose(again.fk(q).homogeneous, moved.fk(q).homogeneous, atol=1e-12)
 
 
-def test_inertia_violating_the_triangle_inequality_is_repaired_by_the_smallest_change(tmp_path):
+def _load_with_forearm_inertia(folder: Path, inertia_xml: str) -> tuple[RobotModel, list[str]]:
+    """The source URDF with the forearm link's ``<inertia>`` replaced, loaded: the robot and the warnings."""
     text = _source()
     start = text.index('<link name="forearm_link">')
     block = re.search(r"<inertia [^>]*/>", text[start:])
-    bad = '<inertia ixx="0.001" ixy="0.0" ixz="0.0" iyy="0.002" iyz="0.0" izz="0.5"/>'
-    text = text[:start + block.start()] + bad + text[start + block.end():]
+    text = text[:start + block.start()] + inertia_xml + text[start + block.end():]
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        robot = RobotModel.load(_write(tmp_path, text))
-    assert any("forearm_link" in str(w.message) for w in caught)
+        robot = RobotModel.load(_write(folder, text))
+    return robot, [str(w.message) for w in caught]
+
+
+def test_inertia_violating_the_triangle_inequality_is_repaired_by_the_smallest_change(tmp_path):
+    robot, caught = _load_with_forearm_inertia(
+        tmp_path, '<inertia ixx="0.001" ixy="0.0" ixz="0.0" iyy="0.002" iyz="0.0" izz="0.5"/>')
+    assert any("forearm_link" in w for w in caught)
     assert any("forearm_link" in a and "repaired" in a for a in robot.assumptions)
     assert _principal_moments_ok(robot.model)
     body = robot.model.inertias[robot.model.getJointId("elbow_joint")]
     moments = np.sort(np.linalg.eigvalsh(body.inertia))
     # the smallest moment raised exactly to the bound 0.5 - 0.002, the other two unchanged
     assert moments == pytest.approx((0.002, 0.498, 0.5), rel=1e-9)
+
+
+def test_an_inertia_a_hair_below_the_moment_floor_is_repaired_without_a_warning(tmp_path):
+    """An identified link near the fit's floor (moments 0.99e-6 kg m², a change of 1e-8): noted, not warned,
+    and the note gives the moments to four digits, not rounded to the floor; a link without inertia is
+    warned."""
+    robot, caught = _load_with_forearm_inertia(
+        tmp_path, '<inertia ixx="9.9e-07" ixy="0.0" ixz="0.0" iyy="9.9e-07" iyz="0.0" izz="9.9e-07"/>')
+    assert not any("forearm_link" in w for w in caught)
+    (note,) = [a for a in robot.assumptions if "forearm_link" in a and "repaired" in a]
+    assert "9.9e-07" in note and "1e-06" in note
+    _, caught = _load_with_forearm_inertia(
+        tmp_path / "zero", '<inertia ixx="0" ixy="0.0" ixz="0.0" iyy="0" iyz="0.0" izz="0"/>')
+    assert any("forearm_link" in w for w in caught)
 
 
 def test_a_product_of_inertia_copied_from_a_moment_becomes_a_labelled_placeholder(tmp_path):
